@@ -1,0 +1,58 @@
+"""Parameter checks shared by every public constructor.
+
+Every message names the argument, the value it got and what is allowed, so that a scene
+error can be traced to its key (the scene layer prefixes the key path).
+"""
+
+from __future__ import annotations
+
+import math
+from numbers import Real
+
+__all__ = ["finite", "positive", "non_negative", "positive_int", "BananagridError"]
+
+
+class BananagridError(ValueError):
+    """A user-facing error: bad parameter, bad scene, bad file. The CLI prints it as one line."""
+
+
+def _real(name: str, value) -> float:
+    if isinstance(value, bool) or not isinstance(value, Real):
+        raise BananagridError(f"{name} = {value!r}: expected a real number")
+    return float(value)
+
+
+def finite(name: str, value) -> float:
+    """Return ``value`` as float, or raise if it is not a finite real number."""
+    v = _real(name, value)
+    if not math.isfinite(v):
+        raise BananagridError(f"{name} = {v!r}: must be finite")
+    return v
+
+
+def positive(name: str, value) -> float:
+    """Return ``value`` as float, or raise unless it is finite and > 0."""
+    v = finite(name, value)
+    if v <= 0.0:
+        raise BananagridError(f"{name} = {v!r}: must be > 0")
+    return v
+
+
+def non_negative(name: str, value) -> float:
+    """Return ``value`` as float, or raise unless it is finite and >= 0."""
+    v = finite(name, value)
+    if v < 0.0:
+        raise BananagridError(f"{name} = {v!r}: must be >= 0")
+    return v
+
+
+def positive_int(name: str, value) -> int:
+    """Return ``value`` as int, or raise unless it is an integer >= 1."""
+    if isinstance(value, bool) or not isinstance(value, (int,)) and not (
+        isinstance(value, float) and value.is_integer()
+    ):
+        raise BananagridError(f"{name} = {value!r}: expected an integer")
+    v = int(value)
+    if v < 1:
+        raise BananagridError(f"{name} = {v}: must be >= 1")
+    return v
