@@ -58,3 +58,277 @@ class Raster:
         if self.normalised:
             return self
         return replace(self, values=self.values / self.mass, normalised=True)
+
+
+# --------------------------------------------------------------------------------------------
+# Launching kernels. This is the only module that calls wp.launch.
+# --------------------------------------------------------------------------------------------
+
+import math
+import os
+import time
+from concurrent.futures import ThreadPoolExecutor
+from dataclasses import dataclass as _dataclass
+
+from .validate import BananagridError
+
+_DTYPES = {np.dtype(np.float32): "float32", np.dtype(np.float64): "float64"}
+
+#: Turn-rate node spacing of the CAT scan table, in units of omega t (radians). Root pairs
+#: closer than this are still found by the fold search; the spacing bounds how many extrema of
+#: F one interval can hold.
+CAT_NODE_SPACING = 0.1
+CAT_MIN_NODES = 64
+CAT_MAX_NODES = 8192
+
+
+def _warp():
+    """Import and initialise Warp on first use (no import-time side effects)."""
+    import warp as wp
+
+    wp.config.quiet = True
+    wp.init()
+    return wp
+
+
+def _scalar(dtype):
+    try:
+        name = _DTYPES[np.dtype(dtype)]
+    except (TypeError, KeyError):
+        raise BananagridError(f"dtype = {dtype!r}: must be float32 or float64") from None
+    wp = _warp()
+    return wp, np.dtype(dtype), getattr(wp, name)
+
+
+def _check_device(wp, device: str) -> str:
+    if not isinstance(device, str):
+        raise BananagridError(f"device = {device!r}: expected 'cpu' or 'cuda'")
+    try:
+        wp.get_device(device)
+    except Exception:
+        available = ", ".join(str(d) for d in wp.get_devices())
+        raise BananagridError(f"device = {device!r}: not available here (available: {available})") from None
+    return device
+
+
+def default_threads() -> int:
+    """Worker threads for CPU launches: every core this process may use."""
+    try:
+        return max(1, len(os.sched_getaffinity(0)))
+    except AttributeError:  # pragma: no cover - non-Linux
+        return max(1, os.cpu_count() or 1)
+
+
+@_dataclass(frozen=True)
+class _Binding:
+    """A model bound to its kernels: both kernels take (xs, ys, offset, *params, out)."""
+
+    grid_kernel: object
+    points_kernel: object
+    params: tuple
+    kernel_name: str
+    notes: dict
+
+
+def _bind(model, wp, np_dtype, scalar, device) -> _Binding:
+    from .models import CAT, PolarBanana
+
+    pose = wp.array(model.pose.as_array().astype(np_dtype), dtype=scalar, device=device)
+    if isinstance(model, CAT):
+        from .kernels import cat
+
+        omegas = _cat_nodes(model).astype(np_dtype)
+        table = wp.zeros((len(omegas), cat.TABLE_COLUMNS), dtype=scalar, device=device)
+        wp.launch(
+            cat.cat_table,
+            dim=len(omegas),
+            inputs=[wp.array(omegas, dtype=scalar, device=device), scalar(model.v0), scalar(model.t), table],
+            device=device,
+        )
+        # Newton stops when its step is below a few ulps of the searched range.
+        tol = 8.0 * np.finfo(np_dtype).eps * model.k_sigma * model.sigma_omega
+        params = (
+            table, scalar(model.v0), scalar(model.t), scalar(model.sigma_a),
+            scalar(model.sigma_omega), pose, scalar(tol),
+        )
+        notes = {"scan_nodes": len(omegas), "k_sigma": model.k_sigma, "truncated_mass": model.truncated_mass}
+        return _Binding(cat.cat_grid, cat.cat_points, params, "cat.cat_grid", notes)
+    if isinstance(model, PolarBanana):
+        from .kernels import polar
+
+        variant = polar.ROUGH if model.variant == "rough" else polar.IMPROVED
+        params = (
+            scalar(model.v0), scalar(model.t), scalar(model.sigma_a), scalar(model.sigma_omega),
+            variant, pose,
+        )
+        notes = {"variant": model.variant, "truncated_mass": model.truncated_mass}
+        return _Binding(polar.polar_grid, polar.polar_points, params, "polar.polar_grid", notes)
+    raise BananagridError(f"model = {type(model).__name__}: not a bananagrid model")
+
+
+def _cat_nodes(model) -> np.ndarray:
+    """Turn-rate nodes of the CAT scan: uniform over +-k_sigma sigma_omega."""
+    span = 2.0 * model.k_sigma * model.sigma_omega * model.t  # in omega t
+    n = int(min(CAT_MAX_NODES, max(CAT_MIN_NODES, math.ceil(span / CAT_NODE_SPACING) + 1)))
+    half = model.k_sigma * model.sigma_omega
+    return np.linspace(-half, half, n)
+
+
+def _bands(n_rows: int, threads: int) -> list[tuple[int, int]]:
+    """Split rows into contiguous bands: a few per thread so uneven rows even out."""
+    n_bands = max(1, min(n_rows, threads * 4))
+    edges = np.linspace(0, n_rows, n_bands + 1).round().astype(int)
+    return [(int(a), int(b)) for a, b in zip(edges[:-1], edges[1:]) if b > a]
+
+
+def _check_threads(threads) -> int:
+    if threads is None:
+        return default_threads()
+    if isinstance(threads, bool) or not isinstance(threads, (int, np.integer)) or threads < 1:
+        raise BananagridError(f"threads = {threads!r}: expected an integer >= 1")
+    return int(threads)
+
+
+def _run_bands(wp, launch_band, n: int, threads: int, device: str):
+    """Launch ``launch_band(start, stop)`` over bands, from a thread pool on the CPU."""
+    if device != "cpu" or threads == 1:
+        bands = [(0, n)] if device != "cpu" else _bands(n, 1)
+        for a, b in bands:
+            launch_band(a, b)
+        return
+    bands = _bands(n, threads)
+    with ThreadPoolExecutor(max_workers=threads) as pool:
+        for future in [pool.submit(launch_band, a, b) for a, b in bands]:
+            future.result()
+
+
+def rasterise(model, grid: Grid, *, dtype=np.float64, device: str = "cpu", threads=None) -> Raster:
+    """Density of ``model`` at the cell centres of ``grid``.
+
+    Parameters
+    ----------
+    model : CAT or PolarBanana
+    grid : Grid
+    dtype : float32 or float64, default float64
+        Kernel precision (and of ``values``).
+    device : str, default "cpu"
+        Warp device; "cuda" where present runs the same kernel source.
+    threads : int, optional
+        CPU worker threads (default: every core). Rows are split into bands, each a launch; a
+        Warp CPU launch uses one core and releases the GIL, so bands run in parallel. Results do
+        not depend on the number of threads.
+
+    Returns
+    -------
+    Raster
+        Raw (not normalised) densities per m^2, with the captured mass and provenance.
+    """
+    if not isinstance(grid, Grid):
+        raise BananagridError(f"grid = {grid!r}: expected a bananagrid.Grid")
+    wp, np_dtype, scalar = _scalar(dtype)
+    device = _check_device(wp, device)
+    threads = _check_threads(threads)
+    start = time.perf_counter()
+    binding = _bind(model, wp, np_dtype, scalar, device)
+    xs = wp.array(grid.x.astype(np_dtype), dtype=scalar, device=device)
+    ys = wp.array(grid.y.astype(np_dtype), dtype=scalar, device=device)
+    if device == "cpu":
+        values = np.zeros(grid.shape, dtype=np_dtype)
+        out = wp.array(values, dtype=scalar, copy=False, device=device)  # shares memory
+    else:
+        out = wp.zeros(grid.shape, dtype=scalar, device=device)
+
+    def launch_band(r0, r1):
+        wp.launch(
+            binding.grid_kernel, dim=(r1 - r0, grid.nx),
+            inputs=[xs, ys, r0, *binding.params, out], device=device,
+        )
+
+    _run_bands(wp, launch_band, grid.ny, threads, device)
+    wp.synchronize_device(device)
+    if device != "cpu":
+        values = out.numpy()
+    seconds = time.perf_counter() - start
+    _check_finite(values, model)
+    mass = float(np.sum(values, dtype=np.float64) * grid.cell_area)
+    provenance = {
+        **model.parameters(),
+        "kernel": binding.kernel_name,
+        "dtype": np_dtype.name,
+        "device": device,
+        "threads": threads if device == "cpu" else 1,
+        "seconds": seconds,
+        **binding.notes,
+    }
+    return Raster(values=values, grid=grid, mass=mass, normalised=False, provenance=provenance)
+
+
+def _check_finite(values: np.ndarray, model) -> None:
+    bad = ~np.isfinite(values)
+    if bad.any():
+        raise FloatingPointError(
+            f"{type(model).__name__}: {int(bad.sum())} non-finite densities (first at index "
+            f"{np.argwhere(bad)[0].tolist()}); please report this with the model parameters"
+        )
+
+
+#: Points per launch in evaluate_points (bounded so the pool gets several chunks).
+POINT_CHUNK = 65536
+
+
+def evaluate_points(model, x, y, *, dtype=np.float64, device: str = "cpu", threads=None) -> np.ndarray:
+    """Density of ``model`` at world points; ``x`` and ``y`` broadcast together."""
+    try:
+        bx, by = np.broadcast_arrays(np.asarray(x, dtype=float), np.asarray(y, dtype=float))
+    except ValueError:
+        raise BananagridError(
+            f"x and y: shapes {np.shape(x)} and {np.shape(y)} do not broadcast"
+        ) from None
+    if not (np.isfinite(bx).all() and np.isfinite(by).all()):
+        raise BananagridError("x, y: points must be finite (NaN or inf given)")
+    wp, np_dtype, scalar = _scalar(dtype)
+    device = _check_device(wp, device)
+    threads = _check_threads(threads)
+    shape = bx.shape
+    n = bx.size
+    if n == 0:
+        return np.zeros(shape, dtype=np_dtype)
+    binding = _bind(model, wp, np_dtype, scalar, device)
+    xs = wp.array(np.ascontiguousarray(bx.ravel(), dtype=np_dtype), dtype=scalar, device=device)
+    ys = wp.array(np.ascontiguousarray(by.ravel(), dtype=np_dtype), dtype=scalar, device=device)
+    out = wp.zeros(n, dtype=scalar, device=device)
+
+    def launch_chunk(a, b):
+        wp.launch(binding.points_kernel, dim=b - a, inputs=[xs, ys, a, *binding.params, out], device=device)
+
+    if device == "cpu":
+        chunks = [(a, min(n, a + POINT_CHUNK)) for a in range(0, n, POINT_CHUNK)]
+        with ThreadPoolExecutor(max_workers=threads) as pool:
+            for future in [pool.submit(launch_chunk, a, b) for a, b in chunks]:
+                future.result()
+    else:
+        launch_chunk(0, n)
+    wp.synchronize_device(device)
+    return out.numpy().reshape(shape)
+
+
+def evaluate_polar_moments(model, phi, *, dtype=np.float64, device: str = "cpu"):
+    """P_mu (8) and P_sigma (11) of a PolarBanana at angles ``phi`` (radians), via the kernel."""
+    phi = np.asarray(phi, dtype=float)
+    if not np.isfinite(phi).all():
+        raise BananagridError("phi: angles must be finite")
+    wp, np_dtype, scalar = _scalar(dtype)
+    device = _check_device(wp, device)
+    from .kernels import polar
+
+    flat = wp.array(np.ascontiguousarray(phi.ravel(), dtype=np_dtype), dtype=scalar, device=device)
+    mu = wp.zeros(phi.size, dtype=scalar, device=device)
+    sd = wp.zeros(phi.size, dtype=scalar, device=device)
+    if phi.size:
+        wp.launch(
+            polar.polar_moments, dim=phi.size,
+            inputs=[flat, scalar(model.v0), scalar(model.t), scalar(model.sigma_a), scalar(model.sigma_omega), mu, sd],
+            device=device,
+        )
+        wp.synchronize_device(device)
+    return mu.numpy().reshape(phi.shape), sd.numpy().reshape(phi.shape)

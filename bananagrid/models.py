@@ -1,0 +1,292 @@
+"""Motion models as frozen, validated parameter objects.
+
+A model holds its parameters and its pose (origin of its local frame in the world, heading as a
+bearing clockwise from north); it knows how to draw samples of its own generative story. Its
+densities are computed by the kernels through :mod:`bananagrid.raster`.
+"""
+
+from __future__ import annotations
+
+import math
+import warnings
+from dataclasses import dataclass, field, fields
+
+import numpy as np
+from scipy.special import erfc
+
+from .validate import BananagridError, finite, positive
+
+__all__ = ["Pose", "CAT", "PolarBanana", "Model"]
+
+
+@dataclass(frozen=True)
+class Pose:
+    """Where a model's local frame sits in the world.
+
+    Parameters
+    ----------
+    origin : (float, float)
+        World position of the last fix (local origin), metres.
+    heading : float
+        Initial heading as a bearing in radians clockwise from north: the local +y axis.
+    """
+
+    origin: tuple[float, float] = (0.0, 0.0)
+    heading: float = 0.0
+
+    def __post_init__(self):
+        try:
+            ox, oy = self.origin
+        except (TypeError, ValueError):
+            raise BananagridError(f"origin = {self.origin!r}: expected a pair (x, y)") from None
+        object.__setattr__(self, "origin", (finite("origin[0]", ox), finite("origin[1]", oy)))
+        object.__setattr__(self, "heading", finite("heading", self.heading))
+
+    def as_array(self) -> np.ndarray:
+        """(ox, oy, cos heading, sin heading): the kernels' pose argument."""
+        return np.array(
+            [self.origin[0], self.origin[1], math.cos(self.heading), math.sin(self.heading)]
+        )
+
+    def to_world(self, local: np.ndarray) -> np.ndarray:
+        """Map (n, 2) local points (x right of heading, y along it) to world (east, north)."""
+        c, s = math.cos(self.heading), math.sin(self.heading)
+        x, y = local[:, 0], local[:, 1]
+        return np.column_stack((self.origin[0] + x * c + y * s, self.origin[1] - x * s + y * c))
+
+
+def _check_rng(rng) -> np.random.Generator:
+    if rng is None:
+        raise BananagridError("rng: pass a numpy.random.Generator (e.g. numpy.random.default_rng(seed))")
+    if isinstance(rng, (int, np.integer)):
+        return np.random.default_rng(int(rng))
+    if not isinstance(rng, np.random.Generator):
+        raise BananagridError(f"rng = {rng!r}: expected a numpy.random.Generator or an integer seed")
+    return rng
+
+
+def _check_n(n) -> int:
+    if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < 0:
+        raise BananagridError(f"n = {n!r}: expected a non-negative integer")
+    return int(n)
+
+
+def cat_position(v0, t, a, omega) -> np.ndarray:
+    """Local CAT position of eq. (1) for arrays of accelerations and turn rates, shape (n, 2).
+
+    Written with u = omega t as  v0 t (A, B) + a t^2 (C, D)  (see ``kernels.common.cat_basis``);
+    C and D use their series below |u| = 1e-2, where the closed forms cancel.
+    """
+    u = np.asarray(omega, dtype=float) * t
+    a = np.asarray(a, dtype=float)
+    half = 0.5 * u
+    A = np.sin(half) * np.sinc(half / np.pi)  # np.sinc is normalised: sinc(x/pi) = sin(x)/x
+    B = np.sinc(u / np.pi)
+    small = np.abs(u) < 1e-2
+    us = np.where(small, 1.0, u)  # avoid 0/0 in the branch that is not used
+    C = np.where(small, u / 3 - u**3 / 30 + u**5 / 840, (np.sin(us) - us * np.cos(us)) / us**2)
+    D = np.where(small, 0.5 - u**2 / 8 + u**4 / 144, (np.cos(us) + us * np.sin(us) - 1) / us**2)
+    return np.column_stack((v0 * t * A + a * t * t * C, v0 * t * B + a * t * t * D))
+
+
+@dataclass(frozen=True)
+class CAT:
+    """Constant, unknown acceleration and turn rate (Gade et al.; eq. (1) of the polar-banana paper).
+
+    From the origin, heading +y at speed ``v0``, the target moves for ``t`` seconds with constant
+    acceleration a ~ N(0, sigma_a) and turn rate omega ~ N(0, sigma_omega). Its density at (x, y)
+    is the sum over every (a, omega) reaching (x, y) of g(a) g(omega) / |det d(x,y)/d(a,omega)|.
+
+    Parameters
+    ----------
+    v0 : float
+        Initial speed, m/s, > 0.
+    t : float
+        Elapsed time, s, > 0.
+    sigma_a : float
+        Standard deviation of the acceleration, m/s^2, > 0.
+    sigma_omega : float
+        Standard deviation of the turn rate, rad/s, > 0.
+    k_sigma : float, default 8
+        Turn rates are searched within +-k_sigma * sigma_omega; the mass beyond,
+        erfc(k_sigma / sqrt 2) (1.2e-15 at 8), is reported as ``truncated_mass`` and excluded.
+    pose : Pose, default origin (0, 0), heading north
+        Places the local frame in the world.
+    """
+
+    v0: float
+    t: float
+    sigma_a: float
+    sigma_omega: float
+    k_sigma: float = 8.0
+    pose: Pose = field(default_factory=Pose)
+
+    kind = "cat"
+
+    def __post_init__(self):
+        for name in ("v0", "t", "sigma_a", "sigma_omega"):
+            object.__setattr__(self, name, positive(name, getattr(self, name)))
+        k = positive("k_sigma", self.k_sigma)
+        if not 1.0 <= k <= 38.0:
+            raise BananagridError(f"k_sigma = {k!r}: must be in [1, 38] (beyond 38 the normal tail underflows)")
+        object.__setattr__(self, "k_sigma", k)
+        if not isinstance(self.pose, Pose):
+            raise BananagridError(f"pose = {self.pose!r}: expected a bananagrid.Pose")
+
+    @property
+    def truncated_mass(self) -> float:
+        """Probability of |omega| > k_sigma sigma_omega, left out of the density."""
+        return float(erfc(self.k_sigma / math.sqrt(2.0)))
+
+    def parameters(self) -> dict:
+        """Plain-data parameters for provenance and recordings."""
+        return _parameters(self)
+
+    def sample(self, n: int, rng) -> np.ndarray:
+        """Draw ``n`` world positions: a and omega from their normal laws, then eq. (1).
+
+        The turn rate is not truncated here (the truncated mass is below 1e-15 by default).
+        """
+        n, rng = _check_n(n), _check_rng(rng)
+        a = rng.normal(0.0, self.sigma_a, n)
+        omega = rng.normal(0.0, self.sigma_omega, n)
+        return self.pose.to_world(cat_position(self.v0, self.t, a, omega))
+
+    def pdf(self, x, y, *, dtype=np.float64, device="cpu"):
+        """Density per m^2 at world points (broadcast x, y), through the same kernels as rasterise."""
+        from .raster import evaluate_points
+
+        return evaluate_points(self, x, y, dtype=dtype, device=device)
+
+
+VARIANTS = ("rough", "improved")
+
+
+@dataclass(frozen=True)
+class PolarBanana:
+    """Polar approximation of the CAT density (Sections 2 and 5 of the polar-banana paper).
+
+    phi ~ N(0, sigma_omega t / 2) is the bearing from the initial heading, r | phi normal with
+    mean and SD ``v0 t sinc(phi)`` and ``sigma_a t^2 / 2`` (``variant="rough"``) or P_mu (8) and
+    P_sigma (11) (``variant="improved"``); the density in the plane is
+    g(phi) g(r; mean, sd) / r.
+
+    Parameters
+    ----------
+    v0, t, sigma_a, sigma_omega : float
+        As for :class:`CAT`, all > 0.
+    variant : {"rough", "improved"}, default "improved"
+    sigma_heading : float, default 0
+        Standard deviation of the initial heading (Section 7); only 0 is supported so far.
+    pose : Pose
+
+    Notes
+    -----
+    P_sigma (11) turns negative where phi^2 > sigma_omega^2 (t^2 / 12 + 6 v0^2 / sigma_a^2); the
+    improved density is set to 0 there and a warning is issued when that angle is below pi.
+    Samples are drawn from the law restricted to |phi| <= pi and r > 0, the support of the
+    plane density.
+    """
+
+    v0: float
+    t: float
+    sigma_a: float
+    sigma_omega: float
+    variant: str = "improved"
+    sigma_heading: float = 0.0
+    pose: Pose = field(default_factory=Pose)
+
+    kind = "polar"
+
+    def __post_init__(self):
+        for name in ("v0", "t", "sigma_a", "sigma_omega"):
+            object.__setattr__(self, name, positive(name, getattr(self, name)))
+        if self.variant not in VARIANTS:
+            raise BananagridError(f"variant = {self.variant!r}: must be one of {', '.join(VARIANTS)}")
+        sh = finite("sigma_heading", self.sigma_heading)
+        if sh != 0.0:
+            raise BananagridError(
+                f"sigma_heading = {sh!r}: initial-heading noise (Section 7) is not implemented yet; use 0"
+            )
+        if not isinstance(self.pose, Pose):
+            raise BananagridError(f"pose = {self.pose!r}: expected a bananagrid.Pose")
+        if self.variant == "improved" and self.sigma_positive_limit < math.pi:
+            warnings.warn(
+                f"P_sigma (11) is not positive for |phi| > {self.sigma_positive_limit:.4g} rad; "
+                "the improved density is 0 there",
+                stacklevel=3,
+            )
+
+    @property
+    def sigma_phi(self) -> float:
+        """SD of the bearing phi, sigma_omega t / 2."""
+        return 0.5 * self.sigma_omega * self.t
+
+    @property
+    def sigma_positive_limit(self) -> float:
+        """|phi| beyond which P_sigma (11) is not positive."""
+        return self.sigma_omega * math.sqrt(self.t**2 / 12 + 6 * self.v0**2 / self.sigma_a**2)
+
+    @property
+    def truncated_mass(self) -> float:
+        """Mass of phi beyond +-pi, outside the plane density."""
+        return float(erfc(math.pi / (self.sigma_phi * math.sqrt(2.0))))
+
+    def parameters(self) -> dict:
+        return _parameters(self)
+
+    def radial_law(self, phi) -> tuple[np.ndarray, np.ndarray]:
+        """Mean and SD of r | phi for this variant, as float64 arrays."""
+        phi = np.asarray(phi, dtype=float)
+        if self.variant == "rough":
+            mean = self.v0 * self.t * np.sinc(phi / np.pi)
+            return mean, np.full_like(mean, 0.5 * self.sigma_a * self.t**2)
+        return self.p_mu(phi), self.p_sigma(phi)
+
+    def p_mu(self, phi, *, dtype=np.float64, device="cpu") -> np.ndarray:
+        """P_mu(phi), eq. (8): the improved approximation's mean of r given phi (kernel)."""
+        from .raster import evaluate_polar_moments
+
+        return evaluate_polar_moments(self, phi, dtype=dtype, device=device)[0]
+
+    def p_sigma(self, phi, *, dtype=np.float64, device="cpu") -> np.ndarray:
+        """P_sigma(phi), eq. (11): the improved approximation's SD of r given phi (kernel)."""
+        from .raster import evaluate_polar_moments
+
+        return evaluate_polar_moments(self, phi, dtype=dtype, device=device)[1]
+
+    def sample(self, n: int, rng) -> np.ndarray:
+        """Draw ``n`` world positions: phi, then r given phi (rejecting |phi| > pi, r <= 0)."""
+        n, rng = _check_n(n), _check_rng(rng)
+        out = np.empty((0, 2))
+        while len(out) < n:
+            m = max(2 * (n - len(out)), 16)
+            phi = rng.normal(0.0, self.sigma_phi, m)
+            mean, sd = self.radial_law(phi)
+            ok = (np.abs(phi) <= np.pi) & (sd > 0)
+            r = rng.normal(mean[ok], sd[ok])
+            keep = r > 0
+            local = np.column_stack((r[keep] * np.sin(phi[ok][keep]), r[keep] * np.cos(phi[ok][keep])))
+            out = np.vstack((out, local))
+        return self.pose.to_world(out[:n])
+
+    def pdf(self, x, y, *, dtype=np.float64, device="cpu"):
+        """Density per m^2 at world points (broadcast x, y), through the same kernels as rasterise."""
+        from .raster import evaluate_points
+
+        return evaluate_points(self, x, y, dtype=dtype, device=device)
+
+
+Model = CAT | PolarBanana
+
+
+def _parameters(model) -> dict:
+    out = {"model": type(model).__name__}
+    for f in fields(model):
+        value = getattr(model, f.name)
+        if isinstance(value, Pose):
+            out["origin_x"], out["origin_y"] = value.origin
+            out["heading"] = value.heading
+        else:
+            out[f.name] = value
+    return out

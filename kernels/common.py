@@ -1,0 +1,122 @@
+"""Shared device math: generic over float32 and float64 (``Any`` scalars).
+
+Warp has no log1p, hypot, Bessel or normal-pdf builtins, and its closed forms lose digits near
+zero, so the small-argument series live here once and every kernel calls them.
+"""
+
+from typing import Any
+
+import warp as wp
+
+#: 1 / sqrt(2 pi)
+INV_SQRT_2PI = 0.3989422804014327
+
+#: Below this |u| the CAT basis functions switch from closed forms to their Taylor series. At
+#: |u| = 1 the series' 10th term is below 1e-19 relative, and the closed forms' cancellation
+#: (sin u - u cos u ~ u^3 / 3) costs at most one digit above it.
+SERIES_SWITCH = 1.0
+
+
+
+@wp.func
+def sinc(x: Any):
+    """Unnormalised sinc, sin(x) / x, with sinc(0) = 1 (ERRATA: not numpy's normalised sinc)."""
+    if wp.abs(x) < type(x)(1.0e-4):
+        return type(x)(1.0) - x * x / type(x)(6.0)
+    return wp.sin(x) / x
+
+
+@wp.func
+def normal_pdf(x: Any, mu: Any, sigma: Any):
+    """g(x; mu, sigma) = exp(-((x - mu) / sigma)^2 / 2) / (sigma sqrt(2 pi))."""
+    z = (x - mu) / sigma
+    return type(x)(INV_SQRT_2PI) / sigma * wp.exp(type(x)(-0.5) * z * z)
+
+
+@wp.func
+def scc(phi: Any):
+    """scc(phi) = (4 sinc(phi) - cos(phi)) / 3, eq. (7) of the polar-banana paper."""
+    return (type(phi)(4.0) * sinc(phi) - wp.cos(phi)) / type(phi)(3.0)
+
+
+#: Taylor coefficients in z = u^2 of C / u, D, C' and D' / u (see ``cat_basis``), from
+#: C = sum (-1)^(n+1) 2n u^(2n-1) / (2n+1)!, D = sum (-1)^(n+1) (2n-1) u^(2n-2) / (2n)!, their
+#: termwise derivatives, n = 1..10. Horner with constants: no divisions on the hot path.
+
+
+@wp.func
+def horner10(z: Any, c0: Any, c1: Any, c2: Any, c3: Any, c4: Any, c5: Any, c6: Any, c7: Any, c8: Any, c9: Any):
+    """c0 + c1 z + ... + c9 z^9 by Horner's rule."""
+    return c0 + z * (c1 + z * (c2 + z * (c3 + z * (c4 + z * (c5 + z * (c6 + z * (c7 + z * (c8 + z * c9))))))))
+
+
+@wp.func
+def series_c_over_u(z: Any):
+    """C(u) / u as a series in z = u^2."""
+    return horner10(z, type(z)(0.3333333333333333), type(z)(-0.03333333333333333), type(z)(0.0011904761904761906), type(z)(-2.2045855379188714e-05), type(z)(2.505210838544172e-07), type(z)(-1.9270852604185937e-09), type(z)(1.0706029224547743e-11), type(z)(-4.498331606952833e-14), type(z)(1.4797143443923793e-16), type(z)(-3.9145882126782523e-19))
+
+
+@wp.func
+def series_d(z: Any):
+    """D(u) as a series in z = u^2."""
+    return horner10(z, type(z)(0.5), type(z)(-0.125), type(z)(0.006944444444444444), type(z)(-0.00017361111111111112), type(z)(2.48015873015873e-06), type(z)(-2.296443268665491e-08), type(z)(1.4911969277048643e-10), type(z)(-7.169215998581078e-13), type(z)(2.6552651846596585e-15), type(z)(-7.809603484293113e-18))
+
+
+@wp.func
+def series_dc(z: Any):
+    """C'(u) as a series in z = u^2."""
+    return horner10(z, type(z)(0.3333333333333333), type(z)(-0.1), type(z)(0.005952380952380952), type(z)(-0.00015432098765432098), type(z)(2.2546897546897547e-06), type(z)(-2.1197937864604532e-08), type(z)(1.3917837991912066e-10), type(z)(-6.74749741042925e-13), type(z)(2.515514385467045e-15), type(z)(-7.437717604088679e-18))
+
+
+@wp.func
+def series_dd_over_u(z: Any):
+    """D'(u) / u as a series in z = u^2."""
+    return horner10(z, type(z)(-0.25), type(z)(0.027777777777777776), type(z)(-0.0010416666666666667), type(z)(1.984126984126984e-05), type(z)(-2.296443268665491e-07), type(z)(1.789436313245837e-09), type(z)(-1.0036902398013508e-11), type(z)(4.2484242954554536e-14), type(z)(-1.4057286271727604e-16), type(z)(0.0))
+
+
+@wp.func
+def cat_basis(u: Any):
+    """The CAT position's dimensionless basis at u = omega t, eq. (1) of the polar-banana paper.
+
+    With x, y as in eq. (1),  (x, y) = v0 t (A, B) + a t^2 (C, D)  where
+
+        A = (1 - cos u) / u,          B = sin(u) / u,
+        C = (sin u - u cos u) / u^2,  D = (cos u + u sin u - 1) / u^2,
+
+    and dA/du = D, dB/du = -C. Returns (A, B, C, D, dC/du, dD/du); below SERIES_SWITCH the
+    Taylor series are summed (no 0/0 at omega = 0, no cancellation):
+
+        C  = sum_{n>=1} (-1)^(n+1) 2n u^(2n-1) / (2n+1)!
+        D  = sum_{n>=1} (-1)^(n+1) (2n-1) u^(2n-2) / (2n)!
+        C' = sum_{n>=1} (-1)^(n+1) 2n (2n-1) u^(2n-2) / (2n+1)!
+        D' = sum_{n>=2} (-1)^(n+1) (2n-1) (2n-2) u^(2n-3) / (2n)!
+    """
+    one = type(u)(1.0)
+    two = type(u)(2.0)
+    half_u = u * type(u)(0.5)
+    a_fn = wp.sin(half_u) * sinc(half_u)  # (1 - cos u) / u without cancellation
+    b_fn = sinc(u)
+    if wp.abs(u) < type(u)(SERIES_SWITCH):
+        z = u * u
+        return a_fn, b_fn, u * series_c_over_u(z), series_d(z), series_dc(z), u * series_dd_over_u(z)
+    s = wp.sin(u)
+    c = wp.cos(u)
+    u2 = u * u
+    u3 = u2 * u
+    c_fn = (s - u * c) / u2
+    d_fn = (c + u * s - one) / u2
+    dc_fn = (u2 * s - two * s + two * u * c) / u3
+    dd_fn = (u2 * c - two * c - two * u * s + two) / u3
+    return a_fn, b_fn, c_fn, d_fn, dc_fn, dd_fn
+
+
+@wp.func
+def world_to_local_x(x: Any, y: Any, ox: Any, oy: Any, cos_h: Any, sin_h: Any):
+    """x coordinate in a model's local frame (+y along the heading, a bearing from north)."""
+    return (x - ox) * cos_h - (y - oy) * sin_h
+
+
+@wp.func
+def world_to_local_y(x: Any, y: Any, ox: Any, oy: Any, cos_h: Any, sin_h: Any):
+    """y coordinate in a model's local frame (+y along the heading, a bearing from north)."""
+    return (x - ox) * sin_h + (y - oy) * cos_h
