@@ -1,0 +1,131 @@
+"""Bad input: one test per kind of bad parameter, each asserting its message."""
+
+import math
+
+import numpy as np
+import pytest
+
+import bananagrid as bg
+from bananagrid.grid import MAX_CELLS
+
+from cases import FIG1
+
+BAD_NUMBERS = [
+    (0.0, "must be > 0"),
+    (-1.0, "must be > 0"),
+    (math.nan, "must be finite"),
+    (math.inf, "must be finite"),
+    ("3", "expected a real number"),
+]
+
+
+@pytest.mark.parametrize("model_cls", [bg.CAT, bg.PolarBanana])
+@pytest.mark.parametrize("name", ["v0", "t", "sigma_a", "sigma_omega"])
+@pytest.mark.parametrize("value, message", BAD_NUMBERS)
+def test_model_parameter_rejected(model_cls, name, value, message):
+    params = dict(FIG1, **{name: value})
+    with pytest.raises(bg.BananagridError) as err:
+        model_cls(**params)
+    assert str(err.value).startswith(f"{name} = ")
+    assert message in str(err.value)
+
+
+def test_k_sigma_range():
+    with pytest.raises(bg.BananagridError, match=r"k_sigma = 0.5: must be in \[1, 38\]"):
+        bg.CAT(**FIG1, k_sigma=0.5)
+
+
+def test_unknown_variant():
+    with pytest.raises(bg.BananagridError, match="variant = 'smooth': must be one of rough, improved"):
+        bg.PolarBanana(**FIG1, variant="smooth")
+
+
+def test_heading_noise_not_yet_supported():
+    with pytest.raises(bg.BananagridError, match="sigma_heading = 0.1: initial-heading noise"):
+        bg.PolarBanana(**FIG1, sigma_heading=0.1)
+
+
+def test_pose_rejects_nan_origin_and_heading():
+    with pytest.raises(bg.BananagridError, match=r"origin\[1\] = nan: must be finite"):
+        bg.Pose(origin=(0.0, math.nan))
+    with pytest.raises(bg.BananagridError, match="heading = inf: must be finite"):
+        bg.Pose(heading=math.inf)
+    with pytest.raises(bg.BananagridError, match="origin = 3.0: expected a pair"):
+        bg.Pose(origin=3.0)
+
+
+def test_improved_warns_where_p_sigma_turns_negative():
+    # sigma_positive_limit = sigma_omega sqrt(t^2/12 + 6 v0^2 / sigma_a^2) = 0.1 * sqrt(1/12 + 24) < pi
+    with pytest.warns(UserWarning, match="P_sigma .* not positive"):
+        bg.PolarBanana(v0=10.0, t=1.0, sigma_a=5.0, sigma_omega=0.1)
+
+
+@pytest.mark.parametrize(
+    "kwargs, message",
+    [
+        (dict(x=(0.0, 0.0), y=(0.0, 1.0), step=1.0), r"x = \(0.0, 0.0\): the upper bound must exceed the lower"),
+        (dict(x=(0.0, 1.0), y=(5.0, 1.0), step=1.0), r"y = \(5.0, 1.0\): the upper bound must exceed the lower"),
+        (dict(x=(0.0, 1.0), y=(0.0, 1.0), step=0.0), "step = 0.0: must be > 0"),
+        (dict(x=(0.0, 1.0), y=(0.0, 1.0), step=-2.0), "step = -2.0: must be > 0"),
+        (dict(x=(0.0, math.nan), y=(0.0, 1.0), step=1.0), r"x\[1\] = nan: must be finite"),
+        (dict(x=(0.0, 1.0), y=(-math.inf, 1.0), step=1.0), r"y\[0\] = -inf: must be finite"),
+        (dict(x=0.0, y=(0.0, 1.0), step=1.0), "x = 0.0: expected bounds"),
+        (dict(x=(0.0, 1.0), y=(0.0, 1.0)), "step .* is required"),
+    ],
+)
+def test_grid_bounds_rejected(kwargs, message):
+    with pytest.raises(bg.BananagridError, match=message):
+        bg.Grid.from_bounds(**kwargs)
+
+
+def test_gigantic_grid_states_memory():
+    with pytest.raises(bg.BananagridError) as err:
+        bg.Grid.from_bounds(x=(0.0, 1e6), y=(0.0, 1e6), step=1.0)
+    message = str(err.value)
+    assert "1000000 x 1000000" in message and "7450.6 GiB" in message and f"{MAX_CELLS:,}" in message
+
+
+def test_explicit_grid_rejects_bad_counts():
+    with pytest.raises(bg.BananagridError, match="nx = 0: must be >= 1"):
+        bg.Grid(origin=(0.0, 0.0), dx=1.0, dy=1.0, nx=0, ny=3)
+    with pytest.raises(bg.BananagridError, match="ny = 2.5: expected an integer"):
+        bg.Grid(origin=(0.0, 0.0), dx=1.0, dy=1.0, nx=2, ny=2.5)
+
+
+def test_grid_cell_centres_and_rounding():
+    grid = bg.Grid.from_bounds(x=(-3000.0, 3000.0), y=(-200.0, 3400.0), step=4.0)
+    assert grid.shape == (900, 1500)
+    assert grid.x[0] == -2998.0 and grid.x[-1] == 2998.0
+    assert grid.y[0] == -198.0 and grid.y[-1] == 3398.0
+    # a non-whole extent is covered by moving the upper edge out to the next whole cell
+    grid = bg.Grid.from_bounds(x=(0.0, 10.5), y=(0.0, 1.0), step=1.0)
+    assert grid.nx == 11 and grid.extent[1] == 11.0
+
+
+def test_rasterise_rejects_bad_dtype_device_threads():
+    model = bg.CAT(**FIG1)
+    grid = bg.Grid.from_bounds(x=(0.0, 10.0), y=(0.0, 10.0), step=5.0)
+    with pytest.raises(bg.BananagridError, match="dtype = .*int32.*: must be float32 or float64"):
+        bg.rasterise(model, grid, dtype=np.int32)
+    with pytest.raises(bg.BananagridError, match="device = 'tpu': not available here"):
+        bg.rasterise(model, grid, device="tpu")
+    with pytest.raises(bg.BananagridError, match="threads = 0: expected an integer >= 1"):
+        bg.rasterise(model, grid, threads=0)
+    with pytest.raises(bg.BananagridError, match="grid = .*: expected a bananagrid.Grid"):
+        bg.rasterise(model, "grid")
+
+
+def test_pdf_rejects_nan_points_and_bad_shapes():
+    model = bg.PolarBanana(**FIG1)
+    with pytest.raises(bg.BananagridError, match="points must be finite"):
+        model.pdf([0.0, math.nan], [1.0, 2.0])
+    with pytest.raises(bg.BananagridError, match="do not broadcast"):
+        model.pdf(np.zeros(3), np.zeros(4))
+
+
+def test_sample_rejects_bad_n_and_rng():
+    model = bg.CAT(**FIG1)
+    with pytest.raises(bg.BananagridError, match="n = -1: expected a non-negative integer"):
+        model.sample(-1, np.random.default_rng(0))
+    with pytest.raises(bg.BananagridError, match="rng = 'x': expected a numpy.random.Generator"):
+        model.sample(3, "x")
