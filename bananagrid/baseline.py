@@ -1,0 +1,140 @@
+"""Vectorised NumPy float64 versions of the kernels' algorithms: the baseline of ``bananagrid bench``.
+
+They compute the same densities as the Warp kernels (same root-finding scheme for CAT), so the
+benchmark's ratio measures the kernels, not a change of algorithm. The tests do not use these:
+they check the kernels against independent oracles of their own.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+__all__ = ["cat_density", "polar_density"]
+
+_INV_SQRT_2PI = 0.3989422804014327
+
+
+def _normal_pdf(x, mu, sigma):
+    z = (x - mu) / sigma
+    return _INV_SQRT_2PI / sigma * np.exp(-0.5 * z * z)
+
+
+def _sinc(x):
+    return np.sinc(x / np.pi)  # numpy's sinc is the normalised one
+
+
+def _basis(u):
+    """(A, B, C, D, C', D') of ``kernels.common.cat_basis``; 6-term series below |u| = 0.1."""
+    u = np.asarray(u, dtype=float)
+    small = np.abs(u) < 0.1
+    us = np.where(small, 1.0, u)
+    s, c = np.sin(us), np.cos(us)
+    z = u * u
+    a_fn = np.sin(0.5 * u) * _sinc(0.5 * u)
+    b_fn = _sinc(u)
+    c_fn = np.where(small, u * (1 / 3 - z / 30 + z**2 / 840 - z**3 / 45360 + z**4 / 3991680), (s - us * c) / us**2)
+    d_fn = np.where(small, 0.5 - z / 8 + z**2 / 144 - z**3 / 5760 + z**4 / 403200, (c + us * s - 1) / us**2)
+    dc_fn = np.where(small, 1 / 3 - z / 10 + z**2 / 168 - z**3 / 6480 + z**4 / 443520, (us**2 * s - 2 * s + 2 * us * c) / us**3)
+    dd_fn = np.where(small, u * (-1 / 4 + z / 36 - z**2 / 960 + z**3 / 50400), (us**2 * c - 2 * c - 2 * us * s + 2) / us**3)
+    return a_fn, b_fn, c_fn, d_fn, dc_fn, dd_fn
+
+
+def _coefficients(omega, v0, t):
+    a_fn, b_fn, c_fn, d_fn, dc_fn, dd_fn = _basis(omega * t)
+    hx, hy = t * t * c_fn, t * t * d_fn
+    dhx, dhy = t**3 * dc_fn, t**3 * dd_fn
+    fx, fy = t * a_fn, t * b_fn
+    h2 = hx * hx + hy * hy
+    return dict(
+        hx=hx, hy=hy, c=v0 * (hx * fy - hy * fx), dhx=dhx, dhy=dhy,
+        dc=v0 * (dhx * fy - dhy * fx - h2), ax=hx / h2, ay=hy / h2, a0=v0 * (hx * fx + hy * fy) / h2,
+    )
+
+
+def _residual(x, y, omega, v0, t):
+    k = _coefficients(omega, v0, t)
+    f = k["hx"] * y - k["hy"] * x - k["c"]
+    df = k["dhx"] * y - k["dhy"] * x - k["dc"]
+    return f, df, k["ax"] * x + k["ay"] * y - k["a0"]
+
+
+def _root_density(x, y, lo, hi, f_lo, v0, t, sigma_a, sigma_omega, iterations=60):
+    """Vectorised bracketed Newton (bisection fallback) from the regula-falsi point."""
+    a, b, fa = lo.copy(), hi.copy(), f_lo.copy()
+    w = 0.5 * (a + b)
+    for _ in range(iterations):
+        f, df, acc = _residual(x, y, w, v0, t)
+        same = (f > 0) == (fa > 0)
+        a = np.where(same, w, a)
+        fa = np.where(same, f, fa)
+        b = np.where(same, b, w)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            newton = w - f / df
+        ok = (newton > a) & (newton < b)
+        w_new = np.where(ok, newton, 0.5 * (a + b))
+        done = np.abs(w_new - w) <= 1e-15 * (np.abs(w) + sigma_omega)
+        w = w_new
+        if done.all():
+            break
+    f, df, acc = _residual(x, y, w, v0, t)
+    return _normal_pdf(acc, 0.0, sigma_a) * _normal_pdf(w, 0.0, sigma_omega) / np.abs(df)
+
+
+def cat_density(x, y, v0, t, sigma_a, sigma_omega, omegas, *, prune_sigmas=38.0, chunk=200_000):
+    """Exact CAT density at local points (x, y) by the kernels' scan-and-refine scheme in NumPy."""
+    x = np.asarray(x, dtype=float).ravel()
+    y = np.asarray(y, dtype=float).ravel()
+    table = _coefficients(np.asarray(omegas, dtype=float), v0, t)
+    out = np.zeros(x.size)
+    a_cut = prune_sigmas * sigma_a
+    for start in range(0, x.size, chunk):
+        xs, ys = x[start : start + chunk, None], y[start : start + chunk, None]
+        f = table["hx"] * ys - table["hy"] * xs - table["c"]
+        g = table["dhx"] * ys - table["dhy"] * xs - table["dc"]
+        acc = table["ax"] * xs + table["ay"] * ys - table["a0"]
+        negligible = ((acc[:, :-1] > a_cut) & (acc[:, 1:] > a_cut)) | ((acc[:, :-1] < -a_cut) & (acc[:, 1:] < -a_cut))
+        crossing = ((f[:, 1:] >= 0) != (f[:, :-1] >= 0)) & ~negligible
+        cell, k = np.nonzero(crossing)
+        dens = _root_density(
+            xs[cell, 0], ys[cell, 0], omegas[k], omegas[k + 1], f[cell, k], v0, t, sigma_a, sigma_omega
+        )
+        block = np.zeros(xs.shape[0])
+        np.add.at(block, cell, dens)
+        # intervals where |F| has an interior minimum: bisection on F' for it, then two roots
+        fold = (f[:, :-1] * g[:, :-1] < 0) & (f[:, 1:] * g[:, 1:] > 0) & ~negligible
+        cell, k = np.nonzero(fold)
+        if cell.size:
+            xf, yf = xs[cell, 0], ys[cell, 0]
+            lo, hi, g_lo = omegas[k].copy(), omegas[k + 1].copy(), g[cell, k]
+            for _ in range(60):
+                mid = 0.5 * (lo + hi)
+                _, g_mid, _ = _residual(xf, yf, mid, v0, t)
+                same = (g_mid > 0) == (g_lo > 0)
+                lo, g_lo, hi = np.where(same, mid, lo), np.where(same, g_mid, g_lo), np.where(same, hi, mid)
+            mid = 0.5 * (lo + hi)
+            f_mid, _, _ = _residual(xf, yf, mid, v0, t)
+            dips = (f_mid >= 0) != (f[cell, k + 1] >= 0)
+            for left, right, f_left in ((omegas[k], mid, f[cell, k]), (mid, omegas[k + 1], f_mid)):
+                d = _root_density(xf[dips], yf[dips], left[dips], right[dips], f_left[dips], v0, t, sigma_a, sigma_omega)
+                np.add.at(block, cell[dips], d)
+        out[start : start + chunk] = block
+    return out
+
+
+def polar_density(x, y, v0, t, sigma_a, sigma_omega, variant="improved"):
+    """Polar-banana density at local points: g(phi) g(r; mean, sd) / r, eqs. (8), (11)."""
+    x = np.asarray(x, dtype=float)
+    y = np.asarray(y, dtype=float)
+    r = np.hypot(x, y)
+    phi = np.arctan2(x, y)
+    if variant == "rough":
+        mean = v0 * t * _sinc(phi)
+        sd = np.full_like(r, 0.5 * sigma_a * t * t)
+    else:
+        scc = (4 * _sinc(phi) - np.cos(phi)) / 3
+        ratio = phi / (0.5 * sigma_omega * t)
+        mean = v0 * t * _sinc(phi) + sigma_a**2 * t**3 / (12 * v0) * (ratio**2 - 1) * scc
+        sd = 0.5 * sigma_a * t * t * (1 + sigma_a**2 / (6 * v0**2) * (t**2 / 12 - phi**2 / sigma_omega**2)) * scc
+    with np.errstate(divide="ignore", invalid="ignore"):
+        dens = _normal_pdf(phi, 0.0, 0.5 * sigma_omega * t) * _normal_pdf(r, mean, sd) / r
+    return np.where((r > 0) & (sd > 0), dens, 0.0)

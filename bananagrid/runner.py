@@ -1,0 +1,224 @@
+"""Run a scene: rasterise every layer at every time, record it, and optionally export arrays.
+
+One scene gives one recording ``OUT/NAME.rrd`` (and ``OUT/NAME.npz`` with ``npz=True``). Both
+are written under temporary names and renamed only when everything succeeded, so a failure
+leaves no file at the final paths.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import time
+import zipfile
+from collections.abc import Callable
+from pathlib import Path
+
+import numpy as np
+
+from . import __version__
+from .raster import Raster, rasterise
+from .record import (
+    default_blueprint,
+    log_raster,
+    log_scene_text,
+    recording_id_for,
+    set_elapsed,
+    write_recording,
+)
+from .scene import Layer, Scene
+from .validate import BananagridError
+
+__all__ = ["run_scene", "array_key", "RUN_ONLY_PROVENANCE"]
+
+#: Provenance keys that describe the run rather than the result. They stay out of the
+#: recording, so that running a scene twice gives equal recordings; the summary rows and the
+#: .npz provenance keep them.
+RUN_ONLY_PROVENANCE = ("seconds", "threads")
+
+Progress = Callable[[int, int, str], None]
+
+
+def run_scene(
+    scene: Scene,
+    out_dir: str | os.PathLike,
+    *,
+    npz: bool = False,
+    threads: int | None = None,
+    progress: Progress | None = None,
+) -> list[dict]:
+    """Rasterise, record and optionally export every layer of ``scene`` at every time.
+
+    Parameters
+    ----------
+    scene : Scene
+        A validated scene (see :func:`bananagrid.scene.load_scene`).
+    out_dir : path-like
+        Existing directory; receives ``NAME.rrd`` and, with ``npz``, ``NAME.npz``.
+    npz : bool, default False
+        Also write the arrays: ``x``, ``y`` (cell centres, m), one ``LAYER__tT`` array of
+        shape ``(ny, nx)`` per layer and time (density per m^2, normalised when the scene
+        says so, rows south to north) and ``provenance`` (a JSON string).
+    threads : int, optional
+        CPU threads per rasterisation (default: every core).
+    progress : callable, optional
+        ``progress(done, total, label)``, called before each layer and time with ``done``
+        items finished so far, and after it (computed and logged) with ``done + 1``.
+
+    Returns
+    -------
+    list of dict
+        One row per layer and time: ``scene``, ``layer``, ``t`` (s), ``cells``, ``mass``
+        (raw captured mass), ``peak`` (largest recorded density, m^-2) and ``seconds``
+        (rasterise and normalise, wall clock).
+    """
+    out_dir = Path(out_dir)
+    if not out_dir.is_dir():
+        raise BananagridError(f"{out_dir}: output directory does not exist")
+    rrd_path = out_dir / f"{scene.name}.rrd"
+    npz_path = out_dir / f"{scene.name}.npz"
+    archive = None
+    rows: list[dict] = []
+
+    def build(rec) -> None:
+        # Runs on this thread: set_elapsed is per thread.
+        log_scene_text(rec, scene.text)
+        jobs = scene.jobs()
+        for k, (layer, t) in enumerate(jobs):
+            label = f"{layer.name} t={t:g} s"
+            if progress is not None:
+                progress(k, len(jobs), label)
+            raster, seconds = compute(scene, layer, t, threads=threads)
+            set_elapsed(rec, t)
+            log_raster(
+                rec, f"layers/{layer.name}", _recordable(raster),
+                levels=scene.levels, colormap=scene.colormap,
+            )
+            if archive is not None:
+                archive.add(layer.name, t, raster)
+            rows.append(_row(scene, layer, t, raster, seconds))
+            if progress is not None:
+                progress(k + 1, len(jobs), label)
+        if archive is not None:
+            archive.close()
+
+    try:
+        archive = _Archive(npz_path, scene) if npz else None
+        write_recording(
+            rrd_path, build, recording_id=_recording_id(scene),
+            blueprint=default_blueprint([f"layers/{layer.name}" for layer in scene.layers]),
+        )
+        if archive is not None:
+            try:
+                archive.publish()
+            except BaseException:
+                rrd_path.unlink(missing_ok=True)  # all or nothing: no recording without its arrays
+                raise
+    finally:
+        if archive is not None:
+            archive.discard()
+    return rows
+
+
+def compute(scene: Scene, layer: Layer, t: float, *, threads: int | None = None) -> tuple[Raster, float]:
+    """One layer at elapsed time ``t``: the raster (normalised if the scene says so) and seconds."""
+    start = time.perf_counter()
+    raster = rasterise(layer.model(t), scene.grid, dtype=np.dtype(scene.dtype), threads=threads)
+    if scene.normalise:
+        if not raster.mass > 0.0:
+            raise BananagridError(
+                f"{scene.source}: layers.{layer.name} at t = {t:g} s: the grid captured no mass, "
+                "so it cannot be normalised; move or enlarge the grid, or set output.normalise = false"
+            )
+        raster = raster.normalise()
+    return raster, time.perf_counter() - start
+
+
+def array_key(layer: str, t: float) -> str:
+    """Name of a layer's array at time ``t`` in the .npz: ``LAYER__tT`` (``T`` shortest form)."""
+    return f"{layer}__t{np.format_float_positional(float(t), trim='-')}"
+
+
+def _recordable(raster: Raster) -> Raster:
+    """The raster without run-dependent provenance (timings, threads)."""
+    kept = {k: v for k, v in raster.provenance.items() if k not in RUN_ONLY_PROVENANCE}
+    return Raster(
+        values=raster.values, grid=raster.grid, mass=raster.mass,
+        normalised=raster.normalised, quantity=raster.quantity, provenance=kept,
+    )
+
+
+def _recording_id(scene: Scene) -> str:
+    """Depends on the scene text and the grid actually used (a step override changes it)."""
+    return recording_id_for(scene.text + "\n" + json.dumps(scene.grid.describe(), sort_keys=True))
+
+
+def _row(scene: Scene, layer: Layer, t: float, raster: Raster, seconds: float) -> dict:
+    """A summary row of one computed layer."""
+    return {
+        "scene": scene.name, "layer": layer.name, "t": float(t), "cells": scene.grid.nx * scene.grid.ny,
+        "mass": raster.mass, "peak": raster.peak, "seconds": seconds,
+    }
+
+
+class _Archive:
+    """The .npz export, streamed into a hidden temporary file and renamed at the end.
+
+    Arrays are added one at a time (no need to hold every raster), in numpy's .npz layout: a
+    zip of ``KEY.npy`` members, deflated, readable with :func:`numpy.load` without pickle.
+    """
+
+    def __init__(self, path: Path, scene: Scene):
+        self.path = path
+        self.partial = path.with_name(f".{path.name}.partial")
+        self.scene = scene
+        self.entries: dict[str, dict] = {}
+        self.zip = zipfile.ZipFile(self.partial, "w", compression=zipfile.ZIP_DEFLATED, compresslevel=1)
+        try:
+            self._write("x", scene.grid.x)
+            self._write("y", scene.grid.y)
+        except BaseException:
+            self.discard()
+            raise
+
+    def add(self, layer: str, t: float, raster: Raster) -> None:
+        """Store ``raster.values`` under :func:`array_key` and note its provenance."""
+        key = array_key(layer, t)
+        self._write(key, raster.values)
+        self.entries[key] = {
+            "layer": layer, "t": float(t), "mass": raster.mass, "peak": raster.peak,
+            "normalised": raster.normalised, "provenance": raster.provenance,
+        }
+
+    def close(self) -> None:
+        """Write the provenance and finish the zip (still under the temporary name)."""
+        self._write("provenance", np.array(json.dumps(self._provenance(), default=str)))
+        self.zip.close()
+
+    def publish(self) -> None:
+        """Rename the finished file to its final path."""
+        os.replace(self.partial, self.path)
+
+    def discard(self) -> None:
+        """Remove the temporary file if it is still there (after a failure)."""
+        self.zip.close()
+        self.partial.unlink(missing_ok=True)
+
+    def _write(self, key: str, array: np.ndarray) -> None:
+        with self.zip.open(f"{key}.npy", "w", force_zip64=True) as member:
+            np.lib.format.write_array(member, np.asanyarray(array), allow_pickle=False)
+
+    def _provenance(self) -> dict:
+        scene = self.scene
+        return {
+            "bananagrid": __version__,
+            "scene": scene.name,
+            "title": scene.title,
+            "source": scene.source,
+            "grid": scene.grid.describe(),
+            "dtype": scene.dtype,
+            "quantity": "density per m^2 at the cell centres (x[j], y[i]); rows south to north",
+            "normalised": scene.normalise,
+            "arrays": self.entries,
+            "text": scene.text,
+        }

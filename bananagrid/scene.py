@@ -1,0 +1,476 @@
+"""Scene files: parse a TOML scene, validate every key once, and build grids and models.
+
+A scene names a grid, one or more model layers and how to record them; see ``docs/scenes.md``
+for the schema. :func:`load_scene` and :func:`parse_scene` raise :class:`BananagridError` with
+one line that names the file, the key path (``layers.exact.sigma_a``), the value given and what
+is allowed; nothing downstream has to check a scene again.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import re
+import tomllib
+from collections.abc import Mapping
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+from types import MappingProxyType
+
+from .grid import Grid
+from .models import CAT, PolarBanana, Pose
+from .record import DEFAULT_LEVELS
+from .validate import BananagridError, positive
+
+__all__ = ["Layer", "Scene", "load_scene", "parse_scene", "MODEL_KINDS", "PARAMETER_KEYS"]
+
+#: Model classes by the ``model`` value of a layer.
+MODEL_KINDS = {"cat": CAT, "polar": PolarBanana}
+
+#: Scene keys of every model kind (the ``t`` key is refused when ``scene.times`` is given).
+PARAMETER_KEYS = {
+    "cat": (
+        "v0", "t", "sigma_a", "sigma_omega", "sigma_omega_deg", "k_sigma",
+        "origin", "heading", "heading_deg",
+    ),
+    "polar": (
+        "v0", "t", "sigma_a", "sigma_omega", "sigma_omega_deg", "variant",
+        "origin", "heading", "heading_deg",
+    ),
+}
+
+#: Angles that a scene may give in radians or, under ``NAME_deg``, in degrees.
+ANGLE_KEYS = ("sigma_omega", "heading")
+
+#: Parameters every layer needs (from its table or ``[defaults]``); ``t`` unless ``scene.times``.
+REQUIRED = ("v0", "sigma_a", "sigma_omega")
+
+NAME_PATTERN = re.compile(r"[A-Za-z0-9_-]+")
+TOP_KEYS = ("scene", "grid", "output", "defaults", "layers")
+SCENE_KEYS = ("name", "title", "description", "times")
+GRID_KEYS = ("x", "y", "step", "dx", "dy")
+OUTPUT_KEYS = ("contour_levels", "normalise", "dtype", "colormap")
+DTYPES = ("float64", "float32")
+
+
+@dataclass(frozen=True)
+class Layer:
+    """One model layer of a scene, validated.
+
+    Attributes
+    ----------
+    name : str
+        Layer name (the table name under ``[layers]``); its entity is ``layers/NAME``.
+    kind : str
+        ``"cat"`` or ``"polar"``.
+    params : Mapping
+        Model parameters in SI units and radians, ``[defaults]`` merged in: ``v0``,
+        ``sigma_a``, ``sigma_omega``, ``t`` (absent when the scene has ``times``) and, where
+        given, ``k_sigma``, ``variant``, ``origin`` (a pair) and ``heading``.
+    """
+
+    name: str
+    kind: str
+    params: Mapping = field(default_factory=dict)
+
+    def __post_init__(self):
+        object.__setattr__(self, "params", MappingProxyType(dict(self.params)))
+
+    def model(self, t: float | None = None) -> CAT | PolarBanana:
+        """The layer's model at elapsed time ``t`` (s); by default the layer's own ``t``.
+
+        Raises
+        ------
+        BananagridError
+            If no ``t`` is known, or a parameter is out of its domain.
+        """
+        kwargs = dict(self.params)
+        if t is not None:
+            kwargs["t"] = t
+        if "t" not in kwargs:
+            raise BananagridError(f"layer {self.name}: no elapsed time t; pass model(t=...)")
+        pose = Pose(origin=kwargs.pop("origin", (0.0, 0.0)), heading=kwargs.pop("heading", 0.0))
+        return MODEL_KINDS[self.kind](**kwargs, pose=pose)
+
+
+@dataclass(frozen=True)
+class Scene:
+    """A validated scene: a grid, model layers and recording options.
+
+    Attributes
+    ----------
+    name : str
+        Scene name, ``[A-Za-z0-9_-]+``; the output files are ``NAME.rrd`` and ``NAME.npz``.
+    title, description : str
+        Free text (title defaults to the name, description to "").
+    text : str
+        The scene file as written (logged into the recording).
+    source : str
+        Where the text came from (file path or ``"<string>"``), used in messages.
+    grid : Grid
+        The grid every layer is rasterised on.
+    bounds : ((float, float), (float, float))
+        The ``x`` and ``y`` bounds as written, m; :meth:`with_step` rebuilds the grid from them.
+    layers : tuple of Layer
+        In file order.
+    times : tuple of float or None
+        Elapsed times, s, strictly increasing; every layer is computed at each. None when the
+        layers give their own ``t``.
+    levels : tuple of float
+        Contour levels, density per m^2.
+    normalise : bool
+        Whether rasters are normalised over the grid before they are recorded.
+    dtype : str
+        Kernel precision, ``"float64"`` or ``"float32"``.
+    colormap : str
+        rerun colormap of the density images (lower case).
+    """
+
+    name: str
+    title: str
+    description: str
+    text: str
+    source: str
+    grid: Grid
+    bounds: tuple
+    layers: tuple
+    times: tuple | None
+    levels: tuple
+    normalise: bool
+    dtype: str
+    colormap: str
+
+    def with_step(self, step: float) -> "Scene":
+        """A copy whose grid covers the same bounds with square cells of ``step`` metres."""
+        step = positive("step", step)
+        x, y = self.bounds
+        try:
+            grid = Grid.from_bounds(x=x, y=y, step=step)
+        except BananagridError as exc:
+            raise BananagridError(f"{self.source}: grid at step {step:g} m: {exc}") from None
+        return replace(self, grid=grid)
+
+    def jobs(self) -> list[tuple[Layer, float]]:
+        """Every (layer, elapsed time) to compute, time-major when the scene has times."""
+        if self.times is None:
+            return [(layer, layer.params["t"]) for layer in self.layers]
+        return [(layer, t) for t in self.times for layer in self.layers]
+
+
+# --- entry points -----------------------------------------------------------------------------
+
+
+def load_scene(path: str | os.PathLike) -> Scene:
+    """Read and validate the scene file at ``path``.
+
+    Raises
+    ------
+    BananagridError
+        If the file cannot be read, is not UTF-8 TOML, or breaks the schema.
+    """
+    path = Path(path)
+    try:
+        data = path.read_bytes()
+    except FileNotFoundError:
+        raise BananagridError(f"{path}: no such scene file") from None
+    except IsADirectoryError:
+        raise BananagridError(f"{path}: is a directory, expected a scene .toml file") from None
+    except OSError as exc:
+        raise BananagridError(f"{path}: cannot read: {exc.strerror or exc}") from None
+    try:
+        text = data.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        raise BananagridError(f"{path}: not UTF-8 text (byte {exc.start})") from None
+    return parse_scene(text, source=str(path))
+
+
+def parse_scene(text: str, source: str = "<string>") -> Scene:
+    """Parse and validate scene TOML ``text``; ``source`` names it in error messages."""
+    try:
+        doc = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise BananagridError(f"{source}: invalid TOML: {exc}") from None
+    try:
+        return _build(doc, text, source)
+    except _KeyError as exc:
+        raise BananagridError(f"{source}: {exc}") from None
+
+
+# --- building the scene -----------------------------------------------------------------------
+
+
+class _KeyError(Exception):
+    """A schema violation; :func:`parse_scene` prefixes the source."""
+
+
+def _build(doc: dict, text: str, source: str) -> Scene:
+    """Validate the parsed document table by table and assemble the Scene."""
+    _check_keys(doc, TOP_KEYS, "")
+    head = _table(doc, "scene", required=True)
+    _check_keys(head, SCENE_KEYS, "scene")
+    name = _name(head.get("name"), "scene.name", required=True)
+    title = _text(head, "title", "scene", default=name)
+    description = _text(head, "description", "scene", default="")
+    times = _times(head["times"]) if "times" in head else None
+    bounds, grid = _grid(_table(doc, "grid", required=True))
+    levels, normalise, dtype, colormap = _output(_table(doc, "output"))
+    defaults = _table(doc, "defaults")
+    _check_keys(defaults, sorted(set().union(*PARAMETER_KEYS.values())), "defaults")
+    layers = _layers(_table(doc, "layers", required=True), defaults, times)
+    return Scene(
+        name=name, title=title, description=description, text=text, source=source,
+        grid=grid, bounds=bounds, layers=layers, times=times, levels=levels,
+        normalise=normalise, dtype=dtype, colormap=colormap,
+    )
+
+
+def _times(value) -> tuple[float, ...]:
+    """``scene.times``: a non-empty list of finite elapsed times > 0, strictly increasing."""
+    path = "scene.times"
+    if not isinstance(value, list) or not value:
+        raise _KeyError(f"{path} = {_show(value)}: expected a non-empty list of elapsed times in s")
+    times = tuple(_number(v, f"{path}[{k}]") for k, v in enumerate(value))
+    for k, t in enumerate(times):
+        if not (math.isfinite(t) and t > 0.0):
+            raise _KeyError(f"{path}[{k}] = {_show(value[k])}: must be finite and > 0 (s)")
+        if k and not t > times[k - 1]:
+            raise _KeyError(
+                f"{path} = {_show(value)}: must be strictly increasing "
+                f"({_show(value[k - 1])} then {_show(value[k])})"
+            )
+    return times
+
+
+def _grid(table: dict) -> tuple[tuple, Grid]:
+    """``[grid]``: bounds ``x``, ``y`` and ``step`` (or ``dx`` and ``dy``), all metres."""
+    _check_keys(table, GRID_KEYS, "grid")
+    x = _pair(table, "x", "grid", required=True)
+    y = _pair(table, "y", "grid", required=True)
+    steps = {k: _number(table[k], f"grid.{k}") for k in ("step", "dx", "dy") if k in table}
+    if "step" in steps and len(steps) > 1:
+        raise _KeyError("grid: give either step or both dx and dy, not both")
+    if "step" not in steps and len(steps) != 2:
+        raise _KeyError("grid: step (m) is required (or both dx and dy)")
+    try:
+        return (x, y), Grid.from_bounds(x=x, y=y, **steps)
+    except BananagridError as exc:
+        raise _KeyError(_prefixed(str(exc), "grid", GRID_KEYS)) from None
+
+
+def _output(table: dict) -> tuple[tuple, bool, str, str]:
+    """``[output]``: contour levels, normalisation, dtype and colormap, with defaults."""
+    _check_keys(table, OUTPUT_KEYS, "output")
+    levels = DEFAULT_LEVELS
+    if "contour_levels" in table:
+        value = table["contour_levels"]
+        if not isinstance(value, list) or not value:
+            raise _KeyError(
+                f"output.contour_levels = {_show(value)}: expected a non-empty list of densities (m^-2)"
+            )
+        levels = tuple(_number(v, f"output.contour_levels[{k}]") for k, v in enumerate(value))
+        for k, level in enumerate(levels):
+            if not (math.isfinite(level) and level > 0.0):
+                raise _KeyError(
+                    f"output.contour_levels[{k}] = {_show(value[k])}: must be finite and > 0 (m^-2)"
+                )
+    normalise = table.get("normalise", True)
+    if not isinstance(normalise, bool):
+        raise _KeyError(f"output.normalise = {_show(normalise)}: expected true or false")
+    dtype = table.get("dtype", "float64")
+    if dtype not in DTYPES:
+        raise _KeyError(f"output.dtype = {_show(dtype)}: must be one of {', '.join(map(_show, DTYPES))}")
+    colormap = table.get("colormap", "viridis")
+    allowed = _colormaps()
+    if not isinstance(colormap, str) or colormap.lower() not in allowed:
+        raise _KeyError(f"output.colormap = {_show(colormap)}: must be one of {', '.join(allowed)}")
+    return tuple(float(v) for v in levels), normalise, dtype, colormap.lower()
+
+
+def _colormaps() -> tuple[str, ...]:
+    """The colormap names rerun knows, in lower case."""
+    import rerun as rr
+
+    return tuple(c.name.lower() for c in rr.components.Colormap)
+
+
+def _layers(table: dict, defaults: dict, times) -> tuple[Layer, ...]:
+    """``[layers.NAME]`` tables in file order, each merged over ``[defaults]`` and checked."""
+    if not table:
+        raise _KeyError("layers: at least one [layers.NAME] table is required")
+    if times is not None and "t" in defaults:
+        raise _KeyError(
+            f"defaults.t = {_show(defaults['t'])}: not allowed when scene.times is given "
+            "(every layer is computed at every time)"
+        )
+    layers = []
+    for name, body in table.items():
+        path = f"layers.{name}"
+        if not NAME_PATTERN.fullmatch(name):
+            raise _KeyError(f"layers.{_show(name)}: a layer name must be letters, digits, _ and -")
+        if not isinstance(body, dict):
+            raise _KeyError(f"{path} = {_show(body)}: expected a table [layers.{name}]")
+        layers.append(_layer(name, body, defaults, times))
+    return tuple(layers)
+
+
+def _layer(name: str, body: dict, defaults: dict, times) -> Layer:
+    """Validate one layer: its keys, its values, and its model at every elapsed time."""
+    path = f"layers.{name}"
+    kind = body.get("model")
+    if kind not in MODEL_KINDS:
+        shown = "missing" if kind is None else f"= {_show(kind)}"
+        raise _KeyError(f"{path}.model {shown}: must be one of {', '.join(map(_show, MODEL_KINDS))}")
+    allowed = PARAMETER_KEYS[kind]
+    _check_keys(body, ("model", *allowed), path, note=f" (model {_show(kind)})")
+    if times is not None and "t" in body:
+        raise _KeyError(
+            f"{path}.t = {_show(body['t'])}: not allowed when scene.times is given "
+            "(every layer is computed at every time)"
+        )
+    # Where each parameter comes from: {param: (key path, value as written, value in SI)}.
+    given = _merge(_parameters(defaults, "defaults", allowed), _parameters(body, path, allowed))
+    needed = REQUIRED if times is not None else (*REQUIRED, "t")
+    missing = [p for p in needed if p not in given]
+    if missing:
+        keys = ", ".join(f"{p} (or {p}_deg)" if p in ANGLE_KEYS else p for p in missing)
+        raise _KeyError(f"{path}: missing {keys}: give each in [{path}] or [defaults]")
+    layer = Layer(name=name, kind=kind, params={p: si for p, (_, _, si) in given.items()})
+    for t in times or (None,):
+        try:
+            layer.model(t)
+        except BananagridError as exc:
+            raise _KeyError(_model_error(str(exc), path, given)) from None
+    return layer
+
+
+def _parameters(table: dict, path: str, allowed) -> dict:
+    """``{param: (key path, written value, SI value)}`` of the parameter keys in ``table``.
+
+    Only keys in ``allowed`` are taken: ``[defaults]`` may hold keys of another model kind.
+    Degrees under ``*_deg`` are converted to radians; giving both forms is an error.
+    """
+    out = {}
+    for key, value in table.items():
+        if key not in allowed:
+            continue
+        where = f"{path}.{key}"
+        param = key.removesuffix("_deg")
+        if param in out:
+            raise _KeyError(
+                f"{path}: give {param} (rad) or {param}_deg (degrees), not both "
+                f"({param} = {_show(table[param])}, {param}_deg = {_show(table[param + '_deg'])})"
+            )
+        if param == "origin":
+            out[param] = (where, value, _pair(table, key, path))
+        elif param == "variant":
+            out[param] = (where, value, value)
+        else:
+            number = _number(value, where)
+            out[param] = (where, value, math.radians(number) if key.endswith("_deg") else number)
+    return out
+
+
+def _merge(defaults: dict, layer: dict) -> dict:
+    """Layer parameters over defaults (a layer's ``sigma_omega`` replaces a default ``_deg``)."""
+    return {**defaults, **layer}
+
+
+def _model_error(message: str, path: str, given: dict) -> str:
+    """A model's ``name = value: rule`` message restated with the scene key and its value."""
+    param, sep, rest = message.partition(" = ")
+    if sep and param in given and ": " in rest:
+        where, written, _ = given[param]
+        return f"{where} = {_show(written)}: {rest.split(': ', 1)[1]}"
+    return f"{path}: {message}"
+
+
+# --- small checks -----------------------------------------------------------------------------
+
+
+def _check_keys(table: dict, allowed, path: str, note: str = "") -> None:
+    """Refuse keys outside ``allowed``, naming the full key path."""
+    for key in table:
+        if key not in allowed:
+            where = f"{path}.{key}" if path else key
+            raise _KeyError(f"{where}: unknown key{note}; allowed: {', '.join(allowed)}")
+
+
+def _table(doc: dict, key: str, required: bool = False) -> dict:
+    """The sub-table ``doc[key]`` ({} when absent and optional)."""
+    if key not in doc:
+        if required:
+            raise _KeyError(f"[{key}]: missing table")
+        return {}
+    value = doc[key]
+    if not isinstance(value, dict):
+        raise _KeyError(f"{key} = {_show(value)}: expected a table [{key}]")
+    return value
+
+
+def _name(value, path: str, required: bool = False, what: str = "name") -> str:
+    """A name made of letters, digits, ``_`` and ``-`` (it becomes a file or entity name)."""
+    if value is None and required:
+        raise _KeyError(f"{path}: missing; expected a {what} of letters, digits, _ and -")
+    if not isinstance(value, str) or not NAME_PATTERN.fullmatch(value):
+        raise _KeyError(f"{path} = {_show(value)}: expected a {what} of letters, digits, _ and -")
+    return value
+
+
+def _text(table: dict, key: str, path: str, default: str) -> str:
+    """An optional free-text string."""
+    value = table.get(key, default)
+    if not isinstance(value, str):
+        raise _KeyError(f"{path}.{key} = {_show(value)}: expected a string")
+    return value
+
+
+def _number(value, path: str) -> float:
+    """A TOML integer or float as float (booleans and strings are refused)."""
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        raise _KeyError(f"{path} = {_show(value)}: expected a number")
+    return float(value)
+
+
+def _pair(table: dict, key: str, path: str, required: bool = False) -> tuple[float, float]:
+    """``[a, b]`` of two finite numbers (metres)."""
+    where = f"{path}.{key}"
+    if key not in table:
+        if required:
+            raise _KeyError(f"{where}: missing; expected [low, high] in m")
+        return None
+    value = table[key]
+    if not isinstance(value, list) or len(value) != 2:
+        raise _KeyError(f"{where} = {_show(value)}: expected a pair of numbers [a, b] in m")
+    a, b = (_number(v, f"{where}[{k}]") for k, v in enumerate(value))
+    for k, v in enumerate((a, b)):
+        if not math.isfinite(v):
+            raise _KeyError(f"{where}[{k}] = {_show(value[k])}: must be finite")
+    return (a, b)
+
+
+def _prefixed(message: str, path: str, keys) -> str:
+    """Prefix ``path.`` to a ``key = ...`` message about one of ``keys``, else ``path: ``."""
+    head = re.match(r"(\w+)(\[\d\])? = ", message)
+    if head and head.group(1) in keys:
+        return f"{path}.{message}"
+    return f"{path}: {message}"
+
+
+def _show(value) -> str:
+    """A value as TOML would write it, for messages."""
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    if isinstance(value, float):
+        if math.isnan(value):
+            return "nan"
+        if math.isinf(value):
+            return "inf" if value > 0 else "-inf"
+        return repr(value)
+    if isinstance(value, str):
+        return json.dumps(value)
+    if isinstance(value, list):
+        return "[" + ", ".join(_show(v) for v in value) + "]"
+    if isinstance(value, dict):
+        return "{" + ", ".join(f"{k} = {_show(v)}" for k, v in value.items()) + "}"
+    return str(value)
