@@ -1,0 +1,183 @@
+"""``bananagrid bench``: kernel throughput against a NumPy baseline measured in the same run.
+
+Each kernel rasterises the Figure 1 frame of the polar-banana paper (x in [-3000, 3000] m,
+y in [-200, 3400] m, 4 m: 1500 x 900 cells) in float64 and float32, on one thread and on all
+cores; its NumPy float64 twin in :mod:`bananagrid.baseline` runs on the same cells. Times are
+the best of ``--repeat`` runs after a warm-up (the first Warp compile is not timed). The exact
+CAT baseline takes about a minute on the full grid, so by default it runs on every 10th row
+and its time is scaled to the full grid (``--baseline-stride 1`` runs it all).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import os
+import platform
+import resource
+import subprocess
+import sys
+import time
+
+import numpy as np
+
+from . import baseline
+from .grid import Grid
+from .models import CAT, PolarBanana
+from .raster import _cat_nodes, default_threads, rasterise
+
+#: Figure 1 of the polar-banana paper.
+FIG1 = dict(v0=280.0, t=10.0, sigma_a=5.0 / 3.0, sigma_omega=math.pi / 54.0)
+FIG1_BOUNDS = dict(x=(-3000.0, 3000.0), y=(-200.0, 3400.0))
+
+KERNELS = {
+    "cat": lambda: CAT(**FIG1),
+    "polar-rough": lambda: PolarBanana(**FIG1, variant="rough"),
+    "polar-improved": lambda: PolarBanana(**FIG1, variant="improved"),
+}
+
+#: Side of the square float32 raster whose peak memory is reported (issue 2: under 1 GiB).
+MEMORY_SIDE = 8192
+
+
+def _best_of(repeat: int, fn) -> float:
+    best = math.inf
+    for _ in range(repeat):
+        start = time.perf_counter()
+        fn()
+        best = min(best, time.perf_counter() - start)
+    return best
+
+
+def _baseline_seconds(name: str, model, grid: Grid, stride: int, repeat: int) -> float:
+    """NumPy float64 time for the whole grid (scaled from every ``stride``-th row for CAT)."""
+    rows = grid.y if name != "cat" else grid.y[::stride]
+    xx, yy = np.meshgrid(grid.x, rows)
+    if name == "cat":
+        nodes = _cat_nodes(model)
+        fn = lambda: baseline.cat_density(xx, yy, model.v0, model.t, model.sigma_a, model.sigma_omega, nodes)
+        seconds = _best_of(1 if stride > 1 else repeat, fn)
+    else:
+        fn = lambda: baseline.polar_density(xx, yy, model.v0, model.t, model.sigma_a, model.sigma_omega, model.variant)
+        seconds = _best_of(repeat, fn)
+    return seconds * grid.ny / len(rows)
+
+
+def run(kernels, step: float, threads: int, repeat: int, stride: int, log=print) -> list[dict]:
+    """Time every kernel in both dtypes on 1 and ``threads`` threads; return the records."""
+    grid = Grid.from_bounds(**FIG1_BOUNDS, step=step)
+    records = []
+    for name in kernels:
+        model = KERNELS[name]()
+        base = _baseline_seconds(name, model, grid, stride, repeat)
+        for dtype in (np.float64, np.float32):
+            rasterise(model, grid, dtype=dtype, threads=1)  # warm-up: compile or load the module
+            for n_threads in sorted({1, threads}):
+                seconds = _best_of(repeat, lambda: rasterise(model, grid, dtype=dtype, threads=n_threads))
+                record = {
+                    "kernel": name, "dtype": np.dtype(dtype).name, "threads": n_threads,
+                    "cells": grid.nx * grid.ny, "seconds": seconds, "baseline_seconds": base,
+                    "ratio": base / seconds, "mcells_per_s": grid.nx * grid.ny / seconds / 1e6,
+                }
+                records.append(record)
+                log(_row(record))
+    return records
+
+
+HEADER = f"{'kernel':<16} {'dtype':<8} {'threads':>7} {'cells':>10} {'seconds':>9} {'Mcells/s':>9} {'numpy s':>9} {'ratio':>7}"
+
+
+def _row(r: dict) -> str:
+    return (
+        f"{r['kernel']:<16} {r['dtype']:<8} {r['threads']:>7} {r['cells']:>10} {r['seconds']:>9.4f} "
+        f"{r['mcells_per_s']:>9.2f} {r['baseline_seconds']:>9.3f} {r['ratio']:>7.1f}"
+    )
+
+
+def memory_probe(side: int = MEMORY_SIDE) -> dict:
+    """Peak resident memory of a fresh process rasterising a side x side float32 polar map."""
+    code = (
+        "import resource, bananagrid as bg, numpy as np;"
+        f"m = bg.PolarBanana(v0=280.0, t=10.0, sigma_a=5/3, sigma_omega={math.pi / 54!r});"
+        "g = bg.Grid.from_bounds(x=(-3000.0, 3000.0), y=(-200.0, 3400.0), dx=6000/{s}, dy=3600/{s});"
+        "bg.rasterise(m, bg.Grid.from_bounds(x=(0.0, 1.0), y=(0.0, 1.0), step=1.0), dtype=np.float32);"
+        "before = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss;"
+        "r = bg.rasterise(m, g, dtype=np.float32);"
+        "after = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss;"
+        "print(before, after, r.values.nbytes)"
+    ).replace("{s}", str(side))
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    before, after, nbytes = (int(v) for v in out.stdout.split()[-3:])
+    return {"side": side, "peak_rss_mib": after / 1024, "rss_before_mib": before / 1024, "raster_mib": nbytes / 2**20}
+
+
+def machine() -> str:
+    model = platform.processor() or platform.machine()
+    try:
+        with open("/proc/cpuinfo") as fh:
+            model = next(line.split(":", 1)[1].strip() for line in fh if line.startswith("model name"))
+    except (OSError, StopIteration):
+        pass
+    return f"{model}, {default_threads()} cores usable, Python {platform.python_version()}, {platform.system()}"
+
+
+def _parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(
+        prog="bananagrid bench",
+        description="Time every kernel against its NumPy float64 baseline, measured in the same run.",
+    )
+    p.add_argument("--kernels", default=",".join(KERNELS), help=f"comma-separated subset of: {', '.join(KERNELS)} (default: all)")
+    p.add_argument("--step", type=float, default=4.0, help="grid step in metres over the Figure 1 frame (default 4: 1500 x 900 cells)")
+    p.add_argument("--threads", type=int, default=default_threads(), help="threads for the all-cores rows (default: every usable core)")
+    p.add_argument("--repeat", type=int, default=3, help="timed runs per row; the best is reported (default 3)")
+    p.add_argument("--baseline-stride", type=int, default=10, help="run the CAT NumPy baseline on every N-th row and scale (default 10; 1 = all rows)")
+    p.add_argument("--no-memory", action="store_true", help=f"skip the peak-memory probe ({MEMORY_SIDE} x {MEMORY_SIDE} float32)")
+    p.add_argument("--json", metavar="FILE", help="also write the records as JSON to FILE")
+    return p
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Entry point of ``bananagrid bench``; returns the exit code."""
+    args = _parser().parse_args(argv)
+    kernels = [k.strip() for k in args.kernels.split(",") if k.strip()]
+    unknown = [k for k in kernels if k not in KERNELS]
+    problems = []
+    if unknown or not kernels:
+        problems.append(f"--kernels = {args.kernels!r}: choose from {', '.join(KERNELS)}")
+    for name in ("threads", "repeat", "baseline_stride"):
+        if getattr(args, name) < 1:
+            problems.append(f"--{name.replace('_', '-')} = {getattr(args, name)}: must be >= 1")
+    if not (math.isfinite(args.step) and args.step > 0):
+        problems.append(f"--step = {args.step}: must be > 0")
+    if problems:
+        print(f"bananagrid: error: {problems[0]}", file=sys.stderr)
+        return 2
+    print(f"machine: {machine()}")
+    print(f"grid: Figure 1 frame at {args.step:g} m; baseline: NumPy {np.__version__} float64"
+          + (f", CAT on every {args.baseline_stride}th row, scaled" if args.baseline_stride > 1 else ""))
+    print(HEADER)
+    records = run(kernels, args.step, args.threads, args.repeat, args.baseline_stride)
+    result = {"machine": machine(), "step": args.step, "records": records}
+    for name in kernels:
+        one = {r["dtype"]: r for r in records if r["kernel"] == name and r["threads"] == 1}
+        many = {r["dtype"]: r for r in records if r["kernel"] == name and r["threads"] == args.threads}
+        if args.threads > 1:
+            print(f"{name}: 1 -> {args.threads} threads speedup "
+                  + ", ".join(f"{d} {one[d]['seconds'] / many[d]['seconds']:.2f}x" for d in one))
+    if not args.no_memory:
+        mem = memory_probe()
+        result["memory"] = mem
+        print(f"memory: {mem['side']} x {mem['side']} float32 polar raster ({mem['raster_mib']:.0f} MiB of values): "
+              f"peak RSS {mem['peak_rss_mib']:.0f} MiB (process after imports and compile: {mem['rss_before_mib']:.0f} MiB)")
+    if args.json:
+        tmp = f"{args.json}.partial"
+        with open(tmp, "w") as fh:
+            json.dump(result, fh, indent=2)
+        os.replace(tmp, args.json)
+        print(f"wrote {args.json}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
