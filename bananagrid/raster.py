@@ -86,7 +86,8 @@ def _warp():
     """Import and initialise Warp on first use (no import-time side effects)."""
     import warp as wp
 
-    wp.config.quiet = True
+    # Warp logs its banner and every module load at INFO; users want our output, not that.
+    wp.config.log_level = wp.LOG_WARNING
     wp.init()
     return wp
 
@@ -189,16 +190,22 @@ def _check_threads(threads) -> int:
     return int(threads)
 
 
-def _run_bands(wp, launch_band, n: int, threads: int, device: str):
-    """Launch ``launch_band(start, stop)`` over bands, from a thread pool on the CPU."""
-    if device != "cpu" or threads == 1:
-        bands = [(0, n)] if device != "cpu" else _bands(n, 1)
-        for a, b in bands:
-            launch_band(a, b)
+def _run_bands(launch_band, bands: list[tuple[int, int]], threads: int) -> None:
+    """Call ``launch_band(start, stop)`` for every band; on several threads, from a pool.
+
+    The first band runs on the calling thread so that the kernel module is compiled or loaded
+    once before the pool starts (concurrent first launches would each build it).
+    """
+    first, rest = bands[0], bands[1:]
+    launch_band(*first)
+    if not rest:
         return
-    bands = _bands(n, threads)
+    if threads == 1:
+        for band in rest:
+            launch_band(*band)
+        return
     with ThreadPoolExecutor(max_workers=threads) as pool:
-        for future in [pool.submit(launch_band, a, b) for a, b in bands]:
+        for future in [pool.submit(launch_band, a, b) for a, b in rest]:
             future.result()
 
 
@@ -244,7 +251,8 @@ def rasterise(model, grid: Grid, *, dtype=np.float64, device: str = "cpu", threa
             inputs=[xs, ys, r0, *binding.params, out], device=device,
         )
 
-    _run_bands(wp, launch_band, grid.ny, threads, device)
+    bands = _bands(grid.ny, threads) if device == "cpu" else [(0, grid.ny)]
+    _run_bands(launch_band, bands, threads)
     wp.synchronize_device(device)
     if device != "cpu":
         values = out.numpy()
@@ -301,13 +309,8 @@ def evaluate_points(model, x, y, *, dtype=np.float64, device: str = "cpu", threa
     def launch_chunk(a, b):
         wp.launch(binding.points_kernel, dim=b - a, inputs=[xs, ys, a, *binding.params, out], device=device)
 
-    if device == "cpu":
-        chunks = [(a, min(n, a + POINT_CHUNK)) for a in range(0, n, POINT_CHUNK)]
-        with ThreadPoolExecutor(max_workers=threads) as pool:
-            for future in [pool.submit(launch_chunk, a, b) for a, b in chunks]:
-                future.result()
-    else:
-        launch_chunk(0, n)
+    chunks = [(a, min(n, a + POINT_CHUNK)) for a in range(0, n, POINT_CHUNK)] if device == "cpu" else [(0, n)]
+    _run_bands(launch_chunk, chunks, threads)
     wp.synchronize_device(device)
     return out.numpy().reshape(shape)
 

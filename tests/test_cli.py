@@ -1,0 +1,283 @@
+"""The command line end to end: scenes to recordings and arrays, one-line errors, no partial files."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+import types
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import bananagrid
+from bananagrid import rasterise
+from bananagrid.cli import main
+from bananagrid.inspect import inspect_recording, read_depth_image
+from bananagrid.runner import array_key, run_scene
+from bananagrid.scene import load_scene
+
+ROOT = Path(__file__).resolve().parent.parent
+SCENES = sorted((ROOT / "scenes").glob("*.toml"))
+RERUN = Path(sys.executable).parent / "rerun"
+
+#: Coarse steps (m) for the end-to-end runs, so the whole file stays well under a minute.
+QUICK_STEP = {"figure1": 40.0, "folding": 40.0, "sequence": 200.0}
+
+SMALL = """\
+[scene]
+name = "small"
+
+[grid]
+x = [-100.0, 100.0]
+y = [0.0, 200.0]
+step = 10.0
+
+[defaults]
+v0 = 10.0
+t = 5.0
+sigma_a = 1.0
+sigma_omega_deg = 10.0
+
+[layers.near]
+model = "cat"
+"""
+
+# The second layer lies far outside the grid: it captures no mass, so normalising fails after
+# the first layer has been computed and logged.
+FAILS_MIDWAY = SMALL + """
+[layers.far]
+model = "polar"
+origin = [1.0e6, 1.0e6]
+"""
+
+
+def write(tmp_path: Path, text: str, name: str = "scene.toml") -> Path:
+    path = tmp_path / name
+    path.write_text(text)
+    return path
+
+
+def error_line(capsys) -> str:
+    """The single stderr line of a failed command (nothing else on stderr)."""
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1, err
+    assert err[0].startswith("bananagrid: error: ")
+    return err[0]
+
+
+def rerun_cli(*args) -> subprocess.CompletedProcess:
+    return subprocess.run([str(RERUN), *map(str, args)], capture_output=True, text=True, timeout=120)
+
+
+# --- errors -----------------------------------------------------------------------------------
+
+
+def test_bad_scene_exits_2_with_one_line(tmp_path, capsys):
+    scene = write(tmp_path, SMALL.replace("sigma_a = 1.0", "sigma_a = -1.0"))
+    out = tmp_path / "out"
+    assert main(["run", str(scene), "--out", str(out)]) == 2
+    assert error_line(capsys) == f"bananagrid: error: {scene}: defaults.sigma_a = -1.0: must be > 0"
+    assert not out.exists()  # scenes are checked before anything is created
+
+
+def test_missing_scene_file(tmp_path, capsys):
+    assert main(["run", str(tmp_path / "nope.toml"), "--out", str(tmp_path)]) == 2
+    assert "nope.toml: no such scene file" in error_line(capsys)
+
+
+def test_toml_syntax_error(tmp_path, capsys):
+    scene = write(tmp_path, SMALL.replace("step = 10.0", "step = "))
+    assert main(["run", str(scene), "--out", str(tmp_path / "out")]) == 2
+    assert "invalid TOML: Invalid value (at line 7, column 8)" in error_line(capsys)
+
+
+@pytest.mark.parametrize("npz", [False, True], ids=["rrd", "rrd+npz"])
+def test_failure_midway_leaves_no_file(tmp_path, capsys, npz):
+    scene = write(tmp_path, FAILS_MIDWAY)
+    out = tmp_path / "out"
+    argv = ["run", str(scene), "--out", str(out), *(["--npz"] if npz else [])]
+    assert main(argv) == 2
+    err = capsys.readouterr().err
+    assert "[1/2] small: near t=5 s ..." in err  # the first layer ran
+    assert err.strip().splitlines()[-1] == (
+        f"bananagrid: error: {scene}: layers.far at t = 5 s: the grid captured no mass, so it "
+        "cannot be normalised; move or enlarge the grid, or set output.normalise = false"
+    )
+    assert sorted(p.name for p in out.iterdir()) == []  # no .rrd, .npz or .partial
+
+
+def test_bad_options(tmp_path, capsys):
+    scene = write(tmp_path, SMALL)
+    assert main(["run", str(scene), "--out", str(tmp_path), "--step", "-5"]) == 2
+    assert error_line(capsys) == "bananagrid: error: step = -5.0: must be > 0"
+    assert main(["run", str(scene), "--out", str(tmp_path), "--threads", "0"]) == 2
+    assert error_line(capsys) == "bananagrid: error: --threads = 0: must be >= 1"
+    assert main(["run", str(scene), "--bogus"]) == 2  # argparse usage error
+    assert "unrecognized arguments: --bogus" in capsys.readouterr().err
+    assert main(["inspect", str(tmp_path / "missing.rrd")]) == 2
+    assert "missing.rrd: no such file" in error_line(capsys)
+
+
+def test_duplicate_scene_names(tmp_path, capsys):
+    a, b = write(tmp_path, SMALL, "a.toml"), write(tmp_path, SMALL, "b.toml")
+    assert main(["run", str(a), str(b), "--out", str(tmp_path / "out")]) == 2
+    assert 'scene.name = "small" is also the name of' in error_line(capsys)
+
+
+def test_error_as_subprocess(tmp_path):
+    scene = write(tmp_path, SMALL.replace('model = "cat"', 'model = "banana"'))
+    result = subprocess.run(
+        [sys.executable, "-m", "bananagrid", "run", str(scene), "--out", str(tmp_path / "out")],
+        capture_output=True, text=True, timeout=120,
+    )
+    assert result.returncode == 2
+    assert result.stderr.strip().splitlines() == [
+        f'bananagrid: error: {scene}: layers.near.model = "banana": must be one of "cat", "polar"'
+    ]
+    assert result.stdout == ""
+
+
+# --- help and delegation ----------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("argv", [["--help"], ["run", "--help"], ["inspect", "--help"]])
+def test_help_exits_0(argv, capsys):
+    assert main(argv) == 0
+    assert "usage: bananagrid" in capsys.readouterr().out
+
+
+def test_help_as_subprocess():
+    result = subprocess.run(
+        [sys.executable, "-m", "bananagrid", "run", "--help"], capture_output=True, text=True, timeout=60
+    )
+    assert result.returncode == 0
+    assert "--npz" in result.stdout and "--step" in result.stdout
+
+
+def test_bench_is_delegated_with_its_arguments(monkeypatch):
+    calls = []
+    fake = types.ModuleType("bananagrid.bench")
+    fake.main = lambda argv: calls.append(argv) or 7
+    monkeypatch.setitem(sys.modules, "bananagrid.bench", fake)
+    monkeypatch.setattr(bananagrid, "bench", fake, raising=False)
+    assert main(["bench", "--help"]) == 7
+    assert main(["bench", "--size", "64", "extra"]) == 7
+    assert calls == [["--help"], ["--size", "64", "extra"]]
+
+
+def test_bench_help_when_installed(capsys):
+    pytest.importorskip("bananagrid.bench")
+    assert main(["bench", "--help"]) == 0
+
+
+# --- scenes end to end ------------------------------------------------------------------------
+
+
+@pytest.fixture(scope="module")
+def quick_runs(tmp_path_factory) -> dict[str, Path]:
+    """Every bundled scene run once by the CLI at its coarse step: {scene name: out dir}."""
+    runs = {}
+    for path in SCENES:
+        name = path.stem
+        out = tmp_path_factory.mktemp(name)
+        argv = ["run", str(path), "--out", str(out), "--step", str(QUICK_STEP.get(name, 100.0)), "--npz"]
+        assert main(argv) == 0, name
+        runs[name] = out
+    return runs
+
+
+def test_every_scene_has_a_quick_step():
+    assert {p.stem for p in SCENES} <= set(QUICK_STEP)
+
+
+@pytest.mark.parametrize("path", SCENES, ids=lambda p: p.stem)
+def test_scene_runs_end_to_end(path, quick_runs):
+    scene = load_scene(path)
+    rrd = quick_runs[scene.name] / f"{scene.name}.rrd"
+    verify = rerun_cli("rrd", "verify", rrd)
+    assert verify.returncode == 0, verify.stderr
+    info = inspect_recording(rrd)
+    assert info["blueprint"]
+    assert "/scene" in info["entities"]
+    for layer in scene.layers:
+        for part in ("density", "log10_density", "contours", "info", "mass"):
+            assert f"/layers/{layer.name}/{part}" in info["entities"]
+        masses = info["entities"][f"/layers/{layer.name}/mass"]["scalars"]
+        assert len(masses) == len(scene.times or (1,))
+    times = scene.times or sorted({layer.params["t"] for layer in scene.layers})
+    assert info["timelines"]["elapsed"]["values"] == pytest.approx(list(times))
+    assert sorted(p.name for p in quick_runs[scene.name].iterdir()) == [f"{scene.name}.npz", f"{scene.name}.rrd"]
+
+
+def test_summary_and_progress(tmp_path, capsys):
+    scene = write(tmp_path, SMALL.replace("t = 5.0", "t = 5.0\norigin = [0, 20]"))
+    assert main(["run", str(scene), "--out", str(tmp_path / "out")]) == 0
+    captured = capsys.readouterr()
+    assert "[1/1] small: near t=5 s ..." in captured.err
+    lines = captured.out.splitlines()
+    header = next(k for k, line in enumerate(lines) if line.startswith("scene"))
+    assert lines[header].split("  ")[:2] == ["scene", "layer"]
+    for column in ("t [s]", "cells", "captured mass", "peak [m^-2]", "seconds"):
+        assert column in lines[header]
+    row = lines[header + 2].split()
+    assert row[:4] == ["small", "near", "5", "400"]
+    assert f"wrote {tmp_path / 'out' / 'small.rrd'}" in lines
+    assert main(["run", str(scene), "--out", str(tmp_path / "quiet"), "--quiet"]) == 0
+    assert "[1/1]" not in capsys.readouterr().err
+
+
+def test_same_scene_twice_gives_equal_recordings(tmp_path, quick_runs):
+    out = tmp_path / "again"
+    scene = ROOT / "scenes" / "figure1.toml"
+    argv = ["run", str(scene), "--out", str(out), "--step", str(QUICK_STEP["figure1"]), "--quiet"]
+    assert main(argv) == 0
+    compare = rerun_cli("rrd", "compare", quick_runs["figure1"] / "figure1.rrd", out / "figure1.rrd")
+    assert compare.returncode == 0, compare.stdout + compare.stderr
+
+
+@pytest.mark.parametrize("name", ["figure1", "sequence"])
+def test_npz_holds_the_rasters(name, quick_runs):
+    scene = load_scene(ROOT / "scenes" / f"{name}.toml").with_step(QUICK_STEP[name])
+    rrd, npz = (quick_runs[name] / f"{name}.{ext}" for ext in ("rrd", "npz"))
+    with np.load(npz, allow_pickle=False) as arrays:
+        provenance = json.loads(str(arrays["provenance"]))
+        np.testing.assert_array_equal(arrays["x"], scene.grid.x)
+        np.testing.assert_array_equal(arrays["y"], scene.grid.y)
+        expected_keys = {array_key(layer.name, t) for layer, t in scene.jobs()}
+        assert set(arrays.files) == expected_keys | {"x", "y", "provenance"}
+        assert set(provenance["arrays"]) == expected_keys
+        for layer, t in scene.jobs():
+            raster = rasterise(layer.model(t), scene.grid)
+            if scene.normalise:
+                raster = raster.normalise()
+            key = array_key(layer.name, t)
+            np.testing.assert_array_equal(arrays[key], raster.values)
+            assert provenance["arrays"][key]["mass"] == raster.mass
+            # The recording holds the same values in float32.
+            image = read_depth_image(rrd, f"layers/{layer.name}/density", elapsed=t)
+            np.testing.assert_allclose(image, raster.values.astype(np.float32), rtol=0, atol=0)
+    assert provenance["scene"] == name and provenance["normalised"] == scene.normalise
+    assert provenance["grid"] == scene.grid.describe()
+
+
+def test_inspect_prints_entities(quick_runs, capsys):
+    rrd = quick_runs["figure1"] / "figure1.rrd"
+    assert main(["inspect", str(rrd)]) == 0
+    out = capsys.readouterr().out
+    for layer in ("cat", "rough", "improved"):
+        assert f"/layers/{layer}/density" in out
+    assert "elapsed  duration" in out
+
+
+def test_run_scene_returns_rows(tmp_path):
+    scene = load_scene(write(tmp_path, SMALL))
+    calls = []
+    rows = run_scene(scene, tmp_path, progress=lambda *a: calls.append(a))
+    assert calls == [(0, 1, "near t=5 s"), (1, 1, "near t=5 s")]
+    (row,) = rows
+    assert (row["scene"], row["layer"], row["t"], row["cells"]) == ("small", "near", 5.0, 400)
+    assert 0.0 < row["mass"] <= 1.0 + 1e-9 and row["peak"] > 0.0 and row["seconds"] >= 0.0
+    with pytest.raises(bananagrid.BananagridError, match="output directory does not exist"):
+        run_scene(scene, tmp_path / "missing")

@@ -1,0 +1,288 @@
+"""Scene files: valid scenes parse into the right grid and models; every bad key is named."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import pytest
+
+from bananagrid import CAT, BananagridError, PolarBanana
+from bananagrid.record import DEFAULT_LEVELS
+from bananagrid.scene import Layer, load_scene, parse_scene
+
+SCENES = Path(__file__).resolve().parent.parent / "scenes"
+
+# A small valid scene; the error cases below edit one line of it each.
+BASE = """\
+[scene]
+name = "demo"
+
+[grid]
+x = [-100.0, 100.0]
+y = [0.0, 200.0]
+step = 10.0
+
+[defaults]
+v0 = 10.0
+t = 5.0
+sigma_a = 1.0
+sigma_omega_deg = 10.0
+
+[layers.exact]
+model = "cat"
+
+[layers.approx]
+model = "polar"
+variant = "rough"
+"""
+
+
+def edited(old: str, new: str, text: str = BASE) -> str:
+    """``text`` with the one occurrence of ``old`` replaced by ``new``."""
+    assert text.count(old) == 1, old
+    return text.replace(old, new)
+
+
+def error_of(text: str, source: str = "bad.toml") -> str:
+    with pytest.raises(BananagridError) as info:
+        parse_scene(text, source=source)
+    message = str(info.value)
+    assert "\n" not in message
+    assert message.startswith(f"{source}: ")
+    return message
+
+
+# --- valid scenes -----------------------------------------------------------------------------
+
+
+def test_base_scene_parses_with_defaults():
+    scene = parse_scene(BASE)
+    assert scene.name == "demo" and scene.title == "demo" and scene.description == ""
+    assert scene.text == BASE and scene.source == "<string>"
+    assert (scene.grid.nx, scene.grid.ny, scene.grid.dx) == (20, 20, 10.0)
+    assert scene.grid.extent == (-100.0, 100.0, 0.0, 200.0)
+    assert [layer.name for layer in scene.layers] == ["exact", "approx"]  # file order
+    assert scene.times is None
+    assert scene.levels == DEFAULT_LEVELS
+    assert (scene.normalise, scene.dtype, scene.colormap) == (True, "float64", "viridis")
+
+
+def test_degrees_become_radians_and_layers_override_defaults():
+    text = edited('variant = "rough"\n', 'variant = "rough"\nsigma_omega = 0.5\nheading_deg = 90\n'
+                  "origin = [5.0, -7]\nv0 = 20\n")
+    exact, approx = parse_scene(text).layers
+    assert exact.params["sigma_omega"] == pytest.approx(math.radians(10.0), rel=1e-15)
+    assert exact.params["v0"] == 10.0
+    model = approx.model()
+    assert isinstance(model, PolarBanana) and model.variant == "rough"
+    assert (model.v0, model.sigma_omega) == (20.0, 0.5)
+    assert model.pose.heading == pytest.approx(math.pi / 2, rel=1e-15)
+    assert model.pose.origin == (5.0, -7.0)
+
+
+def test_layer_model_at_another_time():
+    layer = parse_scene(BASE).layers[0]
+    assert isinstance(layer, Layer) and layer.kind == "cat"
+    assert isinstance(layer.model(), CAT) and layer.model().t == 5.0
+    assert layer.model(t=2.5).t == 2.5
+    with pytest.raises(TypeError):
+        layer.params["v0"] = 1.0  # params are read-only
+
+
+def test_times_give_every_layer_every_time():
+    text = edited('name = "demo"\n', 'name = "demo"\ntimes = [1, 2.5, 4]\n')
+    scene = parse_scene(edited("t = 5.0\n", "", text))
+    assert scene.times == (1.0, 2.5, 4.0)
+    assert "t" not in scene.layers[0].params
+    assert [(layer.name, t) for layer, t in scene.jobs()] == [
+        ("exact", 1.0), ("approx", 1.0), ("exact", 2.5), ("approx", 2.5), ("exact", 4.0), ("approx", 4.0)
+    ]
+    with pytest.raises(BananagridError, match="no elapsed time t"):
+        scene.layers[0].model()
+
+
+def test_output_table():
+    text = BASE + '[output]\ncontour_levels = [1e-3, 1e-4]\nnormalise = false\ndtype = "float32"\ncolormap = "Turbo"\n'
+    scene = parse_scene(text)
+    assert scene.levels == (1e-3, 1e-4)
+    assert (scene.normalise, scene.dtype, scene.colormap) == (False, "float32", "turbo")
+
+
+def test_with_step_keeps_bounds():
+    scene = parse_scene(BASE)
+    coarse = scene.with_step(40.0)
+    assert (coarse.grid.nx, coarse.grid.ny) == (5, 5)
+    assert coarse.with_step(10.0).grid == scene.grid
+    assert coarse.layers == scene.layers and coarse.text == scene.text
+    with pytest.raises(BananagridError, match=r"step = -1.0: must be > 0"):
+        scene.with_step(-1.0)
+
+
+def test_rectangular_cells():
+    scene = parse_scene(edited("step = 10.0\n", "dx = 10.0\ndy = 20.0\n"))
+    assert (scene.grid.dx, scene.grid.dy, scene.grid.ny) == (10.0, 20.0, 10)
+
+
+@pytest.mark.parametrize("path", sorted(SCENES.glob("*.toml")), ids=lambda p: p.name)
+def test_bundled_scenes_load(path):
+    scene = load_scene(path)
+    assert scene.name == path.stem
+    assert scene.source == str(path)
+    for layer, t in scene.jobs():
+        layer.model(t)
+
+
+def test_figure1_parameters():
+    scene = load_scene(SCENES / "figure1.toml")
+    assert [layer.name for layer in scene.layers] == ["cat", "rough", "improved"]
+    model = scene.layers[0].model()
+    assert (model.v0, model.t) == (280.0, 10.0)
+    assert model.sigma_a == pytest.approx(5 / 3, rel=1e-15)
+    assert model.sigma_omega == pytest.approx(math.pi / 54, rel=1e-15)
+    assert (scene.grid.nx, scene.grid.ny, scene.grid.dx) == (1500, 900, 4.0)
+
+
+# --- bad scenes: one case per kind of error, asserting the message -----------------------------
+
+BAD = {
+    "unknown top-level key": ("colour = 1\n" + BASE, ["colour: unknown key", "allowed: scene, grid"]),
+    "unknown key in a layer": (
+        edited('model = "cat"\n', 'model = "cat"\nsigma_omga = 1.0\n'),
+        ["layers.exact.sigma_omga: unknown key", "sigma_omega_deg"],
+    ),
+    "key of the other model": (
+        edited('variant = "rough"\n', 'variant = "rough"\nk_sigma = 6\n'),
+        ['layers.approx.k_sigma: unknown key (model "polar")'],
+    ),
+    "unknown key in scene": (edited('name = "demo"\n', 'name = "demo"\nauthor = "me"\n'), ["scene.author: unknown key"]),
+    "unknown key in grid": (edited("step = 10.0\n", "step = 10.0\nz = [0, 1]\n"), ["grid.z: unknown key"]),
+    "unknown key in output": (BASE + "[output]\nlevels = [1e-6]\n", ["output.levels: unknown key", "contour_levels"]),
+    "unknown key in defaults": (edited("v0 = 10.0\n", "v0 = 10.0\nspeed = 3\n"), ["defaults.speed: unknown key"]),
+    "both sigma_omega forms": (
+        edited('model = "cat"\n', 'model = "cat"\nsigma_omega = 0.1\nsigma_omega_deg = 5.0\n'),
+        ["layers.exact: give sigma_omega (rad) or sigma_omega_deg (degrees), not both"],
+    ),
+    "both heading forms": (
+        edited("v0 = 10.0\n", "v0 = 10.0\nheading = 0.1\nheading_deg = 5.0\n"),
+        ["defaults: give heading (rad) or heading_deg (degrees), not both"],
+    ),
+    "negative parameter": (
+        edited('model = "cat"\n', 'model = "cat"\nsigma_a = -1.0\n'),
+        ["layers.exact.sigma_a = -1.0: must be > 0"],
+    ),
+    "zero parameter": (edited('variant = "rough"\n', 'variant = "rough"\nv0 = 0\n'), ["layers.approx.v0 = 0: must be > 0"]),
+    "nan parameter": (edited('model = "cat"\n', 'model = "cat"\nt = nan\n'), ["layers.exact.t = nan: must be finite"]),
+    "inf parameter in defaults": (
+        edited("sigma_omega_deg = 10.0\n", "sigma_omega_deg = inf\n"),
+        ["defaults.sigma_omega_deg = inf: must be finite"],
+    ),
+    "negative degrees": (
+        edited("sigma_omega_deg = 10.0\n", "sigma_omega_deg = -10.0\n"),
+        ["defaults.sigma_omega_deg = -10.0: must be > 0"],
+    ),
+    "string parameter": (edited("v0 = 10.0\n", 'v0 = "fast"\n'), ['defaults.v0 = "fast": expected a number']),
+    "boolean parameter": (edited("v0 = 10.0\n", "v0 = true\n"), ["defaults.v0 = true: expected a number"]),
+    "k_sigma out of range": (
+        edited('model = "cat"\n', 'model = "cat"\nk_sigma = 40\n'),
+        ["layers.exact.k_sigma = 40: must be in [1, 38]"],
+    ),
+    "unknown variant": (
+        edited('variant = "rough"\n', 'variant = "smooth"\n'),
+        ['layers.approx.variant = "smooth": must be one of rough, improved'],
+    ),
+    "non-finite heading": (
+        edited('model = "cat"\n', 'model = "cat"\nheading_deg = nan\n'),
+        ["layers.exact.heading_deg = nan: must be finite"],
+    ),
+    "bad origin": (
+        edited('model = "cat"\n', 'model = "cat"\norigin = [1.0]\n'),
+        ["layers.exact.origin = [1.0]: expected a pair of numbers"],
+    ),
+    "unknown model kind": (
+        edited('model = "cat"\n', 'model = "ctrv"\n'),
+        ['layers.exact.model = "ctrv": must be one of "cat", "polar"'],
+    ),
+    "missing model": (edited('model = "cat"\n', ""), ['layers.exact.model missing: must be one of "cat", "polar"']),
+    "missing parameter": (
+        edited("sigma_a = 1.0\n", ""),
+        ["layers.exact: missing sigma_a: give each in [layers.exact] or [defaults]"],
+    ),
+    "t in a layer with scene.times": (
+        edited('name = "demo"\n', 'name = "demo"\ntimes = [1, 2]\n', edited("t = 5.0\n", "", edited('model = "cat"\n', 'model = "cat"\nt = 3\n'))),
+        ["layers.exact.t = 3: not allowed when scene.times is given"],
+    ),
+    "t in defaults with scene.times": (
+        edited('name = "demo"\n', 'name = "demo"\ntimes = [1, 2]\n'),
+        ["defaults.t = 5.0: not allowed when scene.times is given"],
+    ),
+    "times not increasing": (
+        edited('name = "demo"\n', 'name = "demo"\ntimes = [1, 3, 3]\n', edited("t = 5.0\n", "")),
+        ["scene.times = [1, 3, 3]: must be strictly increasing (3 then 3)"],
+    ),
+    "times decreasing": (
+        edited('name = "demo"\n', 'name = "demo"\ntimes = [2.0, 1.0]\n', edited("t = 5.0\n", "")),
+        ["scene.times = [2.0, 1.0]: must be strictly increasing"],
+    ),
+    "zero time": (
+        edited('name = "demo"\n', 'name = "demo"\ntimes = [0, 1]\n', edited("t = 5.0\n", "")),
+        ["scene.times[0] = 0: must be finite and > 0"],
+    ),
+    "empty times": (edited('name = "demo"\n', 'name = "demo"\ntimes = []\n'), ["scene.times = []: expected a non-empty list"]),
+    "empty grid": (edited("x = [-100.0, 100.0]\n", "x = [50.0, 50.0]\n"), ["grid.x = (50.0, 50.0): the upper bound must exceed the lower"]),
+    "reversed grid": (edited("y = [0.0, 200.0]\n", "y = [200.0, 0.0]\n"), ["grid.y = (200.0, 0.0)"]),
+    "gigantic grid": (
+        edited("x = [-100.0, 100.0]\n", "x = [-1e6, 1e6]\n", edited("y = [0.0, 200.0]\n", "y = [-1e6, 1e6]\n")),
+        ["grid: grid of 200000 x 200000 = 40,000,000,000 cells would take 298.0 GiB as float64", "use a larger step"],
+    ),
+    "zero step": (edited("step = 10.0\n", "step = 0\n"), ["grid.step = 0.0: must be > 0"]),
+    "missing step": (edited("step = 10.0\n", ""), ["grid: step (m) is required"]),
+    "step and dx": (edited("step = 10.0\n", "step = 10.0\ndx = 5.0\n"), ["grid: give either step or both dx and dy"]),
+    "non-finite bound": (edited("x = [-100.0, 100.0]\n", "x = [-inf, 100.0]\n"), ["grid.x[0] = -inf: must be finite"]),
+    "missing grid": (BASE.replace("[grid]", "[grid_]"), ["grid_: unknown key"]),
+    "missing scene name": (edited('name = "demo"\n', 'title = "x"\n'), ["scene.name: missing"]),
+    "bad scene name": (edited('name = "demo"\n', 'name = "my demo"\n'), ['scene.name = "my demo": expected a name of letters, digits, _ and -']),
+    "bad layer name": (edited("[layers.exact]", '[layers."a/b"]'), ['layers."a/b": a layer name must be letters, digits, _ and -']),
+    "no layers": (BASE.split("[layers.exact]")[0], ["[layers]: missing table"]),
+    "layer not a table": (
+        edited('[layers.exact]\nmodel = "cat"\n', "[layers]\nexact = 1\n"),
+        ["layers.exact = 1: expected a table [layers.exact]"],
+    ),
+    "bad level": (BASE + "[output]\ncontour_levels = [1e-6, -1]\n", ["output.contour_levels[1] = -1: must be finite and > 0"]),
+    "bad dtype": (BASE + '[output]\ndtype = "float16"\n', ['output.dtype = "float16": must be one of "float64", "float32"']),
+    "bad colormap": (BASE + '[output]\ncolormap = "jet"\n', ['output.colormap = "jet": must be one of', "viridis"]),
+    "bad normalise": (BASE + '[output]\nnormalise = "yes"\n', ['output.normalise = "yes": expected true or false']),
+}
+
+
+@pytest.mark.parametrize("case", list(BAD), ids=list(BAD))
+def test_bad_scene_is_named(case):
+    text, expected = BAD[case]
+    message = error_of(text)
+    for part in expected:
+        assert part in message, f"{part!r} not in {message!r}"
+
+
+def test_toml_syntax_error_gives_line_and_column():
+    message = error_of(edited("step = 10.0\n", "step = \n"))
+    assert "bad.toml: invalid TOML:" in message
+    assert "(at line 7, column 8)" in message
+
+
+def test_missing_file(tmp_path):
+    path = tmp_path / "nowhere.toml"
+    with pytest.raises(BananagridError, match=r"nowhere\.toml: no such scene file"):
+        load_scene(path)
+
+
+def test_directory_is_not_a_scene(tmp_path):
+    with pytest.raises(BananagridError, match="is a directory"):
+        load_scene(tmp_path)
+
+
+def test_file_errors_name_the_file(tmp_path):
+    path = tmp_path / "neg.toml"
+    path.write_text(edited('model = "cat"\n', 'model = "cat"\nsigma_a = -1.0\n'))
+    with pytest.raises(BananagridError) as info:
+        load_scene(path)
+    assert str(info.value) == f"{path}: layers.exact.sigma_a = -1.0: must be > 0"
