@@ -2,6 +2,10 @@
 
 Warp has no log1p, hypot, Bessel or normal-pdf builtins, and its closed forms lose digits near
 zero, so the small-argument series live here once and every kernel calls them.
+
+Precision trap: a module-level Python float used in a kernel is a float32 constant in
+arithmetic, so ``type(x)(A * B)`` is rounded to float32 before the cast. Cast single constants
+only (``type(x)(A)``), and precompute products in Python as their own constant.
 """
 
 from typing import Any
