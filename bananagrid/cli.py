@@ -15,7 +15,7 @@ from pathlib import Path
 from typing import TextIO
 
 from . import __version__
-from .validate import BananagridError
+from .validate import BananagridError, positive
 
 __all__ = ["main", "build_parser"]
 
@@ -93,6 +93,10 @@ def _run(args: argparse.Namespace) -> int:
 
     if args.threads is not None and args.threads < 1:
         raise BananagridError(f"--threads = {args.threads}: must be >= 1")
+    if args.step is not None:
+        positive("--step", args.step)
+    if args.out.exists() and not args.out.is_dir():
+        raise BananagridError(f"--out {args.out}: exists and is not a directory")
     scenes = [load_scene(path) for path in args.scenes]
     if args.step is not None:
         scenes = [scene.with_step(args.step) for scene in scenes]

@@ -88,11 +88,13 @@ class Grid:
             if not hi > lo:
                 raise BananagridError(f"{name} = ({lo}, {hi}): the upper bound must exceed the lower")
             span = (hi - lo) / d
-            n = math.ceil(span - 1e-9 * max(1.0, span))
+            # a whole number of steps up to rounding stays whole; anything else rounds up
+            n = round(span) if abs(span - round(span)) <= 1e-9 * max(1.0, span) else math.ceil(span)
             if n > MAX_CELLS:
                 raise BananagridError(
-                    f"{name} bounds ({lo}, {hi}) at step {d} give {n:,} cells in one axis; "
-                    f"the limit is {MAX_CELLS:,} cells in all"
+                    f"{name} bounds ({lo}, {hi}) at step {d} give {n:,} cells in one axis, "
+                    f"over {n * 8 / 2**30:.1f} GiB as float64 for a single row; the limit is "
+                    f"{MAX_CELLS:,} cells ({MAX_CELLS * 8 / 2**30:.0f} GiB) in all"
                 )
             counts.append((lo, max(n, 1)))
         (x0, nx), (y0, ny) = counts

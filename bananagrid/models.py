@@ -16,7 +16,7 @@ from scipy.special import erfc
 
 from .validate import BananagridError, finite, positive
 
-__all__ = ["Pose", "CAT", "PolarBanana", "Model"]
+__all__ = ["Pose", "CAT", "PolarBanana", "Model", "VARIANTS", "cat_position"]
 
 
 @dataclass(frozen=True)
@@ -185,7 +185,9 @@ class PolarBanana:
     P_sigma (11) turns negative where phi^2 > sigma_omega^2 (t^2 / 12 + 6 v0^2 / sigma_a^2); the
     improved density is set to 0 there and a warning is issued when that angle is below pi.
     Samples are drawn from the law restricted to |phi| <= pi and r > 0, the support of the
-    plane density.
+    plane density. Where P_mu(phi) comes near 0 (phi near +-pi when sigma_omega t is large) the
+    density keeps the 1/r of the polar Jacobian: integrable, but cell-centre samples near the
+    origin grow as the grid is refined.
     """
 
     v0: float

@@ -2,13 +2,18 @@
 
 from __future__ import annotations
 
+import math
+import os
+import time
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field, replace
 
 import numpy as np
 
 from .grid import Grid
+from .validate import BananagridError
 
-__all__ = ["Raster"]
+__all__ = ["Raster", "rasterise", "evaluate_points", "evaluate_polar_moments", "default_threads"]
 
 
 @dataclass(frozen=True)
@@ -54,7 +59,10 @@ class Raster:
     def normalise(self) -> "Raster":
         """Return a copy whose values integrate to one over the grid; ``mass`` keeps the raw mass."""
         if not self.mass > 0.0:
-            raise ValueError("cannot normalise a raster that captured no mass")
+            raise BananagridError(
+                f"cannot normalise a raster that captured no mass (mass = {self.mass!r}): "
+                "the grid misses the model's support"
+            )
         if self.normalised:
             return self
         return replace(self, values=self.values / self.mass, normalised=True)
@@ -63,14 +71,6 @@ class Raster:
 # --------------------------------------------------------------------------------------------
 # Launching kernels. This is the only module that calls wp.launch.
 # --------------------------------------------------------------------------------------------
-
-import math
-import os
-import time
-from concurrent.futures import ThreadPoolExecutor
-from dataclasses import dataclass as _dataclass
-
-from .validate import BananagridError
 
 _DTYPES = {np.dtype(np.float32): "float32", np.dtype(np.float64): "float64"}
 
@@ -120,7 +120,7 @@ def default_threads() -> int:
         return max(1, os.cpu_count() or 1)
 
 
-@_dataclass(frozen=True)
+@dataclass(frozen=True)
 class _Binding:
     """A model bound to its kernels: both kernels take (xs, ys, offset, *params, out)."""
 

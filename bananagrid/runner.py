@@ -29,7 +29,7 @@ from .record import (
 from .scene import Layer, Scene
 from .validate import BananagridError
 
-__all__ = ["run_scene", "array_key", "RUN_ONLY_PROVENANCE"]
+__all__ = ["run_scene", "compute", "array_key", "RUN_ONLY_PROVENANCE"]
 
 #: Provenance keys that describe the run rather than the result. They stay out of the
 #: recording, so that running a scene twice gives equal recordings; the summary rows and the

@@ -19,17 +19,17 @@ from pathlib import Path
 from types import MappingProxyType
 
 from .grid import Grid
-from .models import CAT, PolarBanana, Pose
+from .models import CAT, VARIANTS, PolarBanana, Pose
 from .record import DEFAULT_LEVELS
 from .validate import BananagridError, positive
 
 __all__ = ["Layer", "Scene", "load_scene", "parse_scene", "MODEL_KINDS", "PARAMETER_KEYS"]
 
 #: Model classes by the ``model`` value of a layer.
-MODEL_KINDS = {"cat": CAT, "polar": PolarBanana}
+MODEL_KINDS = MappingProxyType({"cat": CAT, "polar": PolarBanana})
 
 #: Scene keys of every model kind (the ``t`` key is refused when ``scene.times`` is given).
-PARAMETER_KEYS = {
+PARAMETER_KEYS = MappingProxyType({
     "cat": (
         "v0", "t", "sigma_a", "sigma_omega", "sigma_omega_deg", "k_sigma",
         "origin", "heading", "heading_deg",
@@ -38,7 +38,7 @@ PARAMETER_KEYS = {
         "v0", "t", "sigma_a", "sigma_omega", "sigma_omega_deg", "variant",
         "origin", "heading", "heading_deg",
     ),
-}
+})
 
 #: Angles that a scene may give in radians or, under ``NAME_deg``, in degrees.
 ANGLE_KEYS = ("sigma_omega", "heading")
@@ -216,8 +216,15 @@ def _build(doc: dict, text: str, source: str) -> Scene:
     bounds, grid = _grid(_table(doc, "grid", required=True))
     levels, normalise, dtype, colormap = _output(_table(doc, "output"))
     defaults = _table(doc, "defaults")
-    _check_keys(defaults, sorted(set().union(*PARAMETER_KEYS.values())), "defaults")
-    layers = _layers(_table(doc, "layers", required=True), defaults, times)
+    every_key = tuple(dict.fromkeys(k for keys in PARAMETER_KEYS.values() for k in keys))
+    _check_keys(defaults, every_key, "defaults")
+    if times is not None and "t" in defaults:
+        raise _KeyError(
+            f"defaults.t = {_show(defaults['t'])}: not allowed when scene.times is given "
+            "(every layer is computed at every time)"
+        )
+    shared = _parameters(defaults, "defaults")
+    layers = _layers(_table(doc, "layers", required=True), shared, times)
     return Scene(
         name=name, title=title, description=description, text=text, source=source,
         grid=grid, bounds=bounds, layers=layers, times=times, levels=levels,
@@ -294,15 +301,13 @@ def _colormaps() -> tuple[str, ...]:
     return tuple(c.name.lower() for c in rr.components.Colormap)
 
 
-def _layers(table: dict, defaults: dict, times) -> tuple[Layer, ...]:
-    """``[layers.NAME]`` tables in file order, each merged over ``[defaults]`` and checked."""
+def _layers(table: dict, shared: dict, times) -> tuple[Layer, ...]:
+    """``[layers.NAME]`` tables in file order, each merged over ``[defaults]`` and checked.
+
+    ``shared`` holds the ``[defaults]`` parameters as returned by :func:`_parameters`.
+    """
     if not table:
         raise _KeyError("layers: at least one [layers.NAME] table is required")
-    if times is not None and "t" in defaults:
-        raise _KeyError(
-            f"defaults.t = {_show(defaults['t'])}: not allowed when scene.times is given "
-            "(every layer is computed at every time)"
-        )
     layers = []
     for name, body in table.items():
         path = f"layers.{name}"
@@ -310,11 +315,11 @@ def _layers(table: dict, defaults: dict, times) -> tuple[Layer, ...]:
             raise _KeyError(f"layers.{_show(name)}: a layer name must be letters, digits, _ and -")
         if not isinstance(body, dict):
             raise _KeyError(f"{path} = {_show(body)}: expected a table [layers.{name}]")
-        layers.append(_layer(name, body, defaults, times))
+        layers.append(_layer(name, body, shared, times))
     return tuple(layers)
 
 
-def _layer(name: str, body: dict, defaults: dict, times) -> Layer:
+def _layer(name: str, body: dict, shared: dict, times) -> Layer:
     """Validate one layer: its keys, its values, and its model at every elapsed time."""
     path = f"layers.{name}"
     kind = body.get("model")
@@ -329,7 +334,10 @@ def _layer(name: str, body: dict, defaults: dict, times) -> Layer:
             "(every layer is computed at every time)"
         )
     # Where each parameter comes from: {param: (key path, value as written, value in SI)}.
-    given = _merge(_parameters(defaults, "defaults", allowed), _parameters(body, path, allowed))
+    # Defaults of the other model kind (k_sigma, variant) do not apply to this layer.
+    params = {key.removesuffix("_deg") for key in allowed}
+    given = {p: v for p, v in shared.items() if p in params}
+    given.update(_parameters({k: v for k, v in body.items() if k != "model"}, path))
     needed = REQUIRED if times is not None else (*REQUIRED, "t")
     missing = [p for p in needed if p not in given]
     if missing:
@@ -344,16 +352,14 @@ def _layer(name: str, body: dict, defaults: dict, times) -> Layer:
     return layer
 
 
-def _parameters(table: dict, path: str, allowed) -> dict:
+def _parameters(table: dict, path: str) -> dict:
     """``{param: (key path, written value, SI value)}`` of the parameter keys in ``table``.
 
-    Only keys in ``allowed`` are taken: ``[defaults]`` may hold keys of another model kind.
-    Degrees under ``*_deg`` are converted to radians; giving both forms is an error.
+    The keys are known to be parameter keys. Degrees under ``*_deg`` are converted to
+    radians; giving both forms of one angle is an error.
     """
     out = {}
     for key, value in table.items():
-        if key not in allowed:
-            continue
         where = f"{path}.{key}"
         param = key.removesuffix("_deg")
         if param in out:
@@ -364,16 +370,13 @@ def _parameters(table: dict, path: str, allowed) -> dict:
         if param == "origin":
             out[param] = (where, value, _pair(table, key, path))
         elif param == "variant":
+            if value not in VARIANTS:
+                raise _KeyError(f"{where} = {_show(value)}: must be one of {', '.join(map(_show, VARIANTS))}")
             out[param] = (where, value, value)
         else:
             number = _number(value, where)
             out[param] = (where, value, math.radians(number) if key.endswith("_deg") else number)
     return out
-
-
-def _merge(defaults: dict, layer: dict) -> dict:
-    """Layer parameters over defaults (a layer's ``sigma_omega`` replaces a default ``_deg``)."""
-    return {**defaults, **layer}
 
 
 def _model_error(message: str, path: str, given: dict) -> str:

@@ -111,7 +111,9 @@ def test_failure_midway_leaves_no_file(tmp_path, capsys, npz):
 def test_bad_options(tmp_path, capsys):
     scene = write(tmp_path, SMALL)
     assert main(["run", str(scene), "--out", str(tmp_path), "--step", "-5"]) == 2
-    assert error_line(capsys) == "bananagrid: error: step = -5.0: must be > 0"
+    assert error_line(capsys) == "bananagrid: error: --step = -5.0: must be > 0"
+    assert main(["run", str(scene), "--out", str(scene)]) == 2
+    assert error_line(capsys) == f"bananagrid: error: --out {scene}: exists and is not a directory"
     assert main(["run", str(scene), "--out", str(tmp_path), "--threads", "0"]) == 2
     assert error_line(capsys) == "bananagrid: error: --threads = 0: must be >= 1"
     assert main(["run", str(scene), "--bogus"]) == 2  # argparse usage error
@@ -137,6 +139,32 @@ def test_error_as_subprocess(tmp_path):
         f'bananagrid: error: {scene}: layers.near.model = "banana": must be one of "cat", "polar"'
     ]
     assert result.stdout == ""
+
+
+def test_run_as_subprocess(tmp_path):
+    scene = write(tmp_path, SMALL)
+    out = tmp_path / "out"
+    result = subprocess.run(
+        [sys.executable, "-m", "bananagrid", "run", str(scene), "--out", str(out), "--npz"],
+        capture_output=True, text=True, timeout=120,
+    )
+    assert result.returncode == 0, result.stderr
+    assert f"wrote {out / 'small.rrd'}" in result.stdout.splitlines()
+    assert f"wrote {out / 'small.npz'}" in result.stdout.splitlines()
+    assert sorted(p.name for p in out.iterdir()) == ["small.npz", "small.rrd"]
+
+
+def test_model_warning_is_one_line(tmp_path, capsys):
+    # P_sigma (11) turns negative beyond |phi| = 0.5 sqrt(25/12 + 6) = 1.42 rad < pi: the
+    # improved approximation warns (once, although the model is built twice).
+    text = SMALL.replace('model = "cat"', 'model = "polar"').replace("sigma_a = 1.0", "sigma_a = 10.0")
+    text = text.replace("sigma_omega_deg = 10.0", "sigma_omega = 0.5")
+    scene = write(tmp_path, text)
+    assert main(["run", str(scene), "--out", str(tmp_path / "out"), "--quiet"]) == 0
+    warnings = [line for line in capsys.readouterr().err.splitlines() if line.startswith("bananagrid:")]
+    assert warnings == [
+        "bananagrid: warning: P_sigma (11) is not positive for |phi| > 1.422 rad; the improved density is 0 there"
+    ]
 
 
 # --- help and delegation ----------------------------------------------------------------------

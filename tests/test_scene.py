@@ -102,6 +102,13 @@ def test_times_give_every_layer_every_time():
         scene.layers[0].model()
 
 
+def test_defaults_of_the_other_model_kind_are_ignored():
+    text = edited("v0 = 10.0\n", 'v0 = 10.0\nk_sigma = 6\nvariant = "improved"\n')
+    exact, approx = parse_scene(text).layers
+    assert exact.params["k_sigma"] == 6.0 and "variant" not in exact.params
+    assert approx.params["variant"] == "rough" and "k_sigma" not in approx.params
+
+
 def test_output_table():
     text = BASE + '[output]\ncontour_levels = [1e-3, 1e-4]\nnormalise = false\ndtype = "float32"\ncolormap = "Turbo"\n'
     scene = parse_scene(text)
@@ -189,7 +196,11 @@ BAD = {
     ),
     "unknown variant": (
         edited('variant = "rough"\n', 'variant = "smooth"\n'),
-        ['layers.approx.variant = "smooth": must be one of rough, improved'],
+        ['layers.approx.variant = "smooth": must be one of "rough", "improved"'],
+    ),
+    "unknown variant in defaults": (
+        edited("v0 = 10.0\n", 'v0 = 10.0\nvariant = "fine"\n'),
+        ['defaults.variant = "fine": must be one of "rough", "improved"'],
     ),
     "non-finite heading": (
         edited('model = "cat"\n', 'model = "cat"\nheading_deg = nan\n'),
@@ -286,3 +297,21 @@ def test_file_errors_name_the_file(tmp_path):
     with pytest.raises(BananagridError) as info:
         load_scene(path)
     assert str(info.value) == f"{path}: layers.exact.sigma_a = -1.0: must be > 0"
+
+
+# --- the schema document -----------------------------------------------------------------------
+
+DOC = SCENES.parent / "docs" / "scenes.md"
+
+
+def test_docs_name_every_key_and_the_example_parses():
+    from bananagrid.scene import GRID_KEYS, OUTPUT_KEYS, PARAMETER_KEYS, SCENE_KEYS, TOP_KEYS
+
+    doc = DOC.read_text()
+    assert not [table for table in TOP_KEYS if f"`[{table}" not in doc]
+    keys = {*SCENE_KEYS, *GRID_KEYS, *OUTPUT_KEYS, "model"}
+    keys.update(k for kind in PARAMETER_KEYS.values() for k in kind)
+    assert not [key for key in sorted(keys) if f"`{key}`" not in doc]
+    example = doc.split("## Example")[1].split("```toml\n")[1].split("```")[0]
+    scene = parse_scene(example, source="docs/scenes.md")
+    assert [layer.name for layer in scene.layers] == ["west", "east"] and len(scene.jobs()) == 6

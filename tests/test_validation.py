@@ -129,3 +129,16 @@ def test_sample_rejects_bad_n_and_rng():
         model.sample(-1, np.random.default_rng(0))
     with pytest.raises(bg.BananagridError, match="rng = 'x': expected a numpy.random.Generator"):
         model.sample(3, "x")
+
+
+def test_single_axis_overflow_states_memory():
+    with pytest.raises(bg.BananagridError, match=r"x bounds \(0.0, 1000000000000.0\) at step 1.0 give 1,000,000,000,000 cells in one axis, over 7450.6 GiB as float64"):
+        bg.Grid.from_bounds(x=(0.0, 1e12), y=(0.0, 1.0), step=1.0)
+
+
+def test_normalise_without_mass_is_a_clear_error():
+    grid = bg.Grid.from_bounds(x=(1e6, 1e6 + 10.0), y=(0.0, 10.0), step=5.0)
+    raster = bg.rasterise(bg.PolarBanana(**FIG1), grid)
+    assert raster.mass == 0.0
+    with pytest.raises(bg.BananagridError, match="cannot normalise a raster that captured no mass"):
+        raster.normalise()
