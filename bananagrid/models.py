@@ -238,24 +238,22 @@ class PolarBanana:
         return _parameters(self)
 
     def radial_law(self, phi) -> tuple[np.ndarray, np.ndarray]:
-        """Mean and SD of r | phi for this variant, as float64 arrays."""
-        phi = np.asarray(phi, dtype=float)
-        if self.variant == "rough":
-            mean = self.v0 * self.t * np.sinc(phi / np.pi)
-            return mean, np.full_like(mean, 0.5 * self.sigma_a * self.t**2)
-        return self.p_mu(phi), self.p_sigma(phi)
+        """Mean and SD of r | phi for this variant, float64 arrays (through the kernel)."""
+        from .raster import evaluate_polar_moments
+
+        return evaluate_polar_moments(self, phi)
 
     def p_mu(self, phi, *, dtype=np.float64, device="cpu") -> np.ndarray:
         """P_mu(phi), eq. (8): the improved approximation's mean of r given phi (kernel)."""
         from .raster import evaluate_polar_moments
 
-        return evaluate_polar_moments(self, phi, dtype=dtype, device=device)[0]
+        return evaluate_polar_moments(self, phi, variant="improved", dtype=dtype, device=device)[0]
 
     def p_sigma(self, phi, *, dtype=np.float64, device="cpu") -> np.ndarray:
         """P_sigma(phi), eq. (11): the improved approximation's SD of r given phi (kernel)."""
         from .raster import evaluate_polar_moments
 
-        return evaluate_polar_moments(self, phi, dtype=dtype, device=device)[1]
+        return evaluate_polar_moments(self, phi, variant="improved", dtype=dtype, device=device)[1]
 
     def sample(self, n: int, rng) -> np.ndarray:
         """Draw ``n`` world positions: phi, then r given phi (rejecting |phi| > pi, r <= 0)."""

@@ -2,8 +2,11 @@
 
 from __future__ import annotations
 
+import functools
 import math
 import os
+import sys
+import tempfile
 import time
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field, replace
@@ -82,13 +85,33 @@ CAT_MIN_NODES = 64
 CAT_MAX_NODES = 8192
 
 
+#: What Warp's native library prints on every machine without an NVIDIA driver. It is not news
+#: to a CPU user and lands in the middle of the CLI's progress line, so it is filtered out.
+_NO_DRIVER_NOTICE = b"Could not find or load the NVIDIA CUDA driver"
+
+
+@functools.cache
 def _warp():
-    """Import and initialise Warp on first use (no import-time side effects)."""
+    """Import and initialise Warp once, on first use (no import-time side effects)."""
     import warp as wp
 
     # Warp logs its banner and every module load at INFO; users want our output, not that.
     wp.config.log_level = wp.LOG_WARNING
-    wp.init()
+    # The native library writes to file descriptor 2 directly: capture it during init and
+    # pass on everything but the no-driver notice.
+    sys.stderr.flush()
+    saved = os.dup(2)
+    with tempfile.TemporaryFile() as captured:
+        os.dup2(captured.fileno(), 2)
+        try:
+            wp.init()
+        finally:
+            os.dup2(saved, 2)
+            os.close(saved)
+            captured.seek(0)
+            for line in captured.read().splitlines(keepends=True):
+                if _NO_DRIVER_NOTICE not in line:
+                    sys.stderr.write(line.decode(errors="replace"))
     return wp
 
 
@@ -122,13 +145,16 @@ def default_threads() -> int:
 
 @dataclass(frozen=True)
 class _Binding:
-    """A model bound to its kernels: both kernels take (xs, ys, offset, *params, out)."""
+    """A model bound to its kernels: both take (xs, ys, offset, *params, out); a grid kernel
+    with ``row_loop`` takes (xs, ys, row0, columns, *params, out) and loops over ``columns``
+    cells of a row per thread."""
 
     grid_kernel: object
     points_kernel: object
     params: tuple
     kernel_name: str
     notes: dict
+    row_loop: bool = False
 
 
 def _bind(model, wp, np_dtype, scalar, device) -> _Binding:
@@ -157,14 +183,23 @@ def _bind(model, wp, np_dtype, scalar, device) -> _Binding:
     if isinstance(model, PolarBanana):
         from .kernels import polar
 
-        variant = polar.ROUGH if model.variant == "rough" else polar.IMPROVED
-        params = (
-            scalar(model.v0), scalar(model.t), scalar(model.sigma_a), scalar(model.sigma_omega),
-            variant, pose,
-        )
+        params = (_polar_coefficients(model, wp, np_dtype, scalar, device), _polar_variant(model), pose)
         notes = {"variant": model.variant, "truncated_mass": model.truncated_mass}
-        return _Binding(polar.polar_grid, polar.polar_points, params, "polar.polar_grid", notes)
+        return _Binding(polar.polar_grid, polar.polar_points, params, "polar.polar_grid", notes, row_loop=True)
     raise BananagridError(f"model = {type(model).__name__}: not a bananagrid model")
+
+
+def _polar_coefficients(model, wp, np_dtype, scalar, device):
+    from .kernels import polar
+
+    values = np.array(polar.coefficients(model.v0, model.t, model.sigma_a, model.sigma_omega), dtype=np_dtype)
+    return wp.array(values, dtype=scalar, device=device)
+
+
+def _polar_variant(model) -> int:
+    from .kernels import polar
+
+    return polar.ROUGH if model.variant == "rough" else polar.IMPROVED
 
 
 def _cat_nodes(model) -> np.ndarray:
@@ -240,16 +275,20 @@ def rasterise(model, grid: Grid, *, dtype=np.float64, device: str = "cpu", threa
     xs = wp.array(grid.x.astype(np_dtype), dtype=scalar, device=device)
     ys = wp.array(grid.y.astype(np_dtype), dtype=scalar, device=device)
     if device == "cpu":
-        values = np.zeros(grid.shape, dtype=np_dtype)
+        values = np.empty(grid.shape, dtype=np_dtype)  # every cell is written by the kernel
         out = wp.array(values, dtype=scalar, copy=False, device=device)  # shares memory
     else:
         out = wp.zeros(grid.shape, dtype=scalar, device=device)
 
+    # row-looping kernels take whole rows per thread on the CPU, one cell per thread on a GPU
+    columns = (grid.nx if device == "cpu" else 1) if binding.row_loop else None
+
     def launch_band(r0, r1):
-        wp.launch(
-            binding.grid_kernel, dim=(r1 - r0, grid.nx),
-            inputs=[xs, ys, r0, *binding.params, out], device=device,
-        )
+        if columns is None:
+            dim, head = (r1 - r0, grid.nx), [xs, ys, r0]
+        else:
+            dim, head = (r1 - r0, -(-grid.nx // columns)), [xs, ys, r0, columns]
+        wp.launch(binding.grid_kernel, dim=dim, inputs=[*head, *binding.params, out], device=device)
 
     bands = _bands(grid.ny, threads) if device == "cpu" else [(0, grid.ny)]
     _run_bands(launch_band, bands, threads)
@@ -272,6 +311,8 @@ def rasterise(model, grid: Grid, *, dtype=np.float64, device: str = "cpu", threa
 
 
 def _check_finite(values: np.ndarray, model) -> None:
+    if np.isfinite(values.sum()):  # one pass, no mask, in the common case
+        return
     bad = ~np.isfinite(values)
     if bad.any():
         raise FloatingPointError(
@@ -315,8 +356,9 @@ def evaluate_points(model, x, y, *, dtype=np.float64, device: str = "cpu", threa
     return out.numpy().reshape(shape)
 
 
-def evaluate_polar_moments(model, phi, *, dtype=np.float64, device: str = "cpu"):
-    """P_mu (8) and P_sigma (11) of a PolarBanana at angles ``phi`` (radians), via the kernel."""
+def evaluate_polar_moments(model, phi, *, variant=None, dtype=np.float64, device: str = "cpu"):
+    """Mean and SD of r given phi of a PolarBanana: its own variant's law, or ``variant``'s
+    ("improved": P_mu (8) and P_sigma (11))."""
     phi = np.asarray(phi, dtype=float)
     if not np.isfinite(phi).all():
         raise BananagridError("phi: angles must be finite")
@@ -325,13 +367,11 @@ def evaluate_polar_moments(model, phi, *, dtype=np.float64, device: str = "cpu")
     from .kernels import polar
 
     flat = wp.array(np.ascontiguousarray(phi.ravel(), dtype=np_dtype), dtype=scalar, device=device)
-    mu = wp.zeros(phi.size, dtype=scalar, device=device)
+    mean = wp.zeros(phi.size, dtype=scalar, device=device)
     sd = wp.zeros(phi.size, dtype=scalar, device=device)
     if phi.size:
-        wp.launch(
-            polar.polar_moments, dim=phi.size,
-            inputs=[flat, scalar(model.v0), scalar(model.t), scalar(model.sigma_a), scalar(model.sigma_omega), mu, sd],
-            device=device,
-        )
+        coef = _polar_coefficients(model, wp, np_dtype, scalar, device)
+        law = _polar_variant(model if variant is None else replace(model, variant=variant))
+        wp.launch(polar.polar_moments, dim=phi.size, inputs=[flat, coef, law, mean, sd], device=device)
         wp.synchronize_device(device)
-    return mu.numpy().reshape(phi.shape), sd.numpy().reshape(phi.shape)
+    return mean.numpy().reshape(phi.shape), sd.numpy().reshape(phi.shape)
