@@ -155,9 +155,19 @@ class _Binding:
     kernel_name: str
     notes: dict
     row_loop: bool = False
+    #: Bands per thread: one where every row costs the same (fewest launches), many where the
+    #: cost follows the density (CAT rows through the banana refine roots, others only scan).
+    bands_per_thread: int = 16
 
 
 def _bind(model, wp, np_dtype, scalar, device) -> _Binding:
+    """Bind ``model`` to its kernels, with their module loaded on ``device``."""
+    binding = _bind_kernels(model, wp, np_dtype, scalar, device)
+    wp.load_module(binding.grid_kernel.module, device=device)
+    return binding
+
+
+def _bind_kernels(model, wp, np_dtype, scalar, device) -> _Binding:
     from .models import CAT, PolarBanana
 
     pose = wp.array(model.pose.as_array().astype(np_dtype), dtype=scalar, device=device)
@@ -185,7 +195,9 @@ def _bind(model, wp, np_dtype, scalar, device) -> _Binding:
 
         params = (_polar_coefficients(model, wp, np_dtype, scalar, device), _polar_variant(model), pose)
         notes = {"variant": model.variant, "truncated_mass": model.truncated_mass}
-        return _Binding(polar.polar_grid, polar.polar_points, params, "polar.polar_grid", notes, row_loop=True)
+        return _Binding(
+            polar.polar_grid, polar.polar_points, params, "polar.polar_grid", notes, row_loop=True, bands_per_thread=1
+        )
     raise BananagridError(f"model = {type(model).__name__}: not a bananagrid model")
 
 
@@ -210,9 +222,9 @@ def _cat_nodes(model) -> np.ndarray:
     return np.linspace(-half, half, n)
 
 
-def _bands(n_rows: int, threads: int) -> list[tuple[int, int]]:
-    """Split rows into contiguous bands: a few per thread so uneven rows even out."""
-    n_bands = max(1, min(n_rows, threads * 4))
+def _bands(n_rows: int, threads: int, per_thread: int = 1) -> list[tuple[int, int]]:
+    """Split rows into ``threads * per_thread`` contiguous bands (fewer if rows run out)."""
+    n_bands = max(1, min(n_rows, threads * per_thread))
     edges = np.linspace(0, n_rows, n_bands + 1).round().astype(int)
     return [(int(a), int(b)) for a, b in zip(edges[:-1], edges[1:]) if b > a]
 
@@ -227,20 +239,13 @@ def _check_threads(threads) -> int:
 
 def _run_bands(launch_band, bands: list[tuple[int, int]], threads: int) -> None:
     """Call ``launch_band(start, stop)`` for every band; on several threads, from a pool.
-
-    The first band runs on the calling thread so that the kernel module is compiled or loaded
-    once before the pool starts (concurrent first launches would each build it).
-    """
-    first, rest = bands[0], bands[1:]
-    launch_band(*first)
-    if not rest:
-        return
-    if threads == 1:
-        for band in rest:
+    The kernel's module must already be loaded (concurrent first launches would each build it)."""
+    if threads == 1 or len(bands) == 1:
+        for band in bands:
             launch_band(*band)
         return
     with ThreadPoolExecutor(max_workers=threads) as pool:
-        for future in [pool.submit(launch_band, a, b) for a, b in rest]:
+        for future in [pool.submit(launch_band, a, b) for a, b in bands]:
             future.result()
 
 
@@ -290,7 +295,7 @@ def rasterise(model, grid: Grid, *, dtype=np.float64, device: str = "cpu", threa
             dim, head = (r1 - r0, -(-grid.nx // columns)), [xs, ys, r0, columns]
         wp.launch(binding.grid_kernel, dim=dim, inputs=[*head, *binding.params, out], device=device)
 
-    bands = _bands(grid.ny, threads) if device == "cpu" else [(0, grid.ny)]
+    bands = _bands(grid.ny, threads, binding.bands_per_thread) if device == "cpu" else [(0, grid.ny)]
     _run_bands(launch_band, bands, threads)
     wp.synchronize_device(device)
     if device != "cpu":
