@@ -132,7 +132,7 @@ def test_error_as_subprocess(tmp_path):
     scene = write(tmp_path, SMALL.replace('model = "cat"', 'model = "banana"'))
     result = subprocess.run(
         [sys.executable, "-m", "bananagrid", "run", str(scene), "--out", str(tmp_path / "out")],
-        capture_output=True, text=True, timeout=120,
+        capture_output=True, text=True, timeout=120, cwd=tmp_path,
     )
     assert result.returncode == 2
     assert result.stderr.strip().splitlines() == [
@@ -146,7 +146,7 @@ def test_run_as_subprocess(tmp_path):
     out = tmp_path / "out"
     result = subprocess.run(
         [sys.executable, "-m", "bananagrid", "run", str(scene), "--out", str(out), "--npz"],
-        capture_output=True, text=True, timeout=120,
+        capture_output=True, text=True, timeout=120, cwd=tmp_path,
     )
     assert result.returncode == 0, result.stderr
     assert f"wrote {out / 'small.rrd'}" in result.stdout.splitlines()
@@ -176,9 +176,10 @@ def test_help_exits_0(argv, capsys):
     assert "usage: bananagrid" in capsys.readouterr().out
 
 
-def test_help_as_subprocess():
+def test_help_as_subprocess(tmp_path):
     result = subprocess.run(
-        [sys.executable, "-m", "bananagrid", "run", "--help"], capture_output=True, text=True, timeout=60
+        [sys.executable, "-m", "bananagrid", "run", "--help"], capture_output=True, text=True, timeout=60,
+        cwd=tmp_path,
     )
     assert result.returncode == 0
     assert "--npz" in result.stdout and "--step" in result.stdout
