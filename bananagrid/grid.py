@@ -7,7 +7,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .validate import BananagridError, finite, positive, positive_int
+from .validate import BananagridError, finite, point, positive, positive_int
 
 __all__ = ["Grid", "MAX_CELLS"]
 
@@ -40,11 +40,7 @@ class Grid:
     ny: int
 
     def __post_init__(self):
-        try:
-            ox, oy = self.origin
-        except (TypeError, ValueError):
-            raise BananagridError(f"origin = {self.origin!r}: expected a pair (x, y)") from None
-        object.__setattr__(self, "origin", (finite("origin[0]", ox), finite("origin[1]", oy)))
+        object.__setattr__(self, "origin", point("origin", self.origin))
         object.__setattr__(self, "dx", positive("dx", self.dx))
         object.__setattr__(self, "dy", positive("dy", self.dy))
         object.__setattr__(self, "nx", positive_int("nx", self.nx))

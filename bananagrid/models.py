@@ -14,7 +14,7 @@ from dataclasses import dataclass, field, fields
 import numpy as np
 from scipy.special import erfc
 
-from .validate import BananagridError, finite, positive
+from .validate import BananagridError, finite, point, positive
 
 __all__ = ["Pose", "CAT", "PolarBanana", "Model", "VARIANTS", "cat_position"]
 
@@ -35,11 +35,7 @@ class Pose:
     heading: float = 0.0
 
     def __post_init__(self):
-        try:
-            ox, oy = self.origin
-        except (TypeError, ValueError):
-            raise BananagridError(f"origin = {self.origin!r}: expected a pair (x, y)") from None
-        object.__setattr__(self, "origin", (finite("origin[0]", ox), finite("origin[1]", oy)))
+        object.__setattr__(self, "origin", point("origin", self.origin))
         object.__setattr__(self, "heading", finite("heading", self.heading))
 
     def as_array(self) -> np.ndarray:
@@ -69,6 +65,14 @@ def _check_n(n) -> int:
     if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < 0:
         raise BananagridError(f"n = {n!r}: expected a non-negative integer")
     return int(n)
+
+
+def _validate_motion(model) -> None:
+    """The parameters every motion model shares: v0, t, sigma_a, sigma_omega > 0 and a Pose."""
+    for name in ("v0", "t", "sigma_a", "sigma_omega"):
+        object.__setattr__(model, name, positive(name, getattr(model, name)))
+    if not isinstance(model.pose, Pose):
+        raise BananagridError(f"pose = {model.pose!r}: expected a bananagrid.Pose")
 
 
 def cat_position(v0, t, a, omega) -> np.ndarray:
@@ -124,14 +128,11 @@ class CAT:
     kind = "cat"
 
     def __post_init__(self):
-        for name in ("v0", "t", "sigma_a", "sigma_omega"):
-            object.__setattr__(self, name, positive(name, getattr(self, name)))
+        _validate_motion(self)
         k = positive("k_sigma", self.k_sigma)
         if not 1.0 <= k <= 38.0:
             raise BananagridError(f"k_sigma = {k!r}: must be in [1, 38] (beyond 38 the normal tail underflows)")
         object.__setattr__(self, "k_sigma", k)
-        if not isinstance(self.pose, Pose):
-            raise BananagridError(f"pose = {self.pose!r}: expected a bananagrid.Pose")
 
     @property
     def truncated_mass(self) -> float:
@@ -201,8 +202,7 @@ class PolarBanana:
     kind = "polar"
 
     def __post_init__(self):
-        for name in ("v0", "t", "sigma_a", "sigma_omega"):
-            object.__setattr__(self, name, positive(name, getattr(self, name)))
+        _validate_motion(self)
         if self.variant not in VARIANTS:
             raise BananagridError(f"variant = {self.variant!r}: must be one of {', '.join(VARIANTS)}")
         sh = finite("sigma_heading", self.sigma_heading)
@@ -210,8 +210,6 @@ class PolarBanana:
             raise BananagridError(
                 f"sigma_heading = {sh!r}: initial-heading noise (Section 7) is not implemented yet; use 0"
             )
-        if not isinstance(self.pose, Pose):
-            raise BananagridError(f"pose = {self.pose!r}: expected a bananagrid.Pose")
         if self.variant == "improved" and self.sigma_positive_limit < math.pi:
             warnings.warn(
                 f"P_sigma (11) is not positive for |phi| > {self.sigma_positive_limit:.4g} rad; "

@@ -9,7 +9,7 @@ from __future__ import annotations
 import math
 from numbers import Real
 
-__all__ = ["finite", "positive", "non_negative", "positive_int", "BananagridError"]
+__all__ = ["finite", "positive", "non_negative", "positive_int", "point", "BananagridError"]
 
 
 class BananagridError(ValueError):
@@ -56,3 +56,12 @@ def positive_int(name: str, value) -> int:
     if v < 1:
         raise BananagridError(f"{name} = {v}: must be >= 1")
     return v
+
+
+def point(name: str, value) -> tuple[float, float]:
+    """Return ``value`` as a pair of finite floats, or raise naming ``name[0]`` / ``name[1]``."""
+    try:
+        x, y = value
+    except (TypeError, ValueError):
+        raise BananagridError(f"{name} = {value!r}: expected a pair (x, y)") from None
+    return finite(f"{name}[0]", x), finite(f"{name}[1]", y)

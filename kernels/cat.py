@@ -20,7 +20,7 @@ from typing import Any
 
 import warp as wp
 
-from .common import cat_basis, normal_pdf, sinc, world_to_local_x, world_to_local_y
+from .common import cat_basis, normal_pdf, sinc, world_to_local
 
 #: Table columns: omega; the coefficients of F = hx*y - hy*x - c and of
 #: dF/domega = dhx*y - dhy*x - dc; and of the acceleration of the line through P,
@@ -311,8 +311,7 @@ def cat_grid(
     """Density at the cell centres (xs[j], ys[row0 + i]) of a band of rows."""
     i, j = wp.tid()
     row = row0 + i
-    x = world_to_local_x(xs[j], ys[row], pose[0], pose[1], pose[2], pose[3])
-    y = world_to_local_y(xs[j], ys[row], pose[0], pose[1], pose[2], pose[3])
+    x, y = world_to_local(xs[j], ys[row], pose)
     out[row, j] = cat_density_local(x, y, table, v0, t, sigma_a, sigma_omega, tol)
 
 
@@ -332,8 +331,7 @@ def cat_points(
 ):
     """Density at arbitrary world points (xs[k], ys[k]) for k in a chunk starting at ``start``."""
     k = start + wp.tid()
-    x = world_to_local_x(xs[k], ys[k], pose[0], pose[1], pose[2], pose[3])
-    y = world_to_local_y(xs[k], ys[k], pose[0], pose[1], pose[2], pose[3])
+    x, y = world_to_local(xs[k], ys[k], pose)
     out[k] = cat_density_local(x, y, table, v0, t, sigma_a, sigma_omega, tol)
 
 

@@ -162,12 +162,9 @@ def cat_basis(u: Any):
 
 
 @wp.func
-def world_to_local_x(x: Any, y: Any, ox: Any, oy: Any, cos_h: Any, sin_h: Any):
-    """x coordinate in a model's local frame (+y along the heading, a bearing from north)."""
-    return (x - ox) * cos_h - (y - oy) * sin_h
-
-
-@wp.func
-def world_to_local_y(x: Any, y: Any, ox: Any, oy: Any, cos_h: Any, sin_h: Any):
-    """y coordinate in a model's local frame (+y along the heading, a bearing from north)."""
-    return (x - ox) * sin_h + (y - oy) * cos_h
+def world_to_local(x: Any, y: Any, pose: wp.array(dtype=Any)):
+    """World (east, north) to a model's local frame (+y along the heading, a bearing from
+    north); ``pose`` = (origin x, origin y, cos heading, sin heading)."""
+    dx = x - pose[0]
+    dy = y - pose[1]
+    return dx * pose[2] - dy * pose[3], dx * pose[3] + dy * pose[2]

@@ -19,7 +19,7 @@ from typing import Any
 
 import warp as wp
 
-from .common import atan2_fast, world_to_local_x, world_to_local_y
+from .common import atan2_fast, world_to_local
 
 ROUGH = 0
 IMPROVED = 1
@@ -110,8 +110,7 @@ def polar_grid(
     y_world = ys[row]
     j_end = wp.min((block + 1) * columns, xs.shape[0])
     for j in range(block * columns, j_end):
-        x = world_to_local_x(xs[j], y_world, pose[0], pose[1], pose[2], pose[3])
-        y = world_to_local_y(xs[j], y_world, pose[0], pose[1], pose[2], pose[3])
+        x, y = world_to_local(xs[j], y_world, pose)
         out[row, j] = polar_density_local(x, y, coef, variant)
 
 
@@ -127,8 +126,7 @@ def polar_points(
 ):
     """Density at arbitrary world points (xs[k], ys[k]) for k in a chunk starting at ``start``."""
     k = start + wp.tid()
-    x = world_to_local_x(xs[k], ys[k], pose[0], pose[1], pose[2], pose[3])
-    y = world_to_local_y(xs[k], ys[k], pose[0], pose[1], pose[2], pose[3])
+    x, y = world_to_local(xs[k], ys[k], pose)
     out[k] = polar_density_local(x, y, coef, variant)
 
 
