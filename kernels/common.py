@@ -14,6 +14,7 @@ import warp as wp
 
 #: 1 / sqrt(2 pi)
 INV_SQRT_2PI = 0.3989422804014327
+ONE_THIRD = 1.0 / 3.0
 
 #: Below this |u| the CAT basis functions switch from closed forms to their Taylor series. At
 #: |u| = 1 the series' 10th term is below 1e-19 relative, and the closed forms' cancellation
@@ -23,11 +24,24 @@ SERIES_SWITCH = 1.0
 
 
 @wp.func
-def sinc(x: Any):
-    """Unnormalised sinc, sin(x) / x, with sinc(0) = 1 (ERRATA: not numpy's normalised sinc)."""
+def sinc_of(x: Any, sin_x: Any):
+    """Unnormalised sinc, sin(x) / x, from a known sin(x); sinc(0) = 1 (ERRATA: not numpy's
+    normalised sinc). Taking sin(x) as an argument lets a caller that knows it skip a sine."""
     if wp.abs(x) < type(x)(1.0e-4):
         return type(x)(1.0) - x * x / type(x)(6.0)
-    return wp.sin(x) / x
+    return sin_x / x
+
+
+@wp.func
+def sinc(x: Any):
+    """Unnormalised sinc, sin(x) / x."""
+    return sinc_of(x, wp.sin(x))
+
+
+@wp.func
+def scc_of(sinc_x: Any, cos_x: Any):
+    """scc(x) = (4 sinc(x) - cos(x)) / 3, eq. (7) of the polar-banana paper, from sinc and cos."""
+    return (type(sinc_x)(4.0) * sinc_x - cos_x) * type(sinc_x)(ONE_THIRD)
 
 
 #: Cephes' atan rational approximation P(z^2) / Q(z^2) on |z| <= 0.66 (Q monic), accurate to
@@ -82,17 +96,6 @@ def normal_pdf(x: Any, mu: Any, sigma: Any):
     """g(x; mu, sigma) = exp(-((x - mu) / sigma)^2 / 2) / (sigma sqrt(2 pi))."""
     z = (x - mu) / sigma
     return type(x)(INV_SQRT_2PI) / sigma * wp.exp(type(x)(-0.5) * z * z)
-
-
-@wp.func
-def scc(phi: Any):
-    """scc(phi) = (4 sinc(phi) - cos(phi)) / 3, eq. (7) of the polar-banana paper."""
-    return (type(phi)(4.0) * sinc(phi) - wp.cos(phi)) / type(phi)(3.0)
-
-
-#: Taylor coefficients in z = u^2 of C / u, D, C' and D' / u (see ``cat_basis``), from
-#: C = sum (-1)^(n+1) 2n u^(2n-1) / (2n+1)!, D = sum (-1)^(n+1) (2n-1) u^(2n-2) / (2n)!, their
-#: termwise derivatives, n = 1..10. Horner with constants: no divisions on the hot path.
 
 
 @wp.func

@@ -19,12 +19,10 @@ from typing import Any
 
 import warp as wp
 
-from .common import atan2_fast, world_to_local
+from .common import atan2_fast, scc_of, sinc_of, world_to_local
 
 ROUGH = 0
 IMPROVED = 1
-
-ONE_THIRD = 1.0 / 3.0
 
 #: Layout of the coefficient array (see :func:`coefficients`).
 MEAN_SINC, MEAN_SCC, INV_SIGMA_PHI, SD_SCALE, SD_CURVATURE, SD_T_TERM, INV_SIGMA_OMEGA_SQ, NORM = range(8)
@@ -46,20 +44,12 @@ def coefficients(v0: float, t: float, sigma_a: float, sigma_omega: float) -> lis
 
 
 @wp.func
-def sinc_of(phi: Any, sin_phi: Any):
-    """sinc(phi) = sin(phi) / phi from a known sin(phi) (no second sine on the hot path)."""
-    if wp.abs(phi) < type(phi)(1.0e-4):
-        return type(phi)(1.0) - phi * phi / type(phi)(6.0)
-    return sin_phi / phi
-
-
-@wp.func
 def polar_mean_sd(phi: Any, sinc_phi: Any, cos_phi: Any, coef: wp.array(dtype=Any), variant: int):
     """Mean and SD of r given phi: the rough law, or P_mu (8) and P_sigma (11)."""
     one = type(phi)(1.0)
     if variant == ROUGH:
         return coef[MEAN_SINC] * sinc_phi, coef[SD_SCALE]
-    scc_phi = (type(phi)(4.0) * sinc_phi - cos_phi) * type(phi)(ONE_THIRD)
+    scc_phi = scc_of(sinc_phi, cos_phi)
     z = phi * coef[INV_SIGMA_PHI]
     mu = coef[MEAN_SINC] * sinc_phi + coef[MEAN_SCC] * (z * z - one) * scc_phi
     sd = coef[SD_SCALE] * (one + coef[SD_CURVATURE] * (coef[SD_T_TERM] - phi * phi * coef[INV_SIGMA_OMEGA_SQ])) * scc_phi
