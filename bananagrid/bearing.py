@@ -1,0 +1,203 @@
+"""Bearing fixes: where two or more direction-finding stations' bearings cross (Walsh, 1968).
+
+Each sensor at S_i reports a bearing b_i (radians clockwise from north) to the contact with an
+independent normal error of standard deviation sigma_i. The fix is the crossing of the bearing
+lines (two sensors) or their weighted least-squares point (three or more, beyond Walsh); its
+linearised covariance is J diag(sigma^2) J^T with J the Jacobian of the fix with respect to the
+bearing errors (ERRATA), equivalently (G^T W G)^-1 with G the gradients of the bearings with
+respect to position and W = diag(1 / sigma^2).
+"""
+
+from __future__ import annotations
+
+import math
+import warnings
+from dataclasses import dataclass
+
+import numpy as np
+
+from .validate import BananagridError
+
+__all__ = ["BearingFix", "bearing_to", "MIN_CROSSING_DEG"]
+
+#: Crossing angles below this (degrees) are refused: the lines are nearly parallel, the fix
+#: lies far out along them and Walsh's linearisation (assumption 7) does not hold.
+MIN_CROSSING_DEG = 2.0
+
+#: Crossing angles below this (degrees) are accepted with a warning.
+POOR_CROSSING_DEG = 20.0
+
+#: Gauss-Newton iterations for three or more sensors (each converges quadratically).
+MAX_ITERATIONS = 50
+
+
+def bearing_to(sensor, point) -> np.ndarray:
+    """Bearing (radians clockwise from north, in (-pi, pi]) from ``sensor`` to ``point``."""
+    sensor = np.asarray(sensor, dtype=float)
+    point = np.asarray(point, dtype=float)
+    d = point - sensor
+    return np.arctan2(d[..., 0], d[..., 1])
+
+
+def _wrap(angle):
+    """Angle difference wrapped to (-pi, pi]."""
+    return np.angle(np.exp(1j * np.asarray(angle, dtype=float)))
+
+
+def _as_array(name: str, value, shape_text: str, ndim: int) -> np.ndarray:
+    try:
+        array = np.asarray(value, dtype=float)
+    except (TypeError, ValueError):
+        raise BananagridError(f"{name} = {value!r}: expected {shape_text} of numbers") from None
+    if array.ndim != ndim or (ndim == 2 and array.shape[1] != 2):
+        raise BananagridError(f"{name}: shape {array.shape}, expected {shape_text}")
+    if not np.isfinite(array).all():
+        raise BananagridError(f"{name} = {value!r}: every value must be finite")
+    return array
+
+
+@dataclass(frozen=True, eq=False)
+class BearingFix:
+    """A position fix from two or more bearings with independent normal errors.
+
+    Parameters
+    ----------
+    sensors : array_like, shape (n, 2)
+        Sensor positions (x east, y north), metres; n >= 2, no two coincident.
+    bearings : array_like, shape (n,)
+        Observed bearings to the contact, radians clockwise from north.
+    sigmas : array_like, shape (n,)
+        Standard deviations of the bearing errors, radians, > 0.
+
+    Raises
+    ------
+    BananagridError
+        For bad shapes or values, coincident sensors, bearing lines that cross behind a sensor
+        or cross at less than ``MIN_CROSSING_DEG``. A crossing under ``POOR_CROSSING_DEG``
+        warns: the linearised covariance is then optimistic (see the validation table).
+    """
+
+    sensors: np.ndarray
+    bearings: np.ndarray
+    sigmas: np.ndarray
+
+    def __post_init__(self):
+        sensors = _as_array("sensors", self.sensors, "an (n, 2) array", 2)
+        bearings = _as_array("bearings", self.bearings, "an (n,) array", 1)
+        sigmas = _as_array("sigmas", self.sigmas, "an (n,) array", 1)
+        n = len(sensors)
+        if n < 2:
+            raise BananagridError(f"sensors: {n} given, a fix needs at least 2")
+        if len(bearings) != n or len(sigmas) != n:
+            raise BananagridError(
+                f"sensors, bearings, sigmas: lengths {n}, {len(bearings)}, {len(sigmas)} must match"
+            )
+        bad = np.flatnonzero(sigmas <= 0)
+        if bad.size:
+            raise BananagridError(f"sigmas[{bad[0]}] = {float(sigmas[bad[0]])!r}: must be > 0")
+        for i in range(n):
+            for j in range(i + 1, n):
+                if np.hypot(*(sensors[i] - sensors[j])) <= 1e-9 * max(1.0, np.abs(sensors).max()):
+                    raise BananagridError(f"sensors {i} and {j} coincide at {tuple(sensors[i])}: no baseline")
+        for name, value in (("sensors", sensors), ("bearings", bearings), ("sigmas", sigmas)):
+            value.setflags(write=False)
+            object.__setattr__(self, name, value)
+        self._check_crossing()
+        object.__setattr__(self, "_fix", self._solve())
+        self._check_in_front()
+
+    # -- geometry ------------------------------------------------------------------------------
+
+    @property
+    def directions(self) -> np.ndarray:
+        """Unit vectors of the observed bearings, shape (n, 2)."""
+        return np.column_stack((np.sin(self.bearings), np.cos(self.bearings)))
+
+    @property
+    def fix(self) -> np.ndarray:
+        """The fix (x, y), metres: the crossing (2 sensors) or the weighted least-squares point."""
+        return self._fix.copy()
+
+    def _check_crossing(self) -> None:
+        # the best-crossing pair decides whether any fix is possible
+        best = 0.0
+        n = len(self.bearings)
+        for i in range(n):
+            for j in range(i + 1, n):
+                best = max(best, abs(math.sin(self.bearings[i] - self.bearings[j])))
+        angle = math.degrees(math.asin(min(1.0, best)))
+        if angle < MIN_CROSSING_DEG:
+            raise BananagridError(
+                f"bearings: the lines cross at {angle:.3g} deg, below {MIN_CROSSING_DEG} deg: "
+                "nearly parallel, no usable fix"
+            )
+        if angle < POOR_CROSSING_DEG:
+            warnings.warn(
+                f"bearings cross at {angle:.3g} deg (< {POOR_CROSSING_DEG} deg): the linearised "
+                "covariance and containment are optimistic", stacklevel=4,
+            )
+
+    def _solve(self) -> np.ndarray:
+        """Crossing of the lines (exact for two), refined by Gauss-Newton on the bearings."""
+        u = self.directions
+        # each line: cross(u_i, P - S_i) = 0, i.e. u_y P_x - u_x P_y = u_y S_x - u_x S_y
+        a = np.column_stack((u[:, 1], -u[:, 0]))
+        rhs = u[:, 1] * self.sensors[:, 0] - u[:, 0] * self.sensors[:, 1]
+        point = np.linalg.lstsq(a, rhs, rcond=None)[0]
+        if len(u) == 2:
+            return point
+        weights = 1.0 / self.sigmas**2
+        for _ in range(MAX_ITERATIONS):
+            residual = _wrap(bearing_to(self.sensors, point) - self.bearings)
+            g = self._bearing_gradients(point)
+            step = np.linalg.solve(g.T @ (weights[:, None] * g), -(g.T @ (weights * residual)))
+            point = point + step
+            if np.hypot(*step) <= 1e-12 * max(1.0, np.hypot(*point)):
+                break
+        return point
+
+    def _check_in_front(self) -> None:
+        along = np.einsum("ij,ij->i", self._fix - self.sensors, self.directions)
+        behind = np.flatnonzero(along <= 0)
+        if behind.size:
+            i = behind[0]
+            raise BananagridError(
+                f"bearings[{i}] = {float(self.bearings[i])!r}: the fix {tuple(np.round(self._fix, 3))} lies "
+                f"behind sensor {i} (the lines cross on the far side of the station)"
+            )
+
+    def _bearing_gradients(self, point) -> np.ndarray:
+        """d bearing_i / d(x, y) at ``point``: (dy, -dx) / r^2, shape (n, 2)."""
+        d = np.asarray(point, dtype=float) - self.sensors
+        r2 = np.einsum("ij,ij->i", d, d)
+        return np.column_stack((d[:, 1], -d[:, 0])) / r2[:, None]
+
+    # -- linearised error --------------------------------------------------------------------
+
+    @property
+    def covariance(self) -> np.ndarray:
+        """Linearised covariance of the fix, (G^T W G)^-1 = J diag(sigma^2) J^T, m^2."""
+        g = self._bearing_gradients(self._fix)
+        info = g.T @ (g / self.sigmas[:, None] ** 2)
+        return np.linalg.inv(info)
+
+    @property
+    def principal_variances(self) -> tuple[float, float]:
+        """(v1, v2): the covariance's eigenvalues, largest first (Walsh's v_g), m^2."""
+        values = np.linalg.eigvalsh(self.covariance)
+        return float(values[1]), float(values[0])
+
+    def ellipse(self, k: float = 1.0) -> dict:
+        """The k-sigma error ellipse: semi-axes (m) and the major axis' bearing (radians from
+        north). It holds probability 1 - exp(-k^2 / 2) of the linearised law."""
+        if not (isinstance(k, (int, float)) and math.isfinite(k) and k > 0):
+            raise BananagridError(f"k = {k!r}: must be a finite number > 0")
+        values, vectors = np.linalg.eigh(self.covariance)
+        major = vectors[:, 1]
+        return {
+            "centre": self.fix,
+            "semi_major": k * math.sqrt(values[1]),
+            "semi_minor": k * math.sqrt(values[0]),
+            "bearing": math.atan2(major[0], major[1]) % math.pi,
+            "probability": 1.0 - math.exp(-0.5 * k * k),
+        }

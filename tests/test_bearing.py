@@ -1,0 +1,136 @@
+"""Bearing-fix geometry (Walsh): fix, linearised covariance, ellipse, and bad geometry."""
+
+import math
+import warnings
+
+import numpy as np
+import pytest
+
+from bananagrid import BananagridError
+from bananagrid.bearing import BearingFix, bearing_to
+
+#: Two coastal stations 20 km apart and a contact about 30 km out (issue 6's first scene).
+STATIONS = np.array([[0.0, 0.0], [20000.0, 0.0]])
+CONTACT = np.array([8000.0, 30000.0])
+SIGMAS = np.array([0.01, 0.02])
+
+
+def make(sensors=STATIONS, target=CONTACT, sigmas=SIGMAS, noise=None):
+    bearings = bearing_to(sensors, target)
+    if noise is not None:
+        bearings = bearings + noise
+    return BearingFix(sensors, bearings, sigmas)
+
+
+def crossing_by_hand(sensors, bearings):
+    """Walsh's standardised formulas: sensor 1 at the origin, sensor 2 at (D, 0) after a
+    rotation; X = D cot(a1) / (cot(a1) - cot(a2)), Y = D / (cot(a1) - cot(a2)), with a_i the
+    angles from the baseline (mathematical convention)."""
+    s1, s2 = sensors
+    base = s2 - s1
+    d = np.hypot(*base)
+    rot = math.atan2(base[1], base[0])  # baseline angle from east
+    # a bearing (clockwise from north) is the mathematical angle pi/2 - b; measure from baseline
+    a1 = (math.pi / 2 - bearings[0]) - rot
+    a2 = (math.pi / 2 - bearings[1]) - rot
+    x = d / math.tan(a1) / (1 / math.tan(a1) - 1 / math.tan(a2))
+    y = d / (1 / math.tan(a1) - 1 / math.tan(a2))
+    c, s = math.cos(rot), math.sin(rot)
+    return s1 + np.array([x * c - y * s, x * s + y * c])
+
+
+@pytest.mark.parametrize("noise", [None, np.array([0.01, -0.02]), np.array([-0.03, 0.005])])
+def test_two_sensor_fix_is_walsh_crossing(noise):
+    fix = make(noise=noise)
+    want = crossing_by_hand(STATIONS, fix.bearings)
+    np.testing.assert_allclose(fix.fix, want, rtol=1e-12)
+
+
+def test_covariance_is_jacobian_of_the_fix():
+    """ERRATA: the covariance is J diag(s^2) J^T, J = d fix / d bearing errors; here J comes
+    from central differences of Walsh's crossing formulas (step 1e-7 rad: truncation ~1e-14
+    relative, rounding ~1e-9 relative for coordinates of 3e4 m)."""
+    fix = make()
+    h = 1e-7
+    jac = np.zeros((2, 2))
+    for i in range(2):
+        step = np.zeros(2)
+        step[i] = h
+        jac[:, i] = (crossing_by_hand(STATIONS, fix.bearings + step) - crossing_by_hand(STATIONS, fix.bearings - step)) / (2 * h)
+    want = jac @ np.diag(SIGMAS**2) @ jac.T
+    np.testing.assert_allclose(fix.covariance, want, rtol=1e-6)
+
+
+def test_covariance_matches_monte_carlo_for_small_errors():
+    """Re-triangulating perturbed bearings: with sigma = 1e-4 rad the nonlinearity is ~1e-4 of
+    the spread, so the sample covariance of 200,000 fixes matches the linearised one within its
+    sampling error (~ sqrt(2 / n) = 0.3 % per variance; 1.5 % allows 5 sigma)."""
+    small = SIGMAS / 100
+    fix = make(sigmas=small)
+    rng = np.random.default_rng(2)
+    n = 200_000
+    eps = rng.normal(size=(n, 2)) * small
+    u1 = np.column_stack((np.sin(fix.bearings[0] + eps[:, 0]), np.cos(fix.bearings[0] + eps[:, 0])))
+    u2 = np.column_stack((np.sin(fix.bearings[1] + eps[:, 1]), np.cos(fix.bearings[1] + eps[:, 1])))
+    # S1 + s1 u1 = S2 + s2 u2  ->  s1 = cross(S2 - S1, u2) / cross(u1, u2)
+    d = STATIONS[1] - STATIONS[0]
+    s1 = (d[0] * u2[:, 1] - d[1] * u2[:, 0]) / (u1[:, 0] * u2[:, 1] - u1[:, 1] * u2[:, 0])
+    pts = STATIONS[0] + s1[:, None] * u1
+    np.testing.assert_allclose(np.cov(pts.T), fix.covariance, rtol=0.015, atol=0.015 * fix.covariance.max())
+
+
+def test_three_sensors_weighted_least_squares():
+    sensors = np.vstack((STATIONS, [[10000.0, -5000.0]]))
+    exact = make(sensors=sensors, sigmas=[0.01, 0.02, 0.01])
+    np.testing.assert_allclose(exact.fix, CONTACT, rtol=1e-12)  # noise-free: the true point
+    noisy = make(sensors=sensors, sigmas=[0.01, 0.02, 0.01], noise=np.array([0.001, -0.002, 0.0005]))
+    # the WLS point makes the weighted bearing residuals orthogonal to their gradients
+    d = noisy.fix - sensors
+    r2 = (d**2).sum(axis=1)
+    g = np.column_stack((d[:, 1], -d[:, 0])) / r2[:, None]
+    resid = np.angle(np.exp(1j * (np.arctan2(d[:, 0], d[:, 1]) - noisy.bearings)))
+    assert np.abs(g.T @ (resid / noisy.sigmas**2)).max() < 1e-12 * np.abs(g).max() / noisy.sigmas.min() ** 2
+    # a third sensor can only shrink the linearised error
+    assert np.trace(exact.covariance) < np.trace(make().covariance)
+
+
+def test_ellipse_axes_are_the_covariance_eigen():
+    fix = make()
+    e = fix.ellipse(2.0)
+    v1, v2 = fix.principal_variances
+    assert e["semi_major"] == pytest.approx(2 * math.sqrt(v1), rel=1e-12)
+    assert e["semi_minor"] == pytest.approx(2 * math.sqrt(v2), rel=1e-12)
+    assert e["probability"] == pytest.approx(1 - math.exp(-2.0), rel=1e-15)
+    axis = np.array([math.sin(e["bearing"]), math.cos(e["bearing"])])
+    assert axis @ fix.covariance @ axis == pytest.approx(v1, rel=1e-12)
+
+
+@pytest.mark.parametrize(
+    "kwargs, message",
+    [
+        (dict(sigmas=[0.01, 0.0]), r"sigmas\[1\] = 0.0: must be > 0"),
+        (dict(sigmas=[-0.01, 0.02]), r"sigmas\[0\] = -0.01: must be > 0"),
+        (dict(sigmas=[0.01, math.nan]), "sigmas = .*: every value must be finite"),
+        (dict(sigmas=[0.01]), "lengths 2, 2, 1 must match"),
+        (dict(sensors=[[0.0, 0.0]], bearings=[0.1], sigmas=[0.01]), "sensors: 1 given, a fix needs at least 2"),
+        (dict(sensors=[[0.0, 0.0], [0.0, 0.0]]), "sensors 0 and 1 coincide"),
+        (dict(sensors=[0.0, 1.0]), r"sensors: shape \(2,\), expected an \(n, 2\) array"),
+        (dict(bearings=[0.3, 0.3 + 1e-3]), "the lines cross at .* deg, below 2.0 deg: nearly parallel"),
+        (dict(bearings=[math.pi + 0.26, -0.5]), r"bearings\[0\] = .*: the fix .* lies behind sensor 0"),
+        (dict(bearings=["north", 0.1]), "bearings = .*: expected an \\(n,\\) array of numbers"),
+    ],
+)
+def test_bad_input(kwargs, message):
+    args = dict(sensors=STATIONS, bearings=bearing_to(STATIONS, CONTACT), sigmas=SIGMAS)
+    args.update(kwargs)
+    with pytest.raises(BananagridError, match=message):
+        BearingFix(**args)
+
+
+def test_poor_crossing_warns():
+    far = np.array([10000.0, 150000.0])  # about 7.6 deg crossing
+    with pytest.warns(UserWarning, match="bearings cross at .* deg .* optimistic"):
+        make(target=far)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        make()  # 26 deg crossing: no warning
