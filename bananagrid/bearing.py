@@ -12,13 +12,13 @@ from __future__ import annotations
 
 import math
 import warnings
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
 from .validate import BananagridError
 
-__all__ = ["BearingFix", "bearing_to", "MIN_CROSSING_DEG"]
+__all__ = ["BearingFix", "bearing_to", "MIN_CROSSING_DEG", "MAP_VARIANTS"]
 
 #: Crossing angles below this (degrees) are refused: the lines are nearly parallel, the fix
 #: lies far out along them and Walsh's linearisation (assumption 7) does not hold.
@@ -26,6 +26,8 @@ MIN_CROSSING_DEG = 2.0
 
 #: Crossing angles below this (degrees) are accepted with a warning.
 POOR_CROSSING_DEG = 20.0
+
+MAP_VARIANTS = ("exact", "linear")
 
 #: Gauss-Newton iterations for three or more sensors (each converges quadratically).
 MAX_ITERATIONS = 50
@@ -68,6 +70,11 @@ class BearingFix:
         Observed bearings to the contact, radians clockwise from north.
     sigmas : array_like, shape (n,)
         Standard deviations of the bearing errors, radians, > 0.
+    variant : {"exact", "linear"}, default "exact"
+        The presence map that ``rasterise`` and ``pdf`` compute: the bearings' likelihood under
+        a flat prior (the true, non-elliptical shape; divided by the linearised normaliser, so
+        it integrates to about one and normalising over a grid gives the posterior), or the
+        normal law of the linearised fix, N(fix, covariance).
 
     Raises
     ------
@@ -80,8 +87,13 @@ class BearingFix:
     sensors: np.ndarray
     bearings: np.ndarray
     sigmas: np.ndarray
+    variant: str = "exact"
+
+    kind = "bearing_fix"
 
     def __post_init__(self):
+        if self.variant not in MAP_VARIANTS:
+            raise BananagridError(f"variant = {self.variant!r}: must be one of {', '.join(MAP_VARIANTS)}")
         sensors = _as_array("sensors", self.sensors, "an (n, 2) array", 2)
         bearings = _as_array("bearings", self.bearings, "an (n,) array", 1)
         sigmas = _as_array("sigmas", self.sigmas, "an (n,) array", 1)
@@ -201,3 +213,33 @@ class BearingFix:
             "bearing": math.atan2(major[0], major[1]) % math.pi,
             "probability": 1.0 - math.exp(-0.5 * k * k),
         }
+
+    # -- maps ---------------------------------------------------------------------------------
+
+    def with_variant(self, variant: str) -> "BearingFix":
+        """The same fix with the other presence map."""
+        return replace(self, variant=variant)
+
+    def kernel_parameters(self) -> np.ndarray:
+        """The bearing kernels' parameter array (layout in ``kernels/bearing.py``)."""
+        cov = self.covariance
+        precision = np.linalg.inv(cov)
+        log_norm = -math.log(2.0 * math.pi * math.sqrt(np.linalg.det(cov)))
+        head = [log_norm, *self._fix, precision[0, 0], precision[0, 1], precision[1, 1]]
+        sensors = np.column_stack((self.sensors, self.bearings, 1.0 / self.sigmas)).ravel()
+        return np.concatenate((head, sensors))
+
+    def parameters(self) -> dict:
+        """Plain-data parameters for provenance and recordings."""
+        out = {"model": "BearingFix", "variant": self.variant}
+        for i, (s, b, sd) in enumerate(zip(self.sensors, self.bearings, self.sigmas)):
+            out[f"sensor{i}_x"], out[f"sensor{i}_y"] = float(s[0]), float(s[1])
+            out[f"bearing{i}"], out[f"sigma{i}"] = float(b), float(sd)
+        out["fix_x"], out["fix_y"] = (float(v) for v in self._fix)
+        return out
+
+    def pdf(self, x, y, *, dtype=np.float64, device="cpu"):
+        """Presence density per m^2 of ``variant`` at world points (broadcast x, y)."""
+        from .raster import evaluate_points
+
+        return evaluate_points(self, x, y, dtype=dtype, device=device)

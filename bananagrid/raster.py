@@ -168,8 +168,20 @@ def _bind(model, wp, np_dtype, scalar, device) -> _Binding:
 
 
 def _bind_kernels(model, wp, np_dtype, scalar, device) -> _Binding:
+    from .bearing import BearingFix
     from .models import CAT, PolarBanana
 
+    if isinstance(model, BearingFix):
+        from .kernels import bearing
+
+        params = wp.array(model.kernel_parameters().astype(np_dtype), dtype=scalar, device=device)
+        variant = bearing.EXACT if model.variant == "exact" else bearing.LINEAR
+        return _Binding(
+            bearing.bearing_grid, bearing.bearing_points, (params, len(model.sensors), variant),
+            "bearing.bearing_grid", {"variant": model.variant},
+        )
+    if not isinstance(model, (CAT, PolarBanana)):
+        raise BananagridError(f"model = {type(model).__name__}: not a bananagrid model")
     pose = wp.array(model.pose.as_array().astype(np_dtype), dtype=scalar, device=device)
     if isinstance(model, CAT):
         from .kernels import cat
@@ -198,7 +210,7 @@ def _bind_kernels(model, wp, np_dtype, scalar, device) -> _Binding:
         return _Binding(
             polar.polar_grid, polar.polar_points, params, "polar.polar_grid", notes, row_loop=True, bands_per_thread=1
         )
-    raise BananagridError(f"model = {type(model).__name__}: not a bananagrid model")
+    raise AssertionError("unreachable: every model kind is bound above")
 
 
 def _polar_coefficients(model, wp, np_dtype, scalar, device):

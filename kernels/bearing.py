@@ -1,0 +1,90 @@
+"""Presence maps from bearings (Walsh's two-bearing fix and its n-sensor extension).
+
+exact:  p(P) proportional to prod_i exp(-wrap(beta_i(P) - b_i)^2 / (2 sigma_i^2)), beta_i(P) the
+        bearing from sensor i to P (clockwise from north), b_i the observed bearing: the
+        bearings' likelihood under a flat prior. Its normaliser has no closed form; the kernel
+        divides by the linearised one, 2 pi sqrt(det C) (the Laplace approximation), so the
+        grid's captured mass shows how far the true shape departs from the ellipse, and
+        normalising over the grid gives the posterior.
+linear: p(P) = N(P; fix, C), C the linearised covariance of the fix.
+"""
+
+from typing import Any
+
+import warp as wp
+
+from .common import PI, atan2_fast
+
+EXACT = 0
+LINEAR = 1
+
+#: Layout of the parameter array: [log_norm, fix_x, fix_y, p_xx, p_xy, p_yy] (p = C^-1), then
+#: per sensor (x, y, bearing, 1/sigma).
+HEAD = 6
+PER_SENSOR = 4
+
+
+@wp.func
+def wrap_angle(d: Any):
+    """Angle difference wrapped to [-pi, pi]."""
+    two_pi = type(d)(2.0) * type(d)(PI)
+    return d - two_pi * wp.floor((d + type(d)(PI)) / two_pi)
+
+
+@wp.func
+def bearing_log_density(x: Any, y: Any, params: wp.array(dtype=Any), n_sensors: int, variant: int):
+    """log p at the world point (x, y) (see the module docstring)."""
+    if variant == LINEAR:
+        dx = x - params[1]
+        dy = y - params[2]
+        q = params[3] * dx * dx + type(x)(2.0) * params[4] * dx * dy + params[5] * dy * dy
+        return params[0] - type(x)(0.5) * q
+    total = params[0]
+    for i in range(n_sensors):
+        base = HEAD + PER_SENSOR * i
+        beta = atan2_fast(x - params[base], y - params[base + 1])
+        z = wrap_angle(beta - params[base + 2]) * params[base + 3]
+        total = total - type(x)(0.5) * z * z
+    return total
+
+
+@wp.kernel
+def bearing_grid(
+    xs: wp.array(dtype=Any),
+    ys: wp.array(dtype=Any),
+    row0: int,
+    params: wp.array(dtype=Any),
+    n_sensors: int,
+    variant: int,
+    out: wp.array2d(dtype=Any),
+):
+    """Density at the cell centres (xs[j], ys[row0 + i]) of a band of rows."""
+    i, j = wp.tid()
+    row = row0 + i
+    out[row, j] = wp.exp(bearing_log_density(xs[j], ys[row], params, n_sensors, variant))
+
+
+@wp.kernel
+def bearing_points(
+    xs: wp.array(dtype=Any),
+    ys: wp.array(dtype=Any),
+    start: int,
+    params: wp.array(dtype=Any),
+    n_sensors: int,
+    variant: int,
+    out: wp.array(dtype=Any),
+):
+    """Density at arbitrary world points (xs[k], ys[k]) for k in a chunk starting at ``start``."""
+    k = start + wp.tid()
+    out[k] = wp.exp(bearing_log_density(xs[k], ys[k], params, n_sensors, variant))
+
+
+def _register_overloads():
+    for scalar in (wp.float32, wp.float64):
+        vec = wp.array(dtype=scalar)
+        common = {"xs": vec, "ys": vec, "params": vec}
+        wp.overload(bearing_grid, {**common, "out": wp.array2d(dtype=scalar)})
+        wp.overload(bearing_points, {**common, "out": vec})
+
+
+_register_overloads()
