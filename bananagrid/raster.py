@@ -205,7 +205,7 @@ def _bind_kernels(model, wp, np_dtype, scalar, device) -> _Binding:
     if isinstance(model, PolarBanana):
         from .kernels import polar
 
-        params = (_polar_coefficients(model, wp, np_dtype, scalar, device), _polar_variant(model), pose)
+        params = (_polar_coefficients(model, wp, np_dtype, scalar, device), _polar_variant(model.variant), pose)
         notes = {"variant": model.variant, "truncated_mass": model.truncated_mass}
         return _Binding(
             polar.polar_grid, polar.polar_points, params, "polar.polar_grid", notes, row_loop=True, bands_per_thread=1
@@ -220,10 +220,10 @@ def _polar_coefficients(model, wp, np_dtype, scalar, device):
     return wp.array(values, dtype=scalar, device=device)
 
 
-def _polar_variant(model) -> int:
+def _polar_variant(name: str) -> int:
     from .kernels import polar
 
-    return polar.ROUGH if model.variant == "rough" else polar.IMPROVED
+    return polar.ROUGH if name == "rough" else polar.IMPROVED
 
 
 def _cat_nodes(model) -> np.ndarray:
@@ -388,7 +388,7 @@ def evaluate_polar_moments(model, phi, *, variant=None, dtype=np.float64, device
     sd = wp.zeros(phi.size, dtype=scalar, device=device)
     if phi.size:
         coef = _polar_coefficients(model, wp, np_dtype, scalar, device)
-        law = _polar_variant(model if variant is None else replace(model, variant=variant))
+        law = _polar_variant(model.variant if variant is None else variant)
         wp.launch(polar.polar_moments, dim=phi.size, inputs=[flat, coef, law, mean, sd], device=device)
         wp.synchronize_device(device)
     return mean.numpy().reshape(phi.shape), sd.numpy().reshape(phi.shape)
