@@ -214,6 +214,22 @@ class BearingFix:
             "probability": 1.0 - math.exp(-0.5 * k * k),
         }
 
+    def containment(self, R, method: str = "exact", tol: float = 1e-12):
+        """Probability that the contact lies within ``R`` (m, broadcast) of the fix under the
+        linearised law: P(v1 t1^2 + v2 t2^2 <= R^2), Walsh's "Evaluation of Probability"
+        (Robbins-Pitman series corrected per ERRATA, or the exact quadrature)."""
+        from .containment import containment
+
+        v1, v2 = self.principal_variances
+        return containment(R, v1, v2, method=method, tol=tol)
+
+    def radius(self, p):
+        """Radius (m) holding probability ``p`` (broadcast): R50 is the CEP; R90, R95."""
+        from .containment import containment_radius
+
+        v1, v2 = self.principal_variances
+        return containment_radius(p, v1, v2)
+
     # -- maps ---------------------------------------------------------------------------------
 
     def with_variant(self, variant: str) -> "BearingFix":

@@ -191,3 +191,22 @@ def test_exact_map_departs_from_the_ellipse_in_proportion_to_sigma():
 def test_map_variant_is_validated():
     with pytest.raises(BananagridError, match="variant = 'smooth': must be one of exact, linear"):
         BearingFix(STATIONS, bearing_to(STATIONS, CONTACT), SIGMAS, variant="smooth")
+
+
+# --- containment -------------------------------------------------------------------------------
+
+
+def test_containment_of_a_fix_matches_its_linear_map():
+    """P(|P - fix| <= R) from the principal variances equals the linear map's mass in the disc
+    (midpoint rule on 20 m cells inside a 6-sigma frame: error ~1e-4 at the disc's edge)."""
+    fix = make().with_variant("linear")
+    r50, r95 = fix.radius([0.5, 0.95])
+    assert fix.containment(r50) == pytest.approx(0.5, abs=1e-12)
+    assert fix.containment(r95, method="series") == pytest.approx(0.95, abs=1e-11)
+    c = fix.covariance
+    half = 6 * math.sqrt(max(c[0, 0], c[1, 1]))
+    grid = bg.Grid.from_bounds(x=(fix.fix[0] - half, fix.fix[0] + half), y=(fix.fix[1] - half, fix.fix[1] + half), step=20.0)
+    values = bg.rasterise(fix, grid).values
+    xx, yy = np.meshgrid(grid.x, grid.y)
+    inside = np.hypot(xx - fix.fix[0], yy - fix.fix[1]) <= r50
+    assert values[inside].sum() * grid.cell_area == pytest.approx(0.5, abs=2e-3)
