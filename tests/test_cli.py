@@ -18,6 +18,8 @@ from bananagrid.inspect import inspect_recording, read_depth_image
 from bananagrid.runner import array_key, run_scene
 from bananagrid.scene import load_scene
 
+from cases import small_scene
+
 ROOT = Path(__file__).resolve().parent.parent
 SCENES = sorted((ROOT / "scenes").glob("*.toml"))
 RERUN = Path(sys.executable).parent / "rerun"
@@ -25,24 +27,10 @@ RERUN = Path(sys.executable).parent / "rerun"
 #: Coarse steps (m) for the end-to-end runs, so the whole file stays well under a minute.
 QUICK_STEP = {"figure1": 40.0, "folding": 40.0, "sequence": 200.0}
 
-SMALL = """\
-[scene]
-name = "small"
-
-[grid]
-x = [-100.0, 100.0]
-y = [0.0, 200.0]
-step = 10.0
-
-[defaults]
-v0 = 10.0
-t = 5.0
-sigma_a = 1.0
-sigma_omega_deg = 10.0
-
+SMALL = small_scene("small", """\
 [layers.near]
 model = "cat"
-"""
+""")
 
 # The second layer lies far outside the grid: it captures no mass, so normalising fails after
 # the first layer has been computed and logged.

@@ -11,31 +11,19 @@ from bananagrid import CAT, BananagridError, PolarBanana
 from bananagrid.record import DEFAULT_LEVELS
 from bananagrid.scene import Layer, load_scene, parse_scene
 
+from cases import small_scene
+
 SCENES = Path(__file__).resolve().parent.parent / "scenes"
 
 # A small valid scene; the error cases below edit one line of it each.
-BASE = """\
-[scene]
-name = "demo"
-
-[grid]
-x = [-100.0, 100.0]
-y = [0.0, 200.0]
-step = 10.0
-
-[defaults]
-v0 = 10.0
-t = 5.0
-sigma_a = 1.0
-sigma_omega_deg = 10.0
-
+BASE = small_scene("demo", """\
 [layers.exact]
 model = "cat"
 
 [layers.approx]
 model = "polar"
 variant = "rough"
-"""
+""")
 
 
 def edited(old: str, new: str, text: str = BASE) -> str:
