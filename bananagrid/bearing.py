@@ -187,6 +187,13 @@ class BearingFix:
     # -- linearised error --------------------------------------------------------------------
 
     @property
+    def chi2_min(self) -> float:
+        """sum_i (wrap(beta_i(fix) - b_i) / sigma_i)^2: 0 for two sensors (the lines cross at the
+        fix), the weighted misfit of the least-squares fix for more."""
+        residual = _wrap(bearing_to(self.sensors, self._fix) - self.bearings) / self.sigmas
+        return float(np.sum(residual**2))
+
+    @property
     def covariance(self) -> np.ndarray:
         """Linearised covariance of the fix, (G^T W G)^-1 = J diag(sigma^2) J^T, m^2."""
         g = self._bearing_gradients(self._fix)
@@ -241,6 +248,10 @@ class BearingFix:
         cov = self.covariance
         precision = np.linalg.inv(cov)
         log_norm = -math.log(2.0 * math.pi * math.sqrt(np.linalg.det(cov)))
+        if self.variant == "exact":
+            # Laplace normaliser of the likelihood: L(fix) 2 pi sqrt(det C). With three or more
+            # bearings they do not all pass through the fix, L(fix) = exp(-chi2_min / 2) < 1.
+            log_norm += 0.5 * self.chi2_min
         head = [log_norm, *self._fix, precision[0, 0], precision[0, 1], precision[1, 1]]
         sensors = np.column_stack((self.sensors, self.bearings, 1.0 / self.sigmas)).ravel()
         return np.concatenate((head, sensors))

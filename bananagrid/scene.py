@@ -18,6 +18,7 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 from types import MappingProxyType
 
+from .bearing import MAP_VARIANTS, BearingFix
 from .grid import Grid
 from .models import CAT, VARIANTS, PolarBanana, Pose
 from .record import DEFAULT_LEVELS
@@ -26,7 +27,10 @@ from .validate import BananagridError, positive
 __all__ = ["Layer", "Scene", "load_scene", "parse_scene", "MODEL_KINDS", "PARAMETER_KEYS"]
 
 #: Model classes by the ``model`` value of a layer.
-MODEL_KINDS = MappingProxyType({"cat": CAT, "polar": PolarBanana})
+MODEL_KINDS = MappingProxyType({"cat": CAT, "polar": PolarBanana, "bearing_fix": BearingFix})
+
+#: Kinds whose density depends on the elapsed time ``t`` (and that have a pose).
+MOTION_KINDS = ("cat", "polar")
 
 #: Scene keys of every model kind (the ``t`` key is refused when ``scene.times`` is given).
 PARAMETER_KEYS = MappingProxyType({
@@ -38,13 +42,22 @@ PARAMETER_KEYS = MappingProxyType({
         "v0", "t", "sigma_a", "sigma_omega", "sigma_omega_deg", "variant",
         "origin", "heading", "heading_deg",
     ),
+    "bearing_fix": ("sensors", "bearings", "bearings_deg", "sigmas", "sigmas_deg", "variant"),
 })
 
-#: Angles that a scene may give in radians or, under ``NAME_deg``, in degrees.
-ANGLE_KEYS = ("sigma_omega", "heading")
+#: Angles that a scene may give in radians or, under ``NAME_deg``, in degrees (lists too).
+ANGLE_KEYS = ("sigma_omega", "heading", "bearings", "sigmas")
 
-#: Parameters every layer needs (from its table or ``[defaults]``); ``t`` unless ``scene.times``.
-REQUIRED = ("v0", "sigma_a", "sigma_omega")
+#: Parameters every layer of a kind needs (from its table or ``[defaults]``); motion kinds
+#: also need ``t`` unless the scene gives ``scene.times``.
+REQUIRED = MappingProxyType({
+    "cat": ("v0", "sigma_a", "sigma_omega"),
+    "polar": ("v0", "sigma_a", "sigma_omega"),
+    "bearing_fix": ("sensors", "bearings", "sigmas"),
+})
+
+#: The ``variant`` values each kind accepts.
+KIND_VARIANTS = MappingProxyType({"polar": VARIANTS, "bearing_fix": MAP_VARIANTS})
 
 NAME_PATTERN = re.compile(r"[A-Za-z0-9_-]+")
 TOP_KEYS = ("scene", "grid", "output", "defaults", "layers")
@@ -77,8 +90,9 @@ class Layer:
     def __post_init__(self):
         object.__setattr__(self, "params", MappingProxyType(dict(self.params)))
 
-    def model(self, t: float | None = None) -> CAT | PolarBanana:
+    def model(self, t: float | None = None) -> CAT | PolarBanana | BearingFix:
         """The layer's model at elapsed time ``t`` (s); by default the layer's own ``t``.
+        A bearing fix does not change with time and ignores ``t``.
 
         Raises
         ------
@@ -86,6 +100,8 @@ class Layer:
             If no ``t`` is known, or a parameter is out of its domain.
         """
         kwargs = dict(self.params)
+        if self.kind not in MOTION_KINDS:
+            return MODEL_KINDS[self.kind](**kwargs)
         if t is not None:
             kwargs["t"] = t
         if "t" not in kwargs:
@@ -152,9 +168,10 @@ class Scene:
         return replace(self, grid=grid)
 
     def jobs(self) -> list[tuple[Layer, float]]:
-        """Every (layer, elapsed time) to compute, time-major when the scene has times."""
+        """Every (layer, elapsed time) to compute, time-major when the scene has times. A
+        bearing fix, timeless, is logged at t = 0 unless the scene has times."""
         if self.times is None:
-            return [(layer, layer.params["t"]) for layer in self.layers]
+            return [(layer, layer.params.get("t", 0.0)) for layer in self.layers]
         return [(layer, t) for t in self.times for layer in self.layers]
 
 
@@ -328,7 +345,7 @@ def _layer(name: str, body: dict, shared: dict, times) -> Layer:
         raise _KeyError(f"{path}.model {shown}: must be one of {', '.join(map(_show, MODEL_KINDS))}")
     allowed = PARAMETER_KEYS[kind]
     _check_keys(body, ("model", *allowed), path, note=f" (model {_show(kind)})")
-    if times is not None and "t" in body:
+    if times is not None and "t" in body and kind in MOTION_KINDS:
         raise _KeyError(
             f"{path}.t = {_show(body['t'])}: not allowed when scene.times is given "
             "(every layer is computed at every time)"
@@ -337,8 +354,8 @@ def _layer(name: str, body: dict, shared: dict, times) -> Layer:
     # Defaults of the other model kind (k_sigma, variant) do not apply to this layer.
     params = {key.removesuffix("_deg") for key in allowed}
     given = {p: v for p, v in shared.items() if p in params}
-    given.update(_parameters({k: v for k, v in body.items() if k != "model"}, path))
-    needed = REQUIRED if times is not None else (*REQUIRED, "t")
+    given.update(_parameters({k: v for k, v in body.items() if k != "model"}, path, kind))
+    needed = REQUIRED[kind] if times is not None or kind not in MOTION_KINDS else (*REQUIRED[kind], "t")
     missing = [p for p in needed if p not in given]
     if missing:
         keys = ", ".join(f"{p} (or {p}_deg)" if p in ANGLE_KEYS else p for p in missing)
@@ -352,11 +369,12 @@ def _layer(name: str, body: dict, shared: dict, times) -> Layer:
     return layer
 
 
-def _parameters(table: dict, path: str) -> dict:
+def _parameters(table: dict, path: str, kind: str | None = None) -> dict:
     """``{param: (key path, written value, SI value)}`` of the parameter keys in ``table``.
 
     The keys are known to be parameter keys. Degrees under ``*_deg`` are converted to
-    radians; giving both forms of one angle is an error.
+    radians; giving both forms of one angle is an error. ``kind`` decides which ``variant``
+    values are allowed (``None``, for ``[defaults]``: any kind's).
     """
     out = {}
     for key, value in table.items():
@@ -370,9 +388,15 @@ def _parameters(table: dict, path: str) -> dict:
         if param == "origin":
             out[param] = (where, value, _pair(table, key, path))
         elif param == "variant":
-            if value not in VARIANTS:
-                raise _KeyError(f"{where} = {_show(value)}: must be one of {', '.join(map(_show, VARIANTS))}")
+            allowed = KIND_VARIANTS.get(kind) if kind else sorted({v for vs in KIND_VARIANTS.values() for v in vs})
+            if allowed is None or value not in allowed:
+                raise _KeyError(f"{where} = {_show(value)}: must be one of {', '.join(map(_show, allowed or ()))}")
             out[param] = (where, value, value)
+        elif param == "sensors":
+            out[param] = (where, value, _pairs(value, where))
+        elif param in ("bearings", "sigmas"):
+            numbers = _numbers(value, where)
+            out[param] = (where, value, [math.radians(v) for v in numbers] if key.endswith("_deg") else numbers)
         else:
             number = _number(value, where)
             out[param] = (where, value, math.radians(number) if key.endswith("_deg") else number)
@@ -433,6 +457,25 @@ def _number(value, path: str) -> float:
     if isinstance(value, bool) or not isinstance(value, (int, float)):
         raise _KeyError(f"{path} = {_show(value)}: expected a number")
     return float(value)
+
+
+def _numbers(value, path: str) -> list[float]:
+    """A non-empty TOML list of numbers."""
+    if not isinstance(value, list) or not value:
+        raise _KeyError(f"{path} = {_show(value)}: expected a list of numbers")
+    return [_number(v, f"{path}[{k}]") for k, v in enumerate(value)]
+
+
+def _pairs(value, path: str) -> list[tuple[float, float]]:
+    """A non-empty TOML list of [x, y] pairs, metres."""
+    if not isinstance(value, list) or not value:
+        raise _KeyError(f"{path} = {_show(value)}: expected a list of [x, y] pairs in m")
+    out = []
+    for k, item in enumerate(value):
+        if not isinstance(item, list) or len(item) != 2:
+            raise _KeyError(f"{path}[{k}] = {_show(item)}: expected a pair [x, y] in m")
+        out.append(tuple(_number(v, f"{path}[{k}][{j}]") for j, v in enumerate(item)))
+    return out
 
 
 def _pair(table: dict, key: str, path: str, required: bool = False) -> tuple[float, float]:

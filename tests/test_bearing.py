@@ -210,3 +210,16 @@ def test_containment_of_a_fix_matches_its_linear_map():
     xx, yy = np.meshgrid(grid.x, grid.y)
     inside = np.hypot(xx - fix.fix[0], yy - fix.fix[1]) <= r50
     assert values[inside].sum() * grid.cell_area == pytest.approx(0.5, abs=2e-3)
+
+
+def test_exact_map_of_three_sensors_is_normalised_by_its_misfit():
+    """With three inconsistent bearings the likelihood peaks below one (exp(-chi2_min / 2)); the
+    map divides by that, so it still integrates to about one (within the 2 % that the nonlinear
+    shape moves, as for two sensors)."""
+    sensors = np.vstack((STATIONS, [[35000.0, 12000.0]]))
+    fix = make(sensors=sensors, sigmas=[0.01, 0.02, 0.01], noise=np.array([0.003, -0.01, 0.004]))
+    assert fix.chi2_min > 0.1
+    c = fix.covariance
+    half = 7 * math.sqrt(max(c[0, 0], c[1, 1]))
+    grid = bg.Grid.from_bounds(x=(fix.fix[0] - half, fix.fix[0] + half), y=(fix.fix[1] - half, fix.fix[1] + half), dx=half / 150, dy=half / 150)
+    assert bg.rasterise(fix, grid).mass == pytest.approx(1.0, abs=0.02)

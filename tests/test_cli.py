@@ -25,7 +25,10 @@ SCENES = sorted((ROOT / "scenes").glob("*.toml"))
 RERUN = Path(sys.executable).parent / "rerun"
 
 #: Coarse steps (m) for the end-to-end runs, so the whole file stays well under a minute.
-QUICK_STEP = {"figure1": 40.0, "folding": 40.0, "sequence": 200.0}
+QUICK_STEP = {
+    "figure1": 40.0, "folding": 40.0, "sequence": 200.0,
+    "bearing_coastal": 100.0, "bearing_poor_crossing": 400.0, "bearing_three_stations": 100.0,
+}
 
 SMALL = small_scene("small", """\
 [layers.near]
@@ -124,7 +127,7 @@ def test_error_as_subprocess(tmp_path):
     )
     assert result.returncode == 2
     assert result.stderr.strip().splitlines() == [
-        f'bananagrid: error: {scene}: layers.near.model = "banana": must be one of "cat", "polar"'
+        f'bananagrid: error: {scene}: layers.near.model = "banana": must be one of "cat", "polar", "bearing_fix"'
     ]
     assert result.stdout == ""
 

@@ -188,7 +188,7 @@ BAD = {
     ),
     "unknown variant in defaults": (
         edited("v0 = 10.0\n", 'v0 = 10.0\nvariant = "fine"\n'),
-        ['defaults.variant = "fine": must be one of "rough", "improved"'],
+        ['defaults.variant = "fine": must be one of "exact", "improved", "linear", "rough"'],
     ),
     "non-finite heading": (
         edited('model = "cat"\n', 'model = "cat"\nheading_deg = nan\n'),
@@ -200,9 +200,9 @@ BAD = {
     ),
     "unknown model kind": (
         edited('model = "cat"\n', 'model = "ctrv"\n'),
-        ['layers.exact.model = "ctrv": must be one of "cat", "polar"'],
+        ['layers.exact.model = "ctrv": must be one of "cat", "polar", "bearing_fix"'],
     ),
-    "missing model": (edited('model = "cat"\n', ""), ['layers.exact.model missing: must be one of "cat", "polar"']),
+    "missing model": (edited('model = "cat"\n', ""), ['layers.exact.model missing: must be one of "cat", "polar", "bearing_fix"']),
     "missing parameter": (
         edited("sigma_a = 1.0\n", ""),
         ["layers.exact: missing sigma_a: give each in [layers.exact] or [defaults]"],
