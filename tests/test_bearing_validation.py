@@ -62,7 +62,7 @@ def test_small_sigma_matches_linearisation():
     grows like sigma^2: -0.0017 at 0.05 rad, so ~1e-6 here), so the empirical containment is
     binomial around 0.5 / 0.95.  Tolerance 3 binomial SE (null SE, n = 200,000: 0.0034 at 0.5,
     0.0015 at 0.95), stricter than the table's 0.005 floor; false-alarm rate (over seeds)
-    <= 2 x 0.27 % = 0.54 %.  n = 200,000 costs ~0.1 s; a smaller n would only loosen the check."""
+    <= 2 x 0.27 % = 0.54 %.  n = 200,000 costs under 1 s; a smaller n would only loosen the check."""
     n = 200_000
     (rec,) = validation_table([90.0], [0.001], n=n, seed=0)
     assert set(rec) == FIELDS
