@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["cat_density", "polar_density"]
+__all__ = ["cat_density", "polar_density", "bearing_density"]
 
 _INV_SQRT_2PI = 0.3989422804014327
 
@@ -138,3 +138,16 @@ def polar_density(x, y, v0, t, sigma_a, sigma_omega, variant="improved"):
     with np.errstate(divide="ignore", invalid="ignore"):
         dens = _normal_pdf(phi, 0.0, 0.5 * sigma_omega * t) * _normal_pdf(r, mean, sd) / r
     return np.where((r > 0) & (sd > 0), dens, 0.0)
+
+
+def bearing_density(x, y, fix) -> np.ndarray:
+    """Exact bearing-fix presence density (``kernels/bearing.py``) of a BearingFix in NumPy."""
+    x = np.asarray(x, dtype=float)
+    y = np.asarray(y, dtype=float)
+    params = fix.kernel_parameters()
+    log_p = np.full(np.broadcast(x, y).shape, params[0])
+    for sx, sy, b, inv_sigma in params[6:].reshape(-1, 4):
+        resid = np.arctan2(x - sx, y - sy) - b
+        resid -= 2 * np.pi * np.floor((resid + np.pi) / (2 * np.pi))
+        log_p -= 0.5 * (resid * inv_sigma) ** 2
+    return np.exp(log_p)

@@ -1,8 +1,10 @@
 """``bananagrid bench``: kernel throughput against a NumPy baseline measured in the same run.
 
-Each kernel rasterises the Figure 1 frame of the polar-banana paper (x in [-3000, 3000] m,
-y in [-200, 3400] m, 4 m: 1500 x 900 cells) in float64 and float32, on one thread and on all
-cores; its NumPy float64 twin in :mod:`bananagrid.baseline` runs on the same cells. Times are
+The banana kernels rasterise the Figure 1 frame of the polar-banana paper (x in [-3000, 3000] m,
+y in [-200, 3400] m, 4 m: 1500 x 900 cells), the bearing-fix kernel a 2048 x 2048 grid about
+issue 6's coastal fix, in float64 and float32, on one thread and on all cores; each kernel's
+NumPy float64 twin in :mod:`bananagrid.baseline` runs on the same cells. With the bearing
+kernel, the containment probability of 10^6 geometries is timed too. Times are
 the best of ``--repeat`` runs after a warm-up (the first Warp compile is not timed). The exact
 CAT baseline takes about a minute on the full grid, so by default it runs on every 10th row
 and its time is scaled to the full grid (``--baseline-stride 1`` runs it all).
@@ -23,6 +25,8 @@ import time
 import numpy as np
 
 from . import baseline
+from .bearing import BearingFix
+from .containment import containment
 from .grid import Grid
 from .models import CAT, PolarBanana
 from .raster import _cat_nodes, default_threads, rasterise
@@ -31,11 +35,26 @@ from .raster import _cat_nodes, default_threads, rasterise
 FIG1 = dict(v0=280.0, t=10.0, sigma_a=5.0 / 3.0, sigma_omega=math.pi / 54.0)
 FIG1_BOUNDS = dict(x=(-3000.0, 3000.0), y=(-200.0, 3400.0))
 
+#: Issue 6's first scene: two stations 20 km apart, contact about 30 km out, 2048 x 2048 cells.
+COASTAL = dict(sensors=[(0.0, 0.0), (20000.0, 0.0)], bearings=[0.2641, -0.3909], sigmas=[0.01, 0.02])
+COASTAL_SIDE = 2048
+
 KERNELS = {
     "cat": lambda: CAT(**FIG1),
     "polar-rough": lambda: PolarBanana(**FIG1, variant="rough"),
     "polar-improved": lambda: PolarBanana(**FIG1, variant="improved"),
+    "bearing-exact": lambda: BearingFix(**COASTAL),
 }
+
+#: Geometries in the containment timing (issue 6: 10^6 in at most 1 s).
+CONTAINMENT_GEOMETRIES = 1_000_000
+
+
+def _grid_for(name: str, step: float) -> Grid:
+    """The Figure 1 frame at ``step`` for the banana kernels; 2048^2 about the fix for bearings."""
+    if name.startswith("bearing"):
+        return Grid.from_bounds(x=(0.0, 16000.0), y=(22000.0, 38000.0), dx=16000.0 / COASTAL_SIDE, dy=16000.0 / COASTAL_SIDE)
+    return Grid.from_bounds(**FIG1_BOUNDS, step=step)
 
 #: Side of the square float32 raster whose peak memory is reported (issue 2: under 1 GiB).
 MEMORY_SIDE = 8192
@@ -58,6 +77,8 @@ def _baseline_seconds(name: str, model, grid: Grid, stride: int, repeat: int) ->
         nodes = _cat_nodes(model)
         fn = lambda: baseline.cat_density(xx, yy, model.v0, model.t, model.sigma_a, model.sigma_omega, nodes)
         seconds = _best_of(1 if stride > 1 else repeat, fn)
+    elif name.startswith("bearing"):
+        seconds = _best_of(repeat, lambda: baseline.bearing_density(xx, yy, model))
     else:
         fn = lambda: baseline.polar_density(xx, yy, model.v0, model.t, model.sigma_a, model.sigma_omega, model.variant)
         seconds = _best_of(repeat, fn)
@@ -66,10 +87,10 @@ def _baseline_seconds(name: str, model, grid: Grid, stride: int, repeat: int) ->
 
 def run(kernels, step: float, threads: int, repeat: int, stride: int, log=print) -> list[dict]:
     """Time every kernel in both dtypes on 1 and ``threads`` threads; return the records."""
-    grid = Grid.from_bounds(**FIG1_BOUNDS, step=step)
     records = []
     for name in kernels:
         model = KERNELS[name]()
+        grid = _grid_for(name, step)
         base = _baseline_seconds(name, model, grid, stride, repeat)
         for dtype in (np.float64, np.float32):
             rasterise(model, grid, dtype=dtype, threads=1)  # warm-up: compile or load the module
@@ -93,6 +114,21 @@ def _row(r: dict) -> str:
         f"{r['kernel']:<16} {r['dtype']:<8} {r['threads']:>7} {r['cells']:>10} {r['seconds']:>9.4f} "
         f"{r['mcells_per_s']:>9.2f} {r['baseline_seconds']:>9.3f} {r['ratio']:>7.1f}"
     )
+
+
+def containment_timing(n: int = CONTAINMENT_GEOMETRIES, seed: int = 0) -> dict:
+    """Seconds for the containment probability of ``n`` random geometries at once (variances
+    spanning 1e2..1e6 m^2, R from 0.1 to 3 major-axis SDs), exact and series methods."""
+    rng = np.random.default_rng(seed)
+    v1 = 10.0 ** rng.uniform(2, 6, n)
+    v2 = v1 / 10.0 ** rng.uniform(0, 2, n)
+    radius = np.sqrt(v1) * rng.uniform(0.1, 3.0, n)
+    out = {"geometries": n}
+    for method in ("exact", "series"):
+        start = time.perf_counter()
+        containment(radius, v1, v2, method=method)
+        out[f"{method}_seconds"] = time.perf_counter() - start
+    return out
 
 
 def memory_probe(side: int = MEMORY_SIDE) -> dict:
@@ -152,7 +188,8 @@ def main(argv: list[str] | None = None) -> int:
         print(f"bananagrid: error: {problems[0]}", file=sys.stderr)
         return 2
     print(f"machine: {machine()}")
-    print(f"grid: Figure 1 frame at {args.step:g} m; baseline: NumPy {np.__version__} float64"
+    print(f"grids: Figure 1 frame at {args.step:g} m (banana kernels), {COASTAL_SIDE} x {COASTAL_SIDE} "
+          f"about the coastal fix (bearing); baseline: NumPy {np.__version__} float64"
           + (f", CAT on every {args.baseline_stride}th row, scaled" if args.baseline_stride > 1 else ""))
     print(HEADER)
     records = run(kernels, args.step, args.threads, args.repeat, args.baseline_stride)
@@ -163,6 +200,11 @@ def main(argv: list[str] | None = None) -> int:
         if args.threads > 1:
             print(f"{name}: 1 -> {args.threads} threads speedup "
                   + ", ".join(f"{d} {one[d]['seconds'] / many[d]['seconds']:.2f}x" for d in one))
+    if "bearing-exact" in kernels:
+        timing = containment_timing()
+        result["containment"] = timing
+        print(f"containment: {timing['geometries']:,} geometries in {timing['exact_seconds']:.2f} s (exact), "
+              f"{timing['series_seconds']:.2f} s (Robbins-Pitman series, tol 1e-12)")
     if not args.no_memory:
         mem = memory_probe()
         result["memory"] = mem

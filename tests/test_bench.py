@@ -1,0 +1,30 @@
+"""``bananagrid bench`` runs and writes its records (timings themselves are never asserted)."""
+
+import json
+
+from bananagrid import bench
+
+
+def test_bench_writes_records(tmp_path, capsys):
+    out = tmp_path / "bench.json"
+    argv = ["--kernels", "cat,polar-improved", "--step", "200", "--repeat", "1", "--no-memory", "--json", str(out)]
+    assert bench.main(argv) == 0
+    records = json.loads(out.read_text())["records"]
+    # two kernels x two dtypes x (1 thread, all cores) rows, fewer when only one core is usable
+    assert len(records) in (4, 8)
+    for record in records:
+        assert set(record) >= {"kernel", "dtype", "threads", "cells", "seconds", "baseline_seconds", "ratio"}
+        assert record["cells"] == 30 * 18 and record["seconds"] > 0 and record["ratio"] > 0
+    assert "polar-improved" in capsys.readouterr().out
+
+
+def test_bench_rejects_bad_arguments(capsys):
+    assert bench.main(["--kernels", "banana"]) == 2
+    assert "--kernels = 'banana': choose from cat, polar-rough, polar-improved, bearing-exact" in capsys.readouterr().err
+    assert bench.main(["--repeat", "0"]) == 2
+    assert "--repeat = 0: must be >= 1" in capsys.readouterr().err
+
+
+def test_containment_timing_reports_both_methods():
+    timing = bench.containment_timing(n=1000)
+    assert timing["geometries"] == 1000 and timing["exact_seconds"] > 0 and timing["series_seconds"] > 0
