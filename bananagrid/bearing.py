@@ -29,6 +29,9 @@ POOR_CROSSING_DEG = 20.0
 
 MAP_VARIANTS = ("exact", "linear")
 
+#: Bearing errors beyond this many sigmas are outside the sampler's support (mass < 1e-22).
+SAMPLE_SIGMAS = 10.0
+
 #: Gauss-Newton iterations for three or more sensors (each converges quadratically).
 MAX_ITERATIONS = 50
 
@@ -270,3 +273,72 @@ class BearingFix:
         from .raster import evaluate_points
 
         return evaluate_points(self, x, y, dtype=dtype, device=device)
+
+    # -- sampling -----------------------------------------------------------------------------
+
+    def _best_pair(self) -> tuple[int, int]:
+        """The two sensors whose bearings cross closest to a right angle."""
+        n = len(self.bearings)
+        pairs = [(i, j) for i in range(n) for j in range(i + 1, n)]
+        return max(pairs, key=lambda ij: abs(math.sin(self.bearings[ij[0]] - self.bearings[ij[1]])))
+
+    def _crossings(self, i: int, j: int, b_i, b_j) -> tuple[np.ndarray, np.ndarray]:
+        """Crossings of sensor i's and j's lines at bearings b_i, b_j (arrays), and whether each
+        lies in front of both sensors."""
+        u = np.column_stack((np.sin(b_i), np.cos(b_i)))
+        w = np.column_stack((np.sin(b_j), np.cos(b_j)))
+        d = self.sensors[j] - self.sensors[i]
+        den = u[:, 0] * w[:, 1] - u[:, 1] * w[:, 0]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            s_i = (d[0] * w[:, 1] - d[1] * w[:, 0]) / den
+            s_j = (d[0] * u[:, 1] - d[1] * u[:, 0]) / den
+        points = self.sensors[i] + s_i[:, None] * u
+        return points, (s_i > 0) & (s_j > 0) & np.isfinite(s_i)
+
+    def _pair_jacobian(self, i: int, j: int, points: np.ndarray) -> np.ndarray:
+        """|det d(beta_i, beta_j) / d(x, y)| = |sin(beta_i - beta_j)| / (r_i r_j)."""
+        di = points - self.sensors[i]
+        dj = points - self.sensors[j]
+        cross = di[:, 0] * dj[:, 1] - di[:, 1] * dj[:, 0]
+        return np.abs(cross) / (np.einsum("ij,ij->i", di, di) * np.einsum("ij,ij->i", dj, dj))
+
+    def sample(self, n: int, rng) -> np.ndarray:
+        """Draw ``n`` positions from the exact presence map (the bearings' likelihood under a
+        flat prior), restricted to bearing errors within ``SAMPLE_SIGMAS`` sigmas.
+
+        Perturbing two bearings and re-triangulating (Walsh's generative story) draws from
+        L_ij(P) |det d(beta_i, beta_j)/dP|, not from L(P): each draw is kept with probability
+        J_min / J(P) times the likelihood factors of the other sensors, J = |sin(beta_i - beta_j)|
+        / (r_i r_j) and J_min its minimum over the corners of the SAMPLE_SIGMAS bearing box (J
+        is smallest there: farthest out, narrowest crossing). Rejection makes the draws exact.
+        """
+        from .models import _check_n, _check_rng
+
+        n, rng = _check_n(n), _check_rng(rng)
+        i, j = self._best_pair()
+        box = SAMPLE_SIGMAS * np.array([self.sigmas[i], self.sigmas[j]])
+        corners_i = self.bearings[i] + np.array([-1, -1, 1, 1]) * box[0]
+        corners_j = self.bearings[j] + np.array([-1, 1, -1, 1]) * box[1]
+        corner_points, corner_ok = self._crossings(i, j, corners_i, corners_j)
+        if not corner_ok.all():
+            raise BananagridError(
+                f"bearings: within {SAMPLE_SIGMAS:g} sigma the lines of sensors {i} and {j} can cross "
+                "behind a station or not at all; the fix is too poor to sample"
+            )
+        j_min = self._pair_jacobian(i, j, corner_points).min()
+        others = [k for k in range(len(self.bearings)) if k not in (i, j)]
+        out = np.empty((0, 2))
+        while len(out) < n:
+            m = max(4 * (n - len(out)), 64)
+            eps = rng.normal(size=(m, 2))
+            eps = eps[np.all(np.abs(eps) <= SAMPLE_SIGMAS, axis=1)]
+            points, ok = self._crossings(
+                i, j, self.bearings[i] + eps[:, 0] * self.sigmas[i], self.bearings[j] + eps[:, 1] * self.sigmas[j]
+            )
+            points = points[ok]
+            accept = j_min / self._pair_jacobian(i, j, points)
+            for k in others:
+                z = _wrap(bearing_to(self.sensors[k], points) - self.bearings[k]) / self.sigmas[k]
+                accept = accept * np.exp(-0.5 * z * z)
+            out = np.vstack((out, points[rng.uniform(size=len(points)) < accept]))
+        return out[:n]
