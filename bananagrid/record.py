@@ -186,7 +186,11 @@ def _close(rec: rr.RecordingStream) -> None:
 
 
 def default_blueprint(
-    layer_entities: Sequence[str], *, scene_entity: str = "scene"
+    layer_entities: Sequence[str],
+    *,
+    scene_entity: str = "scene",
+    extra_images: Sequence[str] = (),
+    text_entities: Sequence[str] = (),
 ) -> rrb.Blueprint:
     """The default layout: per layer a density and a log10 view, beside the scene and mass.
 
@@ -196,10 +200,18 @@ def default_blueprint(
         The ``entity`` paths given to :func:`log_raster`.
     scene_entity : str
         The entity given to :func:`log_scene_text`.
+    extra_images : sequence of str
+        Further images under some layers (``"layers/NAME/IMAGE"``), each shown as one more
+        tab of its layer (e.g. a bearing fix's difference to its linear map).
+    text_entities : sequence of str
+        Further text documents (e.g. a validation table), each a tab beside the scene text.
     """
     layers = [_entity(e) for e in layer_entities]
+    extras = [_entity(e) for e in extra_images]
+    texts = [rrb.TextDocumentView(origin=f"/{_entity(scene_entity)}", name="scene")]
+    texts += [rrb.TextDocumentView(origin=f"/{_entity(e)}", name=_entity(e)) for e in text_entities]
     side = rrb.Vertical(
-        rrb.TextDocumentView(origin=f"/{_entity(scene_entity)}", name="scene"),
+        rrb.Tabs(*texts) if len(texts) > 1 else texts[0],
         rrb.TimeSeriesView(
             origin="/", contents=[f"/{e}/mass" for e in layers], name="captured mass"
         ),
@@ -208,25 +220,29 @@ def default_blueprint(
     if not layers:
         return rrb.Blueprint(side, collapse_panels=False)
     return rrb.Blueprint(
-        rrb.Horizontal(rrb.Grid(*(_layer_tabs(e) for e in layers)), side, column_shares=[3, 1]),
+        rrb.Horizontal(
+            rrb.Grid(*(_layer_tabs(e, [x.rsplit("/", 1)[1] for x in extras if x.rsplit("/", 1)[0] == e]) for e in layers)),
+            side, column_shares=[3, 1],
+        ),
         collapse_panels=False,
     )
 
 
-def _layer_tabs(entity: str) -> rrb.Tabs:
-    """Density and log10 density views of one layer, each with its contours."""
+def _layer_tabs(entity: str, extra_images: Sequence[str] = ()) -> rrb.Tabs:
+    """Density and log10 density views of one layer (and any extra images), each with its
+    contours and whatever geometry the layer carries."""
     return rrb.Tabs(
-        _map_view(entity, "density"),
-        _map_view(entity, "log10_density"),
+        *(_map_view(entity, image) for image in ("density", "log10_density", *extra_images)),
         name=entity,
     )
 
 
 def _map_view(entity: str, image: str) -> rrb.Spatial2DView:
-    """A 2D view of one image and the contours; rooted at ``/`` so the north-up flip applies."""
+    """A 2D view of one image, the contours and the layer's geometry overlay (if any); rooted
+    at ``/`` so the north-up flip applies."""
     return rrb.Spatial2DView(
         origin="/",
-        contents=[f"/{entity}/{image}", f"/{entity}/contours"],
+        contents=[f"/{entity}/{image}", f"/{entity}/contours", f"/{entity}/geometry/**"],
         name=f"{entity} {image}",
     )
 

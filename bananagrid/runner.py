@@ -12,6 +12,7 @@ import os
 import time
 import zipfile
 from collections.abc import Callable
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -94,11 +95,19 @@ def run_scene(
                 rec, f"layers/{layer.name}", _recordable(raster),
                 levels=scene.levels, colormap=scene.colormap,
             )
+            if layer.kind == "bearing_fix":
+                _log_bearing_extras(rec, scene, layer, t, raster, threads)
             if archive is not None:
                 archive.add(layer.name, t, raster)
             rows.append(_row(scene, layer, t, raster, seconds))
             if progress is not None:
                 progress(k + 1, len(jobs), label)
+        if scene.bearing_validation:
+            from .bearing_validation import format_table, summary, validation_table
+            from .record_bearing import log_validation_table
+
+            records = validation_table()
+            log_validation_table(rec, "validation", format_table(records), summary(records))
         if archive is not None:
             archive.close()
 
@@ -106,7 +115,7 @@ def run_scene(
         archive = _Archive(npz_path, scene) if npz else None
         write_recording(
             rrd_path, build, recording_id=_recording_id(scene),
-            blueprint=default_blueprint([f"layers/{layer.name}" for layer in scene.layers]),
+            blueprint=_blueprint(scene),
         )
         if archive is not None:
             try:
@@ -132,6 +141,27 @@ def compute(scene: Scene, layer: Layer, t: float, *, threads: int | None = None)
             )
         raster = raster.normalise()
     return raster, time.perf_counter() - start
+
+
+def _blueprint(scene: Scene):
+    """The default layout, with the bearing-fix difference maps and validation table if any."""
+    exact_fixes = [layer for layer in scene.layers if layer.kind == "bearing_fix" and layer.params.get("variant", "exact") == "exact"]
+    return default_blueprint(
+        [f"layers/{layer.name}" for layer in scene.layers],
+        extra_images=[f"layers/{layer.name}/difference_to_linear" for layer in exact_fixes],
+        text_entities=["validation"] if scene.bearing_validation else [],
+    )
+
+
+def _log_bearing_extras(rec, scene: Scene, layer: Layer, t: float, raster: Raster, threads) -> None:
+    """A bearing fix's geometry, and for the exact map its difference to the linear one."""
+    from .record_bearing import log_bearing_geometry, log_difference
+
+    fix = layer.model(t)
+    log_bearing_geometry(rec, f"layers/{layer.name}/geometry", fix)
+    if fix.variant == "exact":
+        linear, _ = compute(scene, replace(layer, params={**layer.params, "variant": "linear"}), t, threads=threads)
+        log_difference(rec, f"layers/{layer.name}/difference_to_linear", raster, linear)
 
 
 def array_key(layer: str, t: float) -> str:

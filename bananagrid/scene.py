@@ -63,7 +63,7 @@ NAME_PATTERN = re.compile(r"[A-Za-z0-9_-]+")
 TOP_KEYS = ("scene", "grid", "output", "defaults", "layers")
 SCENE_KEYS = ("name", "title", "description", "times")
 GRID_KEYS = ("x", "y", "step", "dx", "dy")
-OUTPUT_KEYS = ("contour_levels", "normalise", "dtype", "colormap")
+OUTPUT_KEYS = ("contour_levels", "normalise", "dtype", "colormap", "bearing_validation")
 DTYPES = ("float64", "float32")
 
 
@@ -141,6 +141,9 @@ class Scene:
         Kernel precision, ``"float64"`` or ``"float32"``.
     colormap : str
         rerun colormap of the density images (lower case).
+    bearing_validation : bool
+        Whether the recording gets the Walsh linearisation validation table (Monte Carlo of
+        the true geometry over crossing angles and bearing errors; a few seconds).
     """
 
     name: str
@@ -156,6 +159,7 @@ class Scene:
     normalise: bool
     dtype: str
     colormap: str
+    bearing_validation: bool = False
 
     def with_step(self, step: float) -> "Scene":
         """A copy whose grid covers the same bounds with square cells of ``step`` metres."""
@@ -231,7 +235,7 @@ def _build(doc: dict, text: str, source: str) -> Scene:
     description = _text(head, "description", "scene", default="")
     times = _times(head["times"]) if "times" in head else None
     bounds, grid = _grid(_table(doc, "grid", required=True))
-    levels, normalise, dtype, colormap = _output(_table(doc, "output"))
+    levels, normalise, dtype, colormap, bearing_validation = _output(_table(doc, "output"))
     defaults = _table(doc, "defaults")
     every_key = tuple(dict.fromkeys(k for keys in PARAMETER_KEYS.values() for k in keys))
     _check_keys(defaults, every_key, "defaults")
@@ -245,7 +249,7 @@ def _build(doc: dict, text: str, source: str) -> Scene:
     return Scene(
         name=name, title=title, description=description, text=text, source=source,
         grid=grid, bounds=bounds, layers=layers, times=times, levels=levels,
-        normalise=normalise, dtype=dtype, colormap=colormap,
+        normalise=normalise, dtype=dtype, colormap=colormap, bearing_validation=bearing_validation,
     )
 
 
@@ -282,8 +286,9 @@ def _grid(table: dict) -> tuple[tuple, Grid]:
         raise _KeyError(_prefixed(str(exc), "grid", GRID_KEYS)) from None
 
 
-def _output(table: dict) -> tuple[tuple, bool, str, str]:
-    """``[output]``: contour levels, normalisation, dtype and colormap, with defaults."""
+def _output(table: dict) -> tuple[tuple, bool, str, str, bool]:
+    """``[output]``: contour levels, normalisation, dtype, colormap and whether to add the
+    bearing-fix validation table, with defaults."""
     _check_keys(table, OUTPUT_KEYS, "output")
     levels = DEFAULT_LEVELS
     if "contour_levels" in table:
@@ -308,7 +313,10 @@ def _output(table: dict) -> tuple[tuple, bool, str, str]:
     allowed = _colormaps()
     if not isinstance(colormap, str) or colormap.lower() not in allowed:
         raise _KeyError(f"output.colormap = {_show(colormap)}: must be one of {', '.join(allowed)}")
-    return tuple(float(v) for v in levels), normalise, dtype, colormap.lower()
+    validation = table.get("bearing_validation", False)
+    if not isinstance(validation, bool):
+        raise _KeyError(f"output.bearing_validation = {_show(validation)}: expected true or false")
+    return tuple(float(v) for v in levels), normalise, dtype, colormap.lower(), validation
 
 
 def _colormaps() -> tuple[str, ...]:

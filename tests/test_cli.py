@@ -303,3 +303,16 @@ def test_run_scene_returns_rows(tmp_path):
     assert 0.0 < row["mass"] <= 1.0 + 1e-9 and row["peak"] > 0.0 and row["seconds"] >= 0.0
     with pytest.raises(bananagrid.BananagridError, match="output directory does not exist"):
         run_scene(scene, tmp_path / "missing")
+
+
+def test_bearing_recording_has_geometry_difference_and_validation(quick_runs):
+    path = quick_runs["bearing_coastal"] / "bearing_coastal.rrd"
+    entities = inspect_recording(path)["entities"]
+    for part in ("sensors", "bearings", "wedges", "fix", "ellipse", "circles", "containment"):
+        assert f"/layers/exact/geometry/{part}" in entities, part
+    assert "/validation" in entities
+    exact = read_depth_image(path, "layers/exact/density")
+    linear = read_depth_image(path, "layers/linear/density")
+    difference = read_depth_image(path, "layers/exact/difference_to_linear")
+    # recorded as float32 from float64 values: compare at float32 resolution of the peak
+    np.testing.assert_allclose(difference, exact - linear, rtol=0, atol=4 * np.finfo(np.float32).eps * exact.max())
