@@ -18,7 +18,7 @@ import numpy as np
 
 from .validate import BananagridError
 
-__all__ = ["BearingFix", "bearing_to", "MIN_CROSSING_DEG", "MAP_VARIANTS"]
+__all__ = ["BearingFix", "bearing_to", "crossings", "MIN_CROSSING_DEG", "MAP_VARIANTS"]
 
 #: Crossing angles below this (degrees) are refused: the lines are nearly parallel, the fix
 #: lies far out along them and Walsh's linearisation (assumption 7) does not hold.
@@ -42,6 +42,34 @@ def bearing_to(sensor, point) -> np.ndarray:
     point = np.asarray(point, dtype=float)
     d = point - sensor
     return np.arctan2(d[..., 0], d[..., 1])
+
+
+def crossings(sensors, b1, b2):
+    r"""Exact crossings of the bearing lines from ``sensors[0]`` at ``b1`` and ``sensors[1]``
+    at ``b2`` (arrays, radians clockwise from north).
+
+    .. math::  s_1 = \frac{d \times u_2}{u_1 \times u_2},\quad
+               s_2 = \frac{d \times u_1}{u_1 \times u_2},\quad F = S_1 + s_1 u_1,
+
+    Returns
+    -------
+    fx, fy : ndarray
+        The crossing F (NaN or inf where the lines are parallel).
+    kept : ndarray of bool
+        A fix exists: the lines cross (finite s) in front of both stations (s1 > 0, s2 > 0).
+    """
+    sensors = np.asarray(sensors, dtype=float)
+    u1x, u1y = np.sin(b1), np.cos(b1)
+    u2x, u2y = np.sin(b2), np.cos(b2)
+    dx, dy = sensors[1] - sensors[0]
+    den = u1x * u2y - u1y * u2x
+    with np.errstate(divide="ignore", invalid="ignore"):
+        s1 = (dx * u2y - dy * u2x) / den
+        s2 = (dx * u1y - dy * u1x) / den
+        fx = sensors[0, 0] + s1 * u1x
+        fy = sensors[0, 1] + s1 * u1y
+    kept = np.isfinite(s1) & np.isfinite(s2) & (s1 > 0.0) & (s2 > 0.0)
+    return fx, fy, kept
 
 
 def _wrap(angle):
@@ -283,17 +311,10 @@ class BearingFix:
         return max(pairs, key=lambda ij: abs(math.sin(self.bearings[ij[0]] - self.bearings[ij[1]])))
 
     def _crossings(self, i: int, j: int, b_i, b_j) -> tuple[np.ndarray, np.ndarray]:
-        """Crossings of sensor i's and j's lines at bearings b_i, b_j (arrays), and whether each
-        lies in front of both sensors."""
-        u = np.column_stack((np.sin(b_i), np.cos(b_i)))
-        w = np.column_stack((np.sin(b_j), np.cos(b_j)))
-        d = self.sensors[j] - self.sensors[i]
-        den = u[:, 0] * w[:, 1] - u[:, 1] * w[:, 0]
-        with np.errstate(divide="ignore", invalid="ignore"):
-            s_i = (d[0] * w[:, 1] - d[1] * w[:, 0]) / den
-            s_j = (d[0] * u[:, 1] - d[1] * u[:, 0]) / den
-        points = self.sensors[i] + s_i[:, None] * u
-        return points, (s_i > 0) & (s_j > 0) & np.isfinite(s_i)
+        """Crossings of sensor i's and j's lines at bearings b_i, b_j (arrays), shape (m, 2),
+        and whether each lies in front of both sensors."""
+        fx, fy, kept = crossings(self.sensors[[i, j]], b_i, b_j)
+        return np.column_stack((fx, fy)), kept
 
     def _pair_jacobian(self, i: int, j: int, points: np.ndarray) -> np.ndarray:
         """|det d(beta_i, beta_j) / d(x, y)| = |sin(beta_i - beta_j)| / (r_i r_j)."""

@@ -61,7 +61,7 @@ from numbers import Integral, Real
 
 import numpy as np
 
-from .bearing import MIN_CROSSING_DEG, BearingFix, bearing_to
+from .bearing import MIN_CROSSING_DEG, BearingFix, bearing_to, crossings
 from .validate import BananagridError
 
 __all__ = ["validation_table", "format_table", "summary", "standard_geometry", "crossings", "verdict"]
@@ -170,34 +170,6 @@ def _linearised_radii(sensors, bearings, sigma):
         warnings.filterwarnings("ignore", message="bearings cross at", category=UserWarning)
         fix = BearingFix(sensors, bearings, [sigma, sigma])
     return np.asarray(fix.radius(list(PROBABILITIES)), dtype=float)
-
-
-def crossings(sensors, b1, b2):
-    r"""Exact crossings of the bearing lines from ``sensors[0]`` at ``b1`` and ``sensors[1]``
-    at ``b2`` (arrays, radians clockwise from north).
-
-    .. math::  s_1 = \frac{d \times u_2}{u_1 \times u_2},\quad
-               s_2 = \frac{d \times u_1}{u_1 \times u_2},\quad F = S_1 + s_1 u_1,
-
-    Returns
-    -------
-    fx, fy : ndarray
-        The crossing F (NaN or inf where the lines are parallel).
-    kept : ndarray of bool
-        A fix exists: the lines cross (finite s) in front of both stations (s1 > 0, s2 > 0).
-    """
-    sensors = np.asarray(sensors, dtype=float)
-    u1x, u1y = np.sin(b1), np.cos(b1)
-    u2x, u2y = np.sin(b2), np.cos(b2)
-    dx, dy = sensors[1] - sensors[0]
-    den = u1x * u2y - u1y * u2x
-    with np.errstate(divide="ignore", invalid="ignore"):
-        s1 = (dx * u2y - dy * u2x) / den
-        s2 = (dx * u1y - dy * u1x) / den
-        fx = sensors[0, 0] + s1 * u1x
-        fy = sensors[0, 1] + s1 * u1y
-    kept = np.isfinite(s1) & np.isfinite(s2) & (s1 > 0.0) & (s2 > 0.0)
-    return fx, fy, kept
 
 
 def _monte_carlo(sensors, target, bearings, sigma, z, radii):
