@@ -233,41 +233,10 @@ from scipy import stats as _stats  # noqa: E402
 ALPHA = 1e-3
 
 
-@pytest.mark.parametrize("three", [False, True], ids=["two-sensors", "three-sensors"])
-def test_exact_map_matches_its_samples(three):
-    """Pearson's chi-square of 300,000 draws binned at 400 m against the grid-normalised exact
-    map integrated on 20 m sub-cells (midpoint error ~ (h^2/24) |f''|/f with the fix's minor SD
-    ~300 m: 2e-4, below the >= 4e-3 statistical error of the fullest bins)."""
-    if three:
-        sensors = np.vstack((STATIONS, [[35000.0, 12000.0]]))
-        fix = make(sensors=sensors, sigmas=[0.01, 0.02, 0.01], noise=np.array([0.004, -0.01, 0.003]))
-    else:
-        fix = make(noise=np.array([0.004, -0.01]))
-    bin_size, sub = 400.0, 20
-    grid = bg.Grid.from_bounds(x=(0.0, 16000.0), y=(22000.0, 38000.0), step=bin_size / sub)
-    probs = bg.rasterise(fix, grid).normalise().values
-    ny, nx = grid.ny // sub, grid.nx // sub
-    probs = probs.reshape(ny, sub, nx, sub).sum(axis=(1, 3)) * grid.cell_area
-    pts = fix.sample(300_000, np.random.default_rng(20261121))
-    counts, _, _ = np.histogram2d(pts[:, 1], pts[:, 0], bins=(ny, nx), range=((22000.0, 38000.0), (0.0, 16000.0)))
-    inside = counts.sum()
-    assert inside > 0.99 * len(pts)  # the frame holds the fix region
-    expected = probs * inside
-    big = expected >= 5
-    obs = np.append(counts[big], counts[~big].sum())
-    exp = np.append(expected[big], expected[~big].sum())
-    chi2 = float(np.sum((obs - exp) ** 2 / exp))
-    p_value = _stats.chi2.sf(chi2, df=len(obs) - 1)
-    assert p_value > ALPHA, f"chi2 = {chi2:.1f} on {len(obs) - 1} dof, p = {p_value:.2e}"
-
-
-def test_re_triangulation_alone_would_fail_the_same_test():
-    """Power check: the raw re-triangulated fixes (no Jacobian correction) are rejected."""
-    fix = make(noise=np.array([0.004, -0.01]))
-    rng = np.random.default_rng(5)
-    eps = rng.normal(size=(300_000, 2)) * fix.sigmas
-    pts, ok = fix._crossings(0, 1, fix.bearings[0] + eps[:, 0], fix.bearings[1] + eps[:, 1])
-    pts = pts[ok]
+def _chi2_against_map(fix, pts):
+    """Pearson's chi-square of points binned at 400 m against the grid-normalised exact map
+    integrated on 20 m sub-cells, over bins expecting >= 5 (the rest pooled): (chi2, dof, the
+    fraction of points inside the frame)."""
     bin_size, sub = 400.0, 20
     grid = bg.Grid.from_bounds(x=(0.0, 16000.0), y=(22000.0, 38000.0), step=bin_size / sub)
     probs = bg.rasterise(fix, grid).normalise().values
@@ -276,8 +245,34 @@ def test_re_triangulation_alone_would_fail_the_same_test():
     counts, _, _ = np.histogram2d(pts[:, 1], pts[:, 0], bins=(ny, nx), range=((22000.0, 38000.0), (0.0, 16000.0)))
     expected = probs * counts.sum()
     big = expected >= 5
-    chi2 = float(np.sum((counts[big] - expected[big]) ** 2 / expected[big]))
-    assert _stats.chi2.sf(chi2, df=big.sum() - 1) < ALPHA
+    obs = np.append(counts[big], counts[~big].sum())
+    exp = np.append(expected[big], expected[~big].sum())
+    return float(np.sum((obs - exp) ** 2 / exp)), len(obs) - 1, counts.sum() / len(pts)
+
+
+@pytest.mark.parametrize("three", [False, True], ids=["two-sensors", "three-sensors"])
+def test_exact_map_matches_its_samples(three):
+    """300,000 draws against the exact map. The midpoint rule's error on 20 m sub-cells is
+    ~ (h^2/24) |f''|/f with the fix's minor SD ~300 m: 2e-4, below the >= 4e-3 statistical
+    error of the fullest bins."""
+    if three:
+        sensors = np.vstack((STATIONS, [[35000.0, 12000.0]]))
+        fix = make(sensors=sensors, sigmas=[0.01, 0.02, 0.01], noise=np.array([0.004, -0.01, 0.003]))
+    else:
+        fix = make(noise=np.array([0.004, -0.01]))
+    chi2, dof, inside = _chi2_against_map(fix, fix.sample(300_000, np.random.default_rng(20261121)))
+    assert inside > 0.99  # the frame holds the fix region
+    p_value = _stats.chi2.sf(chi2, df=dof)
+    assert p_value > ALPHA, f"chi2 = {chi2:.1f} on {dof} dof, p = {p_value:.2e}"
+
+
+def test_re_triangulation_alone_would_fail_the_same_test():
+    """Power check: the raw re-triangulated fixes (no Jacobian correction) are rejected."""
+    fix = make(noise=np.array([0.004, -0.01]))
+    eps = np.random.default_rng(5).normal(size=(300_000, 2)) * fix.sigmas
+    pts, ok = fix._crossings(0, 1, fix.bearings[0] + eps[:, 0], fix.bearings[1] + eps[:, 1])
+    chi2, dof, _ = _chi2_against_map(fix, pts[ok])
+    assert _stats.chi2.sf(chi2, df=dof) < ALPHA
 
 
 def test_sample_validates_its_arguments():
