@@ -18,7 +18,7 @@ import numpy as np
 
 from .validate import BananagridError
 
-__all__ = ["BearingFix", "bearing_to", "crossings", "MIN_CROSSING_DEG", "MAP_VARIANTS"]
+__all__ = ["BearingFix", "bearing_to", "crossings", "two_bearing_variances", "MIN_CROSSING_DEG", "MAP_VARIANTS"]
 
 #: Crossing angles below this (degrees) are refused: the lines are nearly parallel, the fix
 #: lies far out along them and Walsh's linearisation (assumption 7) does not hold.
@@ -70,6 +70,62 @@ def crossings(sensors, b1, b2):
         fy = sensors[0, 1] + s1 * u1y
     kept = np.isfinite(s1) & np.isfinite(s2) & (s1 > 0.0) & (s2 > 0.0)
     return fx, fy, kept
+
+
+def two_bearing_variances(sensor1, sensor2, bearing1, bearing2, sigma1, sigma2):
+    """Fixes and principal variances of many two-bearing geometries at once (broadcast).
+
+    For each geometry the fix F is the crossing of the two bearing lines and the linearised
+    covariance is C = (G^T W G)^-1 with rows g_i = (dy_i, -dx_i) / r_i^2 (the gradients of the
+    bearings at F) and W = diag(1 / sigma_i^2); with two rows det(G) = sin(beta_1 - beta_2) /
+    (r_1 r_2), and C's eigenvalues (v1 >= v2) are Walsh's v_g.
+
+    Parameters
+    ----------
+    sensor1, sensor2 : array_like, shape (..., 2)
+    bearing1, bearing2 : array_like
+        Radians clockwise from north.
+    sigma1, sigma2 : array_like
+        Bearing error SDs, radians, > 0.
+
+    Returns
+    -------
+    fix : ndarray, shape (..., 2)
+    v1, v2 : ndarray
+        Principal variances, m^2. Geometries without a fix in front of both sensors (or with
+        parallel lines) give NaN.
+    """
+    s1 = np.asarray(sensor1, dtype=float)
+    s2 = np.asarray(sensor2, dtype=float)
+    b1, b2, sd1, sd2 = (np.asarray(v, dtype=float) for v in (bearing1, bearing2, sigma1, sigma2))
+    if not all(np.isfinite(v).all() for v in (s1, s2, b1, b2, sd1, sd2)):
+        raise BananagridError("two_bearing_variances: every sensor, bearing and sigma must be finite")
+    if np.any(sd1 <= 0) or np.any(sd2 <= 0):
+        raise BananagridError("two_bearing_variances: sigmas must be > 0")
+    u1 = np.stack((np.sin(b1), np.cos(b1)), axis=-1)
+    u2 = np.stack((np.sin(b2), np.cos(b2)), axis=-1)
+    d = s2 - s1
+    den = u1[..., 0] * u2[..., 1] - u1[..., 1] * u2[..., 0]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        along1 = (d[..., 0] * u2[..., 1] - d[..., 1] * u2[..., 0]) / den
+        along2 = (d[..., 0] * u1[..., 1] - d[..., 1] * u1[..., 0]) / den
+        fix = s1 + along1[..., None] * u1
+        r1, r2 = fix - s1, fix - s2
+        g1 = np.stack((r1[..., 1], -r1[..., 0]), axis=-1) / np.sum(r1 * r1, axis=-1)[..., None]
+        g2 = np.stack((r2[..., 1], -r2[..., 0]), axis=-1) / np.sum(r2 * r2, axis=-1)[..., None]
+        # information I = G^T W G; C = I^-1 has eigenvalues 1 / (eigenvalues of I)
+        w1, w2 = 1.0 / sd1**2, 1.0 / sd2**2
+        ixx = w1 * g1[..., 0] ** 2 + w2 * g2[..., 0] ** 2
+        iyy = w1 * g1[..., 1] ** 2 + w2 * g2[..., 1] ** 2
+        ixy = w1 * g1[..., 0] * g1[..., 1] + w2 * g2[..., 0] * g2[..., 1]
+        half_trace = 0.5 * (ixx + iyy)
+        root = np.sqrt(0.25 * (ixx - iyy) ** 2 + ixy**2)
+        big, det = half_trace + root, ixx * iyy - ixy**2
+        v1 = 1.0 / (det / big)  # 1 / smallest eigenvalue of I (det / largest, no cancellation)
+        v2 = 1.0 / big
+    bad = ~(np.isfinite(along1) & np.isfinite(along2) & (along1 > 0) & (along2 > 0))
+    v1, v2 = np.where(bad, np.nan, v1), np.where(bad, np.nan, v2)
+    return fix, v1, v2
 
 
 def _wrap(angle):

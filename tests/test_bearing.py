@@ -278,3 +278,25 @@ def test_re_triangulation_alone_would_fail_the_same_test():
 def test_sample_validates_its_arguments():
     with pytest.raises(BananagridError, match="n = -2: expected a non-negative integer"):
         make().sample(-2, np.random.default_rng(0))
+
+
+def test_many_geometries_at_once_match_one_at_a_time():
+    from bananagrid.bearing import two_bearing_variances
+
+    rng = np.random.default_rng(8)
+    n = 50
+    s2 = np.column_stack((rng.uniform(5000, 40000, n), rng.uniform(-3000, 3000, n)))
+    targets = np.column_stack((rng.uniform(-10000, 30000, n), rng.uniform(10000, 60000, n)))
+    b1 = bearing_to(np.zeros(2), targets)
+    b2 = bearing_to(s2, targets)
+    sd1, sd2 = rng.uniform(0.005, 0.05, n), rng.uniform(0.005, 0.05, n)
+    fix, v1, v2 = two_bearing_variances(np.zeros(2), s2, b1, b2, sd1, sd2)
+    for k in range(n):
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            one = BearingFix([[0.0, 0.0], s2[k]], [b1[k], b2[k]], [sd1[k], sd2[k]])
+        np.testing.assert_allclose(fix[k], one.fix, rtol=1e-10)
+        np.testing.assert_allclose((v1[k], v2[k]), one.principal_variances, rtol=1e-9)
+    # a geometry whose lines cross behind a station has no fix
+    _, bad1, _ = two_bearing_variances([0.0, 0.0], [20000.0, 0.0], math.pi + 0.3, -0.5, 0.01, 0.01)
+    assert np.isnan(bad1)
