@@ -135,7 +135,7 @@ def _wrap(angle):
 
 def _as_array(name: str, value, shape_text: str, ndim: int) -> np.ndarray:
     try:
-        array = np.asarray(value, dtype=float)
+        array = np.array(value, dtype=float)  # a copy: it is frozen below, the caller's is not
     except (TypeError, ValueError):
         raise BananagridError(f"{name} = {value!r}: expected {shape_text} of numbers") from None
     if array.ndim != ndim or (ndim == 2 and array.shape[1] != 2):
@@ -219,12 +219,8 @@ class BearingFix:
 
     def _check_crossing(self) -> None:
         # the best-crossing pair decides whether any fix is possible
-        best = 0.0
-        n = len(self.bearings)
-        for i in range(n):
-            for j in range(i + 1, n):
-                best = max(best, abs(math.sin(self.bearings[i] - self.bearings[j])))
-        angle = math.degrees(math.asin(min(1.0, best)))
+        i, j = self._best_pair()
+        angle = math.degrees(math.asin(min(1.0, abs(math.sin(self.bearings[i] - self.bearings[j])))))
         if angle < MIN_CROSSING_DEG:
             raise BananagridError(
                 f"bearings: the lines cross at {angle:.3g} deg, below {MIN_CROSSING_DEG} deg: "

@@ -300,3 +300,10 @@ def test_many_geometries_at_once_match_one_at_a_time():
     # a geometry whose lines cross behind a station has no fix
     _, bad1, _ = two_bearing_variances([0.0, 0.0], [20000.0, 0.0], math.pi + 0.3, -0.5, 0.01, 0.01)
     assert np.isnan(bad1)
+
+
+def test_inputs_are_copied_not_frozen():
+    bearings = bearing_to(STATIONS, CONTACT)
+    fix = BearingFix(STATIONS, bearings, SIGMAS)
+    bearings[0] = 0.0  # the caller's array stays writable and the fix does not change
+    assert fix.bearings[0] != 0.0 and not fix.bearings.flags.writeable
