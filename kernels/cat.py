@@ -20,7 +20,7 @@ from typing import Any
 
 import warp as wp
 
-from .common import cat_basis, normal_pdf, sinc, world_to_local
+from .common import cat_basis, normal_pdf, world_to_local
 
 #: Table columns: omega; the coefficients of F = hx*y - hy*x - c and of
 #: dF/domega = dhx*y - dhy*x - dc; and of the acceleration of the line through P,
@@ -36,14 +36,16 @@ MAX_NEWTON = 100
 MAX_FOLD_SEARCH = 100
 
 #: An interval is searched for a root pair when the Hermite interpolant of F comes within this
-#: fraction of its larger end value of zero. The interpolant's error on a 0.05-rad node
-#: interval is about 1e-8 of F's scale, so 1e-2 leaves a wide safety factor.
+#: fraction of its larger end value of zero. The interpolant's error is O(width^4): on the
+#: 0.1-rad node intervals (of omega t) about 2e-7 of F's scale, so 1e-2 leaves a wide margin.
 FOLD_MARGIN = 1.0e-2
 
 
 @wp.func
 def cat_coefficients(omega: Any, v0: Any, t: Any):
-    """(hx, hy, c, dhx, dhy, dc) such that F = hx y - hy x - c and F' = dhx y - dhy x - dc."""
+    """The omega-only coefficients of everything a point needs, from one basis evaluation:
+    F = hx y - hy x - c, dF/domega = dhx y - dhy x - dc, and the acceleration of the line
+    through P, a = h . (P - v0 f) / |h|^2 = ax x + ay y - a0 (exact at a root)."""
     u = omega * t
     a_fn, b_fn, c_fn, d_fn, dc_fn, dd_fn = cat_basis(u)
     t2 = t * t
@@ -53,33 +55,18 @@ def cat_coefficients(omega: Any, v0: Any, t: Any):
     hy = t2 * d_fn
     dhx = t2 * t * dc_fn
     dhy = t2 * t * dd_fn
-    # d/domega (h x f) = h' x f + h x f', and h x f' = -|h|^2
-    return hx, hy, v0 * (hx * fy - hy * fx), dhx, dhy, v0 * (dhx * fy - dhy * fx - (hx * hx + hy * hy))
-
-
-@wp.func
-def cat_line_acceleration(omega: Any, v0: Any, t: Any):
-    """(ax, ay, a0) with a = ax x + ay y - a0 = h . (P - v0 f) / |h|^2 (exact at a root)."""
-    u = omega * t
-    a_fn, b_fn, c_fn, d_fn, dc_fn, dd_fn = cat_basis(u)
-    t2 = t * t
-    hx = t2 * c_fn
-    hy = t2 * d_fn
     h2 = hx * hx + hy * hy
-    return hx / h2, hy / h2, v0 * t * (hx * a_fn + hy * b_fn) / h2
+    # d/domega (h x f) = h' x f + h x f', and h x f' = -|h|^2
+    c = v0 * (hx * fy - hy * fx)
+    dc = v0 * (dhx * fy - dhy * fx - h2)
+    return hx, hy, c, dhx, dhy, dc, hx / h2, hy / h2, v0 * (hx * fx + hy * fy) / h2
 
 
 @wp.func
 def cat_eval(x: Any, y: Any, omega: Any, v0: Any, t: Any):
-    """F(omega), dF/domega and the acceleration a = h . (P - v0 f) / |h|^2, at a local point."""
-    hx, hy, c, dhx, dhy, dc = cat_coefficients(omega, v0, t)
-    f = hx * y - hy * x - c
-    df = dhx * y - dhy * x - dc
-    # P - v0 f = a h + (F / |h|^2) h_perp; at a root the second part vanishes.
-    h2 = hx * hx + hy * hy
-    fx_v0 = v0 * t * wp.sin(omega * t * type(x)(0.5)) * sinc(omega * t * type(x)(0.5))
-    fy_v0 = v0 * t * sinc(omega * t)
-    return f, df, (hx * (x - fx_v0) + hy * (y - fy_v0)) / h2
+    """F(omega), dF/domega and the acceleration a of the line through P, at a local point."""
+    hx, hy, c, dhx, dhy, dc, ax, ay, a0 = cat_coefficients(omega, v0, t)
+    return hx * y - hy * x - c, dhx * y - dhy * x - dc, ax * x + ay * y - a0
 
 
 @wp.func
@@ -280,8 +267,7 @@ def cat_table(
     """Fill the scan table: one row per turn-rate node."""
     k = wp.tid()
     w = omegas[k]
-    hx, hy, c, dhx, dhy, dc = cat_coefficients(w, v0, t)
-    ax, ay, a0 = cat_line_acceleration(w, v0, t)
+    hx, hy, c, dhx, dhy, dc, ax, ay, a0 = cat_coefficients(w, v0, t)
     table[k, 7] = ax
     table[k, 8] = ay
     table[k, 9] = a0
