@@ -14,9 +14,9 @@ from dataclasses import dataclass, field, fields
 import numpy as np
 from scipy.special import erfc
 
-from .validate import BananagridError, finite, point, positive
+from .validate import BananagridError, finite, non_negative, point, positive
 
-__all__ = ["Pose", "CAT", "PolarBanana", "Model", "VARIANTS", "cat_position"]
+__all__ = ["Pose", "CAT", "PolarBanana", "Model", "VARIANTS", "HEADING_ORDERS", "cat_position"]
 
 
 @dataclass(frozen=True)
@@ -68,11 +68,27 @@ def _check_n(n) -> int:
 
 
 def _validate_motion(model) -> None:
-    """The parameters every motion model shares: v0, t, sigma_a, sigma_omega > 0 and a Pose."""
+    """The parameters every motion model shares: v0, t, sigma_a, sigma_omega > 0,
+    sigma_heading >= 0 and a Pose."""
     for name in ("v0", "t", "sigma_a", "sigma_omega"):
         object.__setattr__(model, name, positive(name, getattr(model, name)))
+    object.__setattr__(model, "sigma_heading", non_negative("sigma_heading", model.sigma_heading))
     if not isinstance(model.pose, Pose):
         raise BananagridError(f"pose = {model.pose!r}: expected a bananagrid.Pose")
+
+
+def _heading_errors(model, n: int, rng: np.random.Generator) -> np.ndarray:
+    """Initial-heading errors theta_0 ~ N(0, sigma_heading) (zeros without heading noise)."""
+    if model.sigma_heading == 0.0:
+        return np.zeros(n)
+    return rng.normal(0.0, model.sigma_heading, n)
+
+
+def _rotate(local: np.ndarray, theta0: np.ndarray) -> np.ndarray:
+    """Turn local points by theta0 (radians, clockwise: a heading error to starboard)."""
+    c, s = np.cos(theta0), np.sin(theta0)
+    x, y = local[:, 0], local[:, 1]
+    return np.column_stack((x * c + y * s, -x * s + y * c))
 
 
 def cat_position(v0, t, a, omega) -> np.ndarray:
@@ -114,6 +130,13 @@ class CAT:
     k_sigma : float, default 8
         Turn rates are searched within +-k_sigma * sigma_omega; the mass beyond,
         erfc(k_sigma / sqrt 2) (1.2e-15 at 8), is reported as ``truncated_mass`` and excluded.
+    sigma_heading : float, default 0
+        Standard deviation sigma_0 (radians, >= 0) of a normal error theta_0 on the initial
+        heading (Section 7 of the polar-banana paper). The density is then the exact CAT density
+        convolved over the rotation by theta_0 about the origin:
+        p(r, theta) = integral of p_0(r, theta - theta_0) g(theta_0; 0, sigma_0) d theta_0, computed
+        on a polar lattice (exact wrapped-normal convolution by FFT along the bearing, then
+        interpolation; see :mod:`bananagrid.heading`). 0 gives the foundation's kernel exactly.
     pose : Pose, default origin (0, 0), heading north
         Places the local frame in the world.
     """
@@ -123,6 +146,7 @@ class CAT:
     sigma_a: float
     sigma_omega: float
     k_sigma: float = 8.0
+    sigma_heading: float = 0.0
     pose: Pose = field(default_factory=Pose)
 
     kind = "cat"
@@ -144,14 +168,18 @@ class CAT:
         return _parameters(self)
 
     def sample(self, n: int, rng) -> np.ndarray:
-        """Draw ``n`` world positions: a and omega from their normal laws, then eq. (1).
+        """Draw ``n`` world positions: a and omega from their normal laws, then eq. (1), turned
+        by a heading error theta_0 ~ N(0, sigma_heading) when there is one.
 
         The turn rate is not truncated here (the truncated mass is below 1e-15 by default).
         """
         n, rng = _check_n(n), _check_rng(rng)
         a = rng.normal(0.0, self.sigma_a, n)
         omega = rng.normal(0.0, self.sigma_omega, n)
-        return self.pose.to_world(cat_position(self.v0, self.t, a, omega))
+        local = cat_position(self.v0, self.t, a, omega)
+        if self.sigma_heading > 0.0:
+            local = _rotate(local, _heading_errors(self, n, rng))
+        return self.pose.to_world(local)
 
     def pdf(self, x, y, *, dtype=np.float64, device="cpu"):
         """Density per m^2 at world points (broadcast x, y), through the same kernels as rasterise."""
@@ -161,6 +189,7 @@ class CAT:
 
 
 VARIANTS = ("rough", "improved")
+HEADING_ORDERS = (2, 4)
 
 
 @dataclass(frozen=True)
@@ -178,7 +207,13 @@ class PolarBanana:
         As for :class:`CAT`, all > 0.
     variant : {"rough", "improved"}, default "improved"
     sigma_heading : float, default 0
-        Standard deviation of the initial heading (Section 7); only 0 is supported so far.
+        Standard deviation sigma_0 (radians, >= 0) of a normal error on the initial heading
+        (Section 7). The bearing is then theta ~ N(0, sigma_theta), sigma_theta^2 = sigma_0^2 +
+        sigma_phi^2, and r | theta is normal with the mean (15) and SD (16) built from the
+        variant's P_mu and P_sigma at theta_bar = theta sigma_phi^2 / sigma_theta^2.
+    heading_order : {2, 4}, default 2
+        2: (15) and (16) as printed; 4: with (1/8) P_mu^(4) sigma_bar^4 in the mean and the
+        fourth-order variance terms given after Figure 8. Only used when sigma_heading > 0.
     pose : Pose
 
     Notes
@@ -197,6 +232,7 @@ class PolarBanana:
     sigma_omega: float
     variant: str = "improved"
     sigma_heading: float = 0.0
+    heading_order: int = 2
     pose: Pose = field(default_factory=Pose)
 
     kind = "polar"
@@ -205,11 +241,12 @@ class PolarBanana:
         _validate_motion(self)
         if self.variant not in VARIANTS:
             raise BananagridError(f"variant = {self.variant!r}: must be one of {', '.join(VARIANTS)}")
-        sh = finite("sigma_heading", self.sigma_heading)
-        if sh != 0.0:
+        if isinstance(self.heading_order, bool) or self.heading_order not in HEADING_ORDERS:
             raise BananagridError(
-                f"sigma_heading = {sh!r}: initial-heading noise (Section 7) is not implemented yet; use 0"
+                f"heading_order = {self.heading_order!r}: must be 2 ((15), (16)) or 4 (with the "
+                "fourth-order terms after Figure 8)"
             )
+        object.__setattr__(self, "heading_order", int(self.heading_order))
         if self.variant == "improved" and self.sigma_positive_limit < math.pi:
             warnings.warn(
                 f"P_sigma (11) is not positive for |phi| > {self.sigma_positive_limit:.4g} rad; "
@@ -228,9 +265,25 @@ class PolarBanana:
         return self.sigma_omega * math.sqrt(self.t**2 / 12 + 6 * self.v0**2 / self.sigma_a**2)
 
     @property
+    def sigma_theta(self) -> float:
+        """SD of the bearing theta = theta_0 + phi: sqrt(sigma_heading^2 + sigma_phi^2)."""
+        return math.hypot(self.sigma_heading, self.sigma_phi)
+
+    @property
+    def sigma_bar(self) -> float:
+        """SD of phi given theta, (12): sigma_0 sigma_phi / sigma_theta (0 without heading noise)."""
+        return self.sigma_heading * self.sigma_phi / self.sigma_theta
+
+    @property
+    def kernel_order(self) -> int:
+        """The kernels' heading order: 0 without heading noise, else ``heading_order``."""
+        return self.heading_order if self.sigma_heading > 0.0 else 0
+
+    @property
     def truncated_mass(self) -> float:
-        """Mass of phi beyond +-pi, outside the plane density."""
-        return float(erfc(math.pi / (self.sigma_phi * math.sqrt(2.0))))
+        """Mass of the bearing (phi, or theta with heading noise) beyond +-pi, outside the plane
+        density."""
+        return float(erfc(math.pi / (self.sigma_theta * math.sqrt(2.0))))
 
     def parameters(self) -> dict:
         return _parameters(self)
@@ -253,18 +306,50 @@ class PolarBanana:
 
         return evaluate_polar_moments(self, phi, variant="improved", dtype=dtype, device=device)[1]
 
+    def law_derivatives(self, phi, *, dtype=np.float64, device="cpu") -> np.ndarray:
+        """The variant's mean law with its derivatives 1-4 and its SD law with derivatives 1-2,
+        at phi: array (..., 8) in that order (for "improved": P_mu (8) and P_sigma (11)),
+        analytic, through the kernel that (15)-(16) use."""
+        from .raster import evaluate_polar_derivatives
+
+        return evaluate_polar_derivatives(self, phi, dtype=dtype, device=device)
+
+    def conditional_moments(self, theta, *, order=None, dtype=np.float64, device="cpu"):
+        """Closed-form E[r | theta] and SD[r | theta] of this model (kernel).
+
+        Without heading noise they are the variant's law at phi = theta (P_mu (8), P_sigma
+        (11) for "improved"); with it, (15) and (16) (``order`` 2) or with the fourth-order
+        terms (``order`` 4), by default the model's ``heading_order``. SD is 0 outside the
+        approximation's domain (P_sigma(theta_bar) <= 0).
+        """
+        from .raster import evaluate_polar_moments
+
+        if order is None:
+            order = self.kernel_order
+        elif isinstance(order, bool) or order not in HEADING_ORDERS:
+            raise BananagridError(f"order = {order!r}: must be 2 or 4")
+        elif self.sigma_heading == 0.0:
+            order = 0  # sigma_bar = 0: (15) and (16) reduce to P_mu and P_sigma
+        return evaluate_polar_moments(self, theta, order=order, dtype=dtype, device=device)
+
     def sample(self, n: int, rng) -> np.ndarray:
-        """Draw ``n`` world positions: phi, then r given phi (rejecting |phi| > pi, r <= 0)."""
+        """Draw ``n`` world positions: phi, then r given phi (rejecting |phi| > pi, r <= 0).
+
+        With heading noise the bearing is theta = theta_0 + phi, theta_0 ~ N(0, sigma_heading),
+        and r | theta follows the model's own law, (15)-(16): samples of the density the kernels
+        compute (rejecting |theta| > pi and r <= 0), not of the exact generative story, which
+        ``CAT(sigma_heading=...)`` samples.
+        """
         n, rng = _check_n(n), _check_rng(rng)
         out = np.empty((0, 2))
         while len(out) < n:
             m = max(2 * (n - len(out)), 16)
-            phi = rng.normal(0.0, self.sigma_phi, m)
-            mean, sd = self.radial_law(phi)
-            ok = (np.abs(phi) <= np.pi) & (sd > 0)
+            angle = rng.normal(0.0, self.sigma_theta, m)
+            mean, sd = self.conditional_moments(angle) if self.sigma_heading > 0.0 else self.radial_law(angle)
+            ok = (np.abs(angle) <= np.pi) & (sd > 0)
             r = rng.normal(mean[ok], sd[ok])
             keep = r > 0
-            local = np.column_stack((r[keep] * np.sin(phi[ok][keep]), r[keep] * np.cos(phi[ok][keep])))
+            local = np.column_stack((r[keep] * np.sin(angle[ok][keep]), r[keep] * np.cos(angle[ok][keep])))
             out = np.vstack((out, local))
         return self.pose.to_world(out[:n])
 

@@ -16,7 +16,10 @@ import numpy as np
 from .grid import Grid
 from .validate import BananagridError
 
-__all__ = ["Raster", "rasterise", "evaluate_points", "evaluate_polar_moments", "default_threads"]
+__all__ = [
+    "Raster", "rasterise", "evaluate_points", "evaluate_polar_moments", "evaluate_polar_derivatives",
+    "interpolate_table", "default_threads",
+]
 
 
 @dataclass(frozen=True)
@@ -160,14 +163,16 @@ class _Binding:
     bands_per_thread: int = 16
 
 
-def _bind(model, wp, np_dtype, scalar, device) -> _Binding:
-    """Bind ``model`` to its kernels, with their module loaded on ``device``."""
-    binding = _bind_kernels(model, wp, np_dtype, scalar, device)
+def _bind(model, wp, np_dtype, scalar, device, radii, threads) -> _Binding:
+    """Bind ``model`` to its kernels, with their module loaded on ``device``. ``radii`` is the
+    range (min, max) of distances from the model's origin that will be queried: a model whose
+    kernel interpolates a table of its own (CAT with heading noise) builds it over that range."""
+    binding = _bind_kernels(model, wp, np_dtype, scalar, device, radii, threads)
     wp.load_module(binding.grid_kernel.module, device=device)
     return binding
 
 
-def _bind_kernels(model, wp, np_dtype, scalar, device) -> _Binding:
+def _bind_kernels(model, wp, np_dtype, scalar, device, radii, threads) -> _Binding:
     from .bearing import BearingFix
     from .models import CAT, PolarBanana
 
@@ -183,6 +188,13 @@ def _bind_kernels(model, wp, np_dtype, scalar, device) -> _Binding:
     if not isinstance(model, (CAT, PolarBanana)):
         raise BananagridError(f"model = {type(model).__name__}: not a bananagrid model")
     pose = wp.array(model.pose.as_array().astype(np_dtype), dtype=scalar, device=device)
+    if isinstance(model, CAT) and model.sigma_heading > 0.0:
+        from .heading import heading_table
+
+        table = heading_table(model, *radii, threads=threads)
+        return _bind_table(table, wp, np_dtype, scalar, device, pose, {
+            "k_sigma": model.k_sigma, "truncated_mass": model.truncated_mass, **table.notes(),
+        })
     if isinstance(model, CAT):
         from .kernels import cat
 
@@ -205,19 +217,45 @@ def _bind_kernels(model, wp, np_dtype, scalar, device) -> _Binding:
     if isinstance(model, PolarBanana):
         from .kernels import polar
 
-        params = (_polar_coefficients(model, wp, np_dtype, scalar, device), _polar_variant(model.variant), pose)
+        params = (
+            _polar_coefficients(model, wp, np_dtype, scalar, device), _polar_variant(model.variant),
+            model.kernel_order, pose,
+        )
         notes = {"variant": model.variant, "truncated_mass": model.truncated_mass}
+        if model.sigma_heading > 0.0:
+            notes["heading_order"] = model.heading_order
         return _Binding(
             polar.polar_grid, polar.polar_points, params, "polar.polar_grid", notes, row_loop=True, bands_per_thread=1
         )
     raise AssertionError("unreachable: every model kind is bound above")
 
 
+def _bind_table(table, wp, np_dtype, scalar, device, pose, notes) -> _Binding:
+    """Bind a density tabulated on a polar lattice (``heading.HeadingTable``) to the
+    interpolating kernels."""
+    from .heading import FLOOR
+    from .kernels import tabulated
+
+    values = table.values.astype(np_dtype)
+    floor = FLOOR[np.dtype(np_dtype)]
+    with np.errstate(divide="ignore"):
+        logs = np.log(np.maximum(values, floor))  # entries at the floor are never used in log
+    geometry = np.array([table.r0, table.dr, table.theta0, table.dtheta, floor], dtype=np_dtype)
+    params = (
+        wp.array(logs, dtype=scalar, device=device), wp.array(values, dtype=scalar, device=device),
+        wp.array(geometry, dtype=scalar, device=device), int(table.mirror), pose,
+    )
+    return _Binding(
+        tabulated.table_grid, tabulated.table_points, params, "tabulated.table_grid", notes,
+        row_loop=True, bands_per_thread=1,
+    )
+
+
 def _polar_coefficients(model, wp, np_dtype, scalar, device):
     from .kernels import polar
 
-    values = np.array(polar.coefficients(model.v0, model.t, model.sigma_a, model.sigma_omega), dtype=np_dtype)
-    return wp.array(values, dtype=scalar, device=device)
+    values = polar.coefficients(model.v0, model.t, model.sigma_a, model.sigma_omega, model.sigma_heading)
+    return wp.array(np.array(values, dtype=np_dtype), dtype=scalar, device=device)
 
 
 def _polar_variant(name: str) -> int:
@@ -262,12 +300,17 @@ def _run_bands(launch_band, bands: list[tuple[int, int]], threads: int) -> None:
 
 
 def rasterise(model, grid: Grid, *, dtype=np.float64, device: str = "cpu", threads=None) -> Raster:
-    """Density of ``model`` at the cell centres of ``grid``.
+    """Density of ``model`` at the cell centres of ``grid``, or on a polar lattice.
+
+    With a :class:`~bananagrid.lattice.PolarLattice` the result is a
+    :class:`~bananagrid.lattice.PolarRaster`: densities per (m, rad) at the cell centres and the
+    probability integrated over each (range, bearing) cell (see
+    :func:`bananagrid.lattice.rasterise_lattice`).
 
     Parameters
     ----------
-    model : CAT or PolarBanana
-    grid : Grid
+    model : CAT, PolarBanana or BearingFix
+    grid : Grid or PolarLattice
     dtype : float32 or float64, default float64
         Kernel precision (and of ``values``).
     device : str, default "cpu"
@@ -280,15 +323,20 @@ def rasterise(model, grid: Grid, *, dtype=np.float64, device: str = "cpu", threa
     Returns
     -------
     Raster
-        Raw (not normalised) densities per m^2, with the captured mass and provenance.
+        Raw (not normalised) densities per m^2, with the captured mass and provenance
+        (a PolarRaster for a PolarLattice).
     """
+    from .lattice import PolarLattice, rasterise_lattice  # lazily: lattice imports this module
+
+    if isinstance(grid, PolarLattice):
+        return rasterise_lattice(model, grid, dtype=dtype, device=device, threads=threads)
     if not isinstance(grid, Grid):
         raise BananagridError(f"grid = {grid!r}: expected a bananagrid.Grid")
     wp, np_dtype, scalar = _scalar(dtype)
     device = _check_device(wp, device)
     threads = _check_threads(threads)
     start = time.perf_counter()
-    binding = _bind(model, wp, np_dtype, scalar, device)
+    binding = _bind(model, wp, np_dtype, scalar, device, _grid_radii(model, grid), threads)
     xs = wp.array(grid.x.astype(np_dtype), dtype=scalar, device=device)
     ys = wp.array(grid.y.astype(np_dtype), dtype=scalar, device=device)
     if device == "cpu":
@@ -327,6 +375,28 @@ def rasterise(model, grid: Grid, *, dtype=np.float64, device: str = "cpu", threa
     return Raster(values=values, grid=grid, mass=mass, normalised=False, provenance=provenance)
 
 
+def _origin(model) -> tuple[float, float]:
+    pose = getattr(model, "pose", None)
+    return pose.origin if pose is not None else (0.0, 0.0)
+
+
+def _grid_radii(model, grid: Grid) -> tuple[float, float]:
+    """Least and greatest distance from the model's origin to the grid's cell centres."""
+    ox, oy = _origin(model)
+    x0, x1 = grid.x[0] - ox, grid.x[-1] - ox
+    y0, y1 = grid.y[0] - oy, grid.y[-1] - oy
+    near_x = 0.0 if x0 <= 0.0 <= x1 else min(abs(x0), abs(x1))
+    near_y = 0.0 if y0 <= 0.0 <= y1 else min(abs(y0), abs(y1))
+    far_x, far_y = max(abs(x0), abs(x1)), max(abs(y0), abs(y1))
+    return math.hypot(near_x, near_y), math.hypot(far_x, far_y)
+
+
+def _points_radii(model, x: np.ndarray, y: np.ndarray) -> tuple[float, float]:
+    ox, oy = _origin(model)
+    r = np.hypot(x - ox, y - oy)
+    return float(r.min()), float(r.max())
+
+
 def _check_finite(values: np.ndarray, model) -> None:
     if np.isfinite(values.sum()):  # one pass, no mask, in the common case
         return
@@ -359,7 +429,7 @@ def evaluate_points(model, x, y, *, dtype=np.float64, device: str = "cpu", threa
     n = bx.size
     if n == 0:
         return np.zeros(shape, dtype=np_dtype)
-    binding = _bind(model, wp, np_dtype, scalar, device)
+    binding = _bind(model, wp, np_dtype, scalar, device, _points_radii(model, bx, by), threads)
     xs = wp.array(np.ascontiguousarray(bx.ravel(), dtype=np_dtype), dtype=scalar, device=device)
     ys = wp.array(np.ascontiguousarray(by.ravel(), dtype=np_dtype), dtype=scalar, device=device)
     out = wp.zeros(n, dtype=scalar, device=device)
@@ -373,12 +443,18 @@ def evaluate_points(model, x, y, *, dtype=np.float64, device: str = "cpu", threa
     return out.numpy().reshape(shape)
 
 
-def evaluate_polar_moments(model, phi, *, variant=None, dtype=np.float64, device: str = "cpu"):
-    """Mean and SD of r given phi of a PolarBanana: its own variant's law, or ``variant``'s
-    ("improved": P_mu (8) and P_sigma (11))."""
-    phi = np.asarray(phi, dtype=float)
-    if not np.isfinite(phi).all():
-        raise BananagridError("phi: angles must be finite")
+def _angles(name: str, values) -> np.ndarray:
+    values = np.asarray(values, dtype=float)
+    if not np.isfinite(values).all():
+        raise BananagridError(f"{name}: angles must be finite")
+    return values
+
+
+def evaluate_polar_moments(model, phi, *, variant=None, order=0, dtype=np.float64, device: str = "cpu"):
+    """Mean and SD of r given the angle for a PolarBanana: at ``order`` 0 given phi, its own
+    variant's law or ``variant``'s ("improved": P_mu (8) and P_sigma (11)); at ``order`` 2 or 4
+    given theta with the model's heading noise, (15)-(16)."""
+    phi = _angles("phi", phi)
     wp, np_dtype, scalar = _scalar(dtype)
     device = _check_device(wp, device)
     from .kernels import polar
@@ -389,6 +465,47 @@ def evaluate_polar_moments(model, phi, *, variant=None, dtype=np.float64, device
     if phi.size:
         coef = _polar_coefficients(model, wp, np_dtype, scalar, device)
         law = _polar_variant(model.variant if variant is None else variant)
-        wp.launch(polar.polar_moments, dim=phi.size, inputs=[flat, coef, law, mean, sd], device=device)
+        wp.launch(polar.polar_moments, dim=phi.size, inputs=[flat, coef, law, int(order), mean, sd], device=device)
         wp.synchronize_device(device)
     return mean.numpy().reshape(phi.shape), sd.numpy().reshape(phi.shape)
+
+
+def evaluate_polar_derivatives(model, phi, *, dtype=np.float64, device: str = "cpu") -> np.ndarray:
+    """P_mu with its derivatives 1-4 and P_sigma with its derivatives 1-2 at phi, for the
+    model's variant: array of shape phi.shape + (8,)."""
+    phi = _angles("phi", phi)
+    wp, np_dtype, scalar = _scalar(dtype)
+    device = _check_device(wp, device)
+    from .kernels import polar
+
+    flat = wp.array(np.ascontiguousarray(phi.ravel(), dtype=np_dtype), dtype=scalar, device=device)
+    out = wp.zeros((phi.size, 8), dtype=scalar, device=device)
+    if phi.size:
+        coef = _polar_coefficients(model, wp, np_dtype, scalar, device)
+        law = _polar_variant(model.variant)
+        wp.launch(polar.polar_derivatives, dim=phi.size, inputs=[flat, coef, law, out], device=device)
+        wp.synchronize_device(device)
+    return out.numpy().reshape(phi.shape + (8,))
+
+
+def interpolate_table(table, x, y, *, dtype=np.float64, device: str = "cpu", threads=None) -> np.ndarray:
+    """Interpolate a ``heading.HeadingTable`` at points (x, y) of its own local frame."""
+    wp, np_dtype, scalar = _scalar(dtype)
+    device = _check_device(wp, device)
+    threads = _check_threads(threads)
+    bx, by = np.broadcast_arrays(np.asarray(x, dtype=float), np.asarray(y, dtype=float))
+    identity = wp.array(np.array([0.0, 0.0, 1.0, 0.0], dtype=np_dtype), dtype=scalar, device=device)
+    binding = _bind_table(table, wp, np_dtype, scalar, device, identity, {})
+    wp.load_module(binding.points_kernel.module, device=device)
+    n = bx.size
+    xs = wp.array(np.ascontiguousarray(bx.ravel(), dtype=np_dtype), dtype=scalar, device=device)
+    ys = wp.array(np.ascontiguousarray(by.ravel(), dtype=np_dtype), dtype=scalar, device=device)
+    out = wp.zeros(n, dtype=scalar, device=device)
+
+    def launch_chunk(a, b):
+        wp.launch(binding.points_kernel, dim=b - a, inputs=[xs, ys, a, *binding.params, out], device=device)
+
+    chunks = [(a, min(n, a + POINT_CHUNK)) for a in range(0, n, POINT_CHUNK)] if device == "cpu" else [(0, n)]
+    _run_bands(launch_chunk, chunks, threads)
+    wp.synchronize_device(device)
+    return out.numpy().reshape(bx.shape)

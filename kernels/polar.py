@@ -12,6 +12,23 @@ mu = P_mu (8) and sd = P_sigma (11), with scc(phi) = (4 sinc(phi) - cos(phi)) / 
 
 The parameter-only factors are computed once per model on the host (:func:`coefficients`), so
 a cell costs one sqrt, one atan2 and one exp.
+
+Initial-heading noise (Section 7): theta = theta_0 + phi with theta_0 ~ N(0, sigma_0), so
+theta ~ N(0, sigma_theta), sigma_theta^2 = sigma_0^2 + sigma_phi^2, and by (12)
+phi | theta ~ N(theta_bar, sigma_bar) with theta_bar = theta sigma_phi^2 / sigma_theta^2 and
+sigma_bar = sigma_0 sigma_phi / sigma_theta. The density is
+
+    p(x, y) = g(theta; 0, sigma_theta) g(r; E[r | theta], SD[r | theta]) / r,
+
+with every function at theta_bar ("order" 2: (15), (16); order 4 adds the terms given after
+Figure 8; Pm_k is the k-th derivative of P_mu, Ps_k that of P_sigma):
+
+    E[r | theta]    = P_mu + Pm_2 sigma_bar^2 / 2  [+ Pm_4 sigma_bar^4 / 8]
+    SD[r | theta]^2 = P_sigma^2 + Pm_1^2 sigma_bar^2
+                      [+ (Ps_1^2 + P_sigma Ps_2) sigma_bar^2 + (Pm_2^2 / 2 + Pm_1 Pm_3) sigma_bar^4]
+
+The derivatives are analytic: Leibniz's rule over sinc, scc and the quadratic factors of (8)
+and (11), with ``common.sinc_derivatives``.
 """
 
 import math
@@ -19,18 +36,29 @@ from typing import Any
 
 import warp as wp
 
-from .common import atan2_fast, scc_of, sinc_of, world_to_local
+from .common import atan2_fast, scc_of, sinc_derivatives, sinc_of, world_to_local
 
 ROUGH = 0
 IMPROVED = 1
 
+#: Heading orders: 0 without heading noise (the angle is phi), 2 for (15)-(16), 4 with the
+#: fourth-order terms given after Figure 8.
+HEADING_ORDERS = (0, 2, 4)
+
 #: Layout of the coefficient array (see :func:`coefficients`).
-MEAN_SINC, MEAN_SCC, INV_SIGMA_PHI, SD_SCALE, SD_CURVATURE, SD_T_TERM, INV_SIGMA_OMEGA_SQ, NORM = range(8)
+(
+    MEAN_SINC, MEAN_SCC, INV_SIGMA_PHI, SD_SCALE, SD_CURVATURE, SD_T_TERM, INV_SIGMA_OMEGA_SQ, NORM,
+    INV_SIGMA_THETA, THETA_NORM, SHRINK, SIGMA_BAR_SQ,
+) = range(12)
 
 
-def coefficients(v0: float, t: float, sigma_a: float, sigma_omega: float) -> list[float]:
-    """Host-side factors of P_mu (8), P_sigma (11) and the normal constants, in float64."""
+def coefficients(
+    v0: float, t: float, sigma_a: float, sigma_omega: float, sigma_heading: float = 0.0
+) -> list[float]:
+    """Host-side factors of P_mu (8), P_sigma (11), the heading law (12) and the normal
+    constants, in float64."""
     sigma_phi = 0.5 * sigma_omega * t
+    sigma_theta_sq = sigma_heading**2 + sigma_phi**2
     return [
         v0 * t,  # MEAN_SINC
         sigma_a**2 * t**3 / (12.0 * v0),  # MEAN_SCC
@@ -40,6 +68,10 @@ def coefficients(v0: float, t: float, sigma_a: float, sigma_omega: float) -> lis
         t * t / 12.0,  # SD_T_TERM
         1.0 / sigma_omega**2,  # INV_SIGMA_OMEGA_SQ
         1.0 / (2.0 * math.pi * sigma_phi),  # NORM: both normal constants but 1/sd
+        1.0 / math.sqrt(sigma_theta_sq),  # INV_SIGMA_THETA
+        1.0 / (2.0 * math.pi * math.sqrt(sigma_theta_sq)),  # THETA_NORM
+        sigma_phi**2 / sigma_theta_sq,  # SHRINK: theta_bar = SHRINK theta
+        (sigma_heading * sigma_phi) ** 2 / sigma_theta_sq,  # SIGMA_BAR_SQ
     ]
 
 
@@ -57,12 +89,77 @@ def polar_mean_sd(phi: Any, sinc_phi: Any, cos_phi: Any, coef: wp.array(dtype=An
 
 
 @wp.func
-def polar_density_local(x: Any, y: Any, coef: wp.array(dtype=Any), variant: int):
+def polar_law_derivatives(phi: Any, coef: wp.array(dtype=Any), variant: int):
+    """P_mu and its first four derivatives, P_sigma and its first two, at phi.
+
+    Improved: P_mu = A sinc + K q scc with q = (phi / sigma_phi)^2 - 1, and
+    P_sigma = S w scc with w = 1 + c (T - phi^2 / sigma_omega^2). q and w are quadratics, so by
+    Leibniz's rule  (q scc)^(n) = q scc^(n) + n q' scc^(n-1) + n (n-1) / 2 q'' scc^(n-2),  and
+    scc^(n) = (4 sinc^(n) - cos^(n)) / 3 by (7). Rough: P_mu = A sinc, P_sigma = S (constant).
+    """
+    zero = type(phi)(0.0)
+    two = type(phi)(2.0)
+    three = type(phi)(3.0)
+    four = type(phi)(4.0)
+    d0, d1, d2, d3, d4 = sinc_derivatives(phi)
+    a = coef[MEAN_SINC]
+    if variant == ROUGH:
+        return a * d0, a * d1, a * d2, a * d3, a * d4, coef[SD_SCALE], zero, zero
+    cos_phi = wp.cos(phi)
+    sin_phi = wp.sin(phi)
+    c0 = (four * d0 - cos_phi) / three
+    c1 = (four * d1 + sin_phi) / three
+    c2 = (four * d2 + cos_phi) / three
+    c3 = (four * d3 - sin_phi) / three
+    c4 = (four * d4 - cos_phi) / three
+    inv_sp2 = coef[INV_SIGMA_PHI] * coef[INV_SIGMA_PHI]
+    q = phi * phi * inv_sp2 - type(phi)(1.0)
+    q1 = two * phi * inv_sp2
+    q2 = two * inv_sp2
+    k = coef[MEAN_SCC]
+    m0 = a * d0 + k * q * c0
+    m1 = a * d1 + k * (q * c1 + q1 * c0)
+    m2 = a * d2 + k * (q * c2 + two * q1 * c1 + q2 * c0)
+    m3 = a * d3 + k * (q * c3 + three * q1 * c2 + three * q2 * c1)
+    m4 = a * d4 + k * (q * c4 + four * q1 * c3 + type(phi)(6.0) * q2 * c2)
+    curv = coef[SD_CURVATURE]
+    u = coef[INV_SIGMA_OMEGA_SQ]
+    w = type(phi)(1.0) + curv * (coef[SD_T_TERM] - phi * phi * u)
+    w1 = -two * curv * u * phi
+    w2 = -two * curv * u
+    scale = coef[SD_SCALE]
+    s0 = scale * w * c0
+    s1 = scale * (w * c1 + w1 * c0)
+    s2 = scale * (w * c2 + two * w1 * c1 + w2 * c0)
+    return m0, m1, m2, m3, m4, s0, s1, s2
+
+
+@wp.func
+def polar_heading_mean_sd(theta: Any, coef: wp.array(dtype=Any), variant: int, order: int):
+    """E[r | theta] and SD[r | theta] with initial-heading noise: (15) and (16) at order 2, with
+    the fourth-order terms at order 4. SD is 0 where P_sigma(theta_bar) <= 0 (outside the
+    approximation's domain, as without heading noise) or the variance is not positive."""
+    zero = type(theta)(0.0)
+    sb2 = coef[SIGMA_BAR_SQ]
+    m0, m1, m2, m3, m4, s0, s1, s2 = polar_law_derivatives(theta * coef[SHRINK], coef, variant)
+    mean = m0 + type(theta)(0.5) * m2 * sb2
+    var = s0 * s0 + m1 * m1 * sb2
+    if order == 4:
+        mean = mean + type(theta)(0.125) * m4 * sb2 * sb2
+        var = var + (s1 * s1 + s0 * s2) * sb2 + (type(theta)(0.5) * m2 * m2 + m1 * m3) * sb2 * sb2
+    if s0 <= zero or var <= zero:
+        return mean, zero
+    return mean, wp.sqrt(var)
+
+
+@wp.func
+def polar_density_local(x: Any, y: Any, coef: wp.array(dtype=Any), variant: int, order: int):
     """Density per m^2 at a local point: g(phi; 0, sigma_phi) g(r; mu, sd) / r.
 
     sin(phi) = x / r and cos(phi) = y / r, and the two normal factors share one exp. Zero where
     the improved P_sigma is not positive (outside the approximation's domain; the model warns
-    when that can happen) and at r = 0.
+    when that can happen) and at r = 0. With heading noise (``order`` 2 or 4) the angle is
+    theta ~ N(0, sigma_theta) and r | theta follows (15)-(16).
     """
     zero = type(x)(0.0)
     r = wp.sqrt(x * x + y * y)
@@ -70,6 +167,14 @@ def polar_density_local(x: Any, y: Any, coef: wp.array(dtype=Any), variant: int)
         return zero  # the 1/r Jacobian is singular at the origin
     inv_r = type(x)(1.0) / r
     phi = atan2_fast(x, y)
+    if order != 0:
+        mean_t, sd_t = polar_heading_mean_sd(phi, coef, variant, order)
+        if sd_t <= zero:
+            return zero
+        inv_sd_t = type(x)(1.0) / sd_t
+        z_theta = phi * coef[INV_SIGMA_THETA]
+        z_rt = (r - mean_t) * inv_sd_t
+        return coef[THETA_NORM] * inv_sd_t * inv_r * wp.exp(type(x)(-0.5) * (z_theta * z_theta + z_rt * z_rt))
     mu, sd = polar_mean_sd(phi, sinc_of(phi, x * inv_r), y * inv_r, coef, variant)
     if sd <= zero:
         return zero
@@ -87,6 +192,7 @@ def polar_grid(
     columns: int,
     coef: wp.array(dtype=Any),
     variant: int,
+    order: int,
     pose: wp.array(dtype=Any),
     out: wp.array2d(dtype=Any),
 ):
@@ -101,7 +207,7 @@ def polar_grid(
     j_end = wp.min((block + 1) * columns, xs.shape[0])
     for j in range(block * columns, j_end):
         x, y = world_to_local(xs[j], y_world, pose)
-        out[row, j] = polar_density_local(x, y, coef, variant)
+        out[row, j] = polar_density_local(x, y, coef, variant, order)
 
 
 @wp.kernel
@@ -111,13 +217,14 @@ def polar_points(
     start: int,
     coef: wp.array(dtype=Any),
     variant: int,
+    order: int,
     pose: wp.array(dtype=Any),
     out: wp.array(dtype=Any),
 ):
     """Density at arbitrary world points (xs[k], ys[k]) for k in a chunk starting at ``start``."""
     k = start + wp.tid()
     x, y = world_to_local(xs[k], ys[k], pose)
-    out[k] = polar_density_local(x, y, coef, variant)
+    out[k] = polar_density_local(x, y, coef, variant, order)
 
 
 @wp.kernel
@@ -125,15 +232,42 @@ def polar_moments(
     phis: wp.array(dtype=Any),
     coef: wp.array(dtype=Any),
     variant: int,
+    order: int,
     mean: wp.array(dtype=Any),
     sd: wp.array(dtype=Any),
 ):
-    """Mean and SD of r given phi (P_mu (8) and P_sigma (11) for the improved variant)."""
+    """Mean and SD of r given the angle: at order 0 given phi (P_mu (8) and P_sigma (11) for
+    the improved variant), at order 2 or 4 given theta with heading noise ((15), (16))."""
     k = wp.tid()
     phi = phis[k]
-    m, s = polar_mean_sd(phi, sinc_of(phi, wp.sin(phi)), wp.cos(phi), coef, variant)
-    mean[k] = m
-    sd[k] = s
+    if order == 0:
+        m, s = polar_mean_sd(phi, sinc_of(phi, wp.sin(phi)), wp.cos(phi), coef, variant)
+        mean[k] = m
+        sd[k] = s
+    else:
+        m, s = polar_heading_mean_sd(phi, coef, variant, order)
+        mean[k] = m
+        sd[k] = s
+
+
+@wp.kernel
+def polar_derivatives(
+    phis: wp.array(dtype=Any),
+    coef: wp.array(dtype=Any),
+    variant: int,
+    out: wp.array2d(dtype=Any),
+):
+    """P_mu and its derivatives 1-4, P_sigma and its derivatives 1-2, at each phi (8 columns)."""
+    k = wp.tid()
+    m0, m1, m2, m3, m4, s0, s1, s2 = polar_law_derivatives(phis[k], coef, variant)
+    out[k, 0] = m0
+    out[k, 1] = m1
+    out[k, 2] = m2
+    out[k, 3] = m3
+    out[k, 4] = m4
+    out[k, 5] = s0
+    out[k, 6] = s1
+    out[k, 7] = s2
 
 
 def _register_overloads():
@@ -143,6 +277,7 @@ def _register_overloads():
         wp.overload(polar_grid, {**common, "out": wp.array2d(dtype=scalar)})
         wp.overload(polar_points, {**common, "out": vec})
         wp.overload(polar_moments, {"phis": vec, "coef": vec, "mean": vec, "sd": vec})
+        wp.overload(polar_derivatives, {"phis": vec, "coef": vec, "out": wp.array2d(dtype=scalar)})
 
 
 _register_overloads()

@@ -40,9 +40,22 @@ def test_unknown_variant():
         bg.PolarBanana(**FIG1, variant="smooth")
 
 
-def test_heading_noise_not_yet_supported():
-    with pytest.raises(bg.BananagridError, match="sigma_heading = 0.1: initial-heading noise"):
-        bg.PolarBanana(**FIG1, sigma_heading=0.1)
+@pytest.mark.parametrize("model_cls", [bg.CAT, bg.PolarBanana])
+@pytest.mark.parametrize(
+    "value, message",
+    [(-0.1, "must be >= 0"), (math.nan, "must be finite"), (math.inf, "must be finite"), ("0.1", "expected a real number")],
+)
+def test_sigma_heading_rejected(model_cls, value, message):
+    with pytest.raises(bg.BananagridError) as err:
+        model_cls(**FIG1, sigma_heading=value)
+    assert str(err.value).startswith("sigma_heading = ")
+    assert message in str(err.value)
+
+
+@pytest.mark.parametrize("order", [0, 3, 2.5, True, "4"])
+def test_heading_order_rejected(order):
+    with pytest.raises(bg.BananagridError, match=r"heading_order = .*: must be 2 \(\(15\), \(16\)\) or 4"):
+        bg.PolarBanana(**FIG1, sigma_heading=0.1, heading_order=order)
 
 
 def test_pose_rejects_nan_origin_and_heading():
