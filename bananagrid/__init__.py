@@ -1,9 +1,11 @@
 """bananagrid: probability maps from target-motion and sensing models."""
 
+from .butterly import Butterly
 from .grid import Grid
+from .lattice import PolarLattice, PolarRaster
 from .models import CAT, PolarBanana, Pose
 from .raster import Raster, rasterise
 from .validate import BananagridError
 
-__all__ = ["Grid", "Raster", "CAT", "PolarBanana", "Pose", "rasterise", "BananagridError"]
+__all__ = ["Grid", "PolarLattice", "PolarRaster", "Raster", "CAT", "PolarBanana", "Butterly", "Pose", "rasterise", "BananagridError"]
 __version__ = "0.1.0"
