@@ -41,6 +41,8 @@ COASTAL_SIDE = 2048
 
 KERNELS = {
     "cat": lambda: CAT(**FIG1),
+    # Figure 8's widest heading error, sigma_0 = pi/15 (issue 3: at most 3x the plain CAT)
+    "cat-heading": lambda: CAT(**FIG1, sigma_heading=math.pi / 15),
     "polar-rough": lambda: PolarBanana(**FIG1, variant="rough"),
     "polar-improved": lambda: PolarBanana(**FIG1, variant="improved"),
     "bearing-exact": lambda: BearingFix(**COASTAL),
@@ -70,10 +72,12 @@ def _best_of(repeat: int, fn) -> float:
 
 
 def _baseline_seconds(name: str, model, grid: Grid, stride: int, repeat: int) -> float:
-    """NumPy float64 time for the whole grid (scaled from every ``stride``-th row for CAT)."""
-    rows = grid.y if name != "cat" else grid.y[::stride]
+    """NumPy float64 time for the whole grid (scaled from every ``stride``-th row for CAT). The
+    heading-convolved CAT has no NumPy twin: its baseline is the plain CAT's."""
+    cat = name.startswith("cat")
+    rows = grid.y[::stride] if cat else grid.y
     xx, yy = np.meshgrid(grid.x, rows)
-    if name == "cat":
+    if cat:
         nodes = _cat_nodes(model)
         fn = lambda: baseline.cat_density(xx, yy, model.v0, model.t, model.sigma_a, model.sigma_omega, nodes)
         seconds = _best_of(1 if stride > 1 else repeat, fn)
@@ -198,7 +202,8 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     print(f"machine: {machine()}")
     print(f"grids: Figure 1 frame at {args.step:g} m (banana kernels), {COASTAL_SIDE} x {COASTAL_SIDE} "
-          f"about the coastal fix (bearing); baseline: NumPy {np.__version__} float64"
+          f"about the coastal fix (bearing); baseline: NumPy {np.__version__} float64 (cat-heading: the "
+          "plain CAT's, as it has no NumPy twin)"
           + (f", CAT on every {args.baseline_stride}th row, scaled" if args.baseline_stride > 1 else ""))
     print(HEADER)
     records = run(kernels, args.step, args.threads, args.repeat, args.baseline_stride)
@@ -209,6 +214,17 @@ def main(argv: list[str] | None = None) -> int:
         if args.threads > 1:
             print(f"{name}: 1 -> {args.threads} threads speedup "
                   + ", ".join(f"{d} {one[d]['seconds'] / many[d]['seconds']:.2f}x" for d in one))
+    if "cat" in kernels and "cat-heading" in kernels:
+        cost = {
+            (r["dtype"], r["threads"]): r["seconds"] / next(
+                c["seconds"] for c in records if c["kernel"] == "cat" and c["dtype"] == r["dtype"] and c["threads"] == r["threads"]
+            )
+            for r in records if r["kernel"] == "cat-heading"
+        }
+        result["heading_cost"] = [{"dtype": d, "threads": n, "ratio_to_cat": v} for (d, n), v in cost.items()]
+        print("cat-heading (sigma_0 = pi/15) costs "
+              + ", ".join(f"{v:.2f}x" for v in cost.values()) + " the plain CAT ("
+              + ", ".join(f"{d} {n} thr" for d, n in cost) + ")")
     if "bearing-exact" in kernels:
         timing = containment_timing(repeat=args.repeat)
         result["containment"] = timing

@@ -90,7 +90,7 @@ def _scales(model, pose: Pose) -> tuple[float, float]:
     from .bearing import BearingFix
 
     if isinstance(model, BearingFix):
-        small, large = model.principal_variances()
+        large, small = model.principal_variances
         distance = math.dist(pose.origin, tuple(model.fix))
         return math.sqrt(small), distance + RANGE_SDS * math.sqrt(large)
     raise BananagridError(f"model = {type(model).__name__}: radial laws need a CAT, PolarBanana or BearingFix")
@@ -121,32 +121,37 @@ def _check_angles(angles) -> np.ndarray:
     return values
 
 
-def _profile(model, pose: Pose, angle: float, r_max, threads):
-    """Trapezoid nodes and the values r p(r, angle) over the ray's support."""
+def _profile(model, pose: Pose, angles: np.ndarray, r_max, threads):
+    """Shared trapezoid nodes and the values r p(r, theta), shape (nodes, angles), over the
+    union of the rays' supports."""
     scale, bound = _scales(model, pose)
     if r_max is not None:
-        bound = float(r_max)
+        bound = float(r_max) if isinstance(r_max, (int, float)) else math.nan
         if not (math.isfinite(bound) and bound > 0.0):
             raise BananagridError(f"r_max = {r_max!r}: must be finite and > 0")
     coarse_n = int(min(MAX_NODES, max(256, math.ceil(bound / scale * COARSE_PER_SCALE))))
     coarse = np.linspace(0.0, bound, coarse_n)
-    q = coarse * _ray(model, pose, coarse, np.array([angle]), threads)[:, 0]
-    if not q.max() > 0.0:
-        raise BananagridError(f"angle = {angle!r}: the model has no density along this ray within {bound:.6g} m")
-    keep = np.nonzero(q >= SUPPORT_LEVEL * q.max())[0]
+    q = coarse[:, None] * _ray(model, pose, coarse, angles, threads)
+    peaks = q.max(axis=0)
+    if not (peaks > 0.0).all():
+        empty = float(angles[np.argmin(peaks > 0.0)])
+        raise BananagridError(f"angle = {empty!r}: the model has no density along this ray within {bound:.6g} m")
+    keep = np.nonzero((q >= SUPPORT_LEVEL * peaks).any(axis=1))[0]
     step = coarse[1] - coarse[0]
     lo = max(0.0, coarse[keep[0]] - 2 * step)
     hi = min(bound, coarse[keep[-1]] + 2 * step)
     n = int(min(MAX_NODES, max(512, math.ceil((hi - lo) / scale * FINE_PER_SCALE) + 1)))
     radii = np.linspace(lo, hi, n)
-    return radii, radii * _ray(model, pose, radii, np.array([angle]), threads)[:, 0]
+    return radii, radii[:, None] * _ray(model, pose, radii, angles, threads)
 
 
-def _moments(radii: np.ndarray, q: np.ndarray) -> tuple[float, float, float]:
-    mass = np.trapezoid(q, radii)
-    mean = np.trapezoid(radii * q, radii) / mass
-    var = np.trapezoid((radii - mean) ** 2 * q, radii) / mass
-    return float(mass), float(mean), float(math.sqrt(var))
+def _moments(radii: np.ndarray, q: np.ndarray):
+    """Ray mass, mean and SD of each column of q (trapezoid rule on the shared nodes)."""
+    r = radii[:, None]
+    mass = np.trapezoid(q, radii, axis=0)
+    mean = np.trapezoid(r * q, radii, axis=0) / mass
+    var = np.trapezoid((r - mean) ** 2 * q, radii, axis=0) / mass
+    return mass, mean, np.sqrt(var)
 
 
 def radial_moments(model, angles, *, pose: Pose | None = None, r_max=None, threads=None) -> RadialMoments:
@@ -172,13 +177,10 @@ def radial_moments(model, angles, *, pose: Pose | None = None, r_max=None, threa
     """
     pose = _pose(model, pose)
     values = _check_angles(angles)
-    flat = np.atleast_1d(values)
-    out = np.empty((3, flat.size))
-    for k, angle in enumerate(flat):
-        radii, q = _profile(model, pose, float(angle), r_max, threads)
-        out[2, k], out[0, k], out[1, k] = _moments(radii, q)
+    radii, q = _profile(model, pose, np.atleast_1d(values), r_max, threads)
+    mass, mean, sd = _moments(radii, q)
     shape = values.shape
-    return RadialMoments(values, out[0].reshape(shape), out[1].reshape(shape), out[2].reshape(shape))
+    return RadialMoments(values, mean.reshape(shape), sd.reshape(shape), mass.reshape(shape))
 
 
 def radial_density(model, angle, r=None, *, pose: Pose | None = None, r_max=None, threads=None) -> RadialDensity:
@@ -191,8 +193,9 @@ def radial_density(model, angle, r=None, *, pose: Pose | None = None, r_max=None
     angle = _check_angles(angle)
     if angle.ndim != 0:
         raise BananagridError(f"angle = {angle!r}: expected one angle (radians)")
-    radii, q = _profile(model, pose, float(angle), r_max, threads)
-    mass, mean, sd = _moments(radii, q)
+    radii, q = _profile(model, pose, np.atleast_1d(angle), r_max, threads)
+    mass, mean, sd = (float(v[0]) for v in _moments(radii, q))
+    q = q[:, 0]
     if r is None:
         at, density = radii, q / mass
     else:

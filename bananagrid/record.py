@@ -191,6 +191,7 @@ def default_blueprint(
     scene_entity: str = "scene",
     extra_images: Sequence[str] = (),
     text_entities: Sequence[str] = (),
+    extra_views: Sequence[rrb.View] = (),
 ) -> rrb.Blueprint:
     """The default layout: per layer a density and a log10 view, beside the scene and mass.
 
@@ -205,6 +206,8 @@ def default_blueprint(
         tab of its layer (e.g. a bearing fix's difference to its linear map).
     text_entities : sequence of str
         Further text documents (e.g. a validation table), each a tab beside the scene text.
+    extra_views : sequence of rerun views
+        Further views (e.g. radial-curve plots), as tabs below the maps.
     """
     layers = [_entity(e) for e in layer_entities]
     extras = [_entity(e) for e in extra_images]
@@ -219,13 +222,13 @@ def default_blueprint(
     )
     if not layers:
         return rrb.Blueprint(side, collapse_panels=False)
-    return rrb.Blueprint(
-        rrb.Horizontal(
-            rrb.Grid(*(_layer_tabs(e, [x.rsplit("/", 1)[1] for x in extras if x.rsplit("/", 1)[0] == e]) for e in layers)),
-            side, column_shares=[3, 1],
-        ),
-        collapse_panels=False,
+    top = rrb.Horizontal(
+        rrb.Grid(*(_layer_tabs(e, [x.rsplit("/", 1)[1] for x in extras if x.rsplit("/", 1)[0] == e]) for e in layers)),
+        side, column_shares=[3, 1],
     )
+    if extra_views:
+        top = rrb.Vertical(top, rrb.Tabs(*extra_views), row_shares=[3, 2])
+    return rrb.Blueprint(top, collapse_panels=False)
 
 
 def _layer_tabs(entity: str, extra_images: Sequence[str] = ()) -> rrb.Tabs:

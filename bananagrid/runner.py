@@ -97,6 +97,8 @@ def run_scene(
             )
             if layer.kind == "bearing_fix":
                 _log_bearing_extras(rec, scene, layer, t, raster, threads)
+            if scene.radial is not None and layer.name in scene.radial.layers:
+                _log_radial(rec, scene, layer, t, threads)
             if archive is not None:
                 archive.add(layer.name, t, raster)
             rows.append(_row(scene, layer, t, raster, seconds))
@@ -146,10 +148,29 @@ def compute(scene: Scene, layer: Layer, t: float, *, threads: int | None = None)
 def _blueprint(scene: Scene):
     """The default layout, with the bearing-fix difference maps and validation table if any."""
     exact_fixes = [layer for layer in scene.layers if layer.kind == "bearing_fix" and layer.params.get("variant", "exact") == "exact"]
+    views = []
+    if scene.radial is not None:
+        from .record_radial import radial_groups, radial_views
+
+        groups = radial_groups(scene.radial.density_bearings, scene.radial.moments_max)
+        for name in scene.radial.layers:
+            views += radial_views(f"radial/{name}", groups)
     return default_blueprint(
         [f"layers/{layer.name}" for layer in scene.layers],
         extra_images=[f"layers/{layer.name}/difference_to_linear" for layer in exact_fixes],
         text_entities=["validation"] if scene.bearing_validation else [],
+        extra_views=views,
+    )
+
+
+def _log_radial(rec, scene: Scene, layer: Layer, t: float, threads) -> None:
+    """The conditional radial curves (Figures 2-5 and 8) of a motion layer at time ``t``."""
+    from .record_radial import log_radial_curves
+
+    spec = scene.radial
+    log_radial_curves(
+        rec, f"radial/{layer.name}", layer.model(t), density_bearings=spec.density_bearings,
+        moments_max=spec.moments_max, moments_step=spec.moments_step, threads=threads,
     )
 
 

@@ -24,7 +24,7 @@ from .models import CAT, VARIANTS, PolarBanana, Pose
 from .record import DEFAULT_LEVELS
 from .validate import BananagridError, positive
 
-__all__ = ["Layer", "Scene", "load_scene", "parse_scene", "MODEL_KINDS", "PARAMETER_KEYS"]
+__all__ = ["Layer", "Scene", "RadialOutput", "load_scene", "parse_scene", "MODEL_KINDS", "PARAMETER_KEYS"]
 
 #: Model classes by the ``model`` value of a layer.
 MODEL_KINDS = MappingProxyType({"cat": CAT, "polar": PolarBanana, "bearing_fix": BearingFix})
@@ -36,17 +36,17 @@ MOTION_KINDS = ("cat", "polar")
 PARAMETER_KEYS = MappingProxyType({
     "cat": (
         "v0", "t", "sigma_a", "sigma_omega", "sigma_omega_deg", "k_sigma",
-        "origin", "heading", "heading_deg",
+        "sigma_heading", "sigma_heading_deg", "origin", "heading", "heading_deg",
     ),
     "polar": (
         "v0", "t", "sigma_a", "sigma_omega", "sigma_omega_deg", "variant",
-        "origin", "heading", "heading_deg",
+        "sigma_heading", "sigma_heading_deg", "heading_order", "origin", "heading", "heading_deg",
     ),
     "bearing_fix": ("sensors", "bearings", "bearings_deg", "sigmas", "sigmas_deg", "variant"),
 })
 
 #: Angles that a scene may give in radians or, under ``NAME_deg``, in degrees (lists too).
-ANGLE_KEYS = ("sigma_omega", "heading", "bearings", "sigmas")
+ANGLE_KEYS = ("sigma_omega", "sigma_heading", "heading", "bearings", "sigmas")
 
 #: Parameters every layer of a kind needs (from its table or ``[defaults]``); motion kinds
 #: also need ``t`` unless the scene gives ``scene.times``.
@@ -60,7 +60,8 @@ REQUIRED = MappingProxyType({
 KIND_VARIANTS = MappingProxyType({"polar": VARIANTS, "bearing_fix": MAP_VARIANTS})
 
 NAME_PATTERN = re.compile(r"[A-Za-z0-9_-]+")
-TOP_KEYS = ("scene", "grid", "output", "defaults", "layers")
+TOP_KEYS = ("scene", "grid", "output", "defaults", "layers", "radial")
+RADIAL_KEYS = ("layers", "density_bearings_deg", "moments_max_deg", "moments_step_deg")
 SCENE_KEYS = ("name", "title", "description", "times")
 GRID_KEYS = ("x", "y", "step", "dx", "dy")
 OUTPUT_KEYS = ("contour_levels", "normalise", "dtype", "colormap", "bearing_validation")
@@ -111,6 +112,29 @@ class Layer:
 
 
 @dataclass(frozen=True)
+class RadialOutput:
+    """``[radial]``: the conditional radial curves of Figures 2-5 and 8 of the polar-banana
+    paper, for some motion layers (see :mod:`bananagrid.record_radial`).
+
+    Attributes
+    ----------
+    layers : tuple of str
+        Names of the cat or polar layers that get curves.
+    density_bearings : tuple of float
+        Bearings (rad) at which p(r | theta) is drawn, exact beside its normal approximations.
+    moments_max : float
+        E[r | theta] and SD[r | theta] are drawn for theta in [0, moments_max] (rad); 0 for none.
+    moments_step : float
+        Bearing step of those curves (rad).
+    """
+
+    layers: tuple
+    density_bearings: tuple = ()
+    moments_max: float = 0.0
+    moments_step: float = math.radians(2.0)
+
+
+@dataclass(frozen=True)
 class Scene:
     """A validated scene: a grid, model layers and recording options.
 
@@ -144,6 +168,8 @@ class Scene:
     bearing_validation : bool
         Whether the recording gets the Walsh linearisation validation table (Monte Carlo of
         the true geometry over crossing angles and bearing errors; a few seconds).
+    radial : RadialOutput or None
+        The conditional radial curves to record, if the scene asks for them (``[radial]``).
     """
 
     name: str
@@ -160,6 +186,7 @@ class Scene:
     dtype: str
     colormap: str
     bearing_validation: bool = False
+    radial: RadialOutput | None = None
 
     def with_step(self, step: float) -> "Scene":
         """A copy whose grid covers the same bounds with square cells of ``step`` metres."""
@@ -246,10 +273,49 @@ def _build(doc: dict, text: str, source: str) -> Scene:
         )
     shared = _parameters(defaults, "defaults")
     layers = _layers(_table(doc, "layers", required=True), shared, times)
+    radial = _radial(doc["radial"], layers) if "radial" in doc else None
     return Scene(
         name=name, title=title, description=description, text=text, source=source,
         grid=grid, bounds=bounds, layers=layers, times=times, levels=levels,
         normalise=normalise, dtype=dtype, colormap=colormap, bearing_validation=bearing_validation,
+        radial=radial,
+    )
+
+
+def _radial(value, layers) -> RadialOutput:
+    """``[radial]``: which motion layers get radial curves, at which bearings (degrees)."""
+    table = _table({"radial": value}, "radial")
+    _check_keys(table, RADIAL_KEYS, "radial")
+    motion = [layer.name for layer in layers if layer.kind in MOTION_KINDS]
+    names = table.get("layers", motion)
+    if not isinstance(names, list) or not names:
+        raise _KeyError(f"radial.layers = {_show(names)}: expected a non-empty list of cat or polar layer names")
+    for k, name in enumerate(names):
+        if name not in motion:
+            raise _KeyError(
+                f"radial.layers[{k}] = {_show(name)}: not a cat or polar layer of this scene "
+                f"(those are: {', '.join(map(_show, motion)) or 'none'})"
+            )
+    bearings = ()
+    if "density_bearings_deg" in table:
+        bearings = tuple(_numbers(table["density_bearings_deg"], "radial.density_bearings_deg"))
+        for k, b in enumerate(bearings):
+            if not (math.isfinite(b) and -180.0 < b <= 180.0):
+                raise _KeyError(
+                    f"radial.density_bearings_deg[{k}] = {_show(table['density_bearings_deg'][k])}: "
+                    "must be in (-180, 180] degrees"
+                )
+    top = _number(table.get("moments_max_deg", 0.0), "radial.moments_max_deg")
+    if not (0.0 <= top <= 180.0):
+        raise _KeyError(f"radial.moments_max_deg = {_show(table['moments_max_deg'])}: must be in [0, 180] degrees")
+    step = _number(table.get("moments_step_deg", 2.0), "radial.moments_step_deg")
+    if not (math.isfinite(step) and 0.0 < step <= 90.0):
+        raise _KeyError(f"radial.moments_step_deg = {_show(table['moments_step_deg'])}: must be in (0, 90] degrees")
+    if not bearings and top == 0.0:
+        raise _KeyError("radial: give density_bearings_deg or moments_max_deg (> 0), or drop [radial]")
+    return RadialOutput(
+        layers=tuple(names), density_bearings=tuple(math.radians(b) for b in bearings),
+        moments_max=math.radians(top), moments_step=math.radians(step),
     )
 
 

@@ -20,9 +20,18 @@ def test_bench_writes_records(tmp_path, capsys):
 
 def test_bench_rejects_bad_arguments(capsys):
     assert bench.main(["--kernels", "banana"]) == 2
-    assert "--kernels = 'banana': choose from cat, polar-rough, polar-improved, bearing-exact" in capsys.readouterr().err
+    assert "--kernels = 'banana': choose from cat, cat-heading, polar-rough, polar-improved, bearing-exact" in capsys.readouterr().err
     assert bench.main(["--repeat", "0"]) == 2
     assert "--repeat = 0: must be >= 1" in capsys.readouterr().err
+
+
+def test_bench_reports_heading_cost(tmp_path, capsys):
+    out = tmp_path / "bench.json"
+    argv = ["--kernels", "cat,cat-heading", "--step", "200", "--repeat", "1", "--threads", "1", "--no-memory", "--json", str(out)]
+    assert bench.main(argv) == 0
+    cost = json.loads(out.read_text())["heading_cost"]
+    assert {c["dtype"] for c in cost} == {"float64", "float32"} and all(c["ratio_to_cat"] > 0 for c in cost)
+    assert "cat-heading (sigma_0 = pi/15) costs" in capsys.readouterr().out
 
 
 def test_containment_timing_reports_both_methods():

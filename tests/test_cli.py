@@ -28,6 +28,7 @@ RERUN = Path(sys.executable).parent / "rerun"
 QUICK_STEP = {
     "figure1": 40.0, "folding": 40.0, "sequence": 200.0,
     "bearing_coastal": 100.0, "bearing_poor_crossing": 400.0, "bearing_three_stations": 100.0,
+    "figure8": 100.0, "ship_heading": 20.0,
 }
 
 SMALL = small_scene("small", """\

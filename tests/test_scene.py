@@ -295,13 +295,56 @@ DOC = SCENES.parent / "docs" / "scenes.md"
 
 
 def test_docs_name_every_key_and_the_example_parses():
-    from bananagrid.scene import GRID_KEYS, OUTPUT_KEYS, PARAMETER_KEYS, SCENE_KEYS, TOP_KEYS
+    from bananagrid.scene import GRID_KEYS, OUTPUT_KEYS, PARAMETER_KEYS, RADIAL_KEYS, SCENE_KEYS, TOP_KEYS
 
     doc = DOC.read_text()
     assert not [table for table in TOP_KEYS if f"`[{table}" not in doc]
-    keys = {*SCENE_KEYS, *GRID_KEYS, *OUTPUT_KEYS, "model"}
+    keys = {*SCENE_KEYS, *GRID_KEYS, *OUTPUT_KEYS, *RADIAL_KEYS, "model"}
     keys.update(k for kind in PARAMETER_KEYS.values() for k in kind)
     assert not [key for key in sorted(keys) if f"`{key}`" not in doc]
     example = doc.split("## Example")[1].split("```toml\n")[1].split("```")[0]
     scene = parse_scene(example, source="docs/scenes.md")
     assert [layer.name for layer in scene.layers] == ["west", "east"] and len(scene.jobs()) == 6
+
+
+# --- heading noise and radial curves (issue 3) ------------------------------------------------
+
+
+def test_heading_keys_parse_into_models():
+    text = edited('model = "cat"\n', 'model = "cat"\nsigma_heading_deg = 5.0\n')
+    text = edited('variant = "rough"\n', 'variant = "rough"\nsigma_heading = 0.1\nheading_order = 4\n', text)
+    scene = parse_scene(text)
+    exact, approx = (layer.model() for layer in scene.layers)
+    assert isinstance(exact, CAT) and exact.sigma_heading == pytest.approx(math.radians(5.0), rel=1e-15)
+    assert isinstance(approx, PolarBanana) and approx.sigma_heading == 0.1 and approx.heading_order == 4
+
+
+def test_bad_heading_keys_are_named():
+    message = error_of(edited('model = "cat"\n', 'model = "cat"\nsigma_heading_deg = -2\n'))
+    assert message == "bad.toml: layers.exact.sigma_heading_deg = -2: must be >= 0"
+    message = error_of(edited('model = "cat"\n', 'model = "cat"\nheading_order = 4\n'))
+    assert message.startswith('bad.toml: layers.exact.heading_order: unknown key (model "cat")')
+    message = error_of(edited('variant = "rough"\n', 'variant = "rough"\nheading_order = 3\n'))
+    assert message.startswith("bad.toml: layers.approx.heading_order = 3: must be 2")
+
+
+def test_radial_table_parses():
+    scene = parse_scene(BASE + '\n[radial]\nlayers = ["exact"]\ndensity_bearings_deg = [0.0, 30.0]\nmoments_max_deg = 60\n')
+    spec = scene.radial
+    assert spec.layers == ("exact",) and spec.density_bearings == (0.0, math.radians(30.0))
+    assert spec.moments_max == math.radians(60.0) and spec.moments_step == math.radians(2.0)
+    assert parse_scene(BASE).radial is None
+    assert parse_scene(BASE + "\n[radial]\nmoments_max_deg = 10\n").radial.layers == ("exact", "approx")
+
+
+@pytest.mark.parametrize("body, message", [
+    ('layers = ["nope"]\nmoments_max_deg = 10', 'radial.layers[0] = "nope": not a cat or polar layer of this scene'),
+    ("density_bearings_deg = [200.0]", "radial.density_bearings_deg[0] = 200.0: must be in (-180, 180] degrees"),
+    ("moments_max_deg = -1", "radial.moments_max_deg = -1: must be in [0, 180] degrees"),
+    ("moments_max_deg = 10\nmoments_step_deg = 0", "radial.moments_step_deg = 0: must be in (0, 90] degrees"),
+    ("layers = []", "radial.layers = []: expected a non-empty list"),
+    ("", "radial: give density_bearings_deg or moments_max_deg"),
+    ("colour = 1", "radial.colour: unknown key"),
+])
+def test_bad_radial_keys_are_named(body, message):
+    assert message in error_of(BASE + f"\n[radial]\n{body}\n")
