@@ -50,6 +50,8 @@ __all__ = [
 #: sigma_0 = pi/15: 5e-6 error at 8 nodes per width, 8e-7 at 13).
 RESOLUTION = 8
 BEARING_RESOLUTION = 14
+#: Bearing nodes per angular width for the exact ray values (:func:`ray_densities`).
+RAY_RESOLUTION = 6
 #: Largest relative interpolation error accepted before the spacings are halved.
 TARGET_ERROR = 1.0e-6
 #: The error check covers the points where the density is at least this fraction of its peak.
@@ -265,7 +267,10 @@ def ray_densities(model, radii, angles, *, threads=None) -> np.ndarray:
     radii = np.asarray(radii, dtype=float)
     angles = np.asarray(angles, dtype=float)
     _, angular = natural_scales(model)
-    n_theta = max(16, _even(2.0 * math.pi * 2 * BEARING_RESOLUTION / angular))
+    # no interpolation here, only the FFT: a row sampled at RAY_RESOLUTION nodes per angular
+    # width has negligible spectrum at the Nyquist frequency (about exp(-2 pi^2 6^2 / 4) for a
+    # normal profile of that width)
+    n_theta = max(16, _even(2.0 * math.pi * RAY_RESOLUTION / angular))
     theta = -math.pi + 2.0 * math.pi * np.arange(n_theta) / n_theta
     x = radii[:, None] * np.sin(theta)[None, :]
     y = radii[:, None] * np.cos(theta)[None, :]
