@@ -174,8 +174,17 @@ def _bind(model, wp, np_dtype, scalar, device, radii, threads) -> _Binding:
 
 def _bind_kernels(model, wp, np_dtype, scalar, device, radii, threads) -> _Binding:
     from .bearing import BearingFix
+    from .butterly import Butterly
     from .models import CAT, PolarBanana
 
+    if isinstance(model, Butterly):
+        from .kernels import butterly
+
+        params = wp.array(model.kernel_parameters(np_dtype), dtype=scalar, device=device)
+        return _Binding(
+            butterly.butterly_grid, butterly.butterly_points, (params, model.n_speed_nodes),
+            "butterly.butterly_grid", {"speed_nodes": model.n_speed_nodes}, row_loop=True,
+        )
     if isinstance(model, BearingFix):
         from .kernels import bearing
 

@@ -1,0 +1,577 @@
+"""Butterly's model: a bivariate normal start, a random course and a speed law (Butterly 1975).
+
+The target starts at X ~ N(mean, cov), picks a course c (a bearing clockwise from north, the
+project's heading convention: unit vector e(c) = (sin c, cos c)) and a speed V independently,
+and after t seconds is at U = X + V t e(c). Its density is (2.3), and with a discrete speed law
+(2.5) with (3.1):
+
+    p(u) = sum_i w_i P_i(u),   P_i(u) = int_0^{2 pi} N(u - r_i e(c); mean, cov) p(c) dc,   r_i = V_i t,
+
+with p(c) = 1 / (2 pi) (Butterly's uniform course) or, beyond the paper, the von Mises law
+exp(kappa cos(c - c0)) / (2 pi I0(kappa)) around a mean course c0 (kappa = 0 is Butterly).
+Continuous speed laws (:class:`UniformSpeed`, :class:`NormalSpeed`, :class:`TabulatedSpeed`)
+are integrated by a composite Gauss-Legendre rule whose nodes become the discrete speeds of (2.5)
+(see :data:`SPEED_PANEL_SIGMAS`). The phi-integral is computed by the Warp kernel
+``bananagrid.kernels.butterly`` (method in its docstring); :mod:`bananagrid.butterly_series`
+holds the Bessel series (3.8) as a second method.
+"""
+
+from __future__ import annotations
+
+import math
+import warnings
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy import special, stats
+
+from .validate import BananagridError, finite, non_negative, point, positive
+
+__all__ = [
+    "Butterly",
+    "UniformSpeed",
+    "NormalSpeed",
+    "TabulatedSpeed",
+    "covariance_axes",
+    "numpy_density",
+    "SPEED_PANEL_SIGMAS",
+    "GAUSS_POINTS",
+]
+
+#: Continuous speed laws: width of a Gauss-Legendre panel in travelled range r = V t, in units
+#: of the start's smallest SD sqrt(S1). P_r(u) varies with r on that scale (the ring's
+#: profile), so the error of GAUSS_POINTS nodes per panel is fixed by this ratio: below 1e-11
+#: relative against a rule 4x finer (measured 5e-12, the kernel's own rounding level) wherever
+#: the density exceeds 1e-12 of its peak (tests/test_butterly.py, test_continuous_speed_*).
+SPEED_PANEL_SIGMAS = 1.0
+#: Gauss-Legendre nodes per panel.
+GAUSS_POINTS = 8
+#: A truncated normal speed law is integrated over mean +- NORMAL_SPAN sd (clipped at 0): the
+#: mass beyond, erfc(10 / sqrt 2) = 1.5e-23, is far below the quadrature's own error.
+NORMAL_SPAN = 10.0
+#: More speed nodes than this warn: each costs a full course integral per cell.
+MANY_SPEED_NODES = 2048
+#: Hard limit on speed nodes.
+MAX_SPEED_NODES = 200_000
+
+#: Relative tolerance of the kernel's trapezoid rule (its node count, see kernels/butterly.py)
+#: and the relative size below which the walk drops a node, per kernel precision.
+_KERNEL_TOL = {np.dtype(np.float64): (1e-12, 1e-15, 1e-8), np.dtype(np.float32): (1e-7, 1e-8, 1e-4)}
+
+
+def covariance_axes(cov: np.ndarray) -> tuple[float, float, float]:
+    """Eigen-decomposition of a 2x2 covariance: (S1, S2, beta) with S1 <= S2 its eigenvalues
+    (Butterly's S_u, S_v of (3.7), per ERRATA) and beta the angle from east of S1's eigenvector
+    (Butterly's beta of (3.3)). S1 = det / S2 avoids cancellation for elongated covariances."""
+    sxx, sxy, syy = float(cov[0, 0]), float(cov[0, 1]), float(cov[1, 1])
+    half_trace = 0.5 * (sxx + syy)
+    root = math.hypot(0.5 * (sxx - syy), sxy)
+    s2 = half_trace + root
+    s1 = (sxx * syy - sxy * sxy) / s2
+    # the eigenvector of S1: (sxy, s1 - sxx) or (s1 - syy, sxy), whichever is longer
+    v1 = (sxy, s1 - sxx)
+    v2 = (s1 - syy, sxy)
+    vx, vy = v1 if math.hypot(*v1) >= math.hypot(*v2) else v2
+    if vx == 0.0 and vy == 0.0:  # isotropic: any axis
+        return s1, s2, 0.0
+    return s1, s2, math.atan2(vy, vx)
+
+
+# ---------------------------------------------------------------------------------------------
+# Speed laws
+# ---------------------------------------------------------------------------------------------
+
+
+def _gauss_panels(lo: float, hi: float, width: float) -> tuple[np.ndarray, np.ndarray]:
+    """Composite Gauss-Legendre nodes and weights on [lo, hi] with panels no wider than ``width``."""
+    if hi <= lo:
+        return np.array([lo]), np.array([0.0])
+    n_panels = max(1, math.ceil((hi - lo) / width - 1e-9))
+    if n_panels * GAUSS_POINTS > MAX_SPEED_NODES:
+        raise BananagridError(
+            f"speeds: the speed law spans {(hi - lo):.4g} m of travel, {n_panels} panels of "
+            f"{width:.4g} m ({n_panels * GAUSS_POINTS} nodes, limit {MAX_SPEED_NODES}); "
+            "narrow the law or use a discrete one"
+        )
+    x, w = np.polynomial.legendre.leggauss(GAUSS_POINTS)
+    edges = np.linspace(lo, hi, n_panels + 1)
+    half = 0.5 * np.diff(edges)
+    mid = 0.5 * (edges[1:] + edges[:-1])
+    return (mid[:, None] + half[:, None] * x).ravel(), (half[:, None] * w).ravel()
+
+
+@dataclass(frozen=True)
+class UniformSpeed:
+    """Speed uniform on [v_min, v_max], m/s (0 <= v_min < v_max)."""
+
+    v_min: float
+    v_max: float
+
+    def __post_init__(self):
+        lo = non_negative("speeds.v_min", self.v_min)
+        hi = non_negative("speeds.v_max", self.v_max)
+        if hi <= lo:
+            raise BananagridError(f"speeds.v_max = {hi!r}: must be > v_min = {lo!r}")
+        object.__setattr__(self, "v_min", lo)
+        object.__setattr__(self, "v_max", hi)
+
+    def nodes(self, t: float, panel: float) -> tuple[np.ndarray, np.ndarray]:
+        """Speeds and weights of the composite Gauss-Legendre rule (panels <= ``panel`` m of r)."""
+        v, w = _gauss_panels(self.v_min, self.v_max, panel / t if t > 0 else math.inf)
+        return v, w / (self.v_max - self.v_min)
+
+    def sample(self, n: int, rng: np.random.Generator) -> np.ndarray:
+        return rng.uniform(self.v_min, self.v_max, n)
+
+    def pdf(self, v) -> np.ndarray:
+        v = np.asarray(v, dtype=float)
+        return np.where((v >= self.v_min) & (v <= self.v_max), 1.0 / (self.v_max - self.v_min), 0.0)
+
+
+@dataclass(frozen=True)
+class NormalSpeed:
+    """Speed N(mean, sd) truncated at zero (renormalised over v >= 0), m/s."""
+
+    mean: float
+    sd: float
+
+    def __post_init__(self):
+        object.__setattr__(self, "mean", finite("speeds.mean", self.mean))
+        object.__setattr__(self, "sd", positive("speeds.sd", self.sd))
+        if self.mean + NORMAL_SPAN * self.sd <= 0.0:
+            raise BananagridError(
+                f"speeds.mean = {self.mean!r}: with sd = {self.sd!r} the law has no mass above 0 m/s"
+            )
+
+    @property
+    def _law(self):
+        return stats.truncnorm(-self.mean / self.sd, np.inf, loc=self.mean, scale=self.sd)
+
+    def nodes(self, t: float, panel: float) -> tuple[np.ndarray, np.ndarray]:
+        lo = max(0.0, self.mean - NORMAL_SPAN * self.sd)
+        hi = self.mean + NORMAL_SPAN * self.sd
+        width = min(panel / t if t > 0 else math.inf, self.sd)
+        v, w = _gauss_panels(lo, hi, width)
+        return v, w * self._law.pdf(v)
+
+    def sample(self, n: int, rng: np.random.Generator) -> np.ndarray:
+        return self._law.rvs(size=n, random_state=rng)
+
+    def pdf(self, v) -> np.ndarray:
+        return self._law.pdf(np.asarray(v, dtype=float))
+
+
+@dataclass(frozen=True, eq=False)
+class TabulatedSpeed:
+    """A user's speed table: density values at increasing speeds, joined linearly, zero outside
+    [speeds[0], speeds[-1]] and normalised to one.
+
+    Parameters
+    ----------
+    speeds : array_like, shape (m,)
+        Increasing speeds, m/s, >= 0, m >= 2.
+    density : array_like, shape (m,)
+        Non-negative (relative) density at those speeds, not all zero.
+    """
+
+    speeds: np.ndarray
+    density: np.ndarray
+
+    def __post_init__(self):
+        v = _vector("speeds.speeds", self.speeds)
+        f = _vector("speeds.density", self.density)
+        if v.size < 2 or v.size != f.size:
+            raise BananagridError(
+                f"speeds: a table needs at least 2 speeds and as many densities (got {v.size} and {f.size})"
+            )
+        if v[0] < 0 or np.any(np.diff(v) <= 0):
+            raise BananagridError(f"speeds.speeds = {v.tolist()!r}: must be >= 0 and strictly increasing")
+        if np.any(f < 0) or not np.any(f > 0):
+            raise BananagridError(f"speeds.density = {f.tolist()!r}: must be >= 0 and not all zero")
+        mass = float(np.sum(0.5 * (f[1:] + f[:-1]) * np.diff(v)))
+        f = f / mass
+        for name, value in (("speeds", v), ("density", f)):
+            value.setflags(write=False)
+            object.__setattr__(self, name, value)
+
+    def nodes(self, t: float, panel: float) -> tuple[np.ndarray, np.ndarray]:
+        vs, ws = [], []
+        for lo, hi in zip(self.speeds[:-1], self.speeds[1:]):  # exact on each linear piece
+            v, w = _gauss_panels(float(lo), float(hi), panel / t if t > 0 else math.inf)
+            vs.append(v)
+            ws.append(w * self.pdf(v))
+        return np.concatenate(vs), np.concatenate(ws)
+
+    def pdf(self, v) -> np.ndarray:
+        return np.interp(np.asarray(v, dtype=float), self.speeds, self.density, left=0.0, right=0.0)
+
+    def sample(self, n: int, rng: np.random.Generator) -> np.ndarray:
+        """Inverse CDF: a piece by its mass, then the root of its quadratic CDF."""
+        v, f = self.speeds, self.density
+        h = np.diff(v)
+        mass = 0.5 * (f[1:] + f[:-1]) * h
+        piece = rng.choice(len(h), size=n, p=mass / mass.sum())
+        m = rng.uniform(0.0, 1.0, n) * mass[piece]
+        f0, f1, hp = f[piece], f[piece + 1], h[piece]
+        # f0 s + (f1 - f0) s^2 / (2 h) = m, in the form without cancellation
+        s = 2.0 * m / (f0 + np.sqrt(np.maximum(f0 * f0 + 2.0 * (f1 - f0) * m / hp, 0.0)))
+        return v[piece] + np.minimum(s, hp)
+
+
+SpeedLaw = UniformSpeed | NormalSpeed | TabulatedSpeed
+
+
+def _vector(name: str, value) -> np.ndarray:
+    try:
+        array = np.array(value, dtype=float)
+    except (TypeError, ValueError):
+        raise BananagridError(f"{name} = {value!r}: expected a list of numbers") from None
+    if array.ndim != 1 or array.size == 0:
+        raise BananagridError(f"{name} = {value!r}: expected a non-empty list of numbers")
+    if not np.isfinite(array).all():
+        raise BananagridError(f"{name} = {value!r}: every value must be finite (NaN or inf given)")
+    return array
+
+
+def _covariance(value) -> np.ndarray:
+    try:
+        cov = np.array(value, dtype=float)
+    except (TypeError, ValueError):
+        raise BananagridError(f"cov = {value!r}: expected a 2x2 array of numbers") from None
+    if cov.shape != (2, 2):
+        raise BananagridError(f"cov = {value!r}: expected a 2x2 array [[sxx, sxy], [sxy, syy]], got shape {cov.shape}")
+    if not np.isfinite(cov).all():
+        raise BananagridError(f"cov = {cov.tolist()!r}: every entry must be finite (NaN or inf given)")
+    scale = max(abs(cov[0, 0]), abs(cov[1, 1]), abs(cov[0, 1]), abs(cov[1, 0]))
+    if abs(cov[0, 1] - cov[1, 0]) > 1e-12 * scale:
+        raise BananagridError(f"cov = {cov.tolist()!r}: must be symmetric (cov[0][1] == cov[1][0])")
+    cov[1, 0] = cov[0, 1]
+    if cov[0, 0] <= 0 or cov[1, 1] <= 0:
+        raise BananagridError(f"cov = {cov.tolist()!r}: must be positive definite (variances > 0)")
+    s1, s2, _ = covariance_axes(cov)
+    if not s1 > 1e-13 * s2:
+        rho = cov[0, 1] / math.sqrt(cov[0, 0] * cov[1, 1])
+        raise BananagridError(
+            f"cov = {cov.tolist()!r}: must be positive definite (eigenvalues {s1:.6g}, {s2:.6g}; "
+            f"correlation {rho:.15g}, |rho| must be < 1)"
+        )
+    return cov
+
+
+# ---------------------------------------------------------------------------------------------
+# The model
+# ---------------------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True, eq=False, kw_only=True)
+class Butterly:
+    """Normal start, random course, speed law (Butterly (2.5), (3.1); (2.3) for von Mises).
+
+    Parameters
+    ----------
+    mean : (float, float)
+        Mean of the start position (x east, y north), m.
+    cov : array_like, 2x2
+        Covariance of the start, m^2: symmetric positive definite (any correlation |rho| < 1,
+        any elongation).
+    speeds : list of float, or UniformSpeed, NormalSpeed, TabulatedSpeed
+        Discrete speeds V_i >= 0 (m/s) of (2.5), or a continuous speed law.
+    t : float
+        Elapsed time, s, >= 0.
+    weights : list of float, optional
+        Probabilities p_i of the discrete speeds, >= 0, summing to 1 (within 1e-9). Required
+        for more than one discrete speed; must be left out for a continuous law.
+    course_kappa : float, default 0
+        Concentration of the von Mises course law, >= 0; 0 is Butterly's uniform course.
+    course_mean : float, default 0
+        Mean course c0, radians clockwise from north (used when course_kappa > 0).
+
+    Notes
+    -----
+    Density (per m^2) at u: sum_i w_i int N(u - V_i t e(c); mean, cov) p(c) dc, e(c) =
+    (sin c, cos c). ``rasterise`` and :meth:`pdf` compute it with a relative error below 1e-9
+    (float64) for any r / sigma_min, far into the tails. ``speed_nodes`` holds the discrete
+    (V_i, w_i) the kernel integrates: the speeds given, or a continuous law's quadrature nodes.
+    """
+
+    mean: tuple[float, float]
+    cov: np.ndarray
+    speeds: object
+    t: float
+    weights: object = None
+    course_kappa: float = 0.0
+    course_mean: float = 0.0
+    _nodes: tuple = field(init=False, repr=False)
+
+    kind = "butterly"
+
+    def __post_init__(self):
+        object.__setattr__(self, "mean", point("mean", self.mean))
+        cov = _covariance(self.cov)
+        cov.setflags(write=False)
+        object.__setattr__(self, "cov", cov)
+        t = finite("t", self.t)
+        if t < 0:
+            raise BananagridError(f"t = {t!r}: must be >= 0 (elapsed time, s)")
+        object.__setattr__(self, "t", t)
+        kappa = finite("course_kappa", self.course_kappa)
+        if kappa < 0:
+            raise BananagridError(f"course_kappa = {kappa!r}: must be >= 0 (0 is the uniform course)")
+        object.__setattr__(self, "course_kappa", kappa)
+        object.__setattr__(self, "course_mean", finite("course_mean", self.course_mean))
+        if isinstance(self.speeds, (UniformSpeed, NormalSpeed, TabulatedSpeed)):
+            if self.weights is not None:
+                raise BananagridError(
+                    f"weights = {self.weights!r}: a continuous speed law ({type(self.speeds).__name__}) takes no weights"
+                )
+            v, w = self.speeds.nodes(self.t, SPEED_PANEL_SIGMAS * math.sqrt(self.axes[0]))
+            w = w / w.sum()
+        else:
+            v = _vector("speeds", self.speeds)
+            bad = np.flatnonzero(v < 0)
+            if bad.size:
+                raise BananagridError(f"speeds[{bad[0]}] = {float(v[bad[0]])!r}: must be >= 0 (m/s)")
+            if self.weights is None:
+                if v.size > 1:
+                    raise BananagridError(f"weights: required for {v.size} speeds (probabilities summing to 1)")
+                w = np.ones(1)
+            else:
+                w = _vector("weights", self.weights)
+                if w.size != v.size:
+                    raise BananagridError(f"weights: {w.size} given for {v.size} speeds; lengths must match")
+                bad = np.flatnonzero(w < 0)
+                if bad.size:
+                    raise BananagridError(f"weights[{bad[0]}] = {float(w[bad[0]])!r}: must be >= 0")
+                total = float(w.sum())
+                if abs(total - 1.0) > 1e-9:
+                    raise BananagridError(f"weights = {w.tolist()!r}: must sum to 1 (they sum to {total!r})")
+                w = w / total
+            v.setflags(write=False)
+            object.__setattr__(self, "speeds", v)
+            if self.weights is not None:
+                frozen = w.copy()
+                frozen.setflags(write=False)
+                object.__setattr__(self, "weights", frozen)
+        if v.size > MANY_SPEED_NODES:
+            warnings.warn(
+                f"Butterly: {v.size} speed nodes; each costs a course integral per cell", stacklevel=3
+            )
+        v = np.ascontiguousarray(v, dtype=float)
+        w = np.ascontiguousarray(w, dtype=float)
+        v.setflags(write=False)
+        w.setflags(write=False)
+        object.__setattr__(self, "_nodes", (v, w))
+
+    # -- derived quantities ----------------------------------------------------------------------
+
+    @property
+    def axes(self) -> tuple[float, float, float]:
+        """(S1, S2, beta): the start covariance's eigenvalues (S1 <= S2) and the angle from east
+        of S1's axis (Butterly's S_u, S_v, beta of (3.3), (3.7))."""
+        return covariance_axes(self.cov)
+
+    @property
+    def sigma_min(self) -> float:
+        """Smallest SD of the start, sqrt(S1), m."""
+        return math.sqrt(self.axes[0])
+
+    @property
+    def speed_nodes(self) -> tuple[np.ndarray, np.ndarray]:
+        """(V_i, w_i): the discrete speed law the kernel integrates (copies)."""
+        return self._nodes[0].copy(), self._nodes[1].copy()
+
+    @property
+    def ranges(self) -> np.ndarray:
+        """Travelled ranges r_i = V_i t, m."""
+        return self._nodes[0] * self.t
+
+    @property
+    def n_speed_nodes(self) -> int:
+        return int(self._nodes[0].size)
+
+    def kernel_parameters(self, dtype=np.float64) -> np.ndarray:
+        """The kernel's parameter array (layout in ``kernels/butterly.py``)."""
+        from .kernels import butterly as k
+
+        tol, stop, newton = _KERNEL_TOL[np.dtype(dtype)]
+        s1, s2, beta = self.axes
+        theta0 = 0.5 * math.pi - beta - self.course_mean  # the course mean in the eigen frame
+        kappa = self.course_kappa
+        log_norm = -math.log(4.0 * math.pi**2 * math.sqrt(s1 * s2)) - math.log(special.ive(0, kappa))
+        head = np.zeros(k.HEAD)
+        head[[k.MEAN_X, k.MEAN_Y]] = self.mean
+        head[[k.Q1_X, k.Q1_Y]] = math.cos(beta), math.sin(beta)
+        head[[k.INV_SQRT_S1, k.INV_SQRT_S2]] = 1.0 / math.sqrt(s1), 1.0 / math.sqrt(s2)
+        head[[k.KAPPA, k.COS_THETA0, k.SIN_THETA0]] = kappa, math.cos(theta0), math.sin(theta0)
+        head[k.LOG_TOL] = math.log(1.0 / tol) + math.log(4.0 * math.pi)
+        head[k.STOP] = stop
+        head[k.NEWTON_TOL] = newton
+        head[k.LOG_STOP] = -math.log(stop)
+        tiny = np.finfo(dtype).smallest_subnormal
+        head[k.LOG_TINY] = math.log(tiny) - math.log(2.0 * math.pi) - 1.0
+        r = self.ranges
+        rho1, rho2 = r / math.sqrt(s1), r / math.sqrt(s2)
+        with np.errstate(divide="ignore"):
+            log_w = np.log(self._nodes[1])
+        per = np.zeros((r.size, k.PER_SPEED))
+        per[:, k.RHO1], per[:, k.RHO2] = rho1, rho2
+        per[:, k.FOUR_F] = (rho1 - rho2) * (rho1 + rho2)  # 4F = rho1^2 - rho2^2 without cancellation
+        per[:, k.LOG_COEF] = np.where(np.isfinite(log_w), log_w + log_norm, -1e300)
+        return np.concatenate((head, per.ravel())).astype(dtype)
+
+    def parameters(self) -> dict:
+        """Plain-data parameters for provenance and recordings."""
+        v, w = self._nodes
+        out = {
+            "model": "Butterly",
+            "mean_x": self.mean[0],
+            "mean_y": self.mean[1],
+            "cov_xx": float(self.cov[0, 0]),
+            "cov_xy": float(self.cov[0, 1]),
+            "cov_yy": float(self.cov[1, 1]),
+            "t": self.t,
+            "course_kappa": self.course_kappa,
+            "course_mean": self.course_mean,
+        }
+        if isinstance(self.speeds, np.ndarray):
+            out["speeds"] = v.tolist()
+            out["weights"] = w.tolist()
+        else:
+            out["speed_law"] = repr(self.speeds)
+            out["speed_nodes"] = int(v.size)
+        return out
+
+    # -- densities ---------------------------------------------------------------------------------
+
+    def pdf(self, x, y, *, dtype=np.float64, device="cpu"):
+        """Density per m^2 at world points (broadcast x, y), through the same kernels as rasterise."""
+        from .raster import evaluate_points
+
+        return evaluate_points(self, x, y, dtype=dtype, device=device)
+
+    def series_pdf(self, x, y, **kwargs):
+        """Density by the Bessel series (3.8) (NumPy/SciPy; see :mod:`bananagrid.butterly_series`)."""
+        from .butterly_series import series_density
+
+        return series_density(self, x, y, **kwargs)[0]
+
+    def range_pdf(self, R, *, origin=None, rtol: float = 1e-11) -> np.ndarray:
+        """Density of the distance R = |U - origin| (per m), by default from the start's mean.
+
+        Given the course, U - origin ~ N(mean - origin + r e(c), cov), whose distance from 0 has
+        the Beckmann law (Butterly's Appendix B, per ERRATA)
+
+            p_B(R; m, cov) = R int_0^{2 pi} N(R e(psi); m, cov) dpsi = 2 pi R P_R(m),
+
+        P_R the single-speed density (3.1) of a start N(0, cov) moved by R, at the point m: so the
+        kernel evaluates it. Then p(R) = sum_i w_i int p(c) p_B(R; mean - origin + r_i e(c), cov)
+        dc, a periodic integral in c done by the trapezoid rule, doubled until two successive
+        rules agree to ``rtol``. For an isotropic cov = s^2 I and origin = mean, p_B does not
+        depend on c and p(R) = sum_i w_i Rice(R / s; r_i / s) / s.
+        """
+        R = np.asarray(R, dtype=float)
+        if not np.isfinite(R).all():
+            raise BananagridError("R: ranges must be finite (NaN or inf given)")
+        if origin is None:
+            offset = np.zeros(2)
+        else:
+            offset = np.asarray(self.mean) - np.asarray(point("origin", origin))
+        out = np.zeros(R.shape)
+        flat = out.reshape(-1)
+        radii, weights = self.ranges, self._nodes[1]
+        for k, rk in enumerate(R.reshape(-1)):
+            if rk <= 0.0:
+                continue
+            inner = Butterly(mean=(0.0, 0.0), cov=self.cov, speeds=[rk], t=1.0)
+            flat[k] = rk * 2.0 * math.pi * self._course_average(inner, offset, radii, weights, rtol)
+        return out
+
+    def _course_average(self, inner: "Butterly", offset, radii, weights, rtol) -> float:
+        """sum_i w_i int p(c) inner.pdf(offset + r_i e(c)) dc by the doubling trapezoid rule."""
+        n = 64
+        previous = None
+        while True:
+            c = 2.0 * math.pi * np.arange(n) / n
+            pc = self.course_pdf(c)
+            px = offset[0] + radii[:, None] * np.sin(c)
+            py = offset[1] + radii[:, None] * np.cos(c)
+            values = inner.pdf(px, py)
+            estimate = float(np.sum(weights[:, None] * values * pc) * 2.0 * math.pi / n)
+            if previous is not None and abs(estimate - previous) <= rtol * abs(estimate):
+                return estimate
+            if n >= 2**22:
+                warnings.warn(f"range_pdf: course integral not converged to {rtol:g} with {n} nodes", stacklevel=3)
+                return estimate
+            previous = estimate
+            n *= 2
+
+    def course_pdf(self, c) -> np.ndarray:
+        """Density of the course c (radians clockwise from north): 1 / (2 pi), or von Mises."""
+        c = np.asarray(c, dtype=float)
+        k = self.course_kappa
+        return np.exp(k * (np.cos(c - self.course_mean) - 1.0)) / (2.0 * math.pi * special.ive(0, k))
+
+    # -- sampling ----------------------------------------------------------------------------------
+
+    def sample(self, n: int, rng) -> np.ndarray:
+        """Draw ``n`` world positions: start ~ N(mean, cov), speed from its law, course from its
+        law, then U = X + V t (sin c, cos c). Continuous speed laws are sampled exactly (not
+        through their quadrature nodes)."""
+        from .models import _check_n, _check_rng
+
+        n, rng = _check_n(n), _check_rng(rng)
+        start = rng.multivariate_normal(self.mean, self.cov, size=n, method="cholesky")
+        if isinstance(self.speeds, np.ndarray):
+            v = self._nodes[0][rng.choice(self._nodes[0].size, size=n, p=self._nodes[1])]
+        else:
+            v = self.speeds.sample(n, rng)
+        if self.course_kappa > 0:
+            c = rng.vonmises(self.course_mean, self.course_kappa, n)
+        else:
+            c = rng.uniform(0.0, 2.0 * math.pi, n)
+        r = v * self.t
+        return start + np.column_stack((r * np.sin(c), r * np.cos(c)))
+
+
+# ---------------------------------------------------------------------------------------------
+# The NumPy version (a reference for speed, not for accuracy tests)
+# ---------------------------------------------------------------------------------------------
+
+
+def numpy_density(model: Butterly, x, y, *, chunk: int = 32768) -> np.ndarray:
+    """The same density in vectorised NumPy float64: for every speed, the periodic trapezoid rule
+    on the full circle in log space (max-subtracted), with the kernel's node count for the
+    largest amplitude A in each chunk of points. It lacks the kernel's per-point walk (NumPy
+    cannot stop early per point), so its cost is N per point and speed."""
+    x, y = np.broadcast_arrays(np.asarray(x, dtype=float), np.asarray(y, dtype=float))
+    shape = x.shape
+    x, y = x.ravel(), y.ravel()
+    s1, s2, beta = model.axes
+    q1x, q1y = math.cos(beta), math.sin(beta)
+    kappa = model.course_kappa
+    theta0 = 0.5 * math.pi - beta - model.course_mean
+    log_tol = math.log(1e12) + math.log(4.0 * math.pi)
+    log_norm = -math.log(4.0 * math.pi**2 * math.sqrt(s1 * s2)) - math.log(special.ive(0, kappa))
+    out = np.zeros(x.size)
+    for a0 in range(0, x.size, chunk):
+        dx = x[a0:a0 + chunk] - model.mean[0]
+        dy = y[a0:a0 + chunk] - model.mean[1]
+        z1 = (dx * q1x + dy * q1y) / math.sqrt(s1)
+        z2 = (dy * q1x - dx * q1y) / math.sqrt(s2)
+        total = np.zeros(z1.size)
+        for r, w in zip(model.ranges, model._nodes[1]):
+            rho1, rho2 = r / math.sqrt(s1), r / math.sqrt(s2)
+            a = rho1 * z1 + kappa * math.cos(theta0)
+            b = rho2 * z2 + kappa * math.sin(theta0)
+            amp = float(np.max(np.hypot(a, b))) + (rho1 - rho2) * (rho1 + rho2)
+            n = math.ceil(math.sqrt(2 * amp * (log_tol + 0.5 * math.log1p(amp))) + 12)
+            theta = 2.0 * math.pi * np.arange(n) / n
+            ct, st = np.cos(theta), np.sin(theta)
+            e = -0.5 * ((z1[:, None] - rho1 * ct) ** 2 + (z2[:, None] - rho2 * st) ** 2)
+            if kappa > 0:
+                e += kappa * (np.cos(theta - theta0) - 1.0)
+            top = e.max(axis=1)
+            s = np.exp(e - top[:, None]).sum(axis=1)
+            total += w * np.exp(log_norm + top) * s * (2.0 * math.pi / n)
+        out[a0:a0 + chunk] = total
+    return out.reshape(shape)
