@@ -31,6 +31,7 @@ How it is computed, and why the error is controlled:
 
 from __future__ import annotations
 
+import functools
 import math
 import warnings
 from dataclasses import dataclass, replace
@@ -173,6 +174,18 @@ def _even(n: float) -> int:
 
 
 def heading_table(model, r_lo: float, r_hi: float, *, threads=None) -> HeadingTable:
+    """:func:`build_heading_table`, remembered for the last few (model, range) pairs: a caller
+    that evaluates one region in chunks (``bananagrid.lattice``) builds the table once. The
+    thread count does not change the table."""
+    return _remembered_table(model, float(r_lo), float(r_hi), threads)
+
+
+@functools.lru_cache(maxsize=2)
+def _remembered_table(model, r_lo: float, r_hi: float, threads) -> HeadingTable:
+    return build_heading_table(model, r_lo, r_hi, threads=threads)
+
+
+def build_heading_table(model, r_lo: float, r_hi: float, *, threads=None) -> HeadingTable:
     """The convolved lattice covering ranges [r_lo, r_hi] of the model's local frame, with its
     interpolation error checked. While the estimate exceeds ``TARGET_ERROR`` the spacings are
     refined by the factor the cubic stencils' h^4 error law asks for (with a 10% margin, at most
@@ -195,7 +208,7 @@ def heading_table(model, r_lo: float, r_hi: float, *, threads=None) -> HeadingTa
         f"error estimate is {table.error_estimate:.2g} (target {TARGET_ERROR:g}) where the density "
         f"exceeds {CHECK_LEVEL:g} of its peak; sharp features such as the folds of a banana that "
         "turns over itself are not resolved better within the lattice size limit",
-        stacklevel=4,
+        stacklevel=7,
     )
     return table
 

@@ -477,6 +477,15 @@ def _groups(tasks):
         yield group
 
 
+def _model_radii(model, lattice: PolarLattice) -> tuple[float, float]:
+    """Distances from the model's origin that cover the whole lattice: one range for every
+    chunk, so that a tabulated model (CAT with heading noise) builds its table once."""
+    pose = getattr(model, "pose", None)
+    offset = math.dist(pose.origin, lattice.pose.origin) if pose is not None else 0.0
+    r_min, r_max = lattice.range_edges[0], lattice.range_edges[-1]
+    return max(0.0, r_min - offset), r_max + offset
+
+
 def _integrate(model, lattice: PolarLattice, plan: _Plan, *, dtype, device, threads) -> np.ndarray:
     """Cell probabilities: sum over nodes of w_r(r) r w_b p(O + r u(h + b)), float64."""
     from .raster import evaluate_points
@@ -492,6 +501,7 @@ def _integrate(model, lattice: PolarLattice, plan: _Plan, *, dtype, device, thre
         for row, j0, j1, a0, a1 in _tasks(lattice, plan):
             yield row, j0, j1, a0, a1, len(b_rules[plan.angular[row]][0])
 
+    radii = _model_radii(model, lattice)
     for group in _groups(expand()):
         xs, ys, parts = [], [], []
         for row, j0, j1, a0, a1, _ in group:
@@ -507,7 +517,8 @@ def _integrate(model, lattice: PolarLattice, plan: _Plan, *, dtype, device, thre
             ys.append((oy + r[:, None, None] * c[None]).ravel())
             parts.append((row, j0, j1, w_r, w_b, r.size, theta.shape))
         values = evaluate_points(
-            model, np.concatenate(xs), np.concatenate(ys), dtype=dtype, device=device, threads=threads
+            model, np.concatenate(xs), np.concatenate(ys), dtype=dtype, device=device, threads=threads,
+            radii=radii,
         )
         start = 0
         for row, j0, j1, w_r, w_b, a, (J, K) in parts:
@@ -563,7 +574,8 @@ def rasterise_lattice(
     start = time.perf_counter()
     plan = _plan(model, lattice)
     x, y = lattice.world_centres
-    p = evaluate_points(model, x, y, dtype=dtype, device=device, threads=threads)
+    radii = _model_radii(model, lattice)
+    p = evaluate_points(model, x, y, dtype=dtype, device=device, threads=threads, radii=radii)
     density = (lattice.range_centres[:, None] * p).astype(p.dtype, copy=False)
     _check_finite(density, model)
     probability = _integrate(model, lattice, plan, dtype=dtype, device=device, threads=threads)

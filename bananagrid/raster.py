@@ -421,8 +421,13 @@ def _check_finite(values: np.ndarray, model) -> None:
 POINT_CHUNK = 65536
 
 
-def evaluate_points(model, x, y, *, dtype=np.float64, device: str = "cpu", threads=None) -> np.ndarray:
-    """Density of ``model`` at world points; ``x`` and ``y`` broadcast together."""
+def evaluate_points(model, x, y, *, dtype=np.float64, device: str = "cpu", threads=None, radii=None) -> np.ndarray:
+    """Density of ``model`` at world points; ``x`` and ``y`` broadcast together.
+
+    ``radii`` = (min, max) distance from the model's origin covering these points (default:
+    computed from them). A caller evaluating many chunks of one region passes the region's
+    range, so that a model that tabulates itself (CAT with heading noise) reuses one table.
+    """
     try:
         bx, by = np.broadcast_arrays(np.asarray(x, dtype=float), np.asarray(y, dtype=float))
     except ValueError:
@@ -438,7 +443,9 @@ def evaluate_points(model, x, y, *, dtype=np.float64, device: str = "cpu", threa
     n = bx.size
     if n == 0:
         return np.zeros(shape, dtype=np_dtype)
-    binding = _bind(model, wp, np_dtype, scalar, device, _points_radii(model, bx, by), threads)
+    if radii is None:
+        radii = _points_radii(model, bx, by)
+    binding = _bind(model, wp, np_dtype, scalar, device, radii, threads)
     xs = wp.array(np.ascontiguousarray(bx.ravel(), dtype=np_dtype), dtype=scalar, device=device)
     ys = wp.array(np.ascontiguousarray(by.ravel(), dtype=np_dtype), dtype=scalar, device=device)
     out = wp.zeros(n, dtype=scalar, device=device)
