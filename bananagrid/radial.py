@@ -89,12 +89,19 @@ def _scales(model, pose: Pose) -> tuple[float, float]:
             bound += math.dist(pose.origin, model.pose.origin)
         return natural_scales(model)[0], bound
     from .bearing import BearingFix
+    from .butterly import Butterly
 
+    if isinstance(model, Butterly):
+        s_min, s_max, _ = model.axes
+        distance = math.dist(pose.origin, tuple(model.mean))
+        return math.sqrt(s_min), distance + float(np.max(model.ranges)) + RANGE_SDS * math.sqrt(s_max)
     if isinstance(model, BearingFix):
         large, small = model.principal_variances
         distance = math.dist(pose.origin, tuple(model.fix))
         return math.sqrt(small), distance + RANGE_SDS * math.sqrt(large)
-    raise BananagridError(f"model = {type(model).__name__}: radial laws need a CAT, PolarBanana or BearingFix")
+    raise BananagridError(
+        f"model = {type(model).__name__}: radial laws need a CAT, PolarBanana, Butterly or BearingFix"
+    )
 
 
 def _ray(model, pose: Pose, radii: np.ndarray, angles: np.ndarray, threads) -> np.ndarray:
@@ -170,12 +177,12 @@ def radial_moments(model, angles, *, pose: Pose | None = None, r_max=None, threa
 
     Parameters
     ----------
-    model : CAT, PolarBanana or BearingFix
+    model : CAT, PolarBanana, Butterly or BearingFix
     angles : float or 1-D array
         Bearings theta (radians) clockwise from the pose's heading.
     pose : Pose, optional
         Origin and zero bearing of the rays; by default the model's own pose (required for a
-        BearingFix, which has none).
+        Butterly or a BearingFix, which have none).
     r_max : float, optional
         Greatest range scanned (default: v0 t + 12 sigma_a t^2 / 2 for motion models).
     threads : int, optional

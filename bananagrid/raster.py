@@ -439,13 +439,18 @@ def evaluate_points(model, x, y, *, dtype=np.float64, device: str = "cpu", threa
     wp, np_dtype, scalar = _scalar(dtype)
     device = _check_device(wp, device)
     threads = _check_threads(threads)
-    shape = bx.shape
-    n = bx.size
-    if n == 0:
-        return np.zeros(shape, dtype=np_dtype)
+    if bx.size == 0:
+        return np.zeros(bx.shape, dtype=np_dtype)
     if radii is None:
         radii = _points_radii(model, bx, by)
     binding = _bind(model, wp, np_dtype, scalar, device, radii, threads)
+    return _launch_points(wp, binding, bx, by, np_dtype, scalar, device, threads)
+
+
+def _launch_points(wp, binding: _Binding, bx, by, np_dtype, scalar, device, threads) -> np.ndarray:
+    """Run a bound points kernel over (bx, by) in chunks from the thread pool (one launch on a
+    GPU); the result has bx's shape. The kernel's module must be loaded."""
+    n = bx.size
     xs = wp.array(np.ascontiguousarray(bx.ravel(), dtype=np_dtype), dtype=scalar, device=device)
     ys = wp.array(np.ascontiguousarray(by.ravel(), dtype=np_dtype), dtype=scalar, device=device)
     out = wp.zeros(n, dtype=scalar, device=device)
@@ -456,7 +461,7 @@ def evaluate_points(model, x, y, *, dtype=np.float64, device: str = "cpu", threa
     chunks = [(a, min(n, a + POINT_CHUNK)) for a in range(0, n, POINT_CHUNK)] if device == "cpu" else [(0, n)]
     _run_bands(launch_chunk, chunks, threads)
     wp.synchronize_device(device)
-    return out.numpy().reshape(shape)
+    return out.numpy().reshape(bx.shape)
 
 
 def _angles(name: str, values) -> np.ndarray:
@@ -513,15 +518,4 @@ def interpolate_table(table, x, y, *, dtype=np.float64, device: str = "cpu", thr
     identity = wp.array(np.array([0.0, 0.0, 1.0, 0.0], dtype=np_dtype), dtype=scalar, device=device)
     binding = _bind_table(table, wp, np_dtype, scalar, device, identity, {})
     wp.load_module(binding.points_kernel.module, device=device)
-    n = bx.size
-    xs = wp.array(np.ascontiguousarray(bx.ravel(), dtype=np_dtype), dtype=scalar, device=device)
-    ys = wp.array(np.ascontiguousarray(by.ravel(), dtype=np_dtype), dtype=scalar, device=device)
-    out = wp.zeros(n, dtype=scalar, device=device)
-
-    def launch_chunk(a, b):
-        wp.launch(binding.points_kernel, dim=b - a, inputs=[xs, ys, a, *binding.params, out], device=device)
-
-    chunks = [(a, min(n, a + POINT_CHUNK)) for a in range(0, n, POINT_CHUNK)] if device == "cpu" else [(0, n)]
-    _run_bands(launch_chunk, chunks, threads)
-    wp.synchronize_device(device)
-    return out.numpy().reshape(bx.shape)
+    return _launch_points(wp, binding, bx, by, np_dtype, scalar, device, threads)

@@ -300,3 +300,14 @@ def test_radial_bad_input():
     fix = BearingFix(sensors=[(0.0, 0.0), (20000.0, 0.0)], bearings=[0.2641, -0.3909], sigmas=[0.01, 0.02])
     with pytest.raises(bg.BananagridError, match="no density along this ray"):
         radial_moments(fix, math.pi, pose=bg.Pose(origin=(0.0, 0.0)), r_max=1000.0)
+
+
+def test_radial_moments_of_an_isotropic_butterly_are_rice():
+    """About the start of an isotropic Butterly with one speed, r | theta is Rice(V t / sigma,
+    scale sigma) for every theta (Appendix B): an independent check of the ray quadrature."""
+    sigma, travel = 200.0, 1000.0
+    model = bg.Butterly(mean=(500.0, -300.0), cov=[[sigma**2, 0.0], [0.0, sigma**2]], speeds=[5.0], t=travel / 5.0)
+    got = radial_moments(model, [0.0, 1.0, -2.5], pose=bg.Pose(origin=(500.0, -300.0)))
+    law = stats.rice(travel / sigma, scale=sigma)
+    # the kernel is good to 1e-9 relative and the trapezoid rule's error is far below that
+    assert np.allclose(got.mean, law.mean(), rtol=1e-8) and np.allclose(got.sd, law.std(), rtol=1e-7)
