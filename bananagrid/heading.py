@@ -41,8 +41,9 @@ import numpy as np
 from .validate import BananagridError
 
 __all__ = [
-    "HeadingTable", "heading_table", "convolved_rows", "natural_scales", "convolve_heading",
-    "RESOLUTION", "TARGET_ERROR", "CHECK_LEVEL",
+    "HeadingTable", "heading_table", "build_heading_table", "convolved_rows", "ray_densities",
+    "natural_scales", "convolve_heading", "RESOLUTION", "BEARING_RESOLUTION", "TARGET_ERROR",
+    "CHECK_LEVEL",
 ]
 
 #: Lattice nodes per natural scale: per range SD, and per angular width of the banana on a
@@ -53,7 +54,7 @@ RESOLUTION = 8
 BEARING_RESOLUTION = 14
 #: Bearing nodes per angular width for the exact ray values (:func:`ray_densities`).
 RAY_RESOLUTION = 6
-#: Largest relative interpolation error accepted before the spacings are halved.
+#: Largest relative interpolation error accepted before the spacings are refined.
 TARGET_ERROR = 1.0e-6
 #: The error check covers the points where the density is at least this fraction of its peak.
 CHECK_LEVEL = 1.0e-8
@@ -281,8 +282,8 @@ def ray_densities(model, radii, angles, *, threads=None) -> np.ndarray:
     angles = np.asarray(angles, dtype=float)
     _, angular = natural_scales(model)
     # no interpolation here, only the FFT: a row sampled at RAY_RESOLUTION nodes per angular
-    # width has negligible spectrum at the Nyquist frequency (about exp(-2 pi^2 6^2 / 4) for a
-    # normal profile of that width)
+    # width w has negligible spectrum at the Nyquist frequency pi / dtheta = 6 pi / w (a normal
+    # profile of SD w has exp(-(6 pi)^2 / 2) ~ 1e-77 there)
     n_theta = max(16, _even(2.0 * math.pi * RAY_RESOLUTION / angular))
     theta = -math.pi + 2.0 * math.pi * np.arange(n_theta) / n_theta
     x = radii[:, None] * np.sin(theta)[None, :]
