@@ -1,4 +1,4 @@
-"""Command line: ``bananagrid run``, ``bananagrid inspect`` and ``bananagrid bench``.
+"""Command line: ``bananagrid run``, ``inspect``, ``compare``, ``sweep`` and ``bench``.
 
 Errors a user can fix (bad scene, missing file, unwritable directory) are printed as one line,
 ``bananagrid: error: MESSAGE``, with exit code 2 and no traceback.
@@ -77,10 +77,48 @@ def build_parser() -> tuple[argparse.ArgumentParser, dict[str, argparse.Argument
     inspect.add_argument("files", nargs="+", metavar="FILE.rrd", type=Path, help="recordings")
     inspect.set_defaults(handler=_inspect)
 
+    compare = sub.add_parser(
+        "compare", help="compare two layers of a scene (Tables 1 and 2, goodness, Bhattacharyya)",
+        description="Rasterise two layers of a scene on its grid, print the table of Tables 1 and 2 "
+        "of the polar-banana paper (reference mass inside each contour, largest relative error of "
+        "the model inside it), the goodness of Section 6.1 and the Bhattacharyya coefficient, and "
+        "write OUT/NAME-MODEL-vs-REFERENCE.rrd with both layers and the relative-error map.",
+    )
+    compare.add_argument("scene", metavar="SCENE.toml", type=Path, help="scene file")
+    compare.add_argument("--reference", required=True, metavar="LAYER", help="the reference layer (truth)")
+    compare.add_argument("--model", required=True, metavar="LAYER", help="the layer compared with it")
+    compare.add_argument("--t", type=float, metavar="T",
+                         help="elapsed time, s (default: the layers' own, or the scene's only time)")
+    compare.add_argument("--threshold", type=float, default=0.05, metavar="X",
+                         help="relative error that ends the goodness contour (default 0.05)")
+    compare.add_argument("--levels", metavar="L1,L2,...",
+                         help="contour levels, m^-2 (default: the scene's contour_levels)")
+    compare.add_argument("--step", type=float, metavar="S", help="override the grid step, m")
+    compare.add_argument("--out", type=Path, default=Path("out"), metavar="DIR",
+                         help="output directory, created if missing (default: ./out)")
+    compare.add_argument("--threads", type=int, metavar="N", help="CPU threads (default: every core)")
+    compare.set_defaults(handler=_compare)
+
+    sweep = sub.add_parser(
+        "sweep", help="the Figure 7 study: goodness over sigma_a t / v0 and sigma_omega t",
+        description="Goodness (Section 6.1) of the improved polar approximation, exact CAT as truth, "
+        "over n x n settings: sigma_a t / v0 in (0, 0.2], sigma_omega t in (0, 75] deg (cell-centred). "
+        "Writes OUT/sweep.rrd (the map with Figure 7's contour levels) and OUT/sweep.npz, and "
+        "checks the paper's claim (sigma_a t / v0 < 0.1 and sigma_omega t < 42 deg => >= 99.9%%).",
+    )
+    sweep.add_argument("--n", type=int, default=50, help="settings per axis (default 50; the paper used 200)")
+    sweep.add_argument("--threshold", type=float, default=0.05, metavar="X",
+                       help="relative error that ends the goodness contour (default 0.05)")
+    sweep.add_argument("--out", type=Path, default=Path("out"), metavar="DIR",
+                       help="output directory, created if missing (default: ./out)")
+    sweep.add_argument("--threads", type=int, metavar="N", help="CPU threads (default: every core)")
+    sweep.add_argument("--quiet", action="store_true", help="no progress lines on stderr")
+    sweep.set_defaults(handler=_sweep)
+
     # bench parses its own options (its --help included): everything after it is passed on.
     bench = sub.add_parser("bench", add_help=False, help="throughput against a NumPy baseline")
     bench.set_defaults(handler=None)
-    return parser, {"run": run, "inspect": inspect, "bench": bench}
+    return parser, {"run": run, "inspect": inspect, "compare": compare, "sweep": sweep, "bench": bench}
 
 
 # --- subcommands ------------------------------------------------------------------------------
@@ -126,6 +164,121 @@ def _inspect(args: argparse.Namespace) -> int:
 
     reports = [format_inspection(inspect_recording(path)) for path in args.files]
     print("\n\n".join(reports))
+    return OK
+
+
+def _out_dir(out: Path) -> None:
+    if out.exists() and not out.is_dir():
+        raise BananagridError(f"--out {out}: exists and is not a directory")
+    out.mkdir(parents=True, exist_ok=True)
+
+
+def _threads(threads) -> None:
+    if threads is not None and threads < 1:
+        raise BananagridError(f"--threads = {threads}: must be >= 1")
+
+
+def _compare(args: argparse.Namespace) -> int:
+    """``bananagrid compare``: two layers of a scene, their table and the error map."""
+    from .compare import compare
+    from .record_compare import write_compare_recording
+    from .runner import compute
+    from .scene import load_scene
+
+    _threads(args.threads)
+    scene = load_scene(args.scene)
+    if args.step is not None:
+        scene = scene.with_step(positive("--step", args.step))
+    layers = {layer.name: layer for layer in scene.layers}
+    for option in ("reference", "model"):
+        name = getattr(args, option)
+        if name not in layers:
+            raise BananagridError(f"--{option} {name}: no such layer in {scene.source} (layers: {', '.join(layers)})")
+    reference, model = layers[args.reference], layers[args.model]
+    t = _compare_time(scene, reference, model, args.t)
+    levels = scene.levels if args.levels is None else _parse_levels(args.levels)
+    plain = replace_normalise(scene)
+    ref_raster, _ = compute(plain, reference, t, threads=args.threads)
+    model_raster, _ = compute(plain, model, t, threads=args.threads)
+    comparison = compare(ref_raster, model_raster, levels=levels, threshold=args.threshold)
+    _out_dir(args.out)
+    path = args.out / f"{scene.name}-{model.name}-vs-{reference.name}.rrd"
+    from .record import recording_id_for
+
+    write_compare_recording(
+        path, recording_id=recording_id_for(f"{scene.text}\n{reference.name}\n{model.name}\n{t}\n{levels}"),
+        scene_text=scene.text, names=(reference.name, model.name), rasters=(ref_raster, model_raster),
+        comparison=comparison, levels=levels, colormap=scene.colormap,
+    )
+    print(f"{scene.name}: {model.name} against {reference.name} at t = {t:g} s on {scene.grid.nx} x {scene.grid.ny} cells "
+          f"(reference captures {ref_raster.mass:.9f} of its mass)")
+    print(comparison.table())
+    print(f"\nwrote {path}")
+    return OK
+
+
+def replace_normalise(scene):
+    """The scene with rasters left raw: the table divides by the reference's captured mass."""
+    from dataclasses import replace
+
+    return replace(scene, normalise=False)
+
+
+def _compare_time(scene, reference, model, t) -> float:
+    if t is not None:
+        return positive("--t", t)
+    times = scene.times or tuple(dict.fromkeys(layer.params.get("t") for layer in (reference, model)))
+    times = tuple(x for x in times if x is not None) or (0.0,)
+    if len(times) != 1:
+        raise BananagridError(f"--t: the layers have several elapsed times ({', '.join(f'{x:g}' for x in times)}); choose one")
+    return times[0]
+
+
+def _parse_levels(text: str) -> tuple[float, ...]:
+    try:
+        values = tuple(float(v) for v in text.split(",") if v.strip())
+    except ValueError:
+        raise BananagridError(f"--levels {text}: expected comma-separated densities (m^-2)") from None
+    if not values:
+        raise BananagridError(f"--levels {text!r}: expected at least one density (m^-2)")
+    return tuple(positive(f"--levels[{k}]", v) for k, v in enumerate(values))
+
+
+def _sweep(args: argparse.Namespace) -> int:
+    """``bananagrid sweep``: the Figure 7 study."""
+    import numpy as np
+
+    from .record import recording_id_for
+    from .record_compare import write_sweep_recording
+    from .sweep import FIGURE7_LEVELS, sweep
+
+    _threads(args.threads)
+    _out_dir(args.out)
+
+    def progress(done, total):
+        if not args.quiet:
+            print(f"\r[{done}/{total}] sigma_omega t rows", end="" if done < total else "\n", file=sys.stderr, flush=True)
+
+    result = sweep(args.n, threshold=args.threshold, threads=args.threads, progress=progress)
+    claim = result.claim()
+    rrd = args.out / "sweep.rrd"
+    npz = args.out / "sweep.npz"
+    write_sweep_recording(rrd, result, recording_id=recording_id_for(f"sweep {args.n} {args.threshold}"), levels=FIGURE7_LEVELS)
+    tmp = args.out / ".sweep.npz.partial"
+    with open(tmp, "wb") as fh:
+        np.savez(fh, alpha=result.alpha, beta=result.beta, goodness=result.goodness,
+                 threshold=result.threshold, contour_999_beta_deg=claim["contour_999_beta_deg"])
+    tmp.replace(npz)
+    print(f"{args.n} x {args.n} settings in {result.seconds:.1f} s; goodness from {result.goodness.min():.6f} "
+          f"to {result.goodness.max():.6f}")
+    verdict = "holds" if claim["claim_holds_on_grid"] else "does NOT hold"
+    print(f"claim (sigma_a t / v0 < 0.1 and sigma_omega t < 42 deg => >= 99.9%): least goodness there "
+          f"{claim['least_goodness_in_claim_region']:.6f}: {verdict} on this grid")
+    print("99.9% contour (largest sigma_omega t with goodness >= 0.999, by sigma_a t / v0): " + ", ".join(
+        f"{a:.3f}: {b:.1f} deg" for a, b in zip(result.alpha, claim["contour_999_beta_deg"])
+        if not np.isnan(b))
+    )
+    print(f"wrote {rrd}\nwrote {npz}")
     return OK
 
 

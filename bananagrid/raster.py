@@ -163,16 +163,17 @@ class _Binding:
     bands_per_thread: int = 16
 
 
-def _bind(model, wp, np_dtype, scalar, device, radii, threads) -> _Binding:
+def _bind(model, wp, np_dtype, scalar, device, radii, threads, grid: bool = False) -> _Binding:
     """Bind ``model`` to its kernels, with their module loaded on ``device``. ``radii`` is the
     range (min, max) of distances from the model's origin that will be queried: a model whose
-    kernel interpolates a table of its own (CAT with heading noise) builds it over that range."""
-    binding = _bind_kernels(model, wp, np_dtype, scalar, device, radii, threads)
+    kernel interpolates a table of its own (CAT with heading noise) builds it over that range.
+    ``grid``: the binding is for the grid kernel (Butterly's may then skip negligible cells)."""
+    binding = _bind_kernels(model, wp, np_dtype, scalar, device, radii, threads, grid)
     wp.load_module(binding.grid_kernel.module, device=device)
     return binding
 
 
-def _bind_kernels(model, wp, np_dtype, scalar, device, radii, threads) -> _Binding:
+def _bind_kernels(model, wp, np_dtype, scalar, device, radii, threads, grid=False) -> _Binding:
     from .bearing import BearingFix
     from .butterly import Butterly
     from .models import CAT, PolarBanana
@@ -180,10 +181,15 @@ def _bind_kernels(model, wp, np_dtype, scalar, device, radii, threads) -> _Bindi
     if isinstance(model, Butterly):
         from .kernels import butterly
 
-        params = wp.array(model.kernel_parameters(np_dtype), dtype=scalar, device=device)
+        from .butterly import CELL_FLOOR
+
+        params = wp.array(model.kernel_parameters(np_dtype, floors=grid), dtype=scalar, device=device)
+        notes = {"speed_nodes": model.n_speed_nodes}
+        if grid:
+            notes["zero_below"] = CELL_FLOOR * model.peak_lower_bound()
         return _Binding(
             butterly.butterly_grid, butterly.butterly_points, (params, model.n_speed_nodes),
-            "butterly.butterly_grid", {"speed_nodes": model.n_speed_nodes}, row_loop=True,
+            "butterly.butterly_grid", notes, row_loop=True,
         )
     if isinstance(model, BearingFix):
         from .kernels import bearing
@@ -345,7 +351,7 @@ def rasterise(model, grid: Grid, *, dtype=np.float64, device: str = "cpu", threa
     device = _check_device(wp, device)
     threads = _check_threads(threads)
     start = time.perf_counter()
-    binding = _bind(model, wp, np_dtype, scalar, device, _grid_radii(model, grid), threads)
+    binding = _bind(model, wp, np_dtype, scalar, device, _grid_radii(model, grid), threads, grid=True)
     xs = wp.array(grid.x.astype(np_dtype), dtype=scalar, device=device)
     ys = wp.array(grid.y.astype(np_dtype), dtype=scalar, device=device)
     if device == "cpu":
@@ -417,8 +423,10 @@ def _check_finite(values: np.ndarray, model) -> None:
         )
 
 
-#: Points per launch in evaluate_points (bounded so the pool gets several chunks).
+#: Points per launch in evaluate_points: at most POINT_CHUNK (so the pool gets several chunks),
+#: at least MIN_POINT_CHUNK (a launch costs a few microseconds).
 POINT_CHUNK = 65536
+MIN_POINT_CHUNK = 4096
 
 
 def evaluate_points(model, x, y, *, dtype=np.float64, device: str = "cpu", threads=None, radii=None) -> np.ndarray:
@@ -458,7 +466,9 @@ def _launch_points(wp, binding: _Binding, bx, by, np_dtype, scalar, device, thre
     def launch_chunk(a, b):
         wp.launch(binding.points_kernel, dim=b - a, inputs=[xs, ys, a, *binding.params, out], device=device)
 
-    chunks = [(a, min(n, a + POINT_CHUNK)) for a in range(0, n, POINT_CHUNK)] if device == "cpu" else [(0, n)]
+    # at least one chunk per thread once there is enough work to share
+    size = max(MIN_POINT_CHUNK, min(POINT_CHUNK, -(-n // threads)))
+    chunks = [(a, min(n, a + size)) for a in range(0, n, size)] if device == "cpu" else [(0, n)]
     _run_bands(launch_chunk, chunks, threads)
     wp.synchronize_device(device)
     return out.numpy().reshape(bx.shape)
