@@ -529,3 +529,76 @@ def interpolate_table(table, x, y, *, dtype=np.float64, device: str = "cpu", thr
     binding = _bind_table(table, wp, np_dtype, scalar, device, identity, {})
     wp.load_module(binding.points_kernel.module, device=device)
     return _launch_points(wp, binding, bx, by, np_dtype, scalar, device, threads)
+
+
+# --- many hypotheses at once ----------------------------------------------------------------
+
+
+def _polar_batch_params(models, wp, np_dtype, scalar, device):
+    """Per-hypothesis coefficient rows, variants, heading orders and poses of PolarBananas."""
+    from .kernels import polar
+    from .models import PolarBanana
+
+    for k, model in enumerate(models):
+        if not isinstance(model, PolarBanana):
+            raise BananagridError(f"models[{k}] = {type(model).__name__}: batches take PolarBanana hypotheses")
+    coefs = np.array(
+        [polar.coefficients(m.v0, m.t, m.sigma_a, m.sigma_omega, m.sigma_heading) for m in models], dtype=np_dtype
+    )
+    variants = np.array([_polar_variant(m.variant) for m in models], dtype=np.int32)
+    orders = np.array([m.kernel_order for m in models], dtype=np.int32)
+    poses = np.array([m.pose.as_array() for m in models], dtype=np_dtype)
+    return (
+        wp.array(coefs, dtype=scalar, device=device), wp.array(variants, dtype=wp.int32, device=device),
+        wp.array(orders, dtype=wp.int32, device=device), wp.array(poses, dtype=scalar, device=device),
+    )
+
+
+def _hypothesis_bands(n: int, threads: int, device: str) -> list[tuple[int, int]]:
+    return _bands(n, threads, 4) if device == "cpu" else [(0, n)]
+
+
+def launch_polar_batch(models, xs: np.ndarray, ys: np.ndarray, *, dtype=np.float64, device="cpu", threads=None) -> np.ndarray:
+    """Densities of PolarBanana hypotheses h on their own grids: xs[h] (nx,) and ys[h] (ny,)
+    cell centres; one kernel over (hypothesis, row), hypotheses banded over threads. Returns
+    (H, ny, nx), bit-identical to rasterising each on its own (same device function)."""
+    wp, np_dtype, scalar = _scalar(dtype)
+    device = _check_device(wp, device)
+    threads = _check_threads(threads)
+    from .kernels import polar
+
+    n = len(models)
+    params = _polar_batch_params(models, wp, np_dtype, scalar, device)
+    wp.load_module(polar.polar_batch_grid.module, device=device)
+    x_arr = wp.array(np.ascontiguousarray(xs, dtype=np_dtype), dtype=scalar, device=device)
+    y_arr = wp.array(np.ascontiguousarray(ys, dtype=np_dtype), dtype=scalar, device=device)
+    out = wp.zeros((n, ys.shape[1], xs.shape[1]), dtype=scalar, device=device)
+
+    def launch_band(a, b):
+        wp.launch(polar.polar_batch_grid, dim=(b - a, ys.shape[1]), inputs=[x_arr, y_arr, a, *params, out], device=device)
+
+    _run_bands(launch_band, _hypothesis_bands(n, threads, device), threads)
+    wp.synchronize_device(device)
+    return out.numpy()
+
+
+def launch_polar_batch_points(models, x: np.ndarray, y: np.ndarray, *, dtype=np.float64, device="cpu", threads=None) -> np.ndarray:
+    """Densities of every world point (x[k], y[k]) under every PolarBanana hypothesis: (H, N)."""
+    wp, np_dtype, scalar = _scalar(dtype)
+    device = _check_device(wp, device)
+    threads = _check_threads(threads)
+    from .kernels import polar
+
+    n = len(models)
+    params = _polar_batch_params(models, wp, np_dtype, scalar, device)
+    wp.load_module(polar.polar_batch_points.module, device=device)
+    x_arr = wp.array(np.ascontiguousarray(x, dtype=np_dtype), dtype=scalar, device=device)
+    y_arr = wp.array(np.ascontiguousarray(y, dtype=np_dtype), dtype=scalar, device=device)
+    out = wp.zeros((n, x.size), dtype=scalar, device=device)
+
+    def launch_band(a, b):
+        wp.launch(polar.polar_batch_points, dim=b - a, inputs=[x_arr, y_arr, a, *params, out], device=device)
+
+    _run_bands(launch_band, _hypothesis_bands(n, threads, device), threads)
+    wp.synchronize_device(device)
+    return out.numpy()

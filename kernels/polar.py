@@ -270,6 +270,52 @@ def polar_derivatives(
     out[k, 7] = s2
 
 
+@wp.kernel
+def polar_batch_grid(
+    xs: wp.array2d(dtype=Any),
+    ys: wp.array2d(dtype=Any),
+    h0: int,
+    coefs: wp.array2d(dtype=Any),
+    variants: wp.array(dtype=wp.int32),
+    orders: wp.array(dtype=wp.int32),
+    poses: wp.array2d(dtype=Any),
+    out: wp.array3d(dtype=Any),
+):
+    """Many hypotheses, each on its own grid: thread (h, i) fills row i of hypothesis h0 + h,
+    whose cell centres are xs[h], ys[h] and whose parameters are row h of coefs and poses."""
+    hh, i = wp.tid()
+    h = h0 + hh
+    coef = coefs[h]
+    pose = poses[h]
+    y_world = ys[h, i]
+    for j in range(xs.shape[1]):
+        x, y = world_to_local(xs[h, j], y_world, pose)
+        out[h, i, j] = polar_density_local(x, y, coef, int(variants[h]), int(orders[h]))
+
+
+@wp.kernel
+def polar_batch_points(
+    xs: wp.array(dtype=Any),
+    ys: wp.array(dtype=Any),
+    h0: int,
+    coefs: wp.array2d(dtype=Any),
+    variants: wp.array(dtype=wp.int32),
+    orders: wp.array(dtype=wp.int32),
+    poses: wp.array2d(dtype=Any),
+    out: wp.array2d(dtype=Any),
+):
+    """Every point under every hypothesis: thread h fills out[h0 + h, :] (the tracker's score of
+    every plot against every track)."""
+    h = h0 + wp.tid()
+    coef = coefs[h]
+    pose = poses[h]
+    variant = int(variants[h])
+    order = int(orders[h])
+    for k in range(xs.shape[0]):
+        x, y = world_to_local(xs[k], ys[k], pose)
+        out[h, k] = polar_density_local(x, y, coef, variant, order)
+
+
 def _register_overloads():
     for scalar in (wp.float32, wp.float64):
         vec = wp.array(dtype=scalar)
@@ -278,6 +324,10 @@ def _register_overloads():
         wp.overload(polar_points, {**common, "out": vec})
         wp.overload(polar_moments, {"phis": vec, "coef": vec, "mean": vec, "sd": vec})
         wp.overload(polar_derivatives, {"phis": vec, "coef": vec, "out": wp.array2d(dtype=scalar)})
+        mat = wp.array2d(dtype=scalar)
+        batch = {"coefs": mat, "poses": mat}
+        wp.overload(polar_batch_grid, {"xs": mat, "ys": mat, **batch, "out": wp.array3d(dtype=scalar)})
+        wp.overload(polar_batch_points, {"xs": vec, "ys": vec, **batch, "out": mat})
 
 
 _register_overloads()
