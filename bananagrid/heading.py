@@ -190,8 +190,8 @@ def build_heading_table(model, r_lo: float, r_hi: float, *, threads=None) -> Hea
     """The convolved lattice covering ranges [r_lo, r_hi] of the model's local frame, with its
     interpolation error checked. While the estimate exceeds ``TARGET_ERROR`` the spacings are
     refined by the factor the cubic stencils' h^4 error law asks for (with a 10% margin, at most
-    2), as long as the finer lattice stays within ``MAX_LATTICE_NODES``; else a warning gives
-    the estimate."""
+    2 a step), as long as the finer lattice stays within ``MAX_LATTICE_NODES`` and the factor
+    needed in all stays within 2^MAX_REFINEMENTS; else a warning gives the estimate."""
     radial, angular = natural_scales(model)
     scale = 1.0
     table = None
@@ -203,7 +203,10 @@ def build_heading_table(model, r_lo: float, r_hi: float, *, threads=None) -> Hea
         table = _build(model, r_lo, r_hi, dr, n_theta, refinement, threads)
         if table.error_estimate <= TARGET_ERROR:
             return table
-        scale *= min(2.0, REFINE_MARGIN * (table.error_estimate / TARGET_ERROR) ** 0.25)
+        needed = REFINE_MARGIN * (table.error_estimate / TARGET_ERROR) ** 0.25
+        if scale * needed > 2.0**MAX_REFINEMENTS:
+            break  # beyond what the refinements allowed can reach (the density is not smooth)
+        scale *= min(2.0, needed)
     warnings.warn(
         f"CAT with sigma_heading = {model.sigma_heading:.6g}: the heading lattice's interpolation "
         f"error estimate is {table.error_estimate:.2g} (target {TARGET_ERROR:g}) where the density "
