@@ -1,0 +1,758 @@
+"""Presence laws on angular cells and grids (Pessentheiner, Sections 7-9; ERRATA).
+
+Cell probabilities of a Gaussian mixture
+----------------------------------------
+On the depth d (the plane z = -d) a cell is the annular sector rho in [d tau0, d tau1],
+phi in [phi0, phi1] with tau = tan(pi - theta) (ERRATA: rho = -h tan(theta)). One bivariate
+normal component, whitened by the inverse Cholesky factor B (Sigma = L L^T, B = L^-1), is along
+the ray u = (cos phi, sin phi)
+
+    (rho u - mu)^T Sigma^-1 (rho u - mu) = a (rho - m)^2 + k,
+    a = |B u|^2,  m = (B u . B mu) / a,  k = ((B mu) x (B u))^2 / a  (squared distance of the
+    whitened mean from the whitened ray; no cancellation),
+
+so the polar integral of the density over rho (area element rho d rho) is closed form
+(:func:`ray_moment`): with s = a^-1/2, t = (rho - m) / s,
+
+    int_{rho0}^{rho1} rho exp(-(rho - m)^2 / (2 s^2)) d rho = s^2 J,
+    J = (m / s) sqrt(2 pi) (Phi(t1) - Phi(t0)) + exp(-t0^2 / 2) - exp(-t1^2 / 2).
+
+That makes the nadir (rho0 = 0) and the horizon (rho1 = inf) exact in rho. The phi integral of
+the remaining smooth function is Gauss-Kronrod (7, 15) on panels no wider than two angular
+length scales of the component, doubled until |K15 - G7| meets the tolerance (the G7 error is a
+conservative estimate of the K15 error). A frustum cell (depths d in [h - dh, h + dh]) adds a
+Gauss-Kronrod integral over d of the z marginal times the conditional (x, y) law given z = -d
+(a full 3x3 covariance: the conditional mean moves linearly with z), the same closed form inside.
+
+Cells cut by the region S are integrated piece by piece between host-computed breakpoints in phi
+(corners of S, circles of the cell's radii meeting S's edges), so every piece is smooth; on a
+piece the rho range is [max(rho0, rho_in(phi)), min(rho1, rho_out(phi))], the ray's chord of
+the box (:func:`ray_box`).
+
+Rectangle probabilities
+-----------------------
+:func:`bvn_upper` is Genz's BVNU (Drezner & Wesolowsky 1989 with Genz's double-precision
+changes; TVPACK): P(X > h, Y > k) for standard normals of correlation r, by 6/12/20-point
+Gauss-Legendre in the correlation (nodes passed in ``bvn_rule``).
+
+Precision: Warp has erf but no erfc; :func:`erfcx_pos` is the scaled complementary error
+function from Cephes' ndtr.c rational approximations (relative error a few ulps), so upper
+normal tails keep their relative accuracy far out.
+"""
+
+from typing import Any
+
+import warp as wp
+
+SQRT_2PI = 2.5066282746310002
+SQRT_HALF_PI = 1.2533141373155003
+INV_SQRT2 = 0.7071067811865476
+INV_2PI = 0.15915494309189535
+
+#: Below this the exp(-x^2) (1 - erf) form of erfcx is used (Cephes: erf by T/U there).
+ERFCX_SMALL = 1.0
+#: Cephes switches from the (P, Q) to the (R, S) rational function of erfcx here.
+ERFCX_LARGE = 8.0
+
+#: ray_moment integrates by 8-point Gauss-Legendre when (t1 - t0)(1 + max|t|) is below this:
+#: there the closed form's terms would cancel; the rule's error is below 1e-13 relative.
+RAY_GAUSS_SWITCH = 1.0
+
+#: Rows of ``rule`` (Gauss-Kronrod 15 and its embedded Gauss 7): nodes, Kronrod weights, Gauss
+#: weights (0 where the node is Kronrod only).
+GK_NODES = 15
+
+#: Layout of a 2-D (conditional) component row, see bananagrid.presence.
+(
+    C_LOGW, C_NORM, C_B11, C_B21, C_B22, C_V1, C_V2, C_MX, C_MY, C_SMIN, C_SMAX,
+    C_VG1, C_VG2, C_GX, C_GY, C_MZ, C_SZ,
+) = range(17)
+COMPONENT_COLUMNS = 17
+
+
+@wp.func
+def erfcx_pos(x: Any):
+    """exp(x^2) erfc(x) for x >= 0 (Cephes ndtr.c): x < 1 via erf = x T(x^2) / U(x^2);
+    1 <= x < 8: P(x) / Q(x); x >= 8: R(x) / S(x) (Q, S, U monic)."""
+    one = type(x)(1.0)
+    if x < type(x)(ERFCX_SMALL):
+        z = x * x
+        t = (((type(x)(9.60497373987051638749e0) * z + type(x)(9.00260197203842689217e1)) * z
+              + type(x)(2.23200534594684319226e3)) * z + type(x)(7.00332514112805075473e3)) * z + type(x)(5.55923013010394962768e4)
+        u = ((((z + type(x)(3.35617141647503099647e1)) * z + type(x)(5.21357949780152679795e2)) * z
+              + type(x)(4.59432382970980127987e3)) * z + type(x)(2.26290000613890934246e4)) * z + type(x)(4.92673942608635921086e4)
+        return wp.exp(z) * (one - x * t / u)
+    if x < type(x)(ERFCX_LARGE):
+        p = (((((((type(x)(2.46196981473530512524e-10) * x + type(x)(5.64189564831068821977e-1)) * x
+                  + type(x)(7.46321056442269912687e0)) * x + type(x)(4.86371970985681366614e1)) * x
+                + type(x)(1.96520832956077098242e2)) * x + type(x)(5.26445194995477358631e2)) * x
+              + type(x)(9.34528527171957607540e2)) * x + type(x)(1.02755188689515710272e3)) * x + type(x)(5.57535335369399327526e2)
+        q = (((((((x + type(x)(1.32281951154744992508e1)) * x + type(x)(8.67072140885989742329e1)) * x
+                 + type(x)(3.54937778887819891062e2)) * x + type(x)(9.75708501743205489753e2)) * x
+               + type(x)(1.82390916687909736289e3)) * x + type(x)(2.24633760818710981792e3)) * x
+             + type(x)(1.65666309194161350182e3)) * x + type(x)(5.57535340817727675546e2)
+        return p / q
+    r = ((((type(x)(5.64189583547755073984e-1) * x + type(x)(1.27536670759978104416e0)) * x
+           + type(x)(5.01905042251180477414e0)) * x + type(x)(6.16021097993053585195e0)) * x
+         + type(x)(7.40974269950448939160e0)) * x + type(x)(2.97886665372100240670e0)
+    s = (((((x + type(x)(2.26052863220117276590e0)) * x + type(x)(9.39603524938001434673e0)) * x
+           + type(x)(1.20489539808096656605e1)) * x + type(x)(1.70814450747565897222e1)) * x
+         + type(x)(9.60896809063285878198e0)) * x + type(x)(3.36907645100081516050e0)
+    return r / s
+
+
+@wp.func
+def normal_sf(t: Any):
+    """Q(t) = P(Z > t) for a standard normal, with relative accuracy in the upper tail:
+    Q(t) = erfcx(t / sqrt 2) exp(-t^2 / 2) / 2 for t >= 0, 1 - Q(-t) below."""
+    if t >= type(t)(0.0):
+        return type(t)(0.5) * erfcx_pos(t * type(t)(INV_SQRT2)) * wp.exp(type(t)(-0.5) * t * t)
+    u = -t
+    return type(t)(1.0) - type(t)(0.5) * erfcx_pos(u * type(t)(INV_SQRT2)) * wp.exp(type(t)(-0.5) * u * u)
+
+
+@wp.func
+def normal_cdf(t: Any):
+    """Phi(t) = Q(-t)."""
+    return normal_sf(-t)
+
+
+@wp.func
+def normal_interval(t0: Any, t1: Any):
+    """Phi(t1) - Phi(t0) for t0 <= t1, from the tail on the side away from zero (no
+    cancellation of two numbers near one)."""
+    if t0 >= type(t0)(0.0):
+        return normal_sf(t0) - normal_sf(t1)
+    if t1 <= type(t0)(0.0):
+        return normal_sf(-t1) - normal_sf(-t0)
+    return type(t0)(1.0) - normal_sf(-t0) - normal_sf(t1)
+
+
+@wp.func
+def mills_terms(t: Any):
+    """For t >= 0: R(t) = Q(t) / phi(t) = sqrt(pi / 2) erfcx(t / sqrt 2) (Mills' ratio) and
+    1 - t R(t) (in (0, 1]; it tends to 1 / t^2, so it keeps about 16 - 2 log10(t) digits)."""
+    r = type(t)(SQRT_HALF_PI) * erfcx_pos(t * type(t)(INV_SQRT2))
+    return r, type(t)(1.0) - t * r
+
+
+@wp.func
+def ray_moment(r0: Any, r1: Any, infinite: int, m: Any, s: Any, gl: wp.array2d(dtype=Any)):
+    """J such that  int_{r0}^{r1} rho exp(-(rho - m)^2 / (2 s^2)) d rho = s^2 J,  0 <= r0 < r1
+    (r1 = infinity when ``infinite``).
+
+    With t = (rho - m) / s:  J = int_{t0}^{t1} (m / s + t) exp(-t^2 / 2) dt.
+    * t0 >= 0: J = A(t0) - A(t1), A(t) = exp(-t^2/2) (rho R(t) / s + 1 - t R(t)), both terms
+      >= 0 (R: Mills' ratio), so the upper tail keeps relative accuracy.
+    * otherwise: J = (m / s) sqrt(2 pi) (Phi(t1) - Phi(t0)) + exp(-t0^2 / 2) - exp(-t1^2 / 2).
+    * a short interval, (t1 - t0)(1 + max|t|) < RAY_GAUSS_SWITCH, where the terms above would
+      cancel: 8-point Gauss-Legendre on the integrand itself (``gl``: nodes, weights).
+    """
+    zero = type(s)(0.0)
+    half = type(s)(0.5)
+    inv = type(s)(1.0) / s
+    c = m * inv
+    t0 = (r0 - m) * inv
+    if infinite == 0:
+        t1 = (r1 - m) * inv
+        dt = (r1 - r0) * inv
+        if dt * (type(s)(1.0) + wp.max(wp.abs(t0), wp.abs(t1))) < type(s)(RAY_GAUSS_SWITCH):
+            mid = half * (t0 + t1)
+            acc = zero
+            for i in range(8):
+                t = mid + half * dt * gl[0, i]
+                acc += gl[1, i] * (c + t) * wp.exp(-half * t * t)
+            return half * dt * acc
+    if t0 >= zero:
+        ra, ga = mills_terms(t0)
+        a0 = wp.exp(-half * t0 * t0) * (r0 * inv * ra + ga)
+        a1 = zero
+        if infinite == 0:
+            t1 = (r1 - m) * inv
+            rb, gb = mills_terms(t1)
+            a1 = wp.exp(-half * t1 * t1) * (r1 * inv * rb + gb)
+        return a0 - a1
+    e1 = zero
+    q = zero
+    if infinite == 0:
+        t1 = (r1 - m) * inv
+        e1 = wp.exp(-half * t1 * t1)
+        if t1 <= zero:
+            return c * type(s)(SQRT_2PI) * (normal_sf(-t1) - normal_sf(-t0)) + wp.exp(-half * t0 * t0) - e1
+        q = normal_sf(t1)
+    return c * type(s)(SQRT_2PI) * (type(s)(1.0) - normal_sf(-t0) - q) + wp.exp(-half * t0 * t0) - e1
+
+
+@wp.func
+def ray_box(c: Any, s: Any, box: wp.array(dtype=Any)):
+    """The chord [rho_in, rho_out] of the ray rho (c, s), rho >= 0, in the box
+    [box0, box1] x [box2, box3] (rho_in > rho_out when the ray misses it)."""
+    lo = type(c)(0.0)
+    hi = type(c)(1.0e300)
+    if c > type(c)(0.0):
+        lo = wp.max(lo, box[0] / c)
+        hi = wp.min(hi, box[1] / c)
+    elif c < type(c)(0.0):
+        lo = wp.max(lo, box[1] / c)
+        hi = wp.min(hi, box[0] / c)
+    elif box[0] > type(c)(0.0) or box[1] < type(c)(0.0):
+        hi = type(c)(-1.0)
+    if s > type(c)(0.0):
+        lo = wp.max(lo, box[2] / s)
+        hi = wp.min(hi, box[3] / s)
+    elif s < type(c)(0.0):
+        lo = wp.max(lo, box[3] / s)
+        hi = wp.min(hi, box[2] / s)
+    elif box[2] > type(c)(0.0) or box[3] < type(c)(0.0):
+        hi = type(c)(-1.0)
+    return lo, hi
+
+
+@wp.func
+def ray_mass(
+    c: Any, s: Any, lo: Any, hi: Any, infinite: int, comp: wp.array2d(dtype=Any), i: int,
+    shift: Any, gl: wp.array2d(dtype=Any),
+):
+    """Mass per radian of component row i along the ray (c, s) between rho = lo and hi:
+    norm exp(-k / 2) s^2 J (see the module notes). ``shift`` = z - mu_z moves the whitened mean
+    by shift * (B g) (conditional law given z; 0 for a planar component)."""
+    w1 = comp[i, C_B11] * c
+    w2 = comp[i, C_B21] * c + comp[i, C_B22] * s
+    v1 = comp[i, C_V1] + shift * comp[i, C_VG1]
+    v2 = comp[i, C_V2] + shift * comp[i, C_VG2]
+    a = w1 * w1 + w2 * w2
+    cross = v1 * w2 - v2 * w1
+    k = cross * cross / a
+    if k > type(c)(1400.0):  # exp(-700): below every float64 tolerance
+        return type(c)(0.0)
+    m = (w1 * v1 + w2 * v2) / a
+    sd = type(c)(1.0) / wp.sqrt(a)
+    return comp[i, C_NORM] * wp.exp(type(c)(-0.5) * k) * sd * sd * ray_moment(lo, hi, infinite, m, sd, gl)
+
+
+@wp.func
+def sector_distance(mx: Any, my: Any, r0: Any, r1: Any, infinite: int, p0: Any, p1: Any):
+    """Euclidean distance from (mx, my) to the annular sector r in [r0, r1], phi in [p0, p1]
+    (a lower bound when p1 - p0 >= pi: then only the radial distance is used)."""
+    zero = type(mx)(0.0)
+    rr = wp.sqrt(mx * mx + my * my)
+    radial = wp.max(zero, r0 - rr)
+    if infinite == 0:
+        radial = wp.max(radial, rr - r1)
+    if p1 - p0 >= type(mx)(3.141592653589793):
+        return radial
+    psi = wp.atan2(my, mx)
+    two_pi = type(mx)(6.283185307179586)
+    rel = psi - p0 - two_pi * wp.floor((psi - p0) / two_pi)  # in [0, 2 pi)
+    if rel <= p1 - p0:
+        return radial
+    best = type(mx)(1.0e300)
+    for e in range(2):
+        ang = p0
+        if e == 1:
+            ang = p1
+        ce = wp.cos(ang)
+        se = wp.sin(ang)
+        proj = mx * ce + my * se
+        lim = r1
+        if infinite != 0:
+            lim = type(mx)(1.0e300)
+        proj = wp.min(wp.max(proj, r0), lim)
+        dx = mx - proj * ce
+        dy = my - proj * se
+        best = wp.min(best, wp.sqrt(dx * dx + dy * dy))
+    return best
+
+
+@wp.func
+def panel_count(width: Any, scale: Any, max_panels: int):
+    """Panels of at most two length scales over ``width`` (at least 1, at most max_panels)."""
+    if scale <= type(width)(0.0):
+        return max_panels
+    q = width / (type(width)(2.0) * scale)
+    if q >= type(width)(max_panels):
+        return max_panels
+    return wp.max(1, int(wp.ceil(q)))
+
+
+@wp.func
+def phi_piece(
+    pa: Any, pb: Any, panels: int, rlo: Any, rhi: Any, infinite: int, cut: int,
+    box: wp.array(dtype=Any), comp: wp.array2d(dtype=Any), i: int, shift: Any,
+    rule: wp.array2d(dtype=Any), gl: wp.array2d(dtype=Any),
+):
+    """(K15, G7) of the component's ray mass over phi in [pa, pb], on ``panels`` panels."""
+    zero = type(pa)(0.0)
+    half_w = type(pa)(0.5) * (pb - pa) / type(pa)(float(panels))
+    k_sum = zero
+    g_sum = zero
+    for p in range(panels):
+        centre = pa + (type(pa)(2.0) * type(pa)(float(p)) + type(pa)(1.0)) * half_w
+        for j in range(GK_NODES):
+            phi = centre + half_w * rule[0, j]
+            c = wp.cos(phi)
+            s = wp.sin(phi)
+            lo = rlo
+            hi = rhi
+            inf = infinite
+            if cut != 0:
+                bi, bo = ray_box(c, s, box)
+                lo = wp.max(lo, bi)
+                if inf != 0 or bo < hi:
+                    hi = bo
+                    inf = 0
+            v = zero
+            if inf != 0 or hi > lo:
+                v = ray_mass(c, s, lo, hi, inf, comp, i, shift, gl)
+            k_sum += rule[1, j] * v
+            g_sum += rule[2, j] * v
+    return k_sum * half_w, g_sum * half_w
+
+
+@wp.kernel
+def plane_cells(
+    piece_start: wp.array(dtype=wp.int32),
+    piece_a: wp.array(dtype=Any),
+    piece_b: wp.array(dtype=Any),
+    cut: wp.array(dtype=wp.int32),
+    phi_lo: wp.array(dtype=Any),
+    phi_hi: wp.array(dtype=Any),
+    rho_lo: wp.array(dtype=Any),
+    rho_hi: wp.array(dtype=Any),
+    box: wp.array(dtype=Any),
+    box_far: Any,
+    comp: wp.array2d(dtype=Any),
+    n_comp: int,
+    rule: wp.array2d(dtype=Any),
+    gl: wp.array2d(dtype=Any),
+    rtol: Any,
+    log_atol: Any,
+    max_panels: int,
+    start: int,
+    prob: wp.array(dtype=Any),
+    err: wp.array(dtype=Any),
+    evals: wp.array(dtype=wp.int32),
+):
+    """Probability of plane cells ``start + tid``: the cell is the sector rho in
+    [rho_lo, rho_hi] (rho_hi < 0: unbounded, the horizon), phi in [phi_lo, phi_hi], split into
+    the pieces piece_start[c] .. piece_start[c+1] (clipped to ``box`` where ``cut``). Writes the
+    Kronrod sum over components, its error estimate sum |K15 - G7| and the panels used."""
+    cell = start + wp.tid()
+    zero = rho_lo[cell] * type(rtol)(0.0)
+    r0 = rho_lo[cell]
+    r1 = rho_hi[cell]
+    infinite = int(0)
+    if r1 < zero:
+        infinite = 1
+    clip = cut[cell]
+    p0 = phi_lo[cell]
+    p1 = phi_hi[cell]
+    total = zero
+    error = zero
+    used = int(0)
+    reach = type(rtol)(1.0e300)
+    if infinite == 0:
+        reach = r1
+    if clip != 0:
+        reach = wp.min(reach, box_far)
+    for i in range(n_comp):
+        # whole-cell skip: the component's mass beyond Euclidean distance D is below
+        # exp(-(D / sigma_max)^2 / 2) (the Mahalanobis distance is at least D / sigma_max)
+        dist = sector_distance(comp[i, C_MX], comp[i, C_MY], r0, r1, infinite, p0, p1) / comp[i, C_SMAX]
+        if comp[i, C_LOGW] - type(rtol)(0.5) * dist * dist < log_atol:
+            continue
+        mu = wp.sqrt(comp[i, C_MX] * comp[i, C_MX] + comp[i, C_MY] * comp[i, C_MY])
+        rel = wp.min(reach, mu + type(rtol)(9.0) * comp[i, C_SMAX])
+        scale = type(rtol)(1.0e300)
+        if rel > zero:
+            scale = comp[i, C_SMIN] / rel
+        atol = wp.exp(log_atol)
+        mult = int(1)
+        while True:
+            k_tot = zero
+            g_tot = zero
+            n_used = int(0)
+            for q in range(piece_start[cell], piece_start[cell + 1]):
+                pa = piece_a[q]
+                pb = piece_b[q]
+                panels = wp.min(max_panels, panel_count(pb - pa, scale, max_panels) * mult)
+                kk, gg = phi_piece(pa, pb, panels, r0, r1, infinite, clip, box, comp, i, zero, rule, gl)
+                k_tot += kk
+                g_tot += gg
+                n_used += panels
+            e = wp.abs(k_tot - g_tot)
+            if e <= rtol * wp.abs(k_tot) + atol or mult >= max_panels:
+                total += k_tot
+                error += e
+                used += n_used
+                break
+            mult = mult * 4
+    prob[cell] = total
+    err[cell] = error
+    evals[cell] = used
+
+
+@wp.func
+def depth_piece(
+    da: Any, db: Any, panels: int, c: Any, s: Any, t0: Any, t1: Any, infinite: int,
+    chord_lo: Any, chord_hi: Any, comp: wp.array2d(dtype=Any), i: int,
+    rule: wp.array2d(dtype=Any), gl: wp.array2d(dtype=Any),
+):
+    """(K15, G7) over depth d in [da, db] of  g(-d; mu_z, sigma_z) x (conditional ray mass
+    with rho in [max(d t0, chord_lo), min(d t1, chord_hi)])."""
+    zero = type(da)(0.0)
+    half_w = type(da)(0.5) * (db - da) / type(da)(float(panels))
+    k_sum = zero
+    g_sum = zero
+    for p in range(panels):
+        centre = da + (type(da)(2.0) * type(da)(float(p)) + type(da)(1.0)) * half_w
+        for j in range(GK_NODES):
+            d = centre + half_w * rule[0, j]
+            lo = wp.max(d * t0, chord_lo)
+            hi = chord_hi
+            inf = infinite
+            if infinite == 0:
+                hi = wp.min(d * t1, chord_hi)
+            elif chord_hi < type(da)(1.0e299):
+                inf = 0
+            v = zero
+            if inf != 0 or hi > lo:
+                z = -d
+                u = (z - comp[i, C_MZ]) / comp[i, C_SZ]
+                gz = type(da)(0.3989422804014327) / comp[i, C_SZ] * wp.exp(type(da)(-0.5) * u * u)
+                v = gz * ray_mass(c, s, lo, hi, inf, comp, i, z - comp[i, C_MZ], gl)
+            k_sum += rule[1, j] * v
+            g_sum += rule[2, j] * v
+    return k_sum * half_w, g_sum * half_w
+
+
+@wp.func
+def depth_integral(
+    d0: Any, d1: Any, d_panels: int, c: Any, s: Any, t0: Any, t1: Any, infinite: int,
+    chord_lo: Any, chord_hi: Any, comp: wp.array2d(dtype=Any), i: int,
+    rule: wp.array2d(dtype=Any), gl: wp.array2d(dtype=Any),
+):
+    """(K, G) over d in [d0, d1], split where the rho range changes its active bound
+    (d t0 or d t1 crossing the chord ends: up to four kinks)."""
+    zero = type(d0)(0.0)
+    k_tot = zero
+    g_tot = zero
+    cur = d0
+    while cur < d1:
+        nxt = d1
+        for e in range(4):
+            num = chord_lo
+            if e >= 2:
+                num = chord_hi
+            den = t0
+            if e == 1 or e == 3:
+                den = t1
+            if den > zero and (e < 2 or chord_hi < type(d0)(1.0e299)):
+                if e % 2 == 0 or infinite == 0:
+                    cand = num / den
+                    if cand > cur and cand < nxt:
+                        nxt = cand
+        n = wp.max(1, int(wp.ceil(type(d0)(float(d_panels)) * (nxt - cur) / (d1 - d0))))
+        kk, gg = depth_piece(cur, nxt, n, c, s, t0, t1, infinite, chord_lo, chord_hi, comp, i, rule, gl)
+        k_tot += kk
+        g_tot += gg
+        cur = nxt
+    return k_tot, g_tot
+
+
+@wp.kernel
+def frustum_cells(
+    piece_start: wp.array(dtype=wp.int32),
+    piece_a: wp.array(dtype=Any),
+    piece_b: wp.array(dtype=Any),
+    cut: wp.array(dtype=wp.int32),
+    phi_lo: wp.array(dtype=Any),
+    phi_hi: wp.array(dtype=Any),
+    tau_lo: wp.array(dtype=Any),
+    tau_hi: wp.array(dtype=Any),
+    depth_lo: Any,
+    depth_hi: Any,
+    box: wp.array(dtype=Any),
+    box_far: Any,
+    comp: wp.array2d(dtype=Any),
+    n_comp: int,
+    rule: wp.array2d(dtype=Any),
+    gl: wp.array2d(dtype=Any),
+    rtol: Any,
+    log_atol: Any,
+    max_panels: int,
+    start: int,
+    prob: wp.array(dtype=Any),
+    err: wp.array(dtype=Any),
+    evals: wp.array(dtype=wp.int32),
+):
+    """Probability of frustum cells: depth d in [depth_lo, depth_hi], rho in [d tau_lo,
+    d tau_hi] (tau_hi < 0: unbounded), phi in the cell's pieces. Tensor Gauss-Kronrod in
+    (phi, d) with the closed-form rho integral inside; error estimate |KK - GG|."""
+    cell = start + wp.tid()
+    zero = tau_lo[cell] * type(rtol)(0.0)
+    t0 = tau_lo[cell]
+    t1 = tau_hi[cell]
+    infinite = int(0)
+    if t1 < zero:
+        infinite = 1
+    clip = cut[cell]
+    p0 = phi_lo[cell]
+    p1 = phi_hi[cell]
+    total = zero
+    error = zero
+    used = int(0)
+    reach = type(rtol)(1.0e300)
+    if infinite == 0:
+        reach = depth_hi * t1
+    if clip != 0:
+        reach = wp.min(reach, box_far)
+    r_far = depth_hi * t1
+    for i in range(n_comp):
+        # skip on the (x, y) marginal (mean C_MX, C_MY; largest SD C_SMAX)
+        dist = sector_distance(comp[i, C_MX], comp[i, C_MY], depth_lo * t0, r_far, infinite, p0, p1) / comp[i, C_SMAX]
+        if comp[i, C_LOGW] - type(rtol)(0.5) * dist * dist < log_atol:
+            continue
+        mu = wp.sqrt(comp[i, C_MX] * comp[i, C_MX] + comp[i, C_MY] * comp[i, C_MY])
+        rel = wp.min(reach, mu + type(rtol)(9.0) * comp[i, C_SMAX])
+        scale = type(rtol)(1.0e300)
+        if rel > zero:
+            scale = comp[i, C_SMIN] / rel
+        # depth scale: the z law's SD; the depth change that moves the whitened conditional
+        # mean by one (1 / |B g|); the one that moves the outer arc (rate tau_hi, capped by the
+        # reach) by the smallest conditional SD
+        d_scale = comp[i, C_SZ]
+        bg = wp.sqrt(comp[i, C_VG1] * comp[i, C_VG1] + comp[i, C_VG2] * comp[i, C_VG2])
+        if bg > zero:
+            d_scale = wp.min(d_scale, type(rtol)(1.0) / bg)
+        arc_rate = rel / depth_lo
+        if infinite == 0:
+            arc_rate = wp.min(arc_rate, t1)
+        if arc_rate > zero:
+            d_scale = wp.min(d_scale, comp[i, C_SMIN] / arc_rate)
+        atol = wp.exp(log_atol)
+        mult = int(1)
+        while True:
+            k_tot = zero
+            g_tot = zero
+            n_used = int(0)
+            d_panels = wp.min(max_panels, panel_count(depth_hi - depth_lo, d_scale, max_panels) * mult)
+            for q in range(piece_start[cell], piece_start[cell + 1]):
+                pa = piece_a[q]
+                pb = piece_b[q]
+                panels = wp.min(max_panels, panel_count(pb - pa, scale, max_panels) * mult)
+                half_w = type(rtol)(0.5) * (pb - pa) / type(rtol)(float(panels))
+                for p in range(panels):
+                    centre = pa + (type(rtol)(2.0) * type(rtol)(float(p)) + type(rtol)(1.0)) * half_w
+                    for j in range(GK_NODES):
+                        phi = centre + half_w * rule[0, j]
+                        c = wp.cos(phi)
+                        s = wp.sin(phi)
+                        chord_lo = zero
+                        chord_hi = type(rtol)(1.0e300)
+                        if clip != 0:
+                            chord_lo, chord_hi = ray_box(c, s, box)
+                        if chord_hi > chord_lo:
+                            kd, gd = depth_integral(
+                                depth_lo, depth_hi, d_panels, c, s, t0, t1, infinite, chord_lo, chord_hi,
+                                comp, i, rule, gl,
+                            )
+                            k_tot += half_w * rule[1, j] * kd
+                            g_tot += half_w * rule[2, j] * gd
+                n_used += panels * d_panels
+            e = wp.abs(k_tot - g_tot)
+            if e <= rtol * wp.abs(k_tot) + atol or mult >= max_panels:
+                total += k_tot
+                error += e
+                used += n_used
+                break
+            mult = mult * 4
+    prob[cell] = total
+    err[cell] = error
+    evals[cell] = used
+
+
+# --------------------------------------------------------------------------------------------
+# Dense grids: density at centres and exact rectangle probabilities
+# --------------------------------------------------------------------------------------------
+
+
+@wp.func
+def bvn_upper(h: Any, k: Any, r: Any, bvn_rule: wp.array2d(dtype=Any)):
+    """P(X > h, Y > k) for standard normals of correlation r (Genz's BVNU, TVPACK).
+
+    ``bvn_rule`` rows (0, 1), (2, 3), (4, 5): nodes and weights of the 6-, 12- and 20-point
+    Gauss-Legendre rules on [-1, 1] (zero-padded to 20 columns)."""
+    zero = type(h)(0.0)
+    one = type(h)(1.0)
+    two_pi = type(h)(6.283185307179586)
+    row = 4
+    n = 20
+    if wp.abs(r) < type(h)(0.3):
+        row = 0
+        n = 6
+    elif wp.abs(r) < type(h)(0.75):
+        row = 2
+        n = 12
+    hk = h * k
+    bvn = zero
+    if wp.abs(r) < type(h)(0.925):
+        if wp.abs(r) > zero:
+            hs = type(h)(0.5) * (h * h + k * k)
+            asr = wp.asin(r)
+            for i in range(n):
+                sn = wp.sin(type(h)(0.5) * asr * (bvn_rule[row, i] + one))
+                bvn += bvn_rule[row + 1, i] * wp.exp((sn * hk - hs) / (one - sn * sn))
+            bvn = bvn * asr / (type(h)(2.0) * two_pi)
+        return bvn + normal_sf(h) * normal_sf(k)
+    kk = k
+    if r < zero:
+        kk = -k
+        hk = -hk
+    if wp.abs(r) < one:
+        ass = (one - r) * (one + r)
+        a = wp.sqrt(ass)
+        bs = (h - kk) * (h - kk)
+        c = (type(h)(4.0) - hk) * type(h)(0.125)
+        d = (type(h)(12.0) - hk) * type(h)(0.0625)
+        asr = type(h)(-0.5) * (bs / ass + hk)
+        if asr > type(h)(-100.0):
+            bvn = a * wp.exp(asr) * (one - c * (bs - ass) * (one - d * bs / type(h)(5.0)) / type(h)(3.0)
+                                     + c * d * ass * ass / type(h)(5.0))
+        if -hk < type(h)(100.0):
+            b = wp.sqrt(bs)
+            bvn -= (wp.exp(type(h)(-0.5) * hk) * type(h)(SQRT_2PI) * normal_cdf(-b / a) * b
+                    * (one - c * bs * (one - d * bs / type(h)(5.0)) / type(h)(3.0)))
+        a = type(h)(0.5) * a
+        for i in range(n):
+            xs = a * (bvn_rule[row, i] + one)
+            xs = xs * xs
+            rs = wp.sqrt(one - xs)
+            asr2 = type(h)(-0.5) * (bs / xs + hk)
+            if asr2 > type(h)(-100.0):
+                bvn += a * bvn_rule[row + 1, i] * wp.exp(asr2) * (
+                    wp.exp(-hk * (one - rs) / (type(h)(2.0) * (one + rs))) / rs - (one + c * xs * (one + d * xs)))
+        bvn = -bvn / two_pi
+    if r > zero:
+        return bvn + normal_sf(wp.max(h, kk))
+    bvn = -bvn
+    if kk > h:
+        bvn += normal_interval(h, kk)
+    return bvn
+
+
+@wp.func
+def bvn_rectangle(x0: Any, x1: Any, y0: Any, y1: Any, r: Any, bvn_rule: wp.array2d(dtype=Any)):
+    """P(x0 < X < x1, y0 < Y < y1) for standard normals of correlation r, by inclusion and
+    exclusion of upper orthants, after reflecting each axis so that the rectangle lies on the
+    far side of its centre's sign (the orthant values are then tail values: small, with
+    relative accuracy)."""
+    rr = r
+    a0 = x0
+    a1 = x1
+    b0 = y0
+    b1 = y1
+    if a0 + a1 < type(x0)(0.0):
+        a0 = -x1
+        a1 = -x0
+        rr = -rr
+    if b0 + b1 < type(x0)(0.0):
+        b0 = -y1
+        b1 = -y0
+        rr = -rr
+    return (bvn_upper(a0, b0, rr, bvn_rule) - bvn_upper(a1, b0, rr, bvn_rule)
+            - bvn_upper(a0, b1, rr, bvn_rule) + bvn_upper(a1, b1, rr, bvn_rule))
+
+
+#: Layout of a grid component row: log weight unused here, weight, mean x, mean y, sd x, sd y,
+#: correlation, and the whitening (B11, B21, B22) and density normaliser w / (2 pi det L).
+(G_W, G_MX, G_MY, G_SX, G_SY, G_R, G_B11, G_B21, G_B22, G_NORM) = range(10)
+GRID_COLUMNS = 10
+
+
+@wp.kernel
+def grid_cells(
+    x_edges: wp.array(dtype=Any),
+    y_edges: wp.array(dtype=Any),
+    row0: int,
+    comp: wp.array2d(dtype=Any),
+    n_comp: int,
+    bvn_rule: wp.array2d(dtype=Any),
+    density: wp.array2d(dtype=Any),
+    prob: wp.array2d(dtype=Any),
+):
+    """Row ``row0 + tid``: the mixture's density at each cell centre and the exact probability
+    of each rectangle [x_edges[j], x_edges[j+1]] x [y_edges[i], y_edges[i+1]]."""
+    i = row0 + wp.tid()
+    ya = y_edges[i]
+    yb = y_edges[i + 1]
+    yc = type(ya)(0.5) * (ya + yb)
+    for j in range(x_edges.shape[0] - 1):
+        xa = x_edges[j]
+        xb = x_edges[j + 1]
+        xc = type(ya)(0.5) * (xa + xb)
+        dens = type(ya)(0.0)
+        p = type(ya)(0.0)
+        for c in range(n_comp):
+            dx = xc - comp[c, G_MX]
+            dy = yc - comp[c, G_MY]
+            u1 = comp[c, G_B11] * dx
+            u2 = comp[c, G_B21] * dx + comp[c, G_B22] * dy
+            dens += comp[c, G_NORM] * wp.exp(type(ya)(-0.5) * (u1 * u1 + u2 * u2))
+            sx = comp[c, G_SX]
+            sy = comp[c, G_SY]
+            p += comp[c, G_W] * bvn_rectangle(
+                (xa - comp[c, G_MX]) / sx, (xb - comp[c, G_MX]) / sx,
+                (ya - comp[c, G_MY]) / sy, (yb - comp[c, G_MY]) / sy, comp[c, G_R], bvn_rule,
+            )
+        density[i, j] = dens
+        prob[i, j] = p
+
+
+@wp.kernel
+def rectangles(
+    lims: wp.array2d(dtype=Any),
+    bvn_rule: wp.array2d(dtype=Any),
+    out: wp.array(dtype=Any),
+):
+    """P(l0 < X < l1, l2 < Y < l3) for standard normals of correlation l4, per row of ``lims``."""
+    k = wp.tid()
+    out[k] = bvn_rectangle(lims[k, 0], lims[k, 1], lims[k, 2], lims[k, 3], lims[k, 4], bvn_rule)
+
+
+@wp.kernel
+def special_functions(
+    xs: wp.array(dtype=Any),
+    gl: wp.array2d(dtype=Any),
+    out: wp.array2d(dtype=Any),
+):
+    """The device helpers at xs (for tests): erfcx(|x|), Q(x), Phi(x) - Phi(x - 1), Mills'
+    1 - x R(x) for |x|, and J of ray_moment on [0, 1] (m = x, s = 1), on [|x|, inf)."""
+    k = wp.tid()
+    x = xs[k]
+    ax = wp.abs(x)
+    out[k, 0] = erfcx_pos(ax)
+    out[k, 1] = normal_sf(x)
+    out[k, 2] = normal_interval(x - type(x)(1.0), x)
+    r, g = mills_terms(ax)
+    out[k, 3] = g
+    out[k, 4] = ray_moment(type(x)(0.0), type(x)(1.0), 0, x, type(x)(1.0), gl)
+    out[k, 5] = ray_moment(ax, type(x)(0.0), 1, type(x)(0.0), type(x)(1.0), gl)
+
+
+def _register_overloads():
+    for scalar in (wp.float32, wp.float64):
+        vec = wp.array(dtype=scalar)
+        mat = wp.array2d(dtype=scalar)
+        cells = {
+            "piece_a": vec, "piece_b": vec, "phi_lo": vec, "phi_hi": vec, "box": vec, "box_far": scalar,
+            "comp": mat, "rule": mat, "gl": mat, "rtol": scalar, "log_atol": scalar, "prob": vec, "err": vec,
+        }
+        wp.overload(plane_cells, {**cells, "rho_lo": vec, "rho_hi": vec})
+        wp.overload(frustum_cells, {**cells, "tau_lo": vec, "tau_hi": vec, "depth_lo": scalar, "depth_hi": scalar})
+        wp.overload(grid_cells, {"x_edges": vec, "y_edges": vec, "comp": mat, "bvn_rule": mat, "density": mat, "prob": mat})
+        wp.overload(rectangles, {"lims": mat, "bvn_rule": mat, "out": vec})
+        wp.overload(special_functions, {"xs": vec, "gl": mat, "out": mat})
+
+
+_register_overloads()
