@@ -415,9 +415,10 @@ class CellMap:
     def degree_indices(self) -> tuple[np.ndarray, ...]:
         """The directions as integer degrees, uint16 (the paper's 16-bit angles, Section 2)."""
         out = []
-        for name, values in (("azimuth", self.lattice.azimuths), ("elevation", self.lattice.elevations)):
-            if name == "elevation" and self.lattice.geometry == "line":
-                continue
+        axes = [("azimuth", self.lattice.azimuths)]
+        if self.lattice.geometry != "line":  # a line has azimuths only (no elevations to read)
+            axes.append(("elevation", self.lattice.elevations))
+        for name, values in axes:
             deg = np.degrees(values)
             rounded = np.round(deg)
             if np.max(np.abs(deg - rounded), initial=0.0) > 1e-6:

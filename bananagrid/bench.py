@@ -2,12 +2,15 @@
 
 The banana kernels rasterise the Figure 1 frame of the polar-banana paper (x in [-3000, 3000] m,
 y in [-200, 3400] m, 4 m: 1500 x 900 cells), the bearing-fix kernel a 2048 x 2048 grid about
-issue 6's coastal fix, in float64 and float32, on one thread and on all cores; each kernel's
-NumPy float64 twin in :mod:`bananagrid.baseline` runs on the same cells. With the bearing
-kernel, the containment probability of 10^6 geometries is timed too. Times are
-the best of ``--repeat`` runs after a warm-up (the first Warp compile is not timed). The exact
-CAT baseline takes about a minute on the full grid, so by default it runs on every 10th row
-and its time is scaled to the full grid (``--baseline-stride 1`` runs it all).
+issue 6's coastal fix, the Butterly kernel (``butterly-rN``) a 2048 x 2048 grid framed about
+the ring +- 6 sigma_max of three speeds whose largest travelled range is N sigma_min (a
+correlated start, :data:`BUTTERLY_START`), in float64 and float32, on one thread and on all
+cores; each kernel's NumPy float64 twin (:mod:`bananagrid.baseline`,
+:func:`bananagrid.butterly.numpy_density`) runs on the same cells. With the bearing kernel, the
+containment probability of 10^6 geometries is timed too. Times are the best of ``--repeat``
+runs after a warm-up (the first Warp compile is not timed). The exact CAT and the Butterly
+baselines take about a minute or more on the full grid, so by default they run on every 10th
+row and their time is scaled to the full grid (``--baseline-stride 1`` runs them all).
 """
 
 from __future__ import annotations
@@ -26,6 +29,7 @@ import numpy as np
 
 from . import baseline
 from .bearing import BearingFix, bearing_to, two_bearing_variances
+from .butterly import Butterly, numpy_density
 from .containment import containment
 from .grid import Grid
 from .models import CAT, PolarBanana
@@ -39,6 +43,28 @@ FIG1_BOUNDS = dict(x=(-3000.0, 3000.0), y=(-200.0, 3400.0))
 COASTAL = dict(sensors=[(0.0, 0.0), (20000.0, 0.0)], bearings=[0.2641, -0.3909], sigmas=[0.01, 0.02])
 COASTAL_SIDE = 2048
 
+#: Butterly rows: a start 100 m x 250 m (1 sigma) at rho = 0.5, three speeds travelling
+#: 0.5, 0.75 and 1 times N sigma_min in an hour, weights 0.2, 0.5, 0.3.
+BUTTERLY_START = dict(mean=(1000.0, -500.0), sx=100.0, sy=250.0, rho=0.5)
+BUTTERLY_FRACTIONS, BUTTERLY_WEIGHTS, BUTTERLY_T = (0.5, 0.75, 1.0), (0.2, 0.5, 0.3), 3600.0
+BUTTERLY_RATIOS = (1, 10, 100, 1000)
+#: Side of the Butterly grid (cells).
+BUTTERLY_SIDE = 2048
+#: A Butterly baseline (on its rows) quicker than this many seconds is also timed best of
+#: ``--repeat``, like the kernels; slower ones once (a few percent of noise against minutes).
+BASELINE_REPEAT_BELOW = 5.0
+
+
+def butterly_model(ratio: float) -> Butterly:
+    """The ``butterly-rN`` model: largest travelled range ``ratio`` sigma_min."""
+    sx, sy, rho = BUTTERLY_START["sx"], BUTTERLY_START["sy"], BUTTERLY_START["rho"]
+    cov = [[sx * sx, rho * sx * sy], [rho * sx * sy, sy * sy]]
+    s_min = math.sqrt(0.5 * (sx * sx + sy * sy) - math.hypot(0.5 * (sx * sx - sy * sy), rho * sx * sy))
+    v = ratio * s_min / BUTTERLY_T
+    return Butterly(mean=BUTTERLY_START["mean"], cov=cov, speeds=[f * v for f in BUTTERLY_FRACTIONS],
+                    weights=list(BUTTERLY_WEIGHTS), t=BUTTERLY_T)
+
+
 KERNELS = {
     "cat": lambda: CAT(**FIG1),
     # Figure 8's widest heading error, sigma_0 = pi/15 (issue 3: at most 3x the plain CAT)
@@ -46,6 +72,7 @@ KERNELS = {
     "polar-rough": lambda: PolarBanana(**FIG1, variant="rough"),
     "polar-improved": lambda: PolarBanana(**FIG1, variant="improved"),
     "bearing-exact": lambda: BearingFix(**COASTAL),
+    **{f"butterly-r{n}": (lambda n=n: butterly_model(n)) for n in BUTTERLY_RATIOS},
 }
 
 #: Geometries in the containment timing (issue 6: 10^6 in at most 1 s).
@@ -56,6 +83,11 @@ def _grid_for(name: str, step: float) -> Grid:
     """The Figure 1 frame at ``step`` for the banana kernels; 2048^2 about the fix for bearings."""
     if name.startswith("bearing"):
         return Grid.from_bounds(x=(0.0, 16000.0), y=(22000.0, 38000.0), dx=16000.0 / COASTAL_SIDE, dy=16000.0 / COASTAL_SIDE)
+    if name.startswith("butterly"):
+        model = KERNELS[name]()
+        half = float(model.ranges.max()) + 6.0 * math.sqrt(model.axes[1])
+        (mx, my), side = model.mean, 2.0 * half / BUTTERLY_SIDE
+        return Grid.from_bounds(x=(mx - half, mx + half), y=(my - half, my + half), dx=side, dy=side)
     return Grid.from_bounds(**FIG1_BOUNDS, step=step)
 
 #: Side of the square float32 raster whose peak memory is reported (issue 2: under 1 GiB).
@@ -72,10 +104,12 @@ def _best_of(repeat: int, fn) -> float:
 
 
 def _baseline_seconds(name: str, model, grid: Grid, stride: int, repeat: int) -> float:
-    """NumPy float64 time for the whole grid (scaled from every ``stride``-th row for CAT). The
-    heading-convolved CAT has no NumPy twin: its baseline is the plain CAT's."""
+    """NumPy float64 time for the whole grid (scaled from every ``stride``-th row for CAT and
+    Butterly). The heading-convolved CAT has no NumPy twin: its baseline is the plain CAT's.
+    Butterly's twin skips the same negligible cells as the kernel (``floors``)."""
     cat = name.startswith("cat")
-    rows = grid.y[::stride] if cat else grid.y
+    butterly = name.startswith("butterly")
+    rows = grid.y[::stride] if cat or butterly else grid.y
     xx, yy = np.meshgrid(grid.x, rows)
     if cat:
         nodes = _cat_nodes(model)
@@ -83,6 +117,12 @@ def _baseline_seconds(name: str, model, grid: Grid, stride: int, repeat: int) ->
         seconds = _best_of(1 if stride > 1 else repeat, fn)
     elif name.startswith("bearing"):
         seconds = _best_of(repeat, lambda: baseline.bearing_density(xx, yy, model))
+    elif butterly:
+        model.peak_lower_bound()  # computed once per model, by the kernel: not NumPy's time
+        fn = lambda: numpy_density(model, xx, yy, floors=True)
+        seconds = _best_of(1, fn)
+        if seconds < BASELINE_REPEAT_BELOW:  # best of ``repeat`` too where that is cheap
+            seconds = min(seconds, _best_of(repeat - 1, fn))
     else:
         fn = lambda: baseline.polar_density(xx, yy, model.v0, model.t, model.sigma_a, model.sigma_omega, model.variant)
         seconds = _best_of(repeat, fn)
@@ -178,7 +218,7 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--step", type=float, default=4.0, help="grid step in metres over the Figure 1 frame (default 4: 1500 x 900 cells)")
     p.add_argument("--threads", type=int, default=default_threads(), help="threads for the all-cores rows (default: every usable core)")
     p.add_argument("--repeat", type=int, default=3, help="timed runs per row; the best is reported (default 3)")
-    p.add_argument("--baseline-stride", type=int, default=10, help="run the CAT NumPy baseline on every N-th row and scale (default 10; 1 = all rows)")
+    p.add_argument("--baseline-stride", type=int, default=10, help="run the CAT and Butterly NumPy baselines on every N-th row and scale (default 10; 1 = all rows)")
     p.add_argument("--no-memory", action="store_true", help=f"skip the peak-memory probe ({MEMORY_SIDE} x {MEMORY_SIDE} float32)")
     p.add_argument("--json", metavar="FILE", help="also write the records as JSON to FILE")
     return p
@@ -202,9 +242,10 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     print(f"machine: {machine()}")
     print(f"grids: Figure 1 frame at {args.step:g} m (banana kernels), {COASTAL_SIDE} x {COASTAL_SIDE} "
-          f"about the coastal fix (bearing); baseline: NumPy {np.__version__} float64 (cat-heading: the "
-          "plain CAT's, as it has no NumPy twin)"
-          + (f", CAT on every {args.baseline_stride}th row, scaled" if args.baseline_stride > 1 else ""))
+          f"about the coastal fix (bearing), {BUTTERLY_SIDE} x {BUTTERLY_SIDE} about the ring +- 6 sigma "
+          f"(butterly-rN: three speeds, largest range N sigma_min); baseline: NumPy {np.__version__} float64 "
+          "(cat-heading: the plain CAT's, as it has no NumPy twin)"
+          + (f", CAT and Butterly on every {args.baseline_stride}th row, scaled" if args.baseline_stride > 1 else ""))
     print(HEADER)
     records = run(kernels, args.step, args.threads, args.repeat, args.baseline_stride)
     result = {"machine": machine(), "step": args.step, "records": records}

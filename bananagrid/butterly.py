@@ -54,9 +54,22 @@ MANY_SPEED_NODES = 2048
 #: Hard limit on speed nodes.
 MAX_SPEED_NODES = 200_000
 
+#: Rasterising a grid, a cell is set to 0 where the kernel proves the density is below
+#: CELL_FLOOR times its maximum (10x below the 1e-12 under which relative accuracy is not
+#: promised), and a speed is left out of a cell's sum where its own bound is below SPEED_FLOOR
+#: times the maximum over the number of speeds: together at most 1e-22 of the maximum, a
+#: relative 1e-10 wherever the density exceeds 1e-12 of its maximum.
+CELL_FLOOR = 1e-13
+SPEED_FLOOR = 1e-22
+
 #: Relative tolerance of the kernel's trapezoid rule (its node count, see kernels/butterly.py)
 #: and the relative size below which the walk drops a node, per kernel precision.
 _KERNEL_TOL = {np.dtype(np.float64): (1e-12, 1e-15, 1e-8), np.dtype(np.float32): (1e-7, 1e-8, 1e-4)}
+#: The grid kernel's row recurrence (kernels/butterly.py, row_runs), per kernel precision: the
+#: longest run of cells between exact restarts (rounding about RUN_CELLS^2 eps / 2: 9e-13 in
+#: float64, 8e-6 in float32) and the largest change of a term's exponent over a run (far from
+#: overflow: float64 exp overflows at 709, float32 at 88).
+_RUN = {np.dtype(np.float64): (128, 60.0), np.dtype(np.float32): (16, 20.0)}
 
 
 def covariance_axes(cov: np.ndarray) -> tuple[float, float, float]:
@@ -290,7 +303,10 @@ class Butterly:
     -----
     Density (per m^2) at u: sum_i w_i int N(u - V_i t e(c); mean, cov) p(c) dc, e(c) =
     (sin c, cos c). ``rasterise`` and :meth:`pdf` compute it with a relative error below 1e-9
-    (float64) for any r / sigma_min, far into the tails. ``speed_nodes`` holds the discrete
+    (float64) for any r / sigma_min: :meth:`pdf` far into the tails (until it underflows),
+    ``rasterise`` wherever the density exceeds 1e-12 of its maximum; a grid's cells that the
+    kernel proves below CELL_FLOOR = 1e-13 of the maximum are set to 0 (provenance
+    ``zero_below``, per m^2). ``speed_nodes`` holds the discrete
     (V_i, w_i) the kernel integrates: the speeds given, or a continuous law's quadrature nodes.
     """
 
@@ -389,8 +405,16 @@ class Butterly:
     def n_speed_nodes(self) -> int:
         return int(self._nodes[0].size)
 
-    def kernel_parameters(self, dtype=np.float64) -> np.ndarray:
-        """The kernel's parameter array (layout in ``kernels/butterly.py``)."""
+    def kernel_parameters(self, dtype=np.float64, *, floors: bool = False) -> np.ndarray:
+        """The kernel's parameter array (layout in ``kernels/butterly.py``).
+
+        With ``floors`` (rasterising a grid) the grid kernel may skip work where its bound
+        shows the density is negligible: a cell whose bound is below CELL_FLOOR times a lower
+        bound of the density's maximum (:meth:`peak_lower_bound`) is set to 0, and a speed whose
+        bound at a cell is below SPEED_FLOOR times that maximum over the number of speeds is
+        left out of the cell's sum. Without ``floors`` (and for ``pdf``) only contributions
+        that would underflow to 0 are skipped.
+        """
         from .kernels import butterly as k
 
         tol, stop, newton = _KERNEL_TOL[np.dtype(dtype)]
@@ -409,6 +433,23 @@ class Butterly:
         head[k.LOG_STOP] = -math.log(stop)
         tiny = np.finfo(dtype).smallest_subnormal
         head[k.LOG_TINY] = math.log(tiny) - math.log(2.0 * math.pi) - 1.0
+        # below tiny / e the sum of a speed's terms rounds to 0 anyway
+        head[k.LOG_POINT_FLOOR] = math.log(tiny) - 1.0
+        head[k.LOG_CELL_FLOOR] = -math.inf
+        head[k.LOG_SPEED_FLOOR] = head[k.LOG_POINT_FLOOR]
+        head[k.RUN_CELLS], head[k.RUN_SPREAD] = _RUN[np.dtype(dtype)]
+        # exp(log_scale) times a run's sum (between exp(-spread) and N exp(spread)) stays a
+        # normal number for |log_scale| below this
+        info = np.finfo(dtype)
+        head[k.RUN_SAFE] = min(math.log(info.max), -math.log(info.tiny)) - head[k.RUN_SPREAD] - math.log(k.RECURRENCE_NODES) - 1.0
+        # the recurrence carries the nodes that can reach stop / N of the largest term in a run
+        head[k.RUN_DROP] = -math.log(stop) + math.log(k.RECURRENCE_NODES)
+        if floors:
+            log_peak = math.log(self.peak_lower_bound())
+            head[k.LOG_CELL_FLOOR] = math.log(CELL_FLOOR) + log_peak
+            head[k.LOG_SPEED_FLOOR] = max(
+                head[k.LOG_POINT_FLOOR], math.log(SPEED_FLOOR / self.n_speed_nodes) + log_peak
+            )
         r = self.ranges
         rho1, rho2 = r / math.sqrt(s1), r / math.sqrt(s2)
         with np.errstate(divide="ignore"):
@@ -417,7 +458,28 @@ class Butterly:
         per[:, k.RHO1], per[:, k.RHO2] = rho1, rho2
         per[:, k.FOUR_F] = (rho1 - rho2) * (rho1 + rho2)  # 4F = rho1^2 - rho2^2 without cancellation
         per[:, k.LOG_COEF] = np.where(np.isfinite(log_w), log_w + log_norm, -1e300)
+        per[:, k.LOG_BOUND] = np.where(
+            np.isfinite(log_w), log_w - math.log(2.0 * math.pi * math.sqrt(s1 * s2)), -1e300
+        )
         return np.concatenate((head, per.ravel())).astype(dtype)
+
+    def peak_lower_bound(self) -> float:
+        """A lower bound of the density's maximum (per m^2): the largest of its values at the
+        start mean and at 64 courses on the ring of each of (up to 64, evenly chosen) speeds,
+        computed once by the float64 kernel."""
+        cached = self.__dict__.get("_peak_lower_bound")
+        if cached is not None:
+            return cached
+        r = self.ranges
+        pick = np.unique(np.linspace(0, r.size - 1, min(r.size, 64)).round().astype(int))
+        c = 2.0 * math.pi * np.arange(64) / 64 + self.course_mean
+        x = np.concatenate(([self.mean[0]], (self.mean[0] + r[pick, None] * np.sin(c)).ravel()))
+        y = np.concatenate(([self.mean[1]], (self.mean[1] + r[pick, None] * np.cos(c)).ravel()))
+        peak = float(np.max(self.pdf(x, y)))
+        if not peak > 0.0:  # every candidate underflowed: no floor
+            peak = float(np.finfo(float).smallest_subnormal)
+        self.__dict__["_peak_lower_bound"] = peak
+        return peak
 
     def parameters(self) -> dict:
         """Plain-data parameters for provenance and recordings."""
@@ -538,11 +600,19 @@ class Butterly:
 # ---------------------------------------------------------------------------------------------
 
 
-def numpy_density(model: Butterly, x, y, *, chunk: int = 32768) -> np.ndarray:
-    """The same density in vectorised NumPy float64: for every speed, the periodic trapezoid rule
-    on the full circle in log space (max-subtracted), with the kernel's node count for the
-    largest amplitude A in each chunk of points. It lacks the kernel's per-point walk (NumPy
-    cannot stop early per point), so its cost is N per point and speed."""
+def numpy_density(model: Butterly, x, y, *, floors: bool = False, chunk: int = 4096) -> np.ndarray:
+    """The same density in vectorised NumPy float64: the baseline of ``bananagrid bench``.
+
+    For every speed, the periodic trapezoid rule on the full circle with the kernel's node
+    count N (:func:`bananagrid.kernels.butterly.node_count`, per point), in log space (each
+    point's largest term subtracted before exp); with ``floors`` the same cells and speeds are
+    skipped as by the grid kernel (:meth:`Butterly.kernel_parameters`), with the same bounds.
+    Points are grouped by N (rounded up to a multiple of 8) and done ``chunk`` at a time, so
+    the (points x nodes) work arrays stay in cache. It lacks the kernel's per-point walk from
+    the peak (which stops where the terms fall below 1e-15 of it): an early exit per point
+    does not vectorise, so NumPy pays N nodes per point and speed where the kernel pays the
+    peak's width (about 20-45 nodes).
+    """
     x, y = np.broadcast_arrays(np.asarray(x, dtype=float), np.asarray(y, dtype=float))
     shape = x.shape
     x, y = x.ravel(), y.ravel()
@@ -550,28 +620,66 @@ def numpy_density(model: Butterly, x, y, *, chunk: int = 32768) -> np.ndarray:
     q1x, q1y = math.cos(beta), math.sin(beta)
     kappa = model.course_kappa
     theta0 = 0.5 * math.pi - beta - model.course_mean
-    log_tol = math.log(1e12) + math.log(4.0 * math.pi)
+    tol = _KERNEL_TOL[np.dtype(np.float64)][0]
+    log_tol = math.log(1.0 / tol) + math.log(4.0 * math.pi)
     log_norm = -math.log(4.0 * math.pi**2 * math.sqrt(s1 * s2)) - math.log(special.ive(0, kappa))
+    log_peak_coef = -math.log(2.0 * math.pi * math.sqrt(s1 * s2))
+    tiny = np.finfo(float).smallest_subnormal
+    speed_floor, cell_floor = math.log(tiny) - 1.0, -math.inf
+    ranges, weights = model.ranges, model._nodes[1]
+    if floors:
+        log_peak = math.log(model.peak_lower_bound())
+        cell_floor = math.log(CELL_FLOOR) + log_peak
+        speed_floor = max(speed_floor, math.log(SPEED_FLOOR / ranges.size) + log_peak)
+    dx, dy = x - model.mean[0], y - model.mean[1]
+    z1 = (dx * q1x + dy * q1y) / math.sqrt(s1)
+    z2 = (dy * q1x - dx * q1y) / math.sqrt(s2)
+    z_norm = np.hypot(z1, z2)
+
+    def log_bound(rho1, rho2, w):  # kernels/butterly.py log_bound
+        d = np.maximum(0.0, np.maximum(z_norm - rho1, rho2 - z_norm))
+        if rho2 > 0.0:
+            d = np.maximum(d, rho2 * np.abs(np.hypot(z1 / rho1, z2 / rho2) - 1.0))
+        return math.log(w) + log_peak_coef - 0.5 * d * d if w > 0 else np.full(d.shape, -np.inf)
+
     out = np.zeros(x.size)
-    for a0 in range(0, x.size, chunk):
-        dx = x[a0:a0 + chunk] - model.mean[0]
-        dy = y[a0:a0 + chunk] - model.mean[1]
-        z1 = (dx * q1x + dy * q1y) / math.sqrt(s1)
-        z2 = (dy * q1x - dx * q1y) / math.sqrt(s2)
-        total = np.zeros(z1.size)
-        for r, w in zip(model.ranges, model._nodes[1]):
-            rho1, rho2 = r / math.sqrt(s1), r / math.sqrt(s2)
-            a = rho1 * z1 + kappa * math.cos(theta0)
-            b = rho2 * z2 + kappa * math.sin(theta0)
-            amp = float(np.max(np.hypot(a, b))) + (rho1 - rho2) * (rho1 + rho2)
-            n = math.ceil(math.sqrt(2 * amp * (log_tol + 0.5 * math.log1p(amp))) + 12)
-            theta = 2.0 * math.pi * np.arange(n) / n
-            ct, st = np.cos(theta), np.sin(theta)
-            e = -0.5 * ((z1[:, None] - rho1 * ct) ** 2 + (z2[:, None] - rho2 * st) ** 2)
-            if kappa > 0:
-                e += kappa * (np.cos(theta - theta0) - 1.0)
-            top = e.max(axis=1)
-            s = np.exp(e - top[:, None]).sum(axis=1)
-            total += w * np.exp(log_norm + top) * s * (2.0 * math.pi / n)
-        out[a0:a0 + chunk] = total
+    rhos = [(r / math.sqrt(s1), r / math.sqrt(s2)) for r in ranges]
+    if floors:
+        top = np.full(x.size, -np.inf)
+        for (rho1, rho2), w in zip(rhos, weights):
+            np.maximum(top, log_bound(rho1, rho2, w), out=top)
+        live = top >= cell_floor - math.log(ranges.size)
+    else:
+        live = np.ones(x.size, dtype=bool)
+    for (rho1, rho2), w in zip(rhos, weights):
+        keep = np.flatnonzero(live & (log_bound(rho1, rho2, w) >= speed_floor))
+        if keep.size == 0:
+            continue
+        a = rho1 * z1[keep] + kappa * math.cos(theta0)
+        b = rho2 * z2[keep] + kappa * math.sin(theta0)
+        amp = np.hypot(a, b) + (rho1 - rho2) * (rho1 + rho2)
+        n = np.ceil(np.sqrt(2.0 * amp * (log_tol + 0.5 * np.log1p(amp))) + 12.0).astype(np.int64)
+        n = (n + 7) // 8 * 8
+        order = np.argsort(n, kind="stable")
+        keep, n = keep[order], n[order]
+        bounds = np.flatnonzero(np.diff(n)) + 1
+        for lo, hi in zip(np.concatenate(([0], bounds)), np.concatenate((bounds, [n.size]))):
+            nodes = int(n[lo])
+            theta = 2.0 * math.pi * np.arange(nodes) / nodes
+            ct, st = rho1 * np.cos(theta), rho2 * np.sin(theta)
+            course = kappa * (np.cos(theta - theta0) - 1.0) if kappa > 0 else None
+            for c0 in range(lo, hi, chunk):
+                idx = keep[c0:min(hi, c0 + chunk)]
+                e = z1[idx, None] - ct
+                e *= e
+                t2 = z2[idx, None] - st
+                t2 *= t2
+                e += t2
+                e *= -0.5
+                if course is not None:
+                    e += course
+                peak = e.max(axis=1)
+                e -= peak[:, None]
+                np.exp(e, out=e)
+                out[idx] += w * np.exp(log_norm + peak) * e.sum(axis=1) * (2.0 * math.pi / nodes)
     return out.reshape(shape)

@@ -303,6 +303,10 @@ def _length_scales(model, origin=(0.0, 0.0)) -> tuple[float, float]:
       Heading noise (``sigma_heading``) only smooths and is ignored.
     * BearingFix, about ``origin``: ``sqrt(v2)`` with v2 the smallest principal variance of the
       fix, and that divided by the distance from ``origin`` to the fix.
+    * Butterly, about ``origin``: sigma_min, the start's smallest SD (the ring's narrowest
+      profile and, for r << sigma, the normal's), and that divided by the distance from
+      ``origin`` to the start mean (2 pi at the mean; the Cartesian rule then gives a row at
+      range R the angular scale sigma_min / R, see :func:`_plan`).
 
     Raises
     ------
@@ -310,27 +314,33 @@ def _length_scales(model, origin=(0.0, 0.0)) -> tuple[float, float]:
         For a model whose scales are not known.
     """
     from .bearing import BearingFix
+    from .butterly import Butterly
     from .models import CAT, PolarBanana
 
     if isinstance(model, (CAT, PolarBanana)):
         return _motion_scales(model)
-    if isinstance(model, BearingFix):
-        radial = math.sqrt(model.principal_variances[1])
-        distance = math.hypot(*(model.fix - np.asarray(origin, dtype=float)))
+    if isinstance(model, (BearingFix, Butterly)):
+        if isinstance(model, BearingFix):
+            radial, centre = math.sqrt(model.principal_variances[1]), model.fix
+        else:
+            radial, centre = model.sigma_min, np.asarray(model.mean)
+        distance = math.hypot(*(centre - np.asarray(origin, dtype=float)))
         return radial, (radial / distance if distance > 0.0 else _TWO_PI)
     raise BananagridError(
         f"model = {type(model).__name__}: polar lattices know the length scales of CAT, "
-        "PolarBanana and BearingFix only"
+        "PolarBanana, BearingFix and Butterly only"
     )
 
 
 def _cartesian_scale(model, radial: float, angular: float) -> float:
     """Smallest feature width in metres: the radial scale, or the angular scale at the range
     where the model's mass lies (v0 t for motion models; the fix's distance for BearingFix,
-    whose angular scale is radial / distance, so this is the radial scale)."""
+    whose angular scale is radial / distance, so this is the radial scale; likewise the start
+    mean's for Butterly)."""
     from .bearing import BearingFix
+    from .butterly import Butterly
 
-    if isinstance(model, BearingFix):
+    if isinstance(model, (BearingFix, Butterly)):
         return radial
     return min(radial, angular * model.v0 * model.t)
 
@@ -551,7 +561,7 @@ def rasterise_lattice(
 
     Parameters
     ----------
-    model : CAT, PolarBanana or BearingFix
+    model : CAT, PolarBanana, BearingFix or Butterly
     lattice : PolarLattice
     dtype, device, threads
         As for :func:`bananagrid.rasterise`; probabilities are summed in float64.

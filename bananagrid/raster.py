@@ -161,6 +161,9 @@ class _Binding:
     #: Bands per thread: one where every row costs the same (fewest launches), many where the
     #: cost follows the density (CAT rows through the banana refine roots, others only scan).
     bands_per_thread: int = 16
+    #: Scratch values per band that the grid kernel takes after ``params`` (with the band's
+    #: index): ``(scratch[n_bands, width], band)``; 0 for none.
+    scratch_width: int = 0
 
 
 def _bind(model, wp, np_dtype, scalar, device, radii, threads, grid: bool = False) -> _Binding:
@@ -189,7 +192,7 @@ def _bind_kernels(model, wp, np_dtype, scalar, device, radii, threads, grid=Fals
             notes["zero_below"] = CELL_FLOOR * model.peak_lower_bound()
         return _Binding(
             butterly.butterly_grid, butterly.butterly_points, (params, model.n_speed_nodes),
-            "butterly.butterly_grid", notes, row_loop=True,
+            "butterly.butterly_grid", notes, row_loop=True, scratch_width=butterly.SCRATCH,
         )
     if isinstance(model, BearingFix):
         from .kernels import bearing
@@ -324,7 +327,7 @@ def rasterise(model, grid: Grid, *, dtype=np.float64, device: str = "cpu", threa
 
     Parameters
     ----------
-    model : CAT, PolarBanana or BearingFix
+    model : CAT, PolarBanana, BearingFix or Butterly
     grid : Grid or PolarLattice
     dtype : float32 or float64, default float64
         Kernel precision (and of ``values``).
@@ -363,14 +366,20 @@ def rasterise(model, grid: Grid, *, dtype=np.float64, device: str = "cpu", threa
     # row-looping kernels take whole rows per thread on the CPU, one cell per thread on a GPU
     columns = (grid.nx if device == "cpu" else 1) if binding.row_loop else None
 
+    bands = _bands(grid.ny, threads, binding.bands_per_thread) if device == "cpu" else [(0, grid.ny)]
+    scratch = None
+    if binding.scratch_width:  # one work row per band: a band's rows run one after another
+        scratch = wp.empty((len(bands), binding.scratch_width), dtype=scalar, device=device)
+        band_of = {r0: k for k, (r0, _) in enumerate(bands)}
+
     def launch_band(r0, r1):
         if columns is None:
             dim, head = (r1 - r0, grid.nx), [xs, ys, r0]
         else:
             dim, head = (r1 - r0, -(-grid.nx // columns)), [xs, ys, r0, columns]
-        wp.launch(binding.grid_kernel, dim=dim, inputs=[*head, *binding.params, out], device=device)
+        extra = [] if scratch is None else [scratch, band_of[r0]]
+        wp.launch(binding.grid_kernel, dim=dim, inputs=[*head, *binding.params, *extra, out], device=device)
 
-    bands = _bands(grid.ny, threads, binding.bands_per_thread) if device == "cpu" else [(0, grid.ny)]
     _run_bands(launch_band, bands, threads)
     wp.synchronize_device(device)
     if device != "cpu":

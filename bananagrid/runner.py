@@ -73,6 +73,10 @@ def run_scene(
         (raw captured mass), ``peak`` (largest recorded density, m^-2) and ``seconds``
         (rasterise and normalise, wall clock).
     """
+    from .scene_presence import PresenceScene, run_presence_scene
+
+    if isinstance(scene, PresenceScene):  # an [array] scene: its own runner
+        return run_presence_scene(scene, out_dir, npz=npz, threads=threads, progress=progress)
     out_dir = Path(out_dir)
     if not out_dir.is_dir():
         raise BananagridError(f"{out_dir}: output directory does not exist")
@@ -97,6 +101,8 @@ def run_scene(
             )
             if layer.kind == "bearing_fix":
                 _log_bearing_extras(rec, scene, layer, t, raster, threads)
+            if layer.kind == "butterly":
+                _log_butterly_extras(rec, layer, t, raster)
             if scene.radial is not None and layer.name in scene.radial.layers:
                 _log_radial(rec, scene, layer, t, threads)
             if archive is not None:
@@ -155,6 +161,15 @@ def _blueprint(scene: Scene):
         groups = radial_groups(scene.radial.density_bearings, scene.radial.moments_max)
         for name in scene.radial.layers:
             views += radial_views(f"radial/{name}", groups)
+    if any(layer.kind == "butterly" for layer in scene.layers):
+        import rerun.blueprint as rrb
+
+        from .record_butterly import is_isotropic
+
+        t0 = scene.jobs()[0][1]
+        for layer in scene.layers:
+            if layer.kind == "butterly" and is_isotropic(layer.model(t0 if scene.times else None)):
+                views.append(rrb.BarChartView(origin=f"/layers/{layer.name}/range", name=f"{layer.name}: range vs Rice"))
     return default_blueprint(
         [f"layers/{layer.name}" for layer in scene.layers],
         extra_images=[f"layers/{layer.name}/difference_to_linear" for layer in exact_fixes],
@@ -172,6 +187,17 @@ def _log_radial(rec, scene: Scene, layer: Layer, t: float, threads) -> None:
         rec, f"radial/{layer.name}", layer.model(t), density_bearings=spec.density_bearings,
         moments_max=spec.moments_max, moments_step=spec.moments_step, threads=threads,
     )
+
+
+def _log_butterly_extras(rec, layer: Layer, t: float, raster: Raster) -> None:
+    """A Butterly layer's start geometry and rings, and for an isotropic start the range law of
+    the raster beside Rice's."""
+    from .record_butterly import is_isotropic, log_butterly_geometry, log_range_comparison
+
+    model = layer.model(t)
+    log_butterly_geometry(rec, f"layers/{layer.name}/geometry", model)
+    if is_isotropic(model):
+        log_range_comparison(rec, f"layers/{layer.name}/range", raster, model)
 
 
 def _log_bearing_extras(rec, scene: Scene, layer: Layer, t: float, raster: Raster, threads) -> None:

@@ -19,6 +19,7 @@ from pathlib import Path
 from types import MappingProxyType
 
 from .bearing import MAP_VARIANTS, BearingFix
+from .butterly import Butterly, NormalSpeed, TabulatedSpeed, UniformSpeed
 from .grid import Grid
 from .models import CAT, VARIANTS, PolarBanana, Pose
 from .record import DEFAULT_LEVELS
@@ -27,10 +28,22 @@ from .validate import BananagridError, positive
 __all__ = ["Layer", "Scene", "RadialOutput", "load_scene", "parse_scene", "MODEL_KINDS", "PARAMETER_KEYS"]
 
 #: Model classes by the ``model`` value of a layer.
-MODEL_KINDS = MappingProxyType({"cat": CAT, "polar": PolarBanana, "bearing_fix": BearingFix})
+MODEL_KINDS = MappingProxyType({"cat": CAT, "polar": PolarBanana, "bearing_fix": BearingFix, "butterly": Butterly})
 
-#: Kinds whose density depends on the elapsed time ``t`` (and that have a pose).
+#: Kinds with a pose whose conditional radial curves can be recorded (``[radial]``).
 MOTION_KINDS = ("cat", "polar")
+#: Kinds whose density depends on the elapsed time ``t`` (``scene.times`` applies).
+TIMED_KINDS = ("cat", "polar", "butterly")
+
+#: One knot in m/s (1852 m per hour): ``NAME_kn`` keys are converted with it.
+KNOT = 1852.0 / 3600.0
+#: Butterly's speed laws (``speed_law``) and the keys each takes besides the common ones.
+SPEED_LAWS = MappingProxyType({
+    "discrete": ("speeds", "weights"),
+    "uniform": ("speed_min", "speed_max"),
+    "normal": ("speed_mean", "speed_sd"),
+    "table": ("speeds", "speed_density"),
+})
 
 #: Scene keys of every model kind (the ``t`` key is refused when ``scene.times`` is given).
 PARAMETER_KEYS = MappingProxyType({
@@ -43,10 +56,17 @@ PARAMETER_KEYS = MappingProxyType({
         "sigma_heading", "sigma_heading_deg", "heading_order", "origin", "heading", "heading_deg",
     ),
     "bearing_fix": ("sensors", "bearings", "bearings_deg", "sigmas", "sigmas_deg", "variant"),
+    "butterly": (
+        "mean", "cov", "sigma_x", "sigma_y", "rho", "t", "speed_law", "speeds", "speeds_kn", "weights",
+        "speed_min", "speed_min_kn", "speed_max", "speed_max_kn", "speed_mean", "speed_mean_kn",
+        "speed_sd", "speed_sd_kn", "speed_density", "course_kappa", "course_mean", "course_mean_deg",
+    ),
 })
 
 #: Angles that a scene may give in radians or, under ``NAME_deg``, in degrees (lists too).
-ANGLE_KEYS = ("sigma_omega", "sigma_heading", "heading", "bearings", "sigmas")
+ANGLE_KEYS = ("sigma_omega", "sigma_heading", "heading", "bearings", "sigmas", "course_mean")
+#: Speeds that a scene may give in m/s or, under ``NAME_kn``, in knots (lists too).
+SPEED_KEYS = ("speeds", "speed_min", "speed_max", "speed_mean", "speed_sd")
 
 #: Parameters every layer of a kind needs (from its table or ``[defaults]``); motion kinds
 #: also need ``t`` unless the scene gives ``scene.times``.
@@ -54,6 +74,8 @@ REQUIRED = MappingProxyType({
     "cat": ("v0", "sigma_a", "sigma_omega"),
     "polar": ("v0", "sigma_a", "sigma_omega"),
     "bearing_fix": ("sensors", "bearings", "sigmas"),
+    # and the start covariance (cov, or sigma_x and sigma_y) and the speed law's keys
+    "butterly": ("mean",),
 })
 
 #: The ``variant`` values each kind accepts.
@@ -77,11 +99,13 @@ class Layer:
     name : str
         Layer name (the table name under ``[layers]``); its entity is ``layers/NAME``.
     kind : str
-        ``"cat"`` or ``"polar"``.
+        A key of :data:`MODEL_KINDS`: ``"cat"``, ``"polar"``, ``"bearing_fix"`` or ``"butterly"``.
     params : Mapping
-        Model parameters in SI units and radians, ``[defaults]`` merged in: ``v0``,
-        ``sigma_a``, ``sigma_omega``, ``t`` (absent when the scene has ``times``) and, where
-        given, ``k_sigma``, ``variant``, ``origin`` (a pair) and ``heading``.
+        Model parameters in SI units (m, s, m/s) and radians, ``[defaults]`` merged in, under
+        their scene names without ``_deg`` / ``_kn``: for motion layers ``v0``, ``sigma_a``,
+        ``sigma_omega``, ``t`` (absent when the scene has ``times``) and, where given,
+        ``k_sigma``, ``variant``, ``origin`` (a pair) and ``heading``; for Butterly layers those
+        of :func:`butterly_arguments`.
     """
 
     name: str
@@ -91,7 +115,7 @@ class Layer:
     def __post_init__(self):
         object.__setattr__(self, "params", MappingProxyType(dict(self.params)))
 
-    def model(self, t: float | None = None) -> CAT | PolarBanana | BearingFix:
+    def model(self, t: float | None = None) -> CAT | PolarBanana | BearingFix | Butterly:
         """The layer's model at elapsed time ``t`` (s); by default the layer's own ``t``.
         A bearing fix does not change with time and ignores ``t``.
 
@@ -101,14 +125,58 @@ class Layer:
             If no ``t`` is known, or a parameter is out of its domain.
         """
         kwargs = dict(self.params)
-        if self.kind not in MOTION_KINDS:
+        if self.kind not in TIMED_KINDS:
             return MODEL_KINDS[self.kind](**kwargs)
         if t is not None:
             kwargs["t"] = t
         if "t" not in kwargs:
             raise BananagridError(f"layer {self.name}: no elapsed time t; pass model(t=...)")
+        if self.kind == "butterly":
+            return Butterly(**butterly_arguments(kwargs))
         pose = Pose(origin=kwargs.pop("origin", (0.0, 0.0)), heading=kwargs.pop("heading", 0.0))
         return MODEL_KINDS[self.kind](**kwargs, pose=pose)
+
+
+def butterly_arguments(params: Mapping) -> dict:
+    """Keyword arguments of :class:`~bananagrid.Butterly` from a Butterly layer's parameters.
+
+    ``params`` holds, in SI units: ``mean``; ``cov`` or ``sigma_x``, ``sigma_y`` (m) and
+    optionally ``rho`` (correlation, default 0); ``t``; ``speed_law`` (default
+    ``"discrete"``) with ``speeds`` and ``weights``, ``speed_min`` and ``speed_max``
+    (uniform), ``speed_mean`` and ``speed_sd`` (normal, truncated at 0) or ``speeds`` and
+    ``speed_density`` (table); optionally ``course_kappa`` and ``course_mean``.
+
+    Raises
+    ------
+    BananagridError
+        ``NAME = value: rule`` for a value out of its domain (sigma_x, sigma_y, rho here; the
+        rest from the model and its speed laws).
+    """
+    if "cov" in params:
+        cov = params["cov"]
+    else:
+        sx, sy = params["sigma_x"], params["sigma_y"]
+        rho = params.get("rho", 0.0)
+        for name, value in (("sigma_x", sx), ("sigma_y", sy)):
+            if not (math.isfinite(value) and value > 0.0):
+                raise BananagridError(f"{name} = {value!r}: must be finite and > 0 (m, 1 sigma)")
+        if not (math.isfinite(rho) and -1.0 < rho < 1.0):
+            raise BananagridError(f"rho = {rho!r}: must be in (-1, 1) (the start's correlation)")
+        cov = [[sx * sx, rho * sx * sy], [rho * sx * sy, sy * sy]]
+    law = params.get("speed_law", "discrete")
+    weights = None
+    if law == "discrete":
+        speeds, weights = params["speeds"], params.get("weights")
+    elif law == "uniform":
+        speeds = UniformSpeed(params["speed_min"], params["speed_max"])
+    elif law == "normal":
+        speeds = NormalSpeed(params["speed_mean"], params["speed_sd"])
+    else:
+        speeds = TabulatedSpeed(params["speeds"], params["speed_density"])
+    return dict(
+        mean=params["mean"], cov=cov, speeds=speeds, weights=weights, t=params["t"],
+        course_kappa=params.get("course_kappa", 0.0), course_mean=params.get("course_mean", 0.0),
+    )
 
 
 @dataclass(frozen=True)
@@ -240,6 +308,10 @@ def parse_scene(text: str, source: str = "<string>") -> Scene:
     except tomllib.TOMLDecodeError as exc:
         raise BananagridError(f"{source}: invalid TOML: {exc}") from None
     try:
+        if "array" in doc:  # a presence scene: bananagrid.scene_presence
+            from .scene_presence import build_presence_scene
+
+            return build_presence_scene(doc, text, source)
         return _build(doc, text, source)
     except _KeyError as exc:
         raise BananagridError(f"{source}: {exc}") from None
@@ -286,7 +358,7 @@ def _radial(value, layers) -> RadialOutput:
     """``[radial]``: which motion layers get radial curves, at which bearings (degrees)."""
     table = _table({"radial": value}, "radial")
     _check_keys(table, RADIAL_KEYS, "radial")
-    motion = [layer.name for layer in layers if layer.kind in MOTION_KINDS]
+    motion = [layer.name for layer in layers if layer.kind in MOTION_KINDS]  # not Butterly: no pose
     names = table.get("layers", motion)
     if not isinstance(names, list) or not names:
         raise _KeyError(f"radial.layers = {_show(names)}: expected a non-empty list of cat or polar layer names")
@@ -419,20 +491,24 @@ def _layer(name: str, body: dict, shared: dict, times) -> Layer:
         raise _KeyError(f"{path}.model {shown}: must be one of {', '.join(map(_show, MODEL_KINDS))}")
     allowed = PARAMETER_KEYS[kind]
     _check_keys(body, ("model", *allowed), path, note=f" (model {_show(kind)})")
-    if times is not None and "t" in body and kind in MOTION_KINDS:
+    if times is not None and "t" in body and kind in TIMED_KINDS:
         raise _KeyError(
             f"{path}.t = {_show(body['t'])}: not allowed when scene.times is given "
             "(every layer is computed at every time)"
         )
     # Where each parameter comes from: {param: (key path, value as written, value in SI)}.
     # Defaults of the other model kind (k_sigma, variant) do not apply to this layer.
-    params = {key.removesuffix("_deg") for key in allowed}
+    params = {_base_key(key) for key in allowed}
     given = {p: v for p, v in shared.items() if p in params}
     given.update(_parameters({k: v for k, v in body.items() if k != "model"}, path, kind))
-    needed = REQUIRED[kind] if times is not None or kind not in MOTION_KINDS else (*REQUIRED[kind], "t")
+    needed = REQUIRED[kind] if times is not None or kind not in TIMED_KINDS else (*REQUIRED[kind], "t")
     missing = [p for p in needed if p not in given]
+    if kind == "butterly":
+        missing += _butterly_missing(given, path)
     if missing:
-        keys = ", ".join(f"{p} (or {p}_deg)" if p in ANGLE_KEYS else p for p in missing)
+        keys = ", ".join(
+            f"{p} (or {p}_deg)" if p in ANGLE_KEYS else f"{p} (or {p}_kn)" if p in SPEED_KEYS else p for p in missing
+        )
         raise _KeyError(f"{path}: missing {keys}: give each in [{path}] or [defaults]")
     layer = Layer(name=name, kind=kind, params={p: si for p, (_, _, si) in given.items()})
     for t in times or (None,):
@@ -443,24 +519,75 @@ def _layer(name: str, body: dict, shared: dict, times) -> Layer:
     return layer
 
 
+def _base_key(key: str) -> str:
+    """The parameter a scene key sets: ``heading_deg`` -> ``heading``, ``speeds_kn`` -> ``speeds``."""
+    if key.endswith("_deg"):
+        return key.removesuffix("_deg")
+    if key.endswith("_kn"):
+        return key.removesuffix("_kn")
+    return key
+
+
+def _butterly_missing(given: dict, path: str) -> list[str]:
+    """The start covariance and speed-law keys a Butterly layer lacks (as 'missing' items);
+    keys that contradict each other or the speed law are errors."""
+    missing = []
+    sigmas = [k for k in ("sigma_x", "sigma_y", "rho") if k in given]
+    if "cov" in given and sigmas:
+        raise _KeyError(
+            f"{path}: give cov or sigma_x, sigma_y (and rho), not both "
+            f"(cov from {given['cov'][0]}, {sigmas[0]} from {given[sigmas[0]][0]})"
+        )
+    if "cov" not in given:
+        if sigmas:
+            missing += [k for k in ("sigma_x", "sigma_y") if k not in given]
+        else:
+            missing.append("cov (or sigma_x and sigma_y)")
+    law = given.get("speed_law", (None, None, "discrete"))[2]
+    needed = SPEED_LAWS[law]
+    missing += [k for k in needed if k not in given and not (law == "discrete" and k == "weights")]
+    for key in (k for ks in SPEED_LAWS.values() for k in ks):
+        if key in given and key not in needed:
+            where, written, _ = given[key]
+            laws = [name for name, keys in SPEED_LAWS.items() if key in keys]
+            raise _KeyError(
+                f"{where} = {_show(written)}: only with speed_law = "
+                + " or ".join(map(_show, laws)) + f" (this layer's is {_show(law)})"
+            )
+    return missing
+
+
 def _parameters(table: dict, path: str, kind: str | None = None) -> dict:
     """``{param: (key path, written value, SI value)}`` of the parameter keys in ``table``.
 
     The keys are known to be parameter keys. Degrees under ``*_deg`` are converted to
-    radians; giving both forms of one angle is an error. ``kind`` decides which ``variant``
-    values are allowed (``None``, for ``[defaults]``: any kind's).
+    radians and knots under ``*_kn`` to m/s; giving both forms of one value is an error.
+    ``kind`` decides which ``variant`` values are allowed (``None``, for ``[defaults]``: any
+    kind's).
     """
     out = {}
     for key, value in table.items():
         where = f"{path}.{key}"
-        param = key.removesuffix("_deg")
+        param = _base_key(key)
         if param in out:
+            other = next(k for k in table if k != key and _base_key(k) == param)
+            unit, alt = ("rad", "degrees") if key.endswith("_deg") or other.endswith("_deg") else ("m/s", "knots")
+            suffix = "_deg" if unit == "rad" else "_kn"
             raise _KeyError(
-                f"{path}: give {param} (rad) or {param}_deg (degrees), not both "
-                f"({param} = {_show(table[param])}, {param}_deg = {_show(table[param + '_deg'])})"
+                f"{path}: give {param} ({unit}) or {param}{suffix} ({alt}), not both "
+                f"({param} = {_show(table[param])}, {param}{suffix} = {_show(table[param + suffix])})"
             )
-        if param == "origin":
-            out[param] = (where, value, _pair(table, key, path))
+        if param in ("origin", "mean"):
+            out[param] = (where, value, _pair(table, key, path, unit="m"))
+        elif param == "cov":
+            out[param] = (where, value, _matrix(value, where))
+        elif param == "speed_law":
+            if value not in SPEED_LAWS:
+                raise _KeyError(f"{where} = {_show(value)}: must be one of {', '.join(map(_show, SPEED_LAWS))}")
+            out[param] = (where, value, value)
+        elif param in ("speeds", "weights", "speed_density"):
+            numbers = _numbers(value, where)
+            out[param] = (where, value, [v * KNOT for v in numbers] if key.endswith("_kn") else numbers)
         elif param == "variant":
             allowed = KIND_VARIANTS.get(kind) if kind else sorted({v for vs in KIND_VARIANTS.values() for v in vs})
             if allowed is None or value not in allowed:
@@ -473,13 +600,32 @@ def _parameters(table: dict, path: str, kind: str | None = None) -> dict:
             out[param] = (where, value, [math.radians(v) for v in numbers] if key.endswith("_deg") else numbers)
         else:
             number = _number(value, where)
-            out[param] = (where, value, math.radians(number) if key.endswith("_deg") else number)
+            if key.endswith("_deg"):
+                number = math.radians(number)
+            elif key.endswith("_kn"):
+                number = number * KNOT
+            out[param] = (where, value, number)
     return out
 
 
+#: Butterly speed-law messages name the law's fields; the scene keys that set them.
+_SPEED_LAW_FIELDS = {
+    "speeds.v_min": "speed_min", "speeds.v_max": "speed_max", "speeds.mean": "speed_mean",
+    "speeds.sd": "speed_sd", "speeds.speeds": "speeds", "speeds.density": "speed_density",
+}
+
+
 def _model_error(message: str, path: str, given: dict) -> str:
-    """A model's ``name = value: rule`` message restated with the scene key and its value."""
+    """A model's ``name = value: rule`` (or ``name[k] = value: rule``) message restated with
+    the scene key and its value as written."""
     param, sep, rest = message.partition(" = ")
+    param = _SPEED_LAW_FIELDS.get(param, param)
+    index = re.fullmatch(r"(\w+)\[(\d+)\]", param)
+    if sep and index and index.group(1) in given and ": " in rest:
+        where, written, _ = given[index.group(1)]
+        k = int(index.group(2))
+        shown = _show(written[k]) if isinstance(written, list) and k < len(written) else rest.split(": ", 1)[0]
+        return f"{where}[{k}] = {shown}: {rest.split(': ', 1)[1]}"
     if sep and param in given and ": " in rest:
         where, written, _ = given[param]
         return f"{where} = {_show(written)}: {rest.split(': ', 1)[1]}"
@@ -552,7 +698,15 @@ def _pairs(value, path: str) -> list[tuple[float, float]]:
     return out
 
 
-def _pair(table: dict, key: str, path: str, required: bool = False) -> tuple[float, float]:
+def _matrix(value, path: str) -> list[list[float]]:
+    """A 2 x 2 TOML array of numbers ``[[a, b], [c, d]]`` (m^2); symmetry and positive
+    definiteness are the model's to check."""
+    if not isinstance(value, list) or len(value) != 2 or not all(isinstance(row, list) and len(row) == 2 for row in value):
+        raise _KeyError(f"{path} = {_show(value)}: expected a 2 x 2 array [[sxx, sxy], [sxy, syy]] in m^2")
+    return [[_number(v, f"{path}[{i}][{j}]") for j, v in enumerate(row)] for i, row in enumerate(value)]
+
+
+def _pair(table: dict, key: str, path: str, required: bool = False, unit: str = "m") -> tuple[float, float]:
     """``[a, b]`` of two finite numbers (metres)."""
     where = f"{path}.{key}"
     if key not in table:
@@ -561,7 +715,7 @@ def _pair(table: dict, key: str, path: str, required: bool = False) -> tuple[flo
         return None
     value = table[key]
     if not isinstance(value, list) or len(value) != 2:
-        raise _KeyError(f"{where} = {_show(value)}: expected a pair of numbers [a, b] in m")
+        raise _KeyError(f"{where} = {_show(value)}: expected a pair of numbers [a, b] in {unit}")
     a, b = (_number(v, f"{where}[{k}]") for k, v in enumerate(value))
     for k, v in enumerate((a, b)):
         if not math.isfinite(v):

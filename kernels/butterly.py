@@ -42,6 +42,23 @@ delta, not 1; recomputed exactly every 64 steps), and E - E* is the quadratic fo
     u = cos delta - 1,  v = sin delta,
 
 whose coefficients come from the residual at theta* (no cancellation of large exponents).
+
+Grids. ``butterly_grid`` (a whole row per thread on the CPU) computes the same rule faster:
+
+* Skipping. exp(E) <= exp(-d^2 / 2) with d a lower bound of the whitened distance to the ring
+  (:func:`log_bound`, no exp), so each speed's term is bounded before any work. A cell whose
+  bound (all speeds) is below LOG_CELL_FLOOR is set to 0, and a speed whose bound is below
+  LOG_SPEED_FLOOR is left out of a cell; the host sets them from a lower bound of the density's
+  maximum M (1e-13 M, and 1e-22 M over the number of speeds: a relative 1e-10 at most wherever
+  the density exceeds 1e-12 M). ``butterly_points`` skips only what would underflow.
+* Row recurrence (:func:`row_runs`, rules of up to RECURRENCE_NODES nodes, i.e. r / sigma_min
+  up to a few tens): along a row z moves by a constant dz, so each node's term is carried
+  from cell to cell by one multiplication (a Gaussian recurrence: T_k g_k^m, times
+  H^(m (m - 1) / 2) per cell) instead of an exp, restarted exactly every run of up to
+  RUN_CELLS cells (fewer where cells are coarse), and only the nodes that can reach ``stop``
+  of the largest term within the run are carried.
+* Otherwise each cell walks from its peak as above, Newton starting from the root of the
+  neighbouring cell (the speeds are the outer loop).
 """
 
 from typing import Any
@@ -49,12 +66,17 @@ from typing import Any
 import warp as wp
 
 #: Layout of the parameter array: a head, then PER_SPEED values for each travelled range.
-MEAN_X, MEAN_Y, Q1_X, Q1_Y, INV_SQRT_S1, INV_SQRT_S2, KAPPA, COS_THETA0, SIN_THETA0, LOG_TOL, STOP, NEWTON_TOL, LOG_STOP, LOG_TINY = range(14)
-HEAD = 14
-#: Per speed: rho1 = r / sqrt(S1), rho2 = r / sqrt(S2), F = (rho1^2 - rho2^2) / 4 and
-#: log(weight / (4 pi^2 sqrt(S1 S2) ive(0, kappa))).
-RHO1, RHO2, FOUR_F, LOG_COEF = range(4)
-PER_SPEED = 4
+(
+    MEAN_X, MEAN_Y, Q1_X, Q1_Y, INV_SQRT_S1, INV_SQRT_S2, KAPPA, COS_THETA0, SIN_THETA0, LOG_TOL, STOP,
+    NEWTON_TOL, LOG_STOP, LOG_TINY, LOG_CELL_FLOOR, LOG_SPEED_FLOOR, LOG_POINT_FLOOR, RUN_CELLS, RUN_SPREAD,
+    RUN_SAFE, RUN_DROP,
+) = range(21)
+HEAD = 21
+#: Per speed: rho1 = r / sqrt(S1), rho2 = r / sqrt(S2), 4F = rho1^2 - rho2^2,
+#: log(weight / (4 pi^2 sqrt(S1 S2) ive(0, kappa))) and log(weight / (2 pi sqrt(S1 S2))), the
+#: log of the peak of the weighted start density (see :func:`log_bound`).
+RHO1, RHO2, FOUR_F, LOG_COEF, LOG_BOUND = range(5)
+PER_SPEED = 5
 
 #: Smallest node count of the periodic rule (covers small A, see node_count).
 MIN_NODES = 12
@@ -63,7 +85,14 @@ REANCHOR = 64
 #: Newton iterations of the secular equations (they converge in a handful).
 MAX_NEWTON = 60
 TWO_PI = 6.283185307179586
-TWO_THIRDS = 2.0 / 3.0
+#: The grid kernel's row recurrence (:func:`row_runs`) is used for rule sizes up to this; larger
+#: ones (r / sigma_min beyond a few hundred) walk from the peak.
+RECURRENCE_NODES = 512
+#: Scratch values per band of rows: rho1 cos, rho2 sin and the course term at each node, and
+#: the recurrence's T and g (4 slots of padding each).
+SCRATCH = 5 * RECURRENCE_NODES + 8
+#: Shortest run of cells worth a restart of the recurrence (2N exps); shorter runs walk.
+MIN_RUN = 4
 #: Largest node count: above it the int arithmetic of the walk could overflow (A > 1e17).
 MAX_NODES = 1000000000
 
@@ -79,28 +108,33 @@ def node_count(amplitude: Any, log_tol: Any):
 
 
 @wp.func
-def global_peak(a: Any, b: Any, four_f: Any, eps: Any):
-    """(cos theta*, sin theta*) of the global maximum of a cos + b sin - F cos 2 theta.
+def global_peak(a: Any, b: Any, four_f: Any, eps: Any, mu_start: Any):
+    """(cos theta*, sin theta*, mu) of the global maximum of a cos + b sin - F cos 2 theta.
 
     On the unit circle (x, y) it maximises a x + b y - 2F x^2; the Lagrange condition gives
     x = a / (mu + 4F), y = b / mu with h(mu) = x^2 + y^2 = 1, and the global maximum is the
     root with mu > 0 (mu >= the largest eigenvalue of the objective's Hessian, 0). 1/sqrt(h) is
     concave and increasing there, so Newton from mu_L = max(|b|, |a| - 4F) (where h >= 1)
-    climbs monotonically to the root.
+    climbs monotonically to the root. A start ``mu_start`` above mu_L (the root of the
+    neighbouring cell) is used as is: from above the root one Newton step lands at or below it
+    (concavity: the tangent lies above the curve), and clamping at mu_L keeps it in the
+    concave range, from where the climb is monotone again. ``mu`` is returned for the next
+    cell (0 where there is no Newton: F = 0 or b = 0).
     """
     zero = type(a)(0.0)
     one = type(a)(1.0)
     if four_f <= zero:
         m = wp.sqrt(a * a + b * b)
         if m > zero:
-            return a / m, b / m
-        return one, zero
+            return a / m, b / m, zero
+        return one, zero, zero
     if b == zero:
         if wp.abs(a) >= four_f:
-            return wp.sign(a), zero
+            return wp.sign(a), zero, zero
         x = a / four_f
-        return x, wp.sqrt(wp.max(zero, one - x * x))
-    mu = wp.max(wp.abs(b), wp.abs(a) - four_f)
+        return x, wp.sqrt(wp.max(zero, one - x * x)), zero
+    mu_low = wp.max(wp.abs(b), wp.abs(a) - four_f)
+    mu = wp.max(mu_low, mu_start)
     for _ in range(MAX_NEWTON):
         p = mu + four_f
         ta = a / p
@@ -108,14 +142,15 @@ def global_peak(a: Any, b: Any, four_f: Any, eps: Any):
         h = ta * ta + tb * tb
         s = one / wp.sqrt(h)
         slope = s * s * s * (ta * ta / p + tb * tb / mu)
-        step = (one - s) / slope
-        mu = mu + step
+        mu_next = wp.max(mu + (one - s) / slope, mu_low)
+        step = mu_next - mu
+        mu = mu_next
         if wp.abs(step) <= eps * mu:
             break
     x = a / (mu + four_f)
     y = b / mu
     n = wp.sqrt(x * x + y * y)
-    return x / n, y / n
+    return x / n, y / n, mu
 
 
 @wp.func
@@ -141,8 +176,8 @@ def second_peak(a: Any, b: Any, four_f: Any, eps: Any, depth: Any):
     ratio = a / four_f
     if wp.abs(b) * wp.sqrt(one - ratio * ratio) > depth:
         return int(0), one, zero
-    ca = wp.pow(wp.abs(a), type(a)(TWO_THIRDS))
-    cb = wp.pow(wp.abs(b), type(a)(TWO_THIRDS))
+    ca = wp.cbrt(a * a)  # |a|^(2/3)
+    cb = wp.cbrt(b * b)
     sum_c = ca + cb
     if sum_c * wp.sqrt(sum_c) >= four_f:
         return int(0), one, zero
@@ -209,9 +244,12 @@ def walk(
     p = int(0)
     m = int(0)
     k = int(0)
+    anchor = int(REANCHOR)
     while plus + minus > 0:
         k = k + 1
-        if k % REANCHOR == 0:
+        anchor = anchor - 1
+        if anchor == 0:
+            anchor = int(REANCHOR)
             sk = wp.sin(half * type(c1)(k) * delta)
             u = type(c1)(-2.0) * sk * sk
             v = wp.sin(type(c1)(k) * delta)
@@ -243,8 +281,10 @@ def walk(
 
 
 @wp.func
-def speed_density(z1: Any, z2: Any, params: wp.array(dtype=Any), base: int):
-    """w_i P_{r_i}(u) for the speed whose constants start at ``params[base]``."""
+def speed_density(z1: Any, z2: Any, params: wp.array(dtype=Any), base: int, mu_start: Any):
+    """(w_i P_{r_i}(u), mu) for the speed whose constants start at ``params[base]``; ``mu_start``
+    and ``mu`` are the secular equation's multiplier at the previous and this point (see
+    :func:`global_peak`; 0 for a cold start)."""
     zero = type(z1)(0.0)
     rho1 = params[base + RHO1]
     rho2 = params[base + RHO2]
@@ -257,10 +297,10 @@ def speed_density(z1: Any, z2: Any, params: wp.array(dtype=Any), base: int):
     b = rho2 * z2 + kappa * s0
     n = node_count(wp.sqrt(a * a + b * b) + four_f, params[LOG_TOL])
     delta = type(z1)(TWO_PI) / type(z1)(n)
-    x, y = global_peak(a, b, four_f, params[NEWTON_TOL])
+    x, y, mu = global_peak(a, b, four_f, params[NEWTON_TOL], mu_start)
     e1, c1, c2, p11, p12, p22 = anchor_exponent(z1, z2, rho1, rho2, kappa, c0, s0, x, y)
     if params[base + LOG_COEF] + e1 < params[LOG_TINY]:
-        return zero  # below the smallest positive number even if all N terms were 1 (Delta N = 2 pi)
+        return zero, mu  # below the smallest positive number even if all N terms were 1 (Delta N = 2 pi)
     total, p1, m1 = walk(c1, c2, p11, p12, p22, delta, stop, n - 1, n - 1, n - 1)
     found, x2, y2 = second_peak(a, b, four_f, params[NEWTON_TOL], params[LOG_STOP])
     if found == 1 and p1 + m1 + 1 < n:
@@ -283,23 +323,240 @@ def speed_density(z1: Any, z2: Any, params: wp.array(dtype=Any), base: int):
                 extra, p2, m2 = walk(d1, d2, q11, q12, q22, delta, stop, lim_plus, lim_minus, lim_plus + lim_minus)
                 total = total + scale * extra
     if total <= zero:
-        return zero
-    return delta * total * wp.exp(params[base + LOG_COEF] + e1)
+        return zero, mu
+    return delta * total * wp.exp(params[base + LOG_COEF] + e1), mu
 
 
 @wp.func
-def butterly_density(x: Any, y: Any, params: wp.array(dtype=Any), n_speeds: int):
-    """Density per m^2 at the world point (x, y): sum over speeds of w_i P_{r_i}(x, y)."""
+def log_bound(z1: Any, z2: Any, z_norm: Any, params: wp.array(dtype=Any), base: int):
+    """An upper bound of log(w_i P_{r_i}(u)) that costs no exp: LOG_BOUND - d^2 / 2.
+
+    exp(E(theta)) <= exp(-|z - ring(theta)|^2 / 2) exp(kappa (cos - 1)), so P_r <= (peak of
+    the start density) exp(-d^2 / 2) with d any lower bound of the whitened distance from z
+    to the ring, the ellipse (rho1 cos, rho2 sin) (rho1 >= rho2). It lies in the annulus
+    rho2 <= |p| <= rho1, and g(z) = |(z1 / rho1, z2 / rho2)| is 1 on it with Lipschitz
+    constant 1 / rho2, so d >= max(|z| - rho1, rho2 - |z|, rho2 |g(z) - 1|, 0) (d = |z| for r = 0).
+    """
+    zero = type(z1)(0.0)
+    rho1 = params[base + RHO1]
+    rho2 = params[base + RHO2]
+    d = wp.max(zero, wp.max(z_norm - rho1, rho2 - z_norm))
+    if rho2 > zero:
+        g1 = z1 / rho1
+        g2 = z2 / rho2
+        d = wp.max(d, rho2 * wp.abs(wp.sqrt(g1 * g1 + g2 * g2) - type(z1)(1.0)))
+    return params[base + LOG_BOUND] - type(z1)(0.5) * d * d
+
+
+@wp.func
+def whiten(x: Any, y: Any, params: wp.array(dtype=Any)):
+    """The whitened coordinates (z1, z2) of the world point (x, y)."""
     dx = x - params[MEAN_X]
     dy = y - params[MEAN_Y]
     q1x = params[Q1_X]
     q1y = params[Q1_Y]
-    z1 = (dx * q1x + dy * q1y) * params[INV_SQRT_S1]
-    z2 = (dy * q1x - dx * q1y) * params[INV_SQRT_S2]
+    return (dx * q1x + dy * q1y) * params[INV_SQRT_S1], (dy * q1x - dx * q1y) * params[INV_SQRT_S2]
+
+
+@wp.func
+def butterly_density(x: Any, y: Any, params: wp.array(dtype=Any), n_speeds: int):
+    """Density per m^2 at the world point (x, y): sum over speeds of w_i P_{r_i}(x, y), each
+    from a cold start, a speed skipped only where its bound is below LOG_POINT_FLOOR (its value
+    would underflow to 0)."""
+    z1, z2 = whiten(x, y, params)
+    z_norm = wp.sqrt(z1 * z1 + z2 * z2)
     total = type(x)(0.0)
+    floor = params[LOG_POINT_FLOOR]
     for i in range(n_speeds):
-        total = total + speed_density(z1, z2, params, HEAD + PER_SPEED * i)
+        base = HEAD + PER_SPEED * i
+        if log_bound(z1, z2, z_norm, params, base) >= floor:
+            value, mu = speed_density(z1, z2, params, base, type(x)(0.0))
+            total = total + value
     return total
+
+
+@wp.func
+def rule_size(z1: Any, z2: Any, params: wp.array(dtype=Any), base: int):
+    """The amplitude A = |(a, b)| + 4F at the whitened point z for one speed."""
+    a = params[base + RHO1] * z1 + params[KAPPA] * params[COS_THETA0]
+    b = params[base + RHO2] * z2 + params[KAPPA] * params[SIN_THETA0]
+    return wp.sqrt(a * a + b * b) + params[base + FOUR_F]
+
+
+@wp.func
+def live_cell(xs: wp.array(dtype=Any), y: Any, row: int, j: int, params: wp.array(dtype=Any), base: int,
+              out: wp.array2d(dtype=Any)):
+    """1 where cell j of the row is computed and this speed's bound reaches LOG_SPEED_FLOOR."""
+    if out[row, j] < type(y)(0.0):
+        return int(0)
+    z1, z2 = whiten(xs[j], y, params)
+    if log_bound(z1, z2, wp.sqrt(z1 * z1 + z2 * z2), params, base) >= params[LOG_SPEED_FLOOR]:
+        return int(1)
+    return int(0)
+
+
+@wp.func
+def row_runs(
+    xs: wp.array(dtype=Any), y: Any, row: int, j_begin: int, j_end: int, params: wp.array(dtype=Any),
+    base: int, n: int, scratch: wp.array2d(dtype=Any), band: int, out: wp.array2d(dtype=Any),
+):
+    """Add w_i P_{r_i} to the live cells j_begin..j_end-1 of a row by the full periodic rule,
+    its terms carried from cell to cell by a Gaussian recurrence instead of exps.
+
+    Along a row the whitened point moves by a constant dz per cell, so each node's exponent
+    E_k(j) = -|z(j) - rho_k|^2 / 2 + kappa (cos(theta_k - theta0) - 1) is quadratic in j:
+
+        T_k(j + 1) = T_k(j) G_k(j),   G_k(j + 1) = G_k(j) H,   H = exp(-|dz|^2),
+
+    with T_k = exp(E_k - ref) and G_k = exp(E_k(j + 1) - E_k(j)). The row is cut into runs of
+    at most RUN_CELLS cells over which no exponent moves by more than RUN_SPREAD (|E_k(j + m) -
+    E_k(j)| <= m |dz| (|z| + rho1) + m^2 |dz|^2), restarted exactly (2N exps) at each run's
+    first cell with ref = max_k E_k there: nothing overflows, and a term that underflows at the
+    restart stays below exp(RUN_SPREAD - 708) while the largest stays above exp(-RUN_SPREAD).
+    Each step multiplies rounding errors of about m eps into T (m^2 eps / 2 over a run: 9e-13 at
+    128 cells in float64). Only the nodes that can reach stop / N of the largest term somewhere in
+    the run are carried (the truncation of :func:`walk`); the run's sum is that of the carried
+    T_k g_k^m times H^(m (m - 1) / 2). ``n`` (a multiple of 32, or of 4 below 128) is the rule for the
+    largest amplitude on the row's live span (|(a, b)| is convex along the row, so at one of
+    its ends); a run whose own amplitude needs at most n / 2, n / 4 or n / 8 nodes takes every
+    2nd, 4th or 8th node, the rule of that size (never fewer nodes than node_count asks for).
+    Runs shorter than MIN_RUN (coarse cells far out) walk from the peak instead
+    (:func:`speed_density`), and runs with no live cell are skipped.
+    """
+    zero = type(y)(0.0)
+    one = type(y)(1.0)
+    half = type(y)(0.5)
+    rho1 = params[base + RHO1]
+    rho2 = params[base + RHO2]
+    kappa = params[KAPPA]
+    c0 = params[COS_THETA0]
+    s0 = params[SIN_THETA0]
+    log_coef = params[base + LOG_COEF]
+    log_tol = params[LOG_TOL]
+    spread = params[RUN_SPREAD]
+    run_cells = int(params[RUN_CELLS])
+    delta = type(y)(TWO_PI) / type(y)(n)
+    offset_c = RECURRENCE_NODES
+    offset_k = 2 * RECURRENCE_NODES
+    offset_t = 3 * RECURRENCE_NODES
+    offset_g = 4 * RECURRENCE_NODES + 4
+    for k in range(n):
+        angle = type(y)(k) * delta
+        ck = wp.cos(angle)
+        sk = wp.sin(angle)
+        scratch[band, k] = rho1 * ck
+        scratch[band, offset_c + k] = rho2 * sk
+        scratch[band, offset_k + k] = kappa * (ck * c0 + sk * s0 - one)
+    z1_next, z2_next = whiten(xs[j_begin + 1], y, params)
+    z1_first, z2_first = whiten(xs[j_begin], y, params)
+    dz1 = z1_next - z1_first
+    dz2 = z2_next - z2_first
+    dz_sq = dz1 * dz1 + dz2 * dz2
+    dz_norm = wp.sqrt(dz_sq)
+    h = wp.exp(-dz_sq)
+    mu = type(y)(0.0)
+    j = int(j_begin)
+    while j < j_end:
+        z1, z2 = whiten(xs[j], y, params)
+        z_norm = wp.sqrt(z1 * z1 + z2 * z2)
+        # longest run with L |dz| (|z| + rho1) + L^2 |dz|^2 <= spread
+        reach = dz_norm * (z_norm + rho1)
+        length = run_cells
+        if dz_sq > zero:
+            root = type(y)(2.0) * spread / (reach + wp.sqrt(reach * reach + type(y)(4.0) * dz_sq * spread))
+            if root < type(y)(run_cells):
+                length = int(root)
+        length = wp.max(1, wp.min(length, j_end - j))
+        live = int(0)
+        for m in range(length):
+            if live_cell(xs, y, row, j + m, params, base, out) == 1:
+                live = int(1)
+                break
+        if live == 1 and length < MIN_RUN:
+            for m in range(length):
+                if live_cell(xs, y, row, j + m, params, base, out) == 1:
+                    zm1, zm2 = whiten(xs[j + m], y, params)
+                    value, mu_next = speed_density(zm1, zm2, params, base, mu)
+                    mu = mu_next
+                    out[row, j + m] = out[row, j + m] + value
+        elif live == 1:
+            # this run's own rule: every stride-th node of the row's
+            ze1, ze2 = whiten(xs[j + length - 1], y, params)
+            need = node_count(wp.max(rule_size(z1, z2, params, base), rule_size(ze1, ze2, params, base)), log_tol)
+            stride = int(1)
+            if n % 32 == 0:
+                while stride < 8 and need * stride * 2 <= n:
+                    stride = stride * 2
+            step4 = 4 * stride
+            ref = type(y)(-1.0e30)
+            d_ref = zero
+            for k in range(0, n, stride):
+                r1 = z1 - scratch[band, k]
+                r2 = z2 - scratch[band, offset_c + k]
+                e = scratch[band, offset_k + k] - half * (r1 * r1 + r2 * r2)
+                if e > ref:
+                    ref = e
+                    d_ref = -(r1 * dz1 + r2 * dz2) - half * dz_sq
+            # Keep the nodes that can matter anywhere in the run. Over m <= L cells a node's
+            # exponent rises by at most L max(D_k, 0) (E_k(j + m) - E_k(j) = m D_k - m (m - 1)
+            # |dz|^2 / 2), and the largest term falls by at most L max(-D_ref, 0) + L^2 |dz|^2 / 2,
+            # so a dropped node stays below stop / N of the largest term at every cell of the run.
+            span = type(y)(length)
+            allowance = params[RUN_DROP] + span * wp.max(-d_ref, zero) + half * span * span * dz_sq
+            kept = int(0)
+            for k in range(0, n, stride):
+                r1 = z1 - scratch[band, k]
+                r2 = z2 - scratch[band, offset_c + k]
+                e = scratch[band, offset_k + k] - half * (r1 * r1 + r2 * r2) - ref
+                d = -(r1 * dz1 + r2 * dz2) - half * dz_sq
+                if e + span * wp.max(d, zero) + allowance >= zero:
+                    scratch[band, offset_t + kept] = wp.exp(e)
+                    scratch[band, offset_g + kept] = wp.exp(d)
+                    kept = kept + 1
+            while kept % 4 != 0:  # pad to whole groups of four with zero terms
+                scratch[band, offset_t + kept] = zero
+                scratch[band, offset_g + kept] = one
+                kept = kept + 1
+            log_scale = log_coef + ref
+            safe = wp.abs(log_scale) < params[RUN_SAFE]
+            weight = delta * type(y)(stride)
+            scale = wp.exp(wp.min(log_scale, params[RUN_SAFE])) * weight
+            quad = one  # H^(m (m - 1) / 2)
+            power = one  # H^m
+            for m in range(length):
+                # T_k(j + m) = T_k(j) g_k^m H^(m (m - 1) / 2): carry T g^m, four independent sums
+                s_a = type(y)(0.0)
+                s_b = type(y)(0.0)
+                s_c = type(y)(0.0)
+                s_d = type(y)(0.0)
+                for c in range(0, kept, 4):
+                    ka = offset_t + c
+                    ta = scratch[band, ka]
+                    tb = scratch[band, ka + 1]
+                    tc = scratch[band, ka + 2]
+                    td = scratch[band, ka + 3]
+                    s_a = s_a + ta
+                    s_b = s_b + tb
+                    s_c = s_c + tc
+                    s_d = s_d + td
+                    kg = offset_g + c
+                    ga = scratch[band, kg]  # all loads before the stores (same array: no reordering)
+                    gb = scratch[band, kg + 1]
+                    gc = scratch[band, kg + 2]
+                    gd = scratch[band, kg + 3]
+                    scratch[band, ka] = ta * ga
+                    scratch[band, ka + 1] = tb * gb
+                    scratch[band, ka + 2] = tc * gc
+                    scratch[band, ka + 3] = td * gd
+                total = ((s_a + s_b) + (s_c + s_d)) * quad
+                quad = quad * power
+                power = power * h
+                if out[row, j + m] >= zero:  # (inside the span a cell below the speed floor costs nothing extra)
+                    if safe:
+                        out[row, j + m] = out[row, j + m] + scale * total
+                    else:  # exp(ref) alone under- or overflows: combine in logs
+                        out[row, j + m] = out[row, j + m] + weight * wp.exp(log_scale + wp.log(total))
+        j = j + length
 
 
 @wp.kernel
@@ -310,16 +567,76 @@ def butterly_grid(
     columns: int,
     params: wp.array(dtype=Any),
     n_speeds: int,
+    scratch: wp.array2d(dtype=Any),
+    band: int,
     out: wp.array2d(dtype=Any),
 ):
     """Density at the cell centres of a band of rows, ``columns`` cells per thread (a whole row
-    on the CPU, one cell on a GPU)."""
+    on the CPU, one cell on a GPU); ``scratch[band]`` is this band's work space (a whole row's
+    thread uses it, so a band's rows run one after another, as on the CPU).
+
+    A cell is set to 0 without computing anything where the sum of the speeds' bounds
+    (:func:`log_bound`; n times the largest) is below LOG_CELL_FLOOR, and a speed is skipped at
+    a cell where its own bound is below LOG_SPEED_FLOOR (the floors are set on the host from a
+    lower bound of the density's maximum; see ``Butterly.kernel_parameters``). The speeds are
+    the outer loop: a row of at least 2 * MIN_RUN cells whose rule has at most RECURRENCE_NODES
+    nodes goes through :func:`row_runs`, and otherwise each cell walks from its peak, Newton
+    starting from the neighbouring cell's root. ``out`` holds -1 for skipped cells until the
+    last pass.
+    """
     i, block = wp.tid()
     row = row0 + i
     y = ys[row]
+    zero = type(y)(0.0)
+    j_begin = block * columns
     j_end = wp.min((block + 1) * columns, xs.shape[0])
-    for j in range(block * columns, j_end):
-        out[row, j] = butterly_density(xs[j], y, params, n_speeds)
+    cell_floor = params[LOG_CELL_FLOOR] - wp.log(type(y)(n_speeds))
+    speed_floor = params[LOG_SPEED_FLOOR]
+    for j in range(j_begin, j_end):
+        z1, z2 = whiten(xs[j], y, params)
+        z_norm = wp.sqrt(z1 * z1 + z2 * z2)
+        mark = type(y)(-1.0)
+        for s in range(n_speeds):
+            if log_bound(z1, z2, z_norm, params, HEAD + PER_SPEED * s) >= cell_floor:
+                mark = zero
+                break
+        out[row, j] = mark
+    for s in range(n_speeds):
+        base = HEAD + PER_SPEED * s
+        # the live span of the row for this speed: scan in from both ends
+        first = int(j_begin)
+        while first < j_end and live_cell(xs, y, row, first, params, base, out) == 0:
+            first = first + 1
+        last = int(j_end - 1)
+        while last > first and live_cell(xs, y, row, last, params, base, out) == 0:
+            last = last - 1
+        n = int(MAX_NODES)
+        if last - first + 1 >= 2 * MIN_RUN:
+            za1, za2 = whiten(xs[first], y, params)
+            zb1, zb2 = whiten(xs[last], y, params)
+            amp = wp.max(rule_size(za1, za2, params, base), rule_size(zb1, zb2, params, base))
+            n = node_count(amp, params[LOG_TOL])
+            if n < 128:
+                n = (n + 3) // 4 * 4
+            else:
+                n = (n + 31) // 32 * 32
+        if first == j_end:
+            n = int(0)  # nothing to add on this row
+        elif n <= RECURRENCE_NODES:
+            row_runs(xs, y, row, first, last + 1, params, base, n, scratch, band, out)
+        else:
+            mu = type(y)(0.0)
+            for j in range(j_begin, j_end):
+                if out[row, j] >= zero:
+                    z1, z2 = whiten(xs[j], y, params)
+                    z_norm = wp.sqrt(z1 * z1 + z2 * z2)
+                    if log_bound(z1, z2, z_norm, params, base) >= speed_floor:
+                        value, mu_next = speed_density(z1, z2, params, base, mu)
+                        mu = mu_next
+                        out[row, j] = out[row, j] + value
+    for j in range(j_begin, j_end):
+        if out[row, j] < zero:
+            out[row, j] = zero
 
 
 @wp.kernel
@@ -340,7 +657,7 @@ def _register_overloads():
     for scalar in (wp.float32, wp.float64):
         vec = wp.array(dtype=scalar)
         common = {"xs": vec, "ys": vec, "params": vec}
-        wp.overload(butterly_grid, {**common, "out": wp.array2d(dtype=scalar)})
+        wp.overload(butterly_grid, {**common, "scratch": wp.array2d(dtype=scalar), "out": wp.array2d(dtype=scalar)})
         wp.overload(butterly_points, {**common, "out": vec})
 
 

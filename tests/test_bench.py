@@ -1,6 +1,9 @@
 """``bananagrid bench`` runs and writes its records (timings themselves are never asserted)."""
 
 import json
+import math
+
+import pytest
 
 from bananagrid import bench
 
@@ -20,7 +23,10 @@ def test_bench_writes_records(tmp_path, capsys):
 
 def test_bench_rejects_bad_arguments(capsys):
     assert bench.main(["--kernels", "banana"]) == 2
-    assert "--kernels = 'banana': choose from cat, cat-heading, polar-rough, polar-improved, bearing-exact" in capsys.readouterr().err
+    assert (
+        "--kernels = 'banana': choose from cat, cat-heading, polar-rough, polar-improved, bearing-exact, "
+        "butterly-r1, butterly-r10, butterly-r100, butterly-r1000"
+    ) in capsys.readouterr().err
     assert bench.main(["--repeat", "0"]) == 2
     assert "--repeat = 0: must be >= 1" in capsys.readouterr().err
 
@@ -37,3 +43,26 @@ def test_bench_reports_heading_cost(tmp_path, capsys):
 def test_containment_timing_reports_both_methods():
     timing = bench.containment_timing(n=1000, repeat=1)
     assert timing["geometries"] == 1000 and timing["exact_seconds"] > 0 and timing["series_seconds"] > 0
+
+
+def test_bench_butterly_rows(tmp_path, capsys, monkeypatch):
+    """The Butterly rows on a small grid (the real one is 2048 x 2048): the framed grid, the
+    record format, and the NumPy twin's time scaled from every 4th row."""
+    monkeypatch.setattr(bench, "BUTTERLY_SIDE", 64)
+    out = tmp_path / "bench.json"
+    argv = ["--kernels", "butterly-r10", "--repeat", "1", "--threads", "1", "--baseline-stride", "4",
+            "--no-memory", "--json", str(out)]
+    assert bench.main(argv) == 0
+    records = json.loads(out.read_text())["records"]
+    assert [(r["kernel"], r["dtype"], r["threads"]) for r in records] == [
+        ("butterly-r10", "float64", 1), ("butterly-r10", "float32", 1)
+    ]
+    for record in records:
+        assert record["cells"] == 64 * 64 and record["seconds"] > 0 and record["baseline_seconds"] > 0
+        assert record["mcells_per_s"] == pytest.approx(record["cells"] / record["seconds"] / 1e6)
+    grid = bench._grid_for("butterly-r10", 4.0)
+    model = bench.KERNELS["butterly-r10"]()
+    # framed about the ring +- 6 sigma_max; the largest range is 10 sigma_min
+    assert model.ranges.max() == pytest.approx(10 * model.sigma_min)
+    assert grid.x[-1] - grid.x[0] == pytest.approx(2 * (model.ranges.max() + 6 * math.sqrt(model.axes[1])) * 63 / 64)
+    assert "butterly-r10" in capsys.readouterr().out

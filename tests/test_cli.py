@@ -17,6 +17,7 @@ from bananagrid.cli import main
 from bananagrid.inspect import inspect_recording, read_depth_image
 from bananagrid.runner import array_key, run_scene
 from bananagrid.scene import load_scene
+from bananagrid.scene_presence import PresenceScene
 
 from cases import small_scene
 
@@ -29,7 +30,11 @@ QUICK_STEP = {
     "figure1": 40.0, "folding": 40.0, "sequence": 200.0,
     "bearing_coastal": 100.0, "bearing_poor_crossing": 400.0, "bearing_three_stations": 100.0,
     "figure8": 100.0, "ship_heading": 20.0,
+    "submarine": 4000.0, "rice_isotropic": 20.0, "slow_contact": 200.0,
 }
+#: Presence scenes ([array]) have no grid: --step does not apply (it is ignored with a warning),
+#: so they run at their own 1-degree lattices (about a second each) and get no --step here.
+QUICK_STEP.update(room_mixture=None, room_uniform=None, room_frustum=None, line_section4=None)
 
 SMALL = small_scene("small", """\
 [layers.near]
@@ -128,7 +133,7 @@ def test_error_as_subprocess(tmp_path):
     )
     assert result.returncode == 2
     assert result.stderr.strip().splitlines() == [
-        f'bananagrid: error: {scene}: layers.near.model = "banana": must be one of "cat", "polar", "bearing_fix"'
+        f'bananagrid: error: {scene}: layers.near.model = "banana": must be one of "cat", "polar", "bearing_fix", "butterly"'
     ]
     assert result.stdout == ""
 
@@ -203,7 +208,8 @@ def quick_runs(tmp_path_factory) -> dict[str, Path]:
     for path in SCENES:
         name = path.stem
         out = tmp_path_factory.mktemp(name)
-        argv = ["run", str(path), "--out", str(out), "--step", str(QUICK_STEP.get(name, 100.0)), "--npz"]
+        step = QUICK_STEP.get(name, 100.0)
+        argv = ["run", str(path), "--out", str(out), *(["--step", str(step)] if step is not None else []), "--npz"]
         assert main(argv) == 0, name
         runs[name] = out
     return runs
@@ -224,6 +230,11 @@ def test_scene_runs_end_to_end(path, quick_runs):
     info = inspect_recording(rrd)
     assert info["blueprint"]
     assert "/scene" in info["entities"]
+    if isinstance(scene, PresenceScene):  # one cell map, no grid layers (see test_presence_scene.py)
+        for part in ("plane/cells", "plane/room", "table", "log10_table", "summary"):
+            assert f"/presence/{part}" in info["entities"], part
+        assert sorted(p.name for p in quick_runs[scene.name].iterdir()) == [f"{scene.name}.npz", f"{scene.name}.rrd"]
+        return
     for layer in scene.layers:
         for part in ("density", "log10_density", "contours", "info", "mass"):
             assert f"/layers/{layer.name}/{part}" in info["entities"]
@@ -304,6 +315,23 @@ def test_run_scene_returns_rows(tmp_path):
     assert 0.0 < row["mass"] <= 1.0 + 1e-9 and row["peak"] > 0.0 and row["seconds"] >= 0.0
     with pytest.raises(bananagrid.BananagridError, match="output directory does not exist"):
         run_scene(scene, tmp_path / "missing")
+
+
+def test_butterly_recordings_have_geometry_and_rice(quick_runs):
+    """Every Butterly layer logs its start geometry at every time; the isotropic scene also
+    logs its range law beside Rice's, which agree to 2 % of the peak at the quick 20 m cells
+    (bananagrid.record_butterly: the error of binning cells of s / 5 is about 1e-2 there)."""
+    for name, layers in (("submarine", ["submarine"]), ("rice_isotropic", ["rice"]), ("slow_contact", ["drift", "start"])):
+        scene = load_scene(ROOT / "scenes" / f"{name}.toml")
+        entities = inspect_recording(quick_runs[name] / f"{name}.rrd")["entities"]
+        for layer in layers:
+            for part in ("mean", "ellipses", "parameters"):
+                rows = entities[f"/layers/{layer}/geometry/{part}"]
+                assert rows["temporal_rows"] == len(scene.times or (1,)), (name, layer, part)
+    entities = inspect_recording(quick_runs["rice_isotropic"] / "rice_isotropic.rrd")["entities"]
+    assert "/layers/rice/range/raster" in entities and "/layers/rice/range/rice" in entities
+    summary = entities["/layers/rice/range/summary"]["values"][-1]["values"]
+    assert 0 < summary["relative_to_peak"] < 0.02
 
 
 def test_bearing_recording_has_geometry_difference_and_validation(quick_runs):

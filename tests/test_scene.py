@@ -5,6 +5,7 @@ from __future__ import annotations
 import math
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from bananagrid import CAT, BananagridError, PolarBanana
@@ -126,6 +127,10 @@ def test_bundled_scenes_load(path):
     scene = load_scene(path)
     assert scene.name == path.stem
     assert scene.source == str(path)
+    from bananagrid.scene_presence import PresenceScene
+
+    if isinstance(scene, PresenceScene):  # an [array] scene: checked in test_presence_scene.py
+        return
     for layer, t in scene.jobs():
         layer.model(t)
 
@@ -348,3 +353,103 @@ def test_radial_table_parses():
 ])
 def test_bad_radial_keys_are_named(body, message):
     assert message in error_of(BASE + f"\n[radial]\n{body}\n")
+
+
+# --- Butterly layers (issue 4) -----------------------------------------------------------------
+
+BUTTERLY = BASE + """
+[layers.sub]
+model = "butterly"
+mean = [10.0, 50.0]
+sigma_x = 40.0
+sigma_y = 20.0
+rho = 0.5
+speeds_kn = [5.0, 10.0]
+weights = [0.25, 0.75]
+course_mean_deg = 90.0
+course_kappa = 2.0
+"""
+
+
+def test_butterly_layer_parses_into_the_model():
+    """Knots become m/s (1 kn = 1852 m / 3600 s), sigma_x, sigma_y and rho the covariance,
+    degrees radians; the layer takes the defaults' t (5 s) and follows scene.times."""
+    from bananagrid import Butterly
+
+    layer = parse_scene(BUTTERLY).layers[2]
+    model = layer.model()
+    assert isinstance(model, Butterly) and model.t == 5.0
+    np.testing.assert_allclose(model.speeds, [5.0 * 1852 / 3600, 10.0 * 1852 / 3600], rtol=1e-15)
+    np.testing.assert_array_equal(model.cov, [[1600.0, 400.0], [400.0, 400.0]])
+    assert model.mean == (10.0, 50.0) and model.weights.tolist() == [0.25, 0.75]
+    assert model.course_mean == pytest.approx(math.pi / 2) and model.course_kappa == 2.0
+    timed = parse_scene(edited('name = "demo"\n', 'name = "demo"\ntimes = [60, 120]\n', edited("t = 5.0\n", "", BUTTERLY)))
+    assert [(layer.name, t) for layer, t in timed.jobs()][-1] == ("sub", 120.0)
+    assert timed.layers[2].model(120.0).ranges[1] == pytest.approx(120.0 * 10.0 * 1852 / 3600)
+
+
+def test_butterly_cov_and_continuous_speed_laws_parse():
+    from bananagrid.butterly import NormalSpeed, TabulatedSpeed, UniformSpeed
+
+    start = 'mean = [10.0, 50.0]\nsigma_x = 40.0\nsigma_y = 20.0\nrho = 0.5\n'
+    cases = {
+        'cov = [[1600.0, 400.0], [400.0, 400.0]]\n': None,
+        'speed_law = "uniform"\nspeed_min_kn = 4\nspeed_max = 6.0\n': UniformSpeed(4 * 1852 / 3600, 6.0),
+        'speed_law = "normal"\nspeed_mean = 5.0\nspeed_sd_kn = 1.0\n': NormalSpeed(5.0, 1852 / 3600),
+        'speed_law = "table"\nspeeds = [1.0, 2.0, 4.0]\nspeed_density = [0.0, 1.0, 0.5]\n': "table",
+    }
+    for body, law in cases.items():
+        text = BUTTERLY.replace("speeds_kn = [5.0, 10.0]\nweights = [0.25, 0.75]\n", body if law else "speeds = [1.0]\n")
+        if law is None:
+            text = text.replace(start, "mean = [10.0, 50.0]\n" + body)
+        model = parse_scene(text).layers[2].model()
+        np.testing.assert_array_equal(model.cov, [[1600.0, 400.0], [400.0, 400.0]])
+        if law == "table":
+            assert isinstance(model.speeds, TabulatedSpeed) and model.speeds.speeds.tolist() == [1.0, 2.0, 4.0]
+        elif law is not None:
+            assert model.speeds == law
+
+
+BAD_BUTTERLY = {
+    "rho out of range": (("rho = 0.5", "rho = 1.0"), "layers.sub.rho = 1.0: must be in (-1, 1)"),
+    "negative sigma": (("sigma_x = 40.0", "sigma_x = -40.0"), "layers.sub.sigma_x = -40.0: must be finite and > 0"),
+    "negative speed in knots": (("speeds_kn = [5.0, 10.0]", "speeds_kn = [5.0, -10.0]"), "layers.sub.speeds_kn[1] = -10.0: must be >= 0"),
+    "weights not summing to 1": (("weights = [0.25, 0.75]", "weights = [0.25, 0.5]"), "layers.sub.weights = [0.25, 0.5]: must sum to 1"),
+    "weights missing": (("weights = [0.25, 0.75]\n", ""), "layers.sub: weights: required for 2 speeds"),
+    "speeds missing": (("speeds_kn = [5.0, 10.0]\n", ""), "layers.sub: missing speeds (or speeds_kn): give each in [layers.sub] or [defaults]"),
+    "no start covariance": (("sigma_x = 40.0\nsigma_y = 20.0\nrho = 0.5\n", ""), "layers.sub: missing cov (or sigma_x and sigma_y)"),
+    "sigma_y missing": (("sigma_y = 20.0\n", ""), "layers.sub: missing sigma_y"),
+    "cov and sigmas": (("rho = 0.5", "rho = 0.5\ncov = [[1.0, 0.0], [0.0, 1.0]]"), "layers.sub: give cov or sigma_x, sigma_y (and rho), not both"),
+    "cov not symmetric": (("sigma_x = 40.0\nsigma_y = 20.0\nrho = 0.5\n", "cov = [[4.0, 1.0], [2.0, 9.0]]\n"), "layers.sub.cov = [[4.0, 1.0], [2.0, 9.0]]: must be symmetric"),
+    "cov not positive definite": (("sigma_x = 40.0\nsigma_y = 20.0\nrho = 0.5\n", "cov = [[4.0, 6.0], [6.0, 9.0]]\n"), "layers.sub.cov = [[4.0, 6.0], [6.0, 9.0]]: must be positive definite"),
+    "cov not 2 x 2": (("sigma_x = 40.0\nsigma_y = 20.0\nrho = 0.5\n", "cov = [1.0, 2.0]\n"), "layers.sub.cov = [1.0, 2.0]: expected a 2 x 2 array"),
+    "bad mean": (("mean = [10.0, 50.0]", "mean = [10.0]"), "layers.sub.mean = [10.0]: expected a pair of numbers"),
+    "speeds and knots": (("speeds_kn = [5.0, 10.0]", "speeds_kn = [5.0, 10.0]\nspeeds = [1.0, 2.0]"), "layers.sub: give speeds (m/s) or speeds_kn (knots), not both"),
+    "unknown speed law": (("rho = 0.5", 'rho = 0.5\nspeed_law = "gamma"'), 'layers.sub.speed_law = "gamma": must be one of "discrete", "uniform", "normal", "table"'),
+    "key of another speed law": (("rho = 0.5", "rho = 0.5\nspeed_sd = 1.0"), 'layers.sub.speed_sd = 1.0: only with speed_law = "normal" (this layer\'s is "discrete")'),
+    "uniform law upside down": (
+        ("speeds_kn = [5.0, 10.0]\nweights = [0.25, 0.75]", 'speed_law = "uniform"\nspeed_min = 6.0\nspeed_max = 2.0'),
+        "layers.sub.speed_max = 2.0: must be > v_min = 6.0",
+    ),
+    "negative kappa": (("course_kappa = 2.0", "course_kappa = -2.0"), "layers.sub.course_kappa = -2.0: must be >= 0"),
+    "both course forms": (("course_kappa = 2.0", "course_kappa = 2.0\ncourse_mean = 1.0"), "layers.sub: give course_mean (rad) or course_mean_deg (degrees), not both"),
+    "negative time": (("rho = 0.5", "rho = 0.5\nt = -1.0"), "layers.sub.t = -1.0: must be >= 0"),
+    "motion key": (("rho = 0.5", "rho = 0.5\nheading = 1.0"), 'layers.sub.heading: unknown key (model "butterly")'),
+}
+
+
+@pytest.mark.parametrize("case", list(BAD_BUTTERLY), ids=list(BAD_BUTTERLY))
+def test_bad_butterly_keys_are_named(case):
+    (old, new), expected = BAD_BUTTERLY[case]
+    message = error_of(edited(old, new, BUTTERLY))
+    assert expected in message, message
+
+
+def test_butterly_t_with_scene_times_is_refused():
+    text = edited('name = "demo"\n', 'name = "demo"\ntimes = [1, 2]\n', edited("t = 5.0\n", "", edited("rho = 0.5", "rho = 0.5\nt = 3", BUTTERLY)))
+    assert "layers.sub.t = 3: not allowed when scene.times is given" in error_of(text)
+
+
+def test_butterly_is_not_a_radial_layer():
+    message = error_of(BUTTERLY + '\n[radial]\nlayers = ["sub"]\nmoments_max_deg = 10\n')
+    assert 'radial.layers[0] = "sub": not a cat or polar layer of this scene' in message
