@@ -66,3 +66,15 @@ def test_bench_butterly_rows(tmp_path, capsys, monkeypatch):
     assert model.ranges.max() == pytest.approx(10 * model.sigma_min)
     assert grid.x[-1] - grid.x[0] == pytest.approx(2 * (model.ranges.max() + 6 * math.sqrt(model.axes[1])) * 63 / 64)
     assert "butterly-r10" in capsys.readouterr().out
+
+
+def test_bench_times_jobs_that_are_not_one_grid(tmp_path):
+    """The presence lattice row: float64 only, its cells, and a SciPy baseline (a sample of cells,
+    scaled) in the same record format."""
+    out = tmp_path / "bench.json"
+    argv = ["--kernels", "presence-plane", "--repeat", "1", "--threads", "1", "--baseline-stride", "100",
+            "--no-memory", "--json", str(out)]
+    assert bench.main(argv) == 0
+    (record,) = json.loads(out.read_text())["records"]
+    assert record["kernel"] == "presence-plane" and record["dtype"] == "float64" and record["cells"] == 32760
+    assert record["baseline_seconds"] > 0 and record["ratio"] > 0
