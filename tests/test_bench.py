@@ -78,3 +78,24 @@ def test_bench_times_jobs_that_are_not_one_grid(tmp_path):
     (record,) = json.loads(out.read_text())["records"]
     assert record["kernel"] == "presence-plane" and record["dtype"] == "float64" and record["cells"] == 32760
     assert record["baseline_seconds"] > 0 and record["ratio"] > 0
+
+
+def test_heading_rows_pay_for_their_tables(monkeypatch):
+    """Every timed call of the heading-noise CAT builds its table: the bench clears the cache
+    that would otherwise serve the repeats."""
+    import math
+
+    import bananagrid as bg
+    from bananagrid import heading
+
+    builds = []
+    real = heading.build_heading_table
+    monkeypatch.setattr(heading, "build_heading_table", lambda *a, **k: builds.append(1) or real(*a, **k))
+    model = bg.CAT(v0=280.0, t=10.0, sigma_a=5 / 3, sigma_omega=math.pi / 54, sigma_heading=0.1)
+    grid = bg.Grid.from_bounds(x=(-3000.0, 3000.0), y=(-200.0, 3400.0), step=200.0)
+    bg.rasterise(model, grid)
+    bg.rasterise(model, grid)
+    assert len(builds) == 1  # a user's repeat is served from the cache
+    bench._cold_rasterise(model, grid, float, 1)
+    bench._cold_rasterise(model, grid, float, 1)
+    assert len(builds) == 3
