@@ -9,7 +9,10 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["cat_density", "polar_density", "bearing_density", "presence_plane_cells"]
+__all__ = [
+    "cat_density", "polar_density", "bearing_density", "presence_plane_cells", "presence_grid_cells",
+    "presence_frustum_cells",
+]
 
 _INV_SQRT_2PI = 0.3989422804014327
 
@@ -189,4 +192,55 @@ def presence_plane_cells(mixture, lattice, cells) -> np.ndarray:
                 epsrel=1e-7, epsabs=0.0,
             )[0]
         out[k] = value
+    return out
+
+
+def presence_grid_cells(mixture, grid, cells) -> np.ndarray:
+    """SciPy baseline of rectangle probabilities: for each (row, column) in ``cells``,
+    ``scipy.stats.multivariate_normal.cdf`` at the four corners per component (inclusion and
+    exclusion), summed over the mixture."""
+    from scipy import stats
+
+    out = np.zeros(len(cells))
+    laws = [stats.multivariate_normal(mean=m[:2], cov=np.asarray(c)[:2, :2]) for m, c in zip(mixture.means, mixture.covs)]
+    x0, y0 = grid.origin
+    for k, (i, j) in enumerate(cells):
+        xa, xb = x0 + j * grid.dx, x0 + (j + 1) * grid.dx
+        ya, yb = y0 + i * grid.dy, y0 + (i + 1) * grid.dy
+        corners = np.array([[xb, yb], [xa, yb], [xb, ya], [xa, ya]])
+        for w, law in zip(mixture.weights, laws):
+            c = law.cdf(corners)
+            out[k] += w * (c[0] - c[1] - c[2] + c[3])
+    return out
+
+
+def presence_frustum_cells(mixture, lattice, cells) -> np.ndarray:
+    """SciPy baseline of frustum cells (no region): ``scipy.integrate.tplquad`` of the mixture's
+    3-D density over depth, azimuth and radius (the cell's slab of sectors), relative tolerance
+    1e-7; the horizon's unbounded cells are integrated to 50 m (beyond it the density of a
+    room-scale mixture underflows)."""
+    import math
+
+    from scipy import integrate
+
+    weights = np.asarray(mixture.weights, dtype=float)
+    means = np.asarray(mixture.means, dtype=float)
+    inverses = np.array([np.linalg.inv(c) for c in mixture.covs])
+    norms = weights / np.sqrt((2.0 * math.pi) ** 3 * np.array([np.linalg.det(c) for c in mixture.covs]))
+
+    def density(x, y, z):
+        d = np.array([x, y, z]) - means
+        q = np.einsum("ki,kij,kj->k", d, inverses, d)
+        return float(np.sum(norms * np.exp(-0.5 * q)))
+
+    az = lattice.azimuth_edges
+    tau = np.minimum(lattice.tau_edges, 50.0 / (lattice.h - lattice.dh))
+    depths = (lattice.h - lattice.dh, lattice.h + lattice.dh)
+    out = np.empty(len(cells))
+    for k, (a, e) in enumerate(cells):
+        t0, t1 = float(tau[e + 1]), float(tau[e])
+        out[k] = integrate.tplquad(
+            lambda r, p, d: r * density(r * math.cos(p), r * math.sin(p), -d),
+            depths[0], depths[1], az[a], az[a + 1], lambda d, p: d * t0, lambda d, p: d * t1, epsrel=1e-7,
+        )[0]
     return out

@@ -73,7 +73,9 @@ KERNELS = {
     "polar-improved": lambda: PolarBanana(**FIG1, variant="improved"),
     "bearing-exact": lambda: BearingFix(**COASTAL),
     **{f"butterly-r{n}": (lambda n=n: butterly_model(n)) for n in BUTTERLY_RATIOS},
-    "presence-plane": None,  # see JOBS
+    "presence-plane": None,  # these four: see JOBS
+    "presence-frustum": None,
+    "presence-grid": None,
     "polar-batch": None,
 }
 
@@ -111,6 +113,63 @@ class _PresenceJob:
         start = time.perf_counter()
         baseline.presence_plane_cells(self.mixture, self.lattice, cells)
         return (time.perf_counter() - start) * self.cells / n
+
+
+class _PresenceGridJob(_PresenceJob):
+    """``presence-grid``: the same 8-component mixture on a 1024 x 1024 grid over a 6 m x 5 m
+    room, each cell's exact probability (Genz's BVN in the kernel); baseline: SciPy
+    ``multivariate_normal.cdf`` at each cell's corners per component, on a sample, scaled."""
+
+    def __init__(self):
+        super().__init__()
+        self.grid = Grid.from_bounds(x=(-3.0, 3.0), y=(-2.5, 2.5), dx=6.0 / 1024, dy=5.0 / 1024)
+        self.cells = self.grid.nx * self.grid.ny
+
+    def work(self, dtype, threads):
+        from .presence import grid_probabilities
+
+        grid_probabilities(self.mixture, self.grid, dtype=dtype, threads=threads)
+
+    def baseline(self, stride: int, repeat: int) -> float:
+        n = max(16, 2560 // stride)
+        rng = np.random.default_rng(2)
+        cells = list(zip(rng.integers(0, self.grid.ny, n), rng.integers(0, self.grid.nx, n)))
+        start = time.perf_counter()
+        baseline.presence_grid_cells(self.mixture, self.grid, cells)
+        return (time.perf_counter() - start) * self.cells / n
+
+
+class _PresenceFrustumJob:
+    """``presence-frustum``: the 360 x 91 frustum lattice of the slab 1.3-1.8 m below the array
+    with scenes/room_frustum.toml's 3-D mixture; baseline: SciPy ``tplquad`` per cell on a
+    sample of 8 cells, scaled. float64 only."""
+
+    dtypes = (np.float64,)
+
+    def __init__(self):
+        from .angular import AngularLattice
+        from .presence import GaussianMixture
+
+        sd = [(0.25, 0.25, 0.05), (0.7, 0.2, 0.08), (0.15, 0.3, 0.08)]
+        rho = [0.0, 0.0, 0.3]
+        covs = [[[a * a, r * a * b, 0.0], [r * a * b, b * b, 0.0], [0.0, 0.0, c * c]] for (a, b, c), r in zip(sd, rho)]
+        self.mixture = GaussianMixture(
+            weights=[0.5, 0.35, 0.15], means=[[-1.8, 1.5, -1.75], [1.2, -1.8, -1.75], [2.6, 1.9, -1.35]], covs=covs
+        )
+        self.lattice = AngularLattice.integer_degrees("frustum", h=1.55, dh=0.25)
+        self.cells = self.lattice.n_azimuth * self.lattice.n_elevation
+
+    def work(self, dtype, threads):
+        from .angular import cell_probabilities
+
+        cell_probabilities(self.mixture, self.lattice, dtype=dtype, threads=threads)
+
+    def baseline(self, stride: int, repeat: int) -> float:
+        rng = np.random.default_rng(3)
+        cells = list(zip(rng.integers(0, self.lattice.n_azimuth, 8), rng.integers(0, self.lattice.n_elevation, 8)))
+        start = time.perf_counter()
+        baseline.presence_frustum_cells(self.mixture, self.lattice, cells)
+        return (time.perf_counter() - start) * self.cells / len(cells)
 
 
 class _BatchJob:
@@ -153,7 +212,10 @@ class _BatchJob:
 
 
 #: Kernels timed on work other than one grid.
-JOBS = {"presence-plane": _PresenceJob, "polar-batch": _BatchJob}
+JOBS = {
+    "presence-plane": _PresenceJob, "presence-frustum": _PresenceFrustumJob, "presence-grid": _PresenceGridJob,
+    "polar-batch": _BatchJob,
+}
 
 #: Geometries in the containment timing (issue 6: 10^6 in at most 1 s).
 CONTAINMENT_GEOMETRIES = 1_000_000
