@@ -262,6 +262,29 @@ def test_line_cells_are_cdf_differences():
     assert clipped.prob.sum() == pytest.approx(1.0, abs=1e-14)
 
 
+def test_line_cells_match_monte_carlo():
+    """Line cells against the mixture's own samples binned at x = -h cot(phi) of the cell bounds
+    (Pearson's chi-square over cells expecting >= 5 counts, false-alarm rate 1e-3, fixed seed)."""
+    from scipy import stats
+
+    mix = GaussianMixture([0.6, 0.4], [[0.5], [-2.0]], [0.04, 1.0])
+    lat = AngularLattice("line", h=1.5, azimuth_step=DEG)
+    cm = cell_probabilities(mix, lat)
+    x = np.clip(lat.line_edges(), -1e9, 1e9)  # the end cells reach to infinity
+    order = np.argsort(x)
+    n = 200_000
+    counts = np.histogram(np.asarray(mix.sample(n, np.random.default_rng(8))).ravel(), bins=x[order])[0]
+    # bins follow the sorted edges; cell k lies between edges k and k + 1
+    cells = np.minimum(order[:-1], order[1:])
+    expected = np.zeros(len(cm.prob))
+    observed = np.zeros(len(cm.prob))
+    expected[cells] = cm.prob[cells] * n
+    observed[cells] = counts
+    big = expected >= 5
+    chi2 = float(np.sum((observed[big] - expected[big]) ** 2 / expected[big]))
+    assert stats.chi2.sf(chi2, df=int(big.sum()) - 1) > 1e-3
+
+
 # ----------------------------------------------------------------------------------------------
 # Uniform presence: clipped geometry
 # ----------------------------------------------------------------------------------------------
