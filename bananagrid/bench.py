@@ -84,10 +84,10 @@ KERNELS = {
 class _PresenceJob:
     """``presence-plane``: the paper's 360 x 91 plane lattice (32,760 cells, h = 1.8 m) with an
     8-component mixture (fixed seed) at the guaranteed accuracy; baseline: SciPy ``dblquad``
-    per cell (``baseline.presence_plane_cells``) on a spread sample of cells, scaled. Timed in
-    float64 only (the guarantee is for float64)."""
+    per cell (``baseline.presence_plane_cells``) on a spread sample of cells, scaled. float32
+    runs at tolerance ``angular.FLOAT32_RTOL`` (the 1e-6 guarantee is float64's)."""
 
-    dtypes = (np.float64,)
+    dtypes = (np.float64, np.float32)
 
     def __init__(self):
         from .angular import AngularLattice
@@ -118,7 +118,10 @@ class _PresenceJob:
 class _PresenceGridJob(_PresenceJob):
     """``presence-grid``: the same 8-component mixture on a 1024 x 1024 grid over a 6 m x 5 m
     room, each cell's exact probability (Genz's BVN in the kernel); baseline: SciPy
-    ``multivariate_normal.cdf`` at each cell's corners per component, on a sample, scaled."""
+    ``multivariate_normal.cdf`` at each cell's corners per component, on a sample, scaled.
+    float64 only: ``grid_probabilities`` refuses float32 (cancellation)."""
+
+    dtypes = (np.float64,)
 
     def __init__(self):
         super().__init__()
@@ -142,9 +145,9 @@ class _PresenceGridJob(_PresenceJob):
 class _PresenceFrustumJob:
     """``presence-frustum``: the 360 x 91 frustum lattice of the slab 1.3-1.8 m below the array
     with scenes/room_frustum.toml's 3-D mixture; baseline: SciPy ``tplquad`` per cell on a
-    sample of 8 cells, scaled. float64 only."""
+    sample of 8 cells, scaled; float32 at ``angular.FLOAT32_RTOL``."""
 
-    dtypes = (np.float64,)
+    dtypes = (np.float64, np.float32)
 
     def __init__(self):
         from .angular import AngularLattice

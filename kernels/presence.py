@@ -188,7 +188,7 @@ def ray_box(c: Any, s: Any, box: wp.array(dtype=Any)):
     """The chord [rho_in, rho_out] of the ray rho (c, s), rho >= 0, in the box
     [box0, box1] x [box2, box3] (rho_in > rho_out when the ray misses it)."""
     lo = type(c)(0.0)
-    hi = type(c)(1.0e300)
+    hi = type(c)(1.0e30)
     if c > type(c)(0.0):
         lo = wp.max(lo, box[0] / c)
         hi = wp.min(hi, box[1] / c)
@@ -246,7 +246,7 @@ def sector_distance(mx: Any, my: Any, r0: Any, r1: Any, infinite: int, p0: Any, 
     rel = psi - p0 - two_pi * wp.floor((psi - p0) / two_pi)  # in [0, 2 pi)
     if rel <= p1 - p0:
         return radial
-    best = type(mx)(1.0e300)
+    best = type(mx)(1.0e30)
     for e in range(2):
         ang = p0
         if e == 1:
@@ -256,7 +256,7 @@ def sector_distance(mx: Any, my: Any, r0: Any, r1: Any, infinite: int, p0: Any, 
         proj = mx * ce + my * se
         lim = r1
         if infinite != 0:
-            lim = type(mx)(1.0e300)
+            lim = type(mx)(1.0e30)
         proj = wp.min(wp.max(proj, r0), lim)
         dx = mx - proj * ce
         dy = my - proj * se
@@ -350,7 +350,7 @@ def plane_cells(
     total = zero
     error = zero
     used = int(0)
-    reach = type(rtol)(1.0e300)
+    reach = type(rtol)(1.0e30)
     if infinite == 0:
         reach = r1
     if clip != 0:
@@ -363,7 +363,7 @@ def plane_cells(
             continue
         mu = wp.sqrt(comp[i, C_MX] * comp[i, C_MX] + comp[i, C_MY] * comp[i, C_MY])
         rel = wp.min(reach, mu + type(rtol)(9.0) * comp[i, C_SMAX])
-        scale = type(rtol)(1.0e300)
+        scale = type(rtol)(1.0e30)
         if rel > zero:
             scale = comp[i, C_SMIN] / rel
         atol = wp.exp(log_atol)
@@ -502,7 +502,7 @@ def frustum_cells(
     total = zero
     error = zero
     used = int(0)
-    reach = type(rtol)(1.0e300)
+    reach = type(rtol)(1.0e30)
     if infinite == 0:
         reach = depth_hi * t1
     if clip != 0:
@@ -515,7 +515,7 @@ def frustum_cells(
             continue
         mu = wp.sqrt(comp[i, C_MX] * comp[i, C_MX] + comp[i, C_MY] * comp[i, C_MY])
         rel = wp.min(reach, mu + type(rtol)(9.0) * comp[i, C_SMAX])
-        scale = type(rtol)(1.0e300)
+        scale = type(rtol)(1.0e30)
         if rel > zero:
             scale = comp[i, C_SMIN] / rel
         # depth scale: the z law's SD; the depth change that moves the whitened conditional
@@ -549,7 +549,7 @@ def frustum_cells(
                         c = wp.cos(phi)
                         s = wp.sin(phi)
                         chord_lo = zero
-                        chord_hi = type(rtol)(1.0e300)
+                        chord_hi = type(rtol)(1.0e30)
                         if clip != 0:
                             chord_lo, chord_hi = ray_box(c, s, box)
                         if chord_hi > chord_lo:
