@@ -426,6 +426,18 @@ def _log_log10_density(
     rec.log(path, image, _pixel_to_world(raster))
 
 
+def log_signed_image(rec: rr.RecordingStream, path: str, values: np.ndarray, like: Raster) -> None:
+    """A signed field on ``like``'s grid (a difference, a relative error) as an image with a
+    diverging colormap symmetric about zero, placed in world metres like ``like``'s density."""
+    bound = float(np.max(np.abs(values))) or 1.0
+    with _strict():
+        rec.log(
+            _entity(path),
+            rr.DepthImage(image_from_values(values), meter=1.0, colormap="cyantoyellow", depth_range=(-bound, bound)),
+            _pixel_to_world(like),
+        )
+
+
 def log10_floor(levels: Sequence[float]) -> float:
     """Floor of the log10 image: ``LOG10_FLOOR_DECADES`` below the lowest level.
 

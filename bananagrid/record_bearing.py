@@ -12,7 +12,7 @@ import rerun as rr
 
 from .bearing import BearingFix
 from .raster import Raster
-from .record import _entity, _pixel_to_world, _strict, image_from_values
+from .record import _entity, _strict, log_signed_image
 
 __all__ = ["log_bearing_geometry", "log_difference", "log_validation_table", "WEDGE_SIGMAS"]
 
@@ -92,14 +92,7 @@ def log_bearing_geometry(rec: rr.RecordingStream, entity: str, fix: BearingFix, 
 def log_difference(rec: rr.RecordingStream, path: str, exact: Raster, linear: Raster) -> None:
     """exact - linear (both as given, e.g. normalised), per m^2, as an image with a diverging
     colormap symmetric about zero, placed in world metres like the layer's density."""
-    difference = exact.values - linear.values
-    bound = float(np.max(np.abs(difference))) or 1.0
-    with _strict():
-        rec.log(
-            _entity(path),
-            rr.DepthImage(image_from_values(difference), meter=1.0, colormap="cyantoyellow", depth_range=(-bound, bound)),
-            _pixel_to_world(exact),
-        )
+    log_signed_image(rec, path, exact.values - linear.values, exact)
 
 
 def log_validation_table(rec: rr.RecordingStream, entity: str, table_text: str, summary: str) -> None:

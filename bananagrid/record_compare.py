@@ -24,7 +24,7 @@ import rerun.blueprint as rrb
 
 from .compare import Comparison
 from .raster import Raster
-from .record import _entity, _pixel_to_world, _strict, default_blueprint, image_from_values, log_raster, write_recording
+from .record import _strict, default_blueprint, log_raster, log_signed_image, write_recording
 
 __all__ = ["write_compare_recording", "write_sweep_recording"]
 
@@ -32,13 +32,7 @@ __all__ = ["write_compare_recording", "write_sweep_recording"]
 def log_relative_error(rec: rr.RecordingStream, path: str, reference: Raster, comparison: Comparison, floor: float) -> None:
     """q / p - 1 where p >= ``floor`` (else 0), as an image placed like the layers' densities."""
     error = np.where(reference.values >= floor, np.nan_to_num(comparison.relative_error, nan=0.0), 0.0)
-    bound = float(np.max(np.abs(error))) or 1.0
-    with _strict():
-        rec.log(
-            _entity(path),
-            rr.DepthImage(image_from_values(error), meter=1.0, colormap="cyantoyellow", depth_range=(-bound, bound)),
-            _pixel_to_world(reference),
-        )
+    log_signed_image(rec, path, error, reference)
 
 
 def write_compare_recording(

@@ -487,7 +487,6 @@ def row_runs(
             if n % 32 == 0:
                 while stride < 8 and need * stride * 2 <= n:
                     stride = stride * 2
-            step4 = 4 * stride
             ref = type(y)(-1.0e30)
             d_ref = zero
             for k in range(0, n, stride):
