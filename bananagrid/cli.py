@@ -197,7 +197,7 @@ def _compare(args: argparse.Namespace) -> int:
     reference, model = layers[args.reference], layers[args.model]
     t = _compare_time(scene, reference, model, args.t)
     levels = scene.levels if args.levels is None else _parse_levels(args.levels)
-    plain = replace_normalise(scene)
+    plain = _raw(scene)
     ref_raster, _ = compute(plain, reference, t, threads=args.threads)
     model_raster, _ = compute(plain, model, t, threads=args.threads)
     comparison = compare(ref_raster, model_raster, levels=levels, threshold=args.threshold)
@@ -217,7 +217,7 @@ def _compare(args: argparse.Namespace) -> int:
     return OK
 
 
-def replace_normalise(scene):
+def _raw(scene):
     """The scene with rasters left raw: the table divides by the reference's captured mass."""
     from dataclasses import replace
 

@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import math
 import time
+import warnings
 from collections.abc import Callable
 from dataclasses import dataclass
 
@@ -141,8 +142,6 @@ def sweep(n: int = 50, *, threshold=DEFAULT_THRESHOLD, threads=None,
     beta = math.radians(BETA_MAX_DEG) * (np.arange(n) + 0.5) / n
     goodness = np.empty((n, n))
     start = time.perf_counter()
-    import warnings
-
     with warnings.catch_warnings():
         # large sigma_a t / v0: P_sigma (11) turns negative at large bearings (the model warns);
         # the improved density is 0 there and the goodness says how much that costs
