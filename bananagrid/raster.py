@@ -544,13 +544,10 @@ def interpolate_table(table, x, y, *, dtype=np.float64, device: str = "cpu", thr
 
 
 def _polar_batch_params(models, wp, np_dtype, scalar, device):
-    """Per-hypothesis coefficient rows, variants, heading orders and poses of PolarBananas."""
+    """Per-hypothesis coefficient rows, variants, heading orders and poses of PolarBananas
+    (``bananagrid.batch`` has checked that they are)."""
     from .kernels import polar
-    from .models import PolarBanana
 
-    for k, model in enumerate(models):
-        if not isinstance(model, PolarBanana):
-            raise BananagridError(f"models[{k}] = {type(model).__name__}: batches take PolarBanana hypotheses")
     coefs = np.array(
         [polar.coefficients(m.v0, m.t, m.sigma_a, m.sigma_omega, m.sigma_heading) for m in models], dtype=np_dtype
     )
@@ -563,51 +560,43 @@ def _polar_batch_params(models, wp, np_dtype, scalar, device):
     )
 
 
-def _hypothesis_bands(n: int, threads: int, device: str) -> list[tuple[int, int]]:
-    return _bands(n, threads, 4) if device == "cpu" else [(0, n)]
+def _launch_polar_batch(kernel, models, x, y, out_shape, rows, *, dtype, device, threads) -> np.ndarray:
+    """Run a polar batch kernel (xs, ys, h0, *parameters, out) over bands of hypotheses; each
+    launch covers hypotheses h0 .. h0 + b - a, times ``rows`` when that is not None."""
+    wp, np_dtype, scalar = _scalar(dtype)
+    device = _check_device(wp, device)
+    threads = _check_threads(threads)
+    params = _polar_batch_params(models, wp, np_dtype, scalar, device)
+    wp.load_module(kernel.module, device=device)
+    x_arr = wp.array(np.ascontiguousarray(x, dtype=np_dtype), dtype=scalar, device=device)
+    y_arr = wp.array(np.ascontiguousarray(y, dtype=np_dtype), dtype=scalar, device=device)
+    out = wp.zeros(out_shape, dtype=scalar, device=device)
+
+    def launch_band(a, b):
+        dim = b - a if rows is None else (b - a, rows)
+        wp.launch(kernel, dim=dim, inputs=[x_arr, y_arr, a, *params, out], device=device)
+
+    n = len(models)
+    bands = _bands(n, threads, 4) if device == "cpu" else [(0, n)]
+    _run_bands(launch_band, bands, threads)
+    wp.synchronize_device(device)
+    return out.numpy()
 
 
 def launch_polar_batch(models, xs: np.ndarray, ys: np.ndarray, *, dtype=np.float64, device="cpu", threads=None) -> np.ndarray:
     """Densities of PolarBanana hypotheses h on their own grids: xs[h] (nx,) and ys[h] (ny,)
     cell centres; one kernel over (hypothesis, row), hypotheses banded over threads. Returns
     (H, ny, nx), bit-identical to rasterising each on its own (same device function)."""
-    wp, np_dtype, scalar = _scalar(dtype)
-    device = _check_device(wp, device)
-    threads = _check_threads(threads)
     from .kernels import polar
 
-    n = len(models)
-    params = _polar_batch_params(models, wp, np_dtype, scalar, device)
-    wp.load_module(polar.polar_batch_grid.module, device=device)
-    x_arr = wp.array(np.ascontiguousarray(xs, dtype=np_dtype), dtype=scalar, device=device)
-    y_arr = wp.array(np.ascontiguousarray(ys, dtype=np_dtype), dtype=scalar, device=device)
-    out = wp.zeros((n, ys.shape[1], xs.shape[1]), dtype=scalar, device=device)
-
-    def launch_band(a, b):
-        wp.launch(polar.polar_batch_grid, dim=(b - a, ys.shape[1]), inputs=[x_arr, y_arr, a, *params, out], device=device)
-
-    _run_bands(launch_band, _hypothesis_bands(n, threads, device), threads)
-    wp.synchronize_device(device)
-    return out.numpy()
+    shape = (len(models), ys.shape[1], xs.shape[1])
+    return _launch_polar_batch(polar.polar_batch_grid, models, xs, ys, shape, ys.shape[1],
+                               dtype=dtype, device=device, threads=threads)
 
 
 def launch_polar_batch_points(models, x: np.ndarray, y: np.ndarray, *, dtype=np.float64, device="cpu", threads=None) -> np.ndarray:
     """Densities of every world point (x[k], y[k]) under every PolarBanana hypothesis: (H, N)."""
-    wp, np_dtype, scalar = _scalar(dtype)
-    device = _check_device(wp, device)
-    threads = _check_threads(threads)
     from .kernels import polar
 
-    n = len(models)
-    params = _polar_batch_params(models, wp, np_dtype, scalar, device)
-    wp.load_module(polar.polar_batch_points.module, device=device)
-    x_arr = wp.array(np.ascontiguousarray(x, dtype=np_dtype), dtype=scalar, device=device)
-    y_arr = wp.array(np.ascontiguousarray(y, dtype=np_dtype), dtype=scalar, device=device)
-    out = wp.zeros((n, x.size), dtype=scalar, device=device)
-
-    def launch_band(a, b):
-        wp.launch(polar.polar_batch_points, dim=b - a, inputs=[x_arr, y_arr, a, *params, out], device=device)
-
-    _run_bands(launch_band, _hypothesis_bands(n, threads, device), threads)
-    wp.synchronize_device(device)
-    return out.numpy()
+    return _launch_polar_batch(polar.polar_batch_points, models, x, y, (len(models), x.size), None,
+                               dtype=dtype, device=device, threads=threads)
