@@ -65,18 +65,21 @@ SPEED_FLOOR = 1e-22
 #: Relative tolerance of the kernel's trapezoid rule (its node count, see kernels/butterly.py)
 #: and the relative size below which the walk drops a node, per kernel precision.
 _KERNEL_TOL = {np.dtype(np.float64): (1e-12, 1e-15, 1e-8), np.dtype(np.float32): (1e-7, 1e-8, 1e-4)}
-#: The grid kernel's row recurrence (kernels/butterly.py, row_runs), per kernel precision: the
-#: longest run of cells between exact restarts (rounding about RUN_CELLS^2 eps / 2: 9e-13 in
-#: float64, 8e-6 in float32) and the largest change of a term's exponent over a run (far from
-#: overflow: float64 exp overflows at 709, float32 at 88).
-_RUN = {np.dtype(np.float64): (128, 60.0), np.dtype(np.float32): (16, 20.0)}
+#: The grid kernel's tiles (kernels/butterly.py, tile_speed), per kernel precision: a tile's
+#: factors stay within exp(+-TILE_SAFE), so a product of two is a normal number and the sum of
+#: TILE_NODES of them stays below the largest (float64 exp overflows at 709, float32 at 88).
+_TILE_SAFE = {np.dtype(np.float64): 300.0, np.dtype(np.float32): 40.0}
 
 
 def covariance_axes(cov: np.ndarray) -> tuple[float, float, float]:
     """Eigen-decomposition of a 2x2 covariance: (S1, S2, beta) with S1 <= S2 its eigenvalues
     (Butterly's S_u, S_v of (3.7), per ERRATA) and beta the angle from east of S1's eigenvector
-    (Butterly's beta of (3.3)). S1 = det / S2 avoids cancellation for elongated covariances."""
+    (Butterly's beta of (3.3)). S1 = det / S2 avoids cancellation for elongated covariances;
+    the entries are scaled by a power of two (exactly) so that det neither under- nor
+    overflows at any scale of units."""
     sxx, sxy, syy = float(cov[0, 0]), float(cov[0, 1]), float(cov[1, 1])
+    exponent = math.frexp(max(abs(sxx), abs(syy), abs(sxy)))[1]
+    sxx, sxy, syy = (math.ldexp(v, -exponent) for v in (sxx, sxy, syy))
     half_trace = 0.5 * (sxx + syy)
     root = math.hypot(0.5 * (sxx - syy), sxy)
     s2 = half_trace + root
@@ -85,6 +88,7 @@ def covariance_axes(cov: np.ndarray) -> tuple[float, float, float]:
     v1 = (sxy, s1 - sxx)
     v2 = (s1 - syy, sxy)
     vx, vy = v1 if math.hypot(*v1) >= math.hypot(*v2) else v2
+    s1, s2 = math.ldexp(s1, exponent), math.ldexp(s2, exponent)
     if vx == 0.0 and vy == 0.0:  # isotropic: any axis
         return s1, s2, 0.0
     return s1, s2, math.atan2(vy, vx)
@@ -263,7 +267,7 @@ def _covariance(value) -> np.ndarray:
         raise BananagridError(f"cov = {cov.tolist()!r}: must be positive definite (variances > 0)")
     s1, s2, _ = covariance_axes(cov)
     if not s1 > 1e-13 * s2:
-        rho = cov[0, 1] / math.sqrt(cov[0, 0] * cov[1, 1])
+        rho = cov[0, 1] / (math.sqrt(cov[0, 0]) * math.sqrt(cov[1, 1]))
         raise BananagridError(
             f"cov = {cov.tolist()!r}: must be positive definite (eigenvalues {s1:.6g}, {s2:.6g}; "
             f"correlation {rho:.15g}, |rho| must be < 1)"
@@ -421,7 +425,7 @@ class Butterly:
         s1, s2, beta = self.axes
         theta0 = 0.5 * math.pi - beta - self.course_mean  # the course mean in the eigen frame
         kappa = self.course_kappa
-        log_norm = -math.log(4.0 * math.pi**2 * math.sqrt(s1 * s2)) - math.log(special.ive(0, kappa))
+        log_norm = -math.log(4.0 * math.pi**2 * (math.sqrt(s1) * math.sqrt(s2))) - math.log(special.ive(0, kappa))
         head = np.zeros(k.HEAD)
         head[[k.MEAN_X, k.MEAN_Y]] = self.mean
         head[[k.Q1_X, k.Q1_Y]] = math.cos(beta), math.sin(beta)
@@ -437,13 +441,12 @@ class Butterly:
         head[k.LOG_POINT_FLOOR] = math.log(tiny) - 1.0
         head[k.LOG_CELL_FLOOR] = -math.inf
         head[k.LOG_SPEED_FLOOR] = head[k.LOG_POINT_FLOOR]
-        head[k.RUN_CELLS], head[k.RUN_SPREAD] = _RUN[np.dtype(dtype)]
-        # exp(log_scale) times a run's sum (between exp(-spread) and N exp(spread)) stays a
-        # normal number for |log_scale| below this
+        head[k.TILE_SAFE] = _TILE_SAFE[np.dtype(dtype)]
+        # a tile drops the nodes below stop / TILE_NODES of the largest at every cell
+        head[k.TILE_DROP] = -math.log(stop) + math.log(k.TILE_NODES)
+        # the range of logs of normal numbers, less a margin for the rounding of exp and log
         info = np.finfo(dtype)
-        head[k.RUN_SAFE] = min(math.log(info.max), -math.log(info.tiny)) - head[k.RUN_SPREAD] - math.log(k.RECURRENCE_NODES) - 1.0
-        # the recurrence carries the nodes that can reach stop / N of the largest term in a run
-        head[k.RUN_DROP] = -math.log(stop) + math.log(k.RECURRENCE_NODES)
+        head[k.LOG_HUGE], head[k.LOG_SMALL] = math.log(info.max) - 1.0, math.log(info.tiny) + 1.0
         if floors:
             log_peak = math.log(self.peak_lower_bound())
             head[k.LOG_CELL_FLOOR] = math.log(CELL_FLOOR) + log_peak
@@ -459,7 +462,7 @@ class Butterly:
         per[:, k.FOUR_F] = (rho1 - rho2) * (rho1 + rho2)  # 4F = rho1^2 - rho2^2 without cancellation
         per[:, k.LOG_COEF] = np.where(np.isfinite(log_w), log_w + log_norm, -1e300)
         per[:, k.LOG_BOUND] = np.where(
-            np.isfinite(log_w), log_w - math.log(2.0 * math.pi * math.sqrt(s1 * s2)), -1e300
+            np.isfinite(log_w), log_w - math.log(2.0 * math.pi * (math.sqrt(s1) * math.sqrt(s2))), -1e300
         )
         return np.concatenate((head, per.ravel())).astype(dtype)
 
@@ -622,8 +625,8 @@ def numpy_density(model: Butterly, x, y, *, floors: bool = False, chunk: int = 4
     theta0 = 0.5 * math.pi - beta - model.course_mean
     tol = _KERNEL_TOL[np.dtype(np.float64)][0]
     log_tol = math.log(1.0 / tol) + math.log(4.0 * math.pi)
-    log_norm = -math.log(4.0 * math.pi**2 * math.sqrt(s1 * s2)) - math.log(special.ive(0, kappa))
-    log_peak_coef = -math.log(2.0 * math.pi * math.sqrt(s1 * s2))
+    log_norm = -math.log(4.0 * math.pi**2 * (math.sqrt(s1) * math.sqrt(s2))) - math.log(special.ive(0, kappa))
+    log_peak_coef = -math.log(2.0 * math.pi * (math.sqrt(s1) * math.sqrt(s2)))
     tiny = np.finfo(float).smallest_subnormal
     speed_floor, cell_floor = math.log(tiny) - 1.0, -math.inf
     ranges, weights = model.ranges, model._nodes[1]

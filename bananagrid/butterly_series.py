@@ -103,7 +103,7 @@ def series_density(model, x, y, *, max_terms: int = 20000):
         total = special.ive(0, big_f) * special.ive(0, w)
         for k in range(1, n_terms):
             total = total + (-1) ** k * 2.0 * special.ive(k, big_f) * special.ive(2 * k, w) * np.cos(2 * k * gamma)
-        coef = weight / (2.0 * math.pi * math.sqrt(s1 * s2) * special.ive(0, kappa))
+        coef = weight / (2.0 * math.pi * (math.sqrt(s1) * math.sqrt(s2)) * special.ive(0, kappa))
         # log of an exact 0 sum is -inf (gives 0); where cancellation leaves garbage it may overflow
         with np.errstate(under="ignore", divide="ignore", over="ignore"):
             density += coef * np.sign(total) * np.exp(big_f + w - q + np.log(np.abs(total)))

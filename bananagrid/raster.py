@@ -164,6 +164,11 @@ class _Binding:
     #: Scratch values per band that the grid kernel takes after ``params`` (with the band's
     #: index): ``(scratch[n_bands, width], band)``; 0 for none.
     scratch_width: int = 0
+    #: vec4 scratch per band, taken between the scratch and the band's index; 0 for none.
+    quad_width: int = 0
+    #: Rows per thread of a row-looping kernel that takes blocks of rows on the CPU: it then takes
+    #: (xs, ys, row0, row_end, rows, columns, ...) (one cell per thread on a GPU); 0 for one row.
+    tile_rows: int = 0
 
 
 def _bind(model, wp, np_dtype, scalar, device, radii, threads, grid: bool = False) -> _Binding:
@@ -193,6 +198,7 @@ def _bind_kernels(model, wp, np_dtype, scalar, device, radii, threads, grid=Fals
         return _Binding(
             butterly.butterly_grid, butterly.butterly_points, (params, model.n_speed_nodes),
             "butterly.butterly_grid", notes, row_loop=True, scratch_width=butterly.SCRATCH,
+            quad_width=butterly.QUAD_SCRATCH, tile_rows=butterly.TILE,
         )
     if isinstance(model, BearingFix):
         from .kernels import bearing
@@ -367,17 +373,22 @@ def rasterise(model, grid: Grid, *, dtype=np.float64, device: str = "cpu", threa
     columns = (grid.nx if device == "cpu" else 1) if binding.row_loop else None
 
     bands = _bands(grid.ny, threads, binding.bands_per_thread) if device == "cpu" else [(0, grid.ny)]
-    scratch = None
+    scratch, quads = None, None
     if binding.scratch_width:  # one work row per band: a band's rows run one after another
         scratch = wp.empty((len(bands), binding.scratch_width), dtype=scalar, device=device)
         band_of = {r0: k for k, (r0, _) in enumerate(bands)}
+    if binding.quad_width:
+        quads = wp.empty((len(bands), binding.quad_width), dtype=wp.types.vector(4, scalar), device=device)
+    rows = (binding.tile_rows if device == "cpu" else 1) if binding.tile_rows else None
 
     def launch_band(r0, r1):
         if columns is None:
             dim, head = (r1 - r0, grid.nx), [xs, ys, r0]
-        else:
+        elif rows is None:
             dim, head = (r1 - r0, -(-grid.nx // columns)), [xs, ys, r0, columns]
-        extra = [] if scratch is None else [scratch, band_of[r0]]
+        else:
+            dim, head = (-(-(r1 - r0) // rows), -(-grid.nx // columns)), [xs, ys, r0, r1, rows, columns]
+        extra = [] if scratch is None else [scratch] + ([] if quads is None else [quads]) + [band_of[r0]]
         wp.launch(binding.grid_kernel, dim=dim, inputs=[*head, *binding.params, *extra, out], device=device)
 
     _run_bands(launch_band, bands, threads)

@@ -43,20 +43,24 @@ delta, not 1; recomputed exactly every 64 steps), and E - E* is the quadratic fo
 
 whose coefficients come from the residual at theta* (no cancellation of large exponents).
 
-Grids. ``butterly_grid`` (a whole row per thread on the CPU) computes the same rule faster:
+Grids. ``butterly_grid`` (a strip of TILE rows per thread on the CPU) computes the same rule
+faster:
 
 * Skipping. exp(E) <= exp(-d^2 / 2) with d a lower bound of the whitened distance to the ring
-  (:func:`log_bound`, no exp), so each speed's term is bounded before any work. A cell whose
-  bound (all speeds) is below LOG_CELL_FLOOR is set to 0, and a speed whose bound is below
-  LOG_SPEED_FLOOR is left out of a cell; the host sets them from a lower bound of the density's
-  maximum M (1e-13 M, and 1e-22 M over the number of speeds: a relative 1e-10 at most wherever
-  the density exceeds 1e-12 M). ``butterly_points`` skips only what would underflow.
-* Row recurrence (:func:`row_runs`, rules of up to RECURRENCE_NODES nodes, i.e. r / sigma_min
-  up to a few tens): along a row z moves by a constant dz, so each node's term is carried
-  from cell to cell by one multiplication (a Gaussian recurrence: T_k g_k^m, times
-  H^(m (m - 1) / 2) per cell) instead of an exp, restarted exactly every run of up to
-  RUN_CELLS cells (fewer where cells are coarse), and only the nodes that can reach ``stop``
-  of the largest term within the run are carried.
+  (:func:`ring_distance`, :func:`log_bound`, no exp), so each speed's term is bounded before
+  any work. A cell whose bound (all speeds) is below LOG_CELL_FLOOR is set to 0, and a speed
+  whose bound is below LOG_SPEED_FLOOR is left out; the host sets them from a lower bound of
+  the density's maximum M (1e-13 M, and 1e-22 M over the number of speeds: a relative 1e-10 at
+  most wherever the density exceeds 1e-12 M). d is 1-Lipschitz, so whole tiles are skipped,
+  computed or left out of a speed from the bound at their centre. ``butterly_points`` skips
+  only what would underflow.
+* Tiles (:func:`tile_speed`, rules of up to TILE_NODES nodes, i.e. r / sigma_min up to a few
+  tens): on a uniform grid each node's exponent is a quadratic in the cell's (row, column)
+  whose only mixed term does not depend on the node, so a TILE x TILE tile's rule is a matrix
+  product, sum_k A_k(column) B_k(row), times a node-free cross factor: two short geometric
+  sequences per node instead of an exp per node and cell, and only the nodes that reach
+  ``stop`` / TILE_NODES of the largest somewhere on the tile (an exact test: the difference of
+  two nodes' exponents is linear on the tile).
 * Otherwise each cell walks from its peak as above, Newton starting from the root of the
   neighbouring cell (the speeds are the outer loop).
 """
@@ -68,8 +72,8 @@ import warp as wp
 #: Layout of the parameter array: a head, then PER_SPEED values for each travelled range.
 (
     MEAN_X, MEAN_Y, Q1_X, Q1_Y, INV_SQRT_S1, INV_SQRT_S2, KAPPA, COS_THETA0, SIN_THETA0, LOG_TOL, STOP,
-    NEWTON_TOL, LOG_STOP, LOG_TINY, LOG_CELL_FLOOR, LOG_SPEED_FLOOR, LOG_POINT_FLOOR, RUN_CELLS, RUN_SPREAD,
-    RUN_SAFE, RUN_DROP,
+    NEWTON_TOL, LOG_STOP, LOG_TINY, LOG_CELL_FLOOR, LOG_SPEED_FLOOR, LOG_POINT_FLOOR, TILE_SAFE, LOG_HUGE,
+    LOG_SMALL, TILE_DROP,
 ) = range(21)
 HEAD = 21
 #: Per speed: rho1 = r / sqrt(S1), rho2 = r / sqrt(S2), 4F = rho1^2 - rho2^2,
@@ -80,19 +84,31 @@ PER_SPEED = 5
 
 #: Smallest node count of the periodic rule (covers small A, see node_count).
 MIN_NODES = 12
-#: Exact cos/sin of the walk's offset every this many steps (bounds the recurrence's drift).
+#: Exact cos/sin of the walk's offset every this many steps (bounds the rotation's drift).
 REANCHOR = 64
 #: Newton iterations of the secular equations (they converge in a handful).
 MAX_NEWTON = 60
 TWO_PI = 6.283185307179586
-#: The grid kernel's row recurrence (:func:`row_runs`) is used for rule sizes up to this; larger
-#: ones (r / sigma_min beyond a few hundred) walk from the peak.
-RECURRENCE_NODES = 512
-#: Scratch values per band of rows: rho1 cos, rho2 sin and the course term at each node, and
-#: the recurrence's T and g (4 slots of padding each).
-SCRATCH = 5 * RECURRENCE_NODES + 8
-#: Shortest run of cells worth a restart of the recurrence (2N exps); shorter runs walk.
-MIN_RUN = 4
+#: Side of the grid kernel's tiles (cells); a CPU thread takes a strip of TILE rows.
+TILE = 32
+#: vec4 per node and axis in a tile's factor tables.
+QUADS = TILE // 4
+#: Largest rule the tile product takes; larger ones (r / sigma_min beyond about 100) walk.
+TILE_NODES = 512
+#: Smallest block of cells worth a tile (a GPU thread's single cell walks).
+MIN_TILE_CELLS = 16
+#: Scalar scratch per band: the nodes' exponents and slopes (TILE_NODES each), cos and sin of
+#: the first 16 node angles, and the strip's cross factor (TILE x TILE).
+NODE_E = 0
+NODE_X = TILE_NODES
+NODE_Y = 2 * TILE_NODES
+NODE_TRIG = 3 * TILE_NODES
+CROSS = 3 * TILE_NODES + 32
+SCRATCH = CROSS + TILE * TILE
+#: vec4 scratch per band: the kept nodes' column factors A, then their row factors B.
+QUAD_A = 0
+QUAD_B = TILE_NODES * QUADS
+QUAD_SCRATCH = 2 * TILE_NODES * QUADS
 #: Largest node count: above it the int arithmetic of the walk could overflow (A > 1e17).
 MAX_NODES = 1000000000
 
@@ -328,15 +344,12 @@ def speed_density(z1: Any, z2: Any, params: wp.array(dtype=Any), base: int, mu_s
 
 
 @wp.func
-def log_bound(z1: Any, z2: Any, z_norm: Any, params: wp.array(dtype=Any), base: int):
-    """An upper bound of log(w_i P_{r_i}(u)) that costs no exp: LOG_BOUND - d^2 / 2.
-
-    exp(E(theta)) <= exp(-|z - ring(theta)|^2 / 2) exp(kappa (cos - 1)), so P_r <= (peak of
-    the start density) exp(-d^2 / 2) with d any lower bound of the whitened distance from z
-    to the ring, the ellipse (rho1 cos, rho2 sin) (rho1 >= rho2). It lies in the annulus
-    rho2 <= |p| <= rho1, and g(z) = |(z1 / rho1, z2 / rho2)| is 1 on it with Lipschitz
-    constant 1 / rho2, so d >= max(|z| - rho1, rho2 - |z|, rho2 |g(z) - 1|, 0) (d = |z| for r = 0).
-    """
+def ring_distance(z1: Any, z2: Any, z_norm: Any, params: wp.array(dtype=Any), base: int):
+    """A lower bound d of the whitened distance from z to the ring, the ellipse (rho1 cos,
+    rho2 sin) (rho1 >= rho2), that is 1-Lipschitz in z. The ring lies in the annulus
+    rho2 <= |p| <= rho1, and g(z) = |(z1 / rho1, z2 / rho2)| is 1 on it with Lipschitz constant
+    1 / rho2, so d = max(|z| - rho1, rho2 - |z|, rho2 |g(z) - 1|, 0) (d = |z| for r = 0): a
+    maximum of 1-Lipschitz functions."""
     zero = type(z1)(0.0)
     rho1 = params[base + RHO1]
     rho2 = params[base + RHO2]
@@ -345,6 +358,18 @@ def log_bound(z1: Any, z2: Any, z_norm: Any, params: wp.array(dtype=Any), base: 
         g1 = z1 / rho1
         g2 = z2 / rho2
         d = wp.max(d, rho2 * wp.abs(wp.sqrt(g1 * g1 + g2 * g2) - type(z1)(1.0)))
+    return d
+
+
+@wp.func
+def log_bound(z1: Any, z2: Any, z_norm: Any, params: wp.array(dtype=Any), base: int):
+    """An upper bound of log(w_i P_{r_i}(u)) that costs no exp: LOG_BOUND - d^2 / 2.
+
+    exp(E(theta)) <= exp(-|z - ring(theta)|^2 / 2) exp(kappa (cos - 1)), so P_r <= (peak of
+    the start density) exp(-d^2 / 2) with d (:func:`ring_distance`) a lower bound of the
+    whitened distance from z to the ring.
+    """
+    d = ring_distance(z1, z2, z_norm, params, base)
     return params[base + LOG_BOUND] - type(z1)(0.5) * d * d
 
 
@@ -384,178 +409,241 @@ def rule_size(z1: Any, z2: Any, params: wp.array(dtype=Any), base: int):
 
 
 @wp.func
-def live_cell(xs: wp.array(dtype=Any), y: Any, row: int, j: int, params: wp.array(dtype=Any), base: int,
-              out: wp.array2d(dtype=Any)):
-    """1 where cell j of the row is computed and this speed's bound reaches LOG_SPEED_FLOOR."""
-    if out[row, j] < type(y)(0.0):
-        return int(0)
-    z1, z2 = whiten(xs[j], y, params)
-    if log_bound(z1, z2, wp.sqrt(z1 * z1 + z2 * z2), params, base) >= params[LOG_SPEED_FLOOR]:
-        return int(1)
-    return int(0)
+def geometric_quads(quads: wp.array2d(dtype=Any), band: int, at: int, start: Any, slope: Any):
+    """quads[band, at + q] = exp(start + m slope) for m = 4q .. 4q + 3, q < QUADS: two exps, then
+    products (at most 10 roundings: the factor's relative error stays below 10 eps)."""
+    g = wp.exp(slope)
+    g2 = g * g
+    first = wp.exp(start)
+    lanes = wp.vector(first, first * g, first * g2, first * g2 * g)
+    g4 = g2 * g2
+    for q in range(QUADS):
+        quads[band, at + q] = lanes
+        lanes = lanes * g4
 
 
 @wp.func
-def row_runs(
-    xs: wp.array(dtype=Any), y: Any, row: int, j_begin: int, j_end: int, params: wp.array(dtype=Any),
-    base: int, n: int, scratch: wp.array2d(dtype=Any), band: int, out: wp.array2d(dtype=Any),
+def add_row(
+    out: wp.array2d(dtype=Any), row: int, col: int, cols: int, low: Any, high: Any,
+    scratch: wp.array2d(dtype=Any), band: int, at: int, scale: Any, log_scale: Any, safe: int,
 ):
-    """Add w_i P_{r_i} to the live cells j_begin..j_end-1 of a row by the full periodic rule,
-    its terms carried from cell to cell by a Gaussian recurrence instead of exps.
+    """Add scale C(m) (low, high)[m] to the 8 cells col .. col + 7 of a row (those before
+    ``cols`` and not marked skipped); C(m) = scratch[band, at + m] is the cross factor."""
+    zero = type(scale)(0.0)
+    for lane in range(8):
+        if lane < cols and out[row, col + lane] >= zero:
+            value = zero
+            if lane < 4:
+                value = low[lane]
+            else:
+                value = high[lane - 4]
+            value = value * scratch[band, at + lane]
+            if safe == 1:
+                out[row, col + lane] = out[row, col + lane] + scale * value
+            elif value > zero:  # exp(log_scale) alone under- or overflows: combine in logs
+                out[row, col + lane] = out[row, col + lane] + scale * wp.exp(log_scale + wp.log(value))
 
-    Along a row the whitened point moves by a constant dz per cell, so each node's exponent
-    E_k(j) = -|z(j) - rho_k|^2 / 2 + kappa (cos(theta_k - theta0) - 1) is quadratic in j:
 
-        T_k(j + 1) = T_k(j) G_k(j),   G_k(j + 1) = G_k(j) H,   H = exp(-|dz|^2),
+@wp.func
+def tile_speed(
+    z1: Any, z2: Any, dzx1: Any, dzx2: Any, dzy1: Any, dzy2: Any, row: int, rows: int, col: int,
+    cols: int, params: wp.array(dtype=Any), base: int, scratch: wp.array2d(dtype=Any),
+    quads: wp.array2d(dtype=Any), band: int, out: wp.array2d(dtype=Any),
+):
+    """Add w_i P_{r_i} to the cells of one tile by the full periodic rule as a product of
+    factors; 1 if done, 0 if the tile must be walked cell by cell instead (nothing added).
 
-    with T_k = exp(E_k - ref) and G_k = exp(E_k(j + 1) - E_k(j)). The row is cut into runs of
-    at most RUN_CELLS cells over which no exponent moves by more than RUN_SPREAD (|E_k(j + m) -
-    E_k(j)| <= m |dz| (|z| + rho1) + m^2 |dz|^2), restarted exactly (2N exps) at each run's
-    first cell with ref = max_k E_k there: nothing overflows, and a term that underflows at the
-    restart stays below exp(RUN_SPREAD - 708) while the largest stays above exp(-RUN_SPREAD).
-    Each step multiplies rounding errors of about m eps into T (m^2 eps / 2 over a run: 9e-13 at
-    128 cells in float64). Only the nodes that can reach stop / N of the largest term somewhere in
-    the run are carried (the truncation of :func:`walk`); the run's sum is that of the carried
-    T_k g_k^m times H^(m (m - 1) / 2). ``n`` (a multiple of 32, or of 4 below 128) is the rule for the
-    largest amplitude on the row's live span (|(a, b)| is convex along the row, so at one of
-    its ends); a run whose own amplitude needs at most n / 2, n / 4 or n / 8 nodes takes every
-    2nd, 4th or 8th node, the rule of that size (never fewer nodes than node_count asks for).
-    Runs shorter than MIN_RUN (coarse cells far out) walk from the peak instead
-    (:func:`speed_density`), and runs with no live cell are skipped.
+    The tile is TILE x TILE cells (the real ones: ``rows`` x ``cols`` from (row, col)) about the
+    whitened centre z = (z1, z2); a cell is z + (m - h) dzx + (r - h) dzy, h = (TILE - 1) / 2.
+    With w_k = z - rho_k (rho_k the ring's node k) each node's exponent splits exactly into
+
+        E_k(r, m) = e_k + (m - h) X_k + (r - h) Y_k - |(m - h) dzx + (r - h) dzy|^2 / 2,
+        e_k = kappa (cos(theta_k - theta0) - 1) - |w_k|^2 / 2,  X_k = -w_k . dzx,  Y_k = -w_k . dzy,
+
+    so the rule's sum is C(r, m) sum_k A_k(m) B_k(r) (a matrix product) with A_k(m) =
+    exp(e_k - ref + (m - h) X_k), B_k(r) = exp((r - h) Y_k) and the node-free cross factor C
+    (precomputed for the strip). ref = max_k e_k is taken out. A node is dropped when it stays
+    below exp(-TILE_DROP) = stop / TILE_NODES of the largest node at every cell: E_k - E_ref is
+    linear in (m, r), so its largest value on the tile is e_k - ref + h (|X_k - X_ref| +
+    |Y_k - Y_ref|) (exact, no bound). The tile is refused (walked instead) where the rule needs
+    more than TILE_NODES nodes, or where a factor could leave exp(+-TILE_SAFE) or a cell's largest
+    term fall below exp(-TILE_SAFE) of ref (coarse cells far out): every product of two factors
+    is then a normal number.
     """
-    zero = type(y)(0.0)
-    one = type(y)(1.0)
-    half = type(y)(0.5)
+    zero = type(z1)(0.0)
+    one = type(z1)(1.0)
+    half = type(z1)(0.5)
+    h = type(z1)(0.5 * float(TILE - 1))
     rho1 = params[base + RHO1]
     rho2 = params[base + RHO2]
     kappa = params[KAPPA]
     c0 = params[COS_THETA0]
     s0 = params[SIN_THETA0]
-    log_coef = params[base + LOG_COEF]
-    log_tol = params[LOG_TOL]
-    spread = params[RUN_SPREAD]
-    run_cells = int(params[RUN_CELLS])
-    delta = type(y)(TWO_PI) / type(y)(n)
-    offset_c = RECURRENCE_NODES
-    offset_k = 2 * RECURRENCE_NODES
-    offset_t = 3 * RECURRENCE_NODES
-    offset_g = 4 * RECURRENCE_NODES + 4
+    safe = params[TILE_SAFE]
+    # the rule for the largest amplitude on the tile (|(a, b)| is convex in z: at a corner)
+    amp = zero
+    for corner in range(4):
+        sx = one
+        sy = one
+        if corner % 2 == 1:
+            sx = -one
+        if corner >= 2:
+            sy = -one
+        amp = wp.max(amp, rule_size(z1 + h * (sx * dzx1 + sy * dzy1), z2 + h * (sx * dzx2 + sy * dzy2), params, base))
+    n = node_count(amp, params[LOG_TOL])
+    n = (n + 15) // 16 * 16
+    if n > TILE_NODES:
+        return int(0)
+    delta = type(z1)(TWO_PI) / type(z1)(n)
+    # the nodes' exponents at the centre and their slopes; cos and sin of k delta = 16 b delta +
+    # j delta by one rotation (a few roundings) from those of 16 b delta and of j delta
+    angle = zero
+    for j in range(16):
+        scratch[band, NODE_TRIG + j] = wp.cos(angle)
+        scratch[band, NODE_TRIG + 16 + j] = wp.sin(angle)
+        angle = angle + delta
+    ref = type(z1)(-1.0e30)
+    x_ref = zero
+    y_ref = zero
+    for b in range(n // 16):
+        angle = type(z1)(16 * b) * delta
+        cb = wp.cos(angle)
+        sb = wp.sin(angle)
+        for j in range(16):
+            cj = scratch[band, NODE_TRIG + j]
+            sj = scratch[band, NODE_TRIG + 16 + j]
+            ck = cb * cj - sb * sj
+            sk = sb * cj + cb * sj
+            w1 = z1 - rho1 * ck
+            w2 = z2 - rho2 * sk
+            e = kappa * (ck * c0 + sk * s0 - one) - half * (w1 * w1 + w2 * w2)
+            x = -(w1 * dzx1 + w2 * dzx2)
+            y = -(w1 * dzy1 + w2 * dzy2)
+            k = 16 * b + j
+            scratch[band, NODE_E + k] = e
+            scratch[band, NODE_X + k] = x
+            scratch[band, NODE_Y + k] = y
+            if e > ref:
+                ref = e
+                x_ref = x
+                y_ref = y
+    # every cell's largest term is within exp(-low) of ref (E_ref(r, m) - ref >= -low)
+    spread = h * (wp.sqrt(dzx1 * dzx1 + dzx2 * dzx2) + wp.sqrt(dzy1 * dzy1 + dzy2 * dzy2))
+    low = h * (wp.abs(x_ref) + wp.abs(y_ref)) + half * spread * spread
+    if low > safe:
+        return int(0)
+    drop = params[TILE_DROP]
+    kept = int(0)
+    top = zero  # the largest exponent of a kept A, and of a kept B
+    top_b = zero
     for k in range(n):
-        angle = type(y)(k) * delta
-        ck = wp.cos(angle)
-        sk = wp.sin(angle)
-        scratch[band, k] = rho1 * ck
-        scratch[band, offset_c + k] = rho2 * sk
-        scratch[band, offset_k + k] = kappa * (ck * c0 + sk * s0 - one)
-    z1_next, z2_next = whiten(xs[j_begin + 1], y, params)
-    z1_first, z2_first = whiten(xs[j_begin], y, params)
-    dz1 = z1_next - z1_first
-    dz2 = z2_next - z2_first
-    dz_sq = dz1 * dz1 + dz2 * dz2
-    dz_norm = wp.sqrt(dz_sq)
-    h = wp.exp(-dz_sq)
-    mu = type(y)(0.0)
-    j = int(j_begin)
-    while j < j_end:
-        z1, z2 = whiten(xs[j], y, params)
-        z_norm = wp.sqrt(z1 * z1 + z2 * z2)
-        # longest run with L |dz| (|z| + rho1) + L^2 |dz|^2 <= spread
-        reach = dz_norm * (z_norm + rho1)
-        length = run_cells
-        if dz_sq > zero:
-            root = type(y)(2.0) * spread / (reach + wp.sqrt(reach * reach + type(y)(4.0) * dz_sq * spread))
-            if root < type(y)(run_cells):
-                length = int(root)
-        length = wp.max(1, wp.min(length, j_end - j))
-        live = int(0)
-        for m in range(length):
-            if live_cell(xs, y, row, j + m, params, base, out) == 1:
-                live = int(1)
-                break
-        if live == 1 and length < MIN_RUN:
-            for m in range(length):
-                if live_cell(xs, y, row, j + m, params, base, out) == 1:
-                    zm1, zm2 = whiten(xs[j + m], y, params)
-                    value, mu_next = speed_density(zm1, zm2, params, base, mu)
+        e = scratch[band, NODE_E + k] - ref
+        x = scratch[band, NODE_X + k]
+        y = scratch[band, NODE_Y + k]
+        if e + h * (wp.abs(x - x_ref) + wp.abs(y - y_ref)) >= -drop:
+            if h * wp.abs(x) - e > safe or h * wp.abs(y) > safe:
+                return int(0)
+            top = wp.max(top, e + h * wp.abs(x))
+            top_b = wp.max(top_b, h * wp.abs(y))
+            geometric_quads(quads, band, QUAD_A + kept * QUADS, e - h * x, x)
+            geometric_quads(quads, band, QUAD_B + kept * QUADS, -h * y, y)
+            kept = kept + 1
+    # a cell's sum lies in [exp(-low), kept exp(top + top_b)]: exp(log_scale) times it is a
+    # normal number unless log_scale is extreme (tails far out): then each cell combines logs
+    log_scale = params[base + LOG_COEF] + ref
+    safe_scale = int(0)
+    if log_scale + top + top_b + wp.log(type(z1)(kept)) < params[LOG_HUGE] and log_scale - low > params[LOG_SMALL]:
+        safe_scale = int(1)
+    scale = delta
+    if safe_scale == 1:
+        scale = wp.exp(log_scale) * delta
+    # the product, 4 rows x 8 columns at a time (eight vec4 sums; one node's A and B per step)
+    z4 = wp.vector(zero, zero, zero, zero)
+    for rb in range(0, rows, 4):
+        for q in range(0, (cols + 3) // 4, 2):
+            s00 = z4
+            s01 = z4
+            s10 = z4
+            s11 = z4
+            s20 = z4
+            s21 = z4
+            s30 = z4
+            s31 = z4
+            for k in range(kept):
+                a_lo = quads[band, QUAD_A + k * QUADS + q]
+                a_hi = quads[band, QUAD_A + k * QUADS + q + 1]
+                bk = quads[band, QUAD_B + k * QUADS + rb // 4]
+                s00 = s00 + a_lo * bk[0]
+                s01 = s01 + a_hi * bk[0]
+                s10 = s10 + a_lo * bk[1]
+                s11 = s11 + a_hi * bk[1]
+                s20 = s20 + a_lo * bk[2]
+                s21 = s21 + a_hi * bk[2]
+                s30 = s30 + a_lo * bk[3]
+                s31 = s31 + a_hi * bk[3]
+            m = 4 * q
+            left = cols - m
+            at = CROSS + rb * TILE + m
+            add_row(out, row + rb, col + m, left, s00, s01, scratch, band, at, scale, log_scale, safe_scale)
+            if rb + 1 < rows:
+                add_row(out, row + rb + 1, col + m, left, s10, s11, scratch, band, at + TILE, scale, log_scale, safe_scale)
+            if rb + 2 < rows:
+                add_row(out, row + rb + 2, col + m, left, s20, s21, scratch, band, at + 2 * TILE, scale, log_scale, safe_scale)
+            if rb + 3 < rows:
+                add_row(out, row + rb + 3, col + m, left, s30, s31, scratch, band, at + 3 * TILE, scale, log_scale, safe_scale)
+    return int(1)
+
+
+@wp.func
+def walk_cells(
+    xs: wp.array(dtype=Any), ys: wp.array(dtype=Any), r_begin: int, r_end: int, c_begin: int, c_end: int,
+    params: wp.array(dtype=Any), base: int, out: wp.array2d(dtype=Any),
+):
+    """Add w_i P_{r_i} to the unskipped cells of a block, each walking from its peak (Newton
+    from the neighbouring cell's root), a speed left out where its bound is below the floor."""
+    zero = type(params[0])(0.0)
+    for row in range(r_begin, r_end):
+        y = ys[row]
+        mu = zero
+        for j in range(c_begin, c_end):
+            if out[row, j] >= zero:
+                z1, z2 = whiten(xs[j], y, params)
+                z_norm = wp.sqrt(z1 * z1 + z2 * z2)
+                if log_bound(z1, z2, z_norm, params, base) >= params[LOG_SPEED_FLOOR]:
+                    value, mu_next = speed_density(z1, z2, params, base, mu)
                     mu = mu_next
-                    out[row, j + m] = out[row, j + m] + value
-        elif live == 1:
-            # this run's own rule: every stride-th node of the row's
-            ze1, ze2 = whiten(xs[j + length - 1], y, params)
-            need = node_count(wp.max(rule_size(z1, z2, params, base), rule_size(ze1, ze2, params, base)), log_tol)
-            stride = int(1)
-            if n % 32 == 0:
-                while stride < 8 and need * stride * 2 <= n:
-                    stride = stride * 2
-            ref = type(y)(-1.0e30)
-            d_ref = zero
-            for k in range(0, n, stride):
-                r1 = z1 - scratch[band, k]
-                r2 = z2 - scratch[band, offset_c + k]
-                e = scratch[band, offset_k + k] - half * (r1 * r1 + r2 * r2)
-                if e > ref:
-                    ref = e
-                    d_ref = -(r1 * dz1 + r2 * dz2) - half * dz_sq
-            # Keep the nodes that can matter anywhere in the run. Over m <= L cells a node's
-            # exponent rises by at most L max(D_k, 0) (E_k(j + m) - E_k(j) = m D_k - m (m - 1)
-            # |dz|^2 / 2), and the largest term falls by at most L max(-D_ref, 0) + L^2 |dz|^2 / 2,
-            # so a dropped node stays below stop / N of the largest term at every cell of the run.
-            span = type(y)(length)
-            allowance = params[RUN_DROP] + span * wp.max(-d_ref, zero) + half * span * span * dz_sq
-            kept = int(0)
-            for k in range(0, n, stride):
-                r1 = z1 - scratch[band, k]
-                r2 = z2 - scratch[band, offset_c + k]
-                e = scratch[band, offset_k + k] - half * (r1 * r1 + r2 * r2) - ref
-                d = -(r1 * dz1 + r2 * dz2) - half * dz_sq
-                if e + span * wp.max(d, zero) + allowance >= zero:
-                    scratch[band, offset_t + kept] = wp.exp(e)
-                    scratch[band, offset_g + kept] = wp.exp(d)
-                    kept = kept + 1
-            while kept % 4 != 0:  # pad to whole groups of four with zero terms
-                scratch[band, offset_t + kept] = zero
-                scratch[band, offset_g + kept] = one
-                kept = kept + 1
-            log_scale = log_coef + ref
-            safe = wp.abs(log_scale) < params[RUN_SAFE]
-            weight = delta * type(y)(stride)
-            scale = wp.exp(wp.min(log_scale, params[RUN_SAFE])) * weight
-            quad = one  # H^(m (m - 1) / 2)
-            power = one  # H^m
-            for m in range(length):
-                # T_k(j + m) = T_k(j) g_k^m H^(m (m - 1) / 2): carry T g^m, four independent sums
-                s_a = type(y)(0.0)
-                s_b = type(y)(0.0)
-                s_c = type(y)(0.0)
-                s_d = type(y)(0.0)
-                for c in range(0, kept, 4):
-                    ka = offset_t + c
-                    ta = scratch[band, ka]
-                    tb = scratch[band, ka + 1]
-                    tc = scratch[band, ka + 2]
-                    td = scratch[band, ka + 3]
-                    s_a = s_a + ta
-                    s_b = s_b + tb
-                    s_c = s_c + tc
-                    s_d = s_d + td
-                    kg = offset_g + c
-                    ga = scratch[band, kg]  # all loads before the stores (same array: no reordering)
-                    gb = scratch[band, kg + 1]
-                    gc = scratch[band, kg + 2]
-                    gd = scratch[band, kg + 3]
-                    scratch[band, ka] = ta * ga
-                    scratch[band, ka + 1] = tb * gb
-                    scratch[band, ka + 2] = tc * gc
-                    scratch[band, ka + 3] = td * gd
-                total = ((s_a + s_b) + (s_c + s_d)) * quad
-                quad = quad * power
-                power = power * h
-                if out[row, j + m] >= zero:  # (inside the span a cell below the speed floor costs nothing extra)
-                    if safe:
-                        out[row, j + m] = out[row, j + m] + scale * total
-                    else:  # exp(ref) alone under- or overflows: combine in logs
-                        out[row, j + m] = out[row, j + m] + weight * wp.exp(log_scale + wp.log(total))
-        j = j + length
+                    out[row, j] = out[row, j] + value
+
+
+@wp.func
+def mark_cells(
+    xs: wp.array(dtype=Any), ys: wp.array(dtype=Any), r_begin: int, r_end: int, c_begin: int, c_end: int,
+    params: wp.array(dtype=Any), n_speeds: int, out: wp.array2d(dtype=Any),
+):
+    """out = 0 at the cells of a block to compute, -1 at those to skip: where the sum of the
+    speeds' bounds (n times the largest) is below LOG_CELL_FLOOR."""
+    zero = type(params[0])(0.0)
+    cell_floor = params[LOG_CELL_FLOOR] - wp.log(type(params[0])(n_speeds))
+    for row in range(r_begin, r_end):
+        y = ys[row]
+        for j in range(c_begin, c_end):
+            z1, z2 = whiten(xs[j], y, params)
+            z_norm = wp.sqrt(z1 * z1 + z2 * z2)
+            mark = type(y)(-1.0)
+            for s in range(n_speeds):
+                if log_bound(z1, z2, z_norm, params, HEAD + PER_SPEED * s) >= cell_floor:
+                    mark = zero
+                    break
+            out[row, j] = mark
+
+
+@wp.func
+def fill_cells(r_begin: int, r_end: int, c_begin: int, c_end: int, value: Any, skipped_only: int, out: wp.array2d(dtype=Any)):
+    """out = ``value`` on a block (only where it is marked skipped, < 0, with ``skipped_only``)."""
+    for row in range(r_begin, r_end):
+        for j in range(c_begin, c_end):
+            if skipped_only == 0 or out[row, j] < value:
+                out[row, j] = value
 
 
 @wp.kernel
@@ -563,79 +651,107 @@ def butterly_grid(
     xs: wp.array(dtype=Any),
     ys: wp.array(dtype=Any),
     row0: int,
+    row_end: int,
+    rows: int,
     columns: int,
     params: wp.array(dtype=Any),
     n_speeds: int,
     scratch: wp.array2d(dtype=Any),
+    quads: wp.array2d(dtype=Any),
     band: int,
     out: wp.array2d(dtype=Any),
 ):
-    """Density at the cell centres of a band of rows, ``columns`` cells per thread (a whole row
-    on the CPU, one cell on a GPU); ``scratch[band]`` is this band's work space (a whole row's
-    thread uses it, so a band's rows run one after another, as on the CPU).
+    """Density at the cell centres of a block of ``rows`` x ``columns`` cells per thread (a strip
+    of TILE rows of the band [row0, row_end) on the CPU, one cell on a GPU); ``scratch[band]`` and
+    ``quads[band]`` are this band's work space (a band's threads run one after another on the
+    CPU; a GPU's one-cell blocks never use it).
 
     A cell is set to 0 without computing anything where the sum of the speeds' bounds
-    (:func:`log_bound`; n times the largest) is below LOG_CELL_FLOOR, and a speed is skipped at
-    a cell where its own bound is below LOG_SPEED_FLOOR (the floors are set on the host from a
-    lower bound of the density's maximum; see ``Butterly.kernel_parameters``). The speeds are
-    the outer loop: a row of at least 2 * MIN_RUN cells whose rule has at most RECURRENCE_NODES
-    nodes goes through :func:`row_runs`, and otherwise each cell walks from its peak, Newton
-    starting from the neighbouring cell's root. ``out`` holds -1 for skipped cells until the
-    last pass.
+    (:func:`log_bound`; n times the largest) is below LOG_CELL_FLOOR. A strip is cut into
+    TILE x TILE tiles. The bound's distance is 1-Lipschitz, so on a tile it is within the
+    half-diagonal ``reach`` of its value at the centre: a tile is skipped whole, computed whole,
+    or (near the floor's contour) marked cell by cell. For each speed whose bound on the tile
+    reaches LOG_SPEED_FLOOR, :func:`tile_speed` adds the speed's term, or, where it refuses the
+    tile (rules over TILE_NODES nodes, coarse cells), :func:`walk_cells` does each cell from its
+    peak. Blocks too small for a tile (a GPU's cells) are marked and walked cell by cell.
+    ``out`` holds -1 for skipped cells until the end.
     """
     i, block = wp.tid()
-    row = row0 + i
-    y = ys[row]
-    zero = type(y)(0.0)
+    r_begin = row0 + i * rows
+    r_end = wp.min(r_begin + rows, row_end)
     j_begin = block * columns
-    j_end = wp.min((block + 1) * columns, xs.shape[0])
-    cell_floor = params[LOG_CELL_FLOOR] - wp.log(type(y)(n_speeds))
-    speed_floor = params[LOG_SPEED_FLOOR]
-    for j in range(j_begin, j_end):
-        z1, z2 = whiten(xs[j], y, params)
-        z_norm = wp.sqrt(z1 * z1 + z2 * z2)
-        mark = type(y)(-1.0)
+    j_end = wp.min(j_begin + columns, xs.shape[0])
+    zero = type(params[0])(0.0)
+    half = type(params[0])(0.5)
+    if (r_end - r_begin) * (j_end - j_begin) < MIN_TILE_CELLS:
+        mark_cells(xs, ys, r_begin, r_end, j_begin, j_end, params, n_speeds, out)
         for s in range(n_speeds):
-            if log_bound(z1, z2, z_norm, params, HEAD + PER_SPEED * s) >= cell_floor:
-                mark = zero
+            walk_cells(xs, ys, r_begin, r_end, j_begin, j_end, params, HEAD + PER_SPEED * s, out)
+        fill_cells(r_begin, r_end, j_begin, j_end, zero, 1, out)
+        return
+    cell_floor = params[LOG_CELL_FLOOR] - wp.log(type(params[0])(n_speeds))
+    speed_floor = params[LOG_SPEED_FLOOR]
+    # the whitened steps of a column and a row (the grid is uniform)
+    x0 = xs[0]
+    y0 = ys[0]
+    x1 = x0
+    y1 = y0
+    if xs.shape[0] > 1:
+        x1 = xs[1]
+    if ys.shape[0] > 1:
+        y1 = ys[1]
+    za1, za2 = whiten(x0, y0, params)
+    zb1, zb2 = whiten(x1, y0, params)
+    zc1, zc2 = whiten(x0, y1, params)
+    dzx1 = zb1 - za1
+    dzx2 = zb2 - za2
+    dzy1 = zc1 - za1
+    dzy2 = zc2 - za2
+    h = type(params[0])(0.5 * float(TILE - 1))
+    # the cross factor C(r, m) = exp(-|(m - h) dzx + (r - h) dzy|^2 / 2) of every tile
+    for r in range(TILE):
+        for m in range(TILE):
+            fm = type(params[0])(m) - h
+            fr = type(params[0])(r) - h
+            c1 = fm * dzx1 + fr * dzy1
+            c2 = fm * dzx2 + fr * dzy2
+            scratch[band, CROSS + r * TILE + m] = wp.exp(-half * (c1 * c1 + c2 * c2))
+    reach = h * (wp.sqrt(dzx1 * dzx1 + dzx2 * dzx2) + wp.sqrt(dzy1 * dzy1 + dzy2 * dzy2))
+    for c_begin in range(j_begin, j_end, TILE):
+        c_end = wp.min(c_begin + TILE, j_end)
+        zo1, zo2 = whiten(xs[c_begin], ys[r_begin], params)
+        z1 = zo1 + h * (dzx1 + dzy1)
+        z2 = zo2 + h * (dzx2 + dzy2)
+        z_norm = wp.sqrt(z1 * z1 + z2 * z2)
+        state = int(0)  # 0: every cell skipped, 1: every cell computed, 2: some of each
+        for s in range(n_speeds):
+            base = HEAD + PER_SPEED * s
+            d = ring_distance(z1, z2, z_norm, params, base)
+            far = d + reach
+            near = wp.max(d - reach, zero)
+            if params[base + LOG_BOUND] - half * far * far >= cell_floor:
+                state = int(1)
                 break
-        out[row, j] = mark
-    for s in range(n_speeds):
-        base = HEAD + PER_SPEED * s
-        # the live span of the row for this speed: scan in from both ends
-        first = int(j_begin)
-        while first < j_end and live_cell(xs, y, row, first, params, base, out) == 0:
-            first = first + 1
-        last = int(j_end - 1)
-        while last > first and live_cell(xs, y, row, last, params, base, out) == 0:
-            last = last - 1
-        n = int(MAX_NODES)
-        if last - first + 1 >= 2 * MIN_RUN:
-            za1, za2 = whiten(xs[first], y, params)
-            zb1, zb2 = whiten(xs[last], y, params)
-            amp = wp.max(rule_size(za1, za2, params, base), rule_size(zb1, zb2, params, base))
-            n = node_count(amp, params[LOG_TOL])
-            if n < 128:
-                n = (n + 3) // 4 * 4
-            else:
-                n = (n + 31) // 32 * 32
-        if first == j_end:
-            n = int(0)  # nothing to add on this row
-        elif n <= RECURRENCE_NODES:
-            row_runs(xs, y, row, first, last + 1, params, base, n, scratch, band, out)
+            if params[base + LOG_BOUND] - half * near * near >= cell_floor:
+                state = int(2)
+        if state == 2:
+            mark_cells(xs, ys, r_begin, r_end, c_begin, c_end, params, n_speeds, out)
         else:
-            mu = type(y)(0.0)
-            for j in range(j_begin, j_end):
-                if out[row, j] >= zero:
-                    z1, z2 = whiten(xs[j], y, params)
-                    z_norm = wp.sqrt(z1 * z1 + z2 * z2)
-                    if log_bound(z1, z2, z_norm, params, base) >= speed_floor:
-                        value, mu_next = speed_density(z1, z2, params, base, mu)
-                        mu = mu_next
-                        out[row, j] = out[row, j] + value
-    for j in range(j_begin, j_end):
-        if out[row, j] < zero:
-            out[row, j] = zero
+            fill_cells(r_begin, r_end, c_begin, c_end, zero, 0, out)
+        if state != 0:
+            for s in range(n_speeds):
+                base = HEAD + PER_SPEED * s
+                # the speed's bound on the tile: its distance less the half-diagonal
+                d = wp.max(ring_distance(z1, z2, z_norm, params, base) - reach, zero)
+                if params[base + LOG_BOUND] - half * d * d >= speed_floor:
+                    done = tile_speed(
+                        z1, z2, dzx1, dzx2, dzy1, dzy2, r_begin, r_end - r_begin, c_begin, c_end - c_begin,
+                        params, base, scratch, quads, band, out,
+                    )
+                    if done == 0:
+                        walk_cells(xs, ys, r_begin, r_end, c_begin, c_end, params, base, out)
+        if state == 2:
+            fill_cells(r_begin, r_end, c_begin, c_end, zero, 1, out)
 
 
 @wp.kernel
@@ -656,7 +772,8 @@ def _register_overloads():
     for scalar in (wp.float32, wp.float64):
         vec = wp.array(dtype=scalar)
         common = {"xs": vec, "ys": vec, "params": vec}
-        wp.overload(butterly_grid, {**common, "scratch": wp.array2d(dtype=scalar), "out": wp.array2d(dtype=scalar)})
+        quads = wp.array2d(dtype=wp.types.vector(4, scalar))
+        wp.overload(butterly_grid, {**common, "scratch": wp.array2d(dtype=scalar), "quads": quads, "out": wp.array2d(dtype=scalar)})
         wp.overload(butterly_points, {**common, "out": vec})
 
 

@@ -35,6 +35,14 @@ Rectangle probabilities
 changes; TVPACK): P(X > h, Y > k) for standard normals of correlation r, by 6/12/20-point
 Gauss-Legendre in the correlation (nodes passed in ``bvn_rule``).
 
+A grid cell is a difference of four such orthant probabilities, which cancels. In float32
+arithmetic the small cells are lost (tests/test_presence.py's room against float64, cells above
+1e-6 of the largest: 40% off at 64 x 64, 560% at 256 x 256), and float32 cell edges alone would
+cost ulp(x) / dx of a cell's width (4e-5 for a 1024-cell row of that 6 m room). So
+:func:`grid_cells` always reads float64 edges, components and Gauss-Legendre nodes and does the
+whole cell in float64; only the stored density and probability take the output arrays' dtype
+(the float32 overload rounds each float64 result once: 2^-24 = 6e-8 relative).
+
 Precision: Warp has erf but no erfc; :func:`erfcx_pos` is the scaled complementary error
 function from Cephes' ndtr.c rational approximations (relative error a few ulps), so upper
 normal tails keep their relative accuracy far out.
@@ -682,7 +690,17 @@ def grid_cells(
     prob: wp.array2d(dtype=Any),
 ):
     """Row ``row0 + tid``: the mixture's density at each cell centre and the exact probability
-    of each rectangle [x_edges[j], x_edges[j+1]] x [y_edges[i], y_edges[i+1]]."""
+    of each rectangle [x_edges[j], x_edges[j+1]] x [y_edges[i], y_edges[i+1]],
+
+        P_ij = sum_c w_c [U(a0, b0) - U(a1, b0) - U(a0, b1) + U(a1, b1)],
+
+    U = :func:`bvn_upper` at the component's standardised (and reflected, see
+    :func:`bvn_rectangle`) edges a = (x - mu_x) / sd_x, b = (y - mu_y) / sd_y.
+
+    ``x_edges``, ``y_edges``, ``comp`` and ``bvn_rule`` are float64 in every overload: the four
+    orthant terms cancel (see the module docstring), so the arithmetic is float64 and only the
+    stores convert to the dtype of ``density`` and ``prob`` (one rounding in the float32
+    overload)."""
     i = row0 + wp.tid()
     ya = y_edges[i]
     yb = y_edges[i + 1]
@@ -705,8 +723,8 @@ def grid_cells(
                 (xa - comp[c, G_MX]) / sx, (xb - comp[c, G_MX]) / sx,
                 (ya - comp[c, G_MY]) / sy, (yb - comp[c, G_MY]) / sy, comp[c, G_R], bvn_rule,
             )
-        density[i, j] = dens
-        prob[i, j] = p
+        density[i, j] = density.dtype(dens)
+        prob[i, j] = prob.dtype(p)
 
 
 @wp.kernel
@@ -715,9 +733,11 @@ def rectangles(
     bvn_rule: wp.array2d(dtype=Any),
     out: wp.array(dtype=Any),
 ):
-    """P(l0 < X < l1, l2 < Y < l3) for standard normals of correlation l4, per row of ``lims``."""
+    """P(l0 < X < l1, l2 < Y < l3) for standard normals of correlation l4, per row of ``lims``.
+    ``lims`` and ``bvn_rule`` are float64 in every overload (the orthant terms cancel, as in
+    :func:`grid_cells`); only the store takes the dtype of ``out``."""
     k = wp.tid()
-    out[k] = bvn_rectangle(lims[k, 0], lims[k, 1], lims[k, 2], lims[k, 3], lims[k, 4], bvn_rule)
+    out[k] = out.dtype(bvn_rectangle(lims[k, 0], lims[k, 1], lims[k, 2], lims[k, 3], lims[k, 4], bvn_rule))
 
 
 @wp.kernel
@@ -741,6 +761,8 @@ def special_functions(
 
 
 def _register_overloads():
+    vec64 = wp.array(dtype=wp.float64)
+    mat64 = wp.array2d(dtype=wp.float64)
     for scalar in (wp.float32, wp.float64):
         vec = wp.array(dtype=scalar)
         mat = wp.array2d(dtype=scalar)
@@ -750,8 +772,10 @@ def _register_overloads():
         }
         wp.overload(plane_cells, {**cells, "rho_lo": vec, "rho_hi": vec})
         wp.overload(frustum_cells, {**cells, "tau_lo": vec, "tau_hi": vec, "depth_lo": scalar, "depth_hi": scalar})
-        wp.overload(grid_cells, {"x_edges": vec, "y_edges": vec, "comp": mat, "bvn_rule": mat, "density": mat, "prob": mat})
-        wp.overload(rectangles, {"lims": mat, "bvn_rule": mat, "out": vec})
+        # float64 geometry and arithmetic in both overloads (cancellation, see grid_cells)
+        wp.overload(grid_cells, {"x_edges": vec64, "y_edges": vec64, "comp": mat64, "bvn_rule": mat64,
+                                 "density": mat, "prob": mat})
+        wp.overload(rectangles, {"lims": mat64, "bvn_rule": mat64, "out": vec})
         wp.overload(special_functions, {"xs": vec, "gl": mat, "out": mat})
 
 

@@ -187,10 +187,10 @@ def test_mass_is_conserved_on_a_grid():
 
 
 def test_rasterise_and_pdf_agree():
-    """The grid kernel (row recurrence, Newton from the neighbour's root, skipped cells) and the
-    points kernel (each point on its own) compute the same rule to rounding: 1e-11 relative
-    wherever the density exceeds 1e-12 of its peak (each is within 1e-12 of the exact integral,
-    the recurrence adds <= 1e-12). Cells set to 0 are exactly those the bound proves below
+    """The grid kernel (tiles, skipped cells) and the points kernel (each point walking from its
+    peak) compute the same rule to rounding: 1e-11 relative wherever the density exceeds 1e-12
+    of its peak (each is within 1e-12 of the exact integral; the tile's factors add about 30
+    roundings and drop nodes below 1e-15 / 512 of the largest). Cells set to 0 are exactly those the bound proves below
     1e-13 of the peak: there the points kernel is below that too."""
     model = bg.Butterly(mean=(5.0, 5.0), cov=covariance(0.3, 20.0, 30.0), speeds=[1.0], t=100.0)
     grid = bg.Grid.from_bounds(x=(-400.0, 400.0), y=(-350.0, 370.0), step=4.0)
@@ -212,7 +212,7 @@ GRID_CASES = [(0.6, 0.5), (0.6, 3.0), (-0.99, 10.0), (0.0, 10.0), (0.999, 30.0),
 
 @pytest.mark.parametrize("rho, ratio", GRID_CASES, ids=[f"rho{rho}-r{ratio:g}" for rho, ratio in GRID_CASES])
 def test_grid_kernel_matches_oracle(rho, ratio):
-    """rasterise (its own path: the row recurrence for rules up to 512 nodes, the walk beyond,
+    """rasterise (its own path: tiles for rules up to 512 nodes, the walk beyond,
     cells skipped by the bound) against the independent oracle at 160 cells of a 300 x 240 grid
     framed about the ring +- 8 sigma_max: 1e-9 relative where the density exceeds 1e-12 of its
     peak, and a skipped cell (0) only where the oracle is below 1e-13 of the peak."""
@@ -247,12 +247,61 @@ def test_float32_kernel():
     want = model.pdf(pts[:, 0], pts[:, 1])
     assert got.dtype == np.float32
     np.testing.assert_allclose(got, want, rtol=1e-4)
-    # the grid kernel's float32 path (row recurrence restarted every 16 cells: <= 8e-6 more)
+    # the grid kernel's float32 path (a tile's factors: about 30 more roundings, 2e-6)
     grid = bg.Grid.from_bounds(x=(-800.0, 1400.0), y=(-1000.0, 1200.0), step=10.0)
     got = bg.rasterise(model, grid, dtype=np.float32).values
     want = bg.rasterise(model, grid).values
     keep = want > 1e-6 * want.max()
     np.testing.assert_allclose(got[keep], want[keep], rtol=1e-4)
+
+
+def _points_check(model, grid, threads=1, rtol=1e-11):
+    """rasterise against pdf (each point on its own) at 1e-11 relative above 1e-12 of the peak
+    (both within 1e-12 of the integral); cells set to 0 are below 1e-13 of the peak."""
+    values = bg.rasterise(model, grid, threads=threads).values
+    xx, yy = np.meshgrid(grid.x, grid.y)
+    points = model.pdf(xx, yy)
+    keep = points > 1e-12 * points.max()
+    np.testing.assert_allclose(values[keep], points[keep], rtol=rtol)
+    assert np.all(points[values == 0] < 1e-13 * model.peak_lower_bound())
+    return values
+
+
+def test_grid_kernel_paths_agree_with_points():
+    """Every path of the grid kernel against the points kernel: partial tiles (sides not
+    multiples of 32) on 1 and 2 threads (other strips, other tile centres: equal to rounding),
+    a grid too small for a tile (each cell marked and walked, as on a GPU), and coarse cells
+    (3 sigma_min: a tile's cross factor would span exp(-4000), so tiles are refused and walked)."""
+    model = bg.Butterly(mean=(30.0, -10.0), cov=covariance(0.7, 40.0, 90.0), speeds=[2.0, 5.0], weights=[0.3, 0.7], t=100.0)
+    fine = bg.Grid.from_bounds(x=(-900.0, 950.0), y=(-800.0, 760.0), dx=1850.0 / 77, dy=1560.0 / 45)
+    one = _points_check(model, fine, threads=1)
+    two = _points_check(model, fine, threads=2)
+    np.testing.assert_allclose(two, one, rtol=1e-12, atol=0.0)
+    tiny = bg.Grid.from_bounds(x=(-300.0, 300.0), y=(-200.0, 200.0), dx=200.0, dy=80.0)
+    assert tiny.shape[0] * tiny.shape[1] < 16  # below MIN_TILE_CELLS
+    _points_check(model, tiny)
+    sigma_min = axes(model.cov)[0]
+    coarse = bg.Grid.from_bounds(x=(-2000.0, 2000.0), y=(-2000.0, 2000.0), step=3.0 * sigma_min)
+    _points_check(model, coarse)
+
+
+def test_grid_kernel_extreme_scale():
+    """Lengths in units 1e154 times smaller: the density is 1e308 times larger, exp of a tile's
+    log scale (about +697) times its sum could overflow, so each cell combines logs (a test
+    that fails if that branch adds nothing); the raster is the unscaled one times 1e308 to
+    1e-11 (float64 rounding of the scaled inputs: ~1e-14)."""
+    unit = 1e-154
+    cov = np.asarray(covariance(0.5, 70.0, 120.0))
+    base = bg.Butterly(mean=(10.0, 20.0), cov=cov, speeds=[4.0, 8.0], weights=[0.5, 0.5], t=100.0)
+    small = bg.Butterly(mean=(10.0 * unit, 20.0 * unit), cov=cov * unit**2, speeds=[4.0 * unit, 8.0 * unit],
+                        weights=[0.5, 0.5], t=100.0)
+    grid = bg.Grid.from_bounds(x=(-1400.0, 1400.0), y=(-1300.0, 1300.0), step=10.0)
+    grid_small = bg.Grid.from_bounds(x=(-1400.0 * unit, 1400.0 * unit), y=(-1300.0 * unit, 1300.0 * unit), step=10.0 * unit)
+    want = bg.rasterise(base, grid).values
+    got = bg.rasterise(small, grid_small).values * (unit * unit)
+    assert np.isfinite(got).all() and want.max() > 0
+    keep = want > 1e-12 * want.max()
+    np.testing.assert_allclose(got[keep], want[keep], rtol=1e-11)
 
 
 # --- continuous speed laws --------------------------------------------------------------------
@@ -506,7 +555,7 @@ def test_polar_lattice_rows_match_range_pdf():
 def test_numpy_twin_computes_the_same_raster():
     """bananagrid.butterly.numpy_density (the bench's baseline) is the same rule: with floors it
     zeroes the same cells as the grid kernel and agrees with it to 1e-11 relative elsewhere
-    above 1e-12 of the peak (both within 1e-12 of the integral; the recurrence adds <= 1e-12)."""
+    above 1e-12 of the peak (both within 1e-12 of the integral; the tiles add <= 1e-12)."""
     from bananagrid.butterly import numpy_density
 
     cov = covariance(-0.4, 60.0, 110.0)

@@ -265,7 +265,7 @@ def test_line_cells_are_cdf_differences():
 def test_float32_cells_follow_float64(room_plane):
     """float32 runs at angular.FLOAT32_RTOL = 1e-5: every cell holding 1e-9 of the mass within
     2e-4 relative of float64 (measured 3e-5 on the bench's 8-component lattice and 4e-5 on its
-    frustum); float32 rectangle probabilities are refused (cancellation)."""
+    frustum). Grids in float32: test_float32_grid_is_float64_rounded."""
     from bananagrid.angular import FLOAT32_RTOL
 
     mix, lat = ROOM, PLANE
@@ -274,8 +274,6 @@ def test_float32_cells_follow_float64(room_plane):
     assert b.provenance["rtol"] == FLOAT32_RTOL
     big = a.prob >= 1e-9
     assert np.max(np.abs(b.prob[big] / a.prob[big] - 1.0)) < 2e-4
-    with pytest.raises(BananagridError, match="dtype = float32: rectangle probabilities need float64"):
-        grid_probabilities(mix, Grid.from_bounds(x=(-1.0, 1.0), y=(-1.0, 1.0), step=0.5), dtype=np.float32)
 
 
 def test_line_cells_match_monte_carlo():
@@ -358,6 +356,84 @@ def test_grid_rectangles_match_scipy_cdf_and_products():
     px = stats.norm.cdf(xe[1:], 0.3, math.sqrt(0.4)) - stats.norm.cdf(xe[:-1], 0.3, math.sqrt(0.4))
     py = stats.norm.cdf(ye[1:], -0.4, 0.3) - stats.norm.cdf(ye[:-1], -0.4, 0.3)
     assert gd.probability == pytest.approx(np.outer(py, px), rel=1e-9, abs=1e-16)
+
+
+def _rho(sx, sy, r):
+    return [[sx * sx, r * sx * sy], [r * sx * sy, sy * sy]]
+
+
+#: float32 grids against float64: (mixture, grid), commented with what each case is for. The
+#: old all-float32 kernel missed the cells holding 1e-6 of the largest by 1.2e-4, 8.5%, 2.7e-4
+#: and 38% on these cases (40% and 560% on ROOM at 64 x 64 and 256 x 256 over its room).
+FLOAT32_GRID_CASES = {
+    "well-conditioned": (
+        GaussianMixture([0.6, 0.4], [[-0.8, 0.3], [1.1, -0.5]], [_rho(0.6, 0.5, 0.2), _rho(0.4, 0.7, -0.3)]),
+        Grid.from_bounds(x=(-3.0, 3.0), y=(-2.5, 2.5), dx=6.0 / 64, dy=5.0 / 64)),
+    "rho = 0.99": (  # a needle of minor sd 0.07 m under cells of 0.1 m, another at -0.995
+        GaussianMixture([0.7, 0.3], [[0.2, -0.1], [-1.0, 1.5]], [_rho(0.8, 0.6, 0.99), _rho(0.3, 0.5, -0.995)]),
+        Grid.from_bounds(x=(-3.0, 3.0), y=(-2.5, 2.5), step=0.1)),
+    "far tails": (  # cells from 1.8e-3 down through float32's subnormals to zero
+        GaussianMixture([1.0], [[0.0, 0.0]], [_rho(0.1, 0.15, 0.5)]),
+        Grid.from_bounds(x=(0.2, 1.4), y=(-0.3, 2.1), step=0.04)),
+    "fine, far from the origin": (  # cells of sigma / 1000 at x ~ 1000 m: float32 edges would
+        # be 6e-5 m apart (ulp(1000)), 6% of a cell
+        GaussianMixture([1.0], [[1000.3, 2000.2]], [_rho(1.0, 0.8, 0.6)]),
+        Grid.from_bounds(x=(1000.0, 1000.064), y=(2000.0, 2000.064), step=1e-3)),
+}
+
+
+@pytest.mark.parametrize("name", list(FLOAT32_GRID_CASES))
+def test_float32_grid_is_float64_rounded(name):
+    """float32 grid cells are the float64 cells rounded once (the kernel computes in float64
+    either way, the four orthant terms would cancel in float32)."""
+    mix, grid = FLOAT32_GRID_CASES[name]
+    a = grid_probabilities(mix, grid)
+    b = grid_probabilities(mix, grid, dtype=np.float32)
+    assert b.probability.dtype == np.float32 and b.density.dtype == np.float32
+    assert b.provenance["dtype"] == "float32"
+    # one rounding to float32 is within 2^-24 = 6.0e-8 relative (measured 5.96e-8 here and on
+    # ROOM up to 1024 x 1024, every cell bit for bit float32(float64)); 1e-7 spares the last
+    # float64 bits of a differently compiled overload. Below float32's normal range (1.2e-38)
+    # the rounding is absolute: at most half the least subnormal, 7e-46, hence 1e-45.
+    for got, want in ((b.probability, a.probability), (b.density, a.density)):
+        err = np.abs(got.astype(np.float64) - want)
+        assert np.all(err <= 1e-7 * np.abs(want) + 1e-45), np.max(err / (np.abs(want) + 1e-300))
+    # summed in float64 from the float32 cells: the roundings' sum, far below 1e-7 of the mass
+    assert b.mass == pytest.approx(a.mass, rel=1e-7)
+    if name == "far tails":  # the case reaches float32's subnormals and underflows to zero
+        p = a.probability
+        assert p.max() > 1e-4 and np.any((p > 1e-45) & (p < 1.2e-38)) and np.any(p < 1e-46)
+    if name == "fine, far from the origin":  # independent of the BVN: a cell of side h is its
+        # area times the centre density up to the midpoint rule's (h^2 / 24)(f_xx + f_yy) / f,
+        # 1.7e-7 here (measured), plus float32's 6e-8
+        assert np.all(np.abs(b.probability / (a.density * grid.dx * grid.dy) - 1.0) < 1e-6)
+
+
+def test_float32_rectangles_are_float64_rounded():
+    """rectangle_probabilities (the region masses) computes in float64 for either dtype too:
+    rectangles down to 1e-4 wide, where the four orthant terms cancel, come back as the
+    float64 values rounded once (2^-24 = 6e-8; 1e-7 as above), and agree with SciPy's
+    multivariate normal CDF differenced in float64 on rectangles large enough not to cancel."""
+    from bananagrid.presence import rectangle_probabilities
+
+    rng = np.random.default_rng(3)
+    lo_x, lo_y = rng.uniform(-3.0, 3.0, 40), rng.uniform(-3.0, 3.0, 40)
+    width = 10.0 ** rng.uniform(-4.0, 0.0, 40)
+    rho = rng.uniform(-0.95, 0.95, 40)
+    lims = np.column_stack((lo_x, lo_x + width, lo_y, lo_y + width, rho))
+    a = rectangle_probabilities(lims)
+    b = rectangle_probabilities(lims, dtype=np.float32)
+    assert b.dtype == np.float32
+    # one rounding (and 1e-45 for float32's subnormals): float64 keeps about 1e-17 absolute
+    # (the orthants' rounding), which the float32 value inherits, rounded
+    assert np.all(np.abs(b.astype(np.float64) - a) <= 1e-7 * np.abs(a) + 1e-45)
+    big = width > 0.1
+    want = []
+    for (x0, x1, y0, y1, r) in lims[big]:
+        cdf = stats.multivariate_normal([0.0, 0.0], [[1.0, r], [r, 1.0]]).cdf
+        want.append(cdf([x1, y1]) - cdf([x0, y1]) - cdf([x1, y0]) + cdf([x0, y0]))
+    # SciPy's CDF is good to about 1e-8 absolute (Genz's algorithm, default tolerances)
+    np.testing.assert_allclose(a[big], want, rtol=0, atol=1e-7)
 
 
 def _vector_pdf(mix, x, y):
