@@ -65,12 +65,6 @@ SPEED_FLOOR = 1e-22
 #: Relative tolerance of the kernel's trapezoid rule (its node count, see kernels/butterly.py)
 #: and the relative size below which the walk drops a node, per kernel precision.
 _KERNEL_TOL = {np.dtype(np.float64): (1e-12, 1e-15, 1e-8), np.dtype(np.float32): (1e-7, 1e-8, 1e-4)}
-#: The grid kernel's tiles (kernels/butterly.py, tile_speed), per kernel precision: a tile's
-#: factors stay within exp(+-TILE_SAFE), so a product of two is a normal number and the sum of
-#: TILE_NODES of them stays below the largest (float64 exp overflows at 709, float32 at 88).
-_TILE_SAFE = {np.dtype(np.float64): 300.0, np.dtype(np.float32): 40.0}
-
-
 def covariance_axes(cov: np.ndarray) -> tuple[float, float, float]:
     """Eigen-decomposition of a 2x2 covariance: (S1, S2, beta) with S1 <= S2 its eigenvalues
     (Butterly's S_u, S_v of (3.7), per ERRATA) and beta the angle from east of S1's eigenvector
@@ -441,7 +435,6 @@ class Butterly:
         head[k.LOG_POINT_FLOOR] = math.log(tiny) - 1.0
         head[k.LOG_CELL_FLOOR] = -math.inf
         head[k.LOG_SPEED_FLOOR] = head[k.LOG_POINT_FLOOR]
-        head[k.TILE_SAFE] = _TILE_SAFE[np.dtype(dtype)]
         # a tile drops the nodes below stop / TILE_NODES of the largest at every cell
         head[k.TILE_DROP] = -math.log(stop) + math.log(k.TILE_NODES)
         # the range of logs of normal numbers, less a margin for the rounding of exp and log

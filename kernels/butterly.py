@@ -54,8 +54,8 @@ faster:
   most wherever the density exceeds 1e-12 M). d is 1-Lipschitz, so whole tiles are skipped,
   computed or left out of a speed from the bound at their centre. ``butterly_points`` skips
   only what would underflow.
-* Tiles (:func:`tile_speed`, rules of up to TILE_NODES nodes, i.e. r / sigma_min up to a few
-  tens): on a uniform grid each node's exponent is a quadratic in the cell's (row, column)
+* Tiles (:func:`tile_speed`, rules of up to TILE_NODES nodes, r / sigma_min up to a few
+  hundred): on a uniform grid each node's exponent is a quadratic in the cell's (row, column)
   whose only mixed term does not depend on the node, so a TILE x TILE tile's rule is a matrix
   product, sum_k A_k(column) B_k(row), times a node-free cross factor: two short geometric
   sequences per node instead of an exp per node and cell, and only the nodes that reach
@@ -72,10 +72,10 @@ import warp as wp
 #: Layout of the parameter array: a head, then PER_SPEED values for each travelled range.
 (
     MEAN_X, MEAN_Y, Q1_X, Q1_Y, INV_SQRT_S1, INV_SQRT_S2, KAPPA, COS_THETA0, SIN_THETA0, LOG_TOL, STOP,
-    NEWTON_TOL, LOG_STOP, LOG_TINY, LOG_CELL_FLOOR, LOG_SPEED_FLOOR, LOG_POINT_FLOOR, TILE_SAFE, LOG_HUGE,
-    LOG_SMALL, TILE_DROP,
-) = range(21)
-HEAD = 21
+    NEWTON_TOL, LOG_STOP, LOG_TINY, LOG_CELL_FLOOR, LOG_SPEED_FLOOR, LOG_POINT_FLOOR, LOG_HUGE, LOG_SMALL,
+    TILE_DROP,
+) = range(20)
+HEAD = 20
 #: Per speed: rho1 = r / sqrt(S1), rho2 = r / sqrt(S2), 4F = rho1^2 - rho2^2,
 #: log(weight / (4 pi^2 sqrt(S1 S2) ive(0, kappa))) and log(weight / (2 pi sqrt(S1 S2))), the
 #: log of the peak of the weighted start density (see :func:`log_bound`).
@@ -93,8 +93,8 @@ TWO_PI = 6.283185307179586
 TILE = 32
 #: vec4 per node and axis in a tile's factor tables.
 QUADS = TILE // 4
-#: Largest rule the tile product takes; larger ones (r / sigma_min beyond about 100) walk.
-TILE_NODES = 512
+#: Largest rule the tile product takes; larger ones (r / sigma_min beyond a few hundred) walk.
+TILE_NODES = 2048
 #: Smallest block of cells worth a tile (a GPU thread's single cell walks).
 MIN_TILE_CELLS = 16
 #: Scalar scratch per band: the nodes' exponents and slopes (TILE_NODES each), cos and sin of
@@ -466,9 +466,8 @@ def tile_speed(
     below exp(-TILE_DROP) = stop / TILE_NODES of the largest node at every cell: E_k - E_ref is
     linear in (m, r), so its largest value on the tile is e_k - ref + h (|X_k - X_ref| +
     |Y_k - Y_ref|) (exact, no bound). The tile is refused (walked instead) where the rule needs
-    more than TILE_NODES nodes, or where a factor could leave exp(+-TILE_SAFE) or a cell's largest
-    term fall below exp(-TILE_SAFE) of ref (coarse cells far out): every product of two factors
-    is then a normal number.
+    more than TILE_NODES nodes, or where a factor could overflow or an underflowing one could
+    matter (coarse cells far out).
     """
     zero = type(z1)(0.0)
     one = type(z1)(1.0)
@@ -479,7 +478,6 @@ def tile_speed(
     kappa = params[KAPPA]
     c0 = params[COS_THETA0]
     s0 = params[SIN_THETA0]
-    safe = params[TILE_SAFE]
     # the rule for the largest amplitude on the tile (|(a, b)| is convex in z: at a corner)
     amp = zero
     for corner in range(4):
@@ -527,11 +525,9 @@ def tile_speed(
                 ref = e
                 x_ref = x
                 y_ref = y
-    # every cell's largest term is within exp(-low) of ref (E_ref(r, m) - ref >= -low)
+    # every cell's largest term is at least exp(-low) of ref (E_ref(r, m) - ref >= -low)
     spread = h * (wp.sqrt(dzx1 * dzx1 + dzx2 * dzx2) + wp.sqrt(dzy1 * dzy1 + dzy2 * dzy2))
     low = h * (wp.abs(x_ref) + wp.abs(y_ref)) + half * spread * spread
-    if low > safe:
-        return int(0)
     drop = params[TILE_DROP]
     kept = int(0)
     top = zero  # the largest exponent of a kept A, and of a kept B
@@ -541,18 +537,22 @@ def tile_speed(
         x = scratch[band, NODE_X + k]
         y = scratch[band, NODE_Y + k]
         if e + h * (wp.abs(x - x_ref) + wp.abs(y - y_ref)) >= -drop:
-            if h * wp.abs(x) - e > safe or h * wp.abs(y) > safe:
-                return int(0)
             top = wp.max(top, e + h * wp.abs(x))
             top_b = wp.max(top_b, h * wp.abs(y))
             geometric_quads(quads, band, QUAD_A + kept * QUADS, e - h * x, x)
             geometric_quads(quads, band, QUAD_B + kept * QUADS, -h * y, y)
             kept = kept + 1
+    # The products and sums must not overflow (every factor is at most exp(top), exp(top_b)),
+    # and a factor that underflows must leave only a negligible term: at most tiny exp(top_b)
+    # (or exp(top)), below exp(-drop) of the cell's largest term (>= exp(-low)).
+    log_kept = wp.log(type(z1)(kept))
+    if top + top_b + log_kept >= params[LOG_HUGE] or wp.max(top, top_b) + low + drop >= -params[LOG_SMALL]:
+        return int(0)
     # a cell's sum lies in [exp(-low), kept exp(top + top_b)]: exp(log_scale) times it is a
     # normal number unless log_scale is extreme (tails far out): then each cell combines logs
     log_scale = params[base + LOG_COEF] + ref
     safe_scale = int(0)
-    if log_scale + top + top_b + wp.log(type(z1)(kept)) < params[LOG_HUGE] and log_scale - low > params[LOG_SMALL]:
+    if log_scale + top + top_b + log_kept < params[LOG_HUGE] and log_scale - low > params[LOG_SMALL]:
         safe_scale = int(1)
     scale = delta
     if safe_scale == 1:
@@ -691,22 +691,23 @@ def butterly_grid(
         return
     cell_floor = params[LOG_CELL_FLOOR] - wp.log(type(params[0])(n_speeds))
     speed_floor = params[LOG_SPEED_FLOOR]
-    # the whitened steps of a column and a row (the grid is uniform)
-    x0 = xs[0]
-    y0 = ys[0]
-    x1 = x0
-    y1 = y0
-    if xs.shape[0] > 1:
-        x1 = xs[1]
-    if ys.shape[0] > 1:
-        y1 = ys[1]
-    za1, za2 = whiten(x0, y0, params)
-    zb1, zb2 = whiten(x1, y0, params)
-    zc1, zc2 = whiten(x0, y1, params)
-    dzx1 = zb1 - za1
-    dzx2 = zb2 - za2
-    dzy1 = zc1 - za1
-    dzy2 = zc2 - za2
+    # the whitened steps of a column and a row (the grid is uniform), over the whole grid: the
+    # difference of neighbouring coordinates would carry their rounding (1e-5 of a step in float32)
+    nx = xs.shape[0]
+    ny = ys.shape[0]
+    za1, za2 = whiten(xs[0], ys[0], params)
+    zb1, zb2 = whiten(xs[nx - 1], ys[0], params)
+    zc1, zc2 = whiten(xs[0], ys[ny - 1], params)
+    dzx1 = zero
+    dzx2 = zero
+    dzy1 = zero
+    dzy2 = zero
+    if nx > 1:
+        dzx1 = (zb1 - za1) / type(params[0])(nx - 1)
+        dzx2 = (zb2 - za2) / type(params[0])(nx - 1)
+    if ny > 1:
+        dzy1 = (zc1 - za1) / type(params[0])(ny - 1)
+        dzy2 = (zc2 - za2) / type(params[0])(ny - 1)
     h = type(params[0])(0.5 * float(TILE - 1))
     # the cross factor C(r, m) = exp(-|(m - h) dzx + (r - h) dzy|^2 / 2) of every tile
     for r in range(TILE):

@@ -190,8 +190,8 @@ def test_rasterise_and_pdf_agree():
     """The grid kernel (tiles, skipped cells) and the points kernel (each point walking from its
     peak) compute the same rule to rounding: 1e-11 relative wherever the density exceeds 1e-12
     of its peak (each is within 1e-12 of the exact integral; the tile's factors add about 30
-    roundings and drop nodes below 1e-15 / 512 of the largest). Cells set to 0 are exactly those the bound proves below
-    1e-13 of the peak: there the points kernel is below that too."""
+    roundings and drop nodes below 1e-15 / 2048 of the largest). Cells set to 0 are exactly
+    those the bound proves below 1e-13 of the peak: there the points kernel is below that too."""
     model = bg.Butterly(mean=(5.0, 5.0), cov=covariance(0.3, 20.0, 30.0), speeds=[1.0], t=100.0)
     grid = bg.Grid.from_bounds(x=(-400.0, 400.0), y=(-350.0, 370.0), step=4.0)
     raster = bg.rasterise(model, grid)
@@ -212,7 +212,7 @@ GRID_CASES = [(0.6, 0.5), (0.6, 3.0), (-0.99, 10.0), (0.0, 10.0), (0.999, 30.0),
 
 @pytest.mark.parametrize("rho, ratio", GRID_CASES, ids=[f"rho{rho}-r{ratio:g}" for rho, ratio in GRID_CASES])
 def test_grid_kernel_matches_oracle(rho, ratio):
-    """rasterise (its own path: tiles for rules up to 512 nodes, the walk beyond,
+    """rasterise (its own path: tiles for rules up to 2048 nodes, the walk beyond,
     cells skipped by the bound) against the independent oracle at 160 cells of a 300 x 240 grid
     framed about the ring +- 8 sigma_max: 1e-9 relative where the density exceeds 1e-12 of its
     peak, and a skipped cell (0) only where the oracle is below 1e-13 of the peak."""
@@ -236,6 +236,29 @@ def test_grid_kernel_matches_oracle(rho, ratio):
     assert np.max(self_check[keep]) < 1e-11
     assert np.max(np.abs(got[keep] / want[keep] - 1.0)) <= RTOL
     assert np.all(want[got == 0] < 1e-13 * peak)
+
+
+def test_grid_kernel_window_on_a_wide_ring():
+    """Tiles with rules of about 1,800 nodes (r / sigma_min = 150, rho = 0.9): a window of
+    fine cells (sigma_min / 20) across the ring, against the oracle at 150 cells, 1e-9."""
+    cov = covariance(0.9)
+    sigma_min, sigma_max = axes(cov)
+    r = 150.0 * sigma_min
+    model = bg.Butterly(mean=MEAN, cov=cov, speeds=[r / 100.0], t=100.0)
+    cx, cy = MEAN[0] + r * math.sin(0.7), MEAN[1] + r * math.cos(0.7)
+    half = 4.0 * sigma_max
+    step = sigma_min / 20.0
+    grid = bg.Grid.from_bounds(x=(cx - half, cx + half), y=(cy - half, cy + half), step=step)
+    values = bg.rasterise(model, grid).values
+    rng = np.random.default_rng(11)
+    live = np.argwhere(values > 0)
+    pick = live[rng.choice(len(live), 150, replace=False)]
+    x, y = grid.x[pick[:, 1]], grid.y[pick[:, 0]]
+    want, self_check = oracle(x, y, MEAN, cov, [r], [1.0])
+    got = values[pick[:, 0], pick[:, 1]]
+    keep = want > 1e-12 * model.peak_lower_bound()
+    assert keep.sum() > 100 and np.max(self_check[keep]) < 1e-11
+    assert np.max(np.abs(got[keep] / want[keep] - 1.0)) <= RTOL
 
 
 def test_float32_kernel():
