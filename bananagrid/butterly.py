@@ -65,6 +65,8 @@ SPEED_FLOOR = 1e-22
 #: Relative tolerance of the kernel's trapezoid rule (its node count, see kernels/butterly.py)
 #: and the relative size below which the walk drops a node, per kernel precision.
 _KERNEL_TOL = {np.dtype(np.float64): (1e-12, 1e-15, 1e-8), np.dtype(np.float32): (1e-7, 1e-8, 1e-4)}
+
+
 def covariance_axes(cov: np.ndarray) -> tuple[float, float, float]:
     """Eigen-decomposition of a 2x2 covariance: (S1, S2, beta) with S1 <= S2 its eigenvalues
     (Butterly's S_u, S_v of (3.7), per ERRATA) and beta the angle from east of S1's eigenvector
