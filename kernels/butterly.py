@@ -446,15 +446,16 @@ def add_row(
 
 @wp.func
 def tile_speed(
-    z1: Any, z2: Any, dzx1: Any, dzx2: Any, dzy1: Any, dzy2: Any, row: int, rows: int, col: int,
-    cols: int, params: wp.array(dtype=Any), base: int, scratch: wp.array2d(dtype=Any),
+    z1: Any, z2: Any, dzx1: Any, dzx2: Any, dzy1: Any, dzy2: Any, reach: Any, row: int, rows: int,
+    col: int, cols: int, params: wp.array(dtype=Any), base: int, scratch: wp.array2d(dtype=Any),
     quads: wp.array2d(dtype=Any), band: int, out: wp.array2d(dtype=Any),
 ):
     """Add w_i P_{r_i} to the cells of one tile by the full periodic rule as a product of
     factors; 1 if done, 0 if the tile must be walked cell by cell instead (nothing added).
 
     The tile is TILE x TILE cells (the real ones: ``rows`` x ``cols`` from (row, col)) about the
-    whitened centre z = (z1, z2); a cell is z + (m - h) dzx + (r - h) dzy, h = (TILE - 1) / 2.
+    whitened centre z = (z1, z2); a cell is z + (m - h) dzx + (r - h) dzy, h = (TILE - 1) / 2,
+    within ``reach`` = h (|dzx| + |dzy|) of z.
     With w_k = z - rho_k (rho_k the ring's node k) each node's exponent splits exactly into
 
         E_k(r, m) = e_k + (m - h) X_k + (r - h) Y_k - |(m - h) dzx + (r - h) dzy|^2 / 2,
@@ -526,8 +527,7 @@ def tile_speed(
                 x_ref = x
                 y_ref = y
     # every cell's largest term is at least exp(-low) of ref (E_ref(r, m) - ref >= -low)
-    spread = h * (wp.sqrt(dzx1 * dzx1 + dzx2 * dzx2) + wp.sqrt(dzy1 * dzy1 + dzy2 * dzy2))
-    low = h * (wp.abs(x_ref) + wp.abs(y_ref)) + half * spread * spread
+    low = h * (wp.abs(x_ref) + wp.abs(y_ref)) + half * reach * reach
     drop = params[TILE_DROP]
     kept = int(0)
     top = zero  # the largest exponent of a kept A, and of a kept B
@@ -746,7 +746,7 @@ def butterly_grid(
                 d = wp.max(ring_distance(z1, z2, z_norm, params, base) - reach, zero)
                 if params[base + LOG_BOUND] - half * d * d >= speed_floor:
                     done = tile_speed(
-                        z1, z2, dzx1, dzx2, dzy1, dzy2, r_begin, r_end - r_begin, c_begin, c_end - c_begin,
+                        z1, z2, dzx1, dzx2, dzy1, dzy2, reach, r_begin, r_end - r_begin, c_begin, c_end - c_begin,
                         params, base, scratch, quads, band, out,
                     )
                     if done == 0:
