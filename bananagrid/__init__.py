@@ -1,18 +1,50 @@
-"""bananagrid: probability maps from target-motion and sensing models."""
+"""bananagrid: probability maps from target-motion and sensing models.
 
-from .angular import AngularLattice, CellMap, cell_probabilities
-from .butterly import Butterly
-from .grid import Grid
-from .lattice import PolarLattice, PolarRaster
-from .models import CAT, PolarBanana, Pose
-from .presence import GaussianMixture, Region, UniformPresence
-from .radial import RadialDensity, RadialMoments, radial_density, radial_moments
-from .raster import Raster, rasterise
+The public face: every name below is documented in the README's API section. Models follow one
+protocol (:class:`DensityModel`); ``rasterise`` computes any of them on a grid or a polar
+lattice with Warp kernels, ``cell_probabilities`` the presence laws on an array's angular cells.
+"""
+
+from .analysis.compare import Comparison, compare
+from .analysis.radial import RadialDensity, RadialMoments, radial_density, radial_moments
+from .domains.angular_lattice import AngularLattice
+from .domains.grid import Grid
+from .domains.polar_lattice import PolarLattice
+from .domains.pose import Pose
+from .domains.region import Region
+from .engine.batch import pdf_batch, rasterise_batch
+from .engine.rasterise import rasterise
+from .models.base import Model
+from .models.bearing import BearingFix, bearing_to
+from .models.butterly import Butterly, NormalSpeed, TabulatedSpeed, UniformSpeed
+from .models.cat import CAT
+from .models.containment import containment, containment_radius
+from .models.polar import PolarBanana
+from .models.presence import GaussianMixture, UniformPresence, cell_probabilities, grid_probabilities
+from .models.registry import MODEL_KINDS, ModelKind
+from .protocol import DensityModel
+from .results import BatchRaster, CellMap, GridPresence, PolarRaster, Raster
+from .scenes.load import load_scene, parse_scene
+from .scenes.run import run_scene
 from .validate import BananagridError
+from .version import __version__
 
 __all__ = [
-    "Grid", "PolarLattice", "PolarRaster", "Raster", "CAT", "PolarBanana", "Butterly", "Pose", "rasterise",
-    "radial_moments", "radial_density", "RadialMoments", "RadialDensity", "BananagridError",
-    "GaussianMixture", "UniformPresence", "Region", "AngularLattice", "CellMap", "cell_probabilities",
+    # where cells are
+    "Grid", "PolarLattice", "AngularLattice", "Region", "Pose",
+    # models
+    "CAT", "PolarBanana", "Butterly", "UniformSpeed", "NormalSpeed", "TabulatedSpeed", "BearingFix",
+    "GaussianMixture", "UniformPresence",
+    # computing them
+    "rasterise", "cell_probabilities", "grid_probabilities", "rasterise_batch", "pdf_batch",
+    # results
+    "Raster", "PolarRaster", "CellMap", "GridPresence", "BatchRaster",
+    # analysis
+    "radial_moments", "radial_density", "RadialMoments", "RadialDensity", "compare", "Comparison",
+    "bearing_to", "containment", "containment_radius",
+    # scenes
+    "load_scene", "parse_scene", "run_scene",
+    # your own models
+    "DensityModel", "Model", "ModelKind", "MODEL_KINDS",
+    "BananagridError", "__version__",
 ]
-__version__ = "0.1.0"

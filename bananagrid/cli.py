@@ -11,11 +11,22 @@ import sys
 import time
 import tomllib
 import warnings
+from dataclasses import replace
 from pathlib import Path
 from typing import TextIO
 
-from . import __version__
+import numpy as np
+
+from .analysis.compare import compare
+from .analysis.sweep import FIGURE7_LEVELS, sweep
+from .bench import runner as bench
+from .recording.compare import write_compare_recording, write_sweep_recording
+from .recording.core import recording_id_for
+from .recording.inspect import format_inspection, inspect_recording
+from .scenes.load import Scene, load_scene
+from .scenes.run import compute, run_scene
 from .validate import BananagridError, positive
+from .version import __version__
 
 __all__ = ["main", "build_parser"]
 
@@ -126,9 +137,6 @@ def build_parser() -> tuple[argparse.ArgumentParser, dict[str, argparse.Argument
 
 def _run(args: argparse.Namespace) -> int:
     """``bananagrid run``: load and check every scene first, then run them in order."""
-    from .runner import run_scene
-    from .scene import load_scene
-
     if args.threads is not None and args.threads < 1:
         raise BananagridError(f"--threads = {args.threads}: must be >= 1")
     if args.step is not None:
@@ -159,9 +167,7 @@ def _run(args: argparse.Namespace) -> int:
 
 
 def _inspect(args: argparse.Namespace) -> int:
-    """``bananagrid inspect``: the report of :func:`bananagrid.inspect.format_inspection`."""
-    from .inspect import format_inspection, inspect_recording
-
+    """``bananagrid inspect``: the report of :func:`bananagrid.recording.inspect.format_inspection`."""
     reports = [format_inspection(inspect_recording(path)) for path in args.files]
     print("\n\n".join(reports))
     return OK
@@ -180,11 +186,6 @@ def _threads(threads) -> None:
 
 def _compare(args: argparse.Namespace) -> int:
     """``bananagrid compare``: two layers of a scene, their table and the error map."""
-    from .compare import compare
-    from .record_compare import write_compare_recording
-    from .runner import compute
-    from .scene import load_scene
-
     _threads(args.threads)
     scene = load_scene(args.scene)
     if args.step is not None:
@@ -203,8 +204,6 @@ def _compare(args: argparse.Namespace) -> int:
     comparison = compare(ref_raster, model_raster, levels=levels, threshold=args.threshold)
     _out_dir(args.out)
     path = args.out / f"{scene.name}-{model.name}-vs-{reference.name}.rrd"
-    from .record import recording_id_for
-
     write_compare_recording(
         path, recording_id=recording_id_for(f"{scene.text}\n{reference.name}\n{model.name}\n{t}\n{levels}"),
         scene_text=scene.text, names=(reference.name, model.name), rasters=(ref_raster, model_raster),
@@ -219,12 +218,10 @@ def _compare(args: argparse.Namespace) -> int:
 
 def _raw(scene):
     """The scene with rasters left raw: the table divides by the reference's captured mass."""
-    from dataclasses import replace
-
     return replace(scene, normalise=False)
 
 
-def _compare_time(scene, reference, model, t) -> float:
+def _compare_time(scene: Scene, reference: str, model: str, t: float | None) -> float:
     if t is not None:
         return positive("--t", t)
     times = scene.times or tuple(dict.fromkeys(layer.params.get("t") for layer in (reference, model)))
@@ -246,12 +243,6 @@ def _parse_levels(text: str) -> tuple[float, ...]:
 
 def _sweep(args: argparse.Namespace) -> int:
     """``bananagrid sweep``: the Figure 7 study."""
-    import numpy as np
-
-    from .record import recording_id_for
-    from .record_compare import write_sweep_recording
-    from .sweep import FIGURE7_LEVELS, sweep
-
     _threads(args.threads)
     _out_dir(args.out)
 
@@ -283,13 +274,7 @@ def _sweep(args: argparse.Namespace) -> int:
 
 
 def _bench(argv: list[str]) -> int:
-    """``bananagrid bench``: delegated to :func:`bananagrid.bench.main` with the rest of argv."""
-    try:
-        from . import bench
-    except ModuleNotFoundError as exc:
-        if exc.name != f"{__package__}.bench":
-            raise
-        raise BananagridError("bench: bananagrid.bench is not installed in this build") from None
+    """``bananagrid bench``: delegated to :func:`bananagrid.bench.runner.main` with the rest of argv."""
     return bench.main(list(argv))
 
 
@@ -307,7 +292,7 @@ SUMMARY_COLUMNS = (
 
 
 def format_summary(rows: list[dict]) -> str:
-    """The summary rows of :func:`bananagrid.runner.run_scene` as an aligned text table."""
+    """The summary rows of :func:`bananagrid.scenes.run.run_scene` as an aligned text table."""
     header = [title for title, _, _ in SUMMARY_COLUMNS]
     body = [[fmt.format(row[key]) for _, key, fmt in SUMMARY_COLUMNS] for row in rows]
     widths = [max(len(cell) for cell in column) for column in zip(header, *body)]

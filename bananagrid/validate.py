@@ -6,10 +6,11 @@ error can be traced to its key (the scene layer prefixes the key path).
 
 from __future__ import annotations
 
+import json
 import math
 from numbers import Real
 
-__all__ = ["finite", "positive", "non_negative", "positive_int", "point", "BananagridError"]
+__all__ = ["finite", "positive", "non_negative", "positive_int", "point", "show", "BananagridError"]
 
 
 class BananagridError(ValueError):
@@ -65,3 +66,22 @@ def point(name: str, value) -> tuple[float, float]:
     except (TypeError, ValueError):
         raise BananagridError(f"{name} = {value!r}: expected a pair (x, y)") from None
     return finite(f"{name}[0]", x), finite(f"{name}[1]", y)
+
+
+def show(value) -> str:
+    """A value as a scene file (TOML) would write it, for messages."""
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    if isinstance(value, float):
+        if math.isnan(value):
+            return "nan"
+        if math.isinf(value):
+            return "inf" if value > 0 else "-inf"
+        return repr(value)
+    if isinstance(value, str):
+        return json.dumps(value)
+    if isinstance(value, list):
+        return "[" + ", ".join(show(v) for v in value) + "]"
+    if isinstance(value, dict):
+        return "{" + ", ".join(f"{k} = {show(v)}" for k, v in value.items()) + "}"
+    return str(value)

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 import bananagrid as bg
-from bananagrid.batch import frame, pdf_batch, rasterise_batch
+from bananagrid.engine.batch import frame, pdf_batch, rasterise_batch
 
 
 @pytest.fixture(scope="module")

@@ -7,9 +7,9 @@ import numpy as np
 import pytest
 
 from bananagrid import BananagridError
-from bananagrid.bearing import BearingFix, bearing_to
+from bananagrid.models.bearing import BearingFix, bearing_to
 
-#: Two coastal stations 20 km apart and a contact about 30 km out (issue 6's first scene).
+#: Two coastal stations 20 km apart and a contact about 30 km out (the bearing_coastal scene).
 STATIONS = np.array([[0.0, 0.0], [20000.0, 0.0]])
 CONTACT = np.array([8000.0, 30000.0])
 SIGMAS = np.array([0.01, 0.02])
@@ -281,7 +281,7 @@ def test_sample_validates_its_arguments():
 
 
 def test_many_geometries_at_once_match_one_at_a_time():
-    from bananagrid.bearing import two_bearing_variances
+    from bananagrid.models.bearing import two_bearing_variances
 
     rng = np.random.default_rng(8)
     n = 50

@@ -1,4 +1,4 @@
-"""Issue 6 validation table: Monte Carlo of the exact crossing against Walsh's linearised radii."""
+"""The bearing validation table: Monte Carlo of the exact crossing against Walsh's linearised radii."""
 
 import math
 import warnings
@@ -7,8 +7,8 @@ import numpy as np
 import pytest
 
 from bananagrid import BananagridError
-from bananagrid.bearing import BearingFix, bearing_to
-from bananagrid.bearing_validation import (
+from bananagrid.models.bearing import BearingFix, bearing_to
+from bananagrid.analysis.bearing_validation import (
     crossings,
     format_table,
     standard_geometry,

@@ -12,8 +12,8 @@ from scipy import special, stats
 
 import bananagrid as bg
 from bananagrid import BananagridError
-from bananagrid.butterly import GAUSS_POINTS, NormalSpeed, TabulatedSpeed, UniformSpeed, _gauss_panels
-from bananagrid.butterly_series import series_density
+from bananagrid.models.butterly import GAUSS_POINTS, NormalSpeed, TabulatedSpeed, UniformSpeed, _gauss_panels
+from bananagrid.models._butterly_series import series_density
 from butterly_oracle import butterly_density as oracle
 
 #: Start SDs (m) of the case table: 100 m east, 250 m north, correlated by rho.
@@ -22,7 +22,7 @@ MEAN = (300.0, -200.0)
 RHOS = (-0.99, 0.0, 0.6, 0.999)
 RATIOS = (0.0, 0.1, 1.0, 10.0, 100.0, 1000.0, 1e4)
 
-#: The issue's accuracy target: relative error 1e-9 in float64.
+#: The accuracy target: relative error 1e-9 in float64.
 RTOL = 1e-9
 
 
@@ -53,7 +53,7 @@ CASES = [(rho, ratio) for rho in RHOS for ratio in RATIOS]
 @pytest.mark.parametrize("rho, ratio", CASES, ids=[f"rho{rho}-r{ratio:g}" for rho, ratio in CASES])
 def test_kernel_matches_oracle(rho, ratio):
     """Relative error <= 1e-9 wherever the density is a normal float64 (> 1e-300), which covers
-    the issue's region (density > 1e-12 of its maximum) and the far tails. Rounding bound: the
+    the target region (density > 1e-12 of its maximum) and the far tails. Rounding bound: the
     exponent's inputs carry an absolute error ~ eps r / sigma_min, times |residual| <= ~40 in the
     tails, so about 1e-10 at r / sigma_min = 1e4 (measured: 8e-11 there, <= 1e-12 below 1e3).
     The oracle's own convergence (n / 2 vs n nodes) is checked to 1e-11."""
@@ -466,7 +466,7 @@ def test_node_count_meets_the_trapezoid_bound():
     import warp as wp
 
     from bananagrid.kernels import butterly as kb
-    from bananagrid.raster import _warp
+    from bananagrid.engine.warp_runtime import warp as _warp
 
     _warp()
 
@@ -579,7 +579,7 @@ def test_numpy_twin_computes_the_same_raster():
     """bananagrid.butterly.numpy_density (the bench's baseline) is the same rule: with floors it
     zeroes the same cells as the grid kernel and agrees with it to 1e-11 relative elsewhere
     above 1e-12 of the peak (both within 1e-12 of the integral; the tiles add <= 1e-12)."""
-    from bananagrid.butterly import numpy_density
+    from bananagrid.bench.baselines import butterly_density as numpy_density
 
     cov = covariance(-0.4, 60.0, 110.0)
     model = bg.Butterly(mean=(0.0, 0.0), cov=cov, speeds=[0.5, 3.0, 6.0], weights=[0.2, 0.5, 0.3], t=100.0,

@@ -2,7 +2,7 @@
 
 The oracle shares no code with the kernel: it works in (alpha = a t / v0, s = omega t), scans
 at 0.01 rad, and is itself checked against literal eq. (1) with scipy.optimize.brentq
-(``oracles.self_check``). Requirement (issue 2): at most 1e-6 relative inside the 1e-10 m^-2
+(``oracles.self_check``). Requirement: at most 1e-6 relative inside the 1e-10 m^-2
 contour.
 """
 

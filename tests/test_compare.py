@@ -13,8 +13,8 @@ import pytest
 import bananagrid as bg
 import oracles
 from bananagrid.cli import main
-from bananagrid.compare import compare, compare_samples
-from bananagrid.sweep import banana_lattice, sweep, sweep_point
+from bananagrid.analysis.compare import compare, compare_samples
+from bananagrid.analysis.sweep import banana_lattice, sweep, sweep_point
 
 from cases import FIG1, FIG1_BOUNDS
 
@@ -143,7 +143,7 @@ model = "polar"
     out = capsys.readouterr().out
     assert "goodness (5% error)" in out and "Bhattacharyya" in out
     rrd = tmp_path / "fig1-improved-vs-cat.rrd"
-    from bananagrid.inspect import inspect_recording
+    from bananagrid.recording.inspect import inspect_recording
 
     entities = inspect_recording(rrd)["entities"]
     assert {"/compare/relative_error", "/compare/table", "/layers/cat/density"} <= set(entities)

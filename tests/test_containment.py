@@ -18,8 +18,8 @@ import pytest
 from scipy import integrate, special, stats
 
 import bananagrid as bg
-from bananagrid import containment as cm
-from bananagrid.containment import (
+from bananagrid.models import containment as cm
+from bananagrid.models.containment import (
     EXACT_RTOL,
     containment,
     containment_exact,

@@ -18,9 +18,9 @@ from scipy import stats
 
 import bananagrid as bg
 import oracles
-from bananagrid import heading
-from bananagrid.bearing import BearingFix
-from bananagrid.radial import radial_density, radial_moments
+from bananagrid.models import _cat_heading as heading
+from bananagrid.models.bearing import BearingFix
+from bananagrid.analysis.radial import radial_density, radial_moments
 
 from cases import FIG1, FIG1_BOUNDS, FOLDING
 

@@ -1,4 +1,4 @@
-"""Polar lattices (issue 3, part 2): cells in (range, bearing) about a pose.
+"""Polar lattices: cells in (range, bearing) about a pose.
 
 Oracles are independent of the kernels: the polar-banana densities (8), (11) written below with
 ``math`` for scipy.integrate.dblquad, ``oracles.cat_density`` (exact CAT, float64 NumPy)
@@ -15,10 +15,10 @@ from scipy.integrate import cubature, dblquad
 from scipy.stats import multivariate_normal
 
 import bananagrid as bg
-import bananagrid.lattice as lattice_module
+import bananagrid.engine.polar_cells as lattice_module
 import oracles
-from bananagrid.bearing import BearingFix, bearing_to
-from bananagrid.grid import MAX_CELLS
+from bananagrid.models.bearing import BearingFix, bearing_to
+from bananagrid.domains.grid import MAX_CELLS
 
 from cases import FIG1
 
@@ -426,7 +426,7 @@ def test_heading_cat_lattice_sums_to_grid_mass():
     """A CAT with heading noise on a polar lattice: one table serves every chunk, and the cell
     probabilities sum to the Cartesian grid's mass (both hold the whole banana; the grid's
     midpoint rule and the table's 1e-6 interpolation error bound the difference)."""
-    from bananagrid import heading
+    from bananagrid.models import _cat_heading as heading
 
     model = bg.CAT(**FIG1, sigma_heading=math.pi / 30)
     lattice = bg.PolarLattice(ranges=(0.0, 4000.0), range_step=100.0, bearings=(-math.pi, math.pi),

@@ -1,4 +1,4 @@
-"""Presence probabilities on angular cells and grids (issue 5; Pessentheiner with ERRATA).
+"""Presence probabilities on angular cells and grids (Pessentheiner with ERRATA).
 
 Oracles (tests/presence_oracle.py) are independent of the kernels: scipy dblquad / tplquad of
 scipy.stats densities over each cell written from the geometry alone, scipy quad on the line,
@@ -12,10 +12,12 @@ import pytest
 from scipy import special, stats
 
 import presence_oracle as oracle
-from bananagrid.angular import AngularLattice, cell_probabilities
-from bananagrid.grid import Grid
-from bananagrid.presence import GaussianMixture, Region, UniformPresence, _gl8, grid_probabilities
-from bananagrid.raster import _warp
+from bananagrid.domains.angular_lattice import AngularLattice
+from bananagrid.models.presence import cell_probabilities
+from bananagrid.domains.grid import Grid
+from bananagrid.domains.region import Region
+from bananagrid.models.presence import GaussianMixture, UniformPresence, _gl8, grid_probabilities
+from bananagrid.engine.warp_runtime import warp as _warp
 from bananagrid.validate import BananagridError
 
 DEG = math.pi / 180.0
@@ -266,7 +268,7 @@ def test_float32_cells_follow_float64(room_plane):
     """float32 runs at angular.FLOAT32_RTOL = 1e-5: every cell holding 1e-9 of the mass within
     2e-4 relative of float64 (measured 3e-5 on the bench's 8-component lattice and 4e-5 on its
     frustum). Grids in float32: test_float32_grid_is_float64_rounded."""
-    from bananagrid.angular import FLOAT32_RTOL
+    from bananagrid.models.presence import FLOAT32_RTOL
 
     mix, lat = ROOM, PLANE
     a = room_plane
@@ -347,7 +349,7 @@ def test_grid_rectangles_match_scipy_cdf_and_products():
     for i, j in [(0, 0), (5, 7), (4, 3), (9, 11), (2, 10)]:
         want = sum(w * stats.multivariate_normal(m, c).cdf([xe[j + 1], ye[i + 1]], lower_limit=[xe[j], ye[i]])
                    for w, m, c in zip(ROOM.weights, ROOM.means, ROOM.covs))
-        assert g.probability[i, j] == pytest.approx(want, rel=1e-9, abs=1e-15)  # the issue's 1e-9
+        assert g.probability[i, j] == pytest.approx(want, rel=1e-9, abs=1e-15)  # the required 1e-9
     xc, yc = np.meshgrid(grid.x, grid.y)
     assert g.density == pytest.approx(_vector_pdf(ROOM, xc, yc), rel=1e-13)
     # diagonal covariances: a product of normal CDF differences (exact)
@@ -414,7 +416,7 @@ def test_float32_rectangles_are_float64_rounded():
     rectangles down to 1e-4 wide, where the four orthant terms cancel, come back as the
     float64 values rounded once (2^-24 = 6e-8; 1e-7 as above), and agree with SciPy's
     multivariate normal CDF differenced in float64 on rectangles large enough not to cancel."""
-    from bananagrid.presence import rectangle_probabilities
+    from bananagrid.models.presence import rectangle_probabilities
 
     rng = np.random.default_rng(3)
     lo_x, lo_y = rng.uniform(-3.0, 3.0, 40), rng.uniform(-3.0, 3.0, 40)

@@ -1,4 +1,4 @@
-"""Presence scenes (issue 5): the [array] schema, its errors, the recording and the .npz.
+"""Presence scenes: the [array] schema, its errors, the recording and the .npz.
 
 The probabilities themselves are checked against independent oracles in test_presence.py; here
 the recorded and exported numbers are compared with ``cell_probabilities`` called directly on
@@ -20,11 +20,12 @@ from rerun.chunk import RrdReader
 
 import bananagrid as bg
 from bananagrid.cli import main
-from bananagrid.inspect import inspect_recording, read_depth_image
-from bananagrid.record_presence import cell_colours
-from bananagrid.runner import run_scene
-from bananagrid.scene import load_scene, parse_scene
-from bananagrid.scene_presence import PresenceScene, run_presence_scene
+from bananagrid.recording.inspect import inspect_recording, read_depth_image
+from bananagrid.recording.presence import cell_colours
+from bananagrid.scenes.run import run_scene
+from bananagrid.scenes.load import load_scene, parse_scene
+from bananagrid.scenes.presence import PresenceScene
+from bananagrid.scenes.run_presence import run_presence_scene
 
 ROOT = Path(__file__).resolve().parent.parent
 SCENES = {name: ROOT / "scenes" / f"{name}.toml" for name in ("room_mixture", "room_uniform", "room_frustum", "line_section4")}
@@ -375,7 +376,7 @@ def test_compare_refuses_a_presence_scene_in_one_line(tmp_path, capsys):
 
 
 def test_failure_leaves_no_file(tmp_path, capsys, monkeypatch):
-    import bananagrid.record_presence as rp
+    import bananagrid.scenes.run_presence as rp
 
     def fail(*args, **kwargs):
         raise bg.BananagridError("drawing failed")
@@ -388,7 +389,7 @@ def test_failure_leaves_no_file(tmp_path, capsys, monkeypatch):
 
 
 def test_failure_while_exporting_leaves_no_file(tmp_path, capsys, monkeypatch):
-    import bananagrid.scene_presence as sp
+    import bananagrid.scenes.run_presence as sp
 
     def half_written(path, scene, cm):
         path.write_bytes(b"PK half an archive")

@@ -13,9 +13,9 @@ import pytest
 from rerun.chunk import RrdReader
 
 from bananagrid import BananagridError, Grid, Raster
-from bananagrid.contours import contour_lines, mass_inside
-from bananagrid.inspect import format_inspection, inspect_recording, read_depth_image
-from bananagrid.record import (
+from bananagrid.analysis.contours import contour_lines, mass_inside
+from bananagrid.recording.inspect import format_inspection, inspect_recording, read_depth_image
+from bananagrid.recording.core import (
     default_blueprint,
     log_raster,
     log_scene_text,

@@ -7,9 +7,9 @@ import numpy as np
 import pytest
 from rerun.chunk import RrdReader
 
-from bananagrid.record_radial import radial_curves, radial_groups
-from bananagrid.runner import run_scene
-from bananagrid.scene import parse_scene
+from bananagrid.recording.radial import radial_curves, radial_groups
+from bananagrid.scenes.run import run_scene
+from bananagrid.scenes.load import parse_scene
 
 from cases import small_scene
 

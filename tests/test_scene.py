@@ -9,8 +9,8 @@ import numpy as np
 import pytest
 
 from bananagrid import CAT, BananagridError, PolarBanana
-from bananagrid.record import DEFAULT_LEVELS
-from bananagrid.scene import Layer, load_scene, parse_scene
+from bananagrid.recording.core import DEFAULT_LEVELS
+from bananagrid.scenes.load import Layer, load_scene, parse_scene
 
 from cases import small_scene
 
@@ -127,7 +127,7 @@ def test_bundled_scenes_load(path):
     scene = load_scene(path)
     assert scene.name == path.stem
     assert scene.source == str(path)
-    from bananagrid.scene_presence import PresenceScene
+    from bananagrid.scenes.presence import PresenceScene
 
     if isinstance(scene, PresenceScene):  # an [array] scene: checked in test_presence_scene.py
         return
@@ -300,7 +300,7 @@ DOC = SCENES.parent / "docs" / "scenes.md"
 
 
 def test_docs_name_every_key_and_the_example_parses():
-    from bananagrid.scene import GRID_KEYS, OUTPUT_KEYS, PARAMETER_KEYS, RADIAL_KEYS, SCENE_KEYS, TOP_KEYS
+    from bananagrid.scenes.load import GRID_KEYS, OUTPUT_KEYS, PARAMETER_KEYS, RADIAL_KEYS, SCENE_KEYS, TOP_KEYS
 
     doc = DOC.read_text()
     assert not [table for table in TOP_KEYS if f"`[{table}" not in doc]
@@ -312,7 +312,7 @@ def test_docs_name_every_key_and_the_example_parses():
     assert [layer.name for layer in scene.layers] == ["west", "east"] and len(scene.jobs()) == 6
 
 
-# --- heading noise and radial curves (issue 3) ------------------------------------------------
+# --- heading noise and radial curves --------------------------------------------------------
 
 
 def test_heading_keys_parse_into_models():
@@ -355,7 +355,7 @@ def test_bad_radial_keys_are_named(body, message):
     assert message in error_of(BASE + f"\n[radial]\n{body}\n")
 
 
-# --- Butterly layers (issue 4) -----------------------------------------------------------------
+# --- Butterly layers -------------------------------------------------------------------------
 
 BUTTERLY = BASE + """
 [layers.sub]
@@ -389,7 +389,7 @@ def test_butterly_layer_parses_into_the_model():
 
 
 def test_butterly_cov_and_continuous_speed_laws_parse():
-    from bananagrid.butterly import NormalSpeed, TabulatedSpeed, UniformSpeed
+    from bananagrid.models.butterly import NormalSpeed, TabulatedSpeed, UniformSpeed
 
     start = 'mean = [10.0, 50.0]\nsigma_x = 40.0\nsigma_y = 20.0\nrho = 0.5\n'
     cases = {

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 import bananagrid as bg
-from bananagrid.grid import MAX_CELLS
+from bananagrid.domains.grid import MAX_CELLS
 
 from cases import FIG1
 

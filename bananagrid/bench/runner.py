@@ -1,0 +1,460 @@
+"""``bananagrid bench``: kernel throughput against a NumPy baseline measured in the same run.
+
+The banana kernels rasterise the Figure 1 frame of the polar-banana paper (x in [-3000, 3000] m,
+y in [-200, 3400] m, 4 m: 1500 x 900 cells), the bearing-fix kernel a 2048 x 2048 grid about
+the coastal fix of ``scenes/bearing_coastal.toml``, the Butterly kernel (``butterly-rN``) a 2048 x 2048 grid framed about
+the ring +- 6 sigma_max of three speeds whose largest travelled range is N sigma_min (a
+correlated start, :data:`BUTTERLY_START`), in float64 and float32, on one thread and on all
+cores; each kernel's NumPy float64 twin (:mod:`bananagrid.bench.baselines`) runs on the same
+cells. Every timed model is built through the model registry from its scene parameters (kind and
+keys as a scene layer would give them). With the bearing kernel, the
+containment probability of 10^6 geometries is timed too. Times are the best of ``--repeat``
+runs after a warm-up (the first Warp compile is not timed). The exact CAT and the Butterly
+baselines take about a minute or more on the full grid, so by default they run on every 10th
+row and their time is scaled to the full grid (``--baseline-stride 1`` runs them all).
+"""
+
+from __future__ import annotations
+
+import argparse
+import functools
+import json
+import math
+import os
+import platform
+import subprocess
+import sys
+import time
+
+import numpy as np
+
+from ..domains.angular_lattice import AngularLattice
+from ..domains.grid import Grid
+from ..engine.batch import frame, rasterise_batch
+from ..engine.rasterise import rasterise
+from ..engine.warp_runtime import default_threads
+from ..models.bearing import bearing_to, two_bearing_variances
+from ..models.cat import clear_heading_tables, scan_nodes
+from ..models.containment import containment
+from ..models.presence import GaussianMixture, cell_probabilities, grid_probabilities
+from ..models.registry import MODEL_KINDS
+from ..protocol import DensityModel
+from . import baselines
+
+#: Figure 1 of the polar-banana paper.
+FIG1 = dict(v0=280.0, t=10.0, sigma_a=5.0 / 3.0, sigma_omega=math.pi / 54.0)
+FIG1_BOUNDS = dict(x=(-3000.0, 3000.0), y=(-200.0, 3400.0))
+
+#: The coastal scene's fix: two stations 20 km apart, contact about 30 km out, 2048 x 2048 cells.
+COASTAL = dict(sensors=[(0.0, 0.0), (20000.0, 0.0)], bearings=[0.2641, -0.3909], sigmas=[0.01, 0.02])
+COASTAL_SIDE = 2048
+
+#: Butterly rows: a start 100 m x 250 m (1 sigma) at rho = 0.5, three speeds travelling
+#: 0.5, 0.75 and 1 times N sigma_min in an hour, weights 0.2, 0.5, 0.3.
+BUTTERLY_START = dict(mean=(1000.0, -500.0), sx=100.0, sy=250.0, rho=0.5)
+BUTTERLY_FRACTIONS, BUTTERLY_WEIGHTS, BUTTERLY_T = (0.5, 0.75, 1.0), (0.2, 0.5, 0.3), 3600.0
+BUTTERLY_RATIOS = (1, 10, 100, 1000)
+#: Side of the Butterly grid (cells).
+BUTTERLY_SIDE = 2048
+#: A Butterly baseline (on its rows) quicker than this many seconds is also timed best of
+#: ``--repeat``, like the kernels; slower ones once (a few percent of noise against minutes).
+BASELINE_REPEAT_BELOW = 5.0
+
+
+def butterly_parameters(ratio: float) -> dict:
+    """Scene parameters of the ``butterly-rN`` model: largest travelled range ``ratio`` sigma_min."""
+    sx, sy, rho = BUTTERLY_START["sx"], BUTTERLY_START["sy"], BUTTERLY_START["rho"]
+    cov = [[sx * sx, rho * sx * sy], [rho * sx * sy, sy * sy]]
+    s_min = math.sqrt(0.5 * (sx * sx + sy * sy) - math.hypot(0.5 * (sx * sx - sy * sy), rho * sx * sy))
+    v = ratio * s_min / BUTTERLY_T
+    return dict(mean=BUTTERLY_START["mean"], cov=cov, speeds=[f * v for f in BUTTERLY_FRACTIONS],
+                weights=list(BUTTERLY_WEIGHTS), t=BUTTERLY_T)
+
+
+#: Grid rows: the model kind (a registry name) and its scene parameters in SI units.
+GRID_ROWS = {
+    "cat": ("cat", FIG1),
+    # Figure 8's widest heading error, sigma_0 = pi/15 (its cost against the plain CAT is reported)
+    "cat-heading": ("cat", {**FIG1, "sigma_heading": math.pi / 15}),
+    "polar-rough": ("polar", {**FIG1, "variant": "rough"}),
+    "polar-improved": ("polar", {**FIG1, "variant": "improved"}),
+    "bearing-exact": ("bearing_fix", COASTAL),
+    **{f"butterly-r{n}": ("butterly", butterly_parameters(n)) for n in BUTTERLY_RATIOS},
+}
+
+
+def grid_model(name: str):
+    """The model of grid row ``name``, built through the registry."""
+    kind, params = GRID_ROWS[name]
+    return MODEL_KINDS[kind].build(params)
+
+
+
+class _PresenceJob:
+    """``presence-plane``: the paper's 360 x 91 plane lattice (32,760 cells, h = 1.8 m) with an
+    8-component mixture (fixed seed) at the guaranteed accuracy; baseline: SciPy ``dblquad``
+    per cell (``baselines.presence_plane_cells``) on a spread sample of cells, scaled. float32
+    runs at tolerance ``angular.FLOAT32_RTOL`` (the 1e-6 guarantee is float64's)."""
+
+    dtypes = (np.float64, np.float32)
+
+    def __init__(self):
+        rng = np.random.default_rng(20261121)
+        sd = rng.uniform(0.1, 0.6, (8, 2))
+        rho = rng.uniform(-0.8, 0.8, 8)
+        covs = [[[a * a, r * a * b], [r * a * b, b * b]] for (a, b), r in zip(sd, rho)]
+        self.mixture = GaussianMixture(weights=np.full(8, 1 / 8), means=rng.uniform(-2.5, 2.5, (8, 2)), covs=covs)
+        self.lattice = AngularLattice.integer_degrees("plane", h=1.8)
+        self.cells = self.lattice.n_azimuth * self.lattice.n_elevation
+
+    def work(self, dtype, threads):
+        cell_probabilities(self.mixture, self.lattice, dtype=dtype, threads=threads)
+
+    def baseline(self, stride: int, repeat: int) -> float:
+        n = max(8, self.cells // (100 * stride))
+        rng = np.random.default_rng(1)
+        cells = list(zip(rng.integers(0, self.lattice.n_azimuth, n), rng.integers(0, self.lattice.n_elevation, n)))
+        start = time.perf_counter()
+        baselines.presence_plane_cells(self.mixture, self.lattice, cells)
+        return (time.perf_counter() - start) * self.cells / n
+
+
+class _PresenceGridJob(_PresenceJob):
+    """``presence-grid``: the same 8-component mixture on a 1024 x 1024 grid over a 6 m x 5 m
+    room, each cell's exact probability (Genz's BVN in the kernel); baseline: SciPy
+    ``multivariate_normal.cdf`` at each cell's corners per component, on a sample, scaled.
+    float32 is the float64 arithmetic with float32 output (the orthant terms cancel), so it
+    times the same work."""
+
+    dtypes = (np.float64, np.float32)
+
+    def __init__(self):
+        super().__init__()
+        self.grid = Grid.from_bounds(x=(-3.0, 3.0), y=(-2.5, 2.5), dx=6.0 / 1024, dy=5.0 / 1024)
+        self.cells = self.grid.nx * self.grid.ny
+
+    def work(self, dtype, threads):
+        grid_probabilities(self.mixture, self.grid, dtype=dtype, threads=threads)
+
+    def baseline(self, stride: int, repeat: int) -> float:
+        n = max(16, 2560 // stride)
+        rng = np.random.default_rng(2)
+        cells = list(zip(rng.integers(0, self.grid.ny, n), rng.integers(0, self.grid.nx, n)))
+        start = time.perf_counter()
+        baselines.presence_grid_cells(self.mixture, self.grid, cells)
+        return (time.perf_counter() - start) * self.cells / n
+
+
+class _PresenceFrustumJob:
+    """``presence-frustum``: the 360 x 91 frustum lattice of the slab 1.3-1.8 m below the array
+    with scenes/room_frustum.toml's 3-D mixture; baseline: SciPy ``tplquad`` per cell on a
+    sample of 8 cells, scaled; float32 at ``angular.FLOAT32_RTOL``."""
+
+    dtypes = (np.float64, np.float32)
+
+    def __init__(self):
+        sd = [(0.25, 0.25, 0.05), (0.7, 0.2, 0.08), (0.15, 0.3, 0.08)]
+        rho = [0.0, 0.0, 0.3]
+        covs = [[[a * a, r * a * b, 0.0], [r * a * b, b * b, 0.0], [0.0, 0.0, c * c]] for (a, b, c), r in zip(sd, rho)]
+        self.mixture = GaussianMixture(
+            weights=[0.5, 0.35, 0.15], means=[[-1.8, 1.5, -1.75], [1.2, -1.8, -1.75], [2.6, 1.9, -1.35]], covs=covs
+        )
+        self.lattice = AngularLattice.integer_degrees("frustum", h=1.55, dh=0.25)
+        self.cells = self.lattice.n_azimuth * self.lattice.n_elevation
+
+    def work(self, dtype, threads):
+        cell_probabilities(self.mixture, self.lattice, dtype=dtype, threads=threads)
+
+    def baseline(self, stride: int, repeat: int) -> float:
+        rng = np.random.default_rng(3)
+        cells = list(zip(rng.integers(0, self.lattice.n_azimuth, 8), rng.integers(0, self.lattice.n_elevation, 8)))
+        start = time.perf_counter()
+        baselines.presence_frustum_cells(self.mixture, self.lattice, cells)
+        return (time.perf_counter() - start) * self.cells / len(cells)
+
+
+class _BatchJob:
+    """``polar-batch``: 10,000 improved polar-banana hypotheses (fixed seed), each on its own
+    64 x 64 grid framed about it (framing not timed), in one launch; baseline: the NumPy twin
+    per hypothesis on every ``stride``-th hypothesis, scaled."""
+
+    dtypes = (np.float64, np.float32)
+    HYPOTHESES = 10_000
+
+    def __init__(self):
+        rng = np.random.default_rng(20261121)
+        polar = MODEL_KINDS["polar"]
+        self.models = [
+            polar.build(dict(v0=float(rng.uniform(150.0, 300.0)), t=10.0, sigma_a=float(rng.uniform(0.5, 2.0)),
+                             sigma_omega=float(rng.uniform(0.02, 0.06)), origin=tuple(rng.uniform(-1e4, 1e4, 2)),
+                             heading=float(rng.uniform(-math.pi, math.pi))))
+            for _ in range(self.HYPOTHESES)
+        ]
+        self.grids = frame(self.models)
+        self.cells = self.HYPOTHESES * 64 * 64
+
+    def work(self, dtype, threads):
+        rasterise_batch(self.models, self.grids, dtype=dtype, threads=threads)
+
+    def baseline(self, stride: int, repeat: int) -> float:
+        picks = range(0, self.HYPOTHESES, stride)
+        start = time.perf_counter()
+        for k in picks:
+            m, g = self.models[k], self.grids[k]
+            xx, yy = np.meshgrid(g.x, g.y)
+            c, s = math.cos(m.pose.heading), math.sin(m.pose.heading)
+            dx, dy = xx - m.pose.origin[0], yy - m.pose.origin[1]
+            baselines.polar_density(dx * c - dy * s, dx * s + dy * c, m.v0, m.t, m.sigma_a, m.sigma_omega, m.variant)
+        return (time.perf_counter() - start) * self.HYPOTHESES / len(picks)
+
+
+#: Kernels timed on work other than one grid.
+JOBS = {
+    "presence-plane": _PresenceJob, "presence-frustum": _PresenceFrustumJob, "presence-grid": _PresenceGridJob,
+    "polar-batch": _BatchJob,
+}
+
+#: Every row of the bench, in order: a grid row's model factory, or None for a job.
+KERNELS = {**{name: functools.partial(grid_model, name) for name in GRID_ROWS}, **dict.fromkeys(JOBS)}
+
+#: Geometries in the containment timing.
+CONTAINMENT_GEOMETRIES = 1_000_000
+
+
+def _grid_for(name: str, step: float) -> Grid:
+    """The Figure 1 frame at ``step`` for the banana kernels; 2048^2 about the fix for bearings."""
+    if name.startswith("bearing"):
+        return Grid.from_bounds(x=(0.0, 16000.0), y=(22000.0, 38000.0), dx=16000.0 / COASTAL_SIDE, dy=16000.0 / COASTAL_SIDE)
+    if name.startswith("butterly"):
+        model = grid_model(name)
+        half = float(model.ranges.max()) + 6.0 * math.sqrt(model.axes[1])
+        (mx, my), side = model.mean, 2.0 * half / BUTTERLY_SIDE
+        return Grid.from_bounds(x=(mx - half, mx + half), y=(my - half, my + half), dx=side, dy=side)
+    return Grid.from_bounds(**FIG1_BOUNDS, step=step)
+
+#: Side of the square float32 raster whose peak memory is reported.
+MEMORY_SIDE = 8192
+
+
+def _best_of(repeat: int, fn) -> float:
+    best = math.inf
+    for _ in range(repeat):
+        start = time.perf_counter()
+        fn()
+        best = min(best, time.perf_counter() - start)
+    return best
+
+
+def _baseline_seconds(name: str, model: DensityModel, grid: Grid, stride: int, repeat: int) -> float:
+    """NumPy float64 time for the whole grid (scaled from every ``stride``-th row for CAT and
+    Butterly). The heading-convolved CAT has no NumPy twin: its baseline is the plain CAT's.
+    Butterly's twin skips the same negligible cells as the kernel (``floors``)."""
+    cat = name.startswith("cat")
+    butterly = name.startswith("butterly")
+    rows = grid.y[::stride] if cat or butterly else grid.y
+    xx, yy = np.meshgrid(grid.x, rows)
+    if cat:
+        nodes = scan_nodes(model)
+        fn = lambda: baselines.cat_density(xx, yy, model.v0, model.t, model.sigma_a, model.sigma_omega, nodes)
+        seconds = _best_of(1 if stride > 1 else repeat, fn)
+    elif name.startswith("bearing"):
+        seconds = _best_of(repeat, lambda: baselines.bearing_density(xx, yy, model))
+    elif butterly:
+        model.peak_lower_bound()  # computed once per model, by the kernel: not NumPy's time
+        fn = lambda: baselines.butterly_density(model, xx, yy, floors=True)
+        seconds = _best_of(1, fn)
+        if seconds < BASELINE_REPEAT_BELOW:  # best of ``repeat`` too where that is cheap
+            seconds = min(seconds, _best_of(repeat - 1, fn))
+    else:
+        fn = lambda: baselines.polar_density(xx, yy, model.v0, model.t, model.sigma_a, model.sigma_omega, model.variant)
+        seconds = _best_of(repeat, fn)
+    return seconds * grid.ny / len(rows)
+
+
+def _cold_rasterise(model: DensityModel, grid: Grid, dtype, threads: int):
+    """rasterise with nothing remembered from an earlier call: a CAT with heading noise keeps
+    its last tables, which would leave their cost out of the time."""
+    clear_heading_tables()
+    return rasterise(model, grid, dtype=dtype, threads=threads)
+
+
+def run(kernels, step: float, threads: int, repeat: int, stride: int, log=print) -> list[dict]:
+    """Time every kernel in both dtypes on 1 and ``threads`` threads; return the records."""
+    records = []
+    for name in kernels:
+        if name in JOBS:
+            records += _run_job(name, threads, repeat, stride, log)
+            continue
+        model = grid_model(name)
+        grid = _grid_for(name, step)
+        base = _baseline_seconds(name, model, grid, stride, repeat)
+        for dtype in (np.float64, np.float32):
+            rasterise(model, grid, dtype=dtype, threads=1)  # warm-up: compile or load the module
+            for n_threads in sorted({1, threads}):
+                seconds = _best_of(repeat, lambda: _cold_rasterise(model, grid, dtype, n_threads))
+                record = {
+                    "kernel": name, "dtype": np.dtype(dtype).name, "threads": n_threads,
+                    "cells": grid.nx * grid.ny, "seconds": seconds, "baseline_seconds": base,
+                    "ratio": base / seconds, "mcells_per_s": grid.nx * grid.ny / seconds / 1e6,
+                }
+                records.append(record)
+                log(_row(record))
+    return records
+
+
+def _run_job(name: str, threads: int, repeat: int, stride: int, log) -> list[dict]:
+    job = JOBS[name]()
+    base = job.baseline(stride, repeat)
+    records = []
+    for dtype in job.dtypes:
+        job.work(dtype, 1)  # warm-up: compile or load the module
+        for n_threads in sorted({1, threads}):
+            seconds = _best_of(repeat, lambda: job.work(dtype, n_threads))
+            record = {
+                "kernel": name, "dtype": np.dtype(dtype).name, "threads": n_threads, "cells": job.cells,
+                "seconds": seconds, "baseline_seconds": base, "ratio": base / seconds,
+                "mcells_per_s": job.cells / seconds / 1e6,
+            }
+            records.append(record)
+            log(_row(record))
+    return records
+
+
+HEADER = f"{'kernel':<16} {'dtype':<8} {'threads':>7} {'cells':>10} {'seconds':>9} {'Mcells/s':>9} {'numpy s':>9} {'ratio':>7}"
+
+
+def _row(r: dict) -> str:
+    return (
+        f"{r['kernel']:<16} {r['dtype']:<8} {r['threads']:>7} {r['cells']:>10} {r['seconds']:>9.4f} "
+        f"{r['mcells_per_s']:>9.2f} {r['baseline_seconds']:>9.3f} {r['ratio']:>7.1f}"
+    )
+
+
+def containment_timing(n: int = CONTAINMENT_GEOMETRIES, seed: int = 0, repeat: int = 3) -> dict:
+    """Seconds for the containment probability at R = 1 km of ``n`` two-bearing geometries at
+    once: stations 5-40 km apart, contacts 10-60 km out, bearing SDs 0.005-0.05 rad; the fix
+    and its principal variances (:func:`bananagrid.models.bearing.two_bearing_variances`), then containment by
+    the exact and the series method. Best of ``repeat`` runs, like the kernel rows."""
+    rng = np.random.default_rng(seed)
+    s2 = np.column_stack((rng.uniform(5000.0, 40000.0, n), rng.uniform(-3000.0, 3000.0, n)))
+    targets = np.column_stack((rng.uniform(-10000.0, 30000.0, n), rng.uniform(10000.0, 60000.0, n)))
+    b1 = bearing_to(np.zeros(2), targets)
+    b2 = bearing_to(s2, targets)
+    sd1, sd2 = rng.uniform(0.005, 0.05, n), rng.uniform(0.005, 0.05, n)
+    out = {"geometries": n}
+    def run(method):
+        _, v1, v2 = two_bearing_variances(np.zeros(2), s2, b1, b2, sd1, sd2)
+        ok = np.isfinite(v1)
+        containment(1000.0, v1[ok], v2[ok], method=method)
+        return int(n - ok.sum())
+
+    for method in ("exact", "series"):
+        out[f"{method}_seconds"] = _best_of(repeat, lambda: run(method))
+    out["without_fix"] = run("exact")
+    return out
+
+
+def memory_probe(side: int = MEMORY_SIDE) -> dict:
+    """Peak resident memory (ru_maxrss) of a fresh process that imports bananagrid, initialises
+    Warp and rasterises a side x side float32 polar map: everything a user's process holds."""
+    code = (
+        "import resource, bananagrid as bg, numpy as np;"
+        f"m = bg.PolarBanana(v0=280.0, t=10.0, sigma_a=5/3, sigma_omega={math.pi / 54!r});"
+        "g = bg.Grid.from_bounds(x=(-3000.0, 3000.0), y=(-200.0, 3400.0), dx=6000/{s}, dy=3600/{s});"
+        "r = bg.rasterise(m, g, dtype=np.float32);"
+        "print(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss, r.values.nbytes)"
+    ).replace("{s}", str(side))
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    peak, nbytes = (int(v) for v in out.stdout.split()[-2:])
+    return {"side": side, "peak_rss_mib": peak / 1024, "raster_mib": nbytes / 2**20}
+
+
+def machine() -> str:
+    model = platform.processor() or platform.machine()
+    try:
+        with open("/proc/cpuinfo") as fh:
+            model = next(line.split(":", 1)[1].strip() for line in fh if line.startswith("model name"))
+    except (OSError, StopIteration):
+        pass
+    return f"{model}, {default_threads()} cores usable, Python {platform.python_version()}, {platform.system()}"
+
+
+def _parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(
+        prog="bananagrid bench",
+        description="Time every kernel against its NumPy float64 baseline, measured in the same run.",
+    )
+    p.add_argument("--kernels", default=",".join(KERNELS), help=f"comma-separated subset of: {', '.join(KERNELS)} (default: all)")
+    p.add_argument("--step", type=float, default=4.0, help="grid step in metres over the Figure 1 frame (default 4: 1500 x 900 cells)")
+    p.add_argument("--threads", type=int, default=default_threads(), help="threads for the all-cores rows (default: every usable core)")
+    p.add_argument("--repeat", type=int, default=3, help="timed runs per row; the best is reported (default 3)")
+    p.add_argument("--baseline-stride", type=int, default=10, help="run the CAT and Butterly NumPy baselines on every N-th row and scale (default 10; 1 = all rows)")
+    p.add_argument("--no-memory", action="store_true", help=f"skip the peak-memory probe ({MEMORY_SIDE} x {MEMORY_SIDE} float32)")
+    p.add_argument("--json", metavar="FILE", help="also write the records as JSON to FILE")
+    return p
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Entry point of ``bananagrid bench``; returns the exit code."""
+    args = _parser().parse_args(argv)
+    kernels = [k.strip() for k in args.kernels.split(",") if k.strip()]
+    unknown = [k for k in kernels if k not in KERNELS]
+    problems = []
+    if unknown or not kernels:
+        problems.append(f"--kernels = {args.kernels!r}: choose from {', '.join(KERNELS)}")
+    for name in ("threads", "repeat", "baseline_stride"):
+        if getattr(args, name) < 1:
+            problems.append(f"--{name.replace('_', '-')} = {getattr(args, name)}: must be >= 1")
+    if not (math.isfinite(args.step) and args.step > 0):
+        problems.append(f"--step = {args.step}: must be > 0")
+    if problems:
+        print(f"bananagrid: error: {problems[0]}", file=sys.stderr)
+        return 2
+    print(f"machine: {machine()}")
+    print(f"grids: Figure 1 frame at {args.step:g} m (banana kernels), {COASTAL_SIDE} x {COASTAL_SIDE} "
+          f"about the coastal fix (bearing), {BUTTERLY_SIDE} x {BUTTERLY_SIDE} about the ring +- 6 sigma "
+          f"(butterly-rN: three speeds, largest range N sigma_min); baseline: NumPy {np.__version__} float64 "
+          "(cat-heading: the plain CAT's, as it has no NumPy twin)"
+          + (f", CAT and Butterly on every {args.baseline_stride}th row, scaled" if args.baseline_stride > 1 else ""))
+    print(HEADER)
+    records = run(kernels, args.step, args.threads, args.repeat, args.baseline_stride)
+    result = {"machine": machine(), "step": args.step, "records": records}
+    for name in kernels:
+        one = {r["dtype"]: r for r in records if r["kernel"] == name and r["threads"] == 1}
+        many = {r["dtype"]: r for r in records if r["kernel"] == name and r["threads"] == args.threads}
+        if args.threads > 1:
+            print(f"{name}: 1 -> {args.threads} threads speedup "
+                  + ", ".join(f"{d} {one[d]['seconds'] / many[d]['seconds']:.2f}x" for d in one))
+    if "cat" in kernels and "cat-heading" in kernels:
+        cost = {
+            (r["dtype"], r["threads"]): r["seconds"] / next(
+                c["seconds"] for c in records if c["kernel"] == "cat" and c["dtype"] == r["dtype"] and c["threads"] == r["threads"]
+            )
+            for r in records if r["kernel"] == "cat-heading"
+        }
+        result["heading_cost"] = [{"dtype": d, "threads": n, "ratio_to_cat": v} for (d, n), v in cost.items()]
+        print("cat-heading (sigma_0 = pi/15) costs "
+              + ", ".join(f"{v:.2f}x" for v in cost.values()) + " the plain CAT ("
+              + ", ".join(f"{d} {n} thr" for d, n in cost) + ")")
+    if "bearing-exact" in kernels:
+        timing = containment_timing(repeat=args.repeat)
+        result["containment"] = timing
+        print(f"containment: {timing['geometries']:,} two-bearing geometries (fix, variances, P(R = 1 km)) in "
+              f"{timing['exact_seconds']:.2f} s (exact), {timing['series_seconds']:.2f} s (Robbins-Pitman series, "
+              f"tol 1e-12); {timing['without_fix']:,} had no fix in front of both stations")
+    if not args.no_memory:
+        mem = memory_probe()
+        result["memory"] = mem
+        print(f"memory: {mem['side']} x {mem['side']} float32 polar raster ({mem['raster_mib']:.0f} MiB of values): "
+              f"peak RSS of the whole process {mem['peak_rss_mib']:.0f} MiB")
+    if args.json:
+        tmp = f"{args.json}.partial"
+        with open(tmp, "w") as fh:
+            json.dump(result, fh, indent=2)
+        os.replace(tmp, args.json)
+        print(f"wrote {args.json}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

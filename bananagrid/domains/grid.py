@@ -1,0 +1,126 @@
+"""Cell-centred rectangular grids in world coordinates (x east, y north, metres)."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..validate import BananagridError, finite, point, positive, positive_int
+
+__all__ = ["Grid", "MAX_CELLS"]
+
+#: Largest grid accepted (cells). 2**28 cells are 2 GiB as float64, more than a 24 GiB machine
+#: should spend on one layer with its contour and log copies.
+MAX_CELLS = 2**28
+
+
+@dataclass(frozen=True)
+class Grid:
+    """A cell-centred grid: ``values[i, j]`` belongs to the cell centred at ``(x[j], y[i])``.
+
+    Rows run from south to north. Build one with :meth:`from_bounds` or directly from its
+    south-west corner ``origin``, the cell sizes ``dx``, ``dy`` and the counts ``nx``, ``ny``.
+
+    Parameters
+    ----------
+    origin : (float, float)
+        World coordinates of the grid's south-west corner (the outer edge, not a centre), m.
+    dx, dy : float
+        Cell width (east) and height (north), m, > 0.
+    nx, ny : int
+        Number of columns and rows, >= 1, with ``nx * ny <= MAX_CELLS``.
+    """
+
+    origin: tuple[float, float]
+    dx: float
+    dy: float
+    nx: int
+    ny: int
+
+    def __post_init__(self):
+        object.__setattr__(self, "origin", point("origin", self.origin))
+        object.__setattr__(self, "dx", positive("dx", self.dx))
+        object.__setattr__(self, "dy", positive("dy", self.dy))
+        object.__setattr__(self, "nx", positive_int("nx", self.nx))
+        object.__setattr__(self, "ny", positive_int("ny", self.ny))
+        cells = self.nx * self.ny
+        if cells > MAX_CELLS:
+            gib = cells * 8 / 2**30
+            raise BananagridError(
+                f"grid of {self.nx} x {self.ny} = {cells:,} cells would take {gib:.1f} GiB as "
+                f"float64; the limit is {MAX_CELLS:,} cells ({MAX_CELLS * 8 / 2**30:.0f} GiB): "
+                "use a larger step or smaller bounds"
+            )
+        for name, extent in (("x", self.nx * self.dx), ("y", self.ny * self.dy)):
+            if not math.isfinite(extent):
+                raise BananagridError(f"grid extent in {name} is not finite")
+
+    @classmethod
+    def from_bounds(cls, x, y, step=None, *, dx=None, dy=None) -> "Grid":
+        """Grid covering ``x = (x0, x1)`` and ``y = (y0, y1)`` with square cells of ``step``.
+
+        The bounds are the outer cell edges. When the extent is not a whole number of steps the
+        upper bound is moved out to the next whole cell, so the bounds are always covered.
+        ``dx`` and ``dy`` may be given instead of ``step`` for rectangular cells.
+        """
+        if step is not None:
+            if dx is not None or dy is not None:
+                raise BananagridError("give either step or dx/dy, not both")
+            dx = dy = step
+        if dx is None or dy is None:
+            raise BananagridError("step (or both dx and dy) is required")
+        dx, dy = positive("dx" if step is None else "step", dx), positive(
+            "dy" if step is None else "step", dy
+        )
+        counts = []
+        for name, bounds, d in (("x", x, dx), ("y", y, dy)):
+            try:
+                lo, hi = bounds
+            except (TypeError, ValueError):
+                raise BananagridError(f"{name} = {bounds!r}: expected bounds (low, high)") from None
+            lo, hi = finite(f"{name}[0]", lo), finite(f"{name}[1]", hi)
+            if not hi > lo:
+                raise BananagridError(f"{name} = ({lo}, {hi}): the upper bound must exceed the lower")
+            span = (hi - lo) / d
+            # a whole number of steps up to rounding stays whole; anything else rounds up
+            n = round(span) if abs(span - round(span)) <= 1e-9 * max(1.0, span) else math.ceil(span)
+            if n > MAX_CELLS:
+                raise BananagridError(
+                    f"{name} bounds ({lo}, {hi}) at step {d} give {n:,} cells in one axis, "
+                    f"over {n * 8 / 2**30:.1f} GiB as float64 for a single row; the limit is "
+                    f"{MAX_CELLS:,} cells ({MAX_CELLS * 8 / 2**30:.0f} GiB) in all"
+                )
+            counts.append((lo, max(n, 1)))
+        (x0, nx), (y0, ny) = counts
+        return cls(origin=(x0, y0), dx=dx, dy=dy, nx=nx, ny=ny)
+
+    @property
+    def shape(self) -> tuple[int, int]:
+        """``(ny, nx)``: the shape of a values array on this grid."""
+        return (self.ny, self.nx)
+
+    @property
+    def cell_area(self) -> float:
+        return self.dx * self.dy
+
+    @property
+    def x(self) -> np.ndarray:
+        """Cell-centre x coordinates, shape ``(nx,)``."""
+        return self.origin[0] + (np.arange(self.nx) + 0.5) * self.dx
+
+    @property
+    def y(self) -> np.ndarray:
+        """Cell-centre y coordinates (south to north), shape ``(ny,)``."""
+        return self.origin[1] + (np.arange(self.ny) + 0.5) * self.dy
+
+    @property
+    def extent(self) -> tuple[float, float, float, float]:
+        """Outer edges ``(x0, x1, y0, y1)``."""
+        x0, y0 = self.origin
+        return (x0, x0 + self.nx * self.dx, y0, y0 + self.ny * self.dy)
+
+    def describe(self) -> dict:
+        """Plain-data description for recordings and provenance."""
+        return {"origin": list(self.origin), "dx": self.dx, "dy": self.dy, "nx": self.nx, "ny": self.ny}

@@ -1,0 +1,100 @@
+"""Target regions: boxes in the array frame (a line, a plane or a slab of heights)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..validate import BananagridError, finite
+
+__all__ = ["Region", "as_region"]
+
+_AXES = ("x", "y", "z")
+
+
+def _interval(name: str, value) -> tuple[float, float]:
+    try:
+        lo, hi = value
+    except (TypeError, ValueError):
+        raise BananagridError(f"{name} = {value!r}: expected a pair (low, high)") from None
+    lo, hi = finite(f"{name}[0]", lo), finite(f"{name}[1]", hi)
+    if not hi > lo:
+        raise BananagridError(
+            f"{name} = ({lo!r}, {hi!r}): the region is empty; the upper bound must exceed the lower"
+        )
+    return lo, hi
+
+
+@dataclass(frozen=True)
+class Region:
+    """The target region S: a box with an x range, optionally a y range and a z range.
+
+    Parameters
+    ----------
+    x : (float, float)
+        ``(x0, x1)``, m, x0 < x1.
+    y : (float, float), optional
+        ``(y0, y1)``, m (a plane or a slab).
+    z : (float, float), optional
+        ``(z0, z1)``, m, heights in the array frame (z up, the floor at negative z); needs y.
+
+    The dimension (1, 2 or 3) is the number of ranges given; |S| is its length, area or volume.
+    """
+
+    x: tuple[float, float]
+    y: tuple[float, float] | None = None
+    z: tuple[float, float] | None = None
+
+    def __post_init__(self):
+        object.__setattr__(self, "x", _interval("region x", self.x))
+        if self.y is not None:
+            object.__setattr__(self, "y", _interval("region y", self.y))
+        if self.z is not None:
+            if self.y is None:
+                raise BananagridError(f"region z = {self.z!r} given without y: a slab needs x, y and z ranges")
+            object.__setattr__(self, "z", _interval("region z", self.z))
+
+    @property
+    def dim(self) -> int:
+        return 1 if self.y is None else (2 if self.z is None else 3)
+
+    @property
+    def bounds(self) -> np.ndarray:
+        """``(dim, 2)`` array of (low, high) per axis."""
+        return np.array([r for r in (self.x, self.y, self.z) if r is not None], dtype=float)
+
+    @property
+    def size(self) -> float:
+        """|S|: length, area or volume, in m, m^2 or m^3."""
+        b = self.bounds
+        return float(np.prod(b[:, 1] - b[:, 0]))
+
+    def contains(self, points) -> np.ndarray:
+        """Whether each point (rows of an ``(n, dim)`` array) lies in the closed box."""
+        p = np.atleast_2d(np.asarray(points, dtype=float))
+        b = self.bounds
+        return np.all((p >= b[:, 0]) & (p <= b[:, 1]), axis=1)
+
+    def describe(self) -> dict:
+        return {a: list(r) for a, r in zip(_AXES, (self.x, self.y, self.z)) if r is not None}
+
+    def intersect(self, other: "Region") -> "Region":
+        """The box common to this region and ``other`` (of the same dimension)."""
+        lo = np.maximum(self.bounds[:, 0], other.bounds[:, 0])
+        hi = np.minimum(self.bounds[:, 1], other.bounds[:, 1])
+        if np.any(hi <= lo):
+            raise BananagridError(f"region {other.describe()} does not overlap the uniform law's region {self.describe()}: empty")
+        return Region(*[(float(l), float(h)) for l, h in zip(lo, hi)])
+
+
+def as_region(region) -> Region:
+    """``region`` as a :class:`Region` (a dict with keys x, y, z is accepted too)."""
+    if isinstance(region, Region):
+        return region
+    if isinstance(region, dict):
+        try:
+            return Region(**region)
+        except TypeError:
+            raise BananagridError(f"region = {region!r}: expected keys x, y, z") from None
+    raise BananagridError(f"region = {region!r}: expected a bananagrid Region (or a dict with x, y, z)")

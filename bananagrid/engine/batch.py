@@ -1,0 +1,115 @@
+"""Many hypotheses at once (a tracker's gating and association step).
+
+:func:`rasterise_batch` rasterises thousands of hypotheses of one model kind, each on its own
+small grid framed about it, in one kernel over (hypothesis, row); :func:`pdf_batch` scores every
+point against every hypothesis. A model kind takes part through two class methods of the model
+protocol's batch capability (:class:`~bananagrid.protocol.BatchModel`): ``frame_bounds`` (the
+world box holding each hypothesis) and ``batch_binding`` (its batch kernels). They run the same
+device function as :func:`bananagrid.rasterise` and ``pdf``, so their values are bit-identical
+to one hypothesis at a time.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import numpy as np
+
+from ..domains.grid import Grid
+from ..protocol import BatchModel
+from ..results import BatchRaster
+from ..validate import BananagridError, positive, positive_int
+from .warp_runtime import WarpContext
+
+__all__ = ["frame", "rasterise_batch", "pdf_batch", "FRAME_SDS"]
+
+#: A framed grid holds each hypothesis to this many SDs in range and bearing.
+FRAME_SDS = 4.0
+
+
+def frame(models: Sequence[BatchModel], shape=(64, 64), *, sds: float = FRAME_SDS) -> list[Grid]:
+    """Grids of ``shape`` = (ny, nx) cells framing each hypothesis: the world box that holds it
+    to ``sds`` standard deviations (the model kind's ``frame_bounds``, vectorised over the
+    hypotheses), cut into ``shape`` cells."""
+    models = _models(models)
+    ny, nx = (positive_int("shape[0]", shape[0]), positive_int("shape[1]", shape[1]))
+    sds = positive("sds", sds)
+    bounds = type(models[0]).frame_bounds(models, sds)
+    return [
+        Grid.from_bounds(x=(x0, x1), y=(y0, y1), dx=(x1 - x0) / nx, dy=(y1 - y0) / ny)
+        for x0, x1, y0, y1 in bounds
+    ]
+
+
+def _models(models: Sequence[BatchModel]) -> list[BatchModel]:
+    """The hypotheses as a list, all of one model kind that has batch kernels."""
+    models = list(models)
+    if not models:
+        raise BananagridError("models: expected at least one hypothesis")
+    kind = type(models[0])
+    if not isinstance(models[0], BatchModel):
+        raise BananagridError(f"models[0] = {kind.__name__}: this model has no batch kernels")
+    for k, m in enumerate(models):
+        if type(m) is not kind:
+            raise BananagridError(f"models[{k}] = {type(m).__name__}: batches take {kind.__name__} hypotheses, "
+                                  "like models[0]")
+    return models
+
+
+def rasterise_batch(models: Sequence[BatchModel], grids: Sequence[Grid] | None = None, *, shape=(64, 64),
+                    dtype=np.float64, device: str = "cpu", threads=None) -> BatchRaster:
+    """Rasterise every hypothesis on its own grid in one launch.
+
+    ``grids``: one per hypothesis, all of one shape; by default :func:`frame` of the
+    hypotheses at ``shape``.
+    """
+    models = _models(models)
+    if grids is None:
+        grids = frame(models, shape)
+    grids = tuple(grids)
+    if len(grids) != len(models):
+        raise BananagridError(f"grids: {len(grids)} grids for {len(models)} hypotheses")
+    for k, g in enumerate(grids):
+        if not isinstance(g, Grid):
+            raise BananagridError(f"grids[{k}] = {g!r}: expected a bananagrid.Grid")
+        if g.shape != grids[0].shape:
+            raise BananagridError(f"grids[{k}]: shape {g.shape}, but grids[0] has {grids[0].shape}; one shape for all")
+    xs = np.stack([g.x for g in grids])
+    ys = np.stack([g.y for g in grids])
+    shape = (len(models), ys.shape[1], xs.shape[1])
+    values = _launch("grid", models, xs, ys, shape, ys.shape[1], dtype=dtype, device=device, threads=threads)
+    areas = np.array([g.cell_area for g in grids])
+    mass = values.sum(axis=(1, 2), dtype=np.float64) * areas
+    return BatchRaster(values, grids, mass)
+
+
+def pdf_batch(models: Sequence[BatchModel], x, y, *, dtype=np.float64, device: str = "cpu", threads=None) -> np.ndarray:
+    """Density of every world point (x, y broadcast to N points) under every hypothesis: (H, N)."""
+    models = _models(models)
+    try:
+        bx, by = np.broadcast_arrays(np.asarray(x, dtype=float), np.asarray(y, dtype=float))
+    except ValueError:
+        raise BananagridError(f"x and y: shapes {np.shape(x)} and {np.shape(y)} do not broadcast") from None
+    if not (np.isfinite(bx).all() and np.isfinite(by).all()):
+        raise BananagridError("x, y: points must be finite (NaN or inf given)")
+    return _launch("points", models, bx.ravel(), by.ravel(), (len(models), bx.size), None,
+                   dtype=dtype, device=device, threads=threads)
+
+
+def _launch(which: str, models: list[BatchModel], x, y, out_shape, rows, *, dtype, device, threads) -> np.ndarray:
+    """Run the kind's batch kernel (``which``: "grid" over (hypothesis, row) with ``rows`` rows,
+    or "points") over bands of hypotheses: each launch covers hypotheses h0 .. h0 + b - a."""
+    ctx = WarpContext(dtype, device, threads)
+    binding = type(models[0]).batch_binding(ctx, models)
+    kernel = binding.grid_kernel if which == "grid" else binding.points_kernel
+    ctx.load(kernel)
+    x_arr = ctx.array(x)
+    y_arr = ctx.array(y)
+    out = ctx.zeros(out_shape)
+
+    def launch_band(a, b):
+        dim = b - a if rows is None else (b - a, rows)
+        ctx.launch(kernel, dim=dim, inputs=[x_arr, y_arr, a, *binding.params, out])
+
+    ctx.run_bands(launch_band, ctx.bands(len(models), 4))
+    return ctx.numpy(out)

@@ -1,0 +1,192 @@
+"""Warp's runtime: initialisation, dtypes and devices, thread bands, and every launch.
+
+This is the only module that calls ``wp.launch``. A Warp CPU launch runs on one core and
+releases the GIL, so work is split into bands launched from a thread pool
+(:func:`run_bands`); bands write disjoint outputs (``atomic_add`` on the CPU is not atomic
+across concurrent launches).
+"""
+
+from __future__ import annotations
+
+import functools
+import os
+import sys
+import tempfile
+from concurrent.futures import ThreadPoolExecutor
+
+import numpy as np
+import warp as wp
+
+from ..validate import BananagridError
+
+__all__ = ["WarpContext", "warp", "default_threads", "check_threads", "bands", "run_bands"]
+
+_DTYPES = {np.dtype(np.float32): wp.float32, np.dtype(np.float64): wp.float64}
+_FIXED = {np.dtype(np.float64): wp.float64, np.dtype(np.int32): wp.int32}
+
+#: What Warp's native library prints on every machine without an NVIDIA driver. It is not news
+#: to a CPU user and lands in the middle of the CLI's progress line, so it is filtered out.
+_NO_DRIVER_NOTICE = b"Could not find or load the NVIDIA CUDA driver"
+
+
+@functools.cache
+def warp():
+    """Initialise Warp once, on first use (no import-time side effects), and return it."""
+    # Warp logs its banner and every module load at INFO; users want our output, not that.
+    wp.config.log_level = wp.LOG_WARNING
+    # The native library writes to file descriptor 2 directly: capture it during init and
+    # pass on everything but the no-driver notice.
+    sys.stderr.flush()
+    saved = os.dup(2)
+    with tempfile.TemporaryFile() as captured:
+        os.dup2(captured.fileno(), 2)
+        try:
+            wp.init()
+        finally:
+            os.dup2(saved, 2)
+            os.close(saved)
+            captured.seek(0)
+            for line in captured.read().splitlines(keepends=True):
+                if _NO_DRIVER_NOTICE not in line:
+                    sys.stderr.write(line.decode(errors="replace"))
+    return wp
+
+
+def default_threads() -> int:
+    """Worker threads for CPU launches: every core this process may use."""
+    try:
+        return max(1, len(os.sched_getaffinity(0)))
+    except AttributeError:  # pragma: no cover - non-Linux
+        return max(1, os.cpu_count() or 1)
+
+
+def check_threads(threads) -> int:
+    """``threads`` as an int >= 1 (None: :func:`default_threads`)."""
+    if threads is None:
+        return default_threads()
+    if isinstance(threads, bool) or not isinstance(threads, (int, np.integer)) or threads < 1:
+        raise BananagridError(f"threads = {threads!r}: expected an integer >= 1")
+    return int(threads)
+
+
+def bands(n_rows: int, threads: int, per_thread: int = 1) -> list[tuple[int, int]]:
+    """Split rows into ``threads * per_thread`` contiguous bands (fewer if rows run out)."""
+    n_bands = max(1, min(n_rows, threads * per_thread))
+    edges = np.linspace(0, n_rows, n_bands + 1).round().astype(int)
+    return [(int(a), int(b)) for a, b in zip(edges[:-1], edges[1:]) if b > a]
+
+
+def run_bands(launch_band, bands: list[tuple[int, int]], threads: int) -> None:
+    """Call ``launch_band(start, stop)`` for every band; on several threads, from a pool.
+    The kernel's module must already be loaded (concurrent first launches would each build it)."""
+    if threads == 1 or len(bands) == 1:
+        for band in bands:
+            launch_band(*band)
+        return
+    with ThreadPoolExecutor(max_workers=threads) as pool:
+        for future in [pool.submit(launch_band, a, b) for a, b in bands]:
+            future.result()
+
+
+class WarpContext:
+    """Warp arrays and launches in one dtype on one device (the engine's
+    :class:`~bananagrid.protocol.KernelContext`).
+
+    Parameters
+    ----------
+    dtype : float32 or float64
+        The kernels' scalar type.
+    device : str
+        ``"cpu"``, or ``"cuda"`` where present.
+    threads : int, optional
+        CPU threads (default: every core).
+
+    Raises
+    ------
+    BananagridError
+        For a dtype other than float32 or float64, a device that is not available, or a thread
+        count that is not an integer >= 1 (checked in that order).
+    """
+
+    def __init__(self, dtype=np.float64, device: str = "cpu", threads=None):
+        try:
+            self.dtype = np.dtype(dtype)
+            self.scalar_type = _DTYPES[self.dtype]
+        except (TypeError, KeyError):
+            raise BananagridError(f"dtype = {dtype!r}: must be float32 or float64") from None
+        self.wp = warp()
+        if not isinstance(device, str):
+            raise BananagridError(f"device = {device!r}: expected 'cpu' or 'cuda'")
+        try:
+            self.wp.get_device(device)
+        except Exception:
+            available = ", ".join(str(d) for d in self.wp.get_devices())
+            raise BananagridError(f"device = {device!r}: not available here (available: {available})") from None
+        self.device = device
+        self.threads = check_threads(threads)
+
+    @property
+    def cpu(self) -> bool:
+        return self.device == "cpu"
+
+    @property
+    def launch_threads(self) -> int:
+        """Threads that launch concurrently: ``threads`` on the CPU, one launch on a GPU."""
+        return self.threads if self.cpu else 1
+
+    def _type(self, dtype):
+        """The Warp type of ``dtype``: the scalar type for None, float64 or int32 for those NumPy
+        dtypes, else ``dtype`` itself (a Warp type, e.g. :meth:`vector`)."""
+        if dtype is None:
+            return self.scalar_type
+        if self.wp.types.type_is_vector(dtype):
+            return dtype
+        return _FIXED[np.dtype(dtype)]
+
+    def scalar(self, value: float):
+        """``value`` as the kernels' scalar type."""
+        return self.scalar_type(value)
+
+    def array(self, values, *, dtype=None):
+        """A device array of ``values`` (the scalar type unless ``dtype``: float64 or int32)."""
+        kind = self._type(dtype)
+        if dtype is None:
+            values = np.ascontiguousarray(values, dtype=self.dtype)
+        return self.wp.array(values, dtype=kind, device=self.device)
+
+    def shared(self, values: np.ndarray):
+        """A device array that shares the memory of ``values`` on the CPU (same dtype)."""
+        return self.wp.array(values, dtype=self.scalar_type, copy=False, device=self.device)
+
+    def zeros(self, shape, *, dtype=None):
+        return self.wp.zeros(shape, dtype=self._type(dtype), device=self.device)
+
+    def empty(self, shape, *, dtype=None):
+        return self.wp.empty(shape, dtype=self._type(dtype), device=self.device)
+
+    def vector(self, length: int):
+        """The Warp vector type of ``length`` lanes of the scalar type."""
+        return self.wp.types.vector(length, self.scalar_type)
+
+    def load(self, kernel) -> None:
+        """Compile or load ``kernel``'s module before concurrent launches need it."""
+        self.wp.load_module(kernel.module, device=self.device)
+
+    def launch(self, kernel, *, dim, inputs) -> None:
+        self.wp.launch(kernel, dim=dim, inputs=inputs, device=self.device)
+
+    def synchronize(self) -> None:
+        self.wp.synchronize_device(self.device)
+
+    def numpy(self, array) -> np.ndarray:
+        """``array`` on the host (waits for the device)."""
+        self.synchronize()
+        return array.numpy()
+
+    def bands(self, n: int, per_thread: int = 1) -> list[tuple[int, int]]:
+        """Bands of ``n`` rows for :meth:`run_bands`: ``per_thread`` per thread on the CPU, one on
+        a GPU."""
+        return bands(n, self.threads, per_thread) if self.cpu else [(0, n)]
+
+    def run_bands(self, launch_band, band_list: list[tuple[int, int]]) -> None:
+        run_bands(launch_band, band_list, self.launch_threads)

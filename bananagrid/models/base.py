@@ -1,0 +1,74 @@
+"""What most models share: ``pdf`` through the engine, plain-data parameters, rays through
+``pdf``, and the checks of ``sample``'s arguments.
+
+A model class derives from :class:`Model` and implements the rest of
+:class:`bananagrid.protocol.DensityModel`: ``kind``, ``scene``, ``float32_rtol``, ``bind``,
+``sample``, ``polar_scales``, ``feature_scale`` and ``radial_extent``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import fields
+
+import numpy as np
+
+from ..domains.pose import Pose
+from ..engine.points import evaluate_points
+from ..validate import BananagridError
+
+__all__ = ["Model", "check_n", "check_rng", "RANGE_SDS"]
+
+#: Rays scan a model out to this many of its widest SDs beyond where its mass lies (the density
+#: there is below e^-72 of its peak along the ray).
+RANGE_SDS = 12.0
+
+
+def check_rng(rng) -> np.random.Generator:
+    """``rng`` as a NumPy Generator (an integer seeds a new one)."""
+    if rng is None:
+        raise BananagridError("rng: pass a numpy.random.Generator (e.g. numpy.random.default_rng(seed))")
+    if isinstance(rng, (int, np.integer)):
+        return np.random.default_rng(int(rng))
+    if not isinstance(rng, np.random.Generator):
+        raise BananagridError(f"rng = {rng!r}: expected a numpy.random.Generator or an integer seed")
+    return rng
+
+
+def check_n(n) -> int:
+    """``n`` as a non-negative int."""
+    if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < 0:
+        raise BananagridError(f"n = {n!r}: expected a non-negative integer")
+    return int(n)
+
+
+class Model:
+    """Shared parts of the model protocol (:class:`bananagrid.protocol.DensityModel`)."""
+
+    #: The model's local frame; None for models without one (motion models have a ``pose`` field).
+    pose: Pose | None = None
+
+    def parameters(self) -> dict:
+        """Plain-data parameters for provenance and recordings: the class name, then every
+        dataclass field (a pose as ``origin_x``, ``origin_y`` and ``heading``)."""
+        out = {"model": type(self).__name__}
+        for f in fields(self):
+            value = getattr(self, f.name)
+            if isinstance(value, Pose):
+                out["origin_x"], out["origin_y"] = value.origin
+                out["heading"] = value.heading
+            else:
+                out[f.name] = value
+        return out
+
+    def pdf(self, x, y, *, dtype=np.float64, device="cpu"):
+        """Density per m^2 at world points (broadcast x, y), through the same kernels as rasterise."""
+        return evaluate_points(self, x, y, dtype=dtype, device=device)
+
+    def ray_values(self, pose: Pose, radii: np.ndarray, angles: np.ndarray, *, threads=None) -> np.ndarray:
+        """p(r, theta) at ranges x bearings from ``pose``, shape (len(radii), len(angles)),
+        through the points kernel."""
+        local_x = radii[:, None] * np.sin(angles)[None, :]
+        local_y = radii[:, None] * np.cos(angles)[None, :]
+        world = pose.to_world(np.column_stack((local_x.ravel(), local_y.ravel())))
+        values = evaluate_points(self, world[:, 0], world[:, 1], threads=threads)
+        return values.reshape(local_x.shape)

@@ -1,0 +1,452 @@
+"""Bearing fixes: where two or more direction-finding stations' bearings cross (Walsh, 1968).
+
+Each sensor at S_i reports a bearing b_i (radians clockwise from north) to the contact with an
+independent normal error of standard deviation sigma_i. The fix is the crossing of the bearing
+lines (two sensors) or their weighted least-squares point (three or more, beyond Walsh); its
+linearised covariance is J diag(sigma^2) J^T with J the Jacobian of the fix with respect to the
+bearing errors (ERRATA), equivalently (G^T W G)^-1 with G the gradients of the bearings with
+respect to position and W = diag(1 / sigma^2).
+"""
+
+from __future__ import annotations
+
+import math
+import warnings
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from ..domains.pose import Pose
+from ..kernels import bearing as kernels
+from ..protocol import Extent, KernelBinding, KernelContext, SceneKey, SceneSchema
+from ..validate import BananagridError
+from .base import RANGE_SDS, Model, check_n, check_rng
+from .containment import containment, containment_radius
+
+__all__ = ["BearingFix", "bearing_to", "crossings", "two_bearing_variances", "MIN_CROSSING_DEG", "MAP_VARIANTS"]
+
+#: Crossing angles below this (degrees) are refused: the lines are nearly parallel, the fix
+#: lies far out along them and Walsh's linearisation (assumption 7) does not hold.
+MIN_CROSSING_DEG = 2.0
+
+#: Crossing angles below this (degrees) are accepted with a warning.
+POOR_CROSSING_DEG = 20.0
+
+MAP_VARIANTS = ("exact", "linear")
+
+#: Bearing errors beyond this many sigmas are outside the sampler's support (mass < 1e-22).
+SAMPLE_SIGMAS = 10.0
+
+#: Gauss-Newton iterations for three or more sensors (each converges quadratically).
+MAX_ITERATIONS = 50
+
+
+def bearing_to(sensor, point) -> np.ndarray:
+    """Bearing (radians clockwise from north, in (-pi, pi]) from ``sensor`` to ``point``."""
+    sensor = np.asarray(sensor, dtype=float)
+    point = np.asarray(point, dtype=float)
+    d = point - sensor
+    return np.arctan2(d[..., 0], d[..., 1])
+
+
+def crossings(sensors, b1, b2):
+    r"""Exact crossings of the bearing lines from ``sensors[0]`` at ``b1`` and ``sensors[1]``
+    at ``b2`` (arrays, radians clockwise from north).
+
+    .. math::  s_1 = \frac{d \times u_2}{u_1 \times u_2},\quad
+               s_2 = \frac{d \times u_1}{u_1 \times u_2},\quad F = S_1 + s_1 u_1,
+
+    Returns
+    -------
+    fx, fy : ndarray
+        The crossing F (NaN or inf where the lines are parallel).
+    kept : ndarray of bool
+        A fix exists: the lines cross (finite s) in front of both stations (s1 > 0, s2 > 0).
+    """
+    sensors = np.asarray(sensors, dtype=float)
+    u1x, u1y = np.sin(b1), np.cos(b1)
+    u2x, u2y = np.sin(b2), np.cos(b2)
+    dx, dy = sensors[1] - sensors[0]
+    den = u1x * u2y - u1y * u2x
+    with np.errstate(divide="ignore", invalid="ignore"):
+        s1 = (dx * u2y - dy * u2x) / den
+        s2 = (dx * u1y - dy * u1x) / den
+        fx = sensors[0, 0] + s1 * u1x
+        fy = sensors[0, 1] + s1 * u1y
+    kept = np.isfinite(s1) & np.isfinite(s2) & (s1 > 0.0) & (s2 > 0.0)
+    return fx, fy, kept
+
+
+def two_bearing_variances(sensor1, sensor2, bearing1, bearing2, sigma1, sigma2):
+    """Fixes and principal variances of many two-bearing geometries at once (broadcast).
+
+    For each geometry the fix F is the crossing of the two bearing lines and the linearised
+    covariance is C = (G^T W G)^-1 with rows g_i = (dy_i, -dx_i) / r_i^2 (the gradients of the
+    bearings at F) and W = diag(1 / sigma_i^2); with two rows det(G) = sin(beta_1 - beta_2) /
+    (r_1 r_2), and C's eigenvalues (v1 >= v2) are Walsh's v_g.
+
+    Parameters
+    ----------
+    sensor1, sensor2 : array_like, shape (..., 2)
+    bearing1, bearing2 : array_like
+        Radians clockwise from north.
+    sigma1, sigma2 : array_like
+        Bearing error SDs, radians, > 0.
+
+    Returns
+    -------
+    fix : ndarray, shape (..., 2)
+    v1, v2 : ndarray
+        Principal variances, m^2. Geometries without a fix in front of both sensors (or with
+        parallel lines) give NaN.
+    """
+    s1 = np.asarray(sensor1, dtype=float)
+    s2 = np.asarray(sensor2, dtype=float)
+    b1, b2, sd1, sd2 = (np.asarray(v, dtype=float) for v in (bearing1, bearing2, sigma1, sigma2))
+    if not all(np.isfinite(v).all() for v in (s1, s2, b1, b2, sd1, sd2)):
+        raise BananagridError("two_bearing_variances: every sensor, bearing and sigma must be finite")
+    if np.any(sd1 <= 0) or np.any(sd2 <= 0):
+        raise BananagridError("two_bearing_variances: sigmas must be > 0")
+    u1 = np.stack((np.sin(b1), np.cos(b1)), axis=-1)
+    u2 = np.stack((np.sin(b2), np.cos(b2)), axis=-1)
+    d = s2 - s1
+    den = u1[..., 0] * u2[..., 1] - u1[..., 1] * u2[..., 0]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        along1 = (d[..., 0] * u2[..., 1] - d[..., 1] * u2[..., 0]) / den
+        along2 = (d[..., 0] * u1[..., 1] - d[..., 1] * u1[..., 0]) / den
+        fix = s1 + along1[..., None] * u1
+        r1, r2 = fix - s1, fix - s2
+        g1 = np.stack((r1[..., 1], -r1[..., 0]), axis=-1) / np.sum(r1 * r1, axis=-1)[..., None]
+        g2 = np.stack((r2[..., 1], -r2[..., 0]), axis=-1) / np.sum(r2 * r2, axis=-1)[..., None]
+        # information I = G^T W G; C = I^-1 has eigenvalues 1 / (eigenvalues of I)
+        w1, w2 = 1.0 / sd1**2, 1.0 / sd2**2
+        ixx = w1 * g1[..., 0] ** 2 + w2 * g2[..., 0] ** 2
+        iyy = w1 * g1[..., 1] ** 2 + w2 * g2[..., 1] ** 2
+        ixy = w1 * g1[..., 0] * g1[..., 1] + w2 * g2[..., 0] * g2[..., 1]
+        half_trace = 0.5 * (ixx + iyy)
+        root = np.sqrt(0.25 * (ixx - iyy) ** 2 + ixy**2)
+        big, det = half_trace + root, ixx * iyy - ixy**2
+        v1 = 1.0 / (det / big)  # 1 / smallest eigenvalue of I (det / largest, no cancellation)
+        v2 = 1.0 / big
+    bad = ~(np.isfinite(along1) & np.isfinite(along2) & (along1 > 0) & (along2 > 0))
+    v1, v2 = np.where(bad, np.nan, v1), np.where(bad, np.nan, v2)
+    return fix, v1, v2
+
+
+def _wrap(angle):
+    """Angle difference wrapped to (-pi, pi]."""
+    return np.angle(np.exp(1j * np.asarray(angle, dtype=float)))
+
+
+def _as_array(name: str, value, shape_text: str, ndim: int) -> np.ndarray:
+    try:
+        array = np.array(value, dtype=float)  # a copy: it is frozen below, the caller's is not
+    except (TypeError, ValueError):
+        raise BananagridError(f"{name} = {value!r}: expected {shape_text} of numbers") from None
+    if array.ndim != ndim or (ndim == 2 and array.shape[1] != 2):
+        raise BananagridError(f"{name}: shape {array.shape}, expected {shape_text}")
+    if not np.isfinite(array).all():
+        raise BananagridError(f"{name} = {value!r}: every value must be finite")
+    return array
+
+
+@dataclass(frozen=True, eq=False)
+class BearingFix(Model):
+    """A position fix from two or more bearings with independent normal errors.
+
+    Parameters
+    ----------
+    sensors : array_like, shape (n, 2)
+        Sensor positions (x east, y north), metres; n >= 2, no two coincident.
+    bearings : array_like, shape (n,)
+        Observed bearings to the contact, radians clockwise from north.
+    sigmas : array_like, shape (n,)
+        Standard deviations of the bearing errors, radians, > 0.
+    variant : {"exact", "linear"}, default "exact"
+        The presence map that ``rasterise`` and ``pdf`` compute: the bearings' likelihood under
+        a flat prior (the true, non-elliptical shape; divided by the linearised normaliser, so
+        it integrates to about one and normalising over a grid gives the posterior), or the
+        normal law of the linearised fix, N(fix, covariance).
+
+    Raises
+    ------
+    BananagridError
+        For bad shapes or values, coincident sensors, bearing lines that cross behind a sensor
+        or cross at less than ``MIN_CROSSING_DEG``. A crossing under ``POOR_CROSSING_DEG``
+        warns: the linearised covariance is then optimistic (see the validation table).
+    """
+
+    sensors: np.ndarray
+    bearings: np.ndarray
+    sigmas: np.ndarray
+    variant: str = "exact"
+
+    kind = "bearing_fix"
+    #: float32 agreement with float64 where the density exceeds 1e-6 of its peak.
+    float32_rtol = 1e-4
+    scene = SceneSchema(
+        keys=(
+            SceneKey("sensors", type="pairs", unit="m", allowed="at least 2, finite, no two coincident"),
+            SceneKey("bearings", type="numbers", unit="rad", alias="deg",
+                     allowed="one per sensor, finite, clockwise from north"),
+            SceneKey("sigmas", type="numbers", unit="rad", alias="deg", allowed="one per sensor, finite, > 0"),
+            SceneKey("variant", type="choice", default='`"exact"`', choices=MAP_VARIANTS,
+                     allowed='`"exact"` (the likelihood under a flat prior), `"linear"` (the linearised normal)'),
+        ),
+        required=("sensors", "bearings", "sigmas"),
+        timed=False,
+        build=lambda params: BearingFix(**params),
+        summary="the presence map of a fix from two or more bearings (Walsh)",
+    )
+
+    def __post_init__(self):
+        if self.variant not in MAP_VARIANTS:
+            raise BananagridError(f"variant = {self.variant!r}: must be one of {', '.join(MAP_VARIANTS)}")
+        sensors = _as_array("sensors", self.sensors, "an (n, 2) array", 2)
+        bearings = _as_array("bearings", self.bearings, "an (n,) array", 1)
+        sigmas = _as_array("sigmas", self.sigmas, "an (n,) array", 1)
+        n = len(sensors)
+        if n < 2:
+            raise BananagridError(f"sensors: {n} given, a fix needs at least 2")
+        if len(bearings) != n or len(sigmas) != n:
+            raise BananagridError(
+                f"sensors, bearings, sigmas: lengths {n}, {len(bearings)}, {len(sigmas)} must match"
+            )
+        bad = np.flatnonzero(sigmas <= 0)
+        if bad.size:
+            raise BananagridError(f"sigmas[{bad[0]}] = {float(sigmas[bad[0]])!r}: must be > 0")
+        for i in range(n):
+            for j in range(i + 1, n):
+                if np.hypot(*(sensors[i] - sensors[j])) <= 1e-9 * max(1.0, np.abs(sensors).max()):
+                    raise BananagridError(f"sensors {i} and {j} coincide at {tuple(sensors[i])}: no baseline")
+        for name, value in (("sensors", sensors), ("bearings", bearings), ("sigmas", sigmas)):
+            value.setflags(write=False)
+            object.__setattr__(self, name, value)
+        self._check_crossing()
+        object.__setattr__(self, "_fix", self._solve())
+        self._check_in_front()
+
+    # -- geometry ------------------------------------------------------------------------------
+
+    @property
+    def directions(self) -> np.ndarray:
+        """Unit vectors of the observed bearings, shape (n, 2)."""
+        return np.column_stack((np.sin(self.bearings), np.cos(self.bearings)))
+
+    @property
+    def fix(self) -> np.ndarray:
+        """The fix (x, y), metres: the crossing (2 sensors) or the weighted least-squares point."""
+        return self._fix.copy()
+
+    def _check_crossing(self) -> None:
+        # the best-crossing pair decides whether any fix is possible
+        i, j = self._best_pair()
+        angle = math.degrees(math.asin(min(1.0, abs(math.sin(self.bearings[i] - self.bearings[j])))))
+        if angle < MIN_CROSSING_DEG:
+            raise BananagridError(
+                f"bearings: the lines cross at {angle:.3g} deg, below {MIN_CROSSING_DEG} deg: "
+                "nearly parallel, no usable fix"
+            )
+        if angle < POOR_CROSSING_DEG:
+            warnings.warn(
+                f"bearings cross at {angle:.3g} deg (< {POOR_CROSSING_DEG} deg): the linearised "
+                "covariance and containment are optimistic", stacklevel=4,
+            )
+
+    def _solve(self) -> np.ndarray:
+        """Crossing of the lines (exact for two), refined by Gauss-Newton on the bearings."""
+        u = self.directions
+        # each line: cross(u_i, P - S_i) = 0, i.e. u_y P_x - u_x P_y = u_y S_x - u_x S_y
+        a = np.column_stack((u[:, 1], -u[:, 0]))
+        rhs = u[:, 1] * self.sensors[:, 0] - u[:, 0] * self.sensors[:, 1]
+        point = np.linalg.lstsq(a, rhs, rcond=None)[0]
+        if len(u) == 2:
+            return point
+        weights = 1.0 / self.sigmas**2
+        for _ in range(MAX_ITERATIONS):
+            residual = _wrap(bearing_to(self.sensors, point) - self.bearings)
+            g = self._bearing_gradients(point)
+            step = np.linalg.solve(g.T @ (weights[:, None] * g), -(g.T @ (weights * residual)))
+            point = point + step
+            if np.hypot(*step) <= 1e-12 * max(1.0, np.hypot(*point)):
+                break
+        return point
+
+    def _check_in_front(self) -> None:
+        along = np.einsum("ij,ij->i", self._fix - self.sensors, self.directions)
+        behind = np.flatnonzero(along <= 0)
+        if behind.size:
+            i = behind[0]
+            raise BananagridError(
+                f"bearings[{i}] = {float(self.bearings[i])!r}: the fix {tuple(np.round(self._fix, 3))} lies "
+                f"behind sensor {i} (the lines cross on the far side of the station)"
+            )
+
+    def _bearing_gradients(self, point) -> np.ndarray:
+        """d bearing_i / d(x, y) at ``point``: (dy, -dx) / r^2, shape (n, 2)."""
+        d = np.asarray(point, dtype=float) - self.sensors
+        r2 = np.einsum("ij,ij->i", d, d)
+        return np.column_stack((d[:, 1], -d[:, 0])) / r2[:, None]
+
+    # -- linearised error --------------------------------------------------------------------
+
+    @property
+    def chi2_min(self) -> float:
+        """sum_i (wrap(beta_i(fix) - b_i) / sigma_i)^2: 0 for two sensors (the lines cross at the
+        fix), the weighted misfit of the least-squares fix for more."""
+        residual = _wrap(bearing_to(self.sensors, self._fix) - self.bearings) / self.sigmas
+        return float(np.sum(residual**2))
+
+    @property
+    def covariance(self) -> np.ndarray:
+        """Linearised covariance of the fix, (G^T W G)^-1 = J diag(sigma^2) J^T, m^2."""
+        g = self._bearing_gradients(self._fix)
+        info = g.T @ (g / self.sigmas[:, None] ** 2)
+        return np.linalg.inv(info)
+
+    @property
+    def principal_variances(self) -> tuple[float, float]:
+        """(v1, v2): the covariance's eigenvalues, largest first (Walsh's v_g), m^2."""
+        values = np.linalg.eigvalsh(self.covariance)
+        return float(values[1]), float(values[0])
+
+    def ellipse(self, k: float = 1.0) -> dict:
+        """The k-sigma error ellipse: semi-axes (m) and the major axis' bearing (radians from
+        north). It holds probability 1 - exp(-k^2 / 2) of the linearised law."""
+        if not (isinstance(k, (int, float)) and math.isfinite(k) and k > 0):
+            raise BananagridError(f"k = {k!r}: must be a finite number > 0")
+        values, vectors = np.linalg.eigh(self.covariance)
+        major = vectors[:, 1]
+        return {
+            "centre": self.fix,
+            "semi_major": k * math.sqrt(values[1]),
+            "semi_minor": k * math.sqrt(values[0]),
+            "bearing": math.atan2(major[0], major[1]) % math.pi,
+            "probability": 1.0 - math.exp(-0.5 * k * k),
+        }
+
+    def containment(self, R, method: str = "exact", tol: float = 1e-12):
+        """Probability that the contact lies within ``R`` (m, broadcast) of the fix under the
+        linearised law: P(v1 t1^2 + v2 t2^2 <= R^2), Walsh's "Evaluation of Probability"
+        (Robbins-Pitman series corrected per ERRATA, or the exact quadrature)."""
+        v1, v2 = self.principal_variances
+        return containment(R, v1, v2, method=method, tol=tol)
+
+    def radius(self, p):
+        """Radius (m) holding probability ``p`` (broadcast): R50 is the CEP; R90, R95."""
+        v1, v2 = self.principal_variances
+        return containment_radius(p, v1, v2)
+
+    # -- maps ---------------------------------------------------------------------------------
+
+    def with_variant(self, variant: str) -> "BearingFix":
+        """The same fix with the other presence map."""
+        return replace(self, variant=variant)
+
+    def kernel_parameters(self) -> np.ndarray:
+        """The bearing kernels' parameter array (layout in ``kernels/bearing.py``)."""
+        cov = self.covariance
+        precision = np.linalg.inv(cov)
+        log_norm = -math.log(2.0 * math.pi * math.sqrt(np.linalg.det(cov)))
+        if self.variant == "exact":
+            # Laplace normaliser of the likelihood: L(fix) 2 pi sqrt(det C). With three or more
+            # bearings they do not all pass through the fix, L(fix) = exp(-chi2_min / 2) < 1.
+            log_norm += 0.5 * self.chi2_min
+        head = [log_norm, *self._fix, precision[0, 0], precision[0, 1], precision[1, 1]]
+        sensors = np.column_stack((self.sensors, self.bearings, 1.0 / self.sigmas)).ravel()
+        return np.concatenate((head, sensors))
+
+    def parameters(self) -> dict:
+        """Plain-data parameters for provenance and recordings."""
+        out = {"model": "BearingFix", "variant": self.variant}
+        for i, (s, b, sd) in enumerate(zip(self.sensors, self.bearings, self.sigmas)):
+            out[f"sensor{i}_x"], out[f"sensor{i}_y"] = float(s[0]), float(s[1])
+            out[f"bearing{i}"], out[f"sigma{i}"] = float(b), float(sd)
+        out["fix_x"], out["fix_y"] = (float(v) for v in self._fix)
+        return out
+
+    def bind(self, ctx: KernelContext, extent: Extent, *, grid: bool = False) -> KernelBinding:
+        """The bearing kernels (``kernels/bearing.py``) of ``variant``."""
+        params = (ctx.array(self.kernel_parameters()), len(self.sensors),
+                  kernels.EXACT if self.variant == "exact" else kernels.LINEAR)
+        return KernelBinding(kernels.bearing_grid, kernels.bearing_points, params, "bearing.bearing_grid",
+                             {"variant": self.variant})
+
+    # -- scales (polar lattices and rays) ------------------------------------------------------
+
+    def polar_scales(self, origin=(0.0, 0.0)) -> tuple[float, float]:
+        """``sqrt(v2)`` with v2 the smallest principal variance of the fix, and that divided by
+        the distance from ``origin`` to the fix (2 pi at the fix)."""
+        radial = math.sqrt(self.principal_variances[1])
+        distance = math.hypot(*(self.fix - np.asarray(origin, dtype=float)))
+        return radial, (radial / distance if distance > 0.0 else 2.0 * math.pi)
+
+    def feature_scale(self) -> float:
+        """``sqrt(v2)``: the fix's narrowest SD."""
+        return math.sqrt(self.principal_variances[1])
+
+    def radial_extent(self, pose: Pose) -> tuple[float, float]:
+        """The narrowest SD, and the distance from ``pose`` to the fix plus 12 of the widest."""
+        large, small = self.principal_variances
+        distance = math.dist(pose.origin, tuple(self.fix))
+        return math.sqrt(small), distance + RANGE_SDS * math.sqrt(large)
+
+    # -- sampling -----------------------------------------------------------------------------
+
+    def _best_pair(self) -> tuple[int, int]:
+        """The two sensors whose bearings cross closest to a right angle."""
+        n = len(self.bearings)
+        pairs = [(i, j) for i in range(n) for j in range(i + 1, n)]
+        return max(pairs, key=lambda ij: abs(math.sin(self.bearings[ij[0]] - self.bearings[ij[1]])))
+
+    def _crossings(self, i: int, j: int, b_i, b_j) -> tuple[np.ndarray, np.ndarray]:
+        """Crossings of sensor i's and j's lines at bearings b_i, b_j (arrays), shape (m, 2),
+        and whether each lies in front of both sensors."""
+        fx, fy, kept = crossings(self.sensors[[i, j]], b_i, b_j)
+        return np.column_stack((fx, fy)), kept
+
+    def _pair_jacobian(self, i: int, j: int, points: np.ndarray) -> np.ndarray:
+        """|det d(beta_i, beta_j) / d(x, y)| = |sin(beta_i - beta_j)| / (r_i r_j)."""
+        di = points - self.sensors[i]
+        dj = points - self.sensors[j]
+        cross = di[:, 0] * dj[:, 1] - di[:, 1] * dj[:, 0]
+        return np.abs(cross) / (np.einsum("ij,ij->i", di, di) * np.einsum("ij,ij->i", dj, dj))
+
+    def sample(self, n: int, rng) -> np.ndarray:
+        """Draw ``n`` positions from the exact presence map (the bearings' likelihood under a
+        flat prior), restricted to bearing errors within ``SAMPLE_SIGMAS`` sigmas.
+
+        Perturbing two bearings and re-triangulating (Walsh's generative story) draws from
+        L_ij(P) |det d(beta_i, beta_j)/dP|, not from L(P): each draw is kept with probability
+        J_min / J(P) times the likelihood factors of the other sensors, J = |sin(beta_i - beta_j)|
+        / (r_i r_j) and J_min its minimum over the corners of the SAMPLE_SIGMAS bearing box (J
+        is smallest there: farthest out, narrowest crossing). Rejection makes the draws exact.
+        """
+        n, rng = check_n(n), check_rng(rng)
+        i, j = self._best_pair()
+        box = SAMPLE_SIGMAS * np.array([self.sigmas[i], self.sigmas[j]])
+        corners_i = self.bearings[i] + np.array([-1, -1, 1, 1]) * box[0]
+        corners_j = self.bearings[j] + np.array([-1, 1, -1, 1]) * box[1]
+        corner_points, corner_ok = self._crossings(i, j, corners_i, corners_j)
+        if not corner_ok.all():
+            raise BananagridError(
+                f"bearings: within {SAMPLE_SIGMAS:g} sigma the lines of sensors {i} and {j} can cross "
+                "behind a station or not at all; the fix is too poor to sample"
+            )
+        j_min = self._pair_jacobian(i, j, corner_points).min()
+        others = [k for k in range(len(self.bearings)) if k not in (i, j)]
+        out = np.empty((0, 2))
+        while len(out) < n:
+            m = max(4 * (n - len(out)), 64)
+            eps = rng.normal(size=(m, 2))
+            eps = eps[np.all(np.abs(eps) <= SAMPLE_SIGMAS, axis=1)]
+            points, ok = self._crossings(
+                i, j, self.bearings[i] + eps[:, 0] * self.sigmas[i], self.bearings[j] + eps[:, 1] * self.sigmas[j]
+            )
+            points = points[ok]
+            accept = j_min / self._pair_jacobian(i, j, points)
+            for k in others:
+                z = _wrap(bearing_to(self.sensors[k], points) - self.bearings[k]) / self.sigmas[k]
+                accept = accept * np.exp(-0.5 * z * z)
+            out = np.vstack((out, points[rng.uniform(size=len(points)) < accept]))
+        return out[:n]

@@ -1,0 +1,181 @@
+"""The exact CAT density: constant, unknown acceleration and turn rate (Gade et al.; eq. (1) of
+the polar-banana paper), with an optional normal error on the initial heading (Section 7)."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy.special import erfc
+
+from ..domains.pose import Pose
+from ..kernels import cat as kernels
+from ..protocol import Extent, KernelBinding, KernelContext, SceneKey, SceneSchema
+from ..validate import BananagridError, positive
+from ._cat_heading import clear_heading_tables, heading_table, ray_densities, table_binding
+from .base import check_n, check_rng
+from .motion import MOTION_KEYS, MotionModel, pose_arguments
+
+__all__ = ["CAT", "cat_position", "scan_nodes", "clear_heading_tables", "NODE_SPACING"]
+
+#: Turn-rate node spacing of the scan table, in units of omega t (radians). Root pairs closer
+#: than this are still found by the fold search; the spacing bounds how many extrema of F one
+#: interval can hold.
+NODE_SPACING = 0.1
+MIN_NODES = 64
+MAX_NODES = 8192
+
+
+def cat_position(v0, t, a, omega) -> np.ndarray:
+    """Local CAT position of eq. (1) for arrays of accelerations and turn rates, shape (n, 2).
+
+    Written with u = omega t as  v0 t (A, B) + a t^2 (C, D)  (see ``kernels.common.cat_basis``);
+    C and D use their series below |u| = 1e-2, where the closed forms cancel.
+    """
+    u = np.asarray(omega, dtype=float) * t
+    a = np.asarray(a, dtype=float)
+    half = 0.5 * u
+    A = np.sin(half) * np.sinc(half / np.pi)  # np.sinc is normalised: sinc(x/pi) = sin(x)/x
+    B = np.sinc(u / np.pi)
+    small = np.abs(u) < 1e-2
+    us = np.where(small, 1.0, u)  # avoid 0/0 in the branch that is not used
+    C = np.where(small, u / 3 - u**3 / 30 + u**5 / 840, (np.sin(us) - us * np.cos(us)) / us**2)
+    D = np.where(small, 0.5 - u**2 / 8 + u**4 / 144, (np.cos(us) + us * np.sin(us) - 1) / us**2)
+    return np.column_stack((v0 * t * A + a * t * t * C, v0 * t * B + a * t * t * D))
+
+
+def scan_nodes(model: "CAT") -> np.ndarray:
+    """Turn-rate nodes of the CAT scan: uniform over +-k_sigma sigma_omega, ``NODE_SPACING``
+    apart in omega t (at least ``MIN_NODES``, at most ``MAX_NODES``)."""
+    span = 2.0 * model.k_sigma * model.sigma_omega * model.t  # in omega t
+    n = int(min(MAX_NODES, max(MIN_NODES, math.ceil(span / NODE_SPACING) + 1)))
+    half = model.k_sigma * model.sigma_omega
+    return np.linspace(-half, half, n)
+
+
+def _rotate(local: np.ndarray, theta0: np.ndarray) -> np.ndarray:
+    """Turn local points by theta0 (radians, clockwise: a heading error to starboard)."""
+    c, s = np.cos(theta0), np.sin(theta0)
+    x, y = local[:, 0], local[:, 1]
+    return np.column_stack((x * c + y * s, -x * s + y * c))
+
+
+@dataclass(frozen=True)
+class CAT(MotionModel):
+    """Constant, unknown acceleration and turn rate (Gade et al.; eq. (1) of the polar-banana paper).
+
+    From the origin, heading +y at speed ``v0``, the target moves for ``t`` seconds with constant
+    acceleration a ~ N(0, sigma_a) and turn rate omega ~ N(0, sigma_omega). Its density at (x, y)
+    is the sum over every (a, omega) reaching (x, y) of g(a) g(omega) / |det d(x,y)/d(a,omega)|.
+
+    Parameters
+    ----------
+    v0 : float
+        Initial speed, m/s, > 0.
+    t : float
+        Elapsed time, s, > 0.
+    sigma_a : float
+        Standard deviation of the acceleration, m/s^2, > 0.
+    sigma_omega : float
+        Standard deviation of the turn rate, rad/s, > 0.
+    k_sigma : float, default 8
+        Turn rates are searched within +-k_sigma * sigma_omega; the mass beyond,
+        erfc(k_sigma / sqrt 2) (1.2e-15 at 8), is reported as ``truncated_mass`` and excluded.
+    sigma_heading : float, default 0
+        Standard deviation sigma_0 (radians, >= 0) of a normal error theta_0 on the initial
+        heading (Section 7 of the polar-banana paper). The density is then the exact CAT density
+        convolved over the rotation by theta_0 about the origin:
+        p(r, theta) = integral of p_0(r, theta - theta_0) g(theta_0; 0, sigma_0) d theta_0, computed
+        on a polar lattice (exact wrapped-normal convolution by FFT along the bearing, then
+        interpolation; see :mod:`bananagrid.models._cat_heading`). 0 gives the plain kernel exactly.
+    pose : Pose, default origin (0, 0), heading north
+        Places the local frame in the world.
+
+    Notes
+    -----
+    For a fixed turn rate omega the position is affine in the acceleration a, so a point P is
+    reached at omega iff F(omega) = h(omega) x (P - v0 f(omega)) = 0, and dF/domega = -det J
+    there. Each cell scans a table of F's coefficients at :func:`scan_nodes`, refines each sign
+    change by Newton from the cubic Hermite root and searches intervals where |F| dips towards
+    zero for root pairs (the banana folding over itself); see ``kernels/cat.py``.
+    """
+
+    v0: float
+    t: float
+    sigma_a: float
+    sigma_omega: float
+    k_sigma: float = 8.0
+    sigma_heading: float = 0.0
+    pose: Pose = field(default_factory=Pose)
+
+    kind = "cat"
+    #: float32 agreement with float64 where the density exceeds 1e-6 of its peak.
+    float32_rtol = 2e-4
+    scene = SceneSchema(
+        keys=(
+            MOTION_KEYS["v0"], MOTION_KEYS["t"], MOTION_KEYS["sigma_a"], MOTION_KEYS["sigma_omega"],
+            SceneKey("k_sigma", default="`8`", allowed="in [1, 38]: turn rates beyond +-k_sigma sigma_omega are left out"),
+            MOTION_KEYS["sigma_heading"], MOTION_KEYS["origin"], MOTION_KEYS["heading"],
+        ),
+        required=("v0", "sigma_a", "sigma_omega"),
+        timed=True,
+        build=lambda params: CAT(**pose_arguments(params)),
+        radial_curves=True,
+        summary="the exact CAT density (eq. (1) of the polar-banana paper), with heading noise convolved",
+    )
+
+    def __post_init__(self):
+        self._validate_motion()
+        k = positive("k_sigma", self.k_sigma)
+        if not 1.0 <= k <= 38.0:
+            raise BananagridError(f"k_sigma = {k!r}: must be in [1, 38] (beyond 38 the normal tail underflows)")
+        object.__setattr__(self, "k_sigma", k)
+
+    @property
+    def truncated_mass(self) -> float:
+        """Probability of |omega| > k_sigma sigma_omega, left out of the density."""
+        return float(erfc(self.k_sigma / math.sqrt(2.0)))
+
+    def bind(self, ctx: KernelContext, extent: Extent, *, grid: bool = False) -> KernelBinding:
+        """The scan kernels (``kernels/cat.py``) with their turn-rate table; with heading noise,
+        the interpolating kernels over a heading table covering ``extent``."""
+        pose = ctx.array(self.pose.as_array())
+        if self.sigma_heading > 0.0:
+            table = heading_table(self, *extent.radii(self.pose.origin), threads=ctx.threads)
+            return table_binding(ctx, table, pose, {
+                "k_sigma": self.k_sigma, "truncated_mass": self.truncated_mass, **table.notes(),
+            })
+        omegas = scan_nodes(self)
+        table = ctx.zeros((len(omegas), kernels.TABLE_COLUMNS))
+        ctx.launch(kernels.cat_table, dim=len(omegas),
+                   inputs=[ctx.array(omegas), ctx.scalar(self.v0), ctx.scalar(self.t), table])
+        # Newton stops when its step is below a few ulps of the searched range.
+        tol = 8.0 * np.finfo(ctx.dtype).eps * self.k_sigma * self.sigma_omega
+        params = (
+            table, ctx.scalar(self.v0), ctx.scalar(self.t), ctx.scalar(self.sigma_a),
+            ctx.scalar(self.sigma_omega), pose, ctx.scalar(tol),
+        )
+        notes = {"scan_nodes": len(omegas), "k_sigma": self.k_sigma, "truncated_mass": self.truncated_mass}
+        return KernelBinding(kernels.cat_grid, kernels.cat_points, params, "cat.cat_grid", notes)
+
+    def sample(self, n: int, rng) -> np.ndarray:
+        """Draw ``n`` world positions: a and omega from their normal laws, then eq. (1), turned
+        by a heading error theta_0 ~ N(0, sigma_heading) when there is one.
+
+        The turn rate is not truncated here (the truncated mass is below 1e-15 by default).
+        """
+        n, rng = check_n(n), check_rng(rng)
+        a = rng.normal(0.0, self.sigma_a, n)
+        omega = rng.normal(0.0, self.sigma_omega, n)
+        local = cat_position(self.v0, self.t, a, omega)
+        if self.sigma_heading > 0.0:
+            local = _rotate(local, rng.normal(0.0, self.sigma_heading, n))
+        return self.pose.to_world(local)
+
+    def ray_values(self, pose: Pose, radii: np.ndarray, angles: np.ndarray, *, threads=None) -> np.ndarray:
+        """p(r, theta) along rays; from the model's own pose with heading noise, exactly by the
+        Fourier series of the heading-convolved rows (no table interpolation)."""
+        if self.sigma_heading > 0.0 and pose == self.pose:
+            return ray_densities(self, radii, angles, threads=threads)
+        return super().ray_values(pose, radii, angles, threads=threads)

@@ -1,0 +1,123 @@
+"""What the two motion models of the polar-banana paper share: the CAT parameters (initial
+speed, elapsed time, acceleration and turn-rate SDs, heading error, pose), their validation,
+their length scales and their scene keys.
+
+:class:`~bananagrid.models.cat.CAT` (the exact density) and
+:class:`~bananagrid.models.polar.PolarBanana` (its polar approximations) derive from
+:class:`MotionModel`.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+
+import numpy as np
+
+from ..domains.pose import Pose
+from ..protocol import SceneKey
+from ..validate import BananagridError, non_negative, positive
+from .base import RANGE_SDS, Model
+
+__all__ = ["MotionModel", "natural_scales", "MOTION_KEYS", "pose_arguments"]
+
+
+def _sinc_slope_max(phi_max: float) -> tuple[float, float]:
+    """Largest |sinc'| and |scc'| on [0, phi_max] (scc of eq. (7))."""
+    phi = np.linspace(1e-6, phi_max, 512)
+    s, c = np.sin(phi), np.cos(phi)
+    dsinc = (phi * c - s) / phi**2
+    dscc = (4.0 * dsinc + s) / 3.0
+    return float(np.max(np.abs(dsinc))), float(np.max(np.abs(dscc)))
+
+
+def natural_scales(model: MotionModel) -> tuple[float, float]:
+    """Range and bearing scales (m, rad) of a CAT banana: heading-table spacings are these over
+    their resolutions, and rays sample the range scale.
+
+    The range SD is about sigma_a t^2 / 2 scc(phi) (Section 4.3), smallest at the largest bearing
+    that holds mass, phi_max = min(pi, 7 sigma_phi). On a circle the banana is as wide in
+    bearing as its range SD over the slope of its ridge, |dr/dphi| <= v0 t max|sinc'| +
+    3 sigma_a t^2 / 2 max|scc'| (from (3) with |a| <= 3 sigma_a), and never wider than sigma_phi.
+    """
+    sigma_phi = 0.5 * model.sigma_omega * model.t
+    phi_max = min(math.pi, 7.0 * sigma_phi)
+    scc = (4.0 * math.sin(phi_max) / phi_max - math.cos(phi_max)) / 3.0
+    radial = 0.5 * model.sigma_a * model.t**2 * scc
+    dsinc, dscc = _sinc_slope_max(phi_max)
+    slope = model.v0 * model.t * dsinc + 1.5 * model.sigma_a * model.t**2 * dscc
+    angular = min(sigma_phi, radial / slope) if slope > 0.0 else sigma_phi
+    return radial, angular
+
+
+class MotionModel(Model):
+    """A target that left ``pose`` at speed ``v0`` and moved for ``t`` seconds with a normal
+    acceleration (SD ``sigma_a``) and turn rate (SD ``sigma_omega``), its initial heading known
+    to ``sigma_heading``. Subclasses are frozen dataclasses with these fields."""
+
+    v0: float
+    t: float
+    sigma_a: float
+    sigma_omega: float
+    sigma_heading: float
+    pose: Pose
+
+    def _validate_motion(self) -> None:
+        """The parameters every motion model shares: v0, t, sigma_a, sigma_omega > 0,
+        sigma_heading >= 0 and a Pose."""
+        for name in ("v0", "t", "sigma_a", "sigma_omega"):
+            object.__setattr__(self, name, positive(name, getattr(self, name)))
+        object.__setattr__(self, "sigma_heading", non_negative("sigma_heading", self.sigma_heading))
+        if not isinstance(self.pose, Pose):
+            raise BananagridError(f"pose = {self.pose!r}: expected a bananagrid.Pose")
+
+    def polar_scales(self, origin=(0.0, 0.0)) -> tuple[float, float]:
+        """Smallest widths of the banana's features about its own pose: ``(radial_m, angular_rad)``.
+
+        The radial scale is half the range SD at phi = 0, ``sigma_a t^2 / 4``: the SD of r given
+        phi is sigma_a t^2 / 2 scc(phi) (11), and half of sigma_a t^2 / 2 keeps scc >= 1/2
+        (|phi| <= 2.4 rad) covered. The angular scale is ``min(sigma_omega t / 2, radial /
+        (v0 t))``: the bearing SD, or the turn that moves the ridge r = P_mu(phi) by the radial
+        scale (it moves by at most v0 t per radian, |d sinc / d phi| < 0.44). Heading noise only
+        smooths and is ignored; so is ``origin`` (the scales are the banana's own).
+        """
+        radial = 0.25 * self.sigma_a * self.t**2
+        angular = min(0.5 * self.sigma_omega * self.t, radial / (self.v0 * self.t))
+        return radial, angular
+
+    def feature_scale(self) -> float:
+        """The radial scale, or the angular scale at the range where the mass lies (v0 t)."""
+        radial, angular = self.polar_scales()
+        return min(radial, angular * self.v0 * self.t)
+
+    def radial_extent(self, pose: Pose) -> tuple[float, float]:
+        """Range scale :func:`natural_scales` and the bound v0 t + 12 range SDs (sigma_a t^2 / 2),
+        plus the distance from ``pose``'s origin to the model's."""
+        sd = 0.5 * self.sigma_a * self.t**2
+        bound = self.v0 * self.t + RANGE_SDS * sd
+        if pose.origin != self.pose.origin:
+            bound += math.dist(pose.origin, self.pose.origin)
+        return natural_scales(self)[0], bound
+
+
+def pose_arguments(params: Mapping) -> dict:
+    """Keyword arguments of a motion model from scene parameters in SI units: ``origin`` and
+    ``heading`` become its :class:`~bananagrid.Pose`."""
+    kwargs = dict(params)
+    pose = Pose(origin=kwargs.pop("origin", (0.0, 0.0)), heading=kwargs.pop("heading", 0.0))
+    return {**kwargs, "pose": pose}
+
+
+#: Scene keys of both motion models, by name (each model lists them in its own order).
+MOTION_KEYS = {
+    "v0": SceneKey("v0", unit="m/s", allowed="finite, > 0"),
+    "t": SceneKey("t", unit="s", default="required, unless `scene.times`",
+                  allowed="finite, > 0; refused with `scene.times`"),
+    "sigma_a": SceneKey("sigma_a", unit="m/s^2", allowed="finite, > 0"),
+    "sigma_omega": SceneKey("sigma_omega", unit="rad/s", allowed="finite, > 0", alias="deg"),
+    "sigma_heading": SceneKey("sigma_heading", unit="rad", default="`0`", alias="deg",
+                              allowed="finite, >= 0: SD of a normal error on the initial heading (Section 7)"),
+    "origin": SceneKey("origin", type="pair", unit="m", default="`[0, 0]`", allowed="finite: the last fix"),
+    "heading": SceneKey("heading", unit="rad", default="`0` (north)", alias="deg",
+                        allowed="finite; the initial heading, a bearing clockwise from north"),
+}

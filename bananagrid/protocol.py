@@ -1,0 +1,307 @@
+"""The model protocol: what a model provides so that everything else can compute it.
+
+The engine, the polar lattices, the radial laws, batches, scenes and recordings talk to a model
+only through :class:`DensityModel`; none of them asks a model for its type. A model owns what
+differs between models:
+
+* its parameters, validated at construction, and their plain-data form (:meth:`parameters`);
+* its densities: the Warp kernels and arguments it hands the engine (:meth:`bind`, returning a
+  :class:`KernelBinding`), through which ``pdf`` and ``rasterise`` run;
+* its generative story (:meth:`sample`), the Monte Carlo oracle;
+* its length scales (:meth:`polar_scales`, :meth:`feature_scale`) and radial bounds
+  (:meth:`radial_extent`), from which lattices size their quadrature and rays their support;
+* its scene keys (:attr:`scene`, a :class:`SceneSchema`) and its stated float32 agreement.
+
+:class:`bananagrid.models.base.Model` implements the parts that most models share (``pdf``
+through the engine, ``parameters`` from dataclass fields, rays through ``pdf``).
+
+This module sits below the engine and the models: the engine implements
+:class:`KernelContext` (Warp arrays and launches for the run's dtype and device) and consumes
+:class:`KernelBinding`; models build bindings through the context and never import Warp.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass, field
+from typing import Any, ClassVar, Protocol, runtime_checkable
+
+import numpy as np
+
+from .domains.pose import Pose
+
+__all__ = [
+    "DensityModel", "BatchModel", "KernelBinding", "KernelContext", "Extent", "SceneKey", "SceneSchema",
+    "KEY_TYPES",
+]
+
+
+class KernelContext(Protocol):
+    """Warp arrays and launches in one dtype on one device: the engine's half of a binding.
+
+    Attributes
+    ----------
+    dtype : numpy.dtype
+        The kernels' scalar type (float32 or float64).
+    device : str
+        Warp device (``"cpu"``, ``"cuda"``).
+    threads : int
+        CPU threads the run may use.
+    """
+
+    dtype: np.dtype
+    device: str
+    threads: int
+
+    def scalar(self, value: float) -> Any:
+        """``value`` as the kernels' scalar type."""
+
+    def array(self, values, *, dtype=None) -> Any:
+        """A device array of ``values`` in the kernels' scalar type (or ``dtype``: numpy
+        float64, int32, or a Warp vector type)."""
+
+    def zeros(self, shape, *, dtype=None) -> Any:
+        """A zeroed device array (scalar type unless ``dtype``)."""
+
+    def empty(self, shape, *, dtype=None) -> Any:
+        """An uninitialised device array (scalar type unless ``dtype``)."""
+
+    def vector(self, length: int) -> Any:
+        """The Warp vector type of ``length`` lanes of the scalar type (e.g. SIMD scratch)."""
+
+    def launch(self, kernel, *, dim, inputs) -> None:
+        """Launch ``kernel`` over ``dim`` with ``inputs`` on this context's device."""
+
+    def numpy(self, array) -> np.ndarray:
+        """A device array as a NumPy array (waits for the device)."""
+
+
+class Extent(Protocol):
+    """Where the points of one engine call lie, seen from a model's frame."""
+
+    def radii(self, origin: tuple[float, float]) -> tuple[float, float]:
+        """Least and greatest distance from ``origin`` to the points that will be queried."""
+
+
+@dataclass(frozen=True)
+class KernelBinding:
+    """A model bound to its kernels, ready for the engine to launch.
+
+    The grid kernel takes ``(xs, ys, row0, *params, out)`` and computes one cell per thread
+    over ``dim = (rows, nx)``; with ``row_loop`` it takes ``(xs, ys, row0, columns, *params,
+    out)`` and loops over ``columns`` cells of a row per thread; with ``tile_rows`` as well,
+    ``(xs, ys, row0, row_end, rows, columns, *params, ...)`` for blocks of rows. The points
+    kernel takes ``(xs, ys, offset, *params, out)``.
+
+    Attributes
+    ----------
+    grid_kernel, points_kernel : Warp kernels
+    params : tuple
+        The kernels' arguments after the coordinates (device arrays and scalars).
+    kernel_name : str
+        ``module.kernel`` for provenance.
+    notes : dict
+        Provenance entries of this binding (scan nodes, truncated mass, ...).
+    row_loop : bool
+        Whether the grid kernel loops over columns of a row (see above).
+    bands_per_thread : int
+        Row bands per CPU thread: one where every row costs the same (fewest launches), many
+        where the cost follows the density.
+    scratch_width : int
+        Scratch values per band that the grid kernel takes after ``params``:
+        ``(scratch[n_bands, width], band)``; 0 for none.
+    quad_width : int
+        Vector (4-lane) scratch per band, taken between the scratch and the band's index.
+    tile_rows : int
+        Rows per thread of a row-looping kernel that takes blocks of rows on the CPU (one cell
+        per thread on a GPU); 0 for one row.
+    """
+
+    grid_kernel: Any
+    points_kernel: Any
+    params: tuple
+    kernel_name: str
+    notes: dict = field(default_factory=dict)
+    row_loop: bool = False
+    bands_per_thread: int = 16
+    scratch_width: int = 0
+    quad_width: int = 0
+    tile_rows: int = 0
+
+
+#: Value types of scene keys and how a scene writes them.
+KEY_TYPES = {
+    "number": "number",
+    "numbers": "array of numbers",
+    "pair": "`[x, y]`",
+    "pairs": "array of `[x, y]`",
+    "matrix": "2 x 2 array",
+    "choice": "string",
+}
+
+#: Alternative units a scene may use under ``NAME_ALIAS`` (converted to SI when it is loaded).
+ALIASES = {"deg": "degrees", "kn": "knots"}
+
+
+@dataclass(frozen=True)
+class SceneKey:
+    """One parameter a scene layer may set.
+
+    Attributes
+    ----------
+    name : str
+        The parameter's name (SI units), also its scene key.
+    type : str
+        One of :data:`KEY_TYPES`.
+    unit : str
+        SI unit, for documentation ("" for none).
+    default : str
+        What holds when the key is absent, for documentation ("required" for required keys).
+    allowed : str
+        The domain, for documentation (the model checks it).
+    alias : str or None
+        ``"deg"``: the key may be given as ``NAME_deg`` in degrees; ``"kn"``: as ``NAME_kn`` in
+        knots.
+    choices : tuple of str
+        The allowed strings of a ``"choice"`` key.
+    """
+
+    name: str
+    type: str = "number"
+    unit: str = ""
+    default: str = "required"
+    allowed: str = "finite"
+    alias: str | None = None
+    choices: tuple = ()
+
+    def __post_init__(self):
+        if self.type not in KEY_TYPES:
+            raise ValueError(f"SceneKey {self.name}: type {self.type!r} not in {tuple(KEY_TYPES)}")
+        if self.alias is not None and self.alias not in ALIASES:
+            raise ValueError(f"SceneKey {self.name}: alias {self.alias!r} not in {tuple(ALIASES)}")
+
+    @property
+    def keys(self) -> tuple[str, ...]:
+        """The scene keys that set it: its name and, with an alias, ``NAME_ALIAS``."""
+        return (self.name,) if self.alias is None else (self.name, f"{self.name}_{self.alias}")
+
+
+@dataclass(frozen=True)
+class SceneSchema:
+    """How scene layers of one model kind are written.
+
+    Attributes
+    ----------
+    keys : tuple of SceneKey
+        Every parameter a layer may give, in documentation order.
+    required : tuple of str
+        Parameters every layer needs (from its table or ``[defaults]``); a timed kind also
+        needs ``t`` unless the scene gives ``scene.times``.
+    timed : bool
+        Whether the density depends on the elapsed time ``t`` (then ``scene.times`` applies).
+    build : callable
+        ``build(params) -> model`` from the parameters in SI units (no aliases).
+    missing : callable, optional
+        ``missing(given) -> list of str``: further keys a layer lacks, for rules the key list
+        cannot say (one of two ways to give a value; keys that depend on another's value).
+        ``given`` maps each parameter to ``(key path, value as written, value in SI)``. It raises
+        :class:`~bananagrid.BananagridError` for keys that contradict each other.
+    message_keys : Mapping
+        Names in the model's error messages that are not scene keys, mapped to the key that
+        sets them (e.g. a speed law's fields).
+    radial_curves : bool
+        Whether layers of this kind can record the conditional radial curves (``[radial]``).
+    summary : str
+        One line for the scene documentation.
+    """
+
+    keys: tuple
+    required: tuple
+    timed: bool
+    build: Callable
+    missing: Callable | None = None
+    message_keys: Mapping = field(default_factory=dict)
+    radial_curves: bool = False
+    summary: str = ""
+
+    @property
+    def key_names(self) -> tuple[str, ...]:
+        """Every scene key, aliases included, in documentation order."""
+        return tuple(k for key in self.keys for k in key.keys)
+
+    def key(self, name: str) -> SceneKey:
+        """The :class:`SceneKey` of parameter ``name``."""
+        for key in self.keys:
+            if key.name == name:
+                return key
+        raise KeyError(name)
+
+
+@runtime_checkable
+class DensityModel(Protocol):
+    """A model of where a target is: a density per m^2 in the world plane (x east, y north).
+
+    Class attributes
+    ----------------
+    kind : str
+        Its scene name (``model = "KIND"``).
+    scene : SceneSchema
+        Its scene keys.
+    float32_rtol : float
+        Stated agreement of float32 with float64 kernels, relative, where the density exceeds
+        1e-6 of its peak (tested over every registered model).
+    """
+
+    kind: ClassVar[str]
+    scene: ClassVar[SceneSchema]
+    float32_rtol: ClassVar[float]
+
+    @property
+    def pose(self) -> Pose | None:
+        """The model's local frame (origin at the last fix, +y along the initial heading), or
+        None for a model without one."""
+
+    def parameters(self) -> dict:
+        """Plain-data parameters for provenance and recordings (``{"model": NAME, ...}``)."""
+
+    def bind(self, ctx: KernelContext, extent: Extent, *, grid: bool) -> KernelBinding:
+        """The kernels and arguments that compute the density at points within ``extent``
+        (``grid``: for the grid kernel, which may skip cells the model proves negligible)."""
+
+    def pdf(self, x, y, *, dtype=np.float64, device: str = "cpu") -> np.ndarray:
+        """Density per m^2 at world points (``x``, ``y`` broadcast), through the kernels."""
+
+    def sample(self, n: int, rng) -> np.ndarray:
+        """``n`` world positions from the model's generative story, shape ``(n, 2)``."""
+
+    def polar_scales(self, origin: tuple[float, float]) -> tuple[float, float]:
+        """Smallest widths of the density's features seen from ``origin`` (or from the model's
+        own pose, if it has one): ``(radial_m, angular_rad)``."""
+
+    def feature_scale(self) -> float:
+        """Smallest width of the density's features in metres, in any direction."""
+
+    def radial_extent(self, pose: Pose) -> tuple[float, float]:
+        """``(range scale, greatest range worth scanning)`` of rays from ``pose``: the scale
+        bounds the range SD from below, beyond the range the density is negligible."""
+
+    def ray_values(self, pose: Pose, radii: np.ndarray, angles: np.ndarray, *, threads=None) -> np.ndarray:
+        """p(r, theta) at ``radii`` x ``angles`` (bearings clockwise from ``pose``'s heading),
+        shape ``(len(radii), len(angles))``."""
+
+
+@runtime_checkable
+class BatchModel(Protocol):
+    """A model kind whose hypotheses can be computed many at a time
+    (:mod:`bananagrid.engine.batch`): one launch over (hypothesis, row) of their own grids."""
+
+    @classmethod
+    def frame_bounds(cls, models: Sequence[DensityModel], sds: float) -> np.ndarray:
+        """World boxes ``(x0, x1, y0, y1)``, shape ``(H, 4)``, each holding its hypothesis to
+        ``sds`` standard deviations."""
+
+    @classmethod
+    def batch_binding(cls, ctx: KernelContext, models: Sequence[DensityModel]) -> KernelBinding:
+        """The batch kernels: ``grid_kernel`` over (hypothesis, row) taking ``(xs[H, nx],
+        ys[H, ny], h0, *params, out[H, ny, nx])`` and ``points_kernel`` over hypotheses taking
+        ``(x[N], y[N], h0, *params, out[H, N])``."""

@@ -1,0 +1,124 @@
+"""Recording a bearing fix: sensors, bearing lines with +-2 sigma wedges, the fix, its error
+ellipse and R50 / R95 circles, the difference of the exact and linear maps, and the
+linearisation validation table. Everything is in world metres under a layer entity, whose
+north-up transform :func:`bananagrid.recording.core.log_raster` has set. The registry names this
+module as the ``bearing_fix`` kind's recording extras (:func:`log_layer_extras`,
+:func:`layer_views`)."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import rerun as rr
+
+from ..models.bearing import BearingFix
+from ..results import Raster
+from .core import entity_path, log_signed_image, strict
+
+__all__ = [
+    "log_layer_extras", "layer_views", "log_bearing_geometry", "log_difference", "log_validation_table",
+    "WEDGE_SIGMAS",
+]
+
+#: Half-width of the drawn bearing wedges, in sigmas.
+WEDGE_SIGMAS = 2.0
+#: Points of the drawn ellipse and circles.
+OUTLINE_POINTS = 181
+
+SENSOR_COLOUR = (255, 255, 255)
+LINE_COLOUR = (255, 200, 0)
+WEDGE_COLOUR = (255, 200, 0, 110)
+FIX_COLOUR = (255, 60, 60)
+ELLIPSE_COLOUR = (255, 60, 60)
+CIRCLE_COLOURS = {"R50": (0, 220, 255), "R95": (255, 0, 255)}
+
+
+def _ray(origin: np.ndarray, bearing: float, length: float) -> np.ndarray:
+    return np.array([origin, origin + length * np.array([math.sin(bearing), math.cos(bearing)])])
+
+
+def _circle(centre: np.ndarray, radius: float) -> np.ndarray:
+    angle = np.linspace(0.0, 2.0 * math.pi, OUTLINE_POINTS)
+    return centre + radius * np.column_stack((np.cos(angle), np.sin(angle)))
+
+
+def _ellipse(fix: BearingFix, k: float) -> np.ndarray:
+    """The k-sigma ellipse {P : (P - fix)^T C^-1 (P - fix) = k^2} as a closed polyline."""
+    values, vectors = np.linalg.eigh(fix.covariance)
+    angle = np.linspace(0.0, 2.0 * math.pi, OUTLINE_POINTS)
+    unit = np.column_stack((np.cos(angle), np.sin(angle))) * (k * np.sqrt(values))
+    return fix.fix + unit @ vectors.T
+
+
+def log_bearing_geometry(rec: rr.RecordingStream, entity: str, fix: BearingFix, *, ellipse_k: float = 2.0) -> None:
+    """Log the fix's geometry under ``entity``: ``sensors`` (points), ``bearings`` (lines to
+    1.5 times the farthest sensor-fix range), ``wedges`` (+-WEDGE_SIGMAS sigma), ``fix``,
+    ``ellipse`` (the ``ellipse_k``-sigma ellipse), ``circles`` (R50 and R95 about the fix)."""
+    entity = entity_path(entity)
+    reach = 1.5 * float(np.max(np.hypot(*(fix.fix - fix.sensors).T)))
+    r50, r95 = (float(r) for r in fix.radius([0.5, 0.95]))
+    ellipse = fix.ellipse(ellipse_k)
+    with strict():
+        rec.log(
+            f"{entity}/sensors",
+            rr.Points2D(fix.sensors, colors=SENSOR_COLOUR, radii=rr.Radius.ui_points(6.0),
+                        labels=[f"sensor {i}" for i in range(len(fix.sensors))]),
+        )
+        rec.log(
+            f"{entity}/bearings",
+            rr.LineStrips2D([_ray(s, b, reach) for s, b in zip(fix.sensors, fix.bearings)],
+                            colors=LINE_COLOUR, radii=rr.Radius.ui_points(1.0)),
+        )
+        wedges = [
+            _ray(s, b + side * WEDGE_SIGMAS * sd, reach)
+            for s, b, sd in zip(fix.sensors, fix.bearings, fix.sigmas) for side in (-1.0, 1.0)
+        ]
+        rec.log(f"{entity}/wedges", rr.LineStrips2D(wedges, colors=WEDGE_COLOUR, radii=rr.Radius.ui_points(0.7)))
+        rec.log(f"{entity}/fix", rr.Points2D([fix.fix], colors=FIX_COLOUR, radii=rr.Radius.ui_points(5.0), labels=["fix"]))
+        rec.log(
+            f"{entity}/ellipse",
+            rr.LineStrips2D([_ellipse(fix, ellipse_k)], colors=ELLIPSE_COLOUR, radii=rr.Radius.ui_points(1.5),
+                            labels=[f"{ellipse_k:g}-sigma ellipse ({ellipse['probability']:.3f})"]),
+        )
+        rec.log(
+            f"{entity}/circles",
+            rr.LineStrips2D([_circle(fix.fix, r50), _circle(fix.fix, r95)],
+                            colors=[CIRCLE_COLOURS["R50"], CIRCLE_COLOURS["R95"]], radii=rr.Radius.ui_points(1.5),
+                            labels=[f"R50 = {r50:.0f} m", f"R95 = {r95:.0f} m"]),
+        )
+        rec.log(
+            f"{entity}/containment",
+            rr.AnyValues(r50=r50, r95=r95, fix_x=float(fix.fix[0]), fix_y=float(fix.fix[1]),
+                         semi_major=float(ellipse["semi_major"]), semi_minor=float(ellipse["semi_minor"])),
+        )
+
+
+def log_difference(rec: rr.RecordingStream, path: str, exact: Raster, linear: Raster) -> None:
+    """exact - linear (both as given, e.g. normalised), per m^2, as an image with a diverging
+    colormap symmetric about zero, placed in world metres like the layer's density."""
+    log_signed_image(rec, path, exact.values - linear.values, exact)
+
+
+def log_validation_table(rec: rr.RecordingStream, entity: str, table_text: str, summary: str) -> None:
+    """The linearisation validation table (``bearing_validation.format_table``) as markdown."""
+    with strict():
+        rec.log(
+            entity_path(entity),
+            rr.TextDocument(f"{summary}\n\n```\n{table_text}\n```", media_type=rr.MediaType.MARKDOWN),
+            static=True,
+        )
+
+
+def log_layer_extras(rec: rr.RecordingStream, entity: str, fix: BearingFix, raster: Raster, *, compute) -> None:
+    """Beside a bearing-fix layer: its geometry (``entity/geometry``) and, for the exact map,
+    its difference to the linear one (``entity/difference_to_linear``; ``compute(model)``
+    rasterises the linear fix as the layer was)."""
+    log_bearing_geometry(rec, f"{entity}/geometry", fix)
+    if fix.variant == "exact":
+        log_difference(rec, f"{entity}/difference_to_linear", raster, compute(fix.with_variant("linear")))
+
+
+def layer_views(entity: str, fix: BearingFix) -> tuple[list[str], list]:
+    """The exact map's difference image as one more tab of the layer; no further views."""
+    return (["difference_to_linear"] if fix.variant == "exact" else []), []

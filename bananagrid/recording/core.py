@@ -1,0 +1,504 @@
+"""Log rasters, scene text and a default blueprint into rerun recordings.
+
+Every function takes the :class:`rerun.RecordingStream` explicitly; nothing here touches
+rerun's global or thread-default recording.
+
+Layout of one layer ``entity`` (all of it in world metres, x east, y north):
+
+- ``entity``: a static ``Transform3D`` with scale ``(1, -1, 1)``. rerun's 2D views draw y
+  downwards; this flip puts north at the top of the screen for everything below ``entity``.
+- ``entity/density``: ``DepthImage`` (float32) of the density per square metre, stored with
+  its rows north first (image row 0 is the top), and a ``Transform3D`` from pixels to world
+  metres, so the centre of ``values[i, j]`` lands on ``(x[j], y[i])``.
+- ``entity/log10_density``: the same in ``log10``, cells at or below ``10**floor`` set to the
+  floor (``floor = log10(min(levels)) - LOG10_FLOOR_DECADES``).
+- ``entity/contours``: ``LineStrips2D`` at the contour levels, one colour per level.
+- ``entity/info``: ``AnyValues`` with the flattened provenance, mass, peak and grid.
+- ``entity/mass``: ``Scalars`` with the captured mass, a time series over ``elapsed``.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import uuid
+from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
+from pathlib import Path
+
+import numpy as np
+import rerun as rr
+import rerun.blueprint as rrb
+from rerun.error_utils import catch_and_log_exceptions
+
+from ..analysis.contours import DEFAULT_LEVELS, contour_lines
+from ..results import Raster
+from ..validate import BananagridError, non_negative, positive
+
+__all__ = [
+    "DEFAULT_LEVELS",
+    "ELAPSED",
+    "colormaps",
+    "default_blueprint",
+    "elapsed_nanos",
+    "entity_path",
+    "flatten",
+    "image_from_values",
+    "log_north_up",
+    "log_raster",
+    "log_scene_text",
+    "new_recording",
+    "recording_id_for",
+    "send_blueprint",
+    "set_elapsed",
+    "strict",
+    "values_from_image",
+    "write_recording",
+]
+
+#: Name of the duration timeline that carries the banana's elapsed time ``t``.
+ELAPSED = "elapsed"
+
+#: How many decades below the lowest contour level the log10 image is floored.
+LOG10_FLOOR_DECADES = 2.0
+
+#: Contour colours (RGB), one per level in the order given, cycled. Light and saturated so
+#: that they stand out on both viridis and turbo.
+LEVEL_COLOURS = ((255, 255, 255), (255, 99, 71), (255, 200, 0), (0, 220, 255), (255, 0, 255))
+
+#: Draw contours above the images in a 2D view.
+CONTOUR_DRAW_ORDER = 30.0
+
+_NAMESPACE = uuid.UUID("6f1c1a52-3c1e-4c55-9d0e-7e2b8f0a9b1d")
+
+
+# --- recordings -------------------------------------------------------------------------------
+
+
+def recording_id_for(content: str) -> str:
+    """A recording id that depends on ``content`` only (a UUIDv5), e.g. the scene text."""
+    return str(uuid.uuid5(_NAMESPACE, content))
+
+
+def new_recording(application_id: str = "bananagrid", *, recording_id: str) -> rr.RecordingStream:
+    """A recording stream whose output depends only on what is logged to it.
+
+    rerun adds wall-clock data by default; both sources are switched off here, so that two
+    runs of the same content give recordings that ``rerun rrd compare`` finds equal:
+
+    - ``send_properties=False`` drops the ``/__properties`` ``start_time`` (wall clock),
+    - ``set_log_time_enabled(False)`` drops the ``log_time`` timeline (``log_tick`` too).
+
+    The recording id is the caller's (see :func:`recording_id_for`), never a random one.
+    The ``elapsed`` timeline starts at 0 on the calling thread, so no row is ever logged
+    without a timeline (rerun would then decide on its own whether it is static).
+
+    Parameters
+    ----------
+    application_id : str
+        rerun application id; recordings with the same id share blueprints in the viewer.
+    recording_id : str
+        Non-empty id of this recording.
+    """
+    if not isinstance(recording_id, str) or not recording_id:
+        raise BananagridError(f"recording_id = {recording_id!r}: expected a non-empty string")
+    rec = rr.RecordingStream(application_id, recording_id=recording_id, send_properties=False)
+    rec.set_log_time_enabled(False)
+    rec.set_log_tick_enabled(False)
+    set_elapsed(rec, 0.0)
+    return rec
+
+
+def elapsed_nanos(seconds: float) -> int:
+    """Elapsed ``seconds`` as the integer nanoseconds stored on the ``elapsed`` timeline."""
+    return round(non_negative("elapsed", seconds) * 1e9)
+
+
+def set_elapsed(rec: rr.RecordingStream, seconds: float) -> None:
+    """Put what this thread logs next to ``rec`` at ``elapsed = seconds`` (duration timeline)."""
+    rec.set_time(ELAPSED, duration=np.timedelta64(elapsed_nanos(seconds), "ns"))
+
+
+def write_recording(
+    path: str | os.PathLike,
+    build: Callable[[rr.RecordingStream], None],
+    *,
+    recording_id: str,
+    blueprint: rrb.BlueprintLike | None = None,
+    application_id: str = "bananagrid",
+) -> Path:
+    """Write a recording to ``path`` atomically.
+
+    The recording goes to ``.NAME.partial`` beside ``path``; ``build(rec)`` logs into it, the
+    stream is flushed and closed (which writes the footer), and only then is the file renamed
+    to ``path``. If anything raises, the partial file is removed and the error re-raised, so
+    ``path`` is either the complete new recording or untouched.
+
+    Parameters
+    ----------
+    path : path-like
+        Final ``.rrd`` path; its directory must exist.
+    build : callable
+        ``build(rec)`` logs everything into the open recording.
+    recording_id : str
+        Passed to :func:`new_recording`.
+    blueprint : rerun blueprint, optional
+        Embedded as the default blueprint of the file (see :func:`default_blueprint`).
+    application_id : str
+        Passed to :func:`new_recording`.
+
+    Returns
+    -------
+    Path
+        The final path.
+    """
+    final = Path(path)
+    partial = final.with_name(f".{final.name}.partial")
+    rec = new_recording(application_id, recording_id=recording_id)
+    if not rec.is_enabled():
+        raise BananagridError(f"{final}: rerun logging is disabled (is RERUN=off set?)")
+    try:
+        _open_file(rec, partial, blueprint)
+        try:
+            build(rec)
+        finally:
+            _close(rec)
+        os.replace(partial, final)
+    except BaseException:
+        partial.unlink(missing_ok=True)
+        raise
+    return final
+
+
+def _open_file(rec: rr.RecordingStream, path: Path, blueprint: rrb.BlueprintLike | None) -> None:
+    """Start streaming ``rec`` to ``path``; rerun writes the blueprint as its own store."""
+    try:
+        rec.save(path, default_blueprint=blueprint)
+    except RuntimeError as exc:
+        raise BananagridError(f"{path}: cannot write recording: {exc}") from None
+
+
+def _close(rec: rr.RecordingStream) -> None:
+    """Flush everything logged and close the file sink (this writes the RRD footer)."""
+    rec.flush()
+    rec.disconnect()
+
+
+# --- blueprint --------------------------------------------------------------------------------
+
+
+def default_blueprint(
+    layer_entities: Sequence[str],
+    *,
+    scene_entity: str = "scene",
+    extra_images: Sequence[str] = (),
+    text_entities: Sequence[str] = (),
+    extra_views: Sequence[rrb.View] = (),
+) -> rrb.Blueprint:
+    """The default layout: per layer a density and a log10 view, beside the scene and mass.
+
+    Parameters
+    ----------
+    layer_entities : sequence of str
+        The ``entity`` paths given to :func:`log_raster`.
+    scene_entity : str
+        The entity given to :func:`log_scene_text`.
+    extra_images : sequence of str
+        Further images under some layers (``"layers/NAME/IMAGE"``), each shown as one more
+        tab of its layer (e.g. a bearing fix's difference to its linear map).
+    text_entities : sequence of str
+        Further text documents (e.g. a validation table), each a tab beside the scene text.
+    extra_views : sequence of rerun views
+        Further views (e.g. radial-curve plots), as tabs below the maps.
+    """
+    layers = [entity_path(e) for e in layer_entities]
+    extras = [entity_path(e) for e in extra_images]
+    texts = [rrb.TextDocumentView(origin=f"/{entity_path(scene_entity)}", name="scene")]
+    texts += [rrb.TextDocumentView(origin=f"/{entity_path(e)}", name=entity_path(e)) for e in text_entities]
+    side = rrb.Vertical(
+        rrb.Tabs(*texts) if len(texts) > 1 else texts[0],
+        rrb.TimeSeriesView(
+            origin="/", contents=[f"/{e}/mass" for e in layers], name="captured mass"
+        ),
+        row_shares=[2, 1],
+    )
+    if not layers:
+        return rrb.Blueprint(side, collapse_panels=False)
+    top = rrb.Horizontal(
+        rrb.Grid(*(_layer_tabs(e, [x.rsplit("/", 1)[1] for x in extras if x.rsplit("/", 1)[0] == e]) for e in layers)),
+        side, column_shares=[3, 1],
+    )
+    if extra_views:
+        top = rrb.Vertical(top, rrb.Tabs(*extra_views), row_shares=[3, 2])
+    return rrb.Blueprint(top, collapse_panels=False)
+
+
+def _layer_tabs(entity: str, extra_images: Sequence[str] = ()) -> rrb.Tabs:
+    """Density and log10 density views of one layer (and any extra images), each with its
+    contours and whatever geometry the layer carries."""
+    return rrb.Tabs(
+        *(_map_view(entity, image) for image in ("density", "log10_density", *extra_images)),
+        name=entity,
+    )
+
+
+def _map_view(entity: str, image: str) -> rrb.Spatial2DView:
+    """A 2D view of one image, the contours and the layer's geometry overlay (if any); rooted
+    at ``/`` so the north-up flip applies."""
+    return rrb.Spatial2DView(
+        origin="/",
+        contents=[f"/{entity}/{image}", f"/{entity}/contours", f"/{entity}/geometry/**"],
+        name=f"{entity} {image}",
+    )
+
+
+def send_blueprint(rec: rr.RecordingStream, blueprint: rrb.BlueprintLike) -> None:
+    """Send ``blueprint`` into ``rec``'s sinks as the active and default blueprint.
+
+    With a file sink the blueprint is written into the ``.rrd`` as a separate blueprint store.
+    :func:`write_recording` embeds its ``blueprint`` argument already.
+    """
+    rec.send_blueprint(blueprint, make_active=True, make_default=True)
+
+
+# --- scene text -------------------------------------------------------------------------------
+
+
+def log_scene_text(rec: rr.RecordingStream, text: str, entity: str = "scene") -> None:
+    """Log the scene file as a static markdown ``TextDocument`` (a fenced TOML block).
+
+    rerun renders ``text/plain`` and ``text/markdown`` only, so the TOML goes in a fence.
+    """
+    with strict():
+        rec.log(
+            entity_path(entity),
+            rr.TextDocument(_fenced(text, "toml"), media_type=rr.MediaType.MARKDOWN),
+            static=True,
+        )
+
+
+def _fenced(text: str, language: str) -> str:
+    """``text`` in a markdown code fence longer than any backtick run inside it."""
+    fence = "`" * max(3, _longest_run(text, "`") + 1)
+    return f"{fence}{language}\n{text.rstrip()}\n{fence}\n"
+
+
+def _longest_run(text: str, char: str) -> int:
+    """Length of the longest run of ``char`` in ``text``."""
+    best = run = 0
+    for c in text:
+        run = run + 1 if c == char else 0
+        best = max(best, run)
+    return best
+
+
+# --- rasters ----------------------------------------------------------------------------------
+
+
+def log_raster(
+    rec: rr.RecordingStream,
+    entity: str,
+    raster: Raster,
+    *,
+    levels: Iterable[float] = DEFAULT_LEVELS,
+    colormap: str = "viridis",
+    log10_colormap: str = "turbo",
+) -> None:
+    """Log one raster as a layer under ``entity`` at the current ``elapsed`` time.
+
+    See the module docstring for the entities written. Call :func:`set_elapsed` first when a
+    scene has several times.
+
+    Parameters
+    ----------
+    rec : rerun.RecordingStream
+        Where to log.
+    entity : str
+        Layer path, e.g. ``"cat"`` or ``"layers/cat"``.
+    raster : Raster
+        Density per square metre; values must be finite.
+    levels : iterable of float
+        Contour levels, density per square metre, > 0.
+    colormap, log10_colormap : str
+        rerun colormap names for the density and the log10 density.
+    """
+    entity = entity_path(entity)
+    levels = tuple(positive(f"levels[{k}]", level) for k, level in enumerate(levels))
+    _check_values(raster)
+    with strict():
+        log_north_up(rec, entity)
+        _log_density(rec, f"{entity}/density", raster, colormap)
+        _log_log10_density(rec, f"{entity}/log10_density", raster, levels, log10_colormap)
+        _log_contours(rec, f"{entity}/contours", raster, levels)
+        rec.log(f"{entity}/info", rr.AnyValues(**raster_info(raster)))
+        rec.log(f"{entity}/mass", rr.Scalars(float(raster.mass)))
+
+
+def log_north_up(rec: rr.RecordingStream, entity: str) -> None:
+    """Make ``entity``'s subtree (world metres, y north) show north up in a 2D view."""
+    rec.log(entity_path(entity), rr.Transform3D(scale=(1.0, -1.0, 1.0)), static=True)
+
+
+def image_from_values(values: np.ndarray) -> np.ndarray:
+    """Grid values (row 0 south) as a float32 image (row 0 north, the image's top row)."""
+    return np.ascontiguousarray(np.flipud(values), dtype=np.float32)
+
+
+def values_from_image(image: np.ndarray) -> np.ndarray:
+    """Inverse of :func:`image_from_values`: image rows back to grid rows (row 0 south)."""
+    return np.ascontiguousarray(np.flipud(image))
+
+
+def raster_info(raster: Raster) -> dict[str, float | str]:
+    """Flat ``{key: number or string}`` of the raster's provenance, mass, peak and grid.
+
+    Nested keys are joined with ``.`` (``grid.origin.0``); numbers become float so that a
+    key keeps one arrow type across times; booleans become ``"true"``/``"false"``.
+    """
+    info = {
+        "provenance": raster.provenance,
+        "quantity": raster.quantity,
+        "mass": raster.mass,
+        "normalised": raster.normalised,
+        "peak": raster.peak,
+        "grid": raster.grid.describe(),
+    }
+    return dict(flatten("", info))
+
+
+def flatten(prefix: str, value) -> Iterator[tuple[str, float | str]]:
+    """Yield ``(dotted key, leaf)`` pairs of nested mappings and sequences."""
+    if isinstance(value, Mapping):
+        for key, item in value.items():
+            yield from flatten(f"{prefix}.{key}" if prefix else str(key), item)
+    elif isinstance(value, (list, tuple, np.ndarray)):
+        for k, item in enumerate(value):
+            yield from flatten(f"{prefix}.{k}", item)
+    elif value is not None:
+        yield prefix, _leaf(value)
+
+
+def _leaf(value) -> float | str:
+    """A plain number or string for AnyValues."""
+    if isinstance(value, (bool, np.bool_)):
+        return "true" if value else "false"
+    if isinstance(value, (int, float, np.integer, np.floating)):
+        return float(value)
+    return str(value)
+
+
+def _check_values(raster: Raster) -> None:
+    """Raise unless the values match the grid and are finite (a colour range needs both)."""
+    values = np.asarray(raster.values)
+    if values.shape != raster.grid.shape:
+        raise BananagridError(
+            f"raster values have shape {values.shape}, the grid needs {raster.grid.shape}"
+        )
+    if not np.all(np.isfinite(values)):
+        raise BananagridError("raster values contain NaN or inf; cannot record them")
+
+
+def _log_density(rec: rr.RecordingStream, path: str, raster: Raster, colormap: str) -> None:
+    """The density image with range ``(0, peak)`` and its pixel-to-world transform."""
+    peak = raster.peak
+    image = rr.DepthImage(
+        image_from_values(raster.values),
+        meter=1.0,
+        colormap=colormap,
+        depth_range=(0.0, peak if peak > 0.0 else 1.0),
+    )
+    rec.log(path, image, _pixel_to_world(raster))
+
+
+def _log_log10_density(
+    rec: rr.RecordingStream, path: str, raster: Raster, levels: Sequence[float], colormap: str
+) -> None:
+    """``log10`` of the density, floored (see :func:`log10_floor`), and the same transform."""
+    floor = log10_floor(levels)
+    values = np.asarray(raster.values, dtype=np.float64)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        logs = np.where(values > 10.0**floor, np.log10(values), floor)
+    top = float(logs.max())
+    image = rr.DepthImage(
+        image_from_values(logs),
+        meter=1.0,
+        colormap=colormap,
+        depth_range=(floor, top if top > floor else floor + 1.0),
+    )
+    rec.log(path, image, _pixel_to_world(raster))
+
+
+def log_signed_image(rec: rr.RecordingStream, path: str, values: np.ndarray, like: Raster) -> None:
+    """A signed field on ``like``'s grid (a difference, a relative error) as an image with a
+    diverging colormap symmetric about zero, placed in world metres like ``like``'s density."""
+    bound = float(np.max(np.abs(values))) or 1.0
+    with strict():
+        rec.log(
+            entity_path(path),
+            rr.DepthImage(image_from_values(values), meter=1.0, colormap="cyantoyellow", depth_range=(-bound, bound)),
+            _pixel_to_world(like),
+        )
+
+
+def colormaps() -> tuple[str, ...]:
+    """The colormap names rerun knows, in lower case."""
+    return tuple(c.name.lower() for c in rr.components.Colormap)
+
+
+def log10_floor(levels: Sequence[float]) -> float:
+    """Floor of the log10 image: ``LOG10_FLOOR_DECADES`` below the lowest level.
+
+    Zero cells (``log10 = -inf``) and anything below the floor are shown at the floor. With no
+    levels the default levels decide.
+    """
+    return math.log10(min(levels or DEFAULT_LEVELS)) - LOG10_FLOOR_DECADES
+
+
+def _pixel_to_world(raster: Raster) -> rr.Transform3D:
+    """Pixels of :func:`image_from_values` to world metres.
+
+    Image pixel ``(u, v)`` covers ``[u, u+1] x [v, v+1]`` and row ``v = 0`` is the northern
+    row, so ``x = x0 + dx u`` and ``y = y1 - dy v``; the centre of ``values[i, j]``, pixel
+    ``(j + 1/2, ny - i - 1/2)``, lands on ``(x[j], y[i])``.
+    """
+    x0, _, _, y1 = raster.grid.extent
+    return rr.Transform3D(translation=(x0, y1, 0.0), scale=(raster.grid.dx, -raster.grid.dy, 1.0))
+
+
+def _log_contours(
+    rec: rr.RecordingStream, path: str, raster: Raster, levels: Sequence[float]
+) -> None:
+    """One strip per contour piece, coloured and labelled by level (empty list clears)."""
+    strips, colours, labels = [], [], []
+    for k, (level, pieces) in enumerate(contour_lines(raster, levels).items()):
+        strips += pieces
+        colours += [LEVEL_COLOURS[k % len(LEVEL_COLOURS)]] * len(pieces)
+        labels += [f"{level:g} m^-2"] * len(pieces)
+    rec.log(
+        path,
+        rr.LineStrips2D(
+            strips,
+            colors=colours,
+            labels=labels,
+            radii=rr.Radius.ui_points(1.5),
+            draw_order=CONTOUR_DRAW_ORDER,
+        ),
+    )
+
+
+# --- helpers ----------------------------------------------------------------------------------
+
+
+def entity_path(entity: str) -> str:
+    """``entity`` without leading or trailing slashes; raise if that leaves nothing."""
+    if not isinstance(entity, str) or not entity.strip("/"):
+        raise BananagridError(f"entity = {entity!r}: expected a non-empty entity path")
+    return entity.strip("/")
+
+
+def strict() -> catch_and_log_exceptions:
+    """Make rerun raise on bad data inside this block instead of warning and dropping it.
+
+    A recording that silently lacks a layer is worse than an error: :func:`write_recording`
+    then removes the partial file. The setting is thread-local and restored on exit.
+    """
+    return catch_and_log_exceptions("bananagrid.recording", strict=True)

@@ -1,0 +1,360 @@
+r"""Recording an angular cell map (Pessentheiner): the lattice on the target, the
+(azimuth, elevation) table, the room and the mixture's sigma ellipses.
+
+Layout under one ``entity`` (default ``presence``); everything spatial is in world metres in
+the array frame (x, y horizontal, z up, the array at the origin, the target plane at z = -h):
+
+- ``entity/plane/cells``: the cells drawn on the plane z = -h (the frustum's mid-depth), a
+  ``Mesh3D`` of triangulated cell polygons (each cell in azimuth pieces of at most
+  ``MAX_PIECE_DEG`` so that chords stand for arcs), clipped to the room's (x, y) rectangle where
+  a region is given, else cut at the radius ``far``; one flat colour per cell from
+  :data:`VIRIDIS` on log10 of its probability p(C | S) between ``log10_floor`` and the largest.
+  The line geometry (Section 4) draws its cells as coloured segments (``LineStrips3D``) of the
+  line y = 0, z = -h (the paper's y = -h of the (x, y) plane is the world's z here).
+- ``entity/plane/room``: the room outline, ``LineStrips3D`` (its box when a z range is given,
+  else its rectangle on the target plane; the line's room is its x interval and z range).
+- ``entity/plane/components``: each Gaussian component's (x, y) marginal 1-, 2- and 3-sigma
+  ellipses on the target plane (line: its 1-, 2- and 3-sigma intervals), labelled.
+- ``entity/plane/array``: the array, a point at the origin.
+- ``entity/table``: the probabilities as a ``DepthImage`` (float32) with the azimuths along the
+  columns and the elevations down the rows (row 0 the first elevation, e.g. the horizon, the
+  last row the nadir), range (0, largest); the line geometry gives one row.
+- ``entity/log10_table``: the same in log10, floored at ``log10_floor``.
+- ``entity/summary``: ``AnyValues``: ``total`` (sum of p(C | S)), ``region_probability``
+  (p(S)), ``largest_error`` (largest error estimate of a cell), ``cells``, ``peak`` (largest
+  cell probability) and the flattened provenance without run-dependent values (timings,
+  thread counts), so that two runs give equal recordings.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import rerun as rr
+import rerun.blueprint as rrb
+
+from ..domains.region import Region
+from ..models.presence import GaussianMixture, UniformPresence
+from ..results import CellMap
+from ..validate import BananagridError, positive
+from .core import entity_path, flatten, strict
+
+__all__ = [
+    "log_cell_map", "presence_blueprint", "cell_colours", "table_image", "log10_probabilities", "summary_values",
+    "cell_mesh", "VIRIDIS", "LOG10_FLOOR", "MAX_PIECE_DEG", "RUN_ONLY_PROVENANCE",
+]
+
+#: log10 of the smallest probability the colour scale shows (cells below it get its colour).
+LOG10_FLOOR = -12.0
+#: Cells are drawn in azimuth pieces of at most this many degrees: a chord then departs from
+#: its arc by at most r (1 - cos 1 deg) = 1.5e-4 r.
+MAX_PIECE_DEG = 2.0
+#: viridis sampled at 0, 1/8, ..., 1 (matplotlib's table, rounded to 8 bits); the cells' colours
+#: interpolate it linearly (rerun's colormaps are not exposed for meshes). The table images use
+#: rerun's own viridis, so both views share one scale.
+VIRIDIS = np.array([
+    (68, 1, 84), (71, 44, 122), (59, 81, 139), (44, 113, 142), (33, 145, 140),
+    (39, 173, 129), (92, 200, 99), (170, 220, 50), (253, 231, 37),
+], dtype=float)
+#: Provenance keys left out of the recording (they change from run to run).
+RUN_ONLY_PROVENANCE = ("seconds", "threads")
+
+ROOM_COLOUR = (255, 255, 255)
+ARRAY_COLOUR = (255, 60, 60)
+SIGMA_COLOURS = {1: (255, 255, 255), 2: (255, 200, 0), 3: (255, 0, 255)}
+OUTLINE_POINTS = 121
+
+
+def cell_colours(prob: np.ndarray, log10_floor: float = LOG10_FLOOR) -> tuple[np.ndarray, tuple[float, float]]:
+    """RGB (uint8) of each probability on the log10 viridis scale and that scale's range.
+
+    The range is ``(log10_floor, log10(largest))`` (one decade above the floor when nothing
+    exceeds it); probabilities at or below ``10**log10_floor``, zeros included, get the floor's
+    colour.
+    """
+    logs = log10_probabilities(prob, log10_floor)
+    top = float(np.max(logs, initial=log10_floor))
+    top = top if top > log10_floor else log10_floor + 1.0
+    s = np.clip((logs - log10_floor) / (top - log10_floor), 0.0, 1.0) * (len(VIRIDIS) - 1)
+    k = np.minimum(np.floor(s).astype(int), len(VIRIDIS) - 2)
+    f = (s - k)[..., None]
+    rgb = VIRIDIS[k] * (1.0 - f) + VIRIDIS[k + 1] * f
+    return np.round(rgb).astype(np.uint8), (log10_floor, top)
+
+
+def table_image(values: np.ndarray) -> np.ndarray:
+    """Per-cell values (``[azimuth, elevation]``, or ``[azimuth]`` for a line) as a float32
+    image: columns azimuths, rows elevations (row 0 the first elevation); one row for a line."""
+    v = np.asarray(values)
+    image = v[None, :] if v.ndim == 1 else v.T
+    return np.ascontiguousarray(image, dtype=np.float32)
+
+
+def log10_probabilities(prob: np.ndarray, log10_floor: float = LOG10_FLOOR) -> np.ndarray:
+    """log10 of each probability (float64), ``log10_floor`` at or below ``10**log10_floor``."""
+    p = np.asarray(prob, dtype=float)
+    with np.errstate(divide="ignore"):
+        return np.where(p > 10.0**log10_floor, np.log10(np.where(p > 0, p, 1.0)), log10_floor)
+
+
+def log_cell_map(
+    rec: rr.RecordingStream,
+    entity: str,
+    cell_map: CellMap,
+    presence: GaussianMixture | UniformPresence,
+    region: Region | None = None,
+    *,
+    names=None,
+    room_z: tuple[float, float] | None = None,
+    far: float | None = None,
+    log10_floor: float = LOG10_FLOOR,
+) -> None:
+    """Log a cell map, its room and its presence law under ``entity`` (see the module docstring).
+
+    Parameters
+    ----------
+    rec : rerun.RecordingStream
+    entity : str
+        Root entity, e.g. ``"presence"``.
+    cell_map : CellMap
+        From :func:`bananagrid.cell_probabilities`.
+    presence : GaussianMixture or UniformPresence
+        The law the map was computed from (its components are drawn).
+    region : Region, optional
+        The room S the map is conditioned on (default ``cell_map.region``); the cells are
+        clipped to its (x, y) rectangle (line: its x interval).
+    names : sequence of str, optional
+        Component names for the ellipse labels (default ``component 0``, ...).
+    room_z : (float, float), optional
+        The room's z range for the outline when the region has none (plane and line).
+    far : float, optional
+        m, > 0: radius at which cells are cut when there is no region (default 10 h).
+    log10_floor : float
+        Bottom of the colour scale (log10 of a probability), < 0.
+    """
+    entity = entity_path(entity)
+    if not isinstance(cell_map, CellMap):
+        raise BananagridError(f"cell_map = {cell_map!r}: expected a bananagrid CellMap")
+    if not hasattr(presence, "region_probability"):
+        raise BananagridError(f"presence = {presence!r}: expected a GaussianMixture or a UniformPresence")
+    if not (math.isfinite(log10_floor) and log10_floor < 0.0):
+        raise BananagridError(f"log10_floor = {log10_floor!r}: must be finite and < 0")
+    if not np.all(np.isfinite(cell_map.prob)):
+        raise BananagridError("cell_map.prob contains NaN or inf; cannot record it")
+    lattice = cell_map.lattice
+    region = cell_map.region if region is None else region
+    far = 10.0 * lattice.h if far is None else positive("far", far)
+    n_comp = getattr(presence, "n_components", 0)  # a uniform law has none
+    names = [f"component {i}" for i in range(n_comp)] if names is None else list(names)
+    if len(names) != n_comp:
+        raise BananagridError(f"names = {names!r}: expected {n_comp} names, one per component")
+    colours, (lo, top) = cell_colours(cell_map.prob, log10_floor)
+    plane = f"{entity}/plane"
+    with strict():
+        rec.log(f"{plane}/array", rr.Points3D([(0.0, 0.0, 0.0)], colors=ARRAY_COLOUR,
+                                               radii=rr.Radius.ui_points(6.0), labels=["array"]), static=True)
+        if lattice.geometry == "line":
+            strips, strip_colours = _line_cells(lattice, region, far, colours)
+            rec.log(f"{plane}/cells", rr.LineStrips3D(strips, colors=strip_colours, radii=rr.Radius.ui_points(4.0)))
+        else:
+            positions, triangles, vertex_colours = cell_mesh(lattice, region, far, colours)
+            rec.log(f"{plane}/cells", rr.Mesh3D(vertex_positions=positions, triangle_indices=triangles,
+                                                vertex_colors=vertex_colours))
+        room = _room_strips(lattice, region, room_z)
+        if room:
+            rec.log(f"{plane}/room", rr.LineStrips3D(room, colors=ROOM_COLOUR, radii=rr.Radius.ui_points(1.5)))
+        if n_comp:
+            strips, strip_colours, labels = _component_strips(presence, lattice, names)
+            rec.log(f"{plane}/components", rr.LineStrips3D(strips, colors=strip_colours, labels=labels,
+                                                            radii=rr.Radius.ui_points(1.2)))
+        peak = float(np.max(cell_map.prob))
+        rec.log(f"{entity}/table", rr.DepthImage(table_image(cell_map.prob), meter=1.0, colormap="viridis",
+                                                 depth_range=(0.0, peak if peak > 0.0 else 1.0)))
+        rec.log(f"{entity}/log10_table", rr.DepthImage(table_image(log10_probabilities(cell_map.prob, log10_floor)),
+                                                       meter=1.0, colormap="viridis", depth_range=(lo, top)))
+        rec.log(f"{entity}/summary", rr.AnyValues(**summary_values(cell_map)))
+
+
+def summary_values(cell_map: CellMap) -> dict:
+    """The numbers logged at ``entity/summary`` (see the module docstring)."""
+    err = cell_map.error if cell_map.error is not None else np.zeros_like(cell_map.prob)
+    kept = {k: v for k, v in cell_map.provenance.items() if k not in RUN_ONLY_PROVENANCE}
+    info = {
+        "total": float(np.sum(cell_map.prob)), "region_probability": float(cell_map.region_probability),
+        "largest_error": float(np.max(err, initial=0.0)), "cells": float(cell_map.prob.size),
+        "peak": float(np.max(cell_map.prob)),
+        "region": None if cell_map.region is None else cell_map.region.describe(),
+        "provenance": kept,
+    }
+    return dict(flatten("", info))
+
+
+def presence_blueprint(entity: str = "presence", scene_entity: str = "scene") -> rrb.Blueprint:
+    """The target plane in 3D beside the log10 and linear tables, the numbers and the scene."""
+    entity = entity_path(entity)
+    return rrb.Blueprint(
+        rrb.Horizontal(
+            rrb.Spatial3DView(origin=f"/{entity}/plane", name="cells on the target"),
+            rrb.Vertical(
+                rrb.Tabs(
+                    rrb.Spatial2DView(origin=f"/{entity}/log10_table", name="log10 p (azimuth across, elevation down)"),
+                    rrb.Spatial2DView(origin=f"/{entity}/table", name="p (azimuth across, elevation down)"),
+                ),
+                rrb.Tabs(
+                    rrb.TextDocumentView(origin=f"/{entity_path(scene_entity)}", name="scene"),
+                    rrb.DataframeView(origin=f"/{entity}/summary", name="numbers"),
+                ),
+                row_shares=[1, 1],
+            ),
+            column_shares=[3, 2],
+        ),
+        collapse_panels=False,
+    )
+
+
+# --- geometry ---------------------------------------------------------------------------------
+
+
+def cell_mesh(lattice, region, far: float, colours: np.ndarray):
+    """``(positions (n, 3) float32, triangles (m, 3) uint32, colours (n, 3) uint8)`` of the
+    cells on the plane z = -h: each cell in azimuth pieces of at most MAX_PIECE_DEG, each piece
+    the quadrilateral of its inner and outer radius (cut at ``far``), clipped to the region's
+    (x, y) rectangle if given, fan-triangulated, all vertices of a cell in its colour."""
+    inner, outer = lattice.radii()
+    phi = lattice.azimuth_edges
+    rect = None if region is None else np.asarray(region.bounds[:2], dtype=float)
+    if rect is not None:
+        corners = np.hypot(rect[0][[0, 1, 0, 1]], rect[1][[0, 0, 1, 1]])
+        far = 2.0 * float(corners.max()) + lattice.h  # beyond the room: the clip decides
+    outer = np.minimum(outer, far)
+    rings = np.nonzero(inner < outer)[0]
+    # azimuth pieces: (piece start, piece end, owning azimuth index)
+    widths = np.degrees(np.diff(phi))
+    n_piece = np.maximum(1, np.ceil(widths / MAX_PIECE_DEG - 1e-9).astype(int))
+    owner = np.repeat(np.arange(lattice.n_azimuth), n_piece)
+    frac = np.concatenate([np.arange(n) / n for n in n_piece])
+    step = np.diff(phi)[owner] / n_piece[owner]
+    a0 = phi[owner] + frac * np.diff(phi)[owner]
+    a1 = a0 + step
+    # quads (pieces x rings, 4 corners, xy), counter-clockwise seen from above
+    r0, r1 = inner[rings][None, :], outer[rings][None, :]
+    c0, s0, c1, s1 = (f(a)[:, None] for f, a in ((np.cos, a0), (np.sin, a0), (np.cos, a1), (np.sin, a1)))
+    quads = np.stack([np.stack([r0 * c0, r0 * s0], -1), np.stack([r0 * c1, r0 * s1], -1),
+                      np.stack([r1 * c1, r1 * s1], -1), np.stack([r1 * c0, r1 * s0], -1)], axis=2)
+    quad_colours = colours[owner[:, None], rings[None, :]]
+    quads = quads.reshape(-1, 4, 2)
+    quad_colours = quad_colours.reshape(-1, 3)
+    polys, poly_colours = [], []
+    if rect is None:
+        inside = np.ones(len(quads), bool)
+    else:
+        lo, hi = quads.min(axis=1), quads.max(axis=1)
+        outside = (hi[:, 0] < rect[0, 0]) | (lo[:, 0] > rect[0, 1]) | (hi[:, 1] < rect[1, 0]) | (lo[:, 1] > rect[1, 1])
+        inside = (lo[:, 0] >= rect[0, 0]) & (hi[:, 0] <= rect[0, 1]) & (lo[:, 1] >= rect[1, 0]) & (hi[:, 1] <= rect[1, 1])
+        for q in np.nonzero(~inside & ~outside)[0]:
+            poly = _dedupe(_clip(quads[q], rect))
+            if len(poly) >= 3:
+                polys.append(poly)
+                poly_colours.append(quad_colours[q])
+    n_in = int(inside.sum())
+    xy = [quads[inside].reshape(-1, 2)] + polys
+    sizes = [4] * n_in + [len(p) for p in polys]
+    starts = np.concatenate([[0], np.cumsum(sizes)[:-1]]).astype(np.int64)
+    triangles = [np.stack([starts[:n_in], starts[:n_in] + k, starts[:n_in] + k + 1], axis=1) for k in (1, 2)]
+    for start, n in zip(starts[n_in:], sizes[n_in:]):
+        triangles.append(start + np.stack([np.zeros(n - 2, int), np.arange(1, n - 1), np.arange(2, n)], axis=1))
+    vcols = [np.repeat(quad_colours[inside], 4, axis=0)] + [np.broadcast_to(c, (n, 3)) for c, n in zip(poly_colours, sizes[n_in:])]
+    xy = np.concatenate(xy)
+    pos = np.column_stack([xy, np.full(len(xy), -lattice.h)]).astype(np.float32)
+    return (pos, np.concatenate(triangles).reshape(-1, 3).astype(np.uint32),
+            np.concatenate(vcols).reshape(-1, 3).astype(np.uint8))
+
+
+def _clip(poly: np.ndarray, rect: np.ndarray) -> np.ndarray:
+    """Sutherland-Hodgman: the convex polygon ``poly`` (k, 2) within the rectangle ``rect``
+    (rows x, y of (low, high)); an empty (0, 2) array where they do not meet."""
+    inside = ((poly[:, 0] >= rect[0, 0]) & (poly[:, 0] <= rect[0, 1])
+              & (poly[:, 1] >= rect[1, 0]) & (poly[:, 1] <= rect[1, 1]))
+    if inside.all():
+        return poly
+    pts = list(poly)
+    for axis, bound, sign in ((0, rect[0, 0], 1.0), (0, rect[0, 1], -1.0), (1, rect[1, 0], 1.0), (1, rect[1, 1], -1.0)):
+        if not pts:
+            break
+        out = []
+        for a, b in zip(pts, pts[1:] + pts[:1]):
+            da, db = sign * (a[axis] - bound), sign * (b[axis] - bound)
+            if da >= 0.0:
+                out.append(a)
+            if (da >= 0.0) != (db >= 0.0):
+                t = da / (da - db)
+                out.append(a + t * (b - a))
+        pts = out
+    return np.array(pts).reshape(-1, 2)
+
+
+def _dedupe(poly: np.ndarray) -> np.ndarray:
+    """Drop consecutive repeated vertices (the nadir ring's inner radius is 0)."""
+    if len(poly) == 0:
+        return poly
+    nxt = np.roll(poly, -1, axis=0)
+    keep = np.any(np.abs(poly - nxt) > 1e-12 * (1.0 + np.abs(poly)), axis=1)
+    return poly[keep]
+
+
+def _line_cells(lattice, region, far: float, colours: np.ndarray):
+    """Segments of the line cells (x, 0, -h), clipped to the region's x interval (or +-far)."""
+    x = lattice.line_edges()
+    lo, hi = (region.x if region is not None else (-far, far))
+    x = np.clip(x, lo, hi)
+    strips, cols = [], []
+    for i in range(lattice.n_azimuth):
+        if x[i + 1] > x[i]:
+            strips.append([(x[i], 0.0, -lattice.h), (x[i + 1], 0.0, -lattice.h)])
+            cols.append(colours[i])
+    return strips, np.array(cols, dtype=np.uint8).reshape(-1, 3)
+
+
+def _room_strips(lattice, region, room_z):
+    """The room outline: box edges with a z range, else its rectangle (segment) at z = -h."""
+    if region is None:
+        return []
+    z = region.z if region.z is not None else room_z
+    h = lattice.h
+    if lattice.geometry == "line":
+        x0, x1 = region.x
+        if z is None:
+            return [[(x0, 0.0, -h), (x1, 0.0, -h)]]
+        return [[(x0, 0.0, z[0]), (x1, 0.0, z[0]), (x1, 0.0, z[1]), (x0, 0.0, z[1]), (x0, 0.0, z[0])]]
+    (x0, x1), (y0, y1) = region.x, region.y
+    ring = [(x0, y0), (x1, y0), (x1, y1), (x0, y1), (x0, y0)]
+    if z is None:
+        return [[(x, y, -h) for x, y in ring]]
+    strips = [[(x, y, z[0]) for x, y in ring], [(x, y, z[1]) for x, y in ring]]
+    strips += [[(x, y, z[0]), (x, y, z[1])] for x, y in ring[:4]]
+    return strips
+
+
+def _component_strips(mixture: GaussianMixture, lattice, names):
+    """Each component's 1-, 2-, 3-sigma (x, y) marginal ellipses at z = -h (line: intervals of
+    x, each k drawn 0.02 k m below the line so that they do not overlap)."""
+    strips, cols, labels = [], [], []
+    angle = np.linspace(0.0, 2.0 * math.pi, OUTLINE_POINTS)
+    circle = np.column_stack([np.cos(angle), np.sin(angle)])
+    h = lattice.h
+    for name, mu, cov in zip(names, mixture.means, mixture.covs):
+        if mixture.dim == 1:
+            sd = math.sqrt(cov[0, 0])
+            for k in (1, 2, 3):
+                strips.append([(mu[0] - k * sd, 0.0, -h - 0.02 * k), (mu[0] + k * sd, 0.0, -h - 0.02 * k)])
+                cols.append(SIGMA_COLOURS[k])
+                labels.append(f"{name} {k} sigma")
+            continue
+        values, vectors = np.linalg.eigh(cov[:2, :2])
+        for k in (1, 2, 3):
+            xy = mu[:2] + (circle * (k * np.sqrt(values))) @ vectors.T
+            strips.append(np.column_stack([xy, np.full(len(xy), -h)]))
+            cols.append(SIGMA_COLOURS[k])
+            labels.append(f"{name} {k} sigma")
+    return strips, np.array(cols, dtype=np.uint8), labels

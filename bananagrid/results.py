@@ -1,0 +1,287 @@
+"""Results: values on a domain, with the captured mass and the provenance.
+
+* :class:`Raster` — a density at the cell centres of a :class:`~bananagrid.Grid`;
+* :class:`PolarRaster` — densities and cell probabilities on a :class:`~bananagrid.PolarLattice`;
+* :class:`CellMap` — presence probabilities of the cells of an :class:`~bananagrid.AngularLattice`;
+* :class:`GridPresence` — a planar mixture's density and exact cell probabilities on a grid;
+* :class:`BatchRaster` — many hypotheses, each on its own grid.
+
+Every array says what it holds: a density (per m^2, or per (m, rad) on a polar lattice) at a
+cell centre, or a probability integrated over a cell.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+
+from .domains.angular_lattice import AngularLattice
+from .domains.grid import Grid
+from .domains.polar_lattice import PolarLattice
+from .domains.region import Region
+from .validate import BananagridError, finite
+
+__all__ = ["Raster", "PolarRaster", "CellMap", "GridPresence", "BatchRaster"]
+
+_TWO_PI = 2.0 * math.pi
+
+
+@dataclass(frozen=True)
+class Raster:
+    """A model's density sampled at the cell centres of a grid.
+
+    Attributes
+    ----------
+    values : ndarray, shape (ny, nx)
+        Density per square metre at each cell centre (``quantity == "density"``); rows south
+        to north. After :meth:`normalise` the values are scaled so that they sum to one over the
+        grid (times the cell area).
+    grid : Grid
+        The grid the values belong to.
+    mass : float
+        Probability mass captured by the grid before any normalisation: ``sum(values) * dx * dy``
+        of the raw density (midpoint rule). A value well below one says the grid misses mass.
+    normalised : bool
+        Whether ``values`` were divided by ``mass``.
+    provenance : dict
+        Model name and parameters, kernel, dtype, device, threads, seconds, truncation.
+    """
+
+    values: np.ndarray
+    grid: Grid
+    mass: float
+    normalised: bool = False
+    quantity: str = "density"
+    provenance: dict = field(default_factory=dict)
+
+    @property
+    def x(self) -> np.ndarray:
+        return self.grid.x
+
+    @property
+    def y(self) -> np.ndarray:
+        return self.grid.y
+
+    @property
+    def peak(self) -> float:
+        return float(np.max(self.values))
+
+    def normalise(self) -> "Raster":
+        """Return a copy whose values integrate to one over the grid; ``mass`` keeps the raw mass."""
+        if not self.mass > 0.0:
+            raise BananagridError(
+                f"cannot normalise a raster that captured no mass (mass = {self.mass!r}): "
+                "the grid misses the model's support"
+            )
+        if self.normalised:
+            return self
+        return replace(self, values=self.values / self.mass, normalised=True)
+
+
+@dataclass(frozen=True)
+class PolarRaster:
+    """A model on a :class:`PolarLattice`: densities at the cell centres and cell probabilities.
+
+    Attributes
+    ----------
+    density : ndarray, shape (n_range, n_bearing)
+        Density per (m, rad) at each cell centre, ``r p(x, y)`` with p the model's density per
+        m^2 (kernel dtype). ``sum(density) * dr * db`` is the midpoint-rule mass.
+    probability : ndarray, shape (n_range, n_bearing), float64
+        Probability of each cell: the integral of p over the cell, ``int int p r dr db``
+        (Gauss-Legendre, accuracy in ``provenance["accuracy"]``).
+    lattice : PolarLattice
+    mass : float
+        ``sum(probability)`` before any normalisation: the mass the lattice captures.
+    normalised : bool
+        Whether ``density`` and ``probability`` were divided by ``mass``.
+    provenance : dict
+        Model parameters, lattice, dtype, device, threads, seconds, nodes and the accuracy claim.
+    """
+
+    density: np.ndarray
+    probability: np.ndarray
+    lattice: PolarLattice
+    mass: float
+    normalised: bool = False
+    provenance: dict = field(default_factory=dict)
+
+    @property
+    def ranges(self) -> np.ndarray:
+        """Range cell centres, m."""
+        return self.lattice.range_centres
+
+    @property
+    def bearings(self) -> np.ndarray:
+        """Bearing cell centres, rad clockwise from the lattice's heading."""
+        return self.lattice.bearing_centres
+
+    def normalise(self) -> "PolarRaster":
+        """Return a copy whose probabilities sum to one; ``mass`` keeps the raw captured mass."""
+        if not self.mass > 0.0:
+            raise BananagridError(
+                f"cannot normalise a polar raster that captured no mass (mass = {self.mass!r}): "
+                "the lattice misses the model's support"
+            )
+        if self.normalised:
+            return self
+        return replace(
+            self,
+            density=self.density / np.asarray(self.mass, dtype=self.density.dtype),
+            probability=self.probability / self.mass,
+            normalised=True,
+        )
+
+
+@dataclass(frozen=True)
+class CellMap:
+    """Presence probability of each cell of an :class:`AngularLattice`.
+
+    Attributes
+    ----------
+    prob : ndarray
+        p(C | S) per cell, indexed [azimuth, elevation] (line: [azimuth]), float64.
+    lattice : AngularLattice
+    region : Region or None
+        The conditioning region S (cells clipped to it), if any.
+    region_probability : float
+        p(S) (1 without a region).
+    error : ndarray
+        Estimated absolute error of each probability (0 for exact ones): the sum over components
+        of |K15 - G7| divided by p(S), a conservative estimate of the Kronrod rule's error.
+    clipped_sizes : ndarray or None
+        Length, area or volume of each cell within S, if a region is given.
+    provenance : dict
+    """
+
+    prob: np.ndarray
+    lattice: AngularLattice
+    region: Region | None = None
+    region_probability: float = 1.0
+    error: np.ndarray | None = None
+    clipped_sizes: np.ndarray | None = None
+    provenance: dict = field(default_factory=dict)
+
+    @property
+    def azimuth_edges(self) -> np.ndarray:
+        return self.lattice.azimuth_edges
+
+    @property
+    def elevation_edges(self) -> np.ndarray:
+        return self.lattice.elevation_edges
+
+    @property
+    def sizes(self) -> np.ndarray:
+        return self.lattice.sizes
+
+    @property
+    def centroids(self) -> np.ndarray:
+        return self.lattice.centroids
+
+    def cell_polygons(self, n_arc: int = 8, far: float | None = None) -> np.ndarray:
+        """Outlines on the target plane in world coordinates (see AngularLattice.cell_polygons)."""
+        return self.lattice.cell_polygons(n_arc=n_arc, far=far)
+
+    def clutter_mask(self, threshold: float) -> np.ndarray:
+        """True where a cell's presence probability is below ``threshold`` (detections there are
+        treated as clutter, Section 11)."""
+        t = finite("threshold", threshold)
+        if not 0.0 <= t <= 1.0:
+            raise BananagridError(f"threshold = {t!r}: a probability threshold must be in [0, 1]")
+        return self.prob < t
+
+    def degree_indices(self) -> tuple[np.ndarray, ...]:
+        """The directions as integer degrees, uint16 (the paper's 16-bit angles, Section 2)."""
+        out = []
+        axes = [("azimuth", self.lattice.azimuths)]
+        if self.lattice.geometry != "line":  # a line has azimuths only (no elevations to read)
+            axes.append(("elevation", self.lattice.elevations))
+        for name, values in axes:
+            deg = np.degrees(values)
+            rounded = np.round(deg)
+            if np.max(np.abs(deg - rounded), initial=0.0) > 1e-6:
+                raise BananagridError(f"{name}s are not whole degrees: the lattice has no integer-degree index")
+            out.append((rounded % 360 if name == "azimuth" and self.lattice.geometry != "line" else rounded).astype(np.uint16))
+        return tuple(out)
+
+    def degree_table(self) -> np.ndarray:
+        """The probabilities in an array indexed by integer degrees: ``table[az_deg, el_deg]``
+        of shape (360, 181) (line: ``table[az_deg]``, 361), NaN for directions not in the lattice."""
+        idx = self.degree_indices()
+        if self.lattice.geometry == "line":
+            table = np.full(361, np.nan)
+            table[idx[0]] = self.prob
+            return table
+        table = np.full((360, 181), np.nan)
+        table[np.ix_(idx[0], idx[1])] = self.prob
+        return table
+
+    def world_map(self, x, y) -> np.ndarray:
+        """The presence map on the target plane z = -h in world coordinates: at each point
+        (x, y) (broadcast), the probability of the cell holding it divided by the cell's size
+        (clipped to S where a region is given); 0 outside the lattice (and S). Plane and frustum
+        (for the frustum: per m^3, the cell through the point at depth h)."""
+        if self.lattice.geometry == "line":
+            raise BananagridError("world_map: a line lattice has no plane map; use prob and lattice.line_edges()")
+        bx, by = np.broadcast_arrays(np.asarray(x, dtype=float), np.asarray(y, dtype=float))
+        lat = self.lattice
+        phi = np.arctan2(by, bx)
+        a0 = lat.azimuth_edges[0]
+        rel = (phi - a0) % _TWO_PI
+        ia = np.floor(rel / lat.azimuth_step).astype(int)
+        theta = math.pi - np.arctan2(np.hypot(bx, by), lat.h)
+        ie = np.searchsorted(lat.elevation_edges, theta, side="right") - 1
+        ie = np.where(theta == lat.elevation_edges[-1], lat.n_elevation - 1, ie)
+        ok = (ia >= 0) & (ia < lat.n_azimuth) & (ie >= 0) & (ie < lat.n_elevation)
+        size = self.clipped_sizes if self.clipped_sizes is not None else lat.sizes
+        with np.errstate(divide="ignore", invalid="ignore"):
+            dens = np.where(size > 0, self.prob / size, 0.0)
+        out = np.zeros(bx.shape)
+        out[ok] = dens[ia[ok], ie[ok]]
+        if self.region is not None:
+            b = self.region.bounds
+            out[(bx < b[0, 0]) | (bx > b[0, 1]) | (by < b[1, 0]) | (by > b[1, 1])] = 0.0
+        return out
+
+
+@dataclass(frozen=True)
+class GridPresence:
+    """A planar Gaussian mixture on a :class:`~bananagrid.Grid`.
+
+    Attributes
+    ----------
+    density : ndarray, shape (ny, nx)
+        Density per m^2 at each cell centre (rows south to north).
+    probability : ndarray, shape (ny, nx)
+        Exact probability of each rectangular cell (bivariate normal rectangle probabilities).
+    grid : Grid
+    mass : float
+        ``sum(probability)``: the mixture's probability of the grid's extent.
+    provenance : dict
+    """
+
+    density: np.ndarray
+    probability: np.ndarray
+    grid: Grid
+    mass: float
+    provenance: dict = field(default_factory=dict)
+
+
+@dataclass(frozen=True)
+class BatchRaster:
+    """Densities of H hypotheses on their own grids of one shape.
+
+    Attributes
+    ----------
+    values : ndarray (H, ny, nx)
+        Density per m^2 at each grid's cell centres (raw, not normalised).
+    grids : tuple of Grid
+    mass : ndarray (H,)
+        Captured mass of each (sum of values times its cell area).
+    """
+
+    values: np.ndarray
+    grids: tuple
+    mass: np.ndarray

@@ -1,0 +1,450 @@
+"""Scene files: parse a TOML scene, validate every key once, and build grids and models.
+
+A scene names a grid, one or more model layers and how to record them; see ``docs/scenes.md``
+for the schema. :func:`load_scene` and :func:`parse_scene` raise :class:`BananagridError` with
+one line that names the file, the key path (``layers.exact.sigma_a``), the value given and what
+is allowed; nothing downstream has to check a scene again. The model kinds and their keys come
+from the registry (:data:`bananagrid.models.registry.MODEL_KINDS`): pass ``kinds=`` to parse
+scenes with models of your own.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import re
+import tomllib
+from collections.abc import Mapping
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+from types import MappingProxyType
+
+from ..analysis.contours import DEFAULT_LEVELS
+from ..domains.grid import Grid
+from ..models.registry import MODEL_KINDS, ModelKind, Registry
+from ..protocol import DensityModel
+from ..recording.core import colormaps
+from ..validate import BananagridError, positive
+from . import keys
+from .keys import DTYPES, NAME_PATTERN, SceneKeyError, check_keys, show
+from .presence import PresenceScene, build_presence_scene
+
+__all__ = [
+    "Layer", "Scene", "RadialOutput", "load_scene", "parse_scene", "MODEL_KINDS", "PARAMETER_KEYS",
+    "TOP_KEYS", "RADIAL_KEYS", "SCENE_KEYS", "GRID_KEYS", "OUTPUT_KEYS",
+]
+
+#: Scene keys of every registered model kind.
+PARAMETER_KEYS = MappingProxyType({kind: spec.scene.key_names for kind, spec in MODEL_KINDS.items()})
+
+TOP_KEYS = ("scene", "grid", "output", "defaults", "layers", "radial")
+RADIAL_KEYS = ("layers", "density_bearings_deg", "moments_max_deg", "moments_step_deg")
+SCENE_KEYS = ("name", "title", "description", "times")
+GRID_KEYS = ("x", "y", "step", "dx", "dy")
+OUTPUT_KEYS = ("contour_levels", "normalise", "dtype", "colormap", "bearing_validation")
+
+
+@dataclass(frozen=True)
+class Layer:
+    """One model layer of a scene, validated.
+
+    Attributes
+    ----------
+    name : str
+        Layer name (the table name under ``[layers]``); its entity is ``layers/NAME``.
+    kind : str
+        Its model kind, a key of the registry (``"cat"``, ``"polar"``, ``"bearing_fix"``,
+        ``"butterly"``, or one of your own).
+    params : Mapping
+        Model parameters in SI units (m, s, m/s) and radians, ``[defaults]`` merged in, under
+        their scene names without ``_deg`` / ``_kn`` (``t`` absent when the scene has
+        ``times``).
+    model_kind : ModelKind, optional
+        The registry entry of ``kind`` (default: looked up in ``MODEL_KINDS``).
+    """
+
+    name: str
+    kind: str
+    params: Mapping = field(default_factory=dict)
+    model_kind: ModelKind | None = None
+
+    def __post_init__(self):
+        object.__setattr__(self, "params", MappingProxyType(dict(self.params)))
+        if self.model_kind is None:
+            object.__setattr__(self, "model_kind", MODEL_KINDS[self.kind])
+
+    def model(self, t: float | None = None) -> DensityModel:
+        """The layer's model at elapsed time ``t`` (s); by default the layer's own ``t``.
+        A model that does not change with time (a bearing fix) ignores ``t``.
+
+        Raises
+        ------
+        BananagridError
+            If no ``t`` is known, or a parameter is out of its domain.
+        """
+        kwargs = dict(self.params)
+        if self.model_kind.scene.timed:
+            if t is not None:
+                kwargs["t"] = t
+            if "t" not in kwargs:
+                raise BananagridError(f"layer {self.name}: no elapsed time t; pass model(t=...)")
+        return self.model_kind.build(kwargs)
+
+
+@dataclass(frozen=True)
+class RadialOutput:
+    """``[radial]``: the conditional radial curves of Figures 2-5 and 8 of the polar-banana
+    paper, for some motion layers (see :mod:`bananagrid.recording.radial`).
+
+    Attributes
+    ----------
+    layers : tuple of str
+        Names of the cat or polar layers that get curves.
+    density_bearings : tuple of float
+        Bearings (rad) at which p(r | theta) is drawn, exact beside its normal approximations.
+    moments_max : float
+        E[r | theta] and SD[r | theta] are drawn for theta in [0, moments_max] (rad); 0 for none.
+    moments_step : float
+        Bearing step of those curves (rad).
+    """
+
+    layers: tuple
+    density_bearings: tuple = ()
+    moments_max: float = 0.0
+    moments_step: float = math.radians(2.0)
+
+
+@dataclass(frozen=True)
+class Scene:
+    """A validated scene: a grid, model layers and recording options.
+
+    Attributes
+    ----------
+    name : str
+        Scene name, ``[A-Za-z0-9_-]+``; the output files are ``NAME.rrd`` and ``NAME.npz``.
+    title, description : str
+        Free text (title defaults to the name, description to "").
+    text : str
+        The scene file as written (logged into the recording).
+    source : str
+        Where the text came from (file path or ``"<string>"``), used in messages.
+    grid : Grid
+        The grid every layer is rasterised on.
+    bounds : ((float, float), (float, float))
+        The ``x`` and ``y`` bounds as written, m; :meth:`with_step` rebuilds the grid from them.
+    layers : tuple of Layer
+        In file order.
+    times : tuple of float or None
+        Elapsed times, s, strictly increasing; every layer is computed at each. None when the
+        layers give their own ``t``.
+    levels : tuple of float
+        Contour levels, density per m^2.
+    normalise : bool
+        Whether rasters are normalised over the grid before they are recorded.
+    dtype : str
+        Kernel precision, ``"float64"`` or ``"float32"``.
+    colormap : str
+        rerun colormap of the density images (lower case).
+    bearing_validation : bool
+        Whether the recording gets the Walsh linearisation validation table (Monte Carlo of
+        the true geometry over crossing angles and bearing errors; a few seconds).
+    radial : RadialOutput or None
+        The conditional radial curves to record, if the scene asks for them (``[radial]``).
+    """
+
+    name: str
+    title: str
+    description: str
+    text: str
+    source: str
+    grid: Grid
+    bounds: tuple
+    layers: tuple
+    times: tuple | None
+    levels: tuple
+    normalise: bool
+    dtype: str
+    colormap: str
+    bearing_validation: bool = False
+    radial: RadialOutput | None = None
+
+    def with_step(self, step: float) -> "Scene":
+        """A copy whose grid covers the same bounds with square cells of ``step`` metres."""
+        step = positive("step", step)
+        x, y = self.bounds
+        try:
+            grid = Grid.from_bounds(x=x, y=y, step=step)
+        except BananagridError as exc:
+            raise BananagridError(f"{self.source}: grid at step {step:g} m: {exc}") from None
+        return replace(self, grid=grid)
+
+    def jobs(self) -> list[tuple[Layer, float]]:
+        """Every (layer, elapsed time) to compute, time-major when the scene has times. A
+        bearing fix, timeless, is logged at t = 0 unless the scene has times."""
+        if self.times is None:
+            return [(layer, layer.params.get("t", 0.0)) for layer in self.layers]
+        return [(layer, t) for t in self.times for layer in self.layers]
+
+
+# --- entry points -----------------------------------------------------------------------------
+
+
+def load_scene(path: str | os.PathLike, *, kinds: Registry = MODEL_KINDS) -> Scene | PresenceScene:
+    """Read and validate the scene file at ``path`` (``kinds`` as for :func:`parse_scene`).
+
+    Raises
+    ------
+    BananagridError
+        If the file cannot be read, is not UTF-8 TOML, or breaks the schema.
+    """
+    path = Path(path)
+    try:
+        data = path.read_bytes()
+    except FileNotFoundError:
+        raise BananagridError(f"{path}: no such scene file") from None
+    except IsADirectoryError:
+        raise BananagridError(f"{path}: is a directory, expected a scene .toml file") from None
+    except OSError as exc:
+        raise BananagridError(f"{path}: cannot read: {exc.strerror or exc}") from None
+    try:
+        text = data.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        raise BananagridError(f"{path}: not UTF-8 text (byte {exc.start})") from None
+    return parse_scene(text, source=str(path), kinds=kinds)
+
+
+def parse_scene(text: str, source: str = "<string>", *, kinds: Registry = MODEL_KINDS) -> Scene | PresenceScene:
+    """Parse and validate scene TOML ``text``; ``source`` names it in error messages.
+
+    ``kinds``: the model kinds layers may use (default: the registry's; e.g.
+    ``MODEL_KINDS.with_kinds(ModelKind("mine", Mine))`` adds a model of your own).
+    """
+    try:
+        doc = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise BananagridError(f"{source}: invalid TOML: {exc}") from None
+    try:
+        if "array" in doc:  # a presence scene: bananagrid.scenes.presence
+            return build_presence_scene(doc, text, source)
+        return _build(doc, text, source, kinds)
+    except SceneKeyError as exc:
+        raise BananagridError(f"{source}: {exc}") from None
+
+
+# --- building the scene -----------------------------------------------------------------------
+
+
+def _build(doc: dict, text: str, source: str, kinds: Registry) -> Scene:
+    """Validate the parsed document table by table and assemble the Scene."""
+    check_keys(doc, TOP_KEYS, "")
+    head = keys.table(doc, "scene", required=True)
+    check_keys(head, SCENE_KEYS, "scene")
+    name = keys.name(head.get("name"), "scene.name", required=True)
+    title = keys.text(head, "title", "scene", default=name)
+    description = keys.text(head, "description", "scene", default="")
+    times = _times(head["times"]) if "times" in head else None
+    bounds, grid = _grid(keys.table(doc, "grid", required=True))
+    levels, normalise, dtype, colormap, bearing_validation = _output(keys.table(doc, "output"))
+    defaults = keys.table(doc, "defaults")
+    every_key = tuple(dict.fromkeys(k for kind in kinds.values() for k in kind.scene.key_names))
+    check_keys(defaults, every_key, "defaults")
+    if times is not None and "t" in defaults:
+        raise SceneKeyError(
+            f"defaults.t = {show(defaults['t'])}: not allowed when scene.times is given "
+            "(every layer is computed at every time)"
+        )
+    shared = keys.parameters(defaults, "defaults", keys.merged_keys(kind.scene.keys for kind in kinds.values()))
+    layers = _layers(keys.table(doc, "layers", required=True), shared, times, kinds)
+    radial = _radial(doc["radial"], layers) if "radial" in doc else None
+    return Scene(
+        name=name, title=title, description=description, text=text, source=source,
+        grid=grid, bounds=bounds, layers=layers, times=times, levels=levels,
+        normalise=normalise, dtype=dtype, colormap=colormap, bearing_validation=bearing_validation,
+        radial=radial,
+    )
+
+
+def _radial(value, layers) -> RadialOutput:
+    """``[radial]``: which motion layers get radial curves, at which bearings (degrees)."""
+    table = keys.table({"radial": value}, "radial")
+    check_keys(table, RADIAL_KEYS, "radial")
+    motion = [layer.name for layer in layers if layer.model_kind.scene.radial_curves]  # models with a pose
+    names = table.get("layers", motion)
+    if not isinstance(names, list) or not names:
+        raise SceneKeyError(f"radial.layers = {show(names)}: expected a non-empty list of cat or polar layer names")
+    for k, name in enumerate(names):
+        if name not in motion:
+            raise SceneKeyError(
+                f"radial.layers[{k}] = {show(name)}: not a cat or polar layer of this scene "
+                f"(those are: {', '.join(map(show, motion)) or 'none'})"
+            )
+    bearings = ()
+    if "density_bearings_deg" in table:
+        bearings = tuple(keys.numbers(table["density_bearings_deg"], "radial.density_bearings_deg"))
+        for k, b in enumerate(bearings):
+            if not (math.isfinite(b) and -180.0 < b <= 180.0):
+                raise SceneKeyError(
+                    f"radial.density_bearings_deg[{k}] = {show(table['density_bearings_deg'][k])}: "
+                    "must be in (-180, 180] degrees"
+                )
+    top = keys.number(table.get("moments_max_deg", 0.0), "radial.moments_max_deg")
+    if not (0.0 <= top <= 180.0):
+        raise SceneKeyError(f"radial.moments_max_deg = {show(table['moments_max_deg'])}: must be in [0, 180] degrees")
+    step = keys.number(table.get("moments_step_deg", 2.0), "radial.moments_step_deg")
+    if not (math.isfinite(step) and 0.0 < step <= 90.0):
+        raise SceneKeyError(f"radial.moments_step_deg = {show(table['moments_step_deg'])}: must be in (0, 90] degrees")
+    if not bearings and top == 0.0:
+        raise SceneKeyError("radial: give density_bearings_deg or moments_max_deg (> 0), or drop [radial]")
+    return RadialOutput(
+        layers=tuple(names), density_bearings=tuple(math.radians(b) for b in bearings),
+        moments_max=math.radians(top), moments_step=math.radians(step),
+    )
+
+
+def _times(value) -> tuple[float, ...]:
+    """``scene.times``: a non-empty list of finite elapsed times > 0, strictly increasing."""
+    path = "scene.times"
+    if not isinstance(value, list) or not value:
+        raise SceneKeyError(f"{path} = {show(value)}: expected a non-empty list of elapsed times in s")
+    times = tuple(keys.number(v, f"{path}[{k}]") for k, v in enumerate(value))
+    for k, t in enumerate(times):
+        if not (math.isfinite(t) and t > 0.0):
+            raise SceneKeyError(f"{path}[{k}] = {show(value[k])}: must be finite and > 0 (s)")
+        if k and not t > times[k - 1]:
+            raise SceneKeyError(
+                f"{path} = {show(value)}: must be strictly increasing "
+                f"({show(value[k - 1])} then {show(value[k])})"
+            )
+    return times
+
+
+def _grid(table: dict) -> tuple[tuple, Grid]:
+    """``[grid]``: bounds ``x``, ``y`` and ``step`` (or ``dx`` and ``dy``), all metres."""
+    check_keys(table, GRID_KEYS, "grid")
+    x = keys.pair(table, "x", "grid", required=True)
+    y = keys.pair(table, "y", "grid", required=True)
+    steps = {k: keys.number(table[k], f"grid.{k}") for k in ("step", "dx", "dy") if k in table}
+    if "step" in steps and len(steps) > 1:
+        raise SceneKeyError("grid: give either step or both dx and dy, not both")
+    if "step" not in steps and len(steps) != 2:
+        raise SceneKeyError("grid: step (m) is required (or both dx and dy)")
+    try:
+        return (x, y), Grid.from_bounds(x=x, y=y, **steps)
+    except BananagridError as exc:
+        raise SceneKeyError(keys.prefixed(str(exc), "grid", GRID_KEYS)) from None
+
+
+def _output(table: dict) -> tuple[tuple, bool, str, str, bool]:
+    """``[output]``: contour levels, normalisation, dtype, colormap and whether to add the
+    bearing-fix validation table, with defaults."""
+    check_keys(table, OUTPUT_KEYS, "output")
+    levels = DEFAULT_LEVELS
+    if "contour_levels" in table:
+        value = table["contour_levels"]
+        if not isinstance(value, list) or not value:
+            raise SceneKeyError(
+                f"output.contour_levels = {show(value)}: expected a non-empty list of densities (m^-2)"
+            )
+        levels = tuple(keys.number(v, f"output.contour_levels[{k}]") for k, v in enumerate(value))
+        for k, level in enumerate(levels):
+            if not (math.isfinite(level) and level > 0.0):
+                raise SceneKeyError(
+                    f"output.contour_levels[{k}] = {show(value[k])}: must be finite and > 0 (m^-2)"
+                )
+    normalise = table.get("normalise", True)
+    if not isinstance(normalise, bool):
+        raise SceneKeyError(f"output.normalise = {show(normalise)}: expected true or false")
+    dtype = table.get("dtype", "float64")
+    if dtype not in DTYPES:
+        raise SceneKeyError(f"output.dtype = {show(dtype)}: must be one of {', '.join(map(show, DTYPES))}")
+    colormap = table.get("colormap", "viridis")
+    allowed = _colormaps()
+    if not isinstance(colormap, str) or colormap.lower() not in allowed:
+        raise SceneKeyError(f"output.colormap = {show(colormap)}: must be one of {', '.join(allowed)}")
+    validation = table.get("bearing_validation", False)
+    if not isinstance(validation, bool):
+        raise SceneKeyError(f"output.bearing_validation = {show(validation)}: expected true or false")
+    return tuple(float(v) for v in levels), normalise, dtype, colormap.lower(), validation
+
+
+def _colormaps() -> tuple[str, ...]:
+    """The colormap names rerun knows, in lower case."""
+    return colormaps()
+
+
+def _layers(tables: dict, shared: dict, times, kinds: Registry) -> tuple[Layer, ...]:
+    """``[layers.NAME]`` tables in file order, each merged over ``[defaults]`` and checked.
+
+    ``shared`` holds the ``[defaults]`` parameters as returned by :func:`keys.parameters`.
+    """
+    if not tables:
+        raise SceneKeyError("layers: at least one [layers.NAME] table is required")
+    layers = []
+    for layer_name, body in tables.items():
+        path = f"layers.{layer_name}"
+        if not NAME_PATTERN.fullmatch(layer_name):
+            raise SceneKeyError(f"layers.{show(layer_name)}: a layer name must be letters, digits, _ and -")
+        if not isinstance(body, dict):
+            raise SceneKeyError(f"{path} = {show(body)}: expected a table [layers.{layer_name}]")
+        layers.append(_layer(layer_name, body, shared, times, kinds))
+    return tuple(layers)
+
+
+def _layer(layer_name: str, body: dict, shared: dict, times, kinds: Registry) -> Layer:
+    """Validate one layer: its keys, its values, and its model at every elapsed time."""
+    path = f"layers.{layer_name}"
+    kind_name = body.get("model")
+    if not isinstance(kind_name, str) or kind_name not in kinds:
+        shown = "missing" if kind_name is None else f"= {show(kind_name)}"
+        raise SceneKeyError(f"{path}.model {shown}: must be one of {', '.join(map(show, kinds))}")
+    kind = kinds[kind_name]
+    schema = kind.scene
+    allowed = schema.key_names
+    check_keys(body, ("model", *allowed), path, note=f" (model {show(kind_name)})")
+    if times is not None and "t" in body and schema.timed:
+        raise SceneKeyError(
+            f"{path}.t = {show(body['t'])}: not allowed when scene.times is given "
+            "(every layer is computed at every time)"
+        )
+    # Where each parameter comes from: {param: (key path, value as written, value in SI)}.
+    # Defaults of another model kind (k_sigma, variant) do not apply to this layer.
+    own = {key.name: key for key in schema.keys}
+    given = {p: v for p, v in shared.items() if p in own}
+    given.update(keys.parameters({k: v for k, v in body.items() if k != "model"}, path, own))
+    needed = schema.required if times is not None or not schema.timed else (*schema.required, "t")
+    missing = [p for p in needed if p not in given]
+    if schema.missing is not None:
+        try:
+            missing += schema.missing(given, path)
+        except BananagridError as exc:
+            raise SceneKeyError(str(exc)) from None
+    if missing:
+        listed = ", ".join(
+            f"{p} (or {p}_{own[p].alias})" if p in own and own[p].alias else p for p in missing
+        )
+        raise SceneKeyError(f"{path}: missing {listed}: give each in [{path}] or [defaults]")
+    layer = Layer(name=layer_name, kind=kind_name, params={p: si for p, (_, _, si) in given.items()}, model_kind=kind)
+    for t in times or (None,):
+        try:
+            layer.model(t)
+        except BananagridError as exc:
+            raise SceneKeyError(_model_error(str(exc), path, given, schema.message_keys)) from None
+    return layer
+
+
+def _model_error(message: str, path: str, given: dict, message_keys: Mapping) -> str:
+    """A model's ``name = value: rule`` (or ``name[k] = value: rule``) message restated with
+    the scene key and its value as written (``message_keys`` maps names in the model's
+    messages that are not scene keys to the keys that set them)."""
+    param, sep, rest = message.partition(" = ")
+    param = message_keys.get(param, param)
+    index = re.fullmatch(r"(\w+)\[(\d+)\]", param)
+    if sep and index and index.group(1) in given and ": " in rest:
+        where, written, _ = given[index.group(1)]
+        k = int(index.group(2))
+        shown = show(written[k]) if isinstance(written, list) and k < len(written) else rest.split(": ", 1)[0]
+        return f"{where}[{k}] = {shown}: {rest.split(': ', 1)[1]}"
+    if sep and param in given and ": " in rest:
+        where, written, _ = given[param]
+        return f"{where} = {show(written)}: {rest.split(': ', 1)[1]}"
+    return f"{path}: {message}"

@@ -1,0 +1,400 @@
+r"""Presence scenes: a ceiling array, a room and a presence law (Pessentheiner).
+
+A scene document whose top level has an ``[array]`` table is a presence scene;
+:func:`bananagrid.scenes.load.parse_scene` hands it to :func:`build_presence_scene`. The schema (see
+``docs/scenes.md``, "Presence scenes"):
+
+- ``[scene]``: ``name`` (required), ``title``, ``description``;
+- ``[array]``: ``geometry`` ("line", "plane" or "frustum"), ``h`` (m), ``dh`` (m, frustum),
+  ``azimuth_step_deg``, ``elevation_step_deg``, ``azimuth_range_deg``, ``elevation_range_deg``
+  (whole degrees: the paper's 16-bit integer angles, Section 2);
+- ``[room]``: ``x``, ``y``, ``z`` ranges in the array frame (m, z up, the floor at negative z):
+  the region S the probabilities are conditioned on;
+- ``[presence]``: ``kind`` ("mixture" or "uniform") and, for a mixture,
+  ``[presence.components.NAME]`` tables with ``weight``, ``mean`` and ``cov`` or ``sd_x``,
+  ``sd_y``, ``rho``, ``sd_z``;
+- ``[output]``: ``dtype``, ``far``, ``log10_floor``.
+
+Every key is checked once here; errors name the file, the key path, the value and what is
+allowed, as for grid scenes (the helpers of :mod:`bananagrid.scenes.keys` are shared).
+:func:`bananagrid.scenes.run_presence.run_presence_scene` runs it.
+"""
+
+from __future__ import annotations
+
+import math
+import warnings
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..domains.angular_lattice import AngularLattice
+from ..domains.region import Region
+from ..models.presence import WEIGHT_SUM_TOL, GaussianMixture, UniformPresence, cell_probabilities
+from ..results import CellMap
+from ..validate import BananagridError
+from . import keys
+from .keys import DTYPES, SceneKeyError, check_keys, show
+
+__all__ = [
+    "PresenceScene", "build_presence_scene", "GEOMETRIES", "PRESENCE_KINDS",
+    "TOP_KEYS", "ARRAY_KEYS", "ROOM_KEYS", "PRESENCE_KEYS", "COMPONENT_KEYS", "OUTPUT_KEYS",
+]
+
+GEOMETRIES = ("line", "plane", "frustum")
+PRESENCE_KINDS = ("mixture", "uniform")
+TOP_KEYS = ("scene", "array", "room", "presence", "output")
+SCENE_KEYS = ("name", "title", "description")
+ARRAY_KEYS = ("geometry", "h", "dh", "azimuth_step_deg", "elevation_step_deg", "azimuth_range_deg",
+              "elevation_range_deg")
+ROOM_KEYS = ("x", "y", "z")
+PRESENCE_KEYS = ("kind", "components")
+COMPONENT_KEYS = ("weight", "mean", "cov", "sd_x", "sd_y", "rho", "sd_z")
+OUTPUT_KEYS = ("dtype", "far", "log10_floor")
+#: Axes of the presence law per geometry.
+AXES = {"line": ("x",), "plane": ("x", "y"), "frustum": ("x", "y", "z")}
+#: Default direction ranges, degrees: line azimuths inclusive, plane/frustum azimuths a full
+#: turn (end excluded), elevations inclusive from the horizon to the nadir.
+DEFAULT_AZIMUTH_RANGE = {"line": (180, 360), "plane": (0, 360), "frustum": (0, 360)}
+DEFAULT_ELEVATION_RANGE = (90, 180)
+
+
+@dataclass(frozen=True)
+class PresenceScene:
+    """A validated presence scene.
+
+    Attributes
+    ----------
+    name, title, description, text, source
+        As for grid scenes (:class:`bananagrid.scenes.load.Scene`).
+    lattice : AngularLattice
+    presence : GaussianMixture or UniformPresence
+        Of the lattice's dimension (1 line, 2 plane, 3 frustum).
+    region : Region or None
+        S: the room's ranges on the law's axes (x; x, y; x, y, z); None without ``[room]``.
+    room_z : (float, float) or None
+        The room's z range as written (drawn; it is part of S for the frustum only).
+    component_names : tuple of str
+        Mixture component names in file order (empty for a uniform law).
+    kind : str
+        ``"mixture"`` or ``"uniform"``.
+    dtype : str
+        Kernel precision.
+    far : float or None
+        m: where cells are cut in the drawing when there is no room (default 10 h).
+    log10_floor : float
+        Bottom of the recorded colour scale, log10 of a probability.
+    """
+
+    name: str
+    title: str
+    description: str
+    text: str
+    source: str
+    lattice: AngularLattice
+    presence: GaussianMixture | UniformPresence
+    region: Region | None
+    room_z: tuple | None
+    component_names: tuple
+    kind: str
+    dtype: str = "float64"
+    far: float | None = None
+    log10_floor: float = -12.0
+
+    @property
+    def layers(self):
+        """Presence scenes have no grid layers: commands that need them say so in one line."""
+        raise BananagridError(
+            f"{self.source}: a presence scene ([array]) has no grid layers; only `bananagrid run` takes it"
+        )
+
+    def with_step(self, step: float) -> "PresenceScene":
+        """``--step`` sets grid cells in metres; a presence scene has an angular lattice and no
+        grid, so the step does not apply: the scene is returned unchanged, with a warning."""
+        warnings.warn(
+            f"{self.source}: --step {step:g} does not apply to a presence scene (angular lattice, "
+            "no grid); it runs at its own array steps", UserWarning, stacklevel=2,
+        )
+        return self
+
+    def cell_map(self, *, threads: int | None = None) -> CellMap:
+        """The scene's cell probabilities (:func:`bananagrid.cell_probabilities`)."""
+        return cell_probabilities(self.presence, self.lattice, self.region, dtype=np.dtype(self.dtype),
+                                  threads=threads)
+
+
+# --- parsing ----------------------------------------------------------------------------------
+
+
+def build_presence_scene(doc: dict, text: str, source: str) -> PresenceScene:
+    """Validate a parsed presence-scene document table by table (raises ``SceneKeyError``, which
+    :func:`bananagrid.scenes.load.parse_scene` prefixes with the source)."""
+    check_keys(doc, TOP_KEYS, "", note=" (a presence scene, since it has [array])")
+    head = keys.table(doc, "scene", required=True)
+    check_keys(head, SCENE_KEYS, "scene")
+    name = keys.name(head.get("name"), "scene.name", required=True)
+    title = keys.text(head, "title", "scene", default=name)
+    description = keys.text(head, "description", "scene", default="")
+    lattice = _array(keys.table(doc, "array", required=True))
+    room, room_z = _room(keys.table(doc, "room"), lattice) if "room" in doc else (None, None)
+    presence, names, kind = _presence(keys.table(doc, "presence", required=True), lattice, room)
+    dtype, far, floor = _output(keys.table(doc, "output"))
+    if kind == "mixture" and room is not None:
+        try:
+            p_s = presence.region_probability(room)
+        except BananagridError as exc:
+            raise SceneKeyError(f"room: {exc}") from None
+        if not p_s > 0.0:
+            raise SceneKeyError(f"room = {show(doc['room'])}: the mixture gives the room no mass (p(S) = {p_s!r})")
+    return PresenceScene(
+        name=name, title=title, description=description, text=text, source=source, lattice=lattice,
+        presence=presence, region=room, room_z=room_z, component_names=names, kind=kind, dtype=dtype,
+        far=far, log10_floor=floor,
+    )
+
+
+def _array(table: dict) -> AngularLattice:
+    """``[array]``: the lattice, angles in whole degrees."""
+    check_keys(table, ARRAY_KEYS, "array")
+    geometry = table.get("geometry")
+    if geometry not in GEOMETRIES:
+        shown = "missing" if geometry is None else f"= {show(geometry)}"
+        raise SceneKeyError(f"array.geometry {shown}: must be one of {', '.join(map(show, GEOMETRIES))}")
+    if "h" not in table:
+        raise SceneKeyError("array.h: missing; the depth of the target below the array, m (> 0)")
+    h = keys.number(table["h"], "array.h")
+    if not (math.isfinite(h) and h > 0.0):
+        raise SceneKeyError(f"array.h = {show(table['h'])}: must be finite and > 0 (m below the array)")
+    dh = 0.0
+    if geometry == "frustum":
+        if "dh" not in table:
+            raise SceneKeyError("array.dh: missing; the frustum's slab half-thickness, m (0 < dh < h)")
+        dh = keys.number(table["dh"], "array.dh")
+        if not (math.isfinite(dh) and 0.0 < dh < h):
+            raise SceneKeyError(f"array.dh = {show(table['dh'])}: must be in (0, h = {show(table['h'])}) m")
+    elif "dh" in table:
+        raise SceneKeyError(f"array.dh = {show(table['dh'])}: only the frustum geometry has a slab (geometry = {show(geometry)})")
+    if geometry == "line":
+        for key in ("elevation_step_deg", "elevation_range_deg"):
+            if key in table:
+                raise SceneKeyError(f"array.{key} = {show(table[key])}: the line geometry has azimuths only")
+    da = _whole_degrees(table.get("azimuth_step_deg", 1), "array.azimuth_step_deg", 1, 180)
+    a0, a1 = _degree_range(table, "azimuth_range_deg", DEFAULT_AZIMUTH_RANGE[geometry],
+                           (180, 360) if geometry == "line" else (-360, 720))
+    if geometry == "line":
+        if a1 - a0 == 0 and a0 in (180, 360):
+            raise SceneKeyError(f"array.azimuth_range_deg = {show(table['azimuth_range_deg'])}: the only direction is horizontal")
+    elif not 0 < a1 - a0 <= 360:
+        raise SceneKeyError(
+            f"array.azimuth_range_deg = {show(table['azimuth_range_deg'])}: the span must be in (0, 360] "
+            "(directions first, first + step, ..., last excluded)"
+        )
+    if (a1 - a0) % da:
+        raise SceneKeyError(
+            f"array.azimuth_step_deg = {show(table.get('azimuth_step_deg', 1))}: does not divide the azimuth "
+            f"span {a1 - a0} deg of array.azimuth_range_deg = [{a0}, {a1}]"
+        )
+    kwargs = dict(geometry=geometry, h=h, dh=dh, azimuth_step=math.radians(da),
+                  azimuth_range=(math.radians(a0), math.radians(a1)))
+    if geometry != "line":
+        de = _whole_degrees(table.get("elevation_step_deg", 1), "array.elevation_step_deg", 1, 90)
+        t0, t1 = _degree_range(table, "elevation_range_deg", DEFAULT_ELEVATION_RANGE, (90, 180))
+        if t1 == 90:
+            raise SceneKeyError(f"array.elevation_range_deg = {show(table['elevation_range_deg'])}: the horizon alone never meets the target")
+        if (t1 - t0) % de:
+            raise SceneKeyError(
+                f"array.elevation_step_deg = {show(table.get('elevation_step_deg', 1))}: does not divide the "
+                f"elevation span {t1 - t0} deg of array.elevation_range_deg = [{t0}, {t1}]"
+            )
+        kwargs.update(elevation_step=math.radians(de), elevation_range=(math.radians(t0), math.radians(t1)))
+    try:
+        return AngularLattice(**kwargs)
+    except BananagridError as exc:  # the checks above should leave nothing; say where if not
+        raise SceneKeyError(f"array: {exc}") from None
+
+
+def _whole_degrees(value, path: str, low: int, high: int) -> int:
+    number = keys.number(value, path)
+    if not (math.isfinite(number) and number == int(number) and low <= number <= high):
+        raise SceneKeyError(
+            f"{path} = {show(value)}: must be a whole number of degrees in [{low}, {high}] "
+            "(the paper's integer angles, Section 2)"
+        )
+    return int(number)
+
+
+def _degree_range(table: dict, key: str, default, allowed) -> tuple[int, int]:
+    path = f"array.{key}"
+    if key not in table:
+        return default
+    value = table[key]
+    if not isinstance(value, list) or len(value) != 2:
+        raise SceneKeyError(f"{path} = {show(value)}: expected a pair [first, last] of whole degrees")
+    lo, hi = allowed
+    first, last = (_whole_degrees(v, f"{path}[{k}]", lo, hi) for k, v in enumerate(value))
+    if last < first:
+        raise SceneKeyError(f"{path} = {show(value)}: first must be <= last")
+    return first, last
+
+
+def _room(table: dict, lattice: AngularLattice) -> tuple[Region, tuple | None]:
+    """``[room]``: the box S in the array frame; the law's axes are required."""
+    check_keys(table, ROOM_KEYS, "room")
+    geometry = lattice.geometry
+    ranges = {}
+    for axis in ROOM_KEYS:
+        if axis not in table:
+            if axis in AXES[geometry]:
+                raise SceneKeyError(f"room.{axis}: missing; the {geometry} geometry needs {', '.join(AXES[geometry])} ranges [low, high] in m")
+            continue
+        if geometry == "line" and axis == "y":
+            raise SceneKeyError(f"room.y = {show(table['y'])}: the line geometry (Section 4) has one horizontal axis, x; "
+                            "give x (and z for the drawing)")
+        ranges[axis] = _range(table[axis], f"room.{axis}")
+    z = ranges.get("z")
+    if z is not None:
+        if geometry == "frustum":
+            d0, d1 = lattice.depths
+            if not (z[0] < -d0 and z[1] > -d1):
+                raise SceneKeyError(
+                    f"room.z = {show(table['z'])}: misses the slab z in [{-d1:g}, {-d0:g}] "
+                    f"(depths h - dh to h + dh below the array)"
+                )
+        elif not z[0] <= -lattice.h <= z[1]:
+            raise SceneKeyError(
+                f"room.z = {show(table['z'])}: the target plane z = -h = {-lattice.h:g} m lies outside the room"
+            )
+    region = Region(*(ranges[a] for a in AXES[geometry]))
+    return region, z
+
+
+def _range(value, path: str) -> tuple[float, float]:
+    if not isinstance(value, list) or len(value) != 2:
+        raise SceneKeyError(f"{path} = {show(value)}: expected a pair of numbers [low, high] in m")
+    lo, hi = (keys.number(v, f"{path}[{k}]") for k, v in enumerate(value))
+    for k, v in enumerate((lo, hi)):
+        if not math.isfinite(v):
+            raise SceneKeyError(f"{path}[{k}] = {show(value[k])}: must be finite")
+    if not hi > lo:
+        raise SceneKeyError(f"{path} = {show(value)}: the upper bound must exceed the lower")
+    return lo, hi
+
+
+def _presence(table: dict, lattice: AngularLattice, room: Region | None):
+    """``[presence]``: (law, component names, kind)."""
+    check_keys(table, PRESENCE_KEYS, "presence")
+    kind = table.get("kind")
+    if kind not in PRESENCE_KINDS:
+        shown = "missing" if kind is None else f"= {show(kind)}"
+        raise SceneKeyError(f"presence.kind {shown}: must be one of {', '.join(map(show, PRESENCE_KINDS))}")
+    if kind == "uniform":
+        if "components" in table:
+            raise SceneKeyError("presence.components: a uniform law has no components (kind = \"uniform\")")
+        if room is None:
+            raise SceneKeyError("[room]: missing table; a uniform law (presence.kind = \"uniform\") is uniform on the room")
+        return UniformPresence(room), (), kind
+    components = table.get("components")
+    if not isinstance(components, dict) or not components:
+        raise SceneKeyError("presence.components: a mixture needs at least one [presence.components.NAME] table")
+    axes = AXES[lattice.geometry]
+    names, weights, means, covs = [], [], [], []
+    for name, body in components.items():
+        path = f"presence.components.{name}"
+        keys.name(name, path, what="component name")
+        if not isinstance(body, dict):
+            raise SceneKeyError(f"{path} = {show(body)}: expected a table [{path}]")
+        w, mu, cov = _component(body, path, axes, lattice.geometry)
+        names.append(name)
+        weights.append(w)
+        means.append(mu)
+        covs.append(cov)
+    total = math.fsum(weights)
+    if abs(total - 1.0) > WEIGHT_SUM_TOL:
+        listed = ", ".join(f"{n} = {show(float(w))}" for n, w in zip(names, weights))
+        raise SceneKeyError(
+            f"presence.components: the weights ({listed}) sum to {total!r}, not 1 "
+            f"(allowed error {WEIGHT_SUM_TOL:g}); divide them by their sum"
+        )
+    try:
+        mixture = GaussianMixture(weights=weights, means=means, covs=covs)
+    except BananagridError as exc:
+        message = str(exc)
+        if message.startswith("covs["):
+            k = int(message[5:message.index("]")])
+            path = f"presence.components.{names[k]}"
+            key = "cov" if "cov" in components[names[k]] else "sd_x, sd_y, rho" + (", sd_z" if len(axes) == 3 else "")
+            raise SceneKeyError(f"{path}.{key}: {message.split(': ', 1)[1]}") from None
+        raise SceneKeyError(f"presence.components: {message}") from None
+    return mixture, tuple(names), kind
+
+
+def _component(body: dict, path: str, axes, geometry: str):
+    """One component: (weight, mean (D,), cov (D, D))."""
+    allowed = ("weight", "mean", "cov", *(f"sd_{a}" for a in axes), *(("rho",) if len(axes) > 1 else ()))
+    check_keys(body, allowed, path, note=f" (geometry {show(geometry)}: axes {', '.join(axes)})")
+    if "weight" not in body:
+        raise SceneKeyError(f"{path}.weight: missing; a number in [0, 1]")
+    w = keys.number(body["weight"], f"{path}.weight")
+    if not (math.isfinite(w) and 0.0 <= w <= 1.0):
+        raise SceneKeyError(f"{path}.weight = {show(body['weight'])}: must be in [0, 1]")
+    d = len(axes)
+    if "mean" not in body:
+        raise SceneKeyError(f"{path}.mean: missing; [{', '.join(axes)}] in m")
+    value = body["mean"]
+    if d == 1 and not isinstance(value, list):
+        value = [value]
+    if not isinstance(value, list) or len(value) != d:
+        raise SceneKeyError(f"{path}.mean = {show(body['mean'])}: expected [{', '.join(axes)}] in m ({d} number(s))")
+    mean = [_finite(v, f"{path}.mean[{k}]") for k, v in enumerate(value)]
+    sd_keys = [k for k in body if k.startswith("sd_") or k == "rho"]
+    if "cov" in body:
+        if sd_keys:
+            raise SceneKeyError(f"{path}: give cov or {', '.join(f'sd_{a}' for a in axes)}{', rho' if d > 1 else ''}, "
+                            f"not both ({', '.join(sd_keys)} given with cov)")
+        value = body["cov"]
+        rows = value if isinstance(value, list) else None
+        if rows is None or len(rows) != d or any(not isinstance(r, list) or len(r) != d for r in rows):
+            raise SceneKeyError(f"{path}.cov = {show(value)}: expected a {d} x {d} list of lists in m^2")
+        cov = [[_finite(v, f"{path}.cov[{i}][{j}]") for j, v in enumerate(r)] for i, r in enumerate(rows)]
+        return w, mean, cov
+    missing = [f"sd_{a}" for a in axes if f"sd_{a}" not in body]
+    if missing:
+        raise SceneKeyError(f"{path}: missing {', '.join(missing)}; give cov ({d} x {d}, m^2) or the SDs "
+                        f"{', '.join(f'sd_{a}' for a in axes)} (m){' and rho' if d > 1 else ''}")
+    sds = []
+    for a in axes:
+        sd = _finite(body[f"sd_{a}"], f"{path}.sd_{a}")
+        if not sd > 0.0:
+            raise SceneKeyError(f"{path}.sd_{a} = {show(body[f'sd_{a}'])}: must be > 0 (m)")
+        sds.append(sd)
+    cov = np.diag(np.square(sds))
+    if d > 1:
+        rho = _finite(body.get("rho", 0.0), f"{path}.rho")
+        if not -1.0 < rho < 1.0:
+            raise SceneKeyError(f"{path}.rho = {show(body['rho'])}: must be in (-1, 1) (the x-y correlation)")
+        cov[0, 1] = cov[1, 0] = rho * sds[0] * sds[1]
+    return w, mean, cov.tolist()
+
+
+def _finite(value, path: str) -> float:
+    number = keys.number(value, path)
+    if not math.isfinite(number):
+        raise SceneKeyError(f"{path} = {show(value)}: must be finite")
+    return number
+
+
+def _output(table: dict) -> tuple[str, float | None, float]:
+    """``[output]``: kernel dtype, drawing radius without a room, colour-scale floor."""
+    check_keys(table, OUTPUT_KEYS, "output")
+    dtype = table.get("dtype", "float64")
+    if dtype not in DTYPES:
+        raise SceneKeyError(f"output.dtype = {show(dtype)}: must be one of {', '.join(map(show, DTYPES))}")
+    far = None
+    if "far" in table:
+        far = _finite(table["far"], "output.far")
+        if not far > 0.0:
+            raise SceneKeyError(f"output.far = {show(table['far'])}: must be > 0 (m)")
+    floor = _finite(table.get("log10_floor", -12.0), "output.log10_floor")
+    if not -300.0 <= floor < 0.0:
+        raise SceneKeyError(f"output.log10_floor = {show(table['log10_floor'])}: must be in [-300, 0) (log10 of a probability)")
+    return dtype, far, floor

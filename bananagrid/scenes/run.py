@@ -1,0 +1,277 @@
+"""Run a scene: rasterise every layer at every time, record it, and optionally export arrays.
+
+One scene gives one recording ``OUT/NAME.rrd`` (and ``OUT/NAME.npz`` with ``npz=True``). Both
+are written under temporary names and renamed only when everything succeeded, so a failure
+leaves no file at the final paths.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import time
+import zipfile
+from collections.abc import Callable
+from pathlib import Path
+
+import numpy as np
+
+
+from ..analysis.bearing_validation import format_table, summary, validation_table
+from ..engine.rasterise import rasterise
+from ..protocol import DensityModel
+from ..recording.bearing import log_validation_table
+from ..recording.core import (
+    default_blueprint,
+    log_raster,
+    log_scene_text,
+    recording_id_for,
+    set_elapsed,
+    write_recording,
+)
+from ..recording.layers import layer_views, log_layer_extras
+from ..recording.radial import log_radial_curves, radial_groups, radial_views
+from ..results import Raster
+from ..validate import BananagridError
+from ..version import __version__
+from .load import Layer, Scene
+from .presence import PresenceScene
+from .run_presence import run_presence_scene
+
+__all__ = ["run_scene", "compute", "array_key", "RUN_ONLY_PROVENANCE"]
+
+#: Provenance keys that describe the run rather than the result. They stay out of the
+#: recording, so that running a scene twice gives equal recordings; the summary rows and the
+#: .npz provenance keep them.
+RUN_ONLY_PROVENANCE = ("seconds", "threads")
+
+Progress = Callable[[int, int, str], None]
+
+
+def run_scene(
+    scene: Scene,
+    out_dir: str | os.PathLike,
+    *,
+    npz: bool = False,
+    threads: int | None = None,
+    progress: Progress | None = None,
+) -> list[dict]:
+    """Rasterise, record and optionally export every layer of ``scene`` at every time.
+
+    Parameters
+    ----------
+    scene : Scene
+        A validated scene (see :func:`bananagrid.scenes.load_scene`).
+    out_dir : path-like
+        Existing directory; receives ``NAME.rrd`` and, with ``npz``, ``NAME.npz``.
+    npz : bool, default False
+        Also write the arrays: ``x``, ``y`` (cell centres, m), one ``LAYER__tT`` array of
+        shape ``(ny, nx)`` per layer and time (density per m^2, normalised when the scene
+        says so, rows south to north) and ``provenance`` (a JSON string).
+    threads : int, optional
+        CPU threads per rasterisation (default: every core).
+    progress : callable, optional
+        ``progress(done, total, label)``, called before each layer and time with ``done``
+        items finished so far, and after it (computed and logged) with ``done + 1``.
+
+    Returns
+    -------
+    list of dict
+        One row per layer and time: ``scene``, ``layer``, ``t`` (s), ``cells``, ``mass``
+        (raw captured mass), ``peak`` (largest recorded density, m^-2) and ``seconds``
+        (rasterise and normalise, wall clock).
+    """
+    if isinstance(scene, PresenceScene):  # an [array] scene: its own runner
+        return run_presence_scene(scene, out_dir, npz=npz, threads=threads, progress=progress)
+    out_dir = Path(out_dir)
+    if not out_dir.is_dir():
+        raise BananagridError(f"{out_dir}: output directory does not exist")
+    rrd_path = out_dir / f"{scene.name}.rrd"
+    npz_path = out_dir / f"{scene.name}.npz"
+    archive = None
+    rows: list[dict] = []
+
+    def build(rec) -> None:
+        # Runs on this thread: set_elapsed is per thread.
+        log_scene_text(rec, scene.text)
+        jobs = scene.jobs()
+        for k, (layer, t) in enumerate(jobs):
+            label = f"{layer.name} t={t:g} s"
+            if progress is not None:
+                progress(k, len(jobs), label)
+            model = layer.model(t)
+            raster, seconds = compute(scene, layer, t, threads=threads, model=model)
+            set_elapsed(rec, t)
+            entity = f"layers/{layer.name}"
+            log_raster(rec, entity, _recordable(raster), levels=scene.levels, colormap=scene.colormap)
+            log_layer_extras(
+                rec, entity, layer.model_kind, model, raster,
+                compute=lambda other: compute(scene, layer, t, threads=threads, model=other)[0],
+            )
+            if scene.radial is not None and layer.name in scene.radial.layers:
+                _log_radial(rec, scene, layer, t, threads)
+            if archive is not None:
+                archive.add(layer.name, t, raster)
+            rows.append(_row(scene, layer, t, raster, seconds))
+            if progress is not None:
+                progress(k + 1, len(jobs), label)
+        if scene.bearing_validation:
+            records = validation_table()
+            log_validation_table(rec, "validation", format_table(records), summary(records))
+        if archive is not None:
+            archive.close()
+
+    try:
+        archive = _Archive(npz_path, scene) if npz else None
+        write_recording(
+            rrd_path, build, recording_id=_recording_id(scene),
+            blueprint=_blueprint(scene),
+        )
+        if archive is not None:
+            try:
+                archive.publish()
+            except BaseException:
+                rrd_path.unlink(missing_ok=True)  # all or nothing: no recording without its arrays
+                raise
+    finally:
+        if archive is not None:
+            archive.discard()
+    return rows
+
+
+def compute(scene: Scene, layer: Layer, t: float, *, threads: int | None = None,
+            model: DensityModel | None = None) -> tuple[Raster, float]:
+    """One layer at elapsed time ``t``: the raster (normalised if the scene says so) and seconds.
+    ``model``: the layer's model at ``t`` if already built, or another model rasterised as the
+    layer is (e.g. for a difference map)."""
+    start = time.perf_counter()
+    model = layer.model(t) if model is None else model
+    raster = rasterise(model, scene.grid, dtype=np.dtype(scene.dtype), threads=threads)
+    if scene.normalise:
+        if not raster.mass > 0.0:
+            raise BananagridError(
+                f"{scene.source}: layers.{layer.name} at t = {t:g} s: the grid captured no mass, "
+                "so it cannot be normalised; move or enlarge the grid, or set output.normalise = false"
+            )
+        raster = raster.normalise()
+    return raster, time.perf_counter() - start
+
+
+def _blueprint(scene: Scene):
+    """The default layout, with each kind's extra images and views (from the registry's
+    recording modules), the radial curves and the validation table if any."""
+    views, images = [], []
+    if scene.radial is not None:
+        groups = radial_groups(scene.radial.density_bearings, scene.radial.moments_max)
+        for name in scene.radial.layers:
+            views += radial_views(f"radial/{name}", groups)
+    t0 = scene.jobs()[0][1] if scene.times else None
+    for layer in scene.layers:
+        more_images, more_views = layer_views(f"layers/{layer.name}", layer.model_kind, layer.model(t0))
+        images += more_images
+        views += more_views
+    return default_blueprint(
+        [f"layers/{layer.name}" for layer in scene.layers],
+        extra_images=images,
+        text_entities=["validation"] if scene.bearing_validation else [],
+        extra_views=views,
+    )
+
+
+def _log_radial(rec, scene: Scene, layer: Layer, t: float, threads) -> None:
+    """The conditional radial curves (Figures 2-5 and 8) of a motion layer at time ``t``."""
+    spec = scene.radial
+    log_radial_curves(
+        rec, f"radial/{layer.name}", layer.model(t), density_bearings=spec.density_bearings,
+        moments_max=spec.moments_max, moments_step=spec.moments_step, threads=threads,
+    )
+
+
+def array_key(layer: str, t: float) -> str:
+    """Name of a layer's array at time ``t`` in the .npz: ``LAYER__tT`` (``T`` shortest form)."""
+    return f"{layer}__t{np.format_float_positional(float(t), trim='-')}"
+
+
+def _recordable(raster: Raster) -> Raster:
+    """The raster without run-dependent provenance (timings, threads)."""
+    kept = {k: v for k, v in raster.provenance.items() if k not in RUN_ONLY_PROVENANCE}
+    return Raster(
+        values=raster.values, grid=raster.grid, mass=raster.mass,
+        normalised=raster.normalised, quantity=raster.quantity, provenance=kept,
+    )
+
+
+def _recording_id(scene: Scene) -> str:
+    """Depends on the scene text and the grid actually used (a step override changes it)."""
+    return recording_id_for(scene.text + "\n" + json.dumps(scene.grid.describe(), sort_keys=True))
+
+
+def _row(scene: Scene, layer: Layer, t: float, raster: Raster, seconds: float) -> dict:
+    """A summary row of one computed layer."""
+    return {
+        "scene": scene.name, "layer": layer.name, "t": float(t), "cells": scene.grid.nx * scene.grid.ny,
+        "mass": raster.mass, "peak": raster.peak, "seconds": seconds,
+    }
+
+
+class _Archive:
+    """The .npz export, streamed into a hidden temporary file and renamed at the end.
+
+    Arrays are added one at a time (no need to hold every raster), in numpy's .npz layout: a
+    zip of ``KEY.npy`` members, deflated, readable with :func:`numpy.load` without pickle.
+    """
+
+    def __init__(self, path: Path, scene: Scene):
+        self.path = path
+        self.partial = path.with_name(f".{path.name}.partial")
+        self.scene = scene
+        self.entries: dict[str, dict] = {}
+        self.zip = zipfile.ZipFile(self.partial, "w", compression=zipfile.ZIP_DEFLATED, compresslevel=1)
+        try:
+            self._write("x", scene.grid.x)
+            self._write("y", scene.grid.y)
+        except BaseException:
+            self.discard()
+            raise
+
+    def add(self, layer: str, t: float, raster: Raster) -> None:
+        """Store ``raster.values`` under :func:`array_key` and note its provenance."""
+        key = array_key(layer, t)
+        self._write(key, raster.values)
+        self.entries[key] = {
+            "layer": layer, "t": float(t), "mass": raster.mass, "peak": raster.peak,
+            "normalised": raster.normalised, "provenance": raster.provenance,
+        }
+
+    def close(self) -> None:
+        """Write the provenance and finish the zip (still under the temporary name)."""
+        self._write("provenance", np.array(json.dumps(self._provenance(), default=str)))
+        self.zip.close()
+
+    def publish(self) -> None:
+        """Rename the finished file to its final path."""
+        os.replace(self.partial, self.path)
+
+    def discard(self) -> None:
+        """Remove the temporary file if it is still there (after a failure)."""
+        self.zip.close()
+        self.partial.unlink(missing_ok=True)
+
+    def _write(self, key: str, array: np.ndarray) -> None:
+        with self.zip.open(f"{key}.npy", "w", force_zip64=True) as member:
+            np.lib.format.write_array(member, np.asanyarray(array), allow_pickle=False)
+
+    def _provenance(self) -> dict:
+        scene = self.scene
+        return {
+            "bananagrid": __version__,
+            "scene": scene.name,
+            "title": scene.title,
+            "source": scene.source,
+            "grid": scene.grid.describe(),
+            "dtype": scene.dtype,
+            "quantity": "density per m^2 at the cell centres (x[j], y[i]); rows south to north",
+            "normalised": scene.normalise,
+            "arrays": self.entries,
+            "text": scene.text,
+        }
