@@ -24,3 +24,23 @@ def test_no_top_level_kernels_in_site_packages():
 def test_public_names():
     for name in ("Grid", "Raster", "CAT", "PolarBanana", "Pose", "rasterise", "BananagridError"):
         assert hasattr(bananagrid, name), name
+
+
+def test_typed_marker_ships():
+    """py.typed marks the package as typed (PEP 561): in the installed files, or in the source
+    tree of an editable install."""
+    from importlib import metadata
+
+    files = {f.as_posix() for f in metadata.files("bananagrid") or ()}
+    installed = "bananagrid/py.typed" in files
+    assert installed or (Path(bananagrid.__file__).parent / "py.typed").is_file()
+    if any(name.endswith(".pth") or "__editable__" in name for name in files):
+        return  # editable: the source tree's marker, checked above
+    assert installed, sorted(files)[:10]
+
+
+def test_all_is_curated():
+    assert len(bananagrid.__all__) == len(set(bananagrid.__all__))
+    for name in bananagrid.__all__:
+        assert hasattr(bananagrid, name), name
+    assert {"BearingFix", "grid_probabilities", "DensityModel", "MODEL_KINDS"} <= set(bananagrid.__all__)

@@ -1,0 +1,270 @@
+"""The model contract: every registered model kind through the same checks (in the manner of
+SciPy's ``test_continuous_basic.py``), and a model defined only in the tests through all of them
+plus scenes and recordings.
+
+Each case is a model kind of the registry with scene parameters, a grid holding its mass, a
+polar lattice over its support and bad values with the messages they must give. The checks:
+``pdf`` equals ``rasterise``; the thread count changes nothing; float32 within the model's
+stated ``float32_rtol``; Monte Carlo from the model's own ``sample``; polar-lattice cells that
+sum to the grid's mass; radial moments along rays; every bad value refused with its name.
+"""
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+import pytest
+from scipy import stats
+
+import bananagrid as bg
+from bananagrid.domains.pose import Pose
+from bananagrid.recording.inspect import inspect_recording
+from bananagrid.scenes.load import parse_scene
+from bananagrid.scenes.run import run_scene
+
+from cases import FIG1, FIG1_BOUNDS
+from isotropic_model import ISOTROPIC, IsotropicNormal
+
+COASTAL = dict(sensors=[(0.0, 0.0), (20000.0, 0.0)], bearings=[0.2641, -0.3909], sigmas=[0.01, 0.02])
+BUTTERLY = dict(mean=(0.0, 0.0), cov=[[4e4, 5e3], [5e3, 2.5e4]], speeds=[1.0, 2.0], weights=[0.4, 0.6], t=600.0)
+FULL_TURN = dict(bearings=(-math.pi, math.pi), bearing_step=math.radians(5.0))
+
+
+@dataclass(frozen=True)
+class Case:
+    kind: str
+    params: dict
+    bounds: dict  # grid bounds (x, y) holding the model's mass
+    step: float  # grid step, m
+    lattice: dict  # PolarLattice arguments over the model's support
+    bad: tuple = ()  # (parameter, bad value, message regex)
+    #: pdf against rasterise, and one thread against several: 0 is bit for bit; Butterly's grid
+    #: kernel sums its series about tile centres (other tiles, or the other tiles of other row
+    #: bands: a different summation order) and zeroes cells it proves below 1e-13 of the peak:
+    #: 1e-11 relative where the density exceeds 1e-12 of its maximum (its stated agreement, README).
+    pdf_rtol: float = 0.0
+    pose: dict | None = None  # pose of the rays for radial moments (None: the model's own)
+    kinds: bg.models.registry.Registry = field(default=bg.MODEL_KINDS)
+
+    def model(self, **changes):
+        return self.kinds[self.kind].build({**self.params, **changes})
+
+    @property
+    def grid(self):
+        return bg.Grid.from_bounds(**self.bounds, step=self.step)
+
+
+MOTION_BAD = (
+    ("v0", -1.0, r"v0 = -1.0: must be > 0"),
+    ("sigma_a", math.nan, r"sigma_a = nan: must be finite"),
+    ("sigma_omega", "0.1", r"sigma_omega = '0.1': expected a real number"),
+    ("sigma_heading", -0.1, r"sigma_heading = -0.1: must be >= 0"),
+)
+CASES = {
+    "cat": Case("cat", FIG1, FIG1_BOUNDS, 40.0, dict(ranges=(0.0, 4000.0), range_step=100.0, **FULL_TURN),
+                bad=(*MOTION_BAD, ("k_sigma", 40.0, r"k_sigma = 40.0: must be in \[1, 38\]"))),
+    "cat-heading": Case("cat", {**FIG1, "sigma_heading": math.pi / 30}, dict(x=(-3000.0, 3000.0), y=(-600.0, 3600.0)),
+                        40.0, dict(ranges=(0.0, 4000.0), range_step=100.0, **FULL_TURN)),
+    "cat-posed": Case("cat", {**FIG1, "origin": (500.0, -300.0), "heading": 0.7},
+                      dict(x=(-1500.0, 4500.0), y=(-1800.0, 2800.0)), 40.0,
+                      dict(ranges=(0.0, 4000.0), range_step=100.0, pose=Pose(origin=(500.0, -300.0), heading=0.7),
+                           **FULL_TURN)),
+    "polar-rough": Case("polar", {**FIG1, "variant": "rough"}, FIG1_BOUNDS, 40.0,
+                        dict(ranges=(0.0, 4000.0), range_step=100.0, **FULL_TURN),
+                        bad=(*MOTION_BAD, ("variant", "smooth", r"variant = 'smooth': must be one of rough, improved"))),
+    "polar-heading": Case("polar", {**FIG1, "sigma_heading": math.pi / 15, "heading_order": 4},
+                          dict(x=(-3200.0, 3200.0), y=(-800.0, 3600.0)), 40.0,
+                          dict(ranges=(0.0, 4000.0), range_step=100.0, **FULL_TURN),
+                          bad=(("heading_order", 3, r"heading_order = 3: must be 2"),)),
+    "bearing_fix": Case("bearing_fix", COASTAL, dict(x=(2000.0, 14000.0), y=(24000.0, 36000.0)), 100.0,
+                        dict(ranges=(20000.0, 40000.0), range_step=250.0, bearings=(0.0, 0.5), bearing_step=0.005),
+                        bad=(("sigmas", [0.01, -0.02], r"sigmas\[1\] = -0.02: must be > 0"),
+                             ("sensors", [(0.0, 0.0), (0.0, 0.0)], r"sensors 0 and 1 coincide"),
+                             ("variant", "exact-ish", r"variant = 'exact-ish': must be one of exact, linear")),
+                        pose=dict(origin=(0.0, 0.0), heading=0.26)),
+    "bearing_fix-3": Case("bearing_fix", dict(sensors=[(0.0, 0.0), (20000.0, 0.0), (10000.0, -5000.0)],
+                                              bearings=[0.2641, -0.3909, -0.05], sigmas=[0.01, 0.02, 0.02]),
+                          dict(x=(2000.0, 14000.0), y=(24000.0, 36000.0)), 100.0,
+                          dict(ranges=(20000.0, 40000.0), range_step=250.0, bearings=(0.0, 0.5), bearing_step=0.005),
+                          pose=dict(origin=(0.0, 0.0), heading=0.26)),
+    "butterly": Case("butterly", BUTTERLY, dict(x=(-2500.0, 2500.0), y=(-2500.0, 2500.0)), 50.0,
+                     dict(ranges=(0.0, 2500.0), range_step=50.0, **FULL_TURN),
+                     bad=(("t", -1.0, r"t = -1.0: must be >= 0"),
+                          ("weights", [0.5, 0.6], r"weights = \[0.5, 0.6\]: must sum to 1"),
+                          ("speeds", [1.0, -2.0], r"speeds\[1\] = -2.0: must be >= 0")),
+                     pdf_rtol=1e-11, pose=dict(origin=(0.0, 0.0))),
+    "butterly-course": Case("butterly", dict(mean=(0.0, 0.0), cov=[[1e4, 0.0], [0.0, 1e4]], speed_law="uniform",
+                                             speed_min=0.5, speed_max=2.0, t=600.0, course_kappa=2.0,
+                                             course_mean=0.5),
+                            dict(x=(-1800.0, 1800.0), y=(-1800.0, 1800.0)), 40.0,
+                            dict(ranges=(0.0, 1800.0), range_step=50.0, **FULL_TURN),
+                            bad=(("course_kappa", -1.0, r"course_kappa = -1.0: must be >= 0"),),
+                            pdf_rtol=1e-11, pose=dict(origin=(0.0, 0.0))),
+    # the model of the tests, through exactly the same checks
+    "isotropic": Case("isotropic", dict(mean=(300.0, -200.0), sigma=150.0), dict(x=(-700.0, 1300.0), y=(-1200.0, 800.0)),
+                      20.0, dict(ranges=(0.0, 1200.0), range_step=40.0, pose=Pose(origin=(300.0, -200.0)), **FULL_TURN),
+                      bad=(("sigma", 0.0, r"sigma = 0.0: must be > 0"),), pose=dict(origin=(300.0, -200.0)),
+                      kinds=bg.MODEL_KINDS.with_kinds(ISOTROPIC)),
+}
+
+
+def test_every_registered_kind_has_a_case():
+    """A kind added to the registry must join this table (and so pass every check here)."""
+    assert set(bg.MODEL_KINDS) <= {case.kind for case in CASES.values()}
+    assert all(isinstance(case.model(), bg.DensityModel) for case in CASES.values())
+
+
+@pytest.mark.parametrize("name", CASES)
+def test_pdf_equals_rasterise(name):
+    case = CASES[name]
+    model, grid = case.model(), case.grid
+    raster = bg.rasterise(model, grid)
+    xx, yy = np.meshgrid(grid.x, grid.y)
+    points = model.pdf(xx, yy)
+    if case.pdf_rtol == 0.0:
+        np.testing.assert_array_equal(points, raster.values)
+    else:
+        live = points > 1e-12 * points.max()
+        np.testing.assert_allclose(raster.values[live], points[live], rtol=case.pdf_rtol, atol=0.0)
+
+
+@pytest.mark.parametrize("name", CASES)
+def test_threads_do_not_change_results(name):
+    case = CASES[name]
+    model, grid = case.model(), case.grid
+    one = bg.rasterise(model, grid, threads=1).values
+    for threads in (2, 3):
+        many = bg.rasterise(model, grid, threads=threads).values
+        if case.pdf_rtol == 0.0:
+            np.testing.assert_array_equal(many, one)
+        else:
+            live = one > 1e-12 * one.max()
+            np.testing.assert_allclose(many[live], one[live], rtol=case.pdf_rtol, atol=0.0)
+
+
+@pytest.mark.parametrize("name", CASES)
+def test_float32_within_the_stated_bound(name):
+    """float32 against float64 where the density exceeds 1e-6 of its peak, within the bound the
+    model class states (``float32_rtol``)."""
+    case = CASES[name]
+    model, grid = case.model(), case.grid
+    r64 = bg.rasterise(model, grid).values
+    r32 = bg.rasterise(model, grid, dtype=np.float32).values
+    assert r32.dtype == np.float32
+    live = r64 >= 1e-6 * r64.max()
+    worst = float(np.max(np.abs(r32[live] / r64[live] - 1.0)))
+    assert worst < type(model).float32_rtol, worst
+
+
+#: False-alarm rate of each chi-square test (fixed seeds: deterministic outcome).
+ALPHA = 1e-3
+N_SAMPLES = 200_000
+#: Sub-cells per bin side: the bins' probabilities by the midpoint rule on cells a tenth of the
+#: grid step (at most a few 1e-4 relative for the features above, far below the 1 / sqrt(count)
+#: >= 2e-3 statistical error of the fullest bins).
+SUB = 10
+
+
+@pytest.mark.parametrize("name", CASES)
+def test_density_matches_its_own_samples(name):
+    """Pearson's chi-square of the model's samples binned on its grid against the kernel's bin
+    probabilities (normalised over the grid, which holds the mass), bins expecting >= 5."""
+    case = CASES[name]
+    model = case.model()
+    fine = bg.Grid.from_bounds(**case.bounds, step=case.step / SUB)
+    values = bg.rasterise(model, fine).values
+    ny, nx = values.shape[0] // SUB, values.shape[1] // SUB
+    probs = values[: ny * SUB, : nx * SUB].reshape(ny, SUB, nx, SUB).sum(axis=(1, 3))
+    probs = probs / probs.sum()
+    pts = model.sample(N_SAMPLES, np.random.default_rng(20261122))
+    x0, y0 = fine.origin
+    counts, _, _ = np.histogram2d(pts[:, 1], pts[:, 0], bins=(ny, nx),
+                                  range=((y0, y0 + ny * case.step * 1.0), (x0, x0 + nx * case.step)))
+    assert counts.sum() > (1.0 - 1e-3) * N_SAMPLES  # the grid holds the samples too
+    expected = probs * counts.sum()
+    big = expected >= 5
+    obs = np.append(counts[big], counts[~big].sum())
+    exp = np.append(expected[big], expected[~big].sum())
+    if exp[-1] < 5:  # too little pooled mass for Pearson's approximation
+        obs, exp = obs[:-1], exp[:-1] * (obs[:-1].sum() / exp[:-1].sum())
+    chi2 = float(np.sum((obs - exp) ** 2 / exp))
+    p_value = stats.chi2.sf(chi2, df=len(obs) - 1)
+    assert p_value > ALPHA, f"chi2 = {chi2:.1f} on {len(obs) - 1} dof, p = {p_value:.2e}"
+
+
+@pytest.mark.parametrize("name", CASES)
+def test_polar_lattice_cells_sum_to_the_grid_mass(name):
+    """The lattice's Gauss-Legendre cells and the grid's midpoint rule integrate the same density
+    over regions that both hold its mass (the coarse grid's midpoint rule errs by up to ~1e-4
+    at these steps; the cells by 1e-9)."""
+    case = CASES[name]
+    model = case.model()
+    polar = bg.rasterise(model, bg.PolarLattice(**case.lattice))
+    assert polar.probability.min() >= 0.0
+    fine = bg.rasterise(model, bg.Grid.from_bounds(**case.bounds, step=case.step / 4))
+    assert abs(polar.mass - fine.mass) < 1e-4 * fine.mass, (polar.mass, fine.mass)
+
+
+@pytest.mark.parametrize("name", CASES)
+def test_radial_moments_along_rays(name):
+    """E[r | theta] lies inside the lattice's ranges, SD > 0 and the ray mass > 0 at the
+    bearing of the lattice's centre (through the protocol's radial_extent and ray_values)."""
+    case = CASES[name]
+    model = case.model()
+    pose = None if case.pose is None else Pose(**case.pose)
+    lattice = bg.PolarLattice(**case.lattice)
+    bearing = 0.5 * sum(lattice.bearings) if lattice.bearings[1] - lattice.bearings[0] < math.pi else 0.0
+    moments = bg.radial_moments(model, [bearing], pose=pose)
+    assert lattice.ranges[0] < moments.mean[0] < lattice.ranges[1]
+    assert moments.sd[0] > 0.0 and moments.mass[0] > 0.0
+
+
+BAD = [(name, param, value, message) for name, case in CASES.items() for param, value, message in case.bad]
+
+
+@pytest.mark.parametrize("name, param, value, message", BAD, ids=[f"{n}-{p}" for n, p, _, _ in BAD])
+def test_bad_parameter_is_named(name, param, value, message):
+    with pytest.raises(bg.BananagridError, match=message):
+        CASES[name].model(**{param: value})
+
+
+# --- the model of the tests: scenes and recordings too --------------------------------------
+
+SCENE = """
+[scene]
+name = "isotropic"
+
+[grid]
+x = [-700.0, 1300.0]
+y = [-1200.0, 800.0]
+step = 40.0
+
+[layers.normal]
+model = "isotropic"
+mean = [300.0, -200.0]
+sigma = 150.0
+"""
+
+
+def test_a_model_of_the_tests_gets_a_scene_layer_and_a_recording(tmp_path):
+    kinds = bg.MODEL_KINDS.with_kinds(ISOTROPIC)
+    scene = parse_scene(SCENE, source="isotropic.toml", kinds=kinds)
+    (layer,) = scene.layers
+    assert layer.model() == IsotropicNormal(mean=(300.0, -200.0), sigma=150.0)
+    rows = run_scene(scene, tmp_path)
+    assert rows[0]["mass"] == pytest.approx(1.0, abs=1e-6)  # +-6.7 sigma: 2e-10 outside
+    info = inspect_recording(tmp_path / "isotropic.rrd")
+    assert {"/layers/normal/density", "/layers/normal/contours"} <= set(info["entities"])
+    with pytest.raises(bg.BananagridError, match=r'isotropic.toml: layers.normal.sigma = -1.0: must be > 0'):
+        parse_scene(SCENE.replace("sigma = 150.0", "sigma = -1.0"), source="isotropic.toml", kinds=kinds)
+    with pytest.raises(bg.BananagridError, match=r'layers.normal.model = "isotropic": must be one of "cat"'):
+        parse_scene(SCENE, source="isotropic.toml")  # the default registry does not know it
+
+
+def test_a_model_of_the_tests_matches_its_closed_form():
+    """The test model's kernels are right (so the checks above test the engine, not it)."""
+    model = IsotropicNormal(mean=(300.0, -200.0), sigma=150.0)
+    x = np.array([300.0, 450.0, 0.0])
+    y = np.array([-200.0, -200.0, 100.0])
+    want = stats.multivariate_normal([300.0, -200.0], 150.0**2).pdf(np.column_stack((x, y)))
+    np.testing.assert_allclose(model.pdf(x, y), want, rtol=1e-14)
