@@ -11,9 +11,9 @@ The density is  sum over roots of  g(a; sigma_a) g(omega; sigma_omega) / |dF/dom
 
 F and dF/domega are affine in P with omega-only coefficients, so a table of those coefficients
 at N nodes (``cat_table``) lets each cell scan for sign changes with a few multiply-adds per
-node. A sign change is refined by safeguarded Newton; a node interval without a sign change in
-which |F| has a local minimum (F dF changes sign from - to +) is searched for the minimum, which
-finds the root pairs where the banana folds over itself.
+node. Which node intervals can hold roots, and how many, is decided from proved bounds on F's
+derivatives (``cat_interval``), so that no root, and no root pair where the banana folds over
+itself, is missed: see ``cat_interval`` for the bounds and the proof.
 """
 
 from typing import Any
@@ -35,10 +35,13 @@ PRUNE_SIGMAS = 38.0
 MAX_NEWTON = 100
 MAX_FOLD_SEARCH = 100
 
-#: An interval is searched for a root pair when the Hermite interpolant of F comes within this
-#: fraction of its larger end value of zero. The interpolant's error is O(width^4): on the
-#: 0.1-rad node intervals (of omega t) about 2e-7 of F's scale, so 1e-2 leaves a wide margin.
-FOLD_MARGIN = 1.0e-2
+#: A node interval whose roots the bounds cannot settle is split into SPLIT parts, and each of
+#: those again (two levels: widths 1/8 and 1/64 of the node spacing).
+SPLIT = 8
+
+#: Rounding allowance on computed values of F and dF/domega, in units of the dtype's epsilon
+#: times the largest term they sum (their table coefficients carry a few ulps each).
+ROUNDING_ULPS = 32.0
 
 
 @wp.func
@@ -106,30 +109,25 @@ def hermite_root(f0: Any, g0: Any, f1: Any, g1: Any, width: Any):
 
 
 @wp.func
-def hermite_dips_to_zero(f0: Any, g0: Any, f1: Any, g1: Any, width: Any):
-    """Whether the Hermite interpolant of F (same sign at both ends) comes within FOLD_MARGIN of
-    zero, relative to the larger end value.
-
-    F is smooth on the scale of a node interval (the interpolant's error is O(width^4)), so an
-    interval whose interpolant stays far from zero cannot hold a root pair; only the rest pay
-    for the exact search.
-    """
+def hermite_minimum(f0: Any, g0: Any, f1: Any, g1: Any, width: Any):
+    """The smallest value on [0, 1] of the cubic Hermite interpolant of F (signed: its ends and
+    its interior stationary points, where 3 p s^2 + 2 q s + m0 = 0)."""
     m0, q, p = hermite_cubic(f0, g0, f1, g1, width)
     zero = type(f0)(0.0)
-    lowest = wp.min(wp.abs(f0), wp.abs(f1))
-    # stationary points: 3 p s^2 + 2 q s + m0 = 0
+    one = type(f0)(1.0)
+    lowest = wp.min(f0, f1)
     disc = q * q - type(f0)(3.0) * p * m0
     if p != zero and disc >= zero:
         root = wp.sqrt(disc)
         for sgn in range(2):
-            s = (-q + (type(f0)(2.0 * float(sgn)) - type(f0)(1.0)) * root) / (type(f0)(3.0) * p)
-            if s > zero and s < type(f0)(1.0):
-                lowest = wp.min(lowest, wp.abs(f0 + s * (m0 + s * (q + s * p))))
+            s = (-q + (type(f0)(2.0 * float(sgn)) - one) * root) / (type(f0)(3.0) * p)
+            if s > zero and s < one:
+                lowest = wp.min(lowest, f0 + s * (m0 + s * (q + s * p)))
     elif p == zero and q != zero:
         s = -m0 / (type(f0)(2.0) * q)
-        if s > zero and s < type(f0)(1.0):
-            lowest = wp.min(lowest, wp.abs(f0 + s * (m0 + s * q)))
-    return lowest <= type(f0)(FOLD_MARGIN) * wp.max(wp.abs(f0), wp.abs(f1))
+        if s > zero and s < one:
+            lowest = wp.min(lowest, f0 + s * (m0 + s * q))
+    return lowest
 
 
 @wp.func
@@ -213,6 +211,123 @@ def cat_negligible(table: wp.array2d(dtype=Any), k: int, x: Any, y: Any, a_cut: 
 
 
 @wp.func
+def cat_interval(
+    x: Any, y: Any, lo: Any, hi: Any, f_lo: Any, g_lo: Any, f_hi: Any, g_hi: Any,
+    v0: Any, t: Any, sigma_a: Any, sigma_omega: Any, tol: Any, r: Any, noise_f: Any, noise_g: Any,
+    last: bool,
+):
+    """The density of the roots of F in [lo, hi] (F, dF/domega given at both ends), and whether
+    the bounds below settled them (``last``: settle them anyway, by the fold search).
+
+    Bounds. With tau the time since the fix and e(theta) a unit vector, f = int_0^t e(omega tau)
+    dtau and h = int_0^t tau e(omega tau) dtau, so F = h x P - v0 h x f with
+    h x f = int int tau1 sin(omega (tau1 - tau2)) dtau1 dtau2 (up to sign). Differentiating under
+    the integrals, |d^n h / domega^n| <= t^(n+2) / (n+2) and |d^n (h x f) / domega^n| <=
+    t^(n+3) int_0^1 int_0^1 u |u - v|^n du dv = t^(n+3) (1/12, 1/20, 1/30 for n = 2, 3, 4), so
+    with r = |P| and u = omega t, on an interval of width du in u (w = du / t in omega):
+
+        M2 w^2 = t^2 (r / 4 + v0 t / 12) du^2,    M3 w^2 = t^3 (r / 5 + v0 t / 20) du^2,
+        M4 w^4 = t^2 (r / 6 + v0 t / 30) du^4,    M_n >= max |d^n F / domega^n| on it.
+
+    Proof that no root is missed. (i) Same sign at both ends: F differs from its chord by at most
+    M2 w^2 / 8 and from its cubic Hermite interpolant H by at most M4 w^4 / 384
+    (F - H = F^(4)(xi) / 4! (s - lo)^2 (s - hi)^2); if either bound keeps F off zero there is no
+    root. (ii) Else, if |g_hi - g_lo| > M3 w^2, F'' keeps one sign on the interval (the mean
+    value theorem puts F'' = (g_hi - g_lo) / w somewhere in it, and F'' moves by at most M3 w):
+    F is convex or concave, so it has at most two roots, both around the one minimum of |F|,
+    which exists inside only if |F| falls at lo and rises at hi; ``cat_fold_minimum`` finds it
+    (F' is monotone) and the two roots, if F changes sign there, are bracketed on either side.
+    (iii) A sign change holds exactly one root if F' keeps its sign (F' differs from its chord by
+    at most M3 w^2 / 8) or F'' does (as in (ii)). (iv) Otherwise the interval is undecided and is
+    split (``cat_split``). Values of F and F' carry rounding ``noise_f``, ``noise_g``, added to
+    every margin. An interval still undecided at 1/64 of the node spacing has F, F' and F'' all
+    near zero together (a cusp of the caustic, where three roots meet): there the fold search of
+    (ii) runs without the guarantee.
+    """
+    zero = type(x)(0.0)
+    du = (hi - lo) * t
+    du2 = du * du
+    t2 = t * t
+    m3w2 = t2 * t * (r * type(x)(0.2) + v0 * t * type(x)(0.05)) * du2  # M3 w^2
+    curvature = m3w2 + type(x)(2.0) * noise_g
+    if (f_hi >= zero) != (f_lo >= zero):
+        monotone = (g_lo > zero) == (g_hi > zero) and wp.min(wp.abs(g_lo), wp.abs(g_hi)) > (
+            type(x)(0.125) * m3w2 + noise_g
+        )
+        if monotone or wp.abs(g_hi - g_lo) > curvature or last:
+            return cat_root_density(x, y, lo, hi, f_lo, g_lo, f_hi, g_hi, v0, t, sigma_a, sigma_omega, tol), True
+        return zero, False
+    chord = t2 * (r * type(x)(0.25) + v0 * t / type(x)(12.0)) * du2 * type(x)(0.125) + noise_f
+    if wp.min(wp.abs(f_lo), wp.abs(f_hi)) > chord:
+        return zero, True
+    sign = type(x)(1.0)
+    if f_lo < zero:
+        sign = type(x)(-1.0)
+    hermite = t2 * (r / type(x)(6.0) + v0 * t / type(x)(30.0)) * du2 * du2 / type(x)(384.0)
+    if hermite_minimum(sign * f_lo, sign * g_lo, sign * f_hi, sign * g_hi, hi - lo) > (
+        hermite + noise_f + type(x)(0.3) * (hi - lo) * noise_g
+    ):
+        return zero, True
+    if not (wp.abs(g_hi - g_lo) > curvature or last):
+        return zero, False
+    density = zero
+    if f_lo * g_lo < zero and f_hi * g_hi > zero:  # |F| falls, then rises: its minimum is inside
+        w_min, f_min, g_min = cat_fold_minimum(x, y, lo, hi, g_lo, g_hi, v0, t, tol)
+        if (f_min >= zero) != (f_hi >= zero):
+            density = cat_root_density(
+                x, y, lo, w_min, f_lo, g_lo, f_min, g_min, v0, t, sigma_a, sigma_omega, tol
+            ) + cat_root_density(x, y, w_min, hi, f_min, g_min, f_hi, g_hi, v0, t, sigma_a, sigma_omega, tol)
+    return density, True
+
+
+@wp.func
+def cat_split(
+    x: Any, y: Any, lo: Any, hi: Any, f_lo: Any, g_lo: Any, f_hi: Any, g_hi: Any,
+    v0: Any, t: Any, sigma_a: Any, sigma_omega: Any, tol: Any, r: Any, noise_f: Any, noise_g: Any,
+):
+    """The roots of an interval ``cat_interval`` left undecided: split it into SPLIT parts, and
+    each part it still cannot settle into SPLIT more (the last level settles them)."""
+    density = type(x)(0.0)
+    a = lo
+    f_a = f_lo
+    g_a = g_lo
+    for i in range(SPLIT):
+        b = hi
+        f_b = f_hi
+        g_b = g_hi
+        if i < SPLIT - 1:
+            b = lo + (hi - lo) * type(x)(float(i + 1) / float(SPLIT))
+            f_b, g_b, acc_b = cat_eval(x, y, b, v0, t)
+        part, settled = cat_interval(
+            x, y, a, b, f_a, g_a, f_b, g_b, v0, t, sigma_a, sigma_omega, tol, r, noise_f, noise_g, False
+        )
+        if settled:
+            density += part
+        else:
+            c = a
+            f_c = f_a
+            g_c = g_a
+            for j in range(SPLIT):
+                e = b
+                f_e = f_b
+                g_e = g_b
+                if j < SPLIT - 1:
+                    e = a + (b - a) * type(x)(float(j + 1) / float(SPLIT))
+                    f_e, g_e, acc_e = cat_eval(x, y, e, v0, t)
+                piece, done = cat_interval(
+                    x, y, c, e, f_c, g_c, f_e, g_e, v0, t, sigma_a, sigma_omega, tol, r, noise_f, noise_g, True
+                )
+                density += piece
+                c = e
+                f_c = f_e
+                g_c = g_e
+        a = b
+        f_a = f_b
+        g_a = g_b
+    return density
+
+
+@wp.func
 def cat_density_local(
     x: Any,
     y: Any,
@@ -222,11 +337,23 @@ def cat_density_local(
     sigma_a: Any,
     sigma_omega: Any,
     tol: Any,
+    eps: Any,
 ):
-    """Exact CAT density at a point of the local frame: scan the table, refine every root."""
+    """Exact CAT density at a point of the local frame: scan the table, refine every root.
+
+    Intervals with a sign change, and those whose smaller |F| at an end is within the chord
+    bound of zero (``cat_interval``), are examined; the rest cannot hold a root.
+    """
     zero = type(x)(0.0)
     density = zero
     a_cut = type(x)(PRUNE_SIGMAS) * sigma_a
+    r = wp.sqrt(x * x + y * y)
+    t2 = t * t
+    noise_f = type(x)(ROUNDING_ULPS) * eps * t2 * type(x)(0.5) * (wp.abs(x) + wp.abs(y) + v0 * t)
+    noise_g = type(x)(ROUNDING_ULPS) * eps * t2 * t * (
+        (wp.abs(x) + wp.abs(y)) / type(x)(3.0) + v0 * t * type(x)(7.0 / 12.0)
+    )
+    chord_coef = t2 * t2 * (r * type(x)(0.25) + v0 * t / type(x)(12.0)) * type(x)(0.125)
     n = table.shape[0]
     w_prev = table[0, 0]
     f_prev = table[0, 1] * y - table[0, 2] * x - table[0, 3]
@@ -235,24 +362,22 @@ def cat_density_local(
         w_k = table[k, 0]
         f_k = table[k, 1] * y - table[k, 2] * x - table[k, 3]
         g_k = table[k, 4] * y - table[k, 5] * x - table[k, 6]
-        if (f_k >= zero) != (f_prev >= zero):
+        width = w_k - w_prev
+        # cheap test first: a sign change, or an end within the chord bound M2 w^2 / 8 of zero
+        if (f_k >= zero) != (f_prev >= zero) or wp.min(wp.abs(f_prev), wp.abs(f_k)) <= (
+            chord_coef * width * width + noise_f
+        ):
             if not cat_negligible(table, k, x, y, a_cut):
-                density += cat_root_density(
-                    x, y, w_prev, w_k, f_prev, g_prev, f_k, g_k, v0, t, sigma_a, sigma_omega, tol
+                part, settled = cat_interval(
+                    x, y, w_prev, w_k, f_prev, g_prev, f_k, g_k, v0, t, sigma_a, sigma_omega, tol, r,
+                    noise_f, noise_g, False,
                 )
-        elif f_prev * g_prev < zero and f_k * g_k > zero:
-            # |F| falls then rises inside the interval; if its minimum comes near zero it may
-            # dip through it: a fold of the banana, two roots close together.
-            if hermite_dips_to_zero(f_prev, g_prev, f_k, g_k, w_k - w_prev) and not cat_negligible(
-                table, k, x, y, a_cut
-            ):
-                w_min, f_min, g_min = cat_fold_minimum(x, y, w_prev, w_k, g_prev, g_k, v0, t, tol)
-                if (f_min >= zero) != (f_k >= zero):
-                    density += cat_root_density(
-                        x, y, w_prev, w_min, f_prev, g_prev, f_min, g_min, v0, t, sigma_a, sigma_omega, tol
-                    )
-                    density += cat_root_density(
-                        x, y, w_min, w_k, f_min, g_min, f_k, g_k, v0, t, sigma_a, sigma_omega, tol
+                if settled:
+                    density += part
+                else:
+                    density += cat_split(
+                        x, y, w_prev, w_k, f_prev, g_prev, f_k, g_k, v0, t, sigma_a, sigma_omega, tol, r,
+                        noise_f, noise_g,
                     )
         w_prev = w_k
         f_prev = f_k
@@ -292,13 +417,15 @@ def cat_grid(
     sigma_omega: Any,
     pose: wp.array(dtype=Any),
     tol: Any,
+    eps: Any,
     out: wp.array2d(dtype=Any),
 ):
-    """Density at the cell centres (xs[j], ys[row0 + i]) of a band of rows."""
+    """Density at the cell centres (xs[j], ys[row0 + i]) of a band of rows (``eps``: the dtype's
+    machine epsilon, for the rounding allowance)."""
     i, j = wp.tid()
     row = row0 + i
     x, y = world_to_local(xs[j], ys[row], pose)
-    out[row, j] = cat_density_local(x, y, table, v0, t, sigma_a, sigma_omega, tol)
+    out[row, j] = cat_density_local(x, y, table, v0, t, sigma_a, sigma_omega, tol, eps)
 
 
 @wp.kernel
@@ -313,12 +440,13 @@ def cat_points(
     sigma_omega: Any,
     pose: wp.array(dtype=Any),
     tol: Any,
+    eps: Any,
     out: wp.array(dtype=Any),
 ):
     """Density at arbitrary world points (xs[k], ys[k]) for k in a chunk starting at ``start``."""
     k = start + wp.tid()
     x, y = world_to_local(xs[k], ys[k], pose)
-    out[k] = cat_density_local(x, y, table, v0, t, sigma_a, sigma_omega, tol)
+    out[k] = cat_density_local(x, y, table, v0, t, sigma_a, sigma_omega, tol, eps)
 
 
 def _register_overloads():
@@ -328,7 +456,7 @@ def _register_overloads():
         wp.overload(cat_table, {"omegas": vec, "v0": scalar, "t": scalar, "table": mat})
         common = {
             "xs": vec, "ys": vec, "table": mat, "v0": scalar, "t": scalar,
-            "sigma_a": scalar, "sigma_omega": scalar, "pose": vec, "tol": scalar,
+            "sigma_a": scalar, "sigma_omega": scalar, "pose": vec, "tol": scalar, "eps": scalar,
         }
         wp.overload(cat_grid, {**common, "out": mat})
         wp.overload(cat_points, {**common, "out": vec})

@@ -19,9 +19,9 @@ from .motion import MOTION_KEYS, MotionModel, pose_arguments
 
 __all__ = ["CAT", "cat_position", "scan_nodes", "clear_heading_tables", "NODE_SPACING"]
 
-#: Turn-rate node spacing of the scan table, in units of omega t (radians). Root pairs closer
-#: than this are still found by the fold search; the spacing bounds how many extrema of F one
-#: interval can hold.
+#: Turn-rate node spacing of the scan table, in units of omega t (radians). The kernel's bounds
+#: find every root at any spacing; at this one they are tight enough that few node intervals
+#: need splitting.
 NODE_SPACING = 0.1
 MIN_NODES = 64
 MAX_NODES = 8192
@@ -97,8 +97,9 @@ class CAT(MotionModel):
     For a fixed turn rate omega the position is affine in the acceleration a, so a point P is
     reached at omega iff F(omega) = h(omega) x (P - v0 f(omega)) = 0, and dF/domega = -det J
     there. Each cell scans a table of F's coefficients at :func:`scan_nodes`, refines each sign
-    change by Newton from the cubic Hermite root and searches intervals where |F| dips towards
-    zero for root pairs (the banana folding over itself); see ``kernels/cat.py``.
+    change by Newton from the cubic Hermite root, and finds the root pairs where the banana
+    folds over itself wherever proved bounds on F's derivatives cannot exclude them; see
+    ``kernels/cat.py`` (``cat_interval``).
     """
 
     v0: float
@@ -154,7 +155,7 @@ class CAT(MotionModel):
         tol = 8.0 * np.finfo(ctx.dtype).eps * self.k_sigma * self.sigma_omega
         params = (
             table, ctx.scalar(self.v0), ctx.scalar(self.t), ctx.scalar(self.sigma_a),
-            ctx.scalar(self.sigma_omega), pose, ctx.scalar(tol),
+            ctx.scalar(self.sigma_omega), pose, ctx.scalar(tol), ctx.scalar(np.finfo(ctx.dtype).eps),
         )
         notes = {"scan_nodes": len(omegas), "k_sigma": self.k_sigma, "truncated_mass": self.truncated_mass}
         return KernelBinding(kernels.cat_grid, kernels.cat_points, params, "cat.cat_grid", notes)
