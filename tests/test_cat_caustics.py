@@ -125,6 +125,23 @@ def test_both_sides_of_the_caustic(name):
     assert worst < RTOL, worst
 
 
+@pytest.mark.parametrize("name", FOLDS)
+def test_float32_near_the_caustic(name):
+    """float32 against float64 at the fold points from 1e-6 v0 t: within max(2e-4, 4e-8 v0 t / d)
+    (the README's statement). float32 coordinates carry 6e-8 relative, so the distance to the
+    caustic is known to about 6e-8 v0 t, and the density goes like d^(-1/2): half of that
+    relative error, 3e-8 v0 t / d, plus the kernel's own float32 error away from folds."""
+    params = FOLDS[name]
+    model = bg.CAT(**params)
+    for d in (d for d in DISTANCES if d >= 1e-6):
+        local = fold_points(params, distances=(d,))
+        p64 = model.pdf(local[:, 0], local[:, 1])
+        p32 = model.pdf(local[:, 0], local[:, 1], dtype=np.float32)
+        live = p64 > 1e-6 * p64.max()
+        worst = float(np.max(np.abs(p32[live] / p64[live] - 1.0)))
+        assert worst < max(2e-4, 4e-8 / d), (d, worst)
+
+
 def test_a_posed_model_at_its_caustic():
     pose = Pose(origin=(-1234.5, 678.9), heading=2.3)
     worst, live = agreement(SHIP, fold_points(SHIP, n_folds=3), pose=pose)

@@ -39,6 +39,7 @@ NOT_RUN = {
     "bananagrid bench --repeat 3 --json bench.json": "minutes of timing; tests/test_bench.py runs bench on small grids",
     "bananagrid bench --kernels presence-plane,presence-frustum --repeat 3": "minutes of timing (see tests/test_bench.py)",
     "bananagrid bench --kernels butterly-r1,butterly-r10,butterly-r100,butterly-r1000 --repeat 3": "minutes of timing (see tests/test_bench.py)",
+    "bananagrid bench --kernels cat,cat-heading --repeat 3": "minutes of timing (see tests/test_bench.py)",
     "time bananagrid sweep": "about a minute; tests/test_compare.py runs the sweep at --n 2",
     "python -m bananagrid.scenes.docs --write docs/scenes.md": "rewrites the docs; the same generator runs with --check in tests/test_architecture.py",
     "python -m bananagrid ...": "an elision; tests/test_architecture.py runs python -m bananagrid from the root",
