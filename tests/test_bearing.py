@@ -280,6 +280,16 @@ def test_sample_validates_its_arguments():
         make().sample(-2, np.random.default_rng(0))
 
 
+def test_sample_refuses_bearings_that_disagree():
+    """A third bearing 5.4 sigma off the first two's crossing: its likelihood factor keeps about
+    5e-7 of the re-triangulated draws, so rejection would run for hours; the sampler stops after
+    SAMPLE_PATIENCE proposals with a message instead (the map itself is fine)."""
+    fix = BearingFix([[0.0, 0.0], [20000.0, 0.0], [10000.0, -5000.0]], [0.2641, -0.3909, 0.05], [0.01, 0.02, 0.02])
+    with pytest.raises(BananagridError, match=r"bearings of sensors \[2\] disagree with the crossing of sensors 0 and 1"):
+        fix.sample(100, np.random.default_rng(0))
+    assert np.isfinite(fix.pdf([8700.0], [30950.0])).all()
+
+
 def test_many_geometries_at_once_match_one_at_a_time():
     from bananagrid.models.bearing import two_bearing_variances
 

@@ -36,6 +36,11 @@ MAP_VARIANTS = ("exact", "linear")
 
 #: Bearing errors beyond this many sigmas are outside the sampler's support (mass < 1e-22).
 SAMPLE_SIGMAS = 10.0
+#: The sampler gives up when fewer than this fraction of its proposals were kept after
+#: SAMPLE_PATIENCE proposals: the other stations' bearings then disagree with the best pair's
+#: crossing by several sigmas, and rejection would run for hours (the map itself is fine).
+SAMPLE_MIN_ACCEPTANCE = 1e-4
+SAMPLE_PATIENCE = 1_000_000
 
 #: Gauss-Newton iterations for three or more sensors (each converges quadratically).
 MAX_ITERATIONS = 50
@@ -436,8 +441,16 @@ class BearingFix(Model):
         j_min = self._pair_jacobian(i, j, corner_points).min()
         others = [k for k in range(len(self.bearings)) if k not in (i, j)]
         out = np.empty((0, 2))
+        proposed = 0
         while len(out) < n:
+            if proposed >= SAMPLE_PATIENCE and len(out) < SAMPLE_MIN_ACCEPTANCE * proposed:
+                raise BananagridError(
+                    f"bearings: the bearings of sensors {others} disagree with the crossing of sensors {i} "
+                    f"and {j} (kept {len(out)} of {proposed:,} draws); the fix cannot be sampled by "
+                    "re-triangulation: check the bearings and their sigmas"
+                )
             m = max(4 * (n - len(out)), 64)
+            proposed += m
             eps = rng.normal(size=(m, 2))
             eps = eps[np.all(np.abs(eps) <= SAMPLE_SIGMAS, axis=1)]
             points, ok = self._crossings(
