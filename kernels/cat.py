@@ -281,6 +281,16 @@ def cat_interval(
 
 
 @wp.func
+def cat_part_end(x: Any, y: Any, lo: Any, hi: Any, f_hi: Any, g_hi: Any, i: int, v0: Any, t: Any):
+    """The right end of part ``i`` of SPLIT equal parts of [lo, hi], with F and dF/domega there."""
+    if i == SPLIT - 1:
+        return hi, f_hi, g_hi
+    b = lo + (hi - lo) * type(x)(float(i + 1) / float(SPLIT))
+    f_b, g_b, acc_b = cat_eval(x, y, b, v0, t)
+    return b, f_b, g_b
+
+
+@wp.func
 def cat_split(
     x: Any, y: Any, lo: Any, hi: Any, f_lo: Any, g_lo: Any, f_hi: Any, g_hi: Any,
     v0: Any, t: Any, sigma_a: Any, sigma_omega: Any, tol: Any, r: Any, noise_f: Any, noise_g: Any,
@@ -292,12 +302,7 @@ def cat_split(
     f_a = f_lo
     g_a = g_lo
     for i in range(SPLIT):
-        b = hi
-        f_b = f_hi
-        g_b = g_hi
-        if i < SPLIT - 1:
-            b = lo + (hi - lo) * type(x)(float(i + 1) / float(SPLIT))
-            f_b, g_b, acc_b = cat_eval(x, y, b, v0, t)
+        b, f_b, g_b = cat_part_end(x, y, lo, hi, f_hi, g_hi, i, v0, t)
         part, settled = cat_interval(
             x, y, a, b, f_a, g_a, f_b, g_b, v0, t, sigma_a, sigma_omega, tol, r, noise_f, noise_g, False
         )
@@ -308,12 +313,7 @@ def cat_split(
             f_c = f_a
             g_c = g_a
             for j in range(SPLIT):
-                e = b
-                f_e = f_b
-                g_e = g_b
-                if j < SPLIT - 1:
-                    e = a + (b - a) * type(x)(float(j + 1) / float(SPLIT))
-                    f_e, g_e, acc_e = cat_eval(x, y, e, v0, t)
+                e, f_e, g_e = cat_part_end(x, y, a, b, f_b, g_b, j, v0, t)
                 piece, done = cat_interval(
                     x, y, c, e, f_c, g_c, f_e, g_e, v0, t, sigma_a, sigma_omega, tol, r, noise_f, noise_g, True
                 )
