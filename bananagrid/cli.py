@@ -18,6 +18,7 @@ from typing import TextIO
 import numpy as np
 
 from .analysis.compare import compare
+from .atomic import Terminated, atomic_write, check_writable, signals_as_exceptions
 from .analysis.sweep import FIGURE7_LEVELS, sweep
 from .bench import runner as bench
 from .recording.compare import write_compare_recording, write_sweep_recording
@@ -45,7 +46,8 @@ def main(argv: list[str] | None = None) -> int:
                 return _bench(rest)
             if rest:
                 commands[args.command].error(f"unrecognized arguments: {' '.join(rest)}")
-            return args.handler(args)
+            with signals_as_exceptions():
+                return args.handler(args)
         except SystemExit as exc:  # argparse: --help (0) and usage errors (2)
             return exc.code if isinstance(exc.code, int) else USER_ERROR
         except (BananagridError, OSError, tomllib.TOMLDecodeError) as exc:
@@ -54,6 +56,9 @@ def main(argv: list[str] | None = None) -> int:
         except KeyboardInterrupt:
             print("bananagrid: interrupted", file=sys.stderr)
             return INTERRUPTED
+        except Terminated as exc:  # SIGTERM, SIGHUP: temporary files are already removed
+            print(f"bananagrid: terminated by {exc.name}", file=sys.stderr)
+            return 128 + exc.signum
 
 
 def build_parser() -> tuple[argparse.ArgumentParser, dict[str, argparse.ArgumentParser]]:
@@ -148,11 +153,16 @@ def _run(args: argparse.Namespace) -> int:
         scenes = [scene.with_step(args.step) for scene in scenes]
     _check_unique_names(scenes)
     args.out.mkdir(parents=True, exist_ok=True)
+    check_writable(args.out)
     rows, written = [], []
     for scene in scenes:
         progress = None if args.quiet else _Progress(scene.name, sys.stderr)
         try:
             rows += run_scene(scene, args.out, npz=args.npz, threads=args.threads, progress=progress)
+        except BaseException:
+            if written:  # the scenes before this one are complete: say so
+                print(f"bananagrid: written before the error: {', '.join(map(str, written))}", file=sys.stderr)
+            raise
         finally:
             if progress is not None:
                 progress.close()
@@ -177,6 +187,7 @@ def _out_dir(out: Path) -> None:
     if out.exists() and not out.is_dir():
         raise BananagridError(f"--out {out}: exists and is not a directory")
     out.mkdir(parents=True, exist_ok=True)
+    check_writable(out)
 
 
 def _threads(threads) -> None:
@@ -255,11 +266,9 @@ def _sweep(args: argparse.Namespace) -> int:
     rrd = args.out / "sweep.rrd"
     npz = args.out / "sweep.npz"
     write_sweep_recording(rrd, result, recording_id=recording_id_for(f"sweep {args.n} {args.threshold}"), levels=FIGURE7_LEVELS)
-    tmp = args.out / ".sweep.npz.partial"
-    with open(tmp, "wb") as fh:
+    with atomic_write(npz) as tmp, open(tmp, "wb") as fh:
         np.savez(fh, alpha=result.alpha, beta=result.beta, goodness=result.goodness,
                  threshold=result.threshold, contour_999_beta_deg=claim["contour_999_beta_deg"])
-    tmp.replace(npz)
     print(f"{args.n} x {args.n} settings in {result.seconds:.1f} s; goodness from {result.goodness.min():.6f} "
           f"to {result.goodness.max():.6f}")
     verdict = "holds" if claim["claim_holds_on_grid"] else "does NOT hold"

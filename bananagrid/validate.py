@@ -10,7 +10,9 @@ import json
 import math
 from numbers import Real
 
-__all__ = ["finite", "positive", "non_negative", "positive_int", "point", "show", "BananagridError"]
+import numpy as np
+
+__all__ = ["finite", "positive", "non_negative", "positive_int", "point", "real_array", "show", "BananagridError"]
 
 
 class BananagridError(ValueError):
@@ -21,6 +23,25 @@ def _real(name: str, value) -> float:
     if isinstance(value, bool) or not isinstance(value, Real):
         raise BananagridError(f"{name} = {value!r}: expected a real number")
     return float(value)
+
+
+def real_array(name: str, value, expected: str = "numbers") -> np.ndarray:
+    """``value`` as a new float64 array, or raise unless every entry is a real number: NumPy
+    alone would turn ``"1"`` and ``True`` into 1.0 (shape and finiteness are the caller's)."""
+    try:
+        array = np.array(value)
+    except (TypeError, ValueError):  # ragged nesting
+        array = None
+    # kinds b: booleans, U/S: strings, O: anything else; and a bool among floats becomes a float
+    if array is None or array.dtype.kind not in "iuf" or _holds_non_number(value):
+        raise BananagridError(f"{name} = {value!r}: expected {expected}")
+    return array.astype(float)
+
+
+def _holds_non_number(value) -> bool:
+    if isinstance(value, (bool, np.bool_, str, bytes)):
+        return True
+    return isinstance(value, (list, tuple)) and any(_holds_non_number(v) for v in value)
 
 
 def finite(name: str, value) -> float:

@@ -48,7 +48,7 @@ def venv_tool(name: str) -> str:
 
 def test_import_layers_hold():
     """import-linter's contracts (pyproject.toml): the layers cli > bench > scenes > recording >
-    analysis > models > engine > protocol/results > domains/kernels > validate; only the engine
+    analysis > models > engine > protocol/results > domains/kernels > atomic > validate; only the engine
     and the kernels import warp; the kernels import nothing of bananagrid."""
     run = subprocess.run([venv_tool("lint-imports")], cwd=ROOT, capture_output=True, text=True)
     assert run.returncode == 0, run.stdout + run.stderr

@@ -155,3 +155,21 @@ def test_normalise_without_mass_is_a_clear_error():
     assert raster.mass == 0.0
     with pytest.raises(bg.BananagridError, match="cannot normalise a raster that captured no mass"):
         raster.normalise()
+
+
+NOT_NUMBERS = [
+    ("speeds", lambda v: bg.Butterly(mean=(0.0, 0.0), cov=[[1.0, 0.0], [0.0, 1.0]], speeds=v, t=1.0), ["1"]),
+    ("speeds", lambda v: bg.Butterly(mean=(0.0, 0.0), cov=[[1.0, 0.0], [0.0, 1.0]], speeds=v, t=1.0), [True]),
+    ("cov", lambda v: bg.Butterly(mean=(0.0, 0.0), cov=v, speeds=[1.0], t=1.0), [["1", 0.0], [0.0, 1.0]]),
+    ("bearings", lambda v: bg.BearingFix([[0.0, 0.0], [1000.0, 0.0]], v, [0.01, 0.01]), ["0.1", 0.2]),
+    ("sigmas", lambda v: bg.BearingFix([[0.0, 0.0], [1000.0, 0.0]], [0.1, -0.2], v), [True, 0.01]),
+    ("weights", lambda v: bg.GaussianMixture(weights=v, means=[[0.0, 0.0]], covs=[[[1.0, 0.0], [0.0, 1.0]]]), [True]),
+    ("means", lambda v: bg.GaussianMixture(weights=[1.0], means=v, covs=[[[1.0, 0.0], [0.0, 1.0]]]), [["0", 0.0]]),
+]
+
+
+@pytest.mark.parametrize("name, build, value", NOT_NUMBERS, ids=[f"{n}-{v!r}" for n, _, v in NOT_NUMBERS])
+def test_strings_and_booleans_are_not_numbers(name, build, value):
+    """NumPy turns "1" and True into 1.0; the parameters refuse them, naming the argument."""
+    with pytest.raises(bg.BananagridError, match=rf"^{name} = .*: expected"):
+        build(value)

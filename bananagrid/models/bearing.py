@@ -19,7 +19,7 @@ import numpy as np
 from ..domains.pose import Pose
 from ..kernels import bearing as kernels
 from ..protocol import Extent, KernelBinding, KernelContext, SceneKey, SceneSchema
-from ..validate import BananagridError
+from ..validate import BananagridError, real_array
 from .base import RANGE_SDS, Model, check_n, check_rng
 from .containment import containment, containment_radius
 
@@ -144,10 +144,7 @@ def _wrap(angle):
 
 
 def _as_array(name: str, value, shape_text: str, ndim: int) -> np.ndarray:
-    try:
-        array = np.array(value, dtype=float)  # a copy: it is frozen below, the caller's is not
-    except (TypeError, ValueError):
-        raise BananagridError(f"{name} = {value!r}: expected {shape_text} of numbers") from None
+    array = real_array(name, value, f"{shape_text} of numbers")  # a copy: frozen below, not the caller's
     if array.ndim != ndim or (ndim == 2 and array.shape[1] != 2):
         raise BananagridError(f"{name}: shape {array.shape}, expected {shape_text}")
     if not np.isfinite(array).all():

@@ -29,7 +29,7 @@ from scipy import special, stats
 from ..domains.pose import Pose
 from ..kernels import butterly as kernels
 from ..protocol import Extent, KernelBinding, KernelContext, SceneKey, SceneSchema
-from ..validate import BananagridError, finite, non_negative, point, positive, show
+from ..validate import BananagridError, finite, non_negative, point, positive, real_array, show
 from ._butterly_series import series_density
 from .base import RANGE_SDS, Model, check_n, check_rng
 
@@ -244,10 +244,7 @@ SpeedLaw = UniformSpeed | NormalSpeed | TabulatedSpeed
 
 
 def _vector(name: str, value) -> np.ndarray:
-    try:
-        array = np.array(value, dtype=float)
-    except (TypeError, ValueError):
-        raise BananagridError(f"{name} = {value!r}: expected a list of numbers") from None
+    array = real_array(name, value, "a list of numbers")
     if array.ndim != 1 or array.size == 0:
         raise BananagridError(f"{name} = {value!r}: expected a non-empty list of numbers")
     if not np.isfinite(array).all():
@@ -256,10 +253,7 @@ def _vector(name: str, value) -> np.ndarray:
 
 
 def _covariance(value) -> np.ndarray:
-    try:
-        cov = np.array(value, dtype=float)
-    except (TypeError, ValueError):
-        raise BananagridError(f"cov = {value!r}: expected a 2x2 array of numbers") from None
+    cov = real_array("cov", value, "a 2x2 array of numbers")
     if cov.shape != (2, 2):
         raise BananagridError(f"cov = {value!r}: expected a 2x2 array [[sxx, sxy], [sxy, syy]], got shape {cov.shape}")
     if not np.isfinite(cov).all():

@@ -29,7 +29,7 @@ from ..domains.region import Region, as_region
 from ..engine.warp_runtime import WarpContext, check_threads
 from ..kernels import presence as kp
 from ..results import CellMap, GridPresence
-from ..validate import BananagridError, positive
+from ..validate import BananagridError, positive, real_array
 
 __all__ = [
     "GaussianMixture", "UniformPresence", "cell_probabilities", "grid_probabilities", "rectangle_probabilities",
@@ -216,10 +216,7 @@ class GaussianMixture:
 
 
 def _finite_array(name: str, value) -> np.ndarray:
-    try:
-        a = np.array(value, dtype=float)
-    except (TypeError, ValueError):
-        raise BananagridError(f"{name} = {value!r}: expected numbers") from None
+    a = real_array(name, value)
     if not np.all(np.isfinite(a)):
         raise BananagridError(f"{name}: every entry must be finite (NaN or inf given)")
     return a

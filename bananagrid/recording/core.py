@@ -31,6 +31,7 @@ import rerun.blueprint as rrb
 from rerun.error_utils import catch_and_log_exceptions
 
 from ..analysis.contours import DEFAULT_LEVELS, contour_lines
+from ..atomic import atomic_write
 from ..results import Raster
 from ..validate import BananagridError, non_negative, positive
 
@@ -128,10 +129,11 @@ def write_recording(
 ) -> Path:
     """Write a recording to ``path`` atomically.
 
-    The recording goes to ``.NAME.partial`` beside ``path``; ``build(rec)`` logs into it, the
-    stream is flushed and closed (which writes the footer), and only then is the file renamed
-    to ``path``. If anything raises, the partial file is removed and the error re-raised, so
-    ``path`` is either the complete new recording or untouched.
+    The recording goes to a temporary name beside ``path``, unique to the process
+    (:func:`bananagrid.atomic.partial_path`); ``build(rec)`` logs into it, the stream is flushed
+    and closed (which writes the footer), and only then is the file renamed to ``path``. If
+    anything raises, the temporary file is removed and the error re-raised, so ``path`` is
+    either the complete new recording or untouched.
 
     Parameters
     ----------
@@ -152,20 +154,15 @@ def write_recording(
         The final path.
     """
     final = Path(path)
-    partial = final.with_name(f".{final.name}.partial")
     rec = new_recording(application_id, recording_id=recording_id)
     if not rec.is_enabled():
         raise BananagridError(f"{final}: rerun logging is disabled (is RERUN=off set?)")
-    try:
+    with atomic_write(final) as partial:
         _open_file(rec, partial, blueprint)
         try:
             build(rec)
         finally:
             _close(rec)
-        os.replace(partial, final)
-    except BaseException:
-        partial.unlink(missing_ok=True)
-        raise
     return final
 
 

@@ -8,10 +8,10 @@ FILE's section differs, ``--write FILE`` replaces it. The section lies between :
 from __future__ import annotations
 
 import argparse
-import os
 import sys
 from pathlib import Path
 
+from ..atomic import atomic_write
 from ..models.registry import MODEL_KINDS, Registry
 from ..protocol import ALIASES, KEY_TYPES, SceneKey
 
@@ -88,9 +88,8 @@ def main(argv: list[str] | None = None) -> int:
             print(f"{path}: the model keys differ from the registry; run {parser.prog} --write {path}", file=sys.stderr)
             return 1
         return 0
-    tmp = path.with_name(f".{path.name}.partial")
-    tmp.write_text(updated)
-    os.replace(tmp, path)
+    with atomic_write(path) as tmp:
+        tmp.write_text(updated)
     return 0
 
 

@@ -18,6 +18,7 @@ import numpy as np
 
 
 from ..analysis.bearing_validation import format_table, summary, validation_table
+from ..atomic import partial_path
 from ..engine.rasterise import rasterise
 from ..protocol import DensityModel
 from ..recording.bearing import log_validation_table
@@ -223,7 +224,7 @@ class _Archive:
 
     def __init__(self, path: Path, scene: Scene):
         self.path = path
-        self.partial = path.with_name(f".{path.name}.partial")
+        self.partial = partial_path(path)
         self.scene = scene
         self.entries: dict[str, dict] = {}
         self.zip = zipfile.ZipFile(self.partial, "w", compression=zipfile.ZIP_DEFLATED, compresslevel=1)

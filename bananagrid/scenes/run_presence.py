@@ -10,6 +10,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..atomic import partial_path
 from ..recording.core import log_scene_text, recording_id_for, write_recording
 from ..recording.presence import log_cell_map, presence_blueprint
 from ..results import CellMap
@@ -55,7 +56,7 @@ def run_presence_scene(scene: PresenceScene, out_dir: str | os.PathLike, *, npz:
         raise BananagridError(f"{out_dir}: output directory does not exist")
     rrd_path = out_dir / f"{scene.name}.rrd"
     npz_path = out_dir / f"{scene.name}.npz"
-    npz_partial = npz_path.with_name(f".{npz_path.name}.partial")
+    npz_partial = partial_path(npz_path)
     lattice = scene.lattice
     label = f"{lattice.geometry}/{scene.kind} {' x '.join(map(str, lattice.shape))} cells"
     rows: list[dict] = []
