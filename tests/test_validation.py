@@ -173,3 +173,16 @@ def test_strings_and_booleans_are_not_numbers(name, build, value):
     """NumPy turns "1" and True into 1.0; the parameters refuse them, naming the argument."""
     with pytest.raises(bg.BananagridError, match=rf"^{name} = .*: expected"):
         build(value)
+
+
+@pytest.mark.parametrize("bounds, step, message", [
+    (dict(x=(0.0, 1.0), y=(0.0, 1.0)), 1e-308, r"x bounds \(0.0, 1.0\) at step 1e-308 give 1e\+308 cells in one axis, over 7.45e\+299 GiB"),
+    (dict(x=(0.0, 10.0), y=(0.0, 1.0)), 1e-308, r"x bounds \(0.0, 10.0\) at step 1e-308: the number of cells overflows"),
+    (dict(x=(-1e308, 1e308), y=(0.0, 1.0)), 1.0, r"x bounds .* the number of cells overflows"),
+    (dict(x=(0.0, 1.0), y=(0.0, 1.0)), 1e308, r"dx, dy = 1e\+308, 1e\+308: the cell area inf m\^2"),
+    (dict(x=(1.7e308, 1.75e308), y=(0.0, 1.0)), 1e307, r"grid extent in x is not finite"),
+])
+def test_grids_whose_numbers_overflow_are_refused(bounds, step, message):
+    """Extreme steps and bounds: a message, not an OverflowError or a NaN mass later."""
+    with pytest.raises(bg.BananagridError, match=message):
+        bg.Grid.from_bounds(**bounds, step=step)

@@ -53,9 +53,14 @@ class Grid:
                 f"float64; the limit is {MAX_CELLS:,} cells ({MAX_CELLS * 8 / 2**30:.0f} GiB): "
                 "use a larger step or smaller bounds"
             )
-        for name, extent in (("x", self.nx * self.dx), ("y", self.ny * self.dy)):
-            if not math.isfinite(extent):
-                raise BananagridError(f"grid extent in {name} is not finite")
+        for name, start, extent in (("x", self.origin[0], self.nx * self.dx), ("y", self.origin[1], self.ny * self.dy)):
+            if not (math.isfinite(extent) and math.isfinite(start + extent)):
+                raise BananagridError(f"grid extent in {name} is not finite (origin {start!r}, {extent!r} m)")
+        area = self.dx * self.dy
+        if not (math.isfinite(area) and area > 0.0):  # 1e308 squared overflows, 1e-308 squared underflows
+            raise BananagridError(
+                f"dx, dy = {self.dx!r}, {self.dy!r}: the cell area {area!r} m^2 is not a positive finite number"
+            )
 
     @classmethod
     def from_bounds(cls, x, y, step=None, *, dx=None, dy=None) -> "Grid":
@@ -84,12 +89,17 @@ class Grid:
             if not hi > lo:
                 raise BananagridError(f"{name} = ({lo}, {hi}): the upper bound must exceed the lower")
             span = (hi - lo) / d
+            if not math.isfinite(span):  # a span near 1e308, or a step near 1e-308
+                raise BananagridError(f"{name} bounds ({lo}, {hi}) at step {d}: the number of cells overflows")
             # a whole number of steps up to rounding stays whole; anything else rounds up
             n = round(span) if abs(span - round(span)) <= 1e-9 * max(1.0, span) else math.ceil(span)
             if n > MAX_CELLS:
+                count = f"{n:,}" if n < 1e15 else f"{float(n):.3g}"  # no 300-digit numbers
+                gib = n * 8 / 2**30
+                size = f"{gib:.1f}" if gib < 1e6 else f"{gib:.3g}"
                 raise BananagridError(
-                    f"{name} bounds ({lo}, {hi}) at step {d} give {n:,} cells in one axis, "
-                    f"over {n * 8 / 2**30:.1f} GiB as float64 for a single row; the limit is "
+                    f"{name} bounds ({lo}, {hi}) at step {d} give {count} cells in one axis, "
+                    f"over {size} GiB as float64 for a single row; the limit is "
                     f"{MAX_CELLS:,} cells ({MAX_CELLS * 8 / 2**30:.0f} GiB) in all"
                 )
             counts.append((lo, max(n, 1)))

@@ -19,6 +19,7 @@ Layout of one layer ``entity`` (all of it in world metres, x east, y north):
 
 from __future__ import annotations
 
+import datetime
 import math
 import os
 import uuid
@@ -80,6 +81,14 @@ def recording_id_for(content: str) -> str:
     return str(uuid.uuid5(_NAMESPACE, content))
 
 
+#: rerun's batcher also cuts chunks on a 200 ms clock tick, so chunk boundaries (and with them
+#: the file) depended on timing; with the tick a year long, chunks are cut only by size (rerun's
+#: default 2 MiB) and at flushes, which depend on what is logged alone.
+DETERMINISTIC_BATCHING = rr.ChunkBatcherConfig(
+    flush_tick=datetime.timedelta(days=365), flush_num_bytes=rr.ChunkBatcherConfig.DEFAULT().flush_num_bytes,
+)
+
+
 def new_recording(application_id: str = "bananagrid", *, recording_id: str) -> rr.RecordingStream:
     """A recording stream whose output depends only on what is logged to it.
 
@@ -87,7 +96,8 @@ def new_recording(application_id: str = "bananagrid", *, recording_id: str) -> r
     runs of the same content give recordings that ``rerun rrd compare`` finds equal:
 
     - ``send_properties=False`` drops the ``/__properties`` ``start_time`` (wall clock),
-    - ``set_log_time_enabled(False)`` drops the ``log_time`` timeline (``log_tick`` too).
+    - ``set_log_time_enabled(False)`` drops the ``log_time`` timeline (``log_tick`` too),
+    - :data:`DETERMINISTIC_BATCHING` cuts chunks by size only, never by the clock.
 
     The recording id is the caller's (see :func:`recording_id_for`), never a random one.
     The ``elapsed`` timeline starts at 0 on the calling thread, so no row is ever logged
@@ -102,7 +112,8 @@ def new_recording(application_id: str = "bananagrid", *, recording_id: str) -> r
     """
     if not isinstance(recording_id, str) or not recording_id:
         raise BananagridError(f"recording_id = {recording_id!r}: expected a non-empty string")
-    rec = rr.RecordingStream(application_id, recording_id=recording_id, send_properties=False)
+    rec = rr.RecordingStream(application_id, recording_id=recording_id, send_properties=False,
+                             batcher_config=DETERMINISTIC_BATCHING)
     rec.set_log_time_enabled(False)
     rec.set_log_tick_enabled(False)
     set_elapsed(rec, 0.0)
