@@ -101,3 +101,13 @@ def test_heading_rows_pay_for_their_tables(monkeypatch):
     bench._cold_rasterise(model, grid, float, 1)
     bench._cold_rasterise(model, grid, float, 1)
     assert len(builds) == 3
+
+
+def test_bench_refuses_an_unwritable_json_path_before_timing(tmp_path, capsys, monkeypatch):
+    def never(*args, **kwargs):
+        raise AssertionError("timed before checking --json")
+
+    monkeypatch.setattr(bench, "run", never)
+    assert bench.main(["--kernels", "polar-rough", "--json", str(tmp_path / "missing" / "b.json")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "missing: cannot write there" in err[0], err

@@ -453,3 +453,25 @@ def test_butterly_t_with_scene_times_is_refused():
 def test_butterly_is_not_a_radial_layer():
     message = error_of(BUTTERLY + '\n[radial]\nlayers = ["sub"]\nmoments_max_deg = 10\n')
     assert 'radial.layers[0] = "sub": not a cat or polar layer of this scene' in message
+
+
+# --- extremes that used to end in tracebacks ----------------------------------------------------
+
+def test_deeply_nested_arrays_are_invalid_toml():
+    """tomllib parses nested arrays recursively: a RecursionError became a one-line error."""
+    message = error_of('[scene]\nname = "deep"\n[grid]\nx = ' + "[" * 3000 + "]" * 3000 + "\n")
+    assert message == "bad.toml: invalid TOML: arrays or tables nested too deeply"
+
+
+@pytest.mark.parametrize("old, new, key", [
+    ("t = 5.0\n", "t = 1e10\n", "defaults.t = 10000000000.0"),
+    ('name = "demo"\n', 'name = "demo"\ntimes = [1.0, 1e10]\n', "scene.times[1] = 10000000000.0"),
+])
+def test_elapsed_times_beyond_the_timeline_are_refused(old, new, key):
+    """A recording's elapsed timeline counts nanoseconds in 64 bits (9.2e9 s); beyond, the
+    recording's time conversion overflowed after all the computing."""
+    text = edited(old, new)
+    if "times" in new:
+        text = text.replace("\nt = ", "\n# t = ")  # scene.times replaces defaults.t
+    message = error_of(text)
+    assert f"{key}: must be below 9.22e+09 s" in message, message

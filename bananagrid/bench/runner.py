@@ -20,14 +20,15 @@ import argparse
 import functools
 import json
 import math
-import os
 import platform
 import subprocess
 import sys
 import time
+from pathlib import Path
 
 import numpy as np
 
+from ..atomic import atomic_write, check_writable
 from ..domains.angular_lattice import AngularLattice
 from ..domains.grid import Grid
 from ..engine.batch import frame, rasterise_batch
@@ -39,6 +40,7 @@ from ..models.containment import containment
 from ..models.presence import GaussianMixture, cell_probabilities, grid_probabilities
 from ..models.registry import MODEL_KINDS
 from ..protocol import DensityModel
+from ..validate import BananagridError
 from . import baselines
 
 #: Figure 1 of the polar-banana paper.
@@ -407,6 +409,11 @@ def main(argv: list[str] | None = None) -> int:
             problems.append(f"--{name.replace('_', '-')} = {getattr(args, name)}: must be >= 1")
     if not (math.isfinite(args.step) and args.step > 0):
         problems.append(f"--step = {args.step}: must be > 0")
+    if args.json and not problems:  # before minutes of timing, not after
+        try:
+            check_writable(Path(args.json).resolve().parent)
+        except BananagridError as exc:
+            problems.append(f"--json {args.json}: {exc}")
     if problems:
         print(f"bananagrid: error: {problems[0]}", file=sys.stderr)
         return 2
@@ -448,10 +455,8 @@ def main(argv: list[str] | None = None) -> int:
         print(f"memory: {mem['side']} x {mem['side']} float32 polar raster ({mem['raster_mib']:.0f} MiB of values): "
               f"peak RSS of the whole process {mem['peak_rss_mib']:.0f} MiB")
     if args.json:
-        tmp = f"{args.json}.partial"
-        with open(tmp, "w") as fh:
+        with atomic_write(args.json) as tmp, open(tmp, "w") as fh:
             json.dump(result, fh, indent=2)
-        os.replace(tmp, args.json)
         print(f"wrote {args.json}")
     return 0
 

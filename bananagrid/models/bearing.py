@@ -268,7 +268,15 @@ class BearingFix(Model):
         for _ in range(MAX_ITERATIONS):
             residual = _wrap(bearing_to(self.sensors, point) - self.bearings)
             g = self._bearing_gradients(point)
-            step = np.linalg.solve(g.T @ (weights[:, None] * g), -(g.T @ (weights * residual)))
+            try:
+                step = np.linalg.solve(g.T @ (weights[:, None] * g), -(g.T @ (weights * residual)))
+            except np.linalg.LinAlgError:
+                step = np.full(2, np.nan)
+            if not np.isfinite(step).all():  # an iterate on a sensor, or lines with no common point
+                raise BananagridError(
+                    f"bearings: the lines of the {len(u)} sensors do not meet near one point (the "
+                    "least-squares fix diverges): check the bearings, sensors and their order"
+                )
             point = point + step
             if np.hypot(*step) <= 1e-12 * max(1.0, np.hypot(*point)):
                 break

@@ -310,6 +310,8 @@ def scene_arguments(params: Mapping) -> dict:
         for name, value in (("sigma_x", sx), ("sigma_y", sy)):
             if not (math.isfinite(value) and value > 0.0):
                 raise BananagridError(f"{name} = {value!r}: must be finite and > 0 (m, 1 sigma)")
+            if not 1e-150 < value < 1e150:  # its square, the variance, must be a normal float64
+                raise BananagridError(f"{name} = {value!r}: its square (the variance) overflows or vanishes in float64")
         if not (math.isfinite(rho) and -1.0 < rho < 1.0):
             raise BananagridError(f"rho = {rho!r}: must be in (-1, 1) (the start's correlation)")
         cov = [[sx * sx, rho * sx * sy], [rho * sx * sy, sy * sy]]

@@ -70,6 +70,27 @@ class MotionModel(Model):
         object.__setattr__(self, "sigma_heading", non_negative("sigma_heading", self.sigma_heading))
         if not isinstance(self.pose, Pose):
             raise BananagridError(f"pose = {self.pose!r}: expected a bananagrid.Pose")
+        self._check_scales()
+
+    def _check_scales(self) -> None:
+        """The derived scales the models compute with (the reach v0 t, the range SD sigma_a t^2,
+        the turn sigma_omega t, (v0 / sigma_a)^2 of P_sigma (11), and their products) must be
+        normal float64 numbers: values near 1e308 or 1e-308 would overflow or vanish in them."""
+        v0, t, sa, sw = self.v0, self.t, self.sigma_a, self.sigma_omega
+        derived = {
+            "v0 t": v0 * t, "sigma_a t^2": sa * t * t, "sigma_omega t": sw * t, "t^2": t * t,
+            "(v0 / sigma_a)^2": (v0 / sa) ** 2 if math.isfinite(v0 / sa) and v0 / sa < 1e150 else math.inf,
+            "(v0 t)^2": (v0 * t) ** 2 if v0 * t < 1e150 else math.inf,
+        }
+        bad = [name for name, value in derived.items() if not (math.isfinite(value) and value >= 1e-300)]
+        if bad:
+            given = {"v0": v0, "t": t, "sigma_a": sa, "sigma_omega": sw}
+            worst = max(given, key=lambda name: abs(math.log10(given[name])))  # the extreme one
+            others = ", ".join(f"{name} = {value!r}" for name, value in given.items() if name != worst)
+            raise BananagridError(
+                f"{worst} = {given[worst]!r}: with {others}, {', '.join(bad)} overflow or vanish in "
+                "float64; use units that keep them between 1e-300 and 1e300"
+            )
 
     def polar_scales(self, origin=(0.0, 0.0)) -> tuple[float, float]:
         """Smallest widths of the banana's features about its own pose: ``(radial_m, angular_rad)``.

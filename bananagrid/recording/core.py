@@ -120,9 +120,16 @@ def new_recording(application_id: str = "bananagrid", *, recording_id: str) -> r
     return rec
 
 
+#: Longest elapsed time a recording can hold: its timeline counts nanoseconds in 64 bits.
+MAX_ELAPSED_S = (2**63 - 1) / 1e9  # 9.2e9 s, 292 years
+
+
 def elapsed_nanos(seconds: float) -> int:
     """Elapsed ``seconds`` as the integer nanoseconds stored on the ``elapsed`` timeline."""
-    return round(non_negative("elapsed", seconds) * 1e9)
+    seconds = non_negative("elapsed", seconds)
+    if seconds >= MAX_ELAPSED_S:
+        raise BananagridError(f"elapsed = {seconds!r} s: a recording's timeline ends at {MAX_ELAPSED_S:.3g} s (292 years)")
+    return round(seconds * 1e9)
 
 
 def set_elapsed(rec: rr.RecordingStream, seconds: float) -> None:

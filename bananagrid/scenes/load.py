@@ -23,7 +23,7 @@ from ..analysis.contours import DEFAULT_LEVELS
 from ..domains.grid import Grid
 from ..models.registry import MODEL_KINDS, ModelKind, Registry
 from ..protocol import DensityModel
-from ..recording.core import colormaps
+from ..recording.core import MAX_ELAPSED_S, colormaps
 from ..validate import BananagridError, positive
 from . import keys
 from .keys import DTYPES, NAME_PATTERN, SceneKeyError, check_keys, show
@@ -223,6 +223,8 @@ def parse_scene(text: str, source: str = "<string>", *, kinds: Registry = MODEL_
         doc = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
         raise BananagridError(f"{source}: invalid TOML: {exc}") from None
+    except RecursionError:  # tomllib parses nested arrays recursively
+        raise BananagridError(f"{source}: invalid TOML: arrays or tables nested too deeply") from None
     try:
         if "array" in doc:  # a presence scene: bananagrid.scenes.presence
             return build_presence_scene(doc, text, source)
@@ -301,6 +303,10 @@ def _radial(value, layers) -> RadialOutput:
     )
 
 
+#: Why an elapsed time cannot exceed MAX_ELAPSED_S.
+TIMELINE_LIMIT = f"must be below {MAX_ELAPSED_S:.3g} s (292 years: the recording's timeline counts nanoseconds in 64 bits)"
+
+
 def _times(value) -> tuple[float, ...]:
     """``scene.times``: a non-empty list of finite elapsed times > 0, strictly increasing."""
     path = "scene.times"
@@ -310,6 +316,8 @@ def _times(value) -> tuple[float, ...]:
     for k, t in enumerate(times):
         if not (math.isfinite(t) and t > 0.0):
             raise SceneKeyError(f"{path}[{k}] = {show(value[k])}: must be finite and > 0 (s)")
+        if t >= MAX_ELAPSED_S:
+            raise SceneKeyError(f"{path}[{k}] = {show(value[k])}: {TIMELINE_LIMIT}")
         if k and not t > times[k - 1]:
             raise SceneKeyError(
                 f"{path} = {show(value)}: must be strictly increasing "
@@ -424,11 +432,16 @@ def _layer(layer_name: str, body: dict, shared: dict, times, kinds: Registry) ->
         )
         raise SceneKeyError(f"{path}: missing {listed}: give each in [{path}] or [defaults]")
     layer = Layer(name=layer_name, kind=kind_name, params={p: si for p, (_, _, si) in given.items()}, model_kind=kind)
-    for t in times or (None,):
+    if "t" in given and given["t"][2] >= MAX_ELAPSED_S:
+        where, written, _ = given["t"]
+        raise SceneKeyError(f"{where} = {show(written)}: {TIMELINE_LIMIT}")
+    for k, t in enumerate(times or (None,)):
         try:
             layer.model(t)
         except BananagridError as exc:
-            raise SceneKeyError(_model_error(str(exc), path, given, schema.message_keys)) from None
+            # a time from scene.times is that key's value, not the layer's
+            at = {} if t is None else {"t": (f"scene.times[{k}]", t, t)}
+            raise SceneKeyError(_model_error(str(exc), path, {**given, **at}, schema.message_keys)) from None
     return layer
 
 
