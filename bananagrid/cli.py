@@ -18,8 +18,8 @@ from typing import TextIO
 import numpy as np
 
 from .analysis.compare import compare
-from .atomic import Terminated, atomic_write, check_writable, signals_as_exceptions
 from .analysis.sweep import FIGURE7_LEVELS, sweep
+from .atomic import Terminated, atomic_write, check_writable, signals_as_exceptions
 from .bench import runner as bench
 from .recording.compare import write_compare_recording, write_sweep_recording
 from .recording.core import recording_id_for
@@ -157,15 +157,15 @@ def _run(args: argparse.Namespace) -> int:
     rows, written = [], []
     for scene in scenes:
         progress = None if args.quiet else _Progress(scene.name, sys.stderr)
+        failed = True
         try:
             rows += run_scene(scene, args.out, npz=args.npz, threads=args.threads, progress=progress)
-        except BaseException:
-            if written:  # the scenes before this one are complete: say so
-                print(f"bananagrid: written before the error: {', '.join(map(str, written))}", file=sys.stderr)
-            raise
+            failed = False
         finally:
             if progress is not None:
                 progress.close()
+            if failed and written:  # the scenes before this one are complete: say so
+                print(f"bananagrid: written before the error: {', '.join(map(str, written))}", file=sys.stderr)
         written.append(args.out / f"{scene.name}.rrd")
         if args.npz:
             written.append(args.out / f"{scene.name}.npz")

@@ -84,3 +84,20 @@ def test_an_unwritable_output_directory_is_refused_before_computing(monkeypatch,
 def test_check_writable_names_the_directory(tmp_path):
     check_writable(tmp_path)  # fine, and leaves nothing behind
     assert list(tmp_path.iterdir()) == []
+
+
+def test_a_failing_later_scene_names_the_files_already_written(tmp_path, monkeypatch, capsys):
+    real = cli.run_scene
+
+    def second_fails(scene, *args, **kwargs):
+        if scene.name == "folding":
+            raise cli.BananagridError("folding.toml: the disk is on fire")
+        return real(scene, *args, **kwargs)
+
+    monkeypatch.setattr(cli, "run_scene", second_fails)
+    scenes = [str(ROOT / "scenes" / f"{name}.toml") for name in ("figure1", "folding")]
+    assert cli.main(["run", *scenes, "--step", "200", "--out", str(tmp_path), "--quiet"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err == [f"bananagrid: written before the error: {tmp_path / 'figure1.rrd'}",
+                   "bananagrid: error: folding.toml: the disk is on fire"]
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["figure1.rrd"]
