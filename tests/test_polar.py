@@ -4,6 +4,7 @@ import math
 
 import numpy as np
 import pytest
+from scipy import stats as _stats
 
 import bananagrid as bg
 import oracles
@@ -63,3 +64,14 @@ def test_sample_support_and_moments():
     # phi ~ N(0, sigma_omega t / 2) (its tail beyond pi is 1e-27): SD within 4 standard errors
     sigma_phi = FIG1["sigma_omega"] * FIG1["t"] / 2
     assert abs(phi.std() / sigma_phi - 1) < 4 / math.sqrt(2 * len(phi))
+
+
+def test_sample_with_a_turn_far_beyond_a_full_circle():
+    """sigma_omega t = 1e4 rad: rejecting |phi| > pi would keep 2.5e-4 of the draws (and
+    1e-12 of them at sigma_omega t = 1e12, for ever); the angle is drawn from its law truncated
+    to [-pi, pi] instead, here uniform on it to within 1e-7."""
+    model = bg.PolarBanana(v0=1.0, t=1e4, sigma_a=1e-3, sigma_omega=1.0)
+    pts = model.sample(20_000, np.random.default_rng(3))
+    bearing = np.arctan2(pts[:, 0], pts[:, 1])
+    assert np.all(np.isfinite(pts)) and np.all(np.abs(bearing) <= np.pi)
+    assert _stats.kstest(bearing, _stats.uniform(loc=-np.pi, scale=2 * np.pi).cdf).pvalue > 1e-3

@@ -8,6 +8,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
+from scipy import stats
 from scipy.special import erfc
 
 from ..domains.pose import Pose
@@ -193,9 +194,18 @@ class PolarBanana(MotionModel):
         """
         n, rng = check_n(n), check_rng(rng)
         out = np.empty((0, 2))
+        sd_angle = self.sigma_theta
+        # rejecting |angle| > pi keeps erf(pi / (sd sqrt 2)) of the draws: below 1e-3 (sd above
+        # about 2500 rad) rejection would run for ever, so the angle comes from its law truncated
+        # to [-pi, pi] directly (the same law; other draws than the rejection loop's)
+        truncated = math.erf(math.pi / (sd_angle * math.sqrt(2.0))) < 1e-3
         while len(out) < n:
             m = max(2 * (n - len(out)), 16)
-            angle = rng.normal(0.0, self.sigma_theta, m)
+            if truncated:
+                angle = stats.truncnorm.rvs(-math.pi / sd_angle, math.pi / sd_angle, scale=sd_angle, size=m,
+                                            random_state=rng)
+            else:
+                angle = rng.normal(0.0, sd_angle, m)
             mean, sd = self.conditional_moments(angle) if self.sigma_heading > 0.0 else self.radial_law(angle)
             ok = (np.abs(angle) <= np.pi) & (sd > 0)
             r = rng.normal(mean[ok], sd[ok])
