@@ -509,6 +509,12 @@ class Butterly(Model):
             )
         v = np.ascontiguousarray(v, dtype=float)
         w = np.ascontiguousarray(w, dtype=float)
+        reach = float(v.max()) * t
+        if not reach < 1e150:  # the ranges r = v t, and their squares, must be normal float64 numbers
+            raise BananagridError(
+                f"t = {t!r}: with speeds up to {float(v.max())!r} m/s the range v t = {reach!r} m overflows "
+                "(at most 1e150 m)"
+            )
         v.setflags(write=False)
         w.setflags(write=False)
         object.__setattr__(self, "_nodes", (v, w))

@@ -82,14 +82,14 @@ class MotionModel(Model):
             "(v0 / sigma_a)^2": (v0 / sa) ** 2 if math.isfinite(v0 / sa) and v0 / sa < 1e150 else math.inf,
             "(v0 t)^2": (v0 * t) ** 2 if v0 * t < 1e150 else math.inf,
         }
-        bad = [name for name, value in derived.items() if not (math.isfinite(value) and value >= 1e-300)]
+        bad = [name for name, value in derived.items() if not 1e-150 <= value <= 1e300]  # squares stay normal
         if bad:
             given = {"v0": v0, "t": t, "sigma_a": sa, "sigma_omega": sw}
             worst = max(given, key=lambda name: abs(math.log10(given[name])))  # the extreme one
             others = ", ".join(f"{name} = {value!r}" for name, value in given.items() if name != worst)
             raise BananagridError(
                 f"{worst} = {given[worst]!r}: with {others}, {', '.join(bad)} overflow or vanish in "
-                "float64; use units that keep them between 1e-300 and 1e300"
+                "float64; use units that keep them between 1e-150 and 1e300"
             )
 
     def polar_scales(self, origin=(0.0, 0.0)) -> tuple[float, float]:
