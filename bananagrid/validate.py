@@ -12,7 +12,7 @@ from numbers import Real
 
 import numpy as np
 
-__all__ = ["finite", "positive", "non_negative", "positive_int", "point", "real_array", "show", "BananagridError"]
+__all__ = ["finite", "positive", "non_negative", "positive_int", "pair", "point", "real_array", "show", "BananagridError"]
 
 
 class BananagridError(ValueError):
@@ -80,13 +80,19 @@ def positive_int(name: str, value) -> int:
     return v
 
 
-def point(name: str, value) -> tuple[float, float]:
-    """Return ``value`` as a pair of finite floats, or raise naming ``name[0]`` / ``name[1]``."""
+def pair(name: str, value, expected: str = "a pair (low, high)") -> tuple[float, float]:
+    """Return ``value`` as a pair of finite floats, or raise naming ``name[0]`` / ``name[1]``
+    (``expected`` says what the pair is, for the message when ``value`` is not a pair)."""
     try:
-        x, y = value
+        first, second = value
     except (TypeError, ValueError):
-        raise BananagridError(f"{name} = {value!r}: expected a pair (x, y)") from None
-    return finite(f"{name}[0]", x), finite(f"{name}[1]", y)
+        raise BananagridError(f"{name} = {value!r}: expected {expected}") from None
+    return finite(f"{name}[0]", first), finite(f"{name}[1]", second)
+
+
+def point(name: str, value) -> tuple[float, float]:
+    """Return ``value`` as a pair of finite floats (x, y), or raise naming the bad one."""
+    return pair(name, value, "a pair (x, y)")
 
 
 def show(value) -> str:

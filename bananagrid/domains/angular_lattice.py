@@ -29,7 +29,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..validate import BananagridError, finite, positive
+from ..validate import BananagridError, finite, pair, positive
 from .region import Region
 
 __all__ = [
@@ -44,12 +44,8 @@ _TWO_PI = 2.0 * math.pi
 _HALF_PI = 0.5 * math.pi
 
 
-def _pair(name, value):
-    try:
-        lo, hi = value
-    except (TypeError, ValueError):
-        raise BananagridError(f"{name} = {value!r}: expected a pair (first, last)") from None
-    return finite(f"{name}[0]", lo), finite(f"{name}[1]", hi)
+def _pair(name: str, value) -> tuple[float, float]:
+    return pair(name, value, "a pair (first, last)")
 
 
 def _steps(name: str, step: float, span: float) -> int:

@@ -7,7 +7,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..validate import BananagridError, finite, point, positive, positive_int
+from ..validate import BananagridError, pair, point, positive, positive_int
 
 __all__ = ["Grid", "MAX_CELLS"]
 
@@ -81,11 +81,7 @@ class Grid:
         )
         counts = []
         for name, bounds, d in (("x", x, dx), ("y", y, dy)):
-            try:
-                lo, hi = bounds
-            except (TypeError, ValueError):
-                raise BananagridError(f"{name} = {bounds!r}: expected bounds (low, high)") from None
-            lo, hi = finite(f"{name}[0]", lo), finite(f"{name}[1]", hi)
+            lo, hi = pair(name, bounds, "bounds (low, high)")
             if not hi > lo:
                 raise BananagridError(f"{name} = ({lo}, {hi}): the upper bound must exceed the lower")
             span = (hi - lo) / d

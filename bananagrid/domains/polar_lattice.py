@@ -24,7 +24,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..validate import BananagridError, finite, positive
+from ..validate import BananagridError, pair, positive
 from .grid import MAX_CELLS
 from .pose import Pose
 
@@ -34,14 +34,6 @@ __all__ = ["PolarLattice", "DIVIDES_RTOL"]
 DIVIDES_RTOL = 1e-9
 
 _TWO_PI = 2.0 * math.pi
-
-
-def _pair(name: str, value) -> tuple[float, float]:
-    try:
-        lo, hi = value
-    except (TypeError, ValueError):
-        raise BananagridError(f"{name} = {value!r}: expected a pair (low, high)") from None
-    return finite(f"{name}[0]", lo), finite(f"{name}[1]", hi)
 
 
 def _count(name: str, step: float, span: float, span_text: str, unit: str) -> int:
@@ -93,8 +85,8 @@ class PolarLattice:
     pose: Pose = field(default_factory=Pose)
 
     def __post_init__(self):
-        r_min, r_max = _pair("ranges", self.ranges)
-        b_min, b_max = _pair("bearings", self.bearings)
+        r_min, r_max = pair("ranges", self.ranges)
+        b_min, b_max = pair("bearings", self.bearings)
         dr = positive("range_step", self.range_step)
         db = positive("bearing_step", self.bearing_step)
         if r_min < 0.0:

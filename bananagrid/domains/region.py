@@ -6,7 +6,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..validate import BananagridError, finite
+from ..validate import BananagridError, pair
 
 __all__ = ["Region", "as_region"]
 
@@ -14,11 +14,7 @@ _AXES = ("x", "y", "z")
 
 
 def _interval(name: str, value) -> tuple[float, float]:
-    try:
-        lo, hi = value
-    except (TypeError, ValueError):
-        raise BananagridError(f"{name} = {value!r}: expected a pair (low, high)") from None
-    lo, hi = finite(f"{name}[0]", lo), finite(f"{name}[1]", hi)
+    lo, hi = pair(name, value)
     if not hi > lo:
         raise BananagridError(
             f"{name} = ({lo!r}, {hi!r}): the region is empty; the upper bound must exceed the lower"
