@@ -26,7 +26,7 @@ from .protocol import DensityModel
 from .results import BatchRaster, CellMap, GridPresence, PolarRaster, Raster
 from .scenes.load import load_scene, parse_scene
 from .scenes.run import run_scene
-from .validate import BananagridError
+from .validate import BananagridError, BananagridWarning
 from .version import __version__
 
 __all__ = [
@@ -46,5 +46,5 @@ __all__ = [
     "load_scene", "parse_scene", "run_scene",
     # your own models
     "DensityModel", "Model", "ModelKind", "MODEL_KINDS",
-    "BananagridError", "__version__",
+    "BananagridError", "BananagridWarning", "__version__",
 ]

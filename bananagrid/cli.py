@@ -1,4 +1,4 @@
-"""Command line: ``bananagrid run``, ``inspect``, ``compare``, ``sweep`` and ``bench``.
+"""Command line: ``bananagrid run``, ``examples``, ``inspect``, ``compare``, ``sweep`` and ``bench``.
 
 Errors a user can fix (bad scene, missing file, unwritable directory) are printed as one line,
 ``bananagrid: error: MESSAGE``, with exit code 2 and no traceback.
@@ -21,9 +21,11 @@ from .analysis.compare import compare
 from .analysis.sweep import FIGURE7_LEVELS, sweep
 from .atomic import Terminated, atomic_write, check_writable, signals_as_exceptions
 from .bench import runner as bench
+from .contours import DEFAULT_LEVELS, format_area
 from .recording.compare import write_compare_recording, write_sweep_recording
 from .recording.core import recording_id_for
 from .recording.inspect import format_inspection, inspect_recording
+from .scenes.examples import example_names, example_path, example_title
 from .scenes.load import Scene, load_scene
 from .scenes.run import compute, run_scene
 from .validate import BananagridError, positive
@@ -75,7 +77,9 @@ def build_parser() -> tuple[argparse.ArgumentParser, dict[str, argparse.Argument
         description="Rasterise every layer of each scene at every time and write OUT/NAME.rrd "
         "(and OUT/NAME.npz with --npz). Progress goes to stderr, a summary table to stdout.",
     )
-    run.add_argument("scenes", nargs="+", metavar="SCENE.toml", type=Path, help="scene files")
+    run.add_argument("scenes", nargs="*", metavar="SCENE.toml", type=Path, help="scene files")
+    run.add_argument("--example", action="append", default=[], metavar="NAME",
+                     help="also run the bundled scene NAME (repeatable; `bananagrid examples` lists them)")
     run.add_argument("--out", type=Path, default=Path("out"), metavar="DIR",
                      help="output directory, created if missing (default: ./out)")
     run.add_argument("--npz", action="store_true", help="also write the arrays to NAME.npz")
@@ -85,6 +89,14 @@ def build_parser() -> tuple[argparse.ArgumentParser, dict[str, argparse.Argument
                      help="CPU threads per rasterisation (default: every core)")
     run.add_argument("--quiet", action="store_true", help="no progress lines on stderr")
     run.set_defaults(handler=_run)
+
+    examples = sub.add_parser(
+        "examples", help="list the bundled example scenes",
+        description="List the scenes installed with the package (name and title), or print one "
+        "of them (--show NAME) to copy and edit. Run one with `bananagrid run --example NAME`.",
+    )
+    examples.add_argument("--show", metavar="NAME", help="print the scene file NAME instead of the list")
+    examples.set_defaults(handler=_examples)
 
     inspect = sub.add_parser(
         "inspect", help="print what a recording holds",
@@ -134,7 +146,8 @@ def build_parser() -> tuple[argparse.ArgumentParser, dict[str, argparse.Argument
     # bench parses its own options (its --help included): everything after it is passed on.
     bench = sub.add_parser("bench", add_help=False, help="throughput against a NumPy baseline")
     bench.set_defaults(handler=None)
-    return parser, {"run": run, "inspect": inspect, "compare": compare, "sweep": sweep, "bench": bench}
+    return parser, {"run": run, "examples": examples, "inspect": inspect, "compare": compare, "sweep": sweep,
+                    "bench": bench}
 
 
 # --- subcommands ------------------------------------------------------------------------------
@@ -148,7 +161,10 @@ def _run(args: argparse.Namespace) -> int:
         positive("--step", args.step)
     if args.out.exists() and not args.out.is_dir():
         raise BananagridError(f"--out {args.out}: exists and is not a directory")
-    scenes = [load_scene(path) for path in args.scenes]
+    paths = [*args.scenes, *(example_path(name) for name in args.example)]
+    if not paths:
+        raise BananagridError("run: give at least one SCENE.toml or --example NAME (`bananagrid examples` lists them)")
+    scenes = [load_scene(path) for path in paths]
     if args.step is not None:
         scenes = [scene.with_step(args.step) for scene in scenes]
     _check_unique_names(scenes)
@@ -173,6 +189,18 @@ def _run(args: argparse.Namespace) -> int:
     print()
     for path in written:
         print(f"wrote {path}")
+    return OK
+
+
+def _examples(args: argparse.Namespace) -> int:
+    """``bananagrid examples``: the bundled scenes with their titles, or one scene's text."""
+    if args.show is not None:
+        print(example_path(args.show).read_text(), end="")
+        return OK
+    names = example_names()
+    width = max(map(len, names), default=0)
+    for name in names:
+        print(f"{name.ljust(width)}  {example_title(name)}")
     return OK
 
 
@@ -208,7 +236,8 @@ def _compare(args: argparse.Namespace) -> int:
             raise BananagridError(f"--{option} {name}: no such layer in {scene.source} (layers: {', '.join(layers)})")
     reference, model = layers[args.reference], layers[args.model]
     t = _compare_time(scene, reference, model, args.t)
-    levels = scene.levels if args.levels is None else _parse_levels(args.levels)
+    # the scene's fixed levels, else Figure 7's densities (compare reports fixed levels)
+    levels = (scene.levels or DEFAULT_LEVELS) if args.levels is None else _parse_levels(args.levels)
     plain = _raw(scene)
     ref_raster, _ = compute(plain, reference, t, threads=args.threads)
     model_raster, _ = compute(plain, model, t, threads=args.threads)
@@ -295,15 +324,28 @@ SUMMARY_COLUMNS = (
     ("t [s]", "t", "{:g}"),
     ("cells", "cells", "{:,}"),
     ("captured mass", "mass", "{:.6f}"),
-    ("peak [m^-2]", "peak", "{:.4g}"),
+    ("peak", "peak", "{:.4g}"),
     ("seconds", "seconds", "{:.2f}"),
 )
 
 
 def format_summary(rows: list[dict]) -> str:
-    """The summary rows of :func:`bananagrid.scenes.run.run_scene` as an aligned text table."""
-    header = [title for title, _, _ in SUMMARY_COLUMNS]
-    body = [[fmt.format(row[key]) for _, key, fmt in SUMMARY_COLUMNS] for row in rows]
+    """The summary rows of :func:`bananagrid.scenes.run.run_scene` as an aligned text table.
+
+    The peak carries its unit (``m^-2`` for a density map, ``per cell`` for the cell
+    probabilities of an array scene); one ``P % area`` column per probability-mass level of
+    the rows (the area of the smallest region holding P % of the probability; ``-`` where a
+    row has none).
+    """
+    levels = sorted({r.probability for row in rows for r in row.get("regions", ())})
+    header = [title for title, _, _ in SUMMARY_COLUMNS[:-1]] + [f"{100 * p:g} % area" for p in levels] + ["seconds"]
+    body = []
+    for row in rows:
+        cells = [fmt.format(row[key]) for _, key, fmt in SUMMARY_COLUMNS[:-1]]
+        cells[5] += " " + row.get("peak_unit", "m^-2")
+        areas = {r.probability: _region_size(r) for r in row.get("regions", ())}
+        cells += [areas.get(p, "-") for p in levels] + ["{:.2f}".format(row["seconds"])]
+        body.append(cells)
     widths = [max(len(cell) for cell in column) for column in zip(header, *body)]
     # Text columns left-aligned, numbers right-aligned.
     def line(cells):
@@ -314,6 +356,13 @@ def format_summary(rows: list[dict]) -> str:
     return "\n".join([line(header), line(["-" * w for w in widths]), *map(line, body)])
 
 
+def _region_size(region) -> str:
+    """A region's area, or its number of cells where cells have no common area (array scenes)."""
+    if not region.reached:
+        return "not reached"
+    return format_area(region.area) if np.isfinite(region.area) else f"{region.cells:,} cells"
+
+
 class _Progress:
     """Progress lines ``[3/6] scene: layer t=10 s ... 0.09 s`` for :func:`run_scene`.
 
@@ -321,29 +370,48 @@ class _Progress:
     (``done + 1``); the first call of a pair opens the line, the second closes it with the time.
     """
 
+    #: The progress line left open (waiting for its time), if any: a warning ends it first.
+    open_line: "_Progress | None" = None
+
     def __init__(self, scene: str, stream: TextIO):
         self.scene = scene
         self.stream = stream
         self.started: float | None = None
+        self.head = ""
+        self.broken = False
 
     def __call__(self, done: int, total: int, label: str) -> None:
         if self.started is None:
             self.started = time.perf_counter()
-            print(f"[{done + 1}/{total}] {self.scene}: {label} ...", end="", file=self.stream, flush=True)
+            self.head, self.broken = f"[{done + 1}/{total}] {self.scene}: {label} ...", False
+            print(self.head, end="", file=self.stream, flush=True)
+            _Progress.open_line = self
         else:
             seconds = time.perf_counter() - self.started
             self.started = None
-            print(f" {seconds:.2f} s", file=self.stream, flush=True)
+            _Progress.open_line = None
+            # after a warning the line is restated, so the time is not left alone on a line
+            print(f"{self.head if self.broken else ''} {seconds:.2f} s", file=self.stream, flush=True)
 
     def close(self) -> None:
         """End a line left open by an item that failed, so the error starts on its own line."""
         if self.started is not None:
             self.started = None
+            _Progress.open_line = None
             print(file=self.stream, flush=True)
+
+    @classmethod
+    def interrupt(cls) -> None:
+        """End the open progress line (if any) before something else is printed."""
+        line = cls.open_line
+        if line is not None and not line.broken:
+            line.broken = True
+            print(file=line.stream, flush=True)
 
 
 def _show_warning(message, category, filename, lineno, file=None, line=None) -> None:
-    """Warnings as one line each, like errors."""
+    """Warnings as one line each, like errors (on a line of their own)."""
+    _Progress.interrupt()
     print(f"bananagrid: warning: {_one_line(message)}", file=sys.stderr)
 
 

@@ -12,11 +12,17 @@ from numbers import Real
 
 import numpy as np
 
-__all__ = ["finite", "positive", "non_negative", "positive_int", "pair", "point", "real_array", "show", "BananagridError"]
+__all__ = ["finite", "positive", "non_negative", "positive_int", "pair", "point", "real_array", "show", "BananagridError", "BananagridWarning"]
 
 
 class BananagridError(ValueError):
     """A user-facing error: bad parameter, bad scene, bad file. The CLI prints it as one line."""
+
+
+class BananagridWarning(UserWarning):
+    """A likely mistake that still gives a result: a grid that misses the target, an angle that
+    looks like degrees given in radians, a contour level the map never reaches. The CLI prints
+    it as one line; ``warnings.simplefilter("error", BananagridWarning)`` makes it an error."""
 
 
 def _real(name: str, value) -> float:

@@ -97,7 +97,8 @@ def test_a_failing_later_scene_names_the_files_already_written(tmp_path, monkeyp
     monkeypatch.setattr(cli, "run_scene", second_fails)
     scenes = [str(ROOT / "scenes" / f"{name}.toml") for name in ("figure1", "folding")]
     assert cli.main(["run", *scenes, "--step", "200", "--out", str(tmp_path), "--quiet"]) == 2
-    err = capsys.readouterr().err.strip().splitlines()
+    # (200 m cells are coarse for Figure 1: each layer warns that the grid captured 0.986)
+    err = [line for line in capsys.readouterr().err.strip().splitlines() if not line.startswith("bananagrid: warning:")]
     assert err == [f"bananagrid: written before the error: {tmp_path / 'figure1.rrd'}",
                    "bananagrid: error: folding.toml: the disk is on fire"]
     assert sorted(p.name for p in tmp_path.iterdir()) == ["figure1.rrd"]

@@ -254,7 +254,7 @@ def test_a_model_of_the_tests_gets_a_scene_layer_and_a_recording(tmp_path):
     rows = run_scene(scene, tmp_path)
     assert rows[0]["mass"] == pytest.approx(1.0, abs=1e-6)  # +-6.7 sigma: 2e-10 outside
     info = inspect_recording(tmp_path / "isotropic.rrd")
-    assert {"/layers/normal/density", "/layers/normal/contours"} <= set(info["entities"])
+    assert {"/layers/normal/density", "/layers/normal/contours/lines"} <= set(info["entities"])
     with pytest.raises(bg.BananagridError, match=r'isotropic.toml: layers.normal.sigma = -1.0: must be > 0'):
         parse_scene(SCENE.replace("sigma = 150.0", "sigma = -1.0"), source="isotropic.toml", kinds=kinds)
     with pytest.raises(bg.BananagridError, match=r'layers.normal.model = "isotropic": must be one of "cat"'):

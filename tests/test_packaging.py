@@ -44,3 +44,41 @@ def test_all_is_curated():
     for name in bananagrid.__all__:
         assert hasattr(bananagrid, name), name
     assert {"BearingFix", "grid_probabilities", "DensityModel", "MODEL_KINDS"} <= set(bananagrid.__all__)
+
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def test_every_bundled_scene_is_installed_as_an_example():
+    from bananagrid.scenes.examples import example_names, example_path
+
+    scenes = sorted(p.stem for p in (ROOT / "scenes").glob("*.toml"))
+    assert example_names() == scenes
+    for name in scenes:
+        # the installed copy is the repository's file (one source, no hand-made copies)
+        assert example_path(name).read_bytes() == (ROOT / "scenes" / f"{name}.toml").read_bytes()
+
+
+def test_examples_ship_in_the_wheel():
+    from importlib import metadata
+
+    files = {f.as_posix() for f in metadata.files("bananagrid") or ()}
+    if any(name.endswith(".pth") or "__editable__" in name for name in files):
+        return  # editable: the link bananagrid/examples -> ../scenes, checked above
+    shipped = sorted(Path(f).stem for f in files if f.startswith("bananagrid/examples/") and f.endswith(".toml"))
+    assert shipped == sorted(p.stem for p in (ROOT / "scenes").glob("*.toml"))
+
+
+def test_installed_warp_and_rerun_are_within_the_declared_ranges():
+    # The pins are ranges (warp within its minor version, rerun within the minor version whose
+    # .rrd format inspect reads back); the versions this suite runs against must satisfy them.
+    import tomllib
+    from importlib import metadata
+
+    from packaging.requirements import Requirement
+
+    declared = {Requirement(r).name: Requirement(r) for r in tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]["dependencies"]}
+    for name in ("warp-lang", "rerun-sdk"):
+        spec = declared[name].specifier
+        assert str(spec) and "==" not in str(spec), spec  # a tested range, not an exact pin
+        assert spec.contains(metadata.version(name)), (name, metadata.version(name), spec)

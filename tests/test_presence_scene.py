@@ -153,7 +153,7 @@ BAD = [
      "presence.components.b.cov: not positive definite (eigenvalues [-0.3524937810560445, 0.6524937810560445]); "
      "every covariance needs positive eigenvalues (condition number below 1e14)"),
     ("output key", ("[presence]", '[output]\ncolormap = "turbo"\n\n[presence]'),
-     "output.colormap: unknown key; allowed: dtype, far, log10_floor"),
+     "output.colormap: unknown key; allowed: dtype, far, log10_floor, mass_levels"),
     ("log10 floor", ("[presence]", "[output]\nlog10_floor = 2\n\n[presence]"),
      "output.log10_floor = 2: must be in [-300, 0) (log10 of a probability)"),
 ]

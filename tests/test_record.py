@@ -13,7 +13,7 @@ import pytest
 from rerun.chunk import RrdReader
 
 from bananagrid import BananagridError, Grid, Raster
-from bananagrid.analysis.contours import contour_lines, mass_inside
+from bananagrid.contours import contour_lines, mass_inside, mass_regions
 from bananagrid.recording.inspect import format_inspection, inspect_recording, read_depth_image
 from bananagrid.recording.core import (
     default_blueprint,
@@ -94,7 +94,8 @@ def test_density_reads_back_exactly_in_grid_orientation(tmp_path, raster):
 def test_log10_density_is_floored_log(tmp_path, raster):
     path = write(tmp_path / "a.rrd", {1.0: raster})
     back = read_depth_image(path, "/cat/log10_density")
-    floor = math.log10(1e-10) - 2.0  # lowest default level, two decades down
+    # two decades below the lowest contour drawn: the 99 % region's boundary density
+    floor = math.log10(mass_regions(raster)[-1].density) - 2.0
     with np.errstate(divide="ignore"):
         expected = np.maximum(np.log10(raster.values), floor)
     np.testing.assert_allclose(back, expected, rtol=1e-6)  # float32 storage
@@ -182,7 +183,8 @@ def test_inspect_reports_entities_and_value_range(tmp_path, raster):
     assert density["image_shapes"] == [GRID.shape]
     values = raster.values.astype(np.float32)
     assert density["value_range"] == (float(values.min()), float(values.max()))
-    assert info["entities"]["/cat/contours"]["archetypes"] == ["LineStrips2D"]
+    assert info["entities"]["/cat/contours/lines"]["archetypes"] == ["LineStrips2D"]
+    assert info["entities"]["/cat/contours/labels"]["archetypes"] == ["Points2D"]
     assert info["entities"]["/scene"]["archetypes"] == ["TextDocument"]
     mass = info["entities"]["/cat/mass"]["scalars"]
     assert mass == [{"times": {"elapsed": 1.0}, "values": raster.mass}]

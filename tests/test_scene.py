@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from bananagrid import CAT, BananagridError, PolarBanana
-from bananagrid.recording.core import DEFAULT_LEVELS
+from bananagrid.contours import DEFAULT_MASS_LEVELS
 from bananagrid.scenes.load import Layer, load_scene, parse_scene
 
 from cases import small_scene
@@ -53,7 +53,8 @@ def test_base_scene_parses_with_defaults():
     assert scene.grid.extent == (-100.0, 100.0, 0.0, 200.0)
     assert [layer.name for layer in scene.layers] == ["exact", "approx"]  # file order
     assert scene.times is None
-    assert scene.levels == DEFAULT_LEVELS
+    assert scene.levels == ()  # fixed-density contours only when asked for
+    assert scene.mass_levels == DEFAULT_MASS_LEVELS and scene.min_mass == 0.99 and scene.warnings == ()
     assert (scene.normalise, scene.dtype, scene.colormap) == (True, "float64", "viridis")
 
 

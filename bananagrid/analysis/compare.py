@@ -27,7 +27,7 @@ from numpy.typing import ArrayLike
 
 from ..results import Raster
 from ..validate import BananagridError, positive
-from .contours import DEFAULT_LEVELS
+from ..contours import DEFAULT_LEVELS
 
 __all__ = ["Comparison", "ContourRow", "compare", "compare_samples", "DEFAULT_THRESHOLD"]
 

@@ -11,9 +11,17 @@ Layout of one layer ``entity`` (all of it in world metres, x east, y north):
   its rows north first (image row 0 is the top), and a ``Transform3D`` from pixels to world
   metres, so the centre of ``values[i, j]`` lands on ``(x[j], y[i])``.
 - ``entity/log10_density``: the same in ``log10``, cells at or below ``10**floor`` set to the
-  floor (``floor = log10(min(levels)) - LOG10_FLOOR_DECADES``).
-- ``entity/contours``: ``LineStrips2D`` at the contour levels, one colour per level.
-- ``entity/info``: ``AnyValues`` with the flattened provenance, mass, peak and grid.
+  floor (:func:`log10_floor`: two decades below the lowest contour drawn).
+- ``entity/contours/lines``: ``LineStrips2D`` of the probability-mass contours (the boundaries of
+  the highest-density regions, :func:`bananagrid.contours.mass_regions`), one colour per level;
+  ``entity/contours/labels``: ``Points2D``, one per level on its line, labelled
+  ``"90 % · 0.960 km²"``.
+- ``entity/density_contours/lines`` and ``/labels``: the same for fixed density levels, when
+  given.
+- ``entity/legend/colour_bar``, ``/ticks``, ``/scale``: a log10 colour bar east of the map's
+  frame (:func:`focus_extent`) with a label per decade, and a scale bar below it.
+- ``entity/info``: ``AnyValues`` with the flattened provenance, mass, peak, grid and regions
+  (``regions.90.area`` ...).
 - ``entity/mass``: ``Scalars`` with the captured mass, a time series over ``elapsed``.
 """
 
@@ -31,7 +39,15 @@ import rerun as rr
 import rerun.blueprint as rrb
 from rerun.error_utils import catch_and_log_exceptions
 
-from ..analysis.contours import DEFAULT_LEVELS, contour_lines
+from ..contours import (
+    DEFAULT_LEVELS,
+    DEFAULT_MASS_LEVELS,
+    MassRegion,
+    contour_lines,
+    format_level,
+    label_positions,
+    mass_regions,
+)
 from ..atomic import atomic_write
 from ..results import Raster
 from ..validate import BananagridError, non_negative, positive
@@ -44,6 +60,7 @@ __all__ = [
     "elapsed_nanos",
     "entity_path",
     "flatten",
+    "focus_extent",
     "image_from_values",
     "log_north_up",
     "log_raster",
@@ -53,6 +70,7 @@ __all__ = [
     "send_blueprint",
     "set_elapsed",
     "strict",
+    "union_extent",
     "values_from_image",
     "write_recording",
 ]
@@ -63,9 +81,20 @@ ELAPSED = "elapsed"
 #: How many decades below the lowest contour level the log10 image is floored.
 LOG10_FLOOR_DECADES = 2.0
 
-#: Contour colours (RGB), one per level in the order given, cycled. Light and saturated so
-#: that they stand out on both viridis and turbo.
+#: Fixed-density contour colours (RGB), one per level in the order given, cycled. Light and
+#: saturated so that they stand out on both viridis and turbo.
 LEVEL_COLOURS = ((255, 255, 255), (255, 99, 71), (255, 200, 0), (0, 220, 255), (255, 0, 255))
+
+#: Probability-mass contour colours, innermost (50 %) first. The inner regions lie in turbo's
+#: red and yellow, the outer ones in its greens and blues: white and magenta show on the former,
+#: dark grey and black on the latter.
+MASS_COLOURS = ((255, 255, 255), (255, 0, 255), (70, 70, 70), (0, 0, 0))
+
+#: A map's frame reaches this share of its outermost region's size beyond that region.
+FOCUS_PADDING = 0.15
+
+#: Pixels along the log10 colour bar.
+COLOUR_BAR_PIXELS = 256
 
 #: Draw contours above the images in a 2D view.
 CONTOUR_DRAW_ORDER = 30.0
@@ -205,11 +234,21 @@ def default_blueprint(
     layer_entities: Sequence[str],
     *,
     scene_entity: str = "scene",
+    summary_entity: str | None = None,
     extra_images: Sequence[str] = (),
     text_entities: Sequence[str] = (),
     extra_views: Sequence[rrb.View] = (),
+    several_times: bool = False,
+    frames: Mapping[str, tuple[float, float, float, float]] | None = None,
 ) -> rrb.Blueprint:
-    """The default layout: per layer a density and a log10 view, beside the scene and mass.
+    """The default layout: one map per layer (log10 first), beside the summary and the scene.
+
+    The maps and the text panel fill rows of at most three panels, with no empty cell. Each
+    layer's map is a tab group: the log10 density (shown first: the tails and the
+    probability-mass contours are visible there), the linear density, then any extra images.
+    The captured-mass plot is shown only when the scene has several times (one point says
+    nothing that the summary does not), and the time cursor then starts at the last time
+    (the time panel follows the data to its end).
 
     Parameters
     ----------
@@ -217,52 +256,103 @@ def default_blueprint(
         The ``entity`` paths given to :func:`log_raster`.
     scene_entity : str
         The entity given to :func:`log_scene_text`.
+    summary_entity : str, optional
+        A text document summarising the run (shown first, before the scene text).
     extra_images : sequence of str
         Further images under some layers (``"layers/NAME/IMAGE"``), each shown as one more
         tab of its layer (e.g. a bearing fix's difference to its linear map).
     text_entities : sequence of str
         Further text documents (e.g. a validation table), each a tab beside the scene text.
     extra_views : sequence of rerun views
-        Further views (e.g. radial-curve plots), as tabs below the maps.
+        Further views (e.g. radial-curve plots), as tabs beside the summary and the scene.
+    several_times : bool
+        Whether the layers are logged at more than one elapsed time.
+    frames : mapping of layer entity to (x0, x1, y0, y1), optional
+        Where each map opens (m): its :func:`focus_extent` (over all times, see
+        :func:`union_extent`) and the legend beside it. Anything beyond (the rest of the
+        grid, distant bearing stations) is a zoom-out away.
     """
     layers = [entity_path(e) for e in layer_entities]
     extras = [entity_path(e) for e in extra_images]
-    texts = [rrb.TextDocumentView(origin=f"/{entity_path(scene_entity)}", name="scene")]
+    texts = [] if summary_entity is None else [rrb.TextDocumentView(origin=f"/{entity_path(summary_entity)}", name="summary")]
+    texts.append(rrb.TextDocumentView(origin=f"/{entity_path(scene_entity)}", name="scene"))
     texts += [rrb.TextDocumentView(origin=f"/{entity_path(e)}", name=entity_path(e)) for e in text_entities]
-    side = rrb.Vertical(
-        rrb.Tabs(*texts) if len(texts) > 1 else texts[0],
-        rrb.TimeSeriesView(
-            origin="/", contents=[f"/{e}/mass" for e in layers], name="captured mass"
-        ),
-        row_shares=[2, 1],
-    )
+    texts += list(extra_views)
+    side = rrb.Tabs(*texts) if len(texts) > 1 else texts[0]
+    if several_times and layers:
+        side = rrb.Vertical(
+            side,
+            rrb.TimeSeriesView(origin="/", contents=[f"/{e}/mass" for e in layers], name="captured mass"),
+            row_shares=[2, 1],
+        )
+    # "following" puts the cursor at the last time; an explicit panel state, because rerun
+    # drops the panel's state chunk with a warning when it is left empty.
+    time_panel = rrb.TimePanel(state="expanded", timeline=ELAPSED, play_state="following") if several_times else None
     if not layers:
         return rrb.Blueprint(side, collapse_panels=False)
-    top = rrb.Horizontal(
-        rrb.Grid(*(_layer_tabs(e, [x.rsplit("/", 1)[1] for x in extras if x.rsplit("/", 1)[0] == e]) for e in layers)),
-        side, column_shares=[3, 1],
+    frames = {entity_path(e): extent for e, extent in (frames or {}).items()}
+    maps = [
+        _layer_tabs(e, [x.rsplit("/", 1)[1] for x in extras if x.rsplit("/", 1)[0] == e],
+                    _framed(frames[e]) if e in frames else None)
+        for e in layers
+    ]
+    top = _panels(maps, side)
+    parts = [top] if time_panel is None else [top, time_panel]
+    return rrb.Blueprint(*parts, collapse_panels=False)
+
+
+def _panels(maps: Sequence, side) -> rrb.Container:
+    """Maps and the text panel in rows of at most three, the rows as even as possible, so
+    that no cell is empty; one or two maps sit in one row with a narrower text panel."""
+    if len(maps) <= 2:
+        return rrb.Horizontal(*maps, side, column_shares=[3] * len(maps) + [2])
+    cells = [*maps, side]
+    rows = math.ceil(len(cells) / 3)
+    sizes = [len(cells) // rows + (1 if k < len(cells) % rows else 0) for k in range(rows)]
+    out, k = [], 0
+    for size in sizes:
+        out.append(rrb.Horizontal(*cells[k:k + size]))
+        k += size
+    return rrb.Vertical(*out)
+
+
+def _framed(extent: tuple[float, float, float, float]) -> rrb.VisualBounds2D:
+    """View bounds holding ``extent``, the colour bar east of it and the scale bar below it.
+
+    The view's y axis points down (the layers are flipped north up), so world ``y`` maps to
+    ``-y`` there.
+    """
+    x0, x1, y0, y1 = extent
+    width, height = x1 - x0, y1 - y0
+    return rrb.VisualBounds2D(
+        x_range=(x0 - 0.03 * width, x1 + 0.16 * width), y_range=(-(y1 + 0.08 * height), -(y0 - 0.1 * height)),
     )
-    if extra_views:
-        top = rrb.Vertical(top, rrb.Tabs(*extra_views), row_shares=[3, 2])
-    return rrb.Blueprint(top, collapse_panels=False)
 
 
-def _layer_tabs(entity: str, extra_images: Sequence[str] = ()) -> rrb.Tabs:
-    """Density and log10 density views of one layer (and any extra images), each with its
-    contours and whatever geometry the layer carries."""
+def _layer_tabs(entity: str, extra_images: Sequence[str] = (), bounds: rrb.VisualBounds2D | None = None) -> rrb.Tabs:
+    """Log10 density and density views of one layer (and any extra images), each with its
+    contours and whatever geometry the layer carries; the log10 view is the active tab."""
     return rrb.Tabs(
-        *(_map_view(entity, image) for image in ("density", "log10_density", *extra_images)),
+        *(_map_view(entity, image, bounds) for image in ("log10_density", "density", *extra_images)),
         name=entity,
     )
 
 
-def _map_view(entity: str, image: str) -> rrb.Spatial2DView:
-    """A 2D view of one image, the contours and the layer's geometry overlay (if any); rooted
-    at ``/`` so the north-up flip applies."""
+#: Shown in every map view's name: rerun's hover reports the view's own coordinates, whose y axis
+#: points down (the maps are flipped north up), so a hovered line's "y" is minus the northing;
+#: over an image it reports the pixel (column from the west edge, row from the north edge).
+HOVER_NOTE = "hover y = −north"
+
+
+def _map_view(entity: str, image: str, bounds: rrb.VisualBounds2D | None = None) -> rrb.Spatial2DView:
+    """A 2D view of one image, the contours, the legend (log10 view) and the layer's geometry
+    overlay (if any); rooted at ``/`` so the north-up flip applies."""
+    contents = [f"/{entity}/{image}", f"/{entity}/contours/**", f"/{entity}/density_contours/**", f"/{entity}/geometry/**"]
+    if image == "log10_density":
+        contents.append(f"/{entity}/legend/**")
+    label = entity.removeprefix("layers/")
     return rrb.Spatial2DView(
-        origin="/",
-        contents=[f"/{entity}/{image}", f"/{entity}/contours", f"/{entity}/geometry/**"],
-        name=f"{entity} {image}",
+        origin="/", contents=contents, name=f"{label} · {image.replace('_', ' ')} · {HOVER_NOTE}", visual_bounds=bounds,
     )
 
 
@@ -314,10 +404,11 @@ def log_raster(
     entity: str,
     raster: Raster,
     *,
-    levels: Iterable[float] = DEFAULT_LEVELS,
+    levels: Iterable[float] = (),
+    mass_levels: Iterable[float] = DEFAULT_MASS_LEVELS,
     colormap: str = "viridis",
     log10_colormap: str = "turbo",
-) -> None:
+) -> list[MassRegion]:
     """Log one raster as a layer under ``entity`` at the current ``elapsed`` time.
 
     See the module docstring for the entities written. Call :func:`set_elapsed` first when a
@@ -332,20 +423,43 @@ def log_raster(
     raster : Raster
         Density per square metre; values must be finite.
     levels : iterable of float
-        Contour levels, density per square metre, > 0.
+        Fixed contour levels, density per square metre, > 0 (none by default).
+    mass_levels : iterable of float
+        Probability-mass levels in (0, 1): the highest-density regions drawn as labelled
+        contours (default 50, 90, 95 and 99 %).
     colormap, log10_colormap : str
         rerun colormap names for the density and the log10 density.
+
+    Returns
+    -------
+    list of MassRegion
+        The probability-mass regions drawn (see :func:`bananagrid.contours.mass_regions`).
     """
     entity = entity_path(entity)
     levels = tuple(positive(f"levels[{k}]", level) for k, level in enumerate(levels))
     _check_values(raster)
+    regions = mass_regions(raster, mass_levels)
+    floor = log10_floor(levels, regions, raster.peak)
     with strict():
         log_north_up(rec, entity)
         _log_density(rec, f"{entity}/density", raster, colormap)
-        _log_log10_density(rec, f"{entity}/log10_density", raster, levels, log10_colormap)
-        _log_contours(rec, f"{entity}/contours", raster, levels)
-        rec.log(f"{entity}/info", rr.AnyValues(**raster_info(raster)))
+        top = _log_log10_density(rec, f"{entity}/log10_density", raster, floor, log10_colormap)
+        reached = [r for r in regions if r.reached]
+        placed = _log_lines(
+            rec, f"{entity}/contours", contour_lines(raster, [r.density for r in reached]),
+            [format_level(r) for r in reached], MASS_COLOURS,
+        )
+        if levels:
+            _log_lines(
+                rec, f"{entity}/density_contours", contour_lines(raster, levels),
+                [f"{level:g} m^-2" for level in levels], LEVEL_COLOURS, avoid=placed,
+            )
+        _log_legend(rec, f"{entity}/legend", focus_extent(raster, regions), floor, top, log10_colormap)
+        info = raster_info(raster)
+        info.update(flatten("regions", {f"{100 * r.probability:g}": r.describe() for r in regions}))
+        rec.log(f"{entity}/info", rr.AnyValues(**info))
         rec.log(f"{entity}/mass", rr.Scalars(float(raster.mass)))
+    return regions
 
 
 def log_north_up(rec: rr.RecordingStream, entity: str) -> None:
@@ -425,21 +539,18 @@ def _log_density(rec: rr.RecordingStream, path: str, raster: Raster, colormap: s
 
 
 def _log_log10_density(
-    rec: rr.RecordingStream, path: str, raster: Raster, levels: Sequence[float], colormap: str
-) -> None:
-    """``log10`` of the density, floored (see :func:`log10_floor`), and the same transform."""
-    floor = log10_floor(levels)
+    rec: rr.RecordingStream, path: str, raster: Raster, floor: float, colormap: str
+) -> float:
+    """``log10`` of the density, cells at or below ``10**floor`` shown at ``floor``, and the
+    same transform as the density; returns the top of the colour range."""
     values = np.asarray(raster.values, dtype=np.float64)
     with np.errstate(divide="ignore", invalid="ignore"):
         logs = np.where(values > 10.0**floor, np.log10(values), floor)
     top = float(logs.max())
-    image = rr.DepthImage(
-        image_from_values(logs),
-        meter=1.0,
-        colormap=colormap,
-        depth_range=(floor, top if top > floor else floor + 1.0),
-    )
+    top = top if top > floor else floor + 1.0
+    image = rr.DepthImage(image_from_values(logs), meter=1.0, colormap=colormap, depth_range=(floor, top))
     rec.log(path, image, _pixel_to_world(raster))
+    return top
 
 
 def log_signed_image(rec: rr.RecordingStream, path: str, values: np.ndarray, like: Raster) -> None:
@@ -459,13 +570,18 @@ def colormaps() -> tuple[str, ...]:
     return tuple(c.name.lower() for c in rr.components.Colormap)
 
 
-def log10_floor(levels: Sequence[float]) -> float:
-    """Floor of the log10 image: ``LOG10_FLOOR_DECADES`` below the lowest level.
+def log10_floor(levels: Sequence[float], regions: Sequence[MassRegion], peak: float) -> float:
+    """Floor of the log10 image: ``LOG10_FLOOR_DECADES`` below the lowest contour drawn.
 
-    Zero cells (``log10 = -inf``) and anything below the floor are shown at the floor. With no
-    levels the default levels decide.
+    The lowest contour is the outermost probability-mass region's boundary density or the
+    lowest fixed level, whichever is lower; with neither, ``LOG10_FLOOR_DECADES`` below the
+    peak's decade minus four. Zero cells (``log10 = -inf``) and anything below the floor are
+    shown at the floor.
     """
-    return math.log10(min(levels or DEFAULT_LEVELS)) - LOG10_FLOOR_DECADES
+    lowest = [r.density for r in regions if r.reached and r.density > 0.0] + list(levels)
+    if lowest:
+        return math.log10(min(lowest)) - LOG10_FLOOR_DECADES
+    return (math.log10(peak) - 4.0 if peak > 0.0 else -12.0) - LOG10_FLOOR_DECADES
 
 
 def _pixel_to_world(raster: Raster) -> rr.Transform3D:
@@ -479,25 +595,113 @@ def _pixel_to_world(raster: Raster) -> rr.Transform3D:
     return rr.Transform3D(translation=(x0, y1, 0.0), scale=(raster.grid.dx, -raster.grid.dy, 1.0))
 
 
-def _log_contours(
-    rec: rr.RecordingStream, path: str, raster: Raster, levels: Sequence[float]
-) -> None:
-    """One strip per contour piece, coloured and labelled by level (empty list clears)."""
-    strips, colours, labels = [], [], []
-    for k, (level, pieces) in enumerate(contour_lines(raster, levels).items()):
+def _log_lines(
+    rec: rr.RecordingStream, path: str, lines: dict[float, list[np.ndarray]], labels: Sequence[str],
+    colours: Sequence[tuple[int, int, int]], *, avoid: Sequence[tuple[float, float]] = (),
+) -> list[tuple[float, float]]:
+    """Contour lines under ``path/lines`` (one colour per level, unlabelled) and one label per
+    level under ``path/labels``, placed on its line apart from the others and from ``avoid``
+    (:func:`bananagrid.contours.label_positions`); returns the label positions. Empty lists
+    clear both at this time. rerun writes a label in its point's colour on a dark box, so the
+    label points are white whatever the line's colour."""
+    strips, strip_colours = [], []
+    for k, pieces in enumerate(lines.values()):
         strips += pieces
-        colours += [LEVEL_COLOURS[k % len(LEVEL_COLOURS)]] * len(pieces)
-        labels += [f"{level:g} m^-2"] * len(pieces)
+        strip_colours += [colours[k % len(colours)]] * len(pieces)
     rec.log(
-        path,
-        rr.LineStrips2D(
-            strips,
-            colors=colours,
-            labels=labels,
-            radii=rr.Radius.ui_points(1.5),
-            draw_order=CONTOUR_DRAW_ORDER,
+        f"{path}/lines",
+        rr.LineStrips2D(strips, colors=strip_colours, radii=rr.Radius.ui_points(1.5), draw_order=CONTOUR_DRAW_ORDER),
+    )
+    text = dict(zip(lines, labels))
+    spots = label_positions(lines, avoid=avoid)
+    rec.log(
+        f"{path}/labels",
+        rr.Points2D(
+            [spots[level] for level in spots], labels=[text[level] for level in spots],
+            colors=[(255, 255, 255)] * len(spots), radii=rr.Radius.ui_points(2.5),
+            show_labels=True, draw_order=CONTOUR_DRAW_ORDER + 1,
         ),
     )
+    return list(spots.values())
+
+
+def focus_extent(raster: Raster, regions: Sequence[MassRegion]) -> tuple[float, float, float, float]:
+    """Where a map should be framed: the outermost probability-mass region's cells, padded by
+    ``FOCUS_PADDING`` of its size on each side and clipped to the grid; the whole grid when no
+    region is reached. ``(x0, x1, y0, y1)``, m."""
+    reached = [r for r in regions if r.reached]
+    grid = raster.grid
+    if not reached:
+        return grid.extent
+    inside = np.asarray(raster.values) >= reached[-1].density
+    rows, cols = np.flatnonzero(inside.any(axis=1)), np.flatnonzero(inside.any(axis=0))
+    x0, x1 = raster.x[cols[0]] - grid.dx / 2, raster.x[cols[-1]] + grid.dx / 2
+    y0, y1 = raster.y[rows[0]] - grid.dy / 2, raster.y[rows[-1]] + grid.dy / 2
+    pad_x, pad_y = FOCUS_PADDING * (x1 - x0), FOCUS_PADDING * (y1 - y0)
+    gx0, gx1, gy0, gy1 = grid.extent
+    return (float(max(gx0, x0 - pad_x)), float(min(gx1, x1 + pad_x)),
+            float(max(gy0, y0 - pad_y)), float(min(gy1, y1 + pad_y)))
+
+
+def union_extent(extents: Iterable[tuple[float, float, float, float]]) -> tuple[float, float, float, float]:
+    """The smallest extent holding all of ``extents`` (at least one)."""
+    x0, x1, y0, y1 = zip(*extents)
+    return min(x0), max(x1), min(y0), max(y1)
+
+
+def _log_legend(rec: rr.RecordingStream, path: str, extent: tuple, floor: float, top: float, colormap: str) -> None:
+    """A scale bar below ``extent`` (the map's frame, see :func:`focus_extent`) and a log10
+    colour bar east of it, in world metres.
+
+    The colour bar is a one-pixel-wide image of ``COLOUR_BAR_PIXELS`` values from ``floor``
+    (south end) to ``top`` (north end) in the log10 image's colormap and range, with a label
+    at each whole decade; the scale bar is the roundest length (1, 2 or 5 x 10^k m) no longer
+    than a quarter of the grid's width.
+    """
+    x0, x1, y0, y1 = extent
+    width, height = x1 - x0, y1 - y0
+    length = nice_length(width / 4.0)
+    below = y0 - 0.05 * height
+    rec.log(
+        f"{path}/scale",
+        rr.LineStrips2D(
+            [[(x0, below), (x0 + length, below)]], colors=[(255, 255, 255)], radii=rr.Radius.ui_points(2.0),
+            labels=[format_length(length)], show_labels=True,
+        ),
+    )
+    bar_x0, bar_w = x1 + 0.03 * width, 0.025 * width
+    ramp = np.linspace(top, floor, COLOUR_BAR_PIXELS, dtype=np.float32)[:, None]  # row 0 is the top
+    rec.log(
+        f"{path}/colour_bar",
+        rr.DepthImage(ramp, meter=1.0, colormap=colormap, depth_range=(floor, top)),
+        rr.Transform3D(translation=(bar_x0, y1, 0.0), scale=(bar_w, -height / COLOUR_BAR_PIXELS, 1.0)),
+    )
+    decades = np.arange(math.ceil(floor), math.floor(top) + 1)
+    ticks = [(bar_x0 + bar_w, y0 + (d - floor) / (top - floor) * height) for d in decades]
+    rec.log(
+        f"{path}/ticks",
+        rr.Points2D(
+            ticks + [(bar_x0, y1 + 0.04 * height)],
+            labels=[f"1e{int(d)}" for d in decades] + ["log10 m^-2"],
+            colors=[(255, 255, 255)] * (len(ticks) + 1), radii=rr.Radius.ui_points(1.0), show_labels=True,
+        ),
+    )
+
+
+def nice_length(limit: float) -> float:
+    """The largest 1, 2 or 5 x 10^k not above ``limit`` (> 0)."""
+    exponent = math.floor(math.log10(limit))
+    for mantissa in (5.0, 2.0, 1.0):
+        if mantissa * 10.0**exponent <= limit:
+            return mantissa * 10.0**exponent
+    return 10.0**exponent
+
+
+def format_length(metres: float) -> str:
+    """``500 m``, ``2 km``, ``0.5 m``."""
+    if metres >= 1000.0:
+        return f"{metres / 1000.0:g} km"
+    return f"{metres:g} m"
 
 
 # --- helpers ----------------------------------------------------------------------------------

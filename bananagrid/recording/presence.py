@@ -38,7 +38,8 @@ from ..domains.region import Region
 from ..models.presence import GaussianMixture, UniformPresence
 from ..results import CellMap
 from ..validate import BananagridError, positive
-from .core import entity_path, flatten, strict
+from ..contours import DEFAULT_MASS_LEVELS, MassRegion, cell_regions, label_positions
+from .core import MASS_COLOURS, entity_path, flatten, strict
 
 __all__ = [
     "log_cell_map", "presence_blueprint", "cell_colours", "table_image", "log10_probabilities", "summary_values",
@@ -109,7 +110,8 @@ def log_cell_map(
     room_z: tuple[float, float] | None = None,
     far: float | None = None,
     log10_floor: float = LOG10_FLOOR,
-) -> None:
+    mass_levels=DEFAULT_MASS_LEVELS,
+) -> list[MassRegion]:
     """Log a cell map, its room and its presence law under ``entity`` (see the module docstring).
 
     Parameters
@@ -132,6 +134,15 @@ def log_cell_map(
         m, > 0: radius at which cells are cut when there is no region (default 10 h).
     log10_floor : float
         Bottom of the colour scale (log10 of a probability), < 0.
+    mass_levels : iterable of float
+        Probability-mass levels in (0, 1): the highest-probability sets of cells holding them
+        (:func:`bananagrid.contours.cell_regions`) are outlined on the plane and on the log10
+        table, each labelled once (``"90 % · 412 cells"``).
+
+    Returns
+    -------
+    list of MassRegion
+        The regions outlined.
     """
     entity = entity_path(entity)
     if not isinstance(cell_map, CellMap):
@@ -173,7 +184,157 @@ def log_cell_map(
                                                  depth_range=(0.0, peak if peak > 0.0 else 1.0)))
         rec.log(f"{entity}/log10_table", rr.DepthImage(table_image(log10_probabilities(cell_map.prob, log10_floor)),
                                                        meter=1.0, colormap="viridis", depth_range=(lo, top)))
-        rec.log(f"{entity}/summary", rr.AnyValues(**summary_values(cell_map)))
+        regions = cell_regions(cell_map.prob, mass_levels)
+        _log_regions(rec, plane, f"{entity}/log10_table/regions", cell_map, regions, region, far)
+        info = summary_values(cell_map)
+        info.update(flatten("regions", {f"{100 * r.probability:g}": r.describe() for r in regions}))
+        rec.log(f"{entity}/summary", rr.AnyValues(**info))
+    return regions
+
+
+def region_edges(inside: np.ndarray, wrap: bool) -> tuple[np.ndarray, np.ndarray]:
+    """The cell edges between a set of cells and the rest, in lattice indices.
+
+    Parameters
+    ----------
+    inside : ndarray of bool, shape (n_azimuth, n_elevation)
+        The set (line geometry: one elevation column).
+    wrap : bool
+        Whether azimuth cell ``n_azimuth - 1`` borders cell 0 (a full turn).
+
+    Returns
+    -------
+    radial : ndarray of int, shape (k, 2)
+        ``(a, j)``: the edge at azimuth edge ``a`` (between azimuth cells ``a - 1`` and ``a``)
+        along elevation cell ``j``.
+    arcs : ndarray of int, shape (m, 2)
+        ``(i, e)``: the edge at elevation edge ``e`` (between rings ``e - 1`` and ``e``) along
+        azimuth cell ``i``.
+    """
+    inside = np.asarray(inside, dtype=bool)
+    if wrap:
+        across = inside != np.roll(inside, 1, axis=0)  # row a: cells a - 1 and a
+    else:
+        padded = np.pad(inside, ((1, 1), (0, 0)))
+        across = padded[1:] != padded[:-1]  # rows 0 .. n: edges 0 .. n
+    padded = np.pad(inside, ((0, 0), (1, 1)))
+    rings = padded[:, 1:] != padded[:, :-1]  # columns 0 .. n_el: edges 0 .. n_el
+    return np.argwhere(across), np.argwhere(rings)
+
+
+def _log_regions(rec, plane: str, table: str, cell_map: CellMap, regions, region, far: float) -> None:
+    """Outline each probability-mass region of cells on the plane (``plane/regions``) and on
+    the log10 table (``table``), one colour per level, one label per level."""
+    lattice = cell_map.lattice
+    prob = np.asarray(cell_map.prob, dtype=float)
+    grid_prob = prob[:, None] if prob.ndim == 1 else prob
+    phi = lattice.azimuth_edges
+    wrap = lattice.geometry != "line" and abs(phi[-1] - phi[0] - 2.0 * math.pi) < 1e-9
+    on_plane, on_table, texts = {}, {}, {}
+    for region_k in (r for r in regions if r.reached):
+        radial, arcs = region_edges(grid_prob >= region_k.density, wrap)
+        key = region_k.probability
+        texts[key] = f"{100 * key:g} % · {region_k.cells:,} cells"
+        on_table[key] = [np.array([(a, j), (a, j + 1)], float) for a, j in radial] + \
+                        [np.array([(i, e), (i + 1, e)], float) for i, e in arcs]
+        if lattice.geometry == "line":
+            on_plane[key] = _line_runs(lattice, region, far, grid_prob[:, 0] >= region_k.density, len(on_plane))
+        else:
+            on_plane[key] = _plane_edges(lattice, region, far, radial, arcs)
+    colours = {key: MASS_COLOURS[k % len(MASS_COLOURS)] for k, key in enumerate(texts)}
+    spots = label_positions({k: v for k, v in on_plane.items() if v})
+    rec.log(f"{plane}/regions/lines", rr.LineStrips3D(
+        [np.column_stack([piece, np.full(len(piece), -lattice.h)]) for key in on_plane for piece in on_plane[key]],
+        colors=[colours[key] for key in on_plane for _ in on_plane[key]], radii=rr.Radius.ui_points(1.5)))
+    rec.log(f"{plane}/regions/labels", rr.Points3D(
+        [(x, y, -lattice.h) for x, y in spots.values()], labels=[texts[key] for key in spots],
+        colors=[(255, 255, 255)] * len(spots), radii=rr.Radius.ui_points(2.5), show_labels=True))
+    table_spots = label_positions(on_table)
+    rec.log(f"{table}/lines", rr.LineStrips2D(
+        [piece for key in on_table for piece in on_table[key]],
+        colors=[colours[key] for key in on_table for _ in on_table[key]], radii=rr.Radius.ui_points(1.0),
+        draw_order=30.0))
+    rec.log(f"{table}/labels", rr.Points2D(
+        list(table_spots.values()), labels=[texts[key] for key in table_spots],
+        colors=[(255, 255, 255)] * len(table_spots), radii=rr.Radius.ui_points(2.0), show_labels=True,
+        draw_order=31.0))
+
+
+def _plane_edges(lattice, region, far: float, radial: np.ndarray, arcs: np.ndarray) -> list[np.ndarray]:
+    """The region edges of :func:`region_edges` on the plane z = -h as (n, 2) polylines: radial
+    edges from a ring's inner to its outer radius, arcs in pieces of at most MAX_PIECE_DEG; cut
+    at ``far`` (the horizon ring reaches infinity) and clipped to the room's rectangle."""
+    phi = lattice.azimuth_edges
+    inner, outer = lattice.radii()
+    edges_r = lattice.h * lattice.tau_edges
+    rect = None if region is None else np.asarray(region.bounds[:2], dtype=float)
+    cap = far if rect is None else 2.0 * float(np.hypot(*np.abs(rect).max(axis=1))) + lattice.h
+    pieces = []
+    for a, j in radial:
+        r0, r1 = inner[j], min(outer[j], cap)
+        if r1 > r0:
+            angle = phi[a % len(phi)]
+            pieces.append(np.array([(r0 * math.cos(angle), r0 * math.sin(angle)), (r1 * math.cos(angle), r1 * math.sin(angle))]))
+    for i, e in arcs:
+        radius = min(edges_r[e], cap)
+        if radius > 0.0:
+            n = max(1, math.ceil(math.degrees(phi[i + 1] - phi[i]) / MAX_PIECE_DEG - 1e-9))
+            angles = np.linspace(phi[i], phi[i + 1], n + 1)
+            pieces.append(np.column_stack([radius * np.cos(angles), radius * np.sin(angles)]))
+    if rect is None:
+        return pieces
+    return [clipped for piece in pieces for clipped in _clip_polyline(piece, rect)]
+
+
+def _line_runs(lattice, region, far: float, inside: np.ndarray, k: int) -> list[np.ndarray]:
+    """A line region's runs of cells as segments beside the line (y = -0.15 (k + 1) h for the
+    k-th level, so nested levels stay apart), clipped to the room's x interval (or +-far)."""
+    x = lattice.line_edges()
+    lo, hi = (region.x if region is not None else (-far, far))
+    padded = np.concatenate([[False], inside, [False]])
+    starts = np.flatnonzero(~padded[:-1] & padded[1:])
+    ends = np.flatnonzero(padded[:-1] & ~padded[1:])
+    y = -0.15 * (k + 1) * lattice.h
+    out = []
+    for a, b in zip(starts, ends):
+        x0, x1 = float(np.clip(x[a], lo, hi)), float(np.clip(x[b], lo, hi))
+        if x1 > x0:
+            out.append(np.array([(x0, y), (x1, y)]))
+    return out
+
+
+def _clip_polyline(line: np.ndarray, rect: np.ndarray) -> list[np.ndarray]:
+    """The parts of a polyline inside the rectangle ``rect`` (rows x, y of (low, high)),
+    segment by segment (Liang-Barsky)."""
+    out, current = [], []
+    for p, q in zip(line[:-1], line[1:]):
+        d = q - p
+        t0, t1 = 0.0, 1.0
+        keep = True
+        for axis in (0, 1):
+            for bound, sign in ((rect[axis, 0], -1.0), (rect[axis, 1], 1.0)):
+                num, den = sign * (bound - p[axis]), sign * d[axis]
+                if den == 0.0:
+                    if num < 0.0:
+                        keep = False
+                elif den > 0.0:
+                    t1 = min(t1, num / den)
+                else:
+                    t0 = max(t0, num / den)
+        if not keep or t0 > t1:
+            if len(current) > 1:
+                out.append(np.array(current))
+            current = []
+            continue
+        a, b = p + t0 * d, p + t1 * d
+        if not current or np.any(current[-1] != a):
+            if len(current) > 1:
+                out.append(np.array(current))
+            current = [a]
+        current.append(b)
+    if len(current) > 1:
+        out.append(np.array(current))
+    return out
 
 
 def summary_values(cell_map: CellMap) -> dict:
@@ -190,12 +351,33 @@ def summary_values(cell_map: CellMap) -> dict:
     return dict(flatten("", info))
 
 
-def presence_blueprint(entity: str = "presence", scene_entity: str = "scene") -> rrb.Blueprint:
-    """The target plane in 3D beside the log10 and linear tables, the numbers and the scene."""
+def plane_eye(lattice, region, far: float | None) -> rrb.EyeControls3D:
+    """A camera looking down on the target plane from above and a little south, so the cells,
+    the room and the labels are seen nearly as on a map (north up). It frames the room's
+    rectangle, else a disc of radius ``far`` (default 10 h) around the array."""
+    if region is not None:
+        bounds = region.bounds
+        x0, x1 = bounds[0]
+        y0, y1 = bounds[1] if len(bounds) > 1 else (-0.25 * (x1 - x0), 0.25 * (x1 - x0))  # a line's room: x only
+    else:
+        reach = 10.0 * lattice.h if far is None else far
+        x0, x1, y0, y1 = -reach, reach, -reach, reach
+    cx, cy = 0.5 * (x0 + x1), 0.5 * (y0 + y1)
+    size = max(x1 - x0, y1 - y0)
+    target = (cx, cy, -lattice.h)
+    return rrb.EyeControls3D(
+        position=(cx, cy - 0.3 * size, -lattice.h + 1.5 * size), look_target=target, eye_up=(0.0, 0.0, 1.0),
+    )
+
+
+def presence_blueprint(entity: str = "presence", scene_entity: str = "scene", *,
+                       eye: rrb.EyeControls3D | None = None) -> rrb.Blueprint:
+    """The target plane in 3D (seen from ``eye``, see :func:`plane_eye`) beside the log10 and
+    linear tables, the numbers and the scene."""
     entity = entity_path(entity)
     return rrb.Blueprint(
         rrb.Horizontal(
-            rrb.Spatial3DView(origin=f"/{entity}/plane", name="cells on the target"),
+            rrb.Spatial3DView(origin=f"/{entity}/plane", name="cells on the target", eye_controls=eye),
             rrb.Vertical(
                 rrb.Tabs(
                     rrb.Spatial2DView(origin=f"/{entity}/log10_table", name="log10 p (azimuth across, elevation down)"),

@@ -14,17 +14,19 @@ import math
 import os
 import re
 import tomllib
+import warnings
 from collections.abc import Mapping
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from types import MappingProxyType
 
-from ..analysis.contours import DEFAULT_LEVELS
+from ..analysis.coverage import DEFAULT_MIN_MASS, min_mass
+from ..contours import DEFAULT_MASS_LEVELS, mass_levels
 from ..domains.grid import Grid
 from ..models.registry import MODEL_KINDS, ModelKind, Registry
 from ..protocol import DensityModel
 from ..recording.core import MAX_ELAPSED_S, colormaps
-from ..validate import BananagridError, positive
+from ..validate import BananagridError, BananagridWarning, positive
 from . import keys
 from .keys import DTYPES, NAME_PATTERN, SceneKeyError, check_keys, show
 from .presence import PresenceScene, build_presence_scene
@@ -41,7 +43,7 @@ TOP_KEYS = ("scene", "grid", "output", "defaults", "layers", "radial")
 RADIAL_KEYS = ("layers", "density_bearings_deg", "moments_max_deg", "moments_step_deg")
 SCENE_KEYS = ("name", "title", "description", "times")
 GRID_KEYS = ("x", "y", "step", "dx", "dy")
-OUTPUT_KEYS = ("contour_levels", "normalise", "dtype", "colormap", "bearing_validation")
+OUTPUT_KEYS = ("mass_levels", "contour_levels", "min_mass", "normalise", "dtype", "colormap", "bearing_validation")
 
 
 @dataclass(frozen=True)
@@ -138,7 +140,7 @@ class Scene:
         Elapsed times, s, strictly increasing; every layer is computed at each. None when the
         layers give their own ``t``.
     levels : tuple of float
-        Contour levels, density per m^2.
+        Fixed contour levels, density per m^2 (empty unless the scene gives ``contour_levels``).
     normalise : bool
         Whether rasters are normalised over the grid before they are recorded.
     dtype : str
@@ -150,6 +152,13 @@ class Scene:
         the true geometry over crossing angles and bearing errors; a few seconds).
     radial : RadialOutput or None
         The conditional radial curves to record, if the scene asks for them (``[radial]``).
+    mass_levels : tuple of float
+        Probability-mass levels in (0, 1) whose highest-density regions are drawn and reported.
+    min_mass : float
+        Captured mass below which a layer warns that the grid misses the target (0: never).
+    warnings : tuple of str
+        Likely mistakes found while loading (e.g. an angle that looks like degrees given in
+        radians); each was also issued as a :class:`~bananagrid.BananagridWarning`.
     """
 
     name: str
@@ -167,6 +176,9 @@ class Scene:
     colormap: str
     bearing_validation: bool = False
     radial: RadialOutput | None = None
+    mass_levels: tuple = DEFAULT_MASS_LEVELS
+    min_mass: float = DEFAULT_MIN_MASS
+    warnings: tuple = ()
 
     def with_step(self, step: float) -> "Scene":
         """A copy whose grid covers the same bounds with square cells of ``step`` metres."""
@@ -246,7 +258,7 @@ def _build(doc: dict, text: str, source: str, kinds: Registry) -> Scene:
     description = keys.text(head, "description", "scene", default="")
     times = _times(head["times"]) if "times" in head else None
     bounds, grid = _grid(keys.table(doc, "grid", required=True))
-    levels, normalise, dtype, colormap, bearing_validation = _output(keys.table(doc, "output"))
+    output = _output(keys.table(doc, "output"))
     defaults = keys.table(doc, "defaults")
     every_key = tuple(dict.fromkeys(k for kind in kinds.values() for k in kind.scene.key_names))
     check_keys(defaults, every_key, "defaults")
@@ -256,13 +268,14 @@ def _build(doc: dict, text: str, source: str, kinds: Registry) -> Scene:
             "(every layer is computed at every time)"
         )
     shared = keys.parameters(defaults, "defaults", keys.merged_keys(kind.scene.keys for kind in kinds.values()))
-    layers = _layers(keys.table(doc, "layers", required=True), shared, times, kinds)
+    found: list[str] = []
+    layers = _layers(keys.table(doc, "layers", required=True), shared, times, kinds, found)
     radial = _radial(doc["radial"], layers) if "radial" in doc else None
+    for message in found:
+        warnings.warn(f"{source}: {message}", BananagridWarning, stacklevel=3)
     return Scene(
         name=name, title=title, description=description, text=text, source=source,
-        grid=grid, bounds=bounds, layers=layers, times=times, levels=levels,
-        normalise=normalise, dtype=dtype, colormap=colormap, bearing_validation=bearing_validation,
-        radial=radial,
+        grid=grid, bounds=bounds, layers=layers, times=times, radial=radial, warnings=tuple(found), **output,
     )
 
 
@@ -342,11 +355,12 @@ def _grid(table: dict) -> tuple[tuple, Grid]:
         raise SceneKeyError(keys.prefixed(str(exc), "grid", GRID_KEYS)) from None
 
 
-def _output(table: dict) -> tuple[tuple, bool, str, str, bool]:
-    """``[output]``: contour levels, normalisation, dtype, colormap and whether to add the
-    bearing-fix validation table, with defaults."""
+def _output(table: dict) -> dict:
+    """``[output]``: contour levels (probability mass and fixed densities), the captured-mass
+    threshold, normalisation, dtype, colormap and whether to add the bearing-fix validation
+    table, with defaults; as keyword arguments of :class:`Scene`."""
     check_keys(table, OUTPUT_KEYS, "output")
-    levels = DEFAULT_LEVELS
+    levels: tuple = ()
     if "contour_levels" in table:
         value = table["contour_levels"]
         if not isinstance(value, list) or not value:
@@ -359,6 +373,21 @@ def _output(table: dict) -> tuple[tuple, bool, str, str, bool]:
                 raise SceneKeyError(
                     f"output.contour_levels[{k}] = {show(value[k])}: must be finite and > 0 (m^-2)"
                 )
+    probabilities = DEFAULT_MASS_LEVELS
+    if "mass_levels" in table:
+        value = table["mass_levels"]
+        if not isinstance(value, list):
+            raise SceneKeyError(f"output.mass_levels = {show(value)}: expected a list of probabilities in (0, 1)")
+        try:
+            probabilities = mass_levels(value, key="output.mass_levels")
+        except BananagridError as exc:
+            raise SceneKeyError(str(exc)) from None
+    threshold = DEFAULT_MIN_MASS
+    if "min_mass" in table:
+        try:
+            threshold = min_mass(table["min_mass"], key="output.min_mass")
+        except BananagridError as exc:
+            raise SceneKeyError(str(exc)) from None
     normalise = table.get("normalise", True)
     if not isinstance(normalise, bool):
         raise SceneKeyError(f"output.normalise = {show(normalise)}: expected true or false")
@@ -372,7 +401,10 @@ def _output(table: dict) -> tuple[tuple, bool, str, str, bool]:
     validation = table.get("bearing_validation", False)
     if not isinstance(validation, bool):
         raise SceneKeyError(f"output.bearing_validation = {show(validation)}: expected true or false")
-    return tuple(float(v) for v in levels), normalise, dtype, colormap.lower(), validation
+    return {
+        "levels": tuple(float(v) for v in levels), "mass_levels": probabilities, "min_mass": threshold,
+        "normalise": normalise, "dtype": dtype, "colormap": colormap.lower(), "bearing_validation": validation,
+    }
 
 
 def _colormaps() -> tuple[str, ...]:
@@ -380,10 +412,11 @@ def _colormaps() -> tuple[str, ...]:
     return colormaps()
 
 
-def _layers(tables: dict, shared: dict, times, kinds: Registry) -> tuple[Layer, ...]:
+def _layers(tables: dict, shared: dict, times, kinds: Registry, found: list[str]) -> tuple[Layer, ...]:
     """``[layers.NAME]`` tables in file order, each merged over ``[defaults]`` and checked.
 
-    ``shared`` holds the ``[defaults]`` parameters as returned by :func:`keys.parameters`.
+    ``shared`` holds the ``[defaults]`` parameters as returned by :func:`keys.parameters`;
+    likely mistakes are appended to ``found``.
     """
     if not tables:
         raise SceneKeyError("layers: at least one [layers.NAME] table is required")
@@ -394,12 +427,13 @@ def _layers(tables: dict, shared: dict, times, kinds: Registry) -> tuple[Layer, 
             raise SceneKeyError(f"layers.{show(layer_name)}: a layer name must be letters, digits, _ and -")
         if not isinstance(body, dict):
             raise SceneKeyError(f"{path} = {show(body)}: expected a table [layers.{layer_name}]")
-        layers.append(_layer(layer_name, body, shared, times, kinds))
+        layers.append(_layer(layer_name, body, shared, times, kinds, found))
     return tuple(layers)
 
 
-def _layer(layer_name: str, body: dict, shared: dict, times, kinds: Registry) -> Layer:
-    """Validate one layer: its keys, its values, and its model at every elapsed time."""
+def _layer(layer_name: str, body: dict, shared: dict, times, kinds: Registry, found: list[str]) -> Layer:
+    """Validate one layer: its keys, its values, and its model at every elapsed time; likely
+    mistakes (:func:`_radian_doubts`) are appended to ``found``."""
     path = f"layers.{layer_name}"
     kind_name = body.get("model")
     if not isinstance(kind_name, str) or kind_name not in kinds:
@@ -432,6 +466,8 @@ def _layer(layer_name: str, body: dict, shared: dict, times, kinds: Registry) ->
         )
         raise SceneKeyError(f"{path}: missing {listed}: give each in [{path}] or [defaults]")
     layer = Layer(name=layer_name, kind=kind_name, params={p: si for p, (_, _, si) in given.items()}, model_kind=kind)
+    latest = max(times) if times is not None else given["t"][2] if "t" in given else None
+    found += _radian_doubts(given, own, latest)
     if "t" in given and given["t"][2] >= MAX_ELAPSED_S:
         where, written, _ = given["t"]
         raise SceneKeyError(f"{where} = {show(written)}: {TIMELINE_LIMIT}")
@@ -443,6 +479,33 @@ def _layer(layer_name: str, body: dict, shared: dict, times, kinds: Registry) ->
             at = {} if t is None else {"t": (f"scene.times[{k}]", t, t)}
             raise SceneKeyError(_model_error(str(exc), path, {**given, **at}, schema.message_keys)) from None
     return layer
+
+
+def _radian_doubts(given: dict, own: Mapping, t: float | None) -> list[str]:
+    """Radian values that look like degrees: the key has a ``_deg`` form, the radian form was
+    written, and the value is implausible in radians.
+
+    An angle (unit ``rad``) beyond a full turn, ``|value| > 2 pi``, or a rate (``rad/s``) whose
+    spread over the latest elapsed time is more than a full turn, ``value * t > 2 pi``: both
+    are what a number meant in degrees gives, and neither describes a plausible target.
+    """
+    doubts = []
+    for param, (where, written, si) in given.items():
+        spec = own.get(param)
+        if spec is None or spec.alias != "deg" or where.endswith("_deg"):
+            continue
+        values = si if isinstance(si, list) else [si]
+        if spec.unit == "rad" and any(abs(v) > 2.0 * math.pi for v in values):
+            doubts.append(
+                f"{where} = {show(written)} rad is more than a full turn: were degrees meant? "
+                f"Give {param}_deg for degrees"
+            )
+        elif spec.unit == "rad/s" and t is not None and any(abs(v) * t > 2.0 * math.pi for v in values):
+            doubts.append(
+                f"{where} = {show(written)} rad/s spreads over more than a full turn in t = {t:g} s "
+                f"({math.degrees(max(map(abs, values)) * t):.3g} deg): were degrees meant? Give {param}_deg for degrees/s"
+            )
+    return doubts
 
 
 def _model_error(message: str, path: str, given: dict, message_keys: Mapping) -> str:

@@ -13,7 +13,7 @@ A scene document whose top level has an ``[array]`` table is a presence scene;
 - ``[presence]``: ``kind`` ("mixture" or "uniform") and, for a mixture,
   ``[presence.components.NAME]`` tables with ``weight``, ``mean`` and ``cov`` or ``sd_x``,
   ``sd_y``, ``rho``, ``sd_z``;
-- ``[output]``: ``dtype``, ``far``, ``log10_floor``.
+- ``[output]``: ``dtype``, ``far``, ``log10_floor``, ``mass_levels``.
 
 Every key is checked once here; errors name the file, the key path, the value and what is
 allowed, as for grid scenes (the helpers of :mod:`bananagrid.scenes.keys` are shared).
@@ -28,6 +28,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..contours import DEFAULT_MASS_LEVELS, mass_levels
 from ..domains.angular_lattice import AngularLattice
 from ..domains.region import Region
 from ..models.presence import WEIGHT_SUM_TOL, GaussianMixture, UniformPresence, cell_probabilities
@@ -50,7 +51,7 @@ ARRAY_KEYS = ("geometry", "h", "dh", "azimuth_step_deg", "elevation_step_deg", "
 ROOM_KEYS = ("x", "y", "z")
 PRESENCE_KEYS = ("kind", "components")
 COMPONENT_KEYS = ("weight", "mean", "cov", "sd_x", "sd_y", "rho", "sd_z")
-OUTPUT_KEYS = ("dtype", "far", "log10_floor")
+OUTPUT_KEYS = ("dtype", "far", "log10_floor", "mass_levels")
 #: Axes of the presence law per geometry.
 AXES = {"line": ("x",), "plane": ("x", "y"), "frustum": ("x", "y", "z")}
 #: Default direction ranges, degrees: line azimuths inclusive, plane/frustum azimuths a full
@@ -84,6 +85,8 @@ class PresenceScene:
         m: where cells are cut in the drawing when there is no room (default 10 h).
     log10_floor : float
         Bottom of the recorded colour scale, log10 of a probability.
+    mass_levels : tuple of float
+        Probability-mass levels in (0, 1) whose highest-probability sets of cells are outlined.
     """
 
     name: str
@@ -100,6 +103,7 @@ class PresenceScene:
     dtype: str = "float64"
     far: float | None = None
     log10_floor: float = -12.0
+    mass_levels: tuple = DEFAULT_MASS_LEVELS
 
     @property
     def layers(self):
@@ -138,7 +142,7 @@ def build_presence_scene(doc: dict, text: str, source: str) -> PresenceScene:
     lattice = _array(keys.table(doc, "array", required=True))
     room, room_z = _room(keys.table(doc, "room"), lattice) if "room" in doc else (None, None)
     presence, names, kind = _presence(keys.table(doc, "presence", required=True), lattice, room)
-    dtype, far, floor = _output(keys.table(doc, "output"))
+    dtype, far, floor, levels = _output(keys.table(doc, "output"))
     if kind == "mixture" and room is not None:
         try:
             p_s = presence.region_probability(room)
@@ -149,7 +153,7 @@ def build_presence_scene(doc: dict, text: str, source: str) -> PresenceScene:
     return PresenceScene(
         name=name, title=title, description=description, text=text, source=source, lattice=lattice,
         presence=presence, region=room, room_z=room_z, component_names=names, kind=kind, dtype=dtype,
-        far=far, log10_floor=floor,
+        far=far, log10_floor=floor, mass_levels=levels,
     )
 
 
@@ -383,8 +387,9 @@ def _finite(value, path: str) -> float:
     return number
 
 
-def _output(table: dict) -> tuple[str, float | None, float]:
-    """``[output]``: kernel dtype, drawing radius without a room, colour-scale floor."""
+def _output(table: dict) -> tuple[str, float | None, float, tuple]:
+    """``[output]``: kernel dtype, drawing radius without a room, colour-scale floor and
+    probability-mass levels."""
     check_keys(table, OUTPUT_KEYS, "output")
     dtype = table.get("dtype", "float64")
     if dtype not in DTYPES:
@@ -397,4 +402,12 @@ def _output(table: dict) -> tuple[str, float | None, float]:
     floor = _finite(table.get("log10_floor", -12.0), "output.log10_floor")
     if not -300.0 <= floor < 0.0:
         raise SceneKeyError(f"output.log10_floor = {show(table['log10_floor'])}: must be in [-300, 0) (log10 of a probability)")
-    return dtype, far, floor
+    levels = DEFAULT_MASS_LEVELS
+    if "mass_levels" in table:
+        if not isinstance(table["mass_levels"], list):
+            raise SceneKeyError(f"output.mass_levels = {show(table['mass_levels'])}: expected a list of probabilities in (0, 1)")
+        try:
+            levels = mass_levels(table["mass_levels"], key="output.mass_levels")
+        except BananagridError as exc:
+            raise SceneKeyError(str(exc)) from None
+    return dtype, far, floor, levels

@@ -10,6 +10,7 @@ from __future__ import annotations
 import json
 import os
 import time
+import warnings
 import zipfile
 from collections.abc import Callable
 from pathlib import Path
@@ -18,22 +19,27 @@ import numpy as np
 
 
 from ..analysis.bearing_validation import format_table, summary, validation_table
+from ..analysis.coverage import coverage_warnings, level_warnings, peak_location
 from ..atomic import partial_path
 from ..engine.rasterise import rasterise
 from ..protocol import DensityModel
 from ..recording.bearing import log_validation_table
 from ..recording.core import (
     default_blueprint,
+    focus_extent,
     log_raster,
     log_scene_text,
     recording_id_for,
+    send_blueprint,
     set_elapsed,
+    union_extent,
     write_recording,
 )
 from ..recording.layers import layer_views, log_layer_extras
 from ..recording.radial import log_radial_curves, radial_groups, radial_views
+from ..recording.summary import log_summary
 from ..results import Raster
-from ..validate import BananagridError
+from ..validate import BananagridError, BananagridWarning
 from ..version import __version__
 from .load import Layer, Scene
 from .presence import PresenceScene
@@ -79,8 +85,18 @@ def run_scene(
     -------
     list of dict
         One row per layer and time: ``scene``, ``layer``, ``t`` (s), ``cells``, ``mass``
-        (raw captured mass), ``peak`` (largest recorded density, m^-2) and ``seconds``
-        (rasterise and normalise, wall clock).
+        (raw captured mass), ``peak`` (largest recorded density, m^-2), ``peak_x``, ``peak_y``
+        (its cell centre, m), ``regions`` (the probability-mass regions at the scene's
+        ``mass_levels``, :class:`~bananagrid.contours.MassRegion`) and ``seconds`` (rasterise
+        and normalise, wall clock).
+
+    Warns
+    -----
+    BananagridWarning
+        For a layer whose grid captured less than the scene's ``min_mass`` (naming the edges
+        where the mass leaks), probability-mass levels the grid cannot reach, and fixed
+        contour levels outside the map's range. The scene's own warnings and these are listed
+        in the recording's summary document.
     """
     if isinstance(scene, PresenceScene):  # an [array] scene: its own runner
         return run_presence_scene(scene, out_dir, npz=npz, threads=threads, progress=progress)
@@ -91,6 +107,8 @@ def run_scene(
     npz_path = out_dir / f"{scene.name}.npz"
     archive = None
     rows: list[dict] = []
+    found: list[str] = list(scene.warnings)
+    frames: dict[str, list] = {}
 
     def build(rec) -> None:
         # Runs on this thread: set_elapsed is per thread.
@@ -104,7 +122,16 @@ def run_scene(
             raster, seconds = compute(scene, layer, t, threads=threads, model=model)
             set_elapsed(rec, t)
             entity = f"layers/{layer.name}"
-            log_raster(rec, entity, _recordable(raster), levels=scene.levels, colormap=scene.colormap)
+            regions = log_raster(
+                rec, entity, _recordable(raster), levels=scene.levels, mass_levels=scene.mass_levels,
+                colormap=scene.colormap,
+            )
+            frames.setdefault(entity, []).append(focus_extent(raster, regions))
+            where = f"{scene.name}: layer {layer.name} at t = {t:g} s"
+            for message in (coverage_warnings(raster, regions, where=where, threshold=scene.min_mass)
+                            + level_warnings(raster, scene.levels, where=where)):
+                warnings.warn(message, BananagridWarning, stacklevel=2)
+                found.append(message)
             log_layer_extras(
                 rec, entity, layer.model_kind, model, raster,
                 compute=lambda other: compute(scene, layer, t, threads=threads, model=other)[0],
@@ -113,21 +140,21 @@ def run_scene(
                 _log_radial(rec, scene, layer, t, threads)
             if archive is not None:
                 archive.add(layer.name, t, raster)
-            rows.append(_row(scene, layer, t, raster, seconds))
+            rows.append(_row(scene, layer, t, raster, seconds, regions))
             if progress is not None:
                 progress(k + 1, len(jobs), label)
         if scene.bearing_validation:
             records = validation_table()
             log_validation_table(rec, "validation", format_table(records), summary(records))
+        log_summary(rec, scene.title, rows, found)
+        # The maps open framed on what was found, so the blueprint comes last.
+        send_blueprint(rec, _blueprint(scene, {e: union_extent(extents) for e, extents in frames.items()}))
         if archive is not None:
             archive.close()
 
     try:
         archive = _Archive(npz_path, scene) if npz else None
-        write_recording(
-            rrd_path, build, recording_id=_recording_id(scene),
-            blueprint=_blueprint(scene),
-        )
+        write_recording(rrd_path, build, recording_id=_recording_id(scene))
         if archive is not None:
             try:
                 archive.publish()
@@ -158,7 +185,7 @@ def compute(scene: Scene, layer: Layer, t: float, *, threads: int | None = None,
     return raster, time.perf_counter() - start
 
 
-def _blueprint(scene: Scene):
+def _blueprint(scene: Scene, frames: dict):
     """The default layout, with each kind's extra images and views (from the registry's
     recording modules), the radial curves and the validation table if any."""
     views, images = [], []
@@ -173,9 +200,12 @@ def _blueprint(scene: Scene):
         views += more_views
     return default_blueprint(
         [f"layers/{layer.name}" for layer in scene.layers],
+        summary_entity="summary",
         extra_images=images,
         text_entities=["validation"] if scene.bearing_validation else [],
         extra_views=views,
+        several_times=scene.times is not None and len(scene.times) > 1,
+        frames=frames,
     )
 
 
@@ -207,11 +237,13 @@ def _recording_id(scene: Scene) -> str:
     return recording_id_for(scene.text + "\n" + json.dumps(scene.grid.describe(), sort_keys=True))
 
 
-def _row(scene: Scene, layer: Layer, t: float, raster: Raster, seconds: float) -> dict:
+def _row(scene: Scene, layer: Layer, t: float, raster: Raster, seconds: float, regions: list) -> dict:
     """A summary row of one computed layer."""
+    x, y = peak_location(raster)
     return {
         "scene": scene.name, "layer": layer.name, "t": float(t), "cells": scene.grid.nx * scene.grid.ny,
-        "mass": raster.mass, "peak": raster.peak, "seconds": seconds,
+        "mass": raster.mass, "peak": raster.peak, "peak_x": x, "peak_y": y, "regions": regions,
+        "seconds": seconds,
     }
 
 

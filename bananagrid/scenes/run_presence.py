@@ -6,15 +6,16 @@ from __future__ import annotations
 import json
 import os
 import time
+import warnings
 from pathlib import Path
 
 import numpy as np
 
 from ..atomic import partial_path
 from ..recording.core import log_scene_text, recording_id_for, write_recording
-from ..recording.presence import log_cell_map, presence_blueprint
+from ..recording.presence import log_cell_map, plane_eye, presence_blueprint
 from ..results import CellMap
-from ..validate import BananagridError
+from ..validate import BananagridError, BananagridWarning
 from ..version import __version__
 from .presence import PresenceScene
 
@@ -68,18 +69,23 @@ def run_presence_scene(scene: PresenceScene, out_dir: str | os.PathLike, *, npz:
         start = time.perf_counter()
         cm = scene.cell_map(threads=threads)
         seconds = time.perf_counter() - start
-        log_cell_map(rec, "presence", cm, scene.presence, scene.region, names=scene.component_names or None,
-                     room_z=scene.room_z, far=scene.far, log10_floor=scene.log10_floor)
+        regions = log_cell_map(rec, "presence", cm, scene.presence, scene.region, names=scene.component_names or None,
+                               room_z=scene.room_z, far=scene.far, log10_floor=scene.log10_floor,
+                               mass_levels=scene.mass_levels)
+        where = f"{scene.name}: {lattice.geometry}/{scene.kind}"
+        for message in _unreached(regions, where):
+            warnings.warn(message, BananagridWarning, stacklevel=2)
         if npz:
             _write_npz(npz_partial, scene, cm)
         rows.append({"scene": scene.name, "layer": f"{lattice.geometry}/{scene.kind}", "t": 0.0,
                      "cells": int(cm.prob.size), "mass": float(np.sum(cm.prob)), "peak": float(np.max(cm.prob)),
-                     "seconds": seconds})
+                     "peak_unit": "per cell", "regions": regions, "seconds": seconds})
         if progress is not None:
             progress(1, 1, label)
 
     try:
-        write_recording(rrd_path, build, recording_id=recording_id_for(scene.text), blueprint=presence_blueprint())
+        blueprint = presence_blueprint(eye=plane_eye(lattice, scene.region, scene.far))
+        write_recording(rrd_path, build, recording_id=recording_id_for(scene.text), blueprint=blueprint)
         if npz:
             try:
                 os.replace(npz_partial, npz_path)
@@ -116,3 +122,13 @@ def _write_npz(path: Path, scene: PresenceScene, cm: CellMap) -> None:
     arrays["provenance"] = np.array(json.dumps(provenance, default=str))
     with open(path, "wb") as fh:
         np.savez_compressed(fh, **arrays)
+
+
+def _unreached(regions, where: str) -> list[str]:
+    """A warning for probability-mass levels above the cells' total (they are not outlined)."""
+    missing = [r for r in regions if not r.reached]
+    if not missing:
+        return []
+    shown = ", ".join(f"{100 * r.probability:g} %" for r in missing)
+    return [f"{where}: the cells hold {missing[0].enclosed:.3g} of the probability, so the {shown} "
+            "probability-mass outlines are not drawn (set output.mass_levels below it)"]

@@ -1,0 +1,1 @@
+"""Pictures of rasters with matplotlib (an optional extra)."""
