@@ -1,4 +1,4 @@
-"""Command line: ``bananagrid run``, ``examples``, ``inspect``, ``compare``, ``sweep`` and ``bench``.
+"""Command line: ``bananagrid run``, ``examples``, ``plot``, ``inspect``, ``compare``, ``sweep`` and ``bench``.
 
 Errors a user can fix (bad scene, missing file, unwritable directory) are printed as one line,
 ``bananagrid: error: MESSAGE``, with exit code 2 and no traceback.
@@ -21,12 +21,13 @@ from .analysis.compare import compare
 from .analysis.sweep import FIGURE7_LEVELS, sweep
 from .atomic import Terminated, atomic_write, check_writable, signals_as_exceptions
 from .bench import runner as bench
-from .contours import DEFAULT_LEVELS, format_area
+from .contours import DEFAULT_LEVELS, format_area, mass_levels
 from .recording.compare import write_compare_recording, write_sweep_recording
 from .recording.core import recording_id_for
 from .recording.inspect import format_inspection, inspect_recording
 from .scenes.examples import example_names, example_path, example_title
 from .scenes.load import Scene, load_scene
+from .scenes.pictures import panels, write_picture
 from .scenes.run import compute, run_scene
 from .validate import BananagridError, positive
 from .version import __version__
@@ -98,6 +99,22 @@ def build_parser() -> tuple[argparse.ArgumentParser, dict[str, argparse.Argument
     examples.add_argument("--show", metavar="NAME", help="print the scene file NAME instead of the list")
     examples.set_defaults(handler=_examples)
 
+    plot = sub.add_parser(
+        "plot", help="draw a scene's maps to a PNG (needs matplotlib: the plot extra)",
+        description="Draw every layer (or --layer) at the last time (or --t) as log10 maps in km, "
+        "north up, with a colour bar and labelled probability-mass contours, one panel per layer. "
+        "INPUT is a scene .toml (computed as run does), or a .rrd or .npz written by run.",
+    )
+    plot.add_argument("input", metavar="INPUT", type=Path, help="SCENE.toml, FILE.rrd or FILE.npz")
+    plot.add_argument("-o", "--output", required=True, type=Path, metavar="OUT.png", help="the PNG to write")
+    plot.add_argument("--layer", action="append", default=[], metavar="NAME", help="only this layer (repeatable)")
+    plot.add_argument("--t", type=float, metavar="T", help="elapsed time, s (default: the last)")
+    plot.add_argument("--mass-levels", metavar="P1,P2,...", default="0.5,0.9,0.95,0.99",
+                      help="probability-mass contours, each in (0, 1) (default 0.5,0.9,0.95,0.99)")
+    plot.add_argument("--dpi", type=int, default=100, metavar="N", help="resolution (default 100)")
+    plot.add_argument("--threads", type=int, metavar="N", help="CPU threads for a scene (default: every core)")
+    plot.set_defaults(handler=_plot)
+
     inspect = sub.add_parser(
         "inspect", help="print what a recording holds",
         description="Print the timelines and entities of .rrd recordings without a viewer.",
@@ -146,7 +163,7 @@ def build_parser() -> tuple[argparse.ArgumentParser, dict[str, argparse.Argument
     # bench parses its own options (its --help included): everything after it is passed on.
     bench = sub.add_parser("bench", add_help=False, help="throughput against a NumPy baseline")
     bench.set_defaults(handler=None)
-    return parser, {"run": run, "examples": examples, "inspect": inspect, "compare": compare, "sweep": sweep,
+    return parser, {"run": run, "examples": examples, "plot": plot, "inspect": inspect, "compare": compare, "sweep": sweep,
                     "bench": bench}
 
 
@@ -202,6 +219,26 @@ def _examples(args: argparse.Namespace) -> int:
     for name in names:
         print(f"{name.ljust(width)}  {example_title(name)}")
     return OK
+
+
+def _plot(args: argparse.Namespace) -> int:
+    """``bananagrid plot``: one PNG of a scene's layers at one time."""
+    levels = mass_levels(_split(args.mass_levels, "--mass-levels"), key="--mass-levels")
+    if args.threads is not None and args.threads < 1:
+        raise BananagridError(f"--threads = {args.threads}: must be >= 1")
+    check_writable(args.output.parent if str(args.output.parent) else Path("."))
+    name, chosen = panels(args.input, layers=args.layer, t=args.t, threads=args.threads)
+    out = write_picture(args.output, name, chosen, mass_levels=levels, dpi=args.dpi)
+    print(f"wrote {out}")
+    return OK
+
+
+def _split(text: str, option: str) -> list[float]:
+    """A comma-separated list of numbers, or a one-line error naming the option."""
+    try:
+        return [float(v) for v in text.split(",")]
+    except ValueError:
+        raise BananagridError(f"{option} = {text!r}: expected numbers separated by commas") from None
 
 
 def _inspect(args: argparse.Namespace) -> int:

@@ -23,6 +23,7 @@ __all__ = [
     "MassRegion",
     "cell_regions",
     "contour_lines",
+    "focus_extent",
     "format_area",
     "format_level",
     "label_positions",
@@ -200,6 +201,28 @@ def _regions(values: np.ndarray, weight: float, levels: tuple[float, ...]) -> li
         inside = int(np.searchsorted(-ordered, -density, side="right"))  # ties at the boundary
         regions.append(MassRegion(level, True, density, float(cumulative[inside - 1]), inside, inside * weight))
     return regions
+
+
+#: A map's frame reaches this share of its outermost region's size beyond that region.
+FOCUS_PADDING = 0.15
+
+
+def focus_extent(raster, regions: Sequence[MassRegion]) -> tuple[float, float, float, float]:
+    """Where a map should be framed: the outermost probability-mass region's cells, padded by
+    ``FOCUS_PADDING`` of its size on each side and clipped to the grid; the whole grid when no
+    region is reached. ``(x0, x1, y0, y1)``, m."""
+    reached = [r for r in regions if r.reached]
+    grid = raster.grid
+    if not reached:
+        return grid.extent
+    inside = np.asarray(raster.values) >= reached[-1].density
+    rows, cols = np.flatnonzero(inside.any(axis=1)), np.flatnonzero(inside.any(axis=0))
+    x0, x1 = raster.x[cols[0]] - grid.dx / 2, raster.x[cols[-1]] + grid.dx / 2
+    y0, y1 = raster.y[rows[0]] - grid.dy / 2, raster.y[rows[-1]] + grid.dy / 2
+    pad_x, pad_y = FOCUS_PADDING * (x1 - x0), FOCUS_PADDING * (y1 - y0)
+    gx0, gx1, gy0, gy1 = grid.extent
+    return (float(max(gx0, x0 - pad_x)), float(min(gx1, x1 + pad_x)),
+            float(max(gy0, y0 - pad_y)), float(min(gy1, y1 + pad_y)))
 
 
 #: Width over height of a typical label ("90 % · 0.96 km²"), for the gaps between labels.

@@ -21,6 +21,7 @@ from .domains.angular_lattice import AngularLattice
 from .domains.grid import Grid
 from .domains.polar_lattice import PolarLattice
 from .domains.region import Region
+from . import plotting
 from .validate import BananagridError, finite
 
 __all__ = ["Raster", "PolarRaster", "CellMap", "GridPresence", "BatchRaster"]
@@ -67,6 +68,25 @@ class Raster:
     @property
     def peak(self) -> float:
         return float(np.max(self.values))
+
+    def __repr__(self) -> str:
+        g = self.grid
+        x0, x1, y0, y1 = g.extent
+        return (f"Raster({g.nx} x {g.ny} cells of {g.dx:g} x {g.dy:g} m, x {x0:g}..{x1:g} m, y {y0:g}..{y1:g} m, "
+                f"mass {self.mass:.6f}{' normalised' if self.normalised else ''}, peak {self.peak:.4g} m^-2, "
+                f"model {self.provenance.get('model', '?')})")
+
+    def plot(self, ax=None, **kwargs):
+        """Draw the map with matplotlib (the ``plot`` extra) and return the axes: log10 density
+        in km, north up, a colour bar, labelled probability-mass contours. Keywords as for
+        :func:`bananagrid.plotting.plot_raster` (``mass_levels``, ``title``, ``markers``)."""
+        return plotting.plot_raster(self, ax, **kwargs)
+
+    def _repr_png_(self) -> bytes:
+        return plotting.png_bytes(self)
+
+    def _repr_html_(self) -> str:
+        return plotting.raster_html(self)
 
     def normalise(self) -> "Raster":
         """Return a copy whose values integrate to one over the grid; ``mass`` keeps the raw mass."""
@@ -285,3 +305,23 @@ class BatchRaster:
     values: np.ndarray
     grids: tuple
     mass: np.ndarray
+
+
+def _short_repr(self) -> str:
+    """Fields with arrays shown by shape and dtype, never their values."""
+    parts = []
+    for name in self.__dataclass_fields__:
+        value = getattr(self, name)
+        if isinstance(value, np.ndarray):
+            shown = f"array{value.shape} {value.dtype}"
+        elif isinstance(value, dict):
+            shown = f"{{{len(value)} keys}}"
+        else:
+            shown = repr(value)
+            shown = shown if len(shown) <= 80 else shown[:77] + "..."
+        parts.append(f"{name}={shown}")
+    return f"{type(self).__name__}({', '.join(parts)})"
+
+
+for _cls in (PolarRaster, CellMap, GridPresence, BatchRaster):
+    _cls.__repr__ = _short_repr

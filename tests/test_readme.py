@@ -50,6 +50,9 @@ NOT_RUN = {
     "bananagrid bench --json FILE": "a placeholder; tests/test_bench.py writes the JSON records",
     "rerun rrd verify": "named in prose; tests/test_cli.py runs it on recordings",
     "rerun rrd compare": "named in prose; tests/test_cli.py runs it on two runs of a scene",
+    "pip install 'bananagrid[plot]'": "installs from the package index; the test extra installs matplotlib",
+    "python docs/make_pictures.py": "draws five scenes (seconds each); tests/test_plot.py runs it on one and checks the rest exist",
+    "bananagrid plot INPUT -o OUT.png": "placeholders; tests/test_plot.py runs plot on scenes, recordings and arrays",
 }
 
 SINGLE_WORD_COMMANDS = ("lint-imports",)

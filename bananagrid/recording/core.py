@@ -44,6 +44,7 @@ from ..contours import (
     DEFAULT_MASS_LEVELS,
     MassRegion,
     contour_lines,
+    focus_extent,
     format_level,
     label_positions,
     mass_regions,
@@ -89,9 +90,6 @@ LEVEL_COLOURS = ((255, 255, 255), (255, 99, 71), (255, 200, 0), (0, 220, 255), (
 #: red and yellow, the outer ones in its greens and blues: white and magenta show on the former,
 #: dark grey and black on the latter.
 MASS_COLOURS = ((255, 255, 255), (255, 0, 255), (70, 70, 70), (0, 0, 0))
-
-#: A map's frame reaches this share of its outermost region's size beyond that region.
-FOCUS_PADDING = 0.15
 
 #: Pixels along the log10 colour bar.
 COLOUR_BAR_PIXELS = 256
@@ -623,24 +621,6 @@ def _log_lines(
         ),
     )
     return list(spots.values())
-
-
-def focus_extent(raster: Raster, regions: Sequence[MassRegion]) -> tuple[float, float, float, float]:
-    """Where a map should be framed: the outermost probability-mass region's cells, padded by
-    ``FOCUS_PADDING`` of its size on each side and clipped to the grid; the whole grid when no
-    region is reached. ``(x0, x1, y0, y1)``, m."""
-    reached = [r for r in regions if r.reached]
-    grid = raster.grid
-    if not reached:
-        return grid.extent
-    inside = np.asarray(raster.values) >= reached[-1].density
-    rows, cols = np.flatnonzero(inside.any(axis=1)), np.flatnonzero(inside.any(axis=0))
-    x0, x1 = raster.x[cols[0]] - grid.dx / 2, raster.x[cols[-1]] + grid.dx / 2
-    y0, y1 = raster.y[rows[0]] - grid.dy / 2, raster.y[rows[-1]] + grid.dy / 2
-    pad_x, pad_y = FOCUS_PADDING * (x1 - x0), FOCUS_PADDING * (y1 - y0)
-    gx0, gx1, gy0, gy1 = grid.extent
-    return (float(max(gx0, x0 - pad_x)), float(min(gx1, x1 + pad_x)),
-            float(max(gy0, y0 - pad_y)), float(min(gy1, y1 + pad_y)))
 
 
 def union_extent(extents: Iterable[tuple[float, float, float, float]]) -> tuple[float, float, float, float]:
