@@ -7,6 +7,9 @@ Errors a user can fix (bad scene, missing file, unwritable directory) are printe
 from __future__ import annotations
 
 import argparse
+import json
+import math
+import os
 import sys
 import time
 import tomllib
@@ -25,6 +28,7 @@ from .contours import DEFAULT_LEVELS, format_area, mass_levels
 from .recording.compare import write_compare_recording, write_sweep_recording
 from .recording.core import recording_id_for
 from .recording.inspect import format_inspection, inspect_recording
+from .recording.readback import format_layers, layer_summaries
 from .scenes.examples import example_names, example_path, example_title
 from .scenes.load import Scene, load_scene
 from .scenes.pictures import panels, write_picture
@@ -53,6 +57,10 @@ def main(argv: list[str] | None = None) -> int:
                 return args.handler(args)
         except SystemExit as exc:  # argparse: --help (0) and usage errors (2)
             return exc.code if isinstance(exc.code, int) else USER_ERROR
+        except BrokenPipeError:  # the reader left (`| head`): stop quietly, as cat does
+            devnull = os.open(os.devnull, os.O_WRONLY)
+            os.dup2(devnull, sys.stdout.fileno())  # the exit's own flush must not fail again
+            return OK
         except (BananagridError, OSError, tomllib.TOMLDecodeError) as exc:
             print(f"bananagrid: error: {_one_line(exc)}", file=sys.stderr)
             return USER_ERROR
@@ -120,6 +128,11 @@ def build_parser() -> tuple[argparse.ArgumentParser, dict[str, argparse.Argument
         description="Print the timelines and entities of .rrd recordings without a viewer.",
     )
     inspect.add_argument("files", nargs="+", metavar="FILE.rrd", type=Path, help="recordings")
+    inspect.add_argument("--json", action="store_true",
+                         help="print a JSON list, one object per file: the inspection (timelines, entities) and "
+                         "'layers' (per layer and time: mass, peak, peak_x, peak_y, regions); NaN as null")
+    inspect.add_argument("--mass-levels", metavar="P1,P2,...", default="0.5,0.9,0.95,0.99",
+                         help="probability-mass regions reported per layer (default 0.5,0.9,0.95,0.99)")
     inspect.set_defaults(handler=_inspect)
 
     compare = sub.add_parser(
@@ -242,10 +255,39 @@ def _split(text: str, option: str) -> list[float]:
 
 
 def _inspect(args: argparse.Namespace) -> int:
-    """``bananagrid inspect``: the report of :func:`bananagrid.recording.inspect.format_inspection`."""
-    reports = [format_inspection(inspect_recording(path)) for path in args.files]
+    """``bananagrid inspect``: per file the report of
+    :func:`bananagrid.recording.inspect.format_inspection` and where the target is in each layer
+    (:func:`bananagrid.recording.readback.layer_summaries`), or all of it as JSON."""
+    levels = mass_levels(_split(args.mass_levels, "--mass-levels"), key="--mass-levels")
+    infos = []
+    for path in args.files:
+        info = inspect_recording(path)
+        info["layers"] = layer_summaries(path, levels)
+        infos.append(info)
+    if args.json:
+        print(json.dumps(_plain_json(infos), indent=1))
+        return OK
+    reports = []
+    for info in infos:
+        text = format_inspection(info)
+        if info["layers"]:
+            text += "\n\nlayers (where the target is)\n" + "\n".join(format_layers(info["layers"]))
+        reports.append(text)
     print("\n\n".join(reports))
     return OK
+
+
+def _plain_json(value):
+    """Tuples and sets as lists, NaN and inf as null: standard JSON for scripts."""
+    if isinstance(value, dict):
+        return {str(k): _plain_json(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple, set)):
+        return [_plain_json(v) for v in value]
+    if isinstance(value, float) and not math.isfinite(value):
+        return None
+    if isinstance(value, np.generic):
+        return _plain_json(value.item())
+    return value
 
 
 def _out_dir(out: Path) -> None:

@@ -4,8 +4,9 @@ viewer.
 The map is log10 of the density in km (x east, y north, north up, equal aspect), a colour bar in
 log10 m^-2 floored two decades below the 99 % region's boundary, the probability-mass contours
 (:func:`bananagrid.contours.mass_regions`) each labelled once on its line with its area, and
-optional markers (a fix, bearing stations). matplotlib is imported only when a picture is
-drawn, so the rest of the package never needs it.
+optional markers (a fix, bearing stations). matplotlib is loaded (with importlib, like the
+registry's recording modules) only when a picture is drawn, so the rest of the package never
+needs it.
 
 Rasters are taken duck-typed (``values``, ``x``, ``y``, ``grid``, ``mass``, ``provenance``): this
 module sits below :mod:`bananagrid.results`, whose ``Raster.plot`` calls it.
@@ -15,6 +16,7 @@ from __future__ import annotations
 
 import base64
 import html
+import importlib
 import io
 import math
 from collections.abc import Iterable, Sequence
@@ -45,16 +47,14 @@ def pyplot():
     """``matplotlib.pyplot`` with a non-interactive backend when none is chosen; a one-line
     error naming the extra when matplotlib is not installed."""
     try:
-        import matplotlib
+        matplotlib = importlib.import_module("matplotlib")  # optional: loaded on first use
     except ImportError:
         raise BananagridError(
             "pictures need matplotlib: pip install 'bananagrid[plot]' (or pip install matplotlib)"
         ) from None
     if not matplotlib.get_backend() or matplotlib.get_backend().lower().startswith("qt"):
         matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    return plt
+    return importlib.import_module("matplotlib.pyplot")
 
 
 def plot_raster(

@@ -3,7 +3,6 @@ scenes, recordings and arrays, and the README's pictures."""
 
 from __future__ import annotations
 
-import builtins
 import math
 import re
 import subprocess
@@ -82,14 +81,7 @@ def test_notebook_representations_and_a_short_repr():
 
 
 def test_without_matplotlib_the_error_names_the_extra(monkeypatch):
-    real = builtins.__import__
-
-    def no_matplotlib(name, *args, **kwargs):
-        if name == "matplotlib" or name.startswith("matplotlib."):
-            raise ImportError(name)
-        return real(name, *args, **kwargs)
-
-    monkeypatch.setattr(builtins, "__import__", no_matplotlib)
+    monkeypatch.setitem(sys.modules, "matplotlib", None)  # import_module then raises ImportError
     with pytest.raises(BananagridError, match=r"pip install 'bananagrid\[plot\]'"):
         gaussian_raster().plot()
     assert "bananagrid[plot]" in gaussian_raster()._repr_html_()  # the table stays, saying why

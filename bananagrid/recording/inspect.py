@@ -19,17 +19,20 @@ from rerun.chunk import RrdReader, StoreEntry
 from ..validate import BananagridError
 from .core import ELAPSED, elapsed_nanos, values_from_image
 
-__all__ = ["format_inspection", "inspect_recording", "read_depth_image"]
+__all__ = [
+    "IMAGE_BUFFER", "IMAGE_FORMAT", "decode_image", "format_inspection", "inspect_recording", "open_recording",
+    "plain_cell", "read_depth_image", "recording_rows",
+]
 
-_BUFFER = "DepthImage:buffer"
-_FORMAT = "DepthImage:format"
+IMAGE_BUFFER = "DepthImage:buffer"
+IMAGE_FORMAT = "DepthImage:format"
 _SCALARS = "Scalars:scalars"
 
 
 # --- reading rows -----------------------------------------------------------------------------
 
 
-def _open(path: str | os.PathLike) -> tuple[RrdReader, StoreEntry]:
+def open_recording(path: str | os.PathLike) -> tuple[RrdReader, StoreEntry]:
     """The reader and the first recording store of ``path``; one-line errors naming it."""
     path = Path(path)
     if not path.exists():
@@ -47,7 +50,7 @@ def _open(path: str | os.PathLike) -> tuple[RrdReader, StoreEntry]:
     return reader, stores[0]
 
 
-def _rows(reader: RrdReader, store: StoreEntry) -> Iterator[tuple[str, dict, dict]]:
+def recording_rows(reader: RrdReader, store: StoreEntry) -> Iterator[tuple[str, dict, dict]]:
     """Yield ``(entity_path, times, components)`` for every row of the recording store.
 
     ``times`` maps timeline name to ``(kind, value)`` (empty for static rows); ``components``
@@ -99,7 +102,7 @@ def _seconds(kind: str, value: int) -> float | int:
     return value / 1e9 if kind in ("duration", "timestamp") else value
 
 
-def _decode_image(buffer: pa.Scalar, image_format: pa.Scalar) -> np.ndarray:
+def decode_image(buffer: pa.Scalar, image_format: pa.Scalar) -> np.ndarray:
     """A logged image cell back to a ``(height, width)`` array of its channel type."""
     fmt = image_format.values[0].as_py()
     raw = buffer.values[0].values.to_numpy(zero_copy_only=False)
@@ -107,7 +110,7 @@ def _decode_image(buffer: pa.Scalar, image_format: pa.Scalar) -> np.ndarray:
     return np.frombuffer(raw.tobytes(), dtype=dtype).reshape(fmt["height"], fmt["width"])
 
 
-def _plain(cell: pa.Scalar):
+def plain_cell(cell: pa.Scalar):
     """A component cell (a list) as a python value: its only item, or the list."""
     items = cell.as_py()
     return items[0] if len(items) == 1 else items
@@ -135,10 +138,10 @@ def inspect_recording(path: str | os.PathLike) -> dict:
     BananagridError
         If ``path`` is missing or not a readable recording.
     """
-    reader, store = _open(path)
+    reader, store = open_recording(path)
     timelines: dict[str, dict] = {}
     entities: dict[str, dict] = {}
-    for entity, times, cells in _rows(reader, store):
+    for entity, times, cells in recording_rows(reader, store):
         _add_times(timelines, times)
         _add_row(entities.setdefault(entity, _new_entity()), times, cells)
     return {
@@ -178,14 +181,14 @@ def _add_row(acc: dict, times: dict, cells: dict) -> None:
     acc["components"].update(cells)
     acc["archetypes"].update(archetype for archetype, _ in cells.values())
     when = {name: _seconds(kind, value) for name, (kind, value) in times.items()}
-    if _BUFFER in cells and _FORMAT in cells:
-        image = _decode_image(cells[_BUFFER][1], cells[_FORMAT][1])
+    if IMAGE_BUFFER in cells and IMAGE_FORMAT in cells:
+        image = decode_image(cells[IMAGE_BUFFER][1], cells[IMAGE_FORMAT][1])
         acc["image_shapes"].add(image.shape)
         acc["ranges"].append((float(np.min(image)), float(np.max(image))))
     if _SCALARS in cells:
-        acc["scalars"].append({"times": when, "values": _plain(cells[_SCALARS][1])})
+        acc["scalars"].append({"times": when, "values": plain_cell(cells[_SCALARS][1])})
     untyped = {
-        name: _plain(cell) for name, (archetype, cell) in cells.items() if archetype == "AnyValues"
+        name: plain_cell(cell) for name, (archetype, cell) in cells.items() if archetype == "AnyValues"
     }
     if untyped:
         acc["values"].append({"times": when, "values": dict(sorted(untyped.items()))})
@@ -253,8 +256,16 @@ def _entity_lines(name: str, entity: dict) -> list[str]:
     if "values" in entity:
         latest = entity["values"][-1]
         lines.append(f"{indent}values at {_when(latest['times'])}:")
-        lines += [f"{indent}  {key} = {value}" for key, value in latest["values"].items()]
+        lines += [f"{indent}  {key} = {_number(value)}" for key, value in latest["values"].items()]
     return lines
+
+
+def _number(value):
+    """A recorded value as printed: whole floats as integers (recordings store every number
+    as a float, so that a key keeps one type across times: ``grid.nx = 1500``)."""
+    if isinstance(value, float) and value.is_integer() and abs(value) < 1e15:
+        return int(value)
+    return value
 
 
 def _when(times: dict) -> str:
@@ -288,11 +299,11 @@ def read_depth_image(
         If the file is unreadable, or holds no image there (at that time).
     """
     entity = "/" + entity_path.strip("/")
-    reader, store = _open(path)
+    reader, store = open_recording(path)
     images = [
         (times.get(ELAPSED, (None, -1))[1], cells)
-        for name, times, cells in _rows(reader, store)
-        if name == entity and _BUFFER in cells and _FORMAT in cells
+        for name, times, cells in recording_rows(reader, store)
+        if name == entity and IMAGE_BUFFER in cells and IMAGE_FORMAT in cells
     ]
     if elapsed is not None:
         wanted = elapsed_nanos(elapsed)
@@ -301,4 +312,4 @@ def read_depth_image(
         at = "" if elapsed is None else f" at elapsed = {elapsed:g} s"
         raise BananagridError(f"{path}: no DepthImage at {entity}{at}")
     _, cells = max(images, key=lambda item: item[0])
-    return values_from_image(_decode_image(cells[_BUFFER][1], cells[_FORMAT][1]))
+    return values_from_image(decode_image(cells[IMAGE_BUFFER][1], cells[IMAGE_FORMAT][1]))

@@ -15,13 +15,14 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..contours import DEFAULT_MASS_LEVELS, format_area, mass_regions
 from ..domains.grid import Grid
 from ..results import Raster
 from ..validate import BananagridError
 from .core import ELAPSED, values_from_image
-from .inspect import _BUFFER, _FORMAT, _decode_image, _open, _plain, _rows
+from .inspect import IMAGE_BUFFER, IMAGE_FORMAT, decode_image, open_recording, plain_cell, recording_rows
 
-__all__ = ["RecordedRaster", "read_rasters"]
+__all__ = ["RecordedRaster", "format_layers", "layer_summaries", "read_rasters"]
 
 
 @dataclass(frozen=True)
@@ -55,20 +56,20 @@ def read_rasters(path: str | os.PathLike) -> list[RecordedRaster]:
     BananagridError
         If the file is not a readable recording, or holds no density layer.
     """
-    reader, store = _open(path)
+    reader, store = open_recording(path)
     images, transforms, infos = {}, {}, {}
-    for name, times, cells in _rows(reader, store):
+    for name, times, cells in recording_rows(reader, store):
         parts = name.strip("/").split("/")
         if len(parts) != 3 or parts[0] != "layers":
             continue
         key = (parts[1], times.get(ELAPSED, (None, 0))[1])
         if parts[2] == "density":
-            if _BUFFER in cells and _FORMAT in cells:
-                images[key] = _decode_image(cells[_BUFFER][1], cells[_FORMAT][1])
+            if IMAGE_BUFFER in cells and IMAGE_FORMAT in cells:
+                images[key] = decode_image(cells[IMAGE_BUFFER][1], cells[IMAGE_FORMAT][1])
             if "Transform3D:translation" in cells:
-                transforms[key] = (_plain(cells["Transform3D:translation"][1]), _plain(cells["Transform3D:scale"][1]))
+                transforms[key] = (plain_cell(cells["Transform3D:translation"][1]), plain_cell(cells["Transform3D:scale"][1]))
         elif parts[2] == "info":
-            infos[key] = {component: _plain(value) for component, (_, value) in cells.items()}
+            infos[key] = {component: plain_cell(value) for component, (_, value) in cells.items()}
     out = []
     for (layer, nanos), image in sorted(images.items(), key=lambda item: (item[0][1], item[0][0])):
         if (layer, nanos) not in transforms:
@@ -85,3 +86,40 @@ def read_rasters(path: str | os.PathLike) -> list[RecordedRaster]:
     if not out:
         raise BananagridError(f"{path}: no density layers (layers/NAME/density); is it a scene recording?")
     return out
+
+
+def layer_summaries(path: str | os.PathLike, levels=DEFAULT_MASS_LEVELS) -> list[dict]:
+    """Where the target is, per layer and time of a recording: ``layer``, ``t`` (s), ``mass``
+    (captured, from the layer's info), ``peak`` (m^-2) and ``peak_x``, ``peak_y`` (its cell
+    centre, m), and ``regions`` (:meth:`MassRegion.describe` of the probability-mass regions at
+    ``levels``, from the recorded float32 image). Empty for a recording without density layers
+    (an array scene's)."""
+    try:
+        recorded = read_rasters(path)
+    except BananagridError as exc:
+        if "no density layers" in str(exc):
+            return []
+        raise
+    out = []
+    for item in recorded:
+        raster = item.raster
+        i, j = np.unravel_index(int(np.argmax(raster.values)), raster.values.shape)
+        out.append({
+            "layer": item.layer, "t": item.t, "mass": raster.mass, "peak": raster.peak,
+            "peak_x": float(raster.x[j]), "peak_y": float(raster.y[i]),
+            "regions": [r.describe() for r in mass_regions(raster, levels)],
+        })
+    return out
+
+
+def format_layers(layers: list[dict]) -> list[str]:
+    """Report lines for :func:`layer_summaries`: one block per layer and time."""
+    lines = []
+    for item in layers:
+        lines.append(f"  {item['layer']} at t = {item['t']:g} s: captured mass {item['mass']:.6f}, "
+                     f"peak {item['peak']:.4g} m^-2 at (x, y) = ({item['peak_x']:.6g}, {item['peak_y']:.6g}) m")
+        for r in item["regions"]:
+            shown = (f"{format_area(r['area'])} ({r['area']:.6g} m^2), {r['cells']:,} cells, holds {r['enclosed']:.6f}"
+                     if r["reached"] else f"not reached (the grid holds {r['enclosed']:.6f})")
+            lines.append(f"    {100 * r['probability']:g} % region: {shown}")
+    return lines
