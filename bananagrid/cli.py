@@ -8,7 +8,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import math
 import os
 import sys
 import time
@@ -27,12 +26,11 @@ from .bench import runner as bench
 from .contours import DEFAULT_LEVELS, format_area, mass_levels
 from .recording.compare import write_compare_recording, write_sweep_recording
 from .recording.core import recording_id_for
-from .recording.inspect import format_inspection, inspect_recording
-from .recording.readback import format_layers, layer_summaries
-from .scenes.examples import example_names, example_path, example_title
+from .recording.inspect import cell_map_summaries, format_inspection, inspect_recording, json_ready, layer_summaries
+from .scenes.examples import example_names, example_path, example_title, scene_source
 from .scenes.load import Scene, load_scene
-from .scenes.pictures import panels, write_picture
-from .scenes.run import compute, run_scene
+from .scenes.pictures import check_picture_options, read_picture, write_picture
+from .scenes.run import RUN_ONLY_PROVENANCE, compute, run_scene
 from .validate import BananagridError, positive
 from .version import __version__
 
@@ -40,6 +38,26 @@ __all__ = ["main", "build_parser"]
 
 #: Exit codes: success, a user error (also argparse's usage errors), an interrupt.
 OK, USER_ERROR, INTERRUPTED = 0, 2, 130
+
+
+#: ``bananagrid inspect --json``: what scripts get (the help's epilog; README repeats it).
+INSPECT_JSON_SCHEMA = """\
+--json prints a list, one object per file (numbers as numbers, whole counts as integers, NaN as null):
+  path, application_id, recording_id, blueprint (bool)
+  layers: per density layer and time, by time then layer:
+    layer, entity, t [s], mass (captured, before normalising), normalised,
+    peak [m^-2], peak_x, peak_y [m, the cell centre; x east, y north],
+    grid {origin [m], dx, dy, nx, ny},
+    regions: per level {probability, reached, density [m^-2, the boundary], enclosed, cells,
+             area [m^2], area_km2}
+  cell_maps: per angular cell map and time:
+    entity, t, geometry, cells, region_probability, total, peak [cell probability],
+    peak_azimuth_deg, peak_elevation_deg, peak_x, peak_y, peak_z [m, array frame],
+    regions: per level {probability, reached, cell_probability, enclosed, cells}
+  timelines: {name: {kind, count, min, max, values}}  (seconds for durations)
+  entities: {path: {archetypes, components, static_rows, temporal_rows,
+                    image_shapes, value_range, scalars, values}}
+"""
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -50,11 +68,14 @@ def main(argv: list[str] | None = None) -> int:
         try:
             args, rest = parser.parse_known_args(argv)
             if args.command == "bench":
-                return _bench(rest)
-            if rest:
-                commands[args.command].error(f"unrecognized arguments: {' '.join(rest)}")
-            with signals_as_exceptions():
-                return args.handler(args)
+                code = _bench(rest)
+            else:
+                if rest:
+                    commands[args.command].error(f"unrecognized arguments: {' '.join(rest)}")
+                with signals_as_exceptions():
+                    code = args.handler(args)
+            sys.stdout.flush()  # here a reader that left raises below, not in the interpreter's exit
+            return code
         except SystemExit as exc:  # argparse: --help (0) and usage errors (2)
             return exc.code if isinstance(exc.code, int) else USER_ERROR
         except BrokenPipeError:  # the reader left (`| head`): stop quietly, as cat does
@@ -102,7 +123,8 @@ def build_parser() -> tuple[argparse.ArgumentParser, dict[str, argparse.Argument
     examples = sub.add_parser(
         "examples", help="list the bundled example scenes",
         description="List the scenes installed with the package (name and title), or print one "
-        "of them (--show NAME) to copy and edit. Run one with `bananagrid run --example NAME`.",
+        "of them to copy and edit (`bananagrid examples --show figure1 > mine.toml`). Run one with "
+        "`bananagrid run --example NAME`; `compare` and `plot` take --example NAME too.",
     )
     examples.add_argument("--show", metavar="NAME", help="print the scene file NAME instead of the list")
     examples.set_defaults(handler=_examples)
@@ -113,36 +135,49 @@ def build_parser() -> tuple[argparse.ArgumentParser, dict[str, argparse.Argument
         "north up, with a colour bar and labelled probability-mass contours, one panel per layer. "
         "INPUT is a scene .toml (computed as run does), or a .rrd or .npz written by run.",
     )
-    plot.add_argument("input", metavar="INPUT", type=Path, help="SCENE.toml, FILE.rrd or FILE.npz")
+    plot.add_argument("input", nargs="?", metavar="INPUT", type=Path,
+                      help="SCENE.toml, FILE.rrd or FILE.npz (or --example)")
+    plot.add_argument("--example", metavar="NAME",
+                      help="the bundled scene NAME instead of INPUT (`bananagrid examples` lists them)")
     plot.add_argument("-o", "--output", required=True, type=Path, metavar="OUT.png", help="the PNG to write")
     plot.add_argument("--layer", action="append", default=[], metavar="NAME", help="only this layer (repeatable)")
     plot.add_argument("--t", type=float, metavar="T", help="elapsed time, s (default: the last)")
-    plot.add_argument("--mass-levels", metavar="P1,P2,...", default="0.5,0.9,0.95,0.99",
-                      help="probability-mass contours, each in (0, 1) (default 0.5,0.9,0.95,0.99)")
-    plot.add_argument("--dpi", type=int, default=100, metavar="N", help="resolution (default 100)")
+    plot.add_argument("--mass-levels", metavar="P1,P2,...",
+                      help="probability-mass contours, each in (0, 1) (default: a scene's output.mass_levels, "
+                      "else 0.5,0.9,0.95,0.99)")
+    plot.add_argument("--dpi", type=int, default=100, metavar="N", help="pixels per inch, 20 to 600 (default 100)")
+    plot.add_argument("--step", type=float, metavar="S", help="compute a scene on cells of S m (a quick look)")
     plot.add_argument("--threads", type=int, metavar="N", help="CPU threads for a scene (default: every core)")
     plot.set_defaults(handler=_plot)
 
     inspect = sub.add_parser(
-        "inspect", help="print what a recording holds",
-        description="Print the timelines and entities of .rrd recordings without a viewer.",
+        "inspect", help="say where the target is in a recording, and what it holds",
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+        description="Read .rrd recordings written by `bananagrid run` without a viewer.\n\n"
+        "Per density layer and time: the captured mass, the peak density and where it is (its cell\n"
+        "centre, x east, y north, m) and the probability-mass (highest-density) regions: what they\n"
+        "hold, their area (km², m²) and cells. Per angular cell map (an array scene): the peak cell\n"
+        "probability, its direction and cell, the regions in cells. Then the timelines and every\n"
+        "entity with its latest values.",
+        epilog=INSPECT_JSON_SCHEMA,
     )
     inspect.add_argument("files", nargs="+", metavar="FILE.rrd", type=Path, help="recordings")
-    inspect.add_argument("--json", action="store_true",
-                         help="print a JSON list, one object per file: the inspection (timelines, entities) and "
-                         "'layers' (per layer and time: mass, peak, peak_x, peak_y, regions); NaN as null")
+    inspect.add_argument("--json", action="store_true", help="print all of it as one JSON list (see below)")
     inspect.add_argument("--mass-levels", metavar="P1,P2,...", default="0.5,0.9,0.95,0.99",
-                         help="probability-mass regions reported per layer (default 0.5,0.9,0.95,0.99)")
+                         help="probability-mass regions reported, each in (0, 1) (default 0.5,0.9,0.95,0.99)")
     inspect.set_defaults(handler=_inspect)
 
     compare = sub.add_parser(
         "compare", help="compare two layers of a scene (Tables 1 and 2, goodness, Bhattacharyya)",
-        description="Rasterise two layers of a scene on its grid, print the table of Tables 1 and 2 "
+        description="Rasterise two layers of a scene (SCENE.toml, or --example NAME) on its grid, "
+        "print the table of Tables 1 and 2 "
         "of the polar-banana paper (reference mass inside each contour, largest relative error of "
         "the model inside it), the goodness of Section 6.1 and the Bhattacharyya coefficient, and "
         "write OUT/NAME-MODEL-vs-REFERENCE.rrd with both layers and the relative-error map.",
     )
-    compare.add_argument("scene", metavar="SCENE.toml", type=Path, help="scene file")
+    compare.add_argument("scene", nargs="?", metavar="SCENE.toml", type=Path, help="scene file (or --example)")
+    compare.add_argument("--example", metavar="NAME",
+                         help="the bundled scene NAME instead of a file (`bananagrid examples` lists them)")
     compare.add_argument("--reference", required=True, metavar="LAYER", help="the reference layer (truth)")
     compare.add_argument("--model", required=True, metavar="LAYER", help="the layer compared with it")
     compare.add_argument("--t", type=float, metavar="T",
@@ -225,7 +260,7 @@ def _run(args: argparse.Namespace) -> int:
 def _examples(args: argparse.Namespace) -> int:
     """``bananagrid examples``: the bundled scenes with their titles, or one scene's text."""
     if args.show is not None:
-        print(example_path(args.show).read_text(), end="")
+        print(example_path(args.show, key="--show").read_text(), end="")
         return OK
     names = example_names()
     width = max(map(len, names), default=0)
@@ -235,13 +270,20 @@ def _examples(args: argparse.Namespace) -> int:
 
 
 def _plot(args: argparse.Namespace) -> int:
-    """``bananagrid plot``: one PNG of a scene's layers at one time."""
-    levels = mass_levels(_split(args.mass_levels, "--mass-levels"), key="--mass-levels")
+    """``bananagrid plot``: one PNG of a scene's layers at one time
+    (:mod:`bananagrid.scenes.pictures`); every option checked before any computing."""
+    levels = None
+    if args.mass_levels is not None:
+        levels = mass_levels(_split(args.mass_levels, "--mass-levels"), key="--mass-levels")
     if args.threads is not None and args.threads < 1:
         raise BananagridError(f"--threads = {args.threads}: must be >= 1")
+    if args.step is not None:
+        positive("--step", args.step)
+    check_picture_options(args.output, args.dpi)
     check_writable(args.output.parent if str(args.output.parent) else Path("."))
-    name, chosen = panels(args.input, layers=args.layer, t=args.t, threads=args.threads)
-    out = write_picture(args.output, name, chosen, mass_levels=levels, dpi=args.dpi)
+    source = scene_source(args.input, args.example, what="INPUT")
+    picture = read_picture(source, layers=args.layer, t=args.t, threads=args.threads, step=args.step)
+    out = write_picture(args.output, picture, mass_levels=levels, dpi=args.dpi)
     print(f"wrote {out}")
     return OK
 
@@ -255,39 +297,21 @@ def _split(text: str, option: str) -> list[float]:
 
 
 def _inspect(args: argparse.Namespace) -> int:
-    """``bananagrid inspect``: per file the report of
-    :func:`bananagrid.recording.inspect.format_inspection` and where the target is in each layer
-    (:func:`bananagrid.recording.readback.layer_summaries`), or all of it as JSON."""
+    """``bananagrid inspect``: per file where the target is in each density layer or cell map
+    (:func:`bananagrid.recording.inspect.layer_summaries`, ``cell_map_summaries``) and what the
+    recording holds (``inspect_recording``), as text or, with ``--json``, as one JSON list."""
     levels = mass_levels(_split(args.mass_levels, "--mass-levels"), key="--mass-levels")
     infos = []
     for path in args.files:
         info = inspect_recording(path)
         info["layers"] = layer_summaries(path, levels)
+        info["cell_maps"] = cell_map_summaries(path, levels)
         infos.append(info)
     if args.json:
-        print(json.dumps(_plain_json(infos), indent=1))
-        return OK
-    reports = []
-    for info in infos:
-        text = format_inspection(info)
-        if info["layers"]:
-            text += "\n\nlayers (where the target is)\n" + "\n".join(format_layers(info["layers"]))
-        reports.append(text)
-    print("\n\n".join(reports))
+        print(json.dumps(json_ready(infos), indent=1, allow_nan=False))
+    else:
+        print("\n\n".join(format_inspection(info) for info in infos))
     return OK
-
-
-def _plain_json(value):
-    """Tuples and sets as lists, NaN and inf as null: standard JSON for scripts."""
-    if isinstance(value, dict):
-        return {str(k): _plain_json(v) for k, v in value.items()}
-    if isinstance(value, (list, tuple, set)):
-        return [_plain_json(v) for v in value]
-    if isinstance(value, float) and not math.isfinite(value):
-        return None
-    if isinstance(value, np.generic):
-        return _plain_json(value.item())
-    return value
 
 
 def _out_dir(out: Path) -> None:
@@ -305,7 +329,7 @@ def _threads(threads) -> None:
 def _compare(args: argparse.Namespace) -> int:
     """``bananagrid compare``: two layers of a scene, their table and the error map."""
     _threads(args.threads)
-    scene = load_scene(args.scene)
+    scene = load_scene(scene_source(args.scene, args.example))
     if args.step is not None:
         scene = scene.with_step(positive("--step", args.step))
     layers = {layer.name: layer for layer in scene.layers}
@@ -325,7 +349,8 @@ def _compare(args: argparse.Namespace) -> int:
     path = args.out / f"{scene.name}-{model.name}-vs-{reference.name}.rrd"
     write_compare_recording(
         path, recording_id=recording_id_for(f"{scene.text}\n{reference.name}\n{model.name}\n{t}\n{levels}"),
-        scene_text=scene.text, names=(reference.name, model.name), rasters=(ref_raster, model_raster),
+        scene_text=scene.text, names=(reference.name, model.name),
+        rasters=tuple(_recordable(r) for r in (ref_raster, model_raster)),
         comparison=comparison, levels=levels, colormap=scene.colormap,
     )
     print(f"{scene.name}: {model.name} against {reference.name} at t = {t:g} s on {scene.grid.nx} x {scene.grid.ny} cells "
@@ -333,6 +358,11 @@ def _compare(args: argparse.Namespace) -> int:
     print(comparison.table())
     print(f"\nwrote {path}")
     return OK
+
+
+def _recordable(raster):
+    """The raster without run-dependent provenance (timings, threads): equal runs, equal recordings."""
+    return replace(raster, provenance={k: v for k, v in raster.provenance.items() if k not in RUN_ONLY_PROVENANCE})
 
 
 def _raw(scene):

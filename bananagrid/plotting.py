@@ -1,15 +1,19 @@
 """Pictures of rasters with matplotlib (the ``plot`` extra): a map a reviewer reads without a
 viewer.
 
-The map is log10 of the density in km (x east, y north, north up, equal aspect), a colour bar in
-log10 m^-2 floored two decades below the 99 % region's boundary, the probability-mass contours
-(:func:`bananagrid.contours.mass_regions`) each labelled once on its line with its area, and
-optional markers (a fix, bearing stations). matplotlib is loaded (with importlib, like the
-registry's recording modules) only when a picture is drawn, so the rest of the package never
-needs it.
+A map is log10 of the density in km (x east, y north, north up, equal aspect), framed on the
+outermost probability-mass region (:func:`bananagrid.contours.focus_extent`), with a colour bar
+in log10 m^-2 that starts ``FLOOR_DECADES`` below the lowest drawn region's boundary density (so
+the tails show), the probability-mass contours (:func:`bananagrid.contours.mass_regions`) each
+labelled once on its line with its area, and the geometry the raster's provenance names (as the
+recordings draw it): a bearing fix's sensors, bearing lines with +-2 sigma wedges and the fix; a
+motion model's start with its initial heading; a Butterly start's mean. Points off the frame
+are named at the edge they lie beyond.
 
-Rasters are taken duck-typed (``values``, ``x``, ``y``, ``grid``, ``mass``, ``provenance``): this
-module sits below :mod:`bananagrid.results`, whose ``Raster.plot`` calls it.
+matplotlib is loaded (with importlib) only when a picture is drawn, so the rest of the package
+never needs it. Rasters are taken duck-typed (``values``, ``x``, ``y``, ``grid``, ``mass``,
+``provenance``): this module sits below :mod:`bananagrid.results`, whose ``Raster.plot`` calls
+it.
 """
 
 from __future__ import annotations
@@ -19,7 +23,10 @@ import html
 import importlib
 import io
 import math
-from collections.abc import Iterable, Sequence
+import sys
+import textwrap
+from collections.abc import Iterable, Mapping, Sequence
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -30,31 +37,175 @@ from .contours import (
     format_area,
     format_level,
     label_positions,
+    mass_levels as checked_levels,
     mass_regions,
 )
-from .validate import BananagridError
+from .validate import BananagridError, finite, show
 
-__all__ = ["FLOOR_DECADES", "MASS_COLOURS", "plot_raster", "png_bytes", "raster_html", "pyplot"]
+__all__ = [
+    "FLOOR_DECADES", "MASS_COLOURS", "WEDGE_SIGMAS", "MapGeometry", "MatplotlibMissing", "figure_layout", "format_time", "map_frame",
+    "map_geometry", "plot_raster", "png_bytes", "pyplot", "raster_html",
+]
 
-#: The colour scale starts this many decades below the lowest contour drawn.
+#: The colour scale starts this many decades below the lowest probability-mass contour drawn.
 FLOOR_DECADES = 2.0
 
-#: Contour colours, innermost (50 %) first; they read on turbo's reds and blues alike.
+#: Contour colours by level, innermost (50 %) first; they read on turbo's reds and blues alike.
 MASS_COLOURS = ("white", "magenta", "dimgrey", "black")
 
+#: Half-width of the drawn bearing wedges, in sigmas (as the recordings draw them).
+WEDGE_SIGMAS = 2.0
 
-def pyplot():
-    """``matplotlib.pyplot`` with a non-interactive backend when none is chosen; a one-line
-    error naming the extra when matplotlib is not installed."""
+#: Height of a map (inches) in a default figure, and the room around it for the colour bar,
+#: tick labels and titles.
+MAP_HEIGHT = 3.2
+MAP_WIDTH_RANGE = (2.0, 5.5)
+#: A map's frame is widened (or heightened) to an aspect, width over height, in this range.
+FRAME_ASPECTS = (0.6, 3.0)
+PANEL_MARGINS = (1.7, 1.1)
+#: A figure of several maps puts up to this many in a row, within this width (inches).
+MAX_COLUMNS = 3
+MAX_FIGURE_WIDTH = 16.0
+#: Room for a figure's title above its maps (inches).
+TITLE_HEIGHT = 0.35
+
+_MARKER_STYLES = {  # by the first word of a marker's label
+    "sensor": {"marker": "^", "color": "white", "markersize": 9},
+    "fix": {"marker": "X", "color": "white", "markersize": 9},
+    "start": {"marker": "o", "color": "white", "markersize": 7},
+}
+_OTHER_MARKER = {"marker": "o", "color": "cyan", "markersize": 7}
+_BEARING_COLOUR = "gold"
+
+
+class MatplotlibMissing(BananagridError):
+    """matplotlib (the ``plot`` extra) is not installed."""
+
+
+def pyplot(*, headless: bool = False):
+    """``matplotlib.pyplot``; with ``headless``, on the non-interactive Agg backend unless pyplot
+    was imported already (files only, no window). A one-line error naming the extra when
+    matplotlib is not installed."""
     try:
         matplotlib = importlib.import_module("matplotlib")  # optional: loaded on first use
     except ImportError:
-        raise BananagridError(
+        raise MatplotlibMissing(
             "pictures need matplotlib: pip install 'bananagrid[plot]' (or pip install matplotlib)"
         ) from None
-    if not matplotlib.get_backend() or matplotlib.get_backend().lower().startswith("qt"):
+    if headless and "matplotlib.pyplot" not in sys.modules:
         matplotlib.use("Agg")
     return importlib.import_module("matplotlib.pyplot")
+
+
+@dataclass(frozen=True)
+class MapGeometry:
+    """What a raster's provenance says to draw over its map, in world metres.
+
+    Attributes
+    ----------
+    markers : tuple of (x, y, label)
+        ``"sensor K"`` (a bearing fix's stations), ``"fix"``, ``"start"`` (a motion model's
+        origin) or ``"start mean"`` (a Butterly start).
+    bearings : tuple of ((x, y), bearing, sigma)
+        Each sensor's bearing (rad, clockwise from north) and its SD (rad).
+    heading : (x, y, bearing) or None
+        A motion model's initial heading (rad, clockwise from north) at its start.
+    """
+
+    markers: tuple = ()
+    bearings: tuple = ()
+    heading: tuple | None = None
+
+
+def map_geometry(provenance: Mapping | None) -> MapGeometry:
+    """The points and lines a raster's provenance names (see :class:`MapGeometry`).
+
+    Reads the keys the models write: ``sensorK_x``, ``sensorK_y``, ``bearingK``, ``sigmaK``,
+    ``fix_x``, ``fix_y`` (a bearing fix); ``origin_x``, ``origin_y``, ``heading`` (CAT and
+    polar bananas); ``mean_x``, ``mean_y`` (Butterly). Anything else is ignored.
+    """
+    given = dict(provenance or {})
+
+    def number(key: str) -> float | None:
+        value = given.get(key)
+        ok = isinstance(value, (int, float, np.integer, np.floating)) and not isinstance(value, bool)
+        return float(value) if ok and math.isfinite(value) else None
+
+    markers, bearings, heading = [], [], None
+    k = 0
+    while number(f"sensor{k}_x") is not None and number(f"sensor{k}_y") is not None:
+        x, y = number(f"sensor{k}_x"), number(f"sensor{k}_y")
+        markers.append((x, y, f"sensor {k}"))
+        if number(f"bearing{k}") is not None:
+            bearings.append(((x, y), number(f"bearing{k}"), number(f"sigma{k}") or 0.0))
+        k += 1
+    if number("fix_x") is not None and number("fix_y") is not None:
+        markers.append((number("fix_x"), number("fix_y"), "fix"))
+    if number("origin_x") is not None and number("origin_y") is not None:
+        markers.append((number("origin_x"), number("origin_y"), "start"))
+        if number("heading") is not None:
+            heading = (number("origin_x"), number("origin_y"), number("heading"))
+    elif number("mean_x") is not None and number("mean_y") is not None:
+        markers.append((number("mean_x"), number("mean_y"), "start mean"))
+    return MapGeometry(tuple(markers), tuple(bearings), heading)
+
+
+def format_time(t: float) -> str:
+    """An elapsed time for a title: ``10 s``, ``600 s (10 min)``, ``28800 s (8 h)``."""
+    text = f"{t:g} s"
+    if abs(t) >= 3600.0:
+        return f"{text} ({t / 3600.0:.3g} h)"
+    if abs(t) >= 120.0:
+        return f"{text} ({t / 60.0:.3g} min)"
+    return text
+
+
+def map_frame(raster, mass_levels: Iterable[float] = DEFAULT_MASS_LEVELS) -> tuple[float, float, float, float]:
+    """Where :func:`plot_raster` frames ``raster``: its outermost reached probability-mass
+    region, padded (:func:`bananagrid.contours.focus_extent`), widened or heightened about its
+    centre to an aspect (width over height) within ``FRAME_ASPECTS`` as far as the grid reaches;
+    ``(x0, x1, y0, y1)``, m."""
+    return _framed(raster, [r for r in mass_regions(raster, mass_levels) if r.reached])
+
+
+def _framed(raster, reached) -> tuple[float, float, float, float]:
+    x0, x1, y0, y1 = focus_extent(raster, reached)
+    gx0, gx1, gy0, gy1 = raster.grid.extent
+    low, high = FRAME_ASPECTS
+    width, height = x1 - x0, y1 - y0
+    if width < low * height:
+        x0, x1 = _widened(x0, x1, low * height, gx0, gx1)
+    elif width > high * height:
+        y0, y1 = _widened(y0, y1, width / high, gy0, gy1)
+    return float(x0), float(x1), float(y0), float(y1)
+
+
+def _widened(a: float, b: float, size: float, low: float, high: float) -> tuple[float, float]:
+    """The interval [a, b] grown about its centre to ``size``, shifted and cut to [low, high]."""
+    centre = (a + b) / 2
+    a, b = centre - size / 2, centre + size / 2
+    if a < low:
+        a, b = low, min(high, b + (low - a))
+    if b > high:
+        a, b = max(low, a - (b - high)), high
+    return a, b
+
+
+def figure_layout(frames: Sequence[tuple[float, float, float, float]]) -> tuple[int, int, tuple[float, float]]:
+    """Rows, columns and size (width, height in inches) of a figure of maps framed on
+    ``frames``: each map at most ``MAP_HEIGHT`` tall and ``MAP_WIDTH_RANGE[1]`` wide at the widest
+    frame's aspect (at least ``MAP_WIDTH_RANGE[0]`` wide), plus ``PANEL_MARGINS`` for its colour
+    bar, labels and title; as many maps per row (up to ``MAX_COLUMNS``) as fit in
+    ``MAX_FIGURE_WIDTH``."""
+    aspect = max([(x1 - x0) / (y1 - y0) for x0, x1, y0, y1 in frames if y1 > y0 and x1 > x0] or [1.0])
+    low, high = MAP_WIDTH_RANGE
+    width = min(max(MAP_HEIGHT * aspect, low), high)
+    height = min(MAP_HEIGHT, width / aspect)
+    panel = (width + PANEL_MARGINS[0], height + PANEL_MARGINS[1])
+    count = max(len(frames), 1)
+    columns = max(1, min(MAX_COLUMNS, count, int(MAX_FIGURE_WIDTH // panel[0])))
+    rows = -(-count // columns)
+    return rows, columns, (round(columns * panel[0], 2), round(rows * panel[1] + TITLE_HEIGHT, 2))
 
 
 def plot_raster(
@@ -63,7 +214,9 @@ def plot_raster(
     *,
     mass_levels: Iterable[float] = DEFAULT_MASS_LEVELS,
     title: str | None = None,
+    t: float | None = None,
     markers: Sequence[tuple[float, float, str]] = (),
+    geometry: bool = True,
     colorbar: bool = True,
 ):
     """Draw ``raster`` on ``ax`` (a new figure's axes by default) and return the axes.
@@ -71,32 +224,58 @@ def plot_raster(
     Parameters
     ----------
     raster : Raster
-        Density per m^2 on a grid.
+        Density per m^2 on a grid (finite, >= 0).
     ax : matplotlib Axes, optional
-        Where to draw.
+        Where to draw; a new figure sized to the map when omitted.
     mass_levels : iterable of float
-        Probability-mass levels in (0, 1) whose contours are drawn and labelled.
+        Probability-mass levels in (0, 1) whose contours are drawn and labelled
+        (``"50 % · 0.294 km²"``: the level and the region's area).
     title : str, optional
-        Default: the model's name and elapsed time from the provenance.
+        Default: the model (and variant) from the provenance and the elapsed time.
+    t : float, optional
+        Elapsed time, s, for the default title (default: the provenance's ``t``).
     markers : sequence of (x, y, label)
-        Points to mark, in metres (a fix, stations).
+        More points to mark, in metres; a label starting with ``sensor``, ``fix`` or ``start``
+        is drawn like those of the geometry.
+    geometry : bool
+        Whether to draw what the provenance names (:func:`map_geometry`): sensors, bearing lines
+        with +-``WEDGE_SIGMAS`` sigma wedges, the fix, a start and its heading.
     colorbar : bool
-        Whether to add the log10 colour bar.
+        Whether to add the log10 colour bar (beside the map, as tall as it).
 
     Returns
     -------
     matplotlib Axes
-        With the map as its first image, one ``Line2D`` per contour piece (``gid`` =
-        ``"mass-contour-<probability>"``) and one label ``Text`` per level.
+        The map is its first image (log10 density, clim from the floor to the peak); each
+        contour piece a ``Line2D`` with ``gid`` ``"mass-contour-<probability>"``; one label
+        ``Text`` per level with ``gid`` ``"mass-label-<probability>"`` (levels whose regions
+        coincide on a coarse grid share one line and one label, ``"95, 99 % · 400 m²"``);
+        markers ``Line2D`` with ``gid`` ``"marker-<label>"``; bearing lines ``"bearing-K"`` and
+        their wedges ``"bearing-K-wedge"``.
+
+    Raises
+    ------
+    BananagridError
+        On a bad argument (one line naming it), or when matplotlib is not installed.
     """
+    levels = checked_levels(mass_levels, key="mass_levels")
+    extra = _checked_markers(markers)
+    if title is not None and not isinstance(title, str):
+        raise BananagridError(f"title = {show(title)}: expected a string or None")
+    if t is not None:
+        t = finite("t", t)
+    values = _checked_values(raster)
     plt = pyplot()
-    values = np.asarray(raster.values, dtype=np.float64)
-    if values.ndim != 2 or not np.all(np.isfinite(values)):
-        raise BananagridError("raster values must be a finite 2-D array to be drawn")
     if ax is None:
-        _, ax = plt.subplots(figsize=(7.0, 5.0), layout="constrained")
-    regions = [r for r in mass_regions(raster, mass_levels) if r.reached]
-    lowest = min((r.density for r in regions), default=float(values.max()) * 1e-4)
+        frame = map_frame(raster, levels)
+        _, _, size = figure_layout([frame])
+        _, ax = plt.subplots(figsize=size, layout="constrained")
+    elif not (hasattr(ax, "imshow") and hasattr(ax, "figure")):
+        raise BananagridError(f"ax = {type(ax).__name__}: expected matplotlib Axes or None")
+
+    regions = mass_regions(raster, levels)
+    reached = [r for r in regions if r.reached]
+    lowest = min((r.density for r in reached), default=float(values.max()) * 1e-4)
     floor = math.log10(lowest) - FLOOR_DECADES if lowest > 0.0 else -12.0
     with np.errstate(divide="ignore"):
         logs = np.where(values > 10.0**floor, np.log10(np.where(values > 0.0, values, 1.0)), floor)
@@ -104,66 +283,216 @@ def plot_raster(
     x0, x1, y0, y1 = raster.grid.extent
     image = ax.imshow(logs, origin="lower", extent=(x0 / 1e3, x1 / 1e3, y0 / 1e3, y1 / 1e3),
                       cmap="turbo", vmin=floor, vmax=top, interpolation="nearest")
-    lines = contour_lines(raster, [r.density for r in regions])
-    for k, (region, pieces) in enumerate(zip(regions, lines.values())):
-        for piece in pieces:
-            ax.plot(piece[:, 0] / 1e3, piece[:, 1] / 1e3, color=MASS_COLOURS[k % len(MASS_COLOURS)],
-                    linewidth=1.2, gid=f"mass-contour-{region.probability:g}")
-    spots = label_positions(lines)
-    for region, level in zip(regions, lines):
-        if level in spots:
-            x, y = spots[level]
-            ax.text(x / 1e3, y / 1e3, format_level(region), fontsize=8, ha="center", va="center",
-                    bbox={"boxstyle": "round,pad=0.2", "facecolor": "white", "alpha": 0.8, "linewidth": 0})
-    for x, y, label in markers:  # (off the frame when far away, e.g. distant stations)
-        ax.plot([x / 1e3], [y / 1e3], marker="^", color="white", markeredgecolor="black", markersize=8)
-        ax.annotate(label, (x / 1e3, y / 1e3), textcoords="offset points", xytext=(5, 5), fontsize=8, color="white")
-    # framed on the outermost region (padded), like the recordings' default view
-    fx0, fx1, fy0, fy1 = focus_extent(raster, regions)
+
+    frame = _framed(raster, reached)
+    fx0, fx1, fy0, fy1 = frame
+    colours = {level: MASS_COLOURS[k % len(MASS_COLOURS)] for k, level in enumerate(levels)}
+    lines = contour_lines(raster, [r.density for r in reached])  # one entry per distinct density
+    sharing: dict[float, list] = {}  # regions by boundary density (coarse grids can tie levels)
+    for region in reached:
+        sharing.setdefault(region.density, []).append(region)
+    for density, group in sharing.items():
+        for piece in lines[density]:
+            ax.plot(piece[:, 0] / 1e3, piece[:, 1] / 1e3, color=colours[group[0].probability], linewidth=1.2,
+                    gid=f"mass-contour-{group[0].probability:g}")
+    shown = map_geometry(getattr(raster, "provenance", None)) if geometry else MapGeometry()
+    points = list(shown.markers) + extra
+    inside = [(x, y) for x, y, _ in points if fx0 <= x <= fx1 and fy0 <= y <= fy1]
+    spots = label_positions(_within(lines, frame), avoid=inside)  # labels away from the marked points
+    for density, group in sharing.items():
+        if density in spots:
+            x, y = spots[density]
+            text = format_level(group[0]) if len(group) == 1 else \
+                f"{', '.join(f'{100 * r.probability:g}' for r in group)} % · {format_area(group[0].area)}"
+            ax.text(x / 1e3, y / 1e3, text, fontsize=7.5, ha="center", va="center", zorder=5,
+                    gid=f"mass-label-{group[0].probability:g}",
+                    bbox={"boxstyle": "round,pad=0.2", "facecolor": "white", "alpha": 0.85, "linewidth": 0})
+
+    notes = _draw_bearings(ax, shown, frame)
+    notes += _draw_markers(ax, points, frame, shown.heading)
+
     ax.set_xlim(fx0 / 1e3, fx1 / 1e3)
     ax.set_ylim(fy0 / 1e3, fy1 / 1e3)
     ax.set_aspect("equal")
-    ax.set_xlabel("x east [km]")
+    ax.set_xlabel("\n".join(["x east [km]", *_wrapped(notes, _label_width(ax))]))
     ax.set_ylabel("y north [km]")
-    ax.set_title(title if title is not None else _default_title(raster), fontsize=10)
+    ax.set_title(title if title is not None else _default_title(raster, t), fontsize=10)
     if colorbar:
-        ax.figure.colorbar(image, ax=ax, label="log10 density [m⁻²]", shrink=0.85)
+        inches = max(ax.figure.get_figwidth() * ax.get_position().width, 0.5)
+        # an inset follows the map's box (equal aspect); 0.15 in wide, 0.12 in from the map
+        bar = ax.inset_axes([1.0 + 0.12 / inches, 0.0, 0.15 / inches, 1.0])
+        ax.figure.colorbar(image, cax=bar, label="log10 density [m⁻²]")
     return ax
 
 
 def png_bytes(raster, *, dpi: int = 80, **kwargs) -> bytes:
-    """A PNG of :func:`plot_raster` on a new figure (for notebooks' ``_repr_png_``)."""
+    """A PNG of :func:`plot_raster` on a new figure (for notebooks' ``_repr_png_``); keywords as
+    for :func:`plot_raster`."""
     plt = pyplot()
     ax = plot_raster(raster, **kwargs)
     buffer = io.BytesIO()
-    ax.figure.savefig(buffer, format="png", dpi=dpi)
-    plt.close(ax.figure)
+    try:
+        ax.figure.savefig(buffer, format="png", dpi=dpi)
+    finally:
+        plt.close(ax.figure)
     return buffer.getvalue()
 
 
 def raster_html(raster) -> str:
     """A small HTML summary (grid, mass, peak, the probability-mass regions) and the picture
-    as an embedded PNG when matplotlib is installed."""
+    as an embedded PNG when matplotlib is installed (else a line saying how to get it)."""
     grid = raster.grid
+    x0, x1, y0, y1 = grid.extent
     rows = [
-        ("grid", f"{grid.nx} x {grid.ny} cells of {grid.dx:g} x {grid.dy:g} m, x {grid.extent[0]:g} .. {grid.extent[1]:g} m, "
-                 f"y {grid.extent[2]:g} .. {grid.extent[3]:g} m"),
+        ("grid", f"{grid.nx} x {grid.ny} cells of {grid.dx:g} x {grid.dy:g} m; x {x0:g} .. {x1:g} m, "
+                 f"y {y0:g} .. {y1:g} m"),
         ("captured mass", f"{raster.mass:.6f}" + (" (normalised)" if getattr(raster, "normalised", False) else "")),
         ("peak", f"{float(np.max(raster.values)):.4g} m⁻²"),
     ]
-    rows += [(f"{100 * r.probability:g} % region", f"{format_area(r.area)}, holds {r.enclosed:.4f}" if r.reached else "not reached")
+    rows += [(f"{100 * r.probability:g} % region",
+              f"{format_area(r.area)}, holds {r.enclosed:.4f}, boundary {r.density:.3g} m⁻²" if r.reached
+              else "not reached on this grid")
              for r in mass_regions(raster)]
-    table = "".join(f"<tr><th style='text-align:left'>{html.escape(k)}</th><td>{html.escape(v)}</td></tr>" for k, v in rows)
+    table = "".join(f"<tr><th style='text-align:left'>{html.escape(k)}</th><td>{html.escape(v)}</td></tr>"
+                    for k, v in rows)
     try:
         picture = base64.b64encode(png_bytes(raster)).decode("ascii")
         image = f"<img src='data:image/png;base64,{picture}'/>"
-    except BananagridError as exc:  # no matplotlib: the table alone, saying why
+    except MatplotlibMissing as exc:  # the table alone, saying why
         image = f"<p>{html.escape(str(exc))}</p>"
     return f"<div><table>{table}</table>{image}</div>"
 
 
-def _default_title(raster) -> str:
+# --- helpers ----------------------------------------------------------------------------------
+
+
+def _checked_values(raster) -> np.ndarray:
+    values = np.asarray(getattr(raster, "values", None), dtype=np.float64)
+    if values.ndim != 2 or min(values.shape) < 1 or not np.all(np.isfinite(values)):
+        raise BananagridError(f"raster values of shape {values.shape}: a map needs a finite 2-D array")
+    if np.any(values < 0.0):
+        raise BananagridError("raster values hold negative numbers: a map of log10 density needs values >= 0")
+    return values
+
+
+def _checked_markers(markers) -> list[tuple[float, float, str]]:
+    try:
+        given = list(markers)
+    except TypeError:
+        raise BananagridError(f"markers = {show(markers)}: expected a list of (x, y, label)") from None
+    checked = []
+    for k, marker in enumerate(given):
+        try:
+            x, y, label = marker
+        except (TypeError, ValueError):
+            raise BananagridError(f"markers[{k}] = {show(marker)}: expected (x, y, label), x and y in metres") from None
+        if not isinstance(label, str):
+            raise BananagridError(f"markers[{k}] label = {show(label)}: expected a string")
+        checked.append((finite(f"markers[{k}] x", x), finite(f"markers[{k}] y", y), label))
+    return checked
+
+
+def _within(lines: Mapping[float, list[np.ndarray]], frame, margin: tuple[float, float] = (0.14, 0.07)):
+    """The contour pieces cut to the frame less a margin (a label's half width and height), so
+    that labels land on a visible stretch of their line and inside the frame."""
+    x0, x1, y0, y1 = frame
+    mx, my = margin[0] * (x1 - x0), margin[1] * (y1 - y0)
+    cut = {}
+    for level, pieces in lines.items():
+        kept = []
+        for piece in pieces:
+            inside = (piece[:, 0] > x0 + mx) & (piece[:, 0] < x1 - mx) & (piece[:, 1] > y0 + my) & (piece[:, 1] < y1 - my)
+            # contiguous runs of inside points
+            edges = np.flatnonzero(np.diff(np.concatenate([[0], inside.astype(np.int8), [0]])))
+            kept += [piece[a:b] for a, b in zip(edges[::2], edges[1::2]) if b - a >= 2]
+        cut[level] = kept if kept else pieces  # nothing inside the margin: anywhere on the line
+    return cut
+
+
+def _frame_diagonal(frame) -> float:
+    x0, x1, y0, y1 = frame
+    return math.hypot(x1 - x0, y1 - y0)
+
+
+def _draw_bearings(ax, geometry: MapGeometry, frame) -> list[str]:
+    """Each sensor's bearing line (solid) and its +-WEDGE_SIGMAS sigma wedge (dashed) from the
+    sensor to beyond the fix (or the frame's centre); the key to them for the notes."""
+    if not geometry.bearings:
+        return []
+    fix = next(((x, y) for x, y, label in geometry.markers if label == "fix"), None)
+    x0, x1, y0, y1 = frame
+    centre = np.array(fix if fix is not None else ((x0 + x1) / 2, (y0 + y1) / 2))
+    reach = 1.5 * max(float(np.hypot(*(centre - np.array(s)))) for s, _, _ in geometry.bearings) + _frame_diagonal(frame)
+    for k, (sensor, bearing, sigma) in enumerate(geometry.bearings):
+        s = np.array(sensor)
+        for side in (0.0, -1.0, 1.0):
+            if side and not sigma > 0.0:
+                continue
+            b = bearing + side * WEDGE_SIGMAS * sigma
+            end = s + reach * np.array([math.sin(b), math.cos(b)])
+            ax.plot([s[0] / 1e3, end[0] / 1e3], [s[1] / 1e3, end[1] / 1e3], "--" if side else "-",
+                    color=_BEARING_COLOUR, linewidth=0.7 if side else 1.0, zorder=3,
+                    gid=f"bearing-{k}-wedge" if side else f"bearing-{k}")
+    return [f"bearings (gold), ±{WEDGE_SIGMAS:g}σ dashed"]
+
+
+def _draw_markers(ax, markers, frame, heading) -> list[str]:
+    """Markers inside the frame as labelled points (a start with an arrow along its heading);
+    those beyond it as notes naming them, where they are and which way."""
+    patheffects = importlib.import_module("matplotlib.patheffects")  # present: pyplot() has been called
+    outline = [patheffects.withStroke(linewidth=2.5, foreground="black")]
+    x0, x1, y0, y1 = frame
+    if heading is not None:
+        hx, hy, bearing = heading
+        if x0 <= hx <= x1 and y0 <= hy <= y1:
+            length = 0.12 * _frame_diagonal(frame)
+            tip = (hx + length * math.sin(bearing), hy + length * math.cos(bearing))
+            ax.annotate("", xy=(tip[0] / 1e3, tip[1] / 1e3), xytext=(hx / 1e3, hy / 1e3), zorder=6,
+                        arrowprops={"arrowstyle": "-|>", "color": "white", "linewidth": 1.5,
+                                    "path_effects": outline})
+    beyond = []
+    for x, y, label in markers:
+        if x0 <= x <= x1 and y0 <= y <= y1:
+            style = _MARKER_STYLES.get(label.split(" ")[0], _OTHER_MARKER)
+            ax.plot([x / 1e3], [y / 1e3], linestyle="none", markeredgecolor="black", zorder=7,
+                    gid=f"marker-{label}", **style)
+            ax.annotate(label, (x / 1e3, y / 1e3), textcoords="offset points", xytext=(6, 6), fontsize=8,
+                        color="white", path_effects=outline, zorder=7)
+        else:
+            way = _ARROWS[round(math.atan2(y - (y0 + y1) / 2, x - (x0 + x1) / 2) / (math.pi / 4)) % 8]
+            beyond.append(f"{way} {label} ({_km(x)}, {_km(y)})")
+    return [f"beyond the frame (km): {', '.join(beyond)}"] if beyond else []
+
+
+#: Which way a point beyond the frame lies, by the eighth of a turn counter-clockwise from east.
+_ARROWS = ("→", "↗", "↑", "↖", "←", "↙", "↓", "↘")
+
+
+def _km(metres: float) -> str:
+    return f"{metres / 1e3:.3g}"
+
+
+def _label_width(ax) -> int:
+    """How many characters of the x label fit under the map and its colour bar (about)."""
+    inches = ax.figure.get_figwidth() * ax.get_position().width
+    return max(24, int(inches / 0.075))
+
+
+def _wrapped(notes: Sequence[str], width: int) -> list[str]:
+    """Notes for the x label, wrapped to lines of about ``width`` characters."""
+    lines = []
+    for note in notes:
+        lines += textwrap.wrap(note, width) or [note]
+    return lines
+
+
+def _default_title(raster, t: float | None) -> str:
     provenance = getattr(raster, "provenance", {}) or {}
-    model = provenance.get("model", "raster")
-    t = (provenance.get("parameters") or {}).get("t", provenance.get("t"))
-    return f"{model}, t = {t:g} s" if isinstance(t, (int, float)) else str(model)
+    model = str(provenance.get("model", "raster"))
+    variant = provenance.get("variant")
+    if isinstance(variant, str):
+        model = f"{model} ({variant})"
+    if t is None:
+        given = provenance.get("t")
+        t = float(given) if isinstance(given, (int, float)) and not isinstance(given, bool) else None
+    return model if t is None else f"{model}, t = {format_time(t)}"

@@ -22,6 +22,7 @@ from .domains.grid import Grid
 from .domains.polar_lattice import PolarLattice
 from .domains.region import Region
 from . import plotting
+from .contours import DEFAULT_MASS_LEVELS
 from .validate import BananagridError, finite
 
 __all__ = ["Raster", "PolarRaster", "CellMap", "GridPresence", "BatchRaster"]
@@ -70,22 +71,36 @@ class Raster:
         return float(np.max(self.values))
 
     def __repr__(self) -> str:
+        """Shape, extent, mass and peak; never the values."""
         g = self.grid
         x0, x1, y0, y1 = g.extent
         return (f"Raster({g.nx} x {g.ny} cells of {g.dx:g} x {g.dy:g} m, x {x0:g}..{x1:g} m, y {y0:g}..{y1:g} m, "
                 f"mass {self.mass:.6f}{' normalised' if self.normalised else ''}, peak {self.peak:.4g} m^-2, "
                 f"model {self.provenance.get('model', '?')})")
 
-    def plot(self, ax=None, **kwargs):
-        """Draw the map with matplotlib (the ``plot`` extra) and return the axes: log10 density
-        in km, north up, a colour bar, labelled probability-mass contours. Keywords as for
-        :func:`bananagrid.plotting.plot_raster` (``mass_levels``, ``title``, ``markers``)."""
-        return plotting.plot_raster(self, ax, **kwargs)
+    def plot(self, ax=None, *, mass_levels=DEFAULT_MASS_LEVELS, title: str | None = None,
+             t: float | None = None, markers=(), geometry: bool = True, colorbar: bool = True):
+        """Draw the map with matplotlib (the ``plot`` extra) and return the axes.
 
-    def _repr_png_(self) -> bytes:
-        return plotting.png_bytes(self)
+        log10 density in km (x east, y north, north up), a colour bar, the probability-mass
+        contours labelled with their areas, framed on the outermost region, and what the
+        provenance names (a bearing fix's sensors, bearings and fix; a start and its heading).
+        Arguments as for :func:`bananagrid.plotting.plot_raster`: ``mass_levels`` (in (0, 1)),
+        ``title``, ``t`` (s, for the default title), ``markers`` (``(x, y, label)`` in metres),
+        ``geometry``, ``colorbar``.
+        """
+        return plotting.plot_raster(self, ax, mass_levels=mass_levels, title=title, t=t, markers=markers,
+                                    geometry=geometry, colorbar=colorbar)
+
+    def _repr_png_(self) -> bytes | None:
+        """The map as PNG bytes for notebooks (None without matplotlib: the HTML says why)."""
+        try:
+            return plotting.png_bytes(self)
+        except plotting.MatplotlibMissing:
+            return None
 
     def _repr_html_(self) -> str:
+        """A table of the grid, mass, peak and probability-mass regions, and the map."""
         return plotting.raster_html(self)
 
     def normalise(self) -> "Raster":

@@ -395,3 +395,27 @@ def test_unknown_example_and_no_scene_are_one_line_errors(capsys):
     assert "\n" not in err
     assert cli.main(["run"]) == 2
     assert "give at least one SCENE.toml or --example NAME" in capsys.readouterr().err
+    assert cli.main(["examples", "--show", "figure9"]) == 2  # the message names the option given
+    assert capsys.readouterr().err.startswith('bananagrid: error: --show "figure9": not a bundled scene; choose one of ')
+
+
+def test_compare_example_is_the_same_as_comparing_the_file(tmp_path, capsys):
+    options = ["--reference", "cat", "--model", "improved", "--step", "100"]
+    assert cli.main(["compare", "--example", "folding", *options, "--out", str(tmp_path / "a")]) == 0
+    by_name = capsys.readouterr().out
+    assert cli.main(["compare", str(ROOT / "scenes" / "folding.toml"), *options, "--out", str(tmp_path / "b")]) == 0
+    by_path = capsys.readouterr().out
+    assert by_name.replace(str(tmp_path / "a"), "OUT") == by_path.replace(str(tmp_path / "b"), "OUT")
+    # the same recording: what inspect reads back is equal (not `rerun rrd compare`, for which
+    # the NaN of an empty contour's largest error never equals itself)
+    name = "folding-improved-vs-cat.rrd"
+    assert cli.main(["inspect", "--json", str(tmp_path / "a" / name), str(tmp_path / "b" / name)]) == 0
+    a, b = json.loads(capsys.readouterr().out)
+    assert {**a, "path": None} == {**b, "path": None}
+    # one scene: a file or a name, exactly one of them
+    assert cli.main(["compare", *options]) == 2
+    assert "give SCENE.toml or --example NAME" in capsys.readouterr().err
+    assert cli.main(["compare", str(ROOT / "scenes" / "folding.toml"), "--example", "folding", *options]) == 2
+    assert "give one of them, not both" in capsys.readouterr().err
+    assert cli.main(["compare", "--example", "folding9", *options]) == 2
+    assert '--example "folding9": not a bundled scene' in capsys.readouterr().err

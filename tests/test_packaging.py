@@ -1,6 +1,7 @@
 """The installed layout: kernels/ ships as bananagrid.kernels, never as a top-level module."""
 
 import site
+import warnings
 from pathlib import Path
 
 import bananagrid
@@ -50,13 +51,22 @@ ROOT = Path(__file__).resolve().parents[1]
 
 
 def test_every_bundled_scene_is_installed_as_an_example():
-    from bananagrid.scenes.examples import example_names, example_path
+    from bananagrid.scenes.examples import example_names, example_path, example_title
+    from bananagrid.scenes.load import load_scene
 
     scenes = sorted(p.stem for p in (ROOT / "scenes").glob("*.toml"))
     assert example_names() == scenes
     for name in scenes:
+        path = example_path(name)
+        # read from the package (site-packages, or the checkout's link bananagrid/examples)
+        assert path.parent == Path(bananagrid.__file__).parent / "examples", path
         # the installed copy is the repository's file (one source, no hand-made copies)
-        assert example_path(name).read_bytes() == (ROOT / "scenes" / f"{name}.toml").read_bytes()
+        assert path.read_bytes() == (ROOT / "scenes" / f"{name}.toml").read_bytes()
+        # it loads through the same API; its name is the file's (run --example NAME writes NAME.rrd)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")  # what a scene warns of (a poor crossing) is not asked here
+            scene = load_scene(path)
+        assert (scene.name, scene.title) == (name, example_title(name))
 
 
 def test_examples_ship_in_the_wheel():
@@ -64,9 +74,12 @@ def test_examples_ship_in_the_wheel():
 
     files = {f.as_posix() for f in metadata.files("bananagrid") or ()}
     if any(name.endswith(".pth") or "__editable__" in name for name in files):
-        return  # editable: the link bananagrid/examples -> ../scenes, checked above
+        # editable: the link bananagrid/examples -> ../scenes stands in for the installed folder
+        assert (Path(bananagrid.__file__).parent / "examples").resolve() == (ROOT / "scenes").resolve()
+        return
     shipped = sorted(Path(f).stem for f in files if f.startswith("bananagrid/examples/") and f.endswith(".toml"))
     assert shipped == sorted(p.stem for p in (ROOT / "scenes").glob("*.toml"))
+    assert not any(f.startswith("scenes/") for f in files)  # no top-level "scenes" in site-packages
 
 
 def test_installed_warp_and_rerun_are_within_the_declared_ranges():

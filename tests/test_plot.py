@@ -1,5 +1,6 @@
-"""Pictures without a viewer: Raster.plot, the notebook representations, bananagrid plot on
-scenes, recordings and arrays, and the README's pictures."""
+"""Pictures without a viewer: Raster.plot (contours, labels, colour scale, frame, the geometry
+a provenance names), the notebook representations and short reprs, bananagrid plot on scenes,
+recordings and arrays, its one-line errors, and the README's pictures."""
 
 from __future__ import annotations
 
@@ -7,6 +8,7 @@ import math
 import re
 import subprocess
 import sys
+import warnings
 from pathlib import Path
 
 import matplotlib
@@ -17,31 +19,46 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 import pytest  # noqa: E402
 
+import bananagrid as bg  # noqa: E402
 from bananagrid import BananagridError, Raster, cli  # noqa: E402
 from bananagrid.contours import format_level, mass_regions  # noqa: E402
 from bananagrid.domains.grid import Grid  # noqa: E402
+from bananagrid.plotting import FLOOR_DECADES, figure_layout, map_frame, map_geometry  # noqa: E402
+from bananagrid.scenes.examples import example_path  # noqa: E402
+from bananagrid.scenes.load import load_scene  # noqa: E402
+from bananagrid.scenes.pictures import read_picture  # noqa: E402
+from bananagrid.scenes.presence import PresenceScene  # noqa: E402
 
 from cases import small_scene  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 
 
-def gaussian_raster(step: float = 2.0) -> Raster:
+def gaussian_raster(step: float = 2.0, provenance: dict | None = None, sx: float = 25.0, sy: float = 12.0) -> Raster:
     grid = Grid.from_bounds(x=(-100.0, 140.0), y=(-90.0, 90.0), step=step)
     x, y = np.meshgrid(grid.x, grid.y)
-    sx, sy = 25.0, 12.0
     values = np.exp(-0.5 * (((x - 10.0) / sx) ** 2 + (y / sy) ** 2)) / (2.0 * math.pi * sx * sy)
-    return Raster(values=values, grid=grid, mass=float(values.sum() * grid.cell_area), provenance={"model": "test", "t": 5.0})
+    return Raster(values=values, grid=grid, mass=float(values.sum() * grid.cell_area),
+                  provenance={"model": "test", "t": 5.0} if provenance is None else provenance)
 
 
-def check_png(path: Path, size: tuple[int, int] | None = None) -> np.ndarray:
-    """The PNG as an array; not blank: many distinct colours."""
+def check_png(path, size: tuple[int, int] | None = None) -> np.ndarray:
+    """The PNG as an array, ``size`` (width, height) pixels (to the pixel matplotlib's rounding
+    may take); not blank: many distinct colours."""
     image = mpimg.imread(path)
     if size is not None:
-        assert image.shape[1::-1] == size
+        assert np.abs(np.subtract(image.shape[1::-1], size)).max() <= 1, (image.shape, size)
     colours = np.unique((image[..., :3] * 255).astype(np.uint8).reshape(-1, 3), axis=0)
     assert len(colours) > 50, len(colours)
+    assert float(np.std(image[..., :3])) > 0.05
     return image
+
+
+def pixels(size_inches: tuple[float, float], dpi: int) -> tuple[int, int]:
+    return round(size_inches[0] * dpi), round(size_inches[1] * dpi)
+
+
+# --- Raster.plot ------------------------------------------------------------------------------
 
 
 def test_plot_draws_the_regions_labelled_once_each(tmp_path):
@@ -59,32 +76,158 @@ def test_plot_draws_the_regions_labelled_once_each(tmp_path):
         # within a cell of the line the density is within a cell's gradient of the level:
         # |grad f| h <= f * r h / sigma^2 <= f * 0.5 here (r <= 3.1 sigma, h = 2 m, sigma >= 12 m)
         assert np.allclose(near, region.density, rtol=0.6)
-    texts = [t.get_text() for t in ax.texts]
-    assert texts == [format_level(r) for r in regions]
+    labels = {t.get_gid(): t.get_text() for t in ax.texts}
+    assert labels == {f"mass-label-{r.probability:g}": format_level(r) for r in regions}  # one per level
+    assert re.fullmatch(r"50 % · \d\.\d+ km²|50 % · [\d,]+ m²", labels["mass-label-0.5"])
     assert ax.get_xlabel() == "x east [km]" and ax.get_ylabel() == "y north [km]"
     assert ax.get_title() == "test, t = 5 s"
-    assert ax.images[0].get_clim()[0] == pytest.approx(math.log10(regions[-1].density) - 2.0)
+    floor, top = ax.images[0].get_clim()
+    assert floor == pytest.approx(math.log10(regions[-1].density) - FLOOR_DECADES)
+    assert top == pytest.approx(math.log10(raster.peak))
+    # km axes, north up, framed on the 99 % region, equal aspect
+    x0, x1, y0, y1 = map_frame(raster)
+    assert ax.get_xlim() == pytest.approx((x0 / 1e3, x1 / 1e3)) and ax.get_ylim() == pytest.approx((y0 / 1e3, y1 / 1e3))
+    assert ax.get_aspect() == 1.0
+    assert ax.images[0].origin == "lower"
+    bar = ax.child_axes[0]
+    assert bar.get_ylabel() == "log10 density [m⁻²]"
     ax.figure.savefig(tmp_path / "a.png", dpi=50)
+    check_png(tmp_path / "a.png", pixels(tuple(ax.figure.get_size_inches()), 50))
     plt.close(ax.figure)
-    check_png(tmp_path / "a.png", (350, 250))  # 7 x 5 in at 50 dpi
 
 
-def test_notebook_representations_and_a_short_repr():
+def test_plot_on_given_axes_with_levels_title_and_time():
+    figure, ax = plt.subplots(figsize=(4, 3))
+    raster = gaussian_raster()
+    assert raster.plot(ax, mass_levels=[0.9, 0.5], t=7200.0, colorbar=False) is ax
+    assert ax.get_title() == "test, t = 7200 s (2 h)"
+    assert sorted(t.get_gid() for t in ax.texts) == ["mass-label-0.5", "mass-label-0.9"]
+    assert not ax.child_axes
+    raster.plot(ax, title="mine")
+    assert ax.get_title() == "mine"
+    plt.close(figure)
+
+
+def test_levels_tied_on_a_coarse_grid_share_one_line_and_label():
+    grid = Grid.from_bounds(x=(0.0, 50.0), y=(0.0, 50.0), step=10.0)
+    values = np.full((5, 5), 1e-6)
+    values[2, 2] = 0.5 / 100.0  # one cell holds half the mass, the rest share the remainder
+    values[values < 1e-3] = (1.0 - 0.5) / (24 * 100.0)
+    raster = Raster(values=values, grid=grid, mass=1.0)
+    regions = mass_regions(raster)
+    assert regions[1].density == regions[3].density  # 90, 95 and 99 % are the whole grid
+    ax = raster.plot()
+    labels = [t.get_text() for t in ax.texts]
+    assert "90, 95, 99 % · 2,500 m²" in labels and not [t for t in labels if t.startswith(("95", "99"))]
+    assert {line.get_gid() for line in ax.get_lines()} <= {"mass-contour-0.5", "mass-contour-0.9"}
+    plt.close(ax.figure)
+
+
+def test_the_geometry_a_provenance_names_is_drawn():
+    """A bearing fix's sensors, bearings, wedges and fix, as the recording draws them; points
+    beyond the frame named in the x label with the way to them."""
+    provenance = {"model": "BearingFix", "variant": "exact",
+                  "sensor0_x": -5000.0, "sensor0_y": 0.0, "bearing0": math.pi / 2, "sigma0": 0.01,
+                  "sensor1_x": 10.0, "sensor1_y": 20.0, "bearing1": math.pi, "sigma1": 0.02,
+                  "fix_x": 10.0, "fix_y": 0.0}
+    ax = gaussian_raster(provenance=provenance).plot()
+    gids = [line.get_gid() for line in ax.get_lines()]
+    for k in (0, 1):
+        assert gids.count(f"bearing-{k}") == 1 and gids.count(f"bearing-{k}-wedge") == 2
+    assert "marker-fix" in gids and "marker-sensor 1" in gids and "marker-sensor 0" not in gids
+    bearing = next(line for line in ax.get_lines() if line.get_gid() == "bearing-0")
+    (xa, xb), (ya, yb) = bearing.get_data()
+    assert (xa, ya) == (-5.0, 0.0) and xb > 0.0 and yb == pytest.approx(0.0, abs=1e-9)  # due east, km
+    assert "← sensor 0 (-5, 0)" in ax.get_xlabel() and "±2σ" in ax.get_xlabel()
+    assert ax.get_title() == "BearingFix (exact)"
+    plt.close(ax.figure)
+
+
+def test_a_models_provenance_names_its_geometry():
+    """The keys map_geometry reads are those the models write."""
+    fix = bg.BearingFix(sensors=[[0.0, 0.0], [20000.0, 0.0]], bearings=[0.26, -0.39], sigmas=[0.01, 0.02])
+    shown = map_geometry(fix.parameters())
+    assert [m[2] for m in shown.markers] == ["sensor 0", "sensor 1", "fix"]
+    assert shown.markers[2][:2] == pytest.approx(tuple(fix.fix))
+    assert np.ravel([b[1:] for b in shown.bearings]) == pytest.approx([0.26, 0.01, -0.39, 0.02])
+    cat = bg.CAT(v0=10.0, t=5.0, sigma_a=1.0, sigma_omega=0.1, pose=bg.Pose(origin=(100.0, 50.0), heading=0.5))
+    assert map_geometry(cat.parameters()) == type(shown)(markers=((100.0, 50.0, "start"),), heading=(100.0, 50.0, 0.5))
+    butterly = bg.Butterly(mean=(1.0, 2.0), cov=[[1e4, 0.0], [0.0, 1e4]], t=60.0, speeds=[1.0], weights=[1.0])
+    assert map_geometry(butterly.parameters()).markers == ((1.0, 2.0, "start mean"),)
+    assert map_geometry({"model": "x"}) == type(shown)()
+
+
+def test_markers_and_a_start_heading():
+    ax = gaussian_raster(provenance={"model": "CAT", "t": 5.0, "origin_x": 10.0, "origin_y": 0.0, "heading": 0.0}).plot(
+        markers=[(20.0, 5.0, "buoy"), (1e5, 0.0, "port")])
+    gids = [line.get_gid() for line in ax.get_lines()]
+    assert "marker-start" in gids and "marker-buoy" in gids
+    assert "→ port (100, 0)" in ax.get_xlabel()
+    arrows = [child for child in ax.texts if getattr(child, "arrow_patch", None) is not None]
+    assert len(arrows) == 1 and arrows[0].xy[0] == pytest.approx(0.01) and arrows[0].xy[1] > 0.0  # north
+    plt.close(ax.figure)
+
+
+def test_a_tall_frame_is_widened_within_the_grid():
+    raster = gaussian_raster(sx=2.0, sy=30.0)
+    x0, x1, y0, y1 = map_frame(raster)
+    assert (x1 - x0) == pytest.approx(0.6 * (y1 - y0)) and (x0 + x1) / 2 == pytest.approx(11.0, abs=2.0)
+    rows, columns, size = figure_layout([map_frame(raster)] * 4)
+    assert (rows, columns) == (2, 3) and size[0] <= 16.0  # narrow maps: three to a row
+
+
+@pytest.mark.parametrize("kwargs, message", [
+    ({"mass_levels": [0.5, 1.0]}, r"mass_levels\[1\] = 1\.0: a probability-mass level must lie in \(0, 1\)"),
+    ({"markers": [(1.0, 2.0)]}, r"markers\[0\] = .*: expected \(x, y, label\)"),
+    ({"markers": [(1.0, math.nan, "a")]}, r"markers\[0\] y"),
+    ({"markers": [(1.0, 2.0, 3)]}, r"markers\[0\] label = 3: expected a string"),
+    ({"title": 3}, r"title = 3: expected a string or None"),
+    ({"t": math.inf}, r"^t = inf"),
+    ({"ax": "axes"}, r"ax = str: expected matplotlib Axes or None"),
+])
+def test_bad_plot_arguments_are_one_line_errors(kwargs, message):
+    with pytest.raises(BananagridError, match=message) as info:
+        gaussian_raster().plot(**kwargs)
+    assert "\n" not in str(info.value)
+    plt.close("all")
+
+
+def test_bad_rasters_are_refused():
+    bad = gaussian_raster()
+    with pytest.raises(BananagridError, match="finite 2-D array"):
+        Raster(values=np.full((3, 3), np.nan), grid=Grid.from_bounds(x=(0, 3), y=(0, 3), step=1.0), mass=1.0).plot()
+    with pytest.raises(BananagridError, match="negative"):
+        Raster(values=-bad.values, grid=bad.grid, mass=1.0).plot()
+
+
+# --- notebooks and reprs -----------------------------------------------------------------------
+
+
+def test_notebook_representations_and_short_reprs():
     raster = gaussian_raster()
     png = raster._repr_png_()
     assert png[:8] == b"\x89PNG\r\n\x1a\n"
     page = raster._repr_html_()
-    assert "<table>" in page and "captured mass" in page and "99 % region" in page and "data:image/png;base64," in page
+    assert page.startswith("<div><table>") and "captured mass" in page and "99 % region" in page
+    assert "data:image/png;base64," in page
     big = Raster(values=np.zeros((900, 1500)), grid=Grid.from_bounds(x=(0, 6000), y=(0, 3600), step=4.0), mass=0.0)
     assert len(repr(big)) < 300 and "1500 x 900 cells" in repr(big) and "0.0, 0.0" not in repr(big)
+    batch = bg.BatchRaster(values=np.zeros((5, 900, 1500)), grids=(big.grid,) * 5, mass=np.ones(5))
+    assert len(repr(batch)) < 300 and "array(5, 900, 1500)" in repr(batch)
     plt.close("all")
 
 
 def test_without_matplotlib_the_error_names_the_extra(monkeypatch):
     monkeypatch.setitem(sys.modules, "matplotlib", None)  # import_module then raises ImportError
-    with pytest.raises(BananagridError, match=r"pip install 'bananagrid\[plot\]'"):
+    with pytest.raises(BananagridError, match=r"pip install 'bananagrid\[plot\]'") as info:
         gaussian_raster().plot()
-    assert "bananagrid[plot]" in gaussian_raster()._repr_html_()  # the table stays, saying why
+    assert "\n" not in str(info.value)
+    assert gaussian_raster()._repr_png_() is None  # a notebook falls back to the HTML
+    page = gaussian_raster()._repr_html_()
+    assert "<table>" in page and "bananagrid[plot]" in page  # the table stays, saying why
+
+
+# --- bananagrid plot ---------------------------------------------------------------------------
 
 
 @pytest.fixture(scope="module")
@@ -95,61 +238,117 @@ def scene_file(tmp_path_factory) -> Path:
     return path
 
 
+@pytest.fixture(scope="module")
+def recorded(tmp_path_factory, scene_file) -> Path:
+    """The scene's recording and arrays, as bananagrid run writes them."""
+    out = tmp_path_factory.mktemp("run")
+    assert cli.main(["run", str(scene_file), "--out", str(out), "--npz", "--quiet"]) == 0
+    return out
+
+
 @pytest.mark.parametrize("source", ["toml", "rrd", "npz"])
-def test_plot_command_reads_scenes_recordings_and_arrays(tmp_path, scene_file, source, capsys):
-    if source == "toml":
-        given = scene_file
-    else:
-        assert cli.main(["run", str(scene_file), "--out", str(tmp_path), "--npz", "--quiet"]) == 0
-        given = tmp_path / f"pic.{source}"
+def test_plot_command_reads_scenes_recordings_and_arrays(tmp_path, scene_file, recorded, source, capsys):
+    given = scene_file if source == "toml" else recorded / f"pic.{source}"
     out = tmp_path / "pic.png"
     assert cli.main(["plot", str(given), "-o", str(out), "--dpi", "40"]) == 0
-    assert f"wrote {out}" in capsys.readouterr().out
-    check_png(out, (int(5.5 * 2 * 40), int(4.2 * 40)))  # two panels side by side
+    assert capsys.readouterr().out.strip() == f"wrote {out}"
+    picture = read_picture(given)
+    assert [(p.layer, p.t) for p in picture.panels] == [("a", 4.0), ("b", 4.0)]  # the last time
+    _, columns, size = figure_layout([map_frame(p.raster) for p in picture.panels])
+    assert columns == 2
+    check_png(out, pixels(size, 40))
     assert not list(tmp_path.glob(".*partial"))
+    # every source keeps the provenance that names the geometry (here the start and heading)
+    assert map_geometry(picture.panels[0].raster.provenance).markers == ((0.0, 0.0, "start"),)
+    # every source gives the same regions (the recording's float32 to 3 digits)
+    assert [format_level(r) for r in mass_regions(picture.panels[0].raster)] == \
+        [format_level(r) for r in mass_regions(read_picture(scene_file).panels[0].raster)]
 
 
-def test_plot_picks_a_layer_and_a_time(tmp_path, scene_file):
+def test_plot_picks_layers_a_time_and_a_resolution(tmp_path, scene_file):
     out = tmp_path / "a.png"
     assert cli.main(["plot", str(scene_file), "-o", str(out), "--layer", "a", "--t", "2", "--dpi", "40"]) == 0
-    check_png(out, (int(5.5 * 40), int(4.2 * 40)))
+    picture = read_picture(scene_file, layers=["a"], t=2.0)
+    _, _, size = figure_layout([map_frame(picture.panels[0].raster)])
+    check_png(out, pixels(size, 40))
+    assert cli.main(["plot", str(scene_file), "-o", str(out), "--layer", "a", "--t", "2", "--dpi", "80"]) == 0
+    check_png(out, pixels(size, 80))
+    assert [p.layer for p in read_picture(scene_file, layers=["b", "a"]).panels] == ["b", "a"]
+
+
+def test_plot_example_draws_the_bundled_scene(tmp_path, capsys):
+    out = tmp_path / "folding.png"
+    assert cli.main(["plot", "--example", "folding", "--step", "200", "-o", str(out), "--dpi", "30"]) == 0
+    picture = read_picture(example_path("folding"), step=200.0)
+    _, _, size = figure_layout([map_frame(p.raster) for p in picture.panels])
+    check_png(out, pixels(size, 30))
+    capsys.readouterr()
+    assert cli.main(["plot", "x.toml", "--example", "folding", "-o", str(out)]) == 2
+    assert 'INPUT x.toml and --example "folding": give one of them, not both' in capsys.readouterr().err
+    assert cli.main(["plot", "-o", str(out)]) == 2
+    assert "give INPUT or --example NAME" in capsys.readouterr().err
 
 
 @pytest.mark.parametrize("argv, message", [
-    (["--layer", "c"], r'--layer "c": not a layer of .* at t = 4 s; choose one of a, b'),
-    (["--t", "3"], r"--t = 3\.0: .* has times 2, 4 s"),
-    (["--mass-levels", "0.5,1.5"], r"--mass-levels\[1\] = 1\.5: a probability-mass level must lie in \(0, 1\)"),
+    (["--layer", "c"], r'--layer "c": not a layer of .*pic\.toml at t = 4 s; choose one of a, b$'),
+    (["--t", "3"], r"--t = 3\.0: .* has times 2, 4 s$"),
+    (["--t", "nan"], r"--t = nan: expected a finite time in seconds$"),
+    (["--mass-levels", "0.5,1.5"], r"--mass-levels\[1\] = 1\.5: a probability-mass level must lie in \(0, 1\)$"),
     (["--mass-levels", "half"], r"--mass-levels = 'half': expected numbers"),
-    (["--dpi", "5"], r"--dpi = 5: must be an integer in \[20, 600\]"),
+    (["--dpi", "5"], r"--dpi = 5: must be an integer in \[20, 600\]$"),
+    (["--step", "0"], r"--step = 0\.0: must be > 0|--step = 0\.0"),
+    (["--threads", "0"], r"--threads = 0: must be >= 1$"),
 ])
-def test_bad_plot_arguments_are_one_line_errors(tmp_path, scene_file, capsys, argv, message):
+def test_bad_plot_arguments_are_one_line_cli_errors(tmp_path, scene_file, capsys, argv, message):
     assert cli.main(["plot", str(scene_file), "-o", str(tmp_path / "x.png"), *argv]) == 2
     err = capsys.readouterr().err.strip()
-    assert re.search(message, err) and "\n" not in err
-    assert not (tmp_path / "x.png").exists()
+    assert re.search(message, err) and "\n" not in err, err
+    assert not list(tmp_path.iterdir())
 
 
-def test_plot_refuses_other_inputs_and_array_scenes(tmp_path, capsys):
-    assert cli.main(["plot", str(tmp_path / "x.nc"), "-o", str(tmp_path / "x.png")]) == 2
-    assert "cannot plot a .nc file; give one of .toml, .rrd, .npz" in capsys.readouterr().err
-    assert cli.main(["plot", str(ROOT / "scenes" / "room_mixture.toml"), "-o", str(tmp_path / "x.png")]) == 2
-    assert "an [array] scene maps angular cells, not a grid" in capsys.readouterr().err
+def test_plot_refuses_other_inputs_outputs_and_array_scenes(tmp_path, scene_file, capsys):
+    def error(*argv: str) -> str:
+        assert cli.main(["plot", *argv]) == 2
+        err = capsys.readouterr().err.strip()
+        assert "\n" not in err
+        return err
+
+    assert "cannot plot a .nc file; give one of .toml, .rrd, .npz" in error(str(tmp_path / "x.nc"), "-o", str(tmp_path / "x.png"))
+    assert "no such file" in error(str(tmp_path / "x.rrd"), "-o", str(tmp_path / "x.png"))
+    assert "give a name ending in .png" in error(str(scene_file), "-o", str(tmp_path / "x.jpg"))
+    assert "cannot write there" in error(str(scene_file), "-o", str(tmp_path / "missing" / "x.png"))
+    assert "an [array] scene maps angular cells, not a grid" in error(
+        str(ROOT / "scenes" / "room_mixture.toml"), "-o", str(tmp_path / "x.png"))
+    (tmp_path / "junk.npz").write_bytes(b"not a zip")
+    assert "not an .npz written by bananagrid run --npz" in error(str(tmp_path / "junk.npz"), "-o", str(tmp_path / "x.png"))
+    assert not list(tmp_path.glob("*.png"))
 
 
-def test_readme_pictures_exist_and_the_script_makes_them():
-    readme = (ROOT / "README.md").read_text()
-    shown = re.findall(r"!\[[^\]]*\]\((docs/pictures/[\w-]+\.png)\)", readme)
+# --- the README's pictures ---------------------------------------------------------------------
+
+
+def test_readme_pictures_are_made_from_every_grid_scene(tmp_path):
     sys.path.insert(0, str(ROOT / "docs"))
     try:
         import make_pictures
     finally:
         sys.path.pop(0)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # the poor crossing's warning at load
+        grid_scenes = {path.stem for path in (ROOT / "scenes").glob("*.toml")
+                       if not isinstance(load_scene(path), PresenceScene)}
+    assert set(make_pictures.PICTURED) == grid_scenes
+    readme = (ROOT / "README.md").read_text()
+    shown = re.findall(r"!\[[^\]]+\]\((docs/pictures/[\w-]+\.png)\)", readme)
     assert sorted(shown) == sorted(f"docs/pictures/{name}.png" for name in make_pictures.PICTURED)
+    total = 0
     for picture in shown:
         check_png(ROOT / picture)
+        total += (ROOT / picture).stat().st_size
+    assert total < 500_000
     # the script draws a scene like the committed picture (same size: same layout and dpi)
-    committed = mpimg.imread(ROOT / "docs" / "pictures" / "folding.png").shape
-    run = subprocess.run([sys.executable, str(ROOT / "docs" / "make_pictures.py"), "folding"], capture_output=True,
-                         text=True, timeout=300, cwd=ROOT)
+    run = subprocess.run([sys.executable, str(ROOT / "docs" / "make_pictures.py"), "rice_isotropic", "--out",
+                          str(tmp_path)], capture_output=True, text=True, timeout=300, cwd=ROOT)
     assert run.returncode == 0, run.stderr
-    assert mpimg.imread(ROOT / "docs" / "pictures" / "folding.png").shape == committed
+    made = check_png(tmp_path / "rice_isotropic.png")
+    assert made.shape == mpimg.imread(ROOT / "docs" / "pictures" / "rice_isotropic.png").shape

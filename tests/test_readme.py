@@ -51,7 +51,7 @@ NOT_RUN = {
     "rerun rrd verify": "named in prose; tests/test_cli.py runs it on recordings",
     "rerun rrd compare": "named in prose; tests/test_cli.py runs it on two runs of a scene",
     "pip install 'bananagrid[plot]'": "installs from the package index; the test extra installs matplotlib",
-    "python docs/make_pictures.py": "draws five scenes (seconds each); tests/test_plot.py runs it on one and checks the rest exist",
+    "python docs/make_pictures.py": "rewrites docs/pictures (eleven scenes, about 15 s); tests/test_plot.py runs it on one scene into a temporary folder and checks that every picture exists",
     "bananagrid plot INPUT -o OUT.png": "placeholders; tests/test_plot.py runs plot on scenes, recordings and arrays",
 }
 
@@ -169,3 +169,17 @@ def test_the_api_section_lists_all():
     section = README.split("## API", 1)[1].split("\n## ", 1)[0]
     listed = set(re.findall(r"`([A-Za-z_][A-Za-z_0-9]*)`", section))
     assert set(bg.__all__) <= listed, set(bg.__all__) - listed
+
+
+def test_the_inspect_report_shown_is_what_inspect_prints(workdir):
+    """The Figure 1 report quoted under "Scenes and the command line" (its lines up to the
+    ``...``) is what ``bananagrid inspect out/figure1.rrd`` prints first."""
+    (shown,) = [text for _, text in fenced_blocks("text") if text.startswith("recording  out/figure1.rrd")]
+    shown = shown.split("\n...")[0].splitlines()
+    if not (workdir / "out" / "figure1.rrd").exists():  # run alone: test_shown_commands writes it
+        subprocess.run(as_run_here("bananagrid run scenes/figure1.toml --out out --quiet"), cwd=workdir, check=True,
+                       capture_output=True, timeout=600)
+    run = subprocess.run(as_run_here("bananagrid inspect out/figure1.rrd"), cwd=workdir, capture_output=True,
+                         text=True, timeout=600)
+    assert run.returncode == 0, run.stderr
+    assert run.stdout.splitlines()[: len(shown)] == shown

@@ -1,122 +1,43 @@
-"""Read a recording back without a viewer: what it holds, and its images as arrays.
+"""Inspect a recording without a viewer: what it holds and where the target is.
 
-Everything goes through :class:`rerun.chunk.RrdReader`: each chunk of the (first) recording
-store becomes an arrow record batch whose fields say, in their ``rerun:kind`` metadata,
-whether a column is a timeline (``index``) or a component (``data``).
+:func:`inspect_recording` summarises the timelines and entities of an ``.rrd`` file;
+:func:`layer_summaries` and :func:`cell_map_summaries` say, per density layer or angular cell
+map and time, where the target is (the peak and its place, the captured mass, the
+probability-mass regions); :func:`format_inspection` renders all of it for people and
+:func:`json_ready` for scripts. Reading the file is :mod:`bananagrid.recording.readback`'s.
+
+Places are world metres, x east and y north (a cell map's: the array frame, z up). A
+geographic position (latitude, longitude) would go beside them: in the summaries as
+``peak_lat``, ``peak_lon`` and in the report in :func:`_place`.
 """
 
 from __future__ import annotations
 
+import math
 import os
-from collections.abc import Iterator
-from pathlib import Path
+from collections.abc import Iterable
 
 import numpy as np
-import pyarrow as pa
-import rerun as rr
-from rerun.chunk import RrdReader, StoreEntry
 
-from ..validate import BananagridError
-from .core import ELAPSED, elapsed_nanos, values_from_image
+from ..contours import DEFAULT_MASS_LEVELS, cell_regions, mass_regions
+from ..domains.angular_lattice import AngularLattice
+# The readers moved to readback; they stay importable from here for existing callers.
+from .readback import (
+    IMAGE_BUFFER, IMAGE_FORMAT, RecordedCellMap, decode_image, open_recording, plain_cell,
+    read_cell_maps, read_depth_image, read_layers, recording_rows, seconds,
+)
 
 __all__ = [
-    "IMAGE_BUFFER", "IMAGE_FORMAT", "decode_image", "format_inspection", "inspect_recording", "open_recording",
-    "plain_cell", "read_depth_image", "recording_rows",
+    "IMAGE_BUFFER", "IMAGE_FORMAT", "cell_map_summaries", "decode_image", "format_inspection", "inspect_recording",
+    "json_ready", "layer_summaries", "open_recording", "plain_cell", "read_depth_image", "recording_rows",
 ]
 
-IMAGE_BUFFER = "DepthImage:buffer"
-IMAGE_FORMAT = "DepthImage:format"
 _SCALARS = "Scalars:scalars"
+#: Significant digits of a recorded float in the text report (JSON keeps every digit).
+FLOAT_DIGITS = 8
 
 
-# --- reading rows -----------------------------------------------------------------------------
-
-
-def open_recording(path: str | os.PathLike) -> tuple[RrdReader, StoreEntry]:
-    """The reader and the first recording store of ``path``; one-line errors naming it."""
-    path = Path(path)
-    if not path.exists():
-        raise BananagridError(f"{path}: no such file")
-    if not path.is_file():
-        raise BananagridError(f"{path}: not a file")
-    try:
-        reader = RrdReader(path)
-        stores = reader.recordings()
-    except (RuntimeError, ValueError, OSError) as exc:
-        first_line = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
-        raise BananagridError(f"{path}: not a readable .rrd file ({first_line})") from None
-    if not stores:
-        raise BananagridError(f"{path}: the file holds no recording (only blueprints)")
-    return reader, stores[0]
-
-
-def recording_rows(reader: RrdReader, store: StoreEntry) -> Iterator[tuple[str, dict, dict]]:
-    """Yield ``(entity_path, times, components)`` for every row of the recording store.
-
-    ``times`` maps timeline name to ``(kind, value)`` (empty for static rows); ``components``
-    maps component name to ``(archetype, arrow list value)`` for the non-null cells.
-    """
-    for chunk in reader.stream(store=store):
-        batch = chunk.to_record_batch()
-        indexes, data = _columns(batch)
-        for row in range(batch.num_rows):
-            times = {name: (kind, int(column[row])) for name, (kind, column) in indexes.items()}
-            cells = {
-                name: (archetype, column[row])
-                for name, (archetype, column) in data.items()
-                if column[row].is_valid
-            }
-            yield chunk.entity_path, times, cells
-
-
-def _columns(batch: pa.RecordBatch) -> tuple[dict, dict]:
-    """Split a chunk's columns into timelines ``{name: (kind, column)}`` and components
-    ``{name: (archetype, column)}``; control columns (row ids) are dropped.
-
-    Timeline columns come back as int64 numpy arrays (nanoseconds for durations and
-    timestamps).
-    """
-    indexes, data = {}, {}
-    for field, column in zip(batch.schema, batch.columns):
-        meta = {k.decode(): v.decode() for k, v in (field.metadata or {}).items()}
-        if meta.get("rerun:kind") == "index":
-            times = column.cast(pa.int64()).to_numpy(zero_copy_only=False)
-            indexes[meta.get("rerun:index_name", field.name)] = (_time_kind(field.type), times)
-        elif meta.get("rerun:kind") == "data":
-            archetype = meta.get("rerun:archetype", "AnyValues").rsplit(".", 1)[-1]
-            data[meta.get("rerun:component", field.name)] = (archetype, column)
-    return indexes, data
-
-
-def _time_kind(datatype: pa.DataType) -> str:
-    """``duration``, ``timestamp`` or ``sequence`` from a timeline column's arrow type."""
-    if pa.types.is_duration(datatype):
-        return "duration"
-    if pa.types.is_timestamp(datatype):
-        return "timestamp"
-    return "sequence"
-
-
-def _seconds(kind: str, value: int) -> float | int:
-    """A timeline value for people: seconds for durations and timestamps, else as is."""
-    return value / 1e9 if kind in ("duration", "timestamp") else value
-
-
-def decode_image(buffer: pa.Scalar, image_format: pa.Scalar) -> np.ndarray:
-    """A logged image cell back to a ``(height, width)`` array of its channel type."""
-    fmt = image_format.values[0].as_py()
-    raw = buffer.values[0].values.to_numpy(zero_copy_only=False)
-    dtype = rr.ChannelDatatype(fmt["channel_datatype"]).to_np_dtype()
-    return np.frombuffer(raw.tobytes(), dtype=dtype).reshape(fmt["height"], fmt["width"])
-
-
-def plain_cell(cell: pa.Scalar):
-    """A component cell (a list) as a python value: its only item, or the list."""
-    items = cell.as_py()
-    return items[0] if len(items) == 1 else items
-
-
-# --- inspection -------------------------------------------------------------------------------
+# --- what the recording holds -----------------------------------------------------------------
 
 
 def inspect_recording(path: str | os.PathLike) -> dict:
@@ -131,7 +52,9 @@ def inspect_recording(path: str | os.PathLike) -> dict:
         ``archetypes`` and ``components`` (sorted names), ``static_rows``, ``temporal_rows``,
         and where present ``image_shapes`` (``(height, width)``) and ``value_range``
         (min, max over all its images), ``scalars`` and ``values`` (AnyValues): lists of
-        ``{"times": {timeline: value}, "values": ...}`` in time order.
+        ``{"times": {timeline: value}, "values": ...}`` in time order. Recordings store every
+        number as a float (so that a key keeps one type across times); whole ones come back
+        as ``int`` (``grid.nx = 1500``).
 
     Raises
     ------
@@ -163,7 +86,7 @@ def _add_times(timelines: dict, times: dict) -> None:
 def _timeline_summary(timeline: dict) -> dict:
     """Kind, count, range and sorted distinct values of one timeline (seconds where timed)."""
     kind = timeline["kind"]
-    values = [_seconds(kind, v) for v in sorted(timeline["values"])]
+    values = [seconds(kind, v) for v in sorted(timeline["values"])]
     return {
         "kind": kind, "count": len(values), "min": values[0], "max": values[-1], "values": values
     }
@@ -180,18 +103,27 @@ def _add_row(acc: dict, times: dict, cells: dict) -> None:
     acc["static_rows" if not times else "temporal_rows"] += 1
     acc["components"].update(cells)
     acc["archetypes"].update(archetype for archetype, _ in cells.values())
-    when = {name: _seconds(kind, value) for name, (kind, value) in times.items()}
+    when = {name: seconds(kind, value) for name, (kind, value) in times.items()}
     if IMAGE_BUFFER in cells and IMAGE_FORMAT in cells:
         image = decode_image(cells[IMAGE_BUFFER][1], cells[IMAGE_FORMAT][1])
         acc["image_shapes"].add(image.shape)
         acc["ranges"].append((float(np.min(image)), float(np.max(image))))
     if _SCALARS in cells:
-        acc["scalars"].append({"times": when, "values": plain_cell(cells[_SCALARS][1])})
+        acc["scalars"].append({"times": when, "values": _whole(plain_cell(cells[_SCALARS][1]))})
     untyped = {
-        name: plain_cell(cell) for name, (archetype, cell) in cells.items() if archetype == "AnyValues"
+        name: _whole(plain_cell(cell)) for name, (archetype, cell) in cells.items() if archetype == "AnyValues"
     }
     if untyped:
         acc["values"].append({"times": when, "values": dict(sorted(untyped.items()))})
+
+
+def _whole(value):
+    """A recorded value with whole floats as ints (lists item by item)."""
+    if isinstance(value, list):
+        return [_whole(v) for v in value]
+    if isinstance(value, float) and value.is_integer() and abs(value) < 2**53:
+        return int(value)
+    return value
 
 
 def _entity_summary(acc: dict) -> dict:
@@ -212,25 +144,283 @@ def _entity_summary(acc: dict) -> dict:
     return summary
 
 
-# --- formatting -------------------------------------------------------------------------------
+# --- where the target is ----------------------------------------------------------------------
+
+
+def layer_summaries(path: str | os.PathLike, levels: Iterable[float] = DEFAULT_MASS_LEVELS) -> list[dict]:
+    """Where the target is, per density layer and time of a recording.
+
+    Everything is computed from the recorded float32 density (read back by
+    :func:`bananagrid.recording.readback.read_rasters`), except the captured mass, which the run
+    recorded in float64.
+
+    Parameters
+    ----------
+    path : path-like
+        The ``.rrd`` file.
+    levels : iterable of float
+        Probability-mass levels, each in (0, 1).
+
+    Returns
+    -------
+    list of dict
+        By time, then layer: ``layer``, ``entity``, ``t`` (s), ``mass`` (the raw captured mass,
+        before normalising), ``normalised``, ``peak`` (the highest density, m^-2), ``peak_x``,
+        ``peak_y`` (its cell centre, m, x east, y north; None where the image is all zero), ``grid`` (``origin``, ``dx``, ``dy``,
+        ``nx``, ``ny``) and ``regions``: per level, as
+        :meth:`bananagrid.contours.MassRegion.describe` (``probability``, ``reached``,
+        ``density``, ``enclosed``, ``cells``, ``area`` in m^2) plus ``area_km2``. Empty for a
+        recording without density layers (an array scene's).
+
+    Raises
+    ------
+    BananagridError
+        If the file is not a readable recording, or ``levels`` are not probabilities.
+    """
+    out = []
+    for item in read_layers(path):
+        raster = item.raster
+        i, j = np.unravel_index(int(np.argmax(raster.values)), raster.values.shape)
+        regions = []
+        for region in mass_regions(raster, levels):
+            described = region.describe()
+            described["area_km2"] = None if described["area"] is None else described["area"] / 1e6
+            regions.append(described)
+        peak = float(raster.values[i, j])
+        out.append({
+            "layer": item.layer, "entity": item.entity, "t": item.t, "mass": raster.mass,
+            "normalised": raster.normalised, "peak": peak,
+            "peak_x": float(raster.x[j]) if peak > 0.0 else None, "peak_y": float(raster.y[i]) if peak > 0.0 else None,
+            "grid": raster.grid.describe(), "regions": regions,
+        })
+    return out
+
+
+def cell_map_summaries(path: str | os.PathLike, levels: Iterable[float] = DEFAULT_MASS_LEVELS) -> list[dict]:
+    """Where the target is, per angular cell map (an array scene's) and time of a recording.
+
+    The numbers are cell probabilities p(C | S), not densities, from the recorded float32
+    table (:func:`bananagrid.recording.readback.read_cell_maps`).
+
+    Parameters
+    ----------
+    path : path-like
+        The ``.rrd`` file.
+    levels : iterable of float
+        Probability-mass levels, each in (0, 1).
+
+    Returns
+    -------
+    list of dict
+        By time, then entity: ``entity``, ``t`` (s), ``geometry`` (``line``, ``plane``,
+        ``frustum``; None if the lattice is not recorded), ``cells`` (int), ``region_probability``
+        (p(S)), ``total`` (sum of p(C | S)), ``peak`` (the highest cell probability),
+        ``peak_azimuth_deg``, ``peak_elevation_deg`` (its direction; elevation from +z, 180 the
+        nadir; None for a line), ``peak_x``, ``peak_y``, ``peak_z`` (the centroid of its cell
+        on the target, m, array frame, z up; None for an unbounded horizon cell) and
+        ``regions``: per level ``probability``, ``reached``, ``cell_probability`` (the
+        boundary cell's), ``enclosed`` and ``cells``. Empty for a recording without cell maps.
+
+    Raises
+    ------
+    BananagridError
+        If the file is not a readable recording, or ``levels`` are not probabilities.
+    """
+    out = []
+    for item in read_cell_maps(path):
+        summary = item.summary
+        flat = int(np.argmax(item.prob))
+        index = np.unravel_index(flat, item.prob.shape)
+        entry = {
+            "entity": item.entity, "t": item.t,
+            "geometry": None if item.lattice is None else item.lattice.geometry,
+            "cells": int(item.prob.size), "region_probability": _float(summary.get("region_probability")),
+            "total": _float(summary.get("total")), "peak": float(item.prob[index]),
+        }
+        entry.update(_peak_cell(item, index))
+        entry["regions"] = [
+            {"probability": r.probability, "reached": r.reached,
+             "cell_probability": None if math.isnan(r.density) else r.density,
+             "enclosed": r.enclosed, "cells": r.cells}
+            for r in cell_regions(item.prob, levels)
+        ]
+        out.append(entry)
+    return out
+
+
+def _float(value) -> float | None:
+    """A recorded number as float (None if absent or not a number)."""
+    return float(value) if isinstance(value, (int, float)) and not isinstance(value, bool) else None
+
+
+def _peak_cell(item: RecordedCellMap, index: tuple) -> dict:
+    """Direction (deg) and cell centroid (m) of the cell at ``index``; None where unknown."""
+    out = dict.fromkeys(("peak_azimuth_deg", "peak_elevation_deg", "peak_x", "peak_y", "peak_z"))
+    lattice: AngularLattice | None = item.lattice
+    if lattice is None:
+        return out
+    a = index[0]
+    out["peak_azimuth_deg"] = math.degrees(float(lattice.azimuths[a]))
+    if lattice.geometry == "line":  # the line y = 0, z = -h of the array frame
+        x = float(lattice.centroids[a, 0])
+        centroid = (x, 0.0, -lattice.h) if math.isfinite(x) else (None,) * 3
+    else:
+        out["peak_elevation_deg"] = math.degrees(float(lattice.elevations[index[1]]))
+        point = lattice.centroids[a, index[1]]
+        centroid = tuple(float(v) for v in point) if np.all(np.isfinite(point)) else (None,) * 3
+    out["peak_x"], out["peak_y"], out["peak_z"] = centroid
+    return out
+
+
+# --- for scripts ------------------------------------------------------------------------------
+
+
+def json_ready(value):
+    """``value`` as standard JSON data: tuples and sets as lists, NumPy scalars as Python
+    numbers, NaN and infinities as None (JSON ``null``)."""
+    if isinstance(value, dict):
+        return {str(k): json_ready(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple, set)):
+        return [json_ready(v) for v in value]
+    if isinstance(value, np.generic):
+        return json_ready(value.item())
+    if isinstance(value, float) and not math.isfinite(value):
+        return None
+    return value
+
+
+# --- for people -------------------------------------------------------------------------------
 
 
 def format_inspection(info: dict) -> str:
-    """Render :func:`inspect_recording`'s result as a plain-text report."""
+    """Render :func:`inspect_recording`'s result as a plain-text report.
+
+    Where ``info`` also has ``layers`` (:func:`layer_summaries`) or ``cell_maps``
+    (:func:`cell_map_summaries`), where the target is comes first, after the file's header.
+    """
     lines = [
         f"recording  {info['path']}",
         f"  application {info['application_id']}, id {info['recording_id']}, "
         f"blueprint {'embedded' if info['blueprint'] else 'none'}",
-        "",
-        "timelines",
     ]
-    timelines = [_timeline_line(name, t) for name, t in info["timelines"].items()]
-    lines += timelines or ["  (none: static only)"]
+    if info.get("layers"):
+        lines += ["", "where the target is (density layers; from the recorded float32 images)"]
+        for item in info["layers"]:
+            lines += _layer_lines(item)
+    if info.get("cell_maps"):
+        lines += ["", "where the target is (angular cell maps; cell probabilities p(C | S), not densities)"]
+        for item in info["cell_maps"]:
+            lines += _cell_map_lines(item)
+    lines += ["", "timelines"]
+    lines += [_timeline_line(name, t) for name, t in info["timelines"].items()] or ["  (none: static only)"]
     lines += ["", "entities"]
     width = max((len(name) for name in info["entities"]), default=0)
     for name, entity in info["entities"].items():
         lines += _entity_lines(name.ljust(width), entity)
     return "\n".join(lines)
+
+
+def _layer_lines(item: dict) -> list[str]:
+    """One layer at one time: captured mass, peak and place, then the regions as a table."""
+    lines = [
+        f"  {item['layer']} at t = {item['t']:g} s",
+        f"    captured mass          {_captured(item['mass'], item['normalised'])}",
+        f"    peak density           {item['peak']:.6g} m^-2 {_place(item)}",
+    ]
+    rows = [["region", "area [km²]", "area [m²]", "cells", "holds"]]
+    for r in item["regions"]:
+        label = f"{100 * r['probability']:g} %"
+        if r["reached"]:
+            rows.append([label, _square_kilometres(r["area_km2"]), _square_metres(r["area"]), f"{r['cells']:,}",
+                         f"{r['enclosed']:.6f}"])
+        else:
+            rows.append([label, "not reached", "", "", f"{r['enclosed']:.6f}"])  # the grid's whole mass
+    return lines + _table(rows, indent=4)
+
+
+def _cell_map_lines(item: dict) -> list[str]:
+    """One cell map at one time: its cells, p(S), the peak cell and where, the regions."""
+    geometry = f"{item['geometry']}, " if item["geometry"] else ""
+    lines = [
+        f"  {item['entity']} at t = {item['t']:g} s ({geometry}{item['cells']:,} cells, "
+        f"p(S) = {_show(item['region_probability'])}, sum of p(C | S) = {_show(item['total'])})",
+        f"    peak cell probability  {item['peak']:.6g} {_direction(item)}",
+    ]
+    if item["peak_azimuth_deg"] is not None:
+        lines.append(f"    its cell's centroid    {_centroid(item)}")
+    rows = [["region", "cells", "holds", "smallest cell probability"]]
+    for r in item["regions"]:
+        label = f"{100 * r['probability']:g} %"
+        if r["reached"]:
+            rows.append([label, f"{r['cells']:,}", f"{r['enclosed']:.6f}", f"{r['cell_probability']:.6g}"])
+        else:
+            rows.append([label, "not reached", f"{r['enclosed']:.6f}", ""])  # every cell's
+    return lines + _table(rows, indent=4)
+
+
+def _captured(mass: float | None, normalised: bool) -> str:
+    """The captured mass, how far it is from one, and whether the map was then normalised."""
+    if mass is None or not math.isfinite(mass):
+        return "n/a"
+    gap = 1.0 - mass
+    after = "the map is normalised to 1" if normalised else "the map is not normalised"
+    return f"{mass:.6f} ({abs(gap):.3g} {'missing' if gap >= 0.0 else 'in excess'}; {after})"
+
+
+def _place(item: dict) -> str:
+    """A layer's peak place in words: world metres to the grid's resolution (a geographic
+    position would follow here)."""
+    if item["peak_x"] is None:
+        return "(every cell is zero)"
+    step = min(item["grid"]["dx"], item["grid"]["dy"])
+    decimals = max(0, -math.floor(math.log10(step / 2.0)))
+    return f"in the cell centred on x = {item['peak_x']:,.{decimals}f} m, y = {item['peak_y']:,.{decimals}f} m (east, north)"
+
+
+def _direction(item: dict) -> str:
+    """A cell map's peak cell: its direction, where the lattice is known."""
+    if item["peak_azimuth_deg"] is None:
+        return "(the lattice is not recorded)"
+    out = f"in the cell at azimuth {item['peak_azimuth_deg']:.6g} deg"
+    if item["peak_elevation_deg"] is not None:
+        out += f", elevation {item['peak_elevation_deg']:.6g} deg (from +z, 180 the nadir)"
+    return out
+
+
+def _centroid(item: dict) -> str:
+    """The centroid of a cell map's peak cell on the target, mm resolution."""
+    if item["peak_x"] is None:
+        return "none (a horizon cell, unbounded)"
+    return (f"x = {item['peak_x']:,.3f} m, y = {item['peak_y']:,.3f} m, z = {item['peak_z']:,.3f} m "
+            "(array frame, z up)")
+
+
+def _square_kilometres(value: float | None) -> str:
+    """An area in km^2 to 4 significant digits, thousands separated, no exponent."""
+    if value is None:
+        return "n/a"
+    if value == 0.0:
+        return "0"
+    digits = 3 - int(math.floor(math.log10(abs(value))))
+    return f"{round(value, digits):,.{max(digits, 0)}f}"
+
+
+def _square_metres(value: float | None) -> str:
+    """An area in m^2: whole, thousands separated (small ones to 4 significant digits)."""
+    if value is None:
+        return "n/a"
+    return f"{value:,.0f}" if value >= 100 else f"{value:.4g}"
+
+
+def _table(rows: list[list[str]], indent: int) -> list[str]:
+    """Rows of cells as aligned lines: the first column left-aligned, the others right."""
+    widths = [max(len(row[k]) for row in rows) for k in range(len(rows[0]))]
+    pad = " " * indent
+    def line(row: list[str]) -> str:
+        cells = [cell.ljust(w) if k == 0 else cell.rjust(w) for k, (cell, w) in enumerate(zip(row, widths))]
+        return (pad + "  ".join(cells)).rstrip()
+
+    return [line(row) for row in rows]
 
 
 def _timeline_line(name: str, timeline: dict) -> str:
@@ -252,64 +442,26 @@ def _entity_lines(name: str, entity: dict) -> list[str]:
         low, high = entity["value_range"]
         lines.append(f"{indent}image {shapes} (rows x cols), values {low:.6g} .. {high:.6g}")
     for sample in entity.get("scalars", []):
-        lines.append(f"{indent}{_when(sample['times'])}: {sample['values']}")
+        lines.append(f"{indent}{_when(sample['times'])}: {_show(sample['values'])}")
     if "values" in entity:
         latest = entity["values"][-1]
         lines.append(f"{indent}values at {_when(latest['times'])}:")
-        lines += [f"{indent}  {key} = {_number(value)}" for key, value in latest["values"].items()]
+        lines += [f"{indent}  {key} = {_show(value)}" for key, value in latest["values"].items()]
     return lines
 
 
-def _number(value):
-    """A recorded value as printed: whole floats as integers (recordings store every number
-    as a float, so that a key keeps one type across times: ``grid.nx = 1500``)."""
-    if isinstance(value, float) and value.is_integer() and abs(value) < 1e15:
-        return int(value)
-    return value
+def _show(value) -> str:
+    """A recorded value as printed: ints whole, floats to ``FLOAT_DIGITS`` significant digits,
+    lists item by item, None as n/a."""
+    if value is None:
+        return "n/a"
+    if isinstance(value, list):
+        return "[" + ", ".join(_show(v) for v in value) + "]"
+    if isinstance(value, float):
+        return f"{value:.{FLOAT_DIGITS}g}"
+    return str(value)
 
 
 def _when(times: dict) -> str:
     """``elapsed=1.5`` style label for a row's times (``static`` for none)."""
     return ", ".join(f"{name}={value:g}" for name, value in sorted(times.items())) or "static"
-
-
-# --- images back as arrays --------------------------------------------------------------------
-
-
-def read_depth_image(
-    path: str | os.PathLike, entity_path: str, elapsed: float | None = None
-) -> np.ndarray:
-    """The ``DepthImage`` logged at ``entity_path`` as grid values (row 0 south).
-
-    Undoes the north-first row order of :func:`bananagrid.recording.core.image_from_values`, so the
-    result has the orientation and shape ``(ny, nx)`` of the raster's values, in float32.
-
-    Parameters
-    ----------
-    path : path-like
-        The ``.rrd`` file.
-    entity_path : str
-        E.g. ``"cat/density"`` (a leading ``/`` is optional).
-    elapsed : float, optional
-        Elapsed seconds of the row to read; by default the latest row.
-
-    Raises
-    ------
-    BananagridError
-        If the file is unreadable, or holds no image there (at that time).
-    """
-    entity = "/" + entity_path.strip("/")
-    reader, store = open_recording(path)
-    images = [
-        (times.get(ELAPSED, (None, -1))[1], cells)
-        for name, times, cells in recording_rows(reader, store)
-        if name == entity and IMAGE_BUFFER in cells and IMAGE_FORMAT in cells
-    ]
-    if elapsed is not None:
-        wanted = elapsed_nanos(elapsed)
-        images = [(t, cells) for t, cells in images if t == wanted]
-    if not images:
-        at = "" if elapsed is None else f" at elapsed = {elapsed:g} s"
-        raise BananagridError(f"{path}: no DepthImage at {entity}{at}")
-    _, cells = max(images, key=lambda item: item[0])
-    return values_from_image(decode_image(cells[IMAGE_BUFFER][1], cells[IMAGE_FORMAT][1]))

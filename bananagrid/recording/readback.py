@@ -1,33 +1,205 @@
-"""Read a bananagrid recording's layers back as rasters (for pictures and checks without a
-viewer).
+"""Read a bananagrid recording back: its rows, its images as arrays, its density layers as
+rasters and its angular cell maps as probability tables (for ``inspect``, pictures and checks
+without a viewer).
 
-Each layer ``layers/NAME`` holds, per elapsed time, its density image (rows north first) with a
-``Transform3D`` from pixels to world metres (translation = the north-west corner, scale =
-``(dx, -dy)``, see :func:`bananagrid.recording.core.log_raster`) and its ``info`` values; this
-rebuilds the :class:`~bananagrid.domains.grid.Grid` from them and the values from the float32
-image.
+Everything goes through :class:`rerun.chunk.RrdReader`: each chunk of the (first) recording
+store becomes an arrow record batch whose fields say, in their ``rerun:kind`` metadata,
+whether a column is a timeline (``index``) or a component (``data``).
+
+What ``bananagrid run`` writes and this module reads (see :mod:`bananagrid.recording.core` and
+:mod:`bananagrid.recording.presence`):
+
+- ``layers/NAME/density``: per elapsed time, the density (m^-2) as a float32 ``DepthImage``,
+  rows north first, with a ``Transform3D`` from pixels to world metres (translation = the
+  grid's north-west corner, scale = ``(dx, -dy)``);
+- ``layers/NAME/info``: ``AnyValues`` of the raster (``mass``, ``normalised``, ``grid.*`` in
+  float64, ``provenance.*``, ...);
+- ``ENTITY/table`` and ``ENTITY/summary``: an array's cell probabilities p(C | S) as a float32
+  ``DepthImage`` (columns azimuths, rows elevations) and its ``AnyValues`` (``cells``,
+  ``region_probability``, ``provenance.lattice.*``, ...).
 """
 
 from __future__ import annotations
 
+import math
 import os
-from dataclasses import dataclass
+import warnings
+from collections.abc import Iterator
+from dataclasses import dataclass, field
+from pathlib import Path
 
 import numpy as np
+import pyarrow as pa
+import rerun as rr
+from rerun.chunk import RrdReader, StoreEntry
 
-from ..contours import DEFAULT_MASS_LEVELS, format_area, mass_regions
+from ..domains.angular_lattice import AngularLattice
 from ..domains.grid import Grid
 from ..results import Raster
 from ..validate import BananagridError
-from .core import ELAPSED, values_from_image
-from .inspect import IMAGE_BUFFER, IMAGE_FORMAT, decode_image, open_recording, plain_cell, recording_rows
+from .core import ELAPSED, elapsed_nanos, values_from_image
 
-__all__ = ["RecordedRaster", "format_layers", "layer_summaries", "read_rasters"]
+__all__ = [
+    "IMAGE_BUFFER", "IMAGE_FORMAT", "RecordedCellMap", "RecordedRaster", "decode_image", "open_recording",
+    "plain_cell", "read_cell_maps", "read_depth_image", "read_layers", "read_rasters", "recording_rows", "seconds",
+]
+
+IMAGE_BUFFER = "DepthImage:buffer"
+IMAGE_FORMAT = "DepthImage:format"
+_TRANSLATION = "Transform3D:translation"
+_SCALE = "Transform3D:scale"
+#: Relative slack between the float32 pixel transform and the float64 grid of a layer's info.
+_TRANSFORM_RTOL = 1e-5
+
+
+# --- reading rows -----------------------------------------------------------------------------
+
+
+def open_recording(path: str | os.PathLike) -> tuple[RrdReader, StoreEntry]:
+    """The reader and the first recording store of ``path``; one-line errors naming it."""
+    path = Path(path)
+    if not path.exists():
+        raise BananagridError(f"{path}: no such file")
+    if not path.is_file():
+        raise BananagridError(f"{path}: not a file")
+    try:
+        with warnings.catch_warnings():  # a file without a footer is read by a full scan; nothing to act on
+            warnings.filterwarnings("ignore", message="RRD file has no footer")
+            reader = RrdReader(path)
+            stores = reader.recordings()
+    except (RuntimeError, ValueError, OSError) as exc:
+        first_line = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+        raise BananagridError(f"{path}: not a readable .rrd file ({first_line})") from None
+    if not stores:
+        raise BananagridError(f"{path}: the file holds no recording (only blueprints)")
+    return reader, stores[0]
+
+
+def recording_rows(reader: RrdReader, store: StoreEntry) -> Iterator[tuple[str, dict, dict]]:
+    """Yield ``(entity_path, times, components)`` for every row of the recording store.
+
+    ``times`` maps timeline name to ``(kind, value)`` (empty for static rows); ``components``
+    maps component name to ``(archetype, arrow list value)`` for the non-null cells.
+
+    Raises
+    ------
+    BananagridError
+        If a chunk cannot be decoded (a damaged file), naming the file.
+    """
+    try:
+        for chunk in reader.stream(store=store):
+            batch = chunk.to_record_batch()
+            indexes, data = _columns(batch)
+            rows = []
+            for row in range(batch.num_rows):
+                times = {name: (kind, int(column[row])) for name, (kind, column) in indexes.items()}
+                cells = {
+                    name: (archetype, column[row])
+                    for name, (archetype, column) in data.items()
+                    if column[row].is_valid
+                }
+                rows.append((chunk.entity_path, times, cells))
+            yield from rows
+    except (RuntimeError, ValueError, IndexError, TypeError, pa.ArrowException) as exc:
+        first_line = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+        raise BananagridError(f"{reader.path}: a damaged .rrd file ({first_line})") from None
+
+
+def _columns(batch: pa.RecordBatch) -> tuple[dict, dict]:
+    """Split a chunk's columns into timelines ``{name: (kind, column)}`` and components
+    ``{name: (archetype, column)}``; control columns (row ids) are dropped.
+
+    Timeline columns come back as int64 numpy arrays (nanoseconds for durations and
+    timestamps).
+    """
+    indexes, data = {}, {}
+    for fld, column in zip(batch.schema, batch.columns):
+        meta = {k.decode(): v.decode() for k, v in (fld.metadata or {}).items()}
+        if meta.get("rerun:kind") == "index":
+            times = column.cast(pa.int64()).to_numpy(zero_copy_only=False)
+            indexes[meta.get("rerun:index_name", fld.name)] = (_time_kind(fld.type), times)
+        elif meta.get("rerun:kind") == "data":
+            archetype = meta.get("rerun:archetype", "AnyValues").rsplit(".", 1)[-1]
+            data[meta.get("rerun:component", fld.name)] = (archetype, column)
+    return indexes, data
+
+
+def _time_kind(datatype: pa.DataType) -> str:
+    """``duration``, ``timestamp`` or ``sequence`` from a timeline column's arrow type."""
+    if pa.types.is_duration(datatype):
+        return "duration"
+    if pa.types.is_timestamp(datatype):
+        return "timestamp"
+    return "sequence"
+
+
+def seconds(kind: str, value: int) -> float | int:
+    """A timeline value for people: seconds for durations and timestamps, else as is."""
+    return value / 1e9 if kind in ("duration", "timestamp") else value
+
+
+def decode_image(buffer: pa.Scalar, image_format: pa.Scalar) -> np.ndarray:
+    """A logged image cell back to a ``(height, width)`` array of its channel type."""
+    fmt = image_format.values[0].as_py()
+    raw = buffer.values[0].values.to_numpy(zero_copy_only=False)
+    dtype = rr.ChannelDatatype(fmt["channel_datatype"]).to_np_dtype()
+    return np.frombuffer(raw.tobytes(), dtype=dtype).reshape(fmt["height"], fmt["width"])
+
+
+def plain_cell(cell: pa.Scalar):
+    """A component cell (a list) as a python value: its only item, or the list."""
+    items = cell.as_py()
+    return items[0] if len(items) == 1 else items
+
+
+# --- images back as arrays --------------------------------------------------------------------
+
+
+def read_depth_image(
+    path: str | os.PathLike, entity_path: str, elapsed: float | None = None
+) -> np.ndarray:
+    """The ``DepthImage`` logged at ``entity_path`` as grid values (row 0 south).
+
+    Undoes the north-first row order of :func:`bananagrid.recording.core.image_from_values`, so the
+    result has the orientation and shape ``(ny, nx)`` of the raster's values, in float32.
+
+    Parameters
+    ----------
+    path : path-like
+        The ``.rrd`` file.
+    entity_path : str
+        E.g. ``"cat/density"`` (a leading ``/`` is optional).
+    elapsed : float, optional
+        Elapsed seconds of the row to read; by default the latest row.
+
+    Raises
+    ------
+    BananagridError
+        If the file is unreadable, or holds no image there (at that time).
+    """
+    entity = "/" + entity_path.strip("/")
+    reader, store = open_recording(path)
+    images = [
+        (times.get(ELAPSED, (None, -1))[1], cells)
+        for name, times, cells in recording_rows(reader, store)
+        if name == entity and IMAGE_BUFFER in cells and IMAGE_FORMAT in cells
+    ]
+    if elapsed is not None:
+        wanted = elapsed_nanos(elapsed)
+        images = [(t, cells) for t, cells in images if t == wanted]
+    if not images:
+        at = "" if elapsed is None else f" at elapsed = {elapsed:g} s"
+        raise BananagridError(f"{path}: no DepthImage at {entity}{at}")
+    _, cells = max(images, key=lambda item: item[0])
+    return values_from_image(decode_image(cells[IMAGE_BUFFER][1], cells[IMAGE_FORMAT][1]))
+
+
+# --- density layers as rasters ----------------------------------------------------------------
 
 
 @dataclass(frozen=True)
 class RecordedRaster:
-    """One layer at one elapsed time, read back from a recording.
+    """One density layer at one elapsed time, read back from a recording.
 
     Attributes
     ----------
@@ -36,10 +208,14 @@ class RecordedRaster:
     entity : str
         Its entity (``"layers/cat"``).
     t : float
-        Elapsed time, s.
+        Elapsed time, s (0 for a layer logged without time).
     raster : Raster
-        float64 of the recorded float32 density, on the rebuilt grid; ``mass`` and
-        ``normalised`` from the layer's info, provenance the info's ``provenance.*`` values.
+        The density (m^-2), float64 of the recorded float32 image, rows south to north, on the
+        layer's grid (float64 from its info, else rebuilt from the image's pixel-to-world
+        transform and shape); ``mass`` (the raw captured mass, NaN if not recorded),
+        ``normalised`` and ``quantity`` from the info; ``provenance`` the info's
+        ``provenance.*`` values under their dotted keys without the prefix (``"sigma_a"``,
+        ``"lattice.h"``), numbers as recorded (float).
     """
 
     layer: str
@@ -49,12 +225,42 @@ class RecordedRaster:
 
 
 def read_rasters(path: str | os.PathLike) -> list[RecordedRaster]:
-    """Every density layer of a recording written by ``bananagrid run``, by time then layer.
+    """Every density layer (``layers/NAME/density``) of a recording written by ``bananagrid
+    run``, as rasters, ordered by time, then layer name.
+
+    Parameters
+    ----------
+    path : path-like
+        The ``.rrd`` file.
+
+    Returns
+    -------
+    list of RecordedRaster
+        One per layer and elapsed time.
 
     Raises
     ------
     BananagridError
-        If the file is not a readable recording, or holds no density layer.
+        If the file is not a readable recording, holds no density layer (an array scene's
+        recording holds cell maps instead: :func:`read_cell_maps`), a layer's image has
+        neither a grid in its info nor a pixel-to-world transform, or they disagree, or an image
+        holds NaN or inf (a damaged file).
+    """
+    found = read_layers(path)
+    if not found:
+        raise BananagridError(
+            f"{path}: no density layers (layers/NAME/density); is it a recording of a scene with grid layers?"
+        )
+    return found
+
+
+def read_layers(path: str | os.PathLike) -> list[RecordedRaster]:
+    """As :func:`read_rasters`, but an empty list for a recording without density layers.
+
+    Raises
+    ------
+    BananagridError
+        If the file is not a readable recording, or a layer's grid cannot be rebuilt.
     """
     reader, store = open_recording(path)
     images, transforms, infos = {}, {}, {}
@@ -62,64 +268,169 @@ def read_rasters(path: str | os.PathLike) -> list[RecordedRaster]:
         parts = name.strip("/").split("/")
         if len(parts) != 3 or parts[0] != "layers":
             continue
-        key = (parts[1], times.get(ELAPSED, (None, 0))[1])
+        key = (parts[1], times[ELAPSED][1] if ELAPSED in times else None)  # None: static
         if parts[2] == "density":
             if IMAGE_BUFFER in cells and IMAGE_FORMAT in cells:
                 images[key] = decode_image(cells[IMAGE_BUFFER][1], cells[IMAGE_FORMAT][1])
-            if "Transform3D:translation" in cells:
-                transforms[key] = (plain_cell(cells["Transform3D:translation"][1]), plain_cell(cells["Transform3D:scale"][1]))
+            if _TRANSLATION in cells and _SCALE in cells:
+                transforms[key] = (plain_cell(cells[_TRANSLATION][1]), plain_cell(cells[_SCALE][1]))
         elif parts[2] == "info":
-            infos[key] = {component: plain_cell(value) for component, (_, value) in cells.items()}
+            infos[key] = {
+                component.removeprefix("AnyValues:"): plain_cell(value) for component, (_, value) in cells.items()
+            }
     out = []
-    for (layer, nanos), image in sorted(images.items(), key=lambda item: (item[0][1], item[0][0])):
-        if (layer, nanos) not in transforms:
-            raise BananagridError(f"{path}: layers/{layer}/density has no pixel-to-world transform")
-        (x0, y1, _), (dx, dy, _) = transforms[(layer, nanos)]
+    for (layer, nanos), image in sorted(images.items(), key=lambda item: (item[0][1] or 0, item[0][0])):
+        entity = f"layers/{layer}"
+        info = _latest(infos, layer, nanos, {})
         values = values_from_image(image).astype(np.float64)
-        ny, nx = values.shape
-        grid = Grid(origin=(float(x0), float(y1) + float(dy) * ny), dx=float(dx), dy=-float(dy), nx=nx, ny=ny)
-        info = {k.removeprefix("AnyValues:"): v for k, v in infos.get((layer, nanos), {}).items()}
+        if not np.all(np.isfinite(values)):  # run logs finite densities only
+            raise BananagridError(f"{path}: {entity}/density ({_when(nanos)}) holds NaN or inf: a damaged file")
+        grid = _layer_grid(f"{path}: {entity}/density", values.shape, info, _latest(transforms, layer, nanos))
         provenance = {k.removeprefix("provenance."): v for k, v in info.items() if k.startswith("provenance.")}
-        raster = Raster(values=values, grid=grid, mass=float(info.get("mass", np.nan)),
-                        normalised=info.get("normalised") == "true", provenance=provenance)
-        out.append(RecordedRaster(layer, f"layers/{layer}", nanos / 1e9, raster))
-    if not out:
-        raise BananagridError(f"{path}: no density layers (layers/NAME/density); is it a scene recording?")
+        mass = info.get("mass")
+        raster = Raster(
+            values=values, grid=grid, mass=float(mass) if isinstance(mass, (int, float)) else math.nan,
+            normalised=info.get("normalised") == "true", quantity=str(info.get("quantity", "density")),
+            provenance=provenance,
+        )
+        out.append(RecordedRaster(layer, entity, 0.0 if nanos is None else nanos / 1e9, raster))
     return out
 
 
-def layer_summaries(path: str | os.PathLike, levels=DEFAULT_MASS_LEVELS) -> list[dict]:
-    """Where the target is, per layer and time of a recording: ``layer``, ``t`` (s), ``mass``
-    (captured, from the layer's info), ``peak`` (m^-2) and ``peak_x``, ``peak_y`` (its cell
-    centre, m), and ``regions`` (:meth:`MassRegion.describe` of the probability-mass regions at
-    ``levels``, from the recorded float32 image). Empty for a recording without density layers
-    (an array scene's)."""
-    try:
-        recorded = read_rasters(path)
-    except BananagridError as exc:
-        if "no density layers" in str(exc):
-            return []
-        raise
+def _when(nanos: int | None) -> str:
+    """An elapsed time for messages."""
+    return "static" if nanos is None else f"t = {nanos / 1e9:g} s"
+
+
+def _latest(by_key: dict, name: str, nanos: int | None, default=None):
+    """The value logged for ``name`` at ``nanos``, else its static one, else ``default``."""
+    return by_key.get((name, nanos), by_key.get((name, None), default))
+
+
+def _layer_grid(where: str, shape: tuple[int, int], info: dict, transform) -> Grid:
+    """The layer's grid: from its info's float64 ``grid.*`` values, checked against the image's
+    shape and (to float32 precision) its pixel-to-world transform; else from the transform."""
+    ny, nx = shape
+    keys = ("grid.origin.0", "grid.origin.1", "grid.dx", "grid.dy", "grid.nx", "grid.ny")
+    from_info = None
+    if info and all(isinstance(info.get(k), (int, float)) for k in keys):
+        if (int(info["grid.ny"]), int(info["grid.nx"])) != (ny, nx):
+            raise BananagridError(
+                f"{where}: the image is {ny} x {nx} (rows x cols) but the layer's info says "
+                f"grid.ny x grid.nx = {info['grid.ny']:g} x {info['grid.nx']:g}"
+            )
+        from_info = Grid(origin=(info["grid.origin.0"], info["grid.origin.1"]), dx=info["grid.dx"],
+                         dy=info["grid.dy"], nx=nx, ny=ny)
+    if transform is None:
+        if from_info is None:
+            raise BananagridError(f"{where}: no pixel-to-world transform and no grid.* values in its info")
+        return from_info
+    (x0, y1, _), (sx, sy, _) = transform
+    if not (sx > 0.0 and sy < 0.0):
+        raise BananagridError(
+            f"{where}: pixel-to-world scale ({sx:g}, {sy:g}): expected (dx, -dy) with dx, dy > 0 (rows north first)"
+        )
+    from_transform = Grid(origin=(float(x0), float(y1) + float(sy) * ny), dx=float(sx), dy=-float(sy), nx=nx, ny=ny)
+    if from_info is None:
+        return from_transform
+    scale = max(abs(v) for v in (*from_info.extent, from_info.dx * nx, from_info.dy * ny))
+    if not np.allclose(from_info.extent, from_transform.extent, rtol=0.0, atol=_TRANSFORM_RTOL * scale):
+        raise BananagridError(
+            f"{where}: its pixel-to-world transform spans {_extent(from_transform)} but its info's grid "
+            f"{_extent(from_info)}"
+        )
+    return from_info
+
+
+def _extent(grid: Grid) -> str:
+    x0, x1, y0, y1 = grid.extent
+    return f"x {x0:g} .. {x1:g} m, y {y0:g} .. {y1:g} m"
+
+
+# --- angular cell maps ------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class RecordedCellMap:
+    """One array's angular cell map at one elapsed time, read back from a recording.
+
+    Attributes
+    ----------
+    entity : str
+        Its entity (``"presence"``).
+    t : float
+        Elapsed time, s.
+    prob : ndarray
+        Cell probabilities p(C | S) (per cell, not densities), float64 of the recorded float32
+        table, indexed ``[azimuth, elevation]`` (``[azimuth]`` for a line).
+    lattice : AngularLattice or None
+        The lattice, rebuilt from the summary's ``provenance.lattice.*`` values (None where
+        they are missing or do not describe a lattice of ``prob``'s shape).
+    summary : dict
+        The ``ENTITY/summary`` values under their dotted keys (``cells``,
+        ``region_probability``, ``total``, ``peak``, ``provenance.*``, ...).
+    """
+
+    entity: str
+    t: float
+    prob: np.ndarray
+    lattice: AngularLattice | None
+    summary: dict = field(default_factory=dict)
+
+
+def read_cell_maps(path: str | os.PathLike) -> list[RecordedCellMap]:
+    """Every angular cell map (``ENTITY/table`` beside ``ENTITY/summary``) of a recording, by
+    time, then entity; empty for a recording without one.
+
+    Raises
+    ------
+    BananagridError
+        If the file is not a readable recording.
+    """
+    reader, store = open_recording(path)
+    tables, summaries = {}, {}
+    for name, times, cells in recording_rows(reader, store):
+        entity, _, leaf = name.strip("/").rpartition("/")
+        key = (entity, times[ELAPSED][1] if ELAPSED in times else None)
+        if leaf == "table" and IMAGE_BUFFER in cells and IMAGE_FORMAT in cells:
+            tables[key] = decode_image(cells[IMAGE_BUFFER][1], cells[IMAGE_FORMAT][1])
+        elif leaf == "summary" and any(archetype == "AnyValues" for archetype, _ in cells.values()):
+            summaries[key] = {
+                component.removeprefix("AnyValues:"): plain_cell(value)
+                for component, (archetype, value) in cells.items() if archetype == "AnyValues"
+            }
     out = []
-    for item in recorded:
-        raster = item.raster
-        i, j = np.unravel_index(int(np.argmax(raster.values)), raster.values.shape)
-        out.append({
-            "layer": item.layer, "t": item.t, "mass": raster.mass, "peak": raster.peak,
-            "peak_x": float(raster.x[j]), "peak_y": float(raster.y[i]),
-            "regions": [r.describe() for r in mass_regions(raster, levels)],
-        })
+    for (entity, nanos), image in sorted(tables.items(), key=lambda item: (item[0][1] or 0, item[0][0])):
+        summary = summaries.get((entity, nanos), summaries.get((entity, None)))
+        if summary is None or "cells" not in summary:
+            continue  # a table image that is not a cell map's
+        lattice = _lattice(summary)
+        if lattice is not None and lattice.geometry == "line":
+            prob = image[0].astype(np.float64)
+        else:
+            prob = np.ascontiguousarray(image.T, dtype=np.float64)
+        if not np.all(np.isfinite(prob)):
+            raise BananagridError(f"{path}: {entity}/table ({_when(nanos)}) holds NaN or inf: a damaged file")
+        if lattice is not None and lattice.shape != prob.shape:
+            lattice = None
+        out.append(RecordedCellMap(entity, 0.0 if nanos is None else nanos / 1e9, prob, lattice, summary))
     return out
 
 
-def format_layers(layers: list[dict]) -> list[str]:
-    """Report lines for :func:`layer_summaries`: one block per layer and time."""
-    lines = []
-    for item in layers:
-        lines.append(f"  {item['layer']} at t = {item['t']:g} s: captured mass {item['mass']:.6f}, "
-                     f"peak {item['peak']:.4g} m^-2 at (x, y) = ({item['peak_x']:.6g}, {item['peak_y']:.6g}) m")
-        for r in item["regions"]:
-            shown = (f"{format_area(r['area'])} ({r['area']:.6g} m^2), {r['cells']:,} cells, holds {r['enclosed']:.6f}"
-                     if r["reached"] else f"not reached (the grid holds {r['enclosed']:.6f})")
-            lines.append(f"    {100 * r['probability']:g} % region: {shown}")
-    return lines
+def _lattice(summary: dict) -> AngularLattice | None:
+    """The lattice that ``provenance.lattice.*`` describes, or None."""
+    key = "provenance.lattice."
+    values = {k.removeprefix(key): v for k, v in summary.items() if k.startswith(key)}
+
+    def pair(name: str):
+        first, last = values.get(f"{name}.0"), values.get(f"{name}.1")
+        return None if first is None or last is None else (first, last)
+
+    try:
+        return AngularLattice(
+            geometry=values["geometry"], h=values["h"], dh=values.get("dh", 0.0),
+            azimuth_step=values["azimuth_step"], elevation_step=values.get("elevation_step"),
+            azimuth_range=pair("azimuth_range"), elevation_range=pair("elevation_range"),
+        )
+    except (KeyError, TypeError, BananagridError):
+        return None
