@@ -14,6 +14,7 @@ from .domains.pose import Pose
 from .domains.region import Region
 from .engine.batch import pdf_batch, rasterise_batch
 from .engine.rasterise import rasterise
+from .geo.frame import GeoFrame
 from .models.base import Model
 from .models.bearing import BearingFix, bearing_to
 from .models.butterly import Butterly, NormalSpeed, TabulatedSpeed, UniformSpeed
@@ -31,7 +32,7 @@ from .version import __version__
 
 __all__ = [
     # where cells are
-    "Grid", "PolarLattice", "AngularLattice", "Region", "Pose",
+    "Grid", "PolarLattice", "AngularLattice", "Region", "Pose", "GeoFrame",
     # models
     "CAT", "PolarBanana", "Butterly", "UniformSpeed", "NormalSpeed", "TabulatedSpeed", "BearingFix",
     "GaussianMixture", "UniformPresence",

@@ -30,7 +30,7 @@ from .recording.inspect import cell_map_summaries, format_inspection, inspect_re
 from .scenes.examples import example_names, example_path, example_title, scene_source
 from .scenes.load import Scene, load_scene
 from .scenes.pictures import check_picture_options, read_picture, write_picture
-from .scenes.run import RUN_ONLY_PROVENANCE, compute, run_scene
+from .scenes.run import RUN_ONLY_PROVENANCE, check_exports, compute, run_scene
 from .validate import BananagridError, positive
 from .version import __version__
 
@@ -47,6 +47,7 @@ INSPECT_JSON_SCHEMA = """\
   layers: per density layer and time, by time then layer:
     layer, entity, t [s], mass (captured, before normalising), normalised,
     peak [m^-2], peak_x, peak_y [m, the cell centre; x east, y north],
+    peak_lat, peak_lon [deg], utc (t as ISO 8601), crs: for a geographic scene, else null,
     grid {origin [m], dx, dy, nx, ny},
     regions: per level {probability, reached, density [m^-2, the boundary], enclosed, cells,
              area [m^2], area_km2}
@@ -105,7 +106,8 @@ def build_parser() -> tuple[argparse.ArgumentParser, dict[str, argparse.Argument
     run = sub.add_parser(
         "run", help="rasterise scene files into .rrd recordings",
         description="Rasterise every layer of each scene at every time and write OUT/NAME.rrd "
-        "(and OUT/NAME.npz with --npz). Progress goes to stderr, a summary table to stdout.",
+        "(and OUT/NAME.npz with --npz; the map files of --netcdf, --geotiff and --geojson, which need "
+        "the geo extra). Progress goes to stderr, a summary table to stdout.",
     )
     run.add_argument("scenes", nargs="*", metavar="SCENE.toml", type=Path, help="scene files")
     run.add_argument("--example", action="append", default=[], metavar="NAME",
@@ -113,6 +115,12 @@ def build_parser() -> tuple[argparse.ArgumentParser, dict[str, argparse.Argument
     run.add_argument("--out", type=Path, default=Path("out"), metavar="DIR",
                      help="output directory, created if missing (default: ./out)")
     run.add_argument("--npz", action="store_true", help="also write the arrays to NAME.npz")
+    run.add_argument("--netcdf", action="store_true",
+                     help="also write NAME.nc: CF-1.10 NetCDF (x, y; with [geo] lat, lon, CRS and UTC times)")
+    run.add_argument("--geotiff", action="store_true",
+                     help="also write NAME.tif: one georeferenced float32 band per layer and time")
+    run.add_argument("--geojson", action="store_true",
+                     help="also write NAME-areas.geojson: the probability-mass regions as WGS84 polygons (needs [geo])")
     run.add_argument("--step", type=float, metavar="S",
                      help="override the grid step of every scene, m (e.g. for a quick look)")
     run.add_argument("--threads", type=int, metavar="N",
@@ -133,10 +141,10 @@ def build_parser() -> tuple[argparse.ArgumentParser, dict[str, argparse.Argument
         "plot", help="draw a scene's maps to a PNG (needs matplotlib: the plot extra)",
         description="Draw every layer (or --layer) at the last time (or --t) as log10 maps in km, "
         "north up, with a colour bar and labelled probability-mass contours, one panel per layer. "
-        "INPUT is a scene .toml (computed as run does), or a .rrd or .npz written by run.",
+        "INPUT is a scene .toml (computed as run does), or a .rrd, .npz or .nc written by run.",
     )
     plot.add_argument("input", nargs="?", metavar="INPUT", type=Path,
-                      help="SCENE.toml, FILE.rrd or FILE.npz (or --example)")
+                      help="SCENE.toml, FILE.rrd, FILE.npz or FILE.nc (or --example)")
     plot.add_argument("--example", metavar="NAME",
                       help="the bundled scene NAME instead of INPUT (`bananagrid examples` lists them)")
     plot.add_argument("-o", "--output", required=True, type=Path, metavar="OUT.png", help="the PNG to write")
@@ -233,6 +241,9 @@ def _run(args: argparse.Namespace) -> int:
     if args.step is not None:
         scenes = [scene.with_step(args.step) for scene in scenes]
     _check_unique_names(scenes)
+    exports = {"netcdf": args.netcdf, "geotiff": args.geotiff, "geojson": args.geojson}
+    for scene in scenes:
+        check_exports(scene, **exports)
     args.out.mkdir(parents=True, exist_ok=True)
     check_writable(args.out)
     rows, written = [], []
@@ -240,7 +251,7 @@ def _run(args: argparse.Namespace) -> int:
         progress = None if args.quiet else _Progress(scene.name, sys.stderr)
         failed = True
         try:
-            rows += run_scene(scene, args.out, npz=args.npz, threads=args.threads, progress=progress)
+            rows += run_scene(scene, args.out, npz=args.npz, threads=args.threads, progress=progress, **exports)
             failed = False
         finally:
             if progress is not None:
@@ -250,6 +261,9 @@ def _run(args: argparse.Namespace) -> int:
         written.append(args.out / f"{scene.name}.rrd")
         if args.npz:
             written.append(args.out / f"{scene.name}.npz")
+        for suffix, wanted in ((".nc", args.netcdf), (".tif", args.geotiff), ("-areas.geojson", args.geojson)):
+            if wanted:
+                written.append(args.out / f"{scene.name}{suffix}")
     print(format_summary(rows))
     print()
     for path in written:

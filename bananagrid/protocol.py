@@ -33,6 +33,7 @@ from .domains.pose import Pose
 __all__ = [
     "DensityModel", "BatchModel", "KernelBinding", "KernelContext", "Extent", "SceneKey", "SceneSchema",
     "KEY_TYPES",
+    "LATLON",
 ]
 
 
@@ -141,6 +142,8 @@ KEY_TYPES = {
 
 #: Alternative units a scene may use under ``NAME_ALIAS`` (converted to SI when it is loaded).
 ALIASES = {"deg": "degrees", "kn": "knots"}
+#: Suffix of a position given as ``[latitude, longitude]`` in degrees (geographic scenes).
+LATLON = "latlon"
 
 
 @dataclass(frozen=True)
@@ -164,6 +167,11 @@ class SceneKey:
         knots.
     choices : tuple of str
         The allowed strings of a ``"choice"`` key.
+    bearing_at : str or None
+        For a bearing (rad, clockwise from north): the position parameter (a ``"pair"`` or
+        ``"pairs"`` key, one position per bearing) where it is measured, or ``""`` for the
+        local origin. A geographic scene gives true bearings; the scene turns them into grid
+        bearings there (:meth:`bananagrid.geo.frame.GeoFrame.grid_bearing`).
     """
 
     name: str
@@ -173,6 +181,7 @@ class SceneKey:
     allowed: str = "finite"
     alias: str | None = None
     choices: tuple = ()
+    bearing_at: str | None = None
 
     def __post_init__(self):
         if self.type not in KEY_TYPES:
@@ -181,9 +190,17 @@ class SceneKey:
             raise ValueError(f"SceneKey {self.name}: alias {self.alias!r} not in {tuple(ALIASES)}")
 
     @property
+    def position(self) -> bool:
+        """Whether it holds positions in metres (``"pair"`` or ``"pairs"``): then a geographic
+        scene may give it as ``NAME_latlon`` in degrees of latitude and longitude."""
+        return self.type in ("pair", "pairs") and self.unit == "m"
+
+    @property
     def keys(self) -> tuple[str, ...]:
-        """The scene keys that set it: its name and, with an alias, ``NAME_ALIAS``."""
-        return (self.name,) if self.alias is None else (self.name, f"{self.name}_{self.alias}")
+        """The scene keys that set it: its name, ``NAME_ALIAS`` with an alias, and
+        ``NAME_latlon`` for a position."""
+        names = (self.name,) if self.alias is None else (self.name, f"{self.name}_{self.alias}")
+        return (*names, f"{self.name}_{LATLON}") if self.position else names
 
 
 @dataclass(frozen=True)
@@ -273,6 +290,12 @@ class DensityModel(Protocol):
 
     def sample(self, n: int, rng) -> np.ndarray:
         """``n`` world positions from the model's generative story, shape ``(n, 2)``."""
+
+    def landmarks(self) -> dict[str, np.ndarray]:
+        """Where the model is anchored in the world, for maps (world metres): ``"fix"``, shape
+        ``(1, 2)`` (a last fix, a start's mean, an estimated position), and for a model built on
+        sensors ``"stations"`` ``(n, 2)`` and ``"bearings"`` ``(n, 2, 2)`` (line segments);
+        empty for a model anchored nowhere."""
 
     def polar_scales(self, origin: tuple[float, float]) -> tuple[float, float]:
         """Smallest widths of the density's features seen from ``origin`` (or from the model's

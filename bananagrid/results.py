@@ -21,6 +21,8 @@ from .domains.angular_lattice import AngularLattice
 from .domains.grid import Grid
 from .domains.polar_lattice import PolarLattice
 from .domains.region import Region
+from .geo.dataset import cell_map_dataset, polar_dataset, raster_dataset
+from .geo.frame import GeoFrame
 from . import plotting
 from .contours import DEFAULT_MASS_LEVELS
 from .validate import BananagridError, finite
@@ -49,6 +51,9 @@ class Raster:
         Whether ``values`` were divided by ``mass``.
     provenance : dict
         Model name and parameters, kernel, dtype, device, threads, seconds, truncation.
+    frame : GeoFrame or None
+        Where the grid's local metres lie on the Earth (a geographic scene's ``[geo]``), for
+        latitude and longitude, UTC times and the CRS of exported maps; None in local metres.
     """
 
     values: np.ndarray
@@ -57,6 +62,7 @@ class Raster:
     normalised: bool = False
     quantity: str = "density"
     provenance: dict = field(default_factory=dict)
+    frame: GeoFrame | None = None
 
     @property
     def x(self) -> np.ndarray:
@@ -103,6 +109,21 @@ class Raster:
         """A table of the grid, mass, peak and probability-mass regions, and the map."""
         return plotting.raster_html(self)
 
+    def to_xarray(self, frame: GeoFrame | None = None, name: str = "density", t: float | None = None):
+        """The raster as a CF-1.10 :class:`xarray.Dataset` (the ``geo`` extra).
+
+        One variable ``name`` (the density per m^2, dims (time, y, x)) at one time ``t``
+        (s since the fix; default the provenance's ``t`` where the model has one, else 0),
+        with ``name_mass`` and ``name_normalised``, projected ``x``/``y`` and, with a frame
+        (default :attr:`frame`), ``lat``/``lon``, the ``crs`` grid mapping and UTC time. See
+        :func:`bananagrid.geo.dataset.raster_dataset`; write it with
+        :func:`bananagrid.geo.dataset.write_netcdf`.
+        """
+        if t is None:
+            given = self.provenance.get("t", 0.0)
+            t = float(given) if isinstance(given, (int, float)) and not isinstance(given, bool) else 0.0
+        return raster_dataset([(name, t, self)], self.frame if frame is None else frame)
+
     def normalise(self) -> "Raster":
         """Return a copy whose values integrate to one over the grid; ``mass`` keeps the raw mass."""
         if not self.mass > 0.0:
@@ -134,6 +155,8 @@ class PolarRaster:
         Whether ``density`` and ``probability`` were divided by ``mass``.
     provenance : dict
         Model parameters, lattice, dtype, device, threads, seconds, nodes and the accuracy claim.
+    frame : GeoFrame or None
+        Where the lattice's local metres lie on the Earth, if known (see :class:`Raster`).
     """
 
     density: np.ndarray
@@ -142,6 +165,7 @@ class PolarRaster:
     mass: float
     normalised: bool = False
     provenance: dict = field(default_factory=dict)
+    frame: GeoFrame | None = None
 
     @property
     def ranges(self) -> np.ndarray:
@@ -152,6 +176,12 @@ class PolarRaster:
     def bearings(self) -> np.ndarray:
         """Bearing cell centres, rad clockwise from the lattice's heading."""
         return self.lattice.bearing_centres
+
+    def to_xarray(self, frame: GeoFrame | None = None):
+        """The densities and cell probabilities as an :class:`xarray.Dataset` on ``range`` and
+        ``bearing`` (the ``geo`` extra); see :func:`bananagrid.geo.dataset.polar_dataset`.
+        ``frame`` defaults to :attr:`frame` (adds latitude and longitude of the cell centres)."""
+        return polar_dataset(self, self.frame if frame is None else frame)
 
     def normalise(self) -> "PolarRaster":
         """Return a copy whose probabilities sum to one; ``mass`` keeps the raw captured mass."""
@@ -189,6 +219,8 @@ class CellMap:
     clipped_sizes : ndarray or None
         Length, area or volume of each cell within S, if a region is given.
     provenance : dict
+    frame : GeoFrame or None
+        Where the array's frame lies on the Earth, if known (see :class:`Raster`).
     """
 
     prob: np.ndarray
@@ -198,6 +230,7 @@ class CellMap:
     error: np.ndarray | None = None
     clipped_sizes: np.ndarray | None = None
     provenance: dict = field(default_factory=dict)
+    frame: GeoFrame | None = None
 
     @property
     def azimuth_edges(self) -> np.ndarray:
@@ -218,6 +251,12 @@ class CellMap:
     def cell_polygons(self, n_arc: int = 8, far: float | None = None) -> np.ndarray:
         """Outlines on the target plane in world coordinates (see AngularLattice.cell_polygons)."""
         return self.lattice.cell_polygons(n_arc=n_arc, far=far)
+
+    def to_xarray(self):
+        """The cell probabilities, their errors and the cell sizes as an :class:`xarray.Dataset`
+        on ``azimuth`` (and ``elevation``) with the cell edges as bounds (the ``geo`` extra);
+        see :func:`bananagrid.geo.dataset.cell_map_dataset`."""
+        return cell_map_dataset(self)
 
     def clutter_mask(self, threshold: float) -> np.ndarray:
         """True where a cell's presence probability is below ``threshold`` (detections there are

@@ -39,6 +39,8 @@ PICTURED = {
     "submarine": (500.0, 7200.0, ()),
     "rice_isotropic": (10.0, None, ()),
     "slow_contact": (40.0, None, ()),
+    "geo_ship": (50.0, None, ()),
+    "geo_bearing": (50.0, None, ()),
 }
 
 DPI = 60

@@ -313,7 +313,7 @@ def test_plot_refuses_other_inputs_outputs_and_array_scenes(tmp_path, scene_file
         assert "\n" not in err
         return err
 
-    assert "cannot plot a .nc file; give one of .toml, .rrd, .npz" in error(str(tmp_path / "x.nc"), "-o", str(tmp_path / "x.png"))
+    assert "cannot plot a .tif file; give one of .toml, .rrd, .npz, .nc" in error(str(tmp_path / "x.tif"), "-o", str(tmp_path / "x.png"))
     assert "no such file" in error(str(tmp_path / "x.rrd"), "-o", str(tmp_path / "x.png"))
     assert "give a name ending in .png" in error(str(scene_file), "-o", str(tmp_path / "x.jpg"))
     assert "cannot write there" in error(str(scene_file), "-o", str(tmp_path / "missing" / "x.png"))
@@ -321,6 +321,8 @@ def test_plot_refuses_other_inputs_outputs_and_array_scenes(tmp_path, scene_file
         str(ROOT / "scenes" / "room_mixture.toml"), "-o", str(tmp_path / "x.png"))
     (tmp_path / "junk.npz").write_bytes(b"not a zip")
     assert "not an .npz written by bananagrid run --npz" in error(str(tmp_path / "junk.npz"), "-o", str(tmp_path / "x.png"))
+    (tmp_path / "junk.nc").write_bytes(b"not a NetCDF file")
+    assert "junk.nc: not a NetCDF file" in error(str(tmp_path / "junk.nc"), "-o", str(tmp_path / "x.png"))
     assert not list(tmp_path.glob("*.png"))
 
 

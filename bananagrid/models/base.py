@@ -47,6 +47,13 @@ class Model:
     #: The model's local frame; None for models without one (motion models have a ``pose`` field).
     pose: Pose | None = None
 
+    def landmarks(self) -> dict[str, np.ndarray]:
+        """The last fix, the origin of the model's pose; nothing for a model without a pose
+        (:meth:`bananagrid.protocol.DensityModel.landmarks`)."""
+        if self.pose is None:
+            return {}
+        return {"fix": np.reshape(np.asarray(self.pose.origin, dtype=np.float64), (1, 2))}
+
     def parameters(self) -> dict:
         """Plain-data parameters for provenance and recordings: the class name, then every
         dataclass field (a pose as ``origin_x``, ``origin_y`` and ``heading``)."""

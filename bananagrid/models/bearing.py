@@ -189,8 +189,8 @@ class BearingFix(Model):
     scene = SceneSchema(
         keys=(
             SceneKey("sensors", type="pairs", unit="m", allowed="at least 2, finite, no two coincident"),
-            SceneKey("bearings", type="numbers", unit="rad", alias="deg",
-                     allowed="one per sensor, finite, clockwise from north"),
+            SceneKey("bearings", type="numbers", unit="rad", alias="deg", bearing_at="sensors",
+                     allowed="one per sensor, finite, clockwise from north (true north in a geographic scene)"),
             SceneKey("sigmas", type="numbers", unit="rad", alias="deg", allowed="one per sensor, finite, > 0"),
             SceneKey("variant", type="choice", default='`"exact"`', choices=MAP_VARIANTS,
                      allowed='`"exact"` (the likelihood under a flat prior), `"linear"` (the linearised normal)'),
@@ -421,6 +421,15 @@ class BearingFix(Model):
         dj = points - self.sensors[j]
         cross = di[:, 0] * dj[:, 1] - di[:, 1] * dj[:, 0]
         return np.abs(cross) / (np.einsum("ij,ij->i", di, di) * np.einsum("ij,ij->i", dj, dj))
+
+    def landmarks(self) -> dict[str, np.ndarray]:
+        """The fix, the stations, and each bearing line from its station to 1.5 times the
+        farthest station's range from the fix (as the recording draws them)."""
+        reach = 1.5 * float(np.max(np.hypot(*(self.fix - self.sensors).T)))
+        ends = self.sensors + reach * np.column_stack((np.sin(self.bearings), np.cos(self.bearings)))
+        return {"fix": np.reshape(np.asarray(self.fix, dtype=np.float64), (1, 2)),
+                "stations": np.asarray(self.sensors, dtype=np.float64),
+                "bearings": np.stack([self.sensors, ends], axis=1).astype(np.float64)}
 
     def sample(self, n: int, rng) -> np.ndarray:
         """Draw ``n`` positions from the exact presence map (the bearings' likelihood under a

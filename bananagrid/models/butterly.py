@@ -150,6 +150,11 @@ class UniformSpeed:
         return np.where((v >= self.v_min) & (v <= self.v_max), 1.0 / (self.v_max - self.v_min), 0.0)
 
 
+#: Fastest speed a continuous speed law may reach, m/s: its quadrature panels and the ranges
+#: v t stay normal float64 numbers.
+MAX_SPEED = 1e100
+
+
 @dataclass(frozen=True)
 class NormalSpeed:
     """Speed N(mean, sd) truncated at zero (renormalised over v >= 0), m/s."""
@@ -163,6 +168,14 @@ class NormalSpeed:
         if self.mean + NORMAL_SPAN * self.sd <= 0.0:
             raise BananagridError(
                 f"speeds.mean = {self.mean!r}: with sd = {self.sd!r} the law has no mass above 0 m/s"
+            )
+        # the quadrature's nodes reach mean + NORMAL_SPAN sd: they must stay finite
+        if not abs(self.mean) < MAX_SPEED:
+            raise BananagridError(f"speeds.mean = {self.mean!r}: must be below {MAX_SPEED:g} m/s")
+        if not abs(self.mean) + NORMAL_SPAN * self.sd < MAX_SPEED:
+            raise BananagridError(
+                f"speeds.sd = {self.sd!r}: with mean = {self.mean!r} the law reaches "
+                f"{abs(self.mean) + NORMAL_SPAN * self.sd!r} m/s (at most {MAX_SPEED:g})"
             )
 
     @property
@@ -434,16 +447,16 @@ class Butterly(Model):
             SceneKey("speed_max", unit="m/s", alias="kn", default='required for `"uniform"` (or `speed_max_kn`)',
                      allowed="finite, > `speed_min`"),
             SceneKey("speed_mean", unit="m/s", alias="kn", default='required for `"normal"` (or `speed_mean_kn`)',
-                     allowed="finite; some of the law's mass above 0"),
+                     allowed="|mean| < 1e100; some of the law's mass above 0"),
             SceneKey("speed_sd", unit="m/s", alias="kn", default='required for `"normal"` (or `speed_sd_kn`)',
-                     allowed="finite, > 0"),
+                     allowed="> 0, with |mean| + 10 sd < 1e100"),
             SceneKey("speed_density", type="numbers", unit="(relative)", default='required for `"table"`',
                      allowed="one per speed, >= 0, not all 0; normalised over the table"),
             SceneKey("course_kappa", default="`0`",
                      allowed="finite, >= 0: concentration of a von Mises course law; 0 is Butterly's uniform course"),
-            SceneKey("course_mean", unit="rad", alias="deg", default="`0` (north)",
-                     allowed="finite; the von Mises law's mean course, clockwise from north (used when "
-                             "`course_kappa` > 0)"),
+            SceneKey("course_mean", unit="rad", alias="deg", default="`0` (north)", bearing_at="mean",
+                     allowed="finite; the von Mises law's mean course, clockwise from north (true north in a "
+                             "geographic scene; used when `course_kappa` > 0)"),
         ),
         required=("mean",),
         timed=True,
@@ -511,9 +524,10 @@ class Butterly(Model):
         w = np.ascontiguousarray(w, dtype=float)
         reach = float(v.max()) * t
         if not reach < 1e150:  # the ranges r = v t, and their squares, must be normal float64 numbers
+            fastest = {UniformSpeed: "speed_max", NormalSpeed: "speed_mean and speed_sd"}.get(type(self.speeds), "speeds")
             raise BananagridError(
-                f"t = {t!r}: with speeds up to {float(v.max())!r} m/s the range v t = {reach!r} m overflows "
-                "(at most 1e150 m)"
+                f"t = {t!r}: with speeds up to {float(v.max())!r} m/s (from {fastest}) the range v t = {reach!r} m "
+                "overflows (at most 1e150 m)"
             )
         v.setflags(write=False)
         w.setflags(write=False)
@@ -740,6 +754,10 @@ class Butterly(Model):
         c = np.asarray(c, dtype=float)
         k = self.course_kappa
         return np.exp(k * (np.cos(c - self.course_mean) - 1.0)) / (2.0 * math.pi * special.ive(0, k))
+
+    def landmarks(self) -> dict[str, np.ndarray]:
+        """The start's mean, as ``"fix"``."""
+        return {"fix": np.reshape(np.asarray(self.mean, dtype=np.float64), (1, 2))}
 
     # -- sampling ----------------------------------------------------------------------------------
 

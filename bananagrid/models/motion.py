@@ -139,6 +139,7 @@ MOTION_KEYS = {
     "sigma_heading": SceneKey("sigma_heading", unit="rad", default="`0`", alias="deg",
                               allowed="finite, >= 0: SD of a normal error on the initial heading (Section 7)"),
     "origin": SceneKey("origin", type="pair", unit="m", default="`[0, 0]`", allowed="finite: the last fix"),
-    "heading": SceneKey("heading", unit="rad", default="`0` (north)", alias="deg",
-                        allowed="finite; the initial heading, a bearing clockwise from north"),
+    "heading": SceneKey("heading", unit="rad", default="`0` (north)", alias="deg", bearing_at="origin",
+                        allowed="finite; the initial heading, a bearing clockwise from north (true north in a "
+                                "geographic scene)"),
 }

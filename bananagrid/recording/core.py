@@ -238,6 +238,7 @@ def default_blueprint(
     extra_views: Sequence[rrb.View] = (),
     several_times: bool = False,
     frames: Mapping[str, tuple[float, float, float, float]] | None = None,
+    map_view: rrb.View | None = None,
 ) -> rrb.Blueprint:
     """The default layout: one map per layer (log10 first), beside the summary and the scene.
 
@@ -269,6 +270,9 @@ def default_blueprint(
         Where each map opens (m): its :func:`focus_extent` (over all times, see
         :func:`union_extent`) and the legend beside it. Anything beyond (the rest of the
         grid, distant bearing stations) is a zoom-out away.
+    map_view : rerun view, optional
+        A geographic scene's map (:func:`bananagrid.recording.geomap.map_view`), a panel
+        after the layers' maps.
     """
     layers = [entity_path(e) for e in layer_entities]
     extras = [entity_path(e) for e in extra_images]
@@ -294,6 +298,8 @@ def default_blueprint(
                     _framed(frames[e]) if e in frames else None)
         for e in layers
     ]
+    if map_view is not None:
+        maps.append(map_view)
     top = _panels(maps, side)
     parts = [top] if time_panel is None else [top, time_panel]
     return rrb.Blueprint(*parts, collapse_panels=False)

@@ -187,13 +187,25 @@ def layer_summaries(path: str | os.PathLike, levels: Iterable[float] = DEFAULT_M
             described["area_km2"] = None if described["area"] is None else described["area"] / 1e6
             regions.append(described)
         peak = float(raster.values[i, j])
+        found = peak > 0.0
+        x, y = float(raster.x[j]), float(raster.y[i])
+        lat, lon = raster.frame.geographic(x, y) if raster.frame is not None and found else (None, None)
         out.append({
             "layer": item.layer, "entity": item.entity, "t": item.t, "mass": raster.mass,
             "normalised": raster.normalised, "peak": peak,
-            "peak_x": float(raster.x[j]) if peak > 0.0 else None, "peak_y": float(raster.y[i]) if peak > 0.0 else None,
+            "peak_x": x if found else None, "peak_y": y if found else None,
+            "peak_lat": None if lat is None else float(lat), "peak_lon": None if lon is None else float(lon),
+            "utc": None if raster.frame is None or raster.frame.time is None else _iso(raster.frame.utc(item.t)),
+            "crs": None if raster.frame is None else raster.frame.crs_name,
             "grid": raster.grid.describe(), "regions": regions,
         })
     return out
+
+
+def _iso(when) -> str:
+    """A UTC time as ISO 8601 with ``Z``, to the millisecond when it has fractions."""
+    text = when.strftime("%Y-%m-%dT%H:%M:%S.%f")[:-3].removesuffix(".000")
+    return text + "Z"
 
 
 def cell_map_summaries(path: str | os.PathLike, levels: Iterable[float] = DEFAULT_MASS_LEVELS) -> list[dict]:
@@ -323,7 +335,7 @@ def format_inspection(info: dict) -> str:
 def _layer_lines(item: dict) -> list[str]:
     """One layer at one time: captured mass, peak and place, then the regions as a table."""
     lines = [
-        f"  {item['layer']} at t = {item['t']:g} s",
+        f"  {item['layer']} at t = {item['t']:g} s" + (f" ({item['utc']})" if item.get("utc") else ""),
         f"    captured mass          {_captured(item['mass'], item['normalised'])}",
         f"    peak density           {item['peak']:.6g} m^-2 {_place(item)}",
     ]
@@ -374,7 +386,14 @@ def _place(item: dict) -> str:
         return "(every cell is zero)"
     step = min(item["grid"]["dx"], item["grid"]["dy"])
     decimals = max(0, -math.floor(math.log10(step / 2.0)))
-    return f"in the cell centred on x = {item['peak_x']:,.{decimals}f} m, y = {item['peak_y']:,.{decimals}f} m (east, north)"
+    place = f"in the cell centred on x = {item['peak_x']:,.{decimals}f} m, y = {item['peak_y']:,.{decimals}f} m (east, north)"
+    if item.get("peak_lat") is None:
+        return place
+    # degrees to a tenth of the cell: 1e-5 deg of latitude is 1.1 m
+    places = max(4, -math.floor(math.log10(step / 10.0 / 111_000.0)))
+    lat, lon = item["peak_lat"], item["peak_lon"]
+    return (f"{place}, {abs(lat):.{places}f} {'N' if lat >= 0 else 'S'} {abs(lon):.{places}f} "
+            f"{'E' if lon >= 0 else 'W'}")
 
 
 def _direction(item: dict) -> str:

@@ -35,13 +35,15 @@ from rerun.chunk import RrdReader, StoreEntry
 
 from ..domains.angular_lattice import AngularLattice
 from ..domains.grid import Grid
+from ..geo.frame import GeoFrame
 from ..results import Raster
 from ..validate import BananagridError
 from .core import ELAPSED, elapsed_nanos, values_from_image
 
 __all__ = [
     "IMAGE_BUFFER", "IMAGE_FORMAT", "RecordedCellMap", "RecordedRaster", "decode_image", "open_recording",
-    "plain_cell", "read_cell_maps", "read_depth_image", "read_layers", "read_rasters", "recording_rows", "seconds",
+    "plain_cell", "read_cell_maps", "read_depth_image", "read_layers", "read_rasters", "recorded_frame",
+    "recording_rows", "seconds",
 ]
 
 IMAGE_BUFFER = "DepthImage:buffer"
@@ -291,10 +293,26 @@ def read_layers(path: str | os.PathLike) -> list[RecordedRaster]:
         raster = Raster(
             values=values, grid=grid, mass=float(mass) if isinstance(mass, (int, float)) else math.nan,
             normalised=info.get("normalised") == "true", quantity=str(info.get("quantity", "density")),
-            provenance=provenance,
+            provenance=provenance, frame=recorded_frame(provenance),
         )
         out.append(RecordedRaster(layer, entity, 0.0 if nanos is None else nanos / 1e9, raster))
     return out
+
+
+def recorded_frame(provenance: dict) -> GeoFrame | None:
+    """The geographic frame a layer's flattened provenance names (``geo.lat``, ``geo.lon``,
+    ``geo.time``, ``geo.crs``), or None: a scene in local metres, or pyproj missing (the geo
+    extra), when positions stay in metres."""
+    keys = ("geo.lat", "geo.lon", "geo.crs")
+    if not all(k in provenance for k in keys):
+        return None
+    try:
+        return GeoFrame.from_identity({
+            "lat": provenance["geo.lat"], "lon": provenance["geo.lon"],
+            "time": provenance.get("geo.time") or None, "crs": provenance["geo.crs"],
+        })
+    except BananagridError:
+        return None
 
 
 def _when(nanos: int | None) -> str:

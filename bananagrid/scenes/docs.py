@@ -13,7 +13,7 @@ from pathlib import Path
 
 from ..atomic import atomic_write
 from ..models.registry import MODEL_KINDS, Registry
-from ..protocol import ALIASES, KEY_TYPES, SceneKey
+from ..protocol import ALIASES, KEY_TYPES, LATLON, SceneKey
 
 __all__ = ["model_keys_markdown", "replace_section", "BEGIN", "END", "main"]
 
@@ -38,6 +38,10 @@ def _rows(key: SceneKey) -> list[str]:
         unit = key.unit.replace(si, alt) if si in key.unit else alt
         rows.append(f"| `{key.name}_{key.alias}` | {kind} | {unit} | instead of `{key.name}` "
                     f"| as `{key.name}`, in {ALIASES[key.alias]} |")
+    if key.position:
+        shape = "`[lat, lon]`" if key.type == "pair" else "array of `[lat, lon]`"
+        rows.append(f"| `{key.name}_{LATLON}` | {shape} | deg | instead of `{key.name}` "
+                    f"| latitude in [-90, 90], longitude in [-180, 180]; needs `[geo]` |")
     return rows
 
 

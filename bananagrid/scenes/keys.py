@@ -12,12 +12,12 @@ import math
 import re
 from collections.abc import Mapping
 
-from ..protocol import SceneKey
-from ..validate import show
+from ..protocol import LATLON, SceneKey
+from ..validate import BananagridError, show
 
 __all__ = [
     "SceneKeyError", "check_keys", "table", "name", "text", "number", "numbers", "pairs", "matrix", "pair",
-    "prefixed", "parameters", "base_key", "merged_keys", "show", "NAME_PATTERN", "DTYPES", "KNOT",
+    "prefixed", "parameters", "base_key", "merged_keys", "show", "NAME_PATTERN", "DTYPES", "KNOT", "UNIT_WORDS",
 ]
 
 #: Names of scenes, layers and components: they become file and entity names.
@@ -135,12 +135,20 @@ def prefixed(message: str, path: str, keys) -> str:
 
 
 def base_key(key: str) -> str:
-    """The parameter a scene key sets: ``heading_deg`` -> ``heading``, ``speeds_kn`` -> ``speeds``."""
-    if key.endswith("_deg"):
-        return key.removesuffix("_deg")
-    if key.endswith("_kn"):
-        return key.removesuffix("_kn")
+    """The parameter a scene key sets: ``heading_deg`` -> ``heading``, ``speeds_kn`` -> ``speeds``,
+    ``sensors_latlon`` -> ``sensors``."""
+    for suffix in ("_deg", "_kn", f"_{LATLON}"):
+        if key.endswith(suffix):
+            return key.removesuffix(suffix)
     return key
+
+
+#: A key's suffix: the units of the plain key and of the suffixed one, for messages.
+UNIT_WORDS = {"_deg": ("rad", "degrees"), "_kn": ("m/s", "knots"), f"_{LATLON}": ("m", "[lat, lon] degrees")}
+
+
+def _unit_suffix(key: str) -> str:
+    return key[len(base_key(key)):]
 
 
 def merged_keys(key_lists) -> dict[str, SceneKey]:
@@ -156,8 +164,11 @@ def merged_keys(key_lists) -> dict[str, SceneKey]:
     return out
 
 
-def _convert(spec: SceneKey, key: str, value, where: str):
-    """``value`` of scene key ``key`` (``spec.name`` or its alias) checked by type, in SI."""
+def _convert(spec: SceneKey, key: str, value, where: str, frame=None):
+    """``value`` of scene key ``key`` (``spec.name`` or its alias) checked by type, in SI;
+    ``NAME_latlon`` positions through the scene's geographic ``frame``."""
+    if key.endswith(f"_{LATLON}"):
+        return _latlon(spec, value, where, frame)
     scale = math.radians if key.endswith("_deg") else (lambda v: v * KNOT) if key.endswith("_kn") else None
     if spec.type == "pair":
         return _finite_pair(value, where, spec.unit or "m")
@@ -176,24 +187,44 @@ def _convert(spec: SceneKey, key: str, value, where: str):
     return scale(value) if scale else value
 
 
-def parameters(doc: dict, path: str, keys: Mapping[str, SceneKey]) -> dict:
+def _latlon(spec: SceneKey, value, where: str, frame):
+    """A position (``"pair"``) or positions (``"pairs"``) given as ``[lat, lon]`` degrees, in
+    local metres of the scene's geographic frame."""
+    if frame is None:
+        raise SceneKeyError(f"{where} = {show(value)}: positions in latitude and longitude need a [geo] table "
+                            "(its origin_latlon)")
+    points = [_finite_pair(value, where, "degrees [lat, lon]")] if spec.type == "pair" else pairs(value, where)
+    local = []
+    for k, (lat, lon) in enumerate(points):
+        at = where if spec.type == "pair" else f"{where}[{k}]"
+        if not (-90.0 <= lat <= 90.0 and -180.0 <= lon <= 180.0):
+            raise SceneKeyError(f"{at} = {show([lat, lon])}: expected [latitude in [-90, 90], longitude in [-180, 180]] degrees")
+        try:
+            x, y = frame.local(lat, lon)
+        except BananagridError as exc:
+            raise SceneKeyError(f"{at} = {show([lat, lon])}: {exc}") from None
+        local.append((float(x), float(y)))
+    return local[0] if spec.type == "pair" else local
+
+
+def parameters(doc: dict, path: str, keys: Mapping[str, SceneKey], frame=None) -> dict:
     """``{param: (key path, written value, SI value)}`` of the parameter keys in ``doc``.
 
     The keys are known to be parameter keys of ``keys`` (parameter name -> SceneKey). Degrees
-    under ``*_deg`` are converted to radians and knots under ``*_kn`` to m/s; giving both forms
-    of one value is an error.
+    under ``*_deg`` are converted to radians, knots under ``*_kn`` to m/s, and positions under
+    ``*_latlon`` (``[lat, lon]`` degrees) to local metres of the geographic ``frame`` (a
+    :class:`~bananagrid.geo.frame.GeoFrame`); giving two forms of one value is an error.
     """
     out = {}
     for key, value in doc.items():
         where = f"{path}.{key}"
         param = base_key(key)
         if param in out:
-            other = next(k for k in doc if k != key and base_key(k) == param)
-            unit, alt = ("rad", "degrees") if key.endswith("_deg") or other.endswith("_deg") else ("m/s", "knots")
-            suffix = "_deg" if unit == "rad" else "_kn"
+            first, second = sorted((key, next(k for k in doc if k != key and base_key(k) == param)), key=len)
+            suffix = _unit_suffix(second)
             raise SceneKeyError(
-                f"{path}: give {param} ({unit}) or {param}{suffix} ({alt}), not both "
-                f"({param} = {show(doc[param])}, {param}{suffix} = {show(doc[param + suffix])})"
+                f"{path}: give {first} ({UNIT_WORDS[suffix][0]}) or {second} ({UNIT_WORDS[suffix][1]}), not both "
+                f"({first} = {show(doc[first])}, {second} = {show(doc[second])})"
             )
-        out[param] = (where, value, _convert(keys[param], key, value, where))
+        out[param] = (where, value, _convert(keys[param], key, value, where, frame))
     return out

@@ -23,6 +23,7 @@ from types import MappingProxyType
 from ..analysis.coverage import DEFAULT_MIN_MASS, min_mass
 from ..contours import DEFAULT_MASS_LEVELS, mass_levels
 from ..domains.grid import Grid
+from ..geo.frame import DEFAULT_MAX_SCALE_ERROR, GeoFrame
 from ..models.registry import MODEL_KINDS, ModelKind, Registry
 from ..protocol import DensityModel
 from ..recording.core import MAX_ELAPSED_S, colormaps
@@ -33,13 +34,14 @@ from .presence import PresenceScene, build_presence_scene
 
 __all__ = [
     "Layer", "Scene", "RadialOutput", "load_scene", "parse_scene", "MODEL_KINDS", "PARAMETER_KEYS",
-    "TOP_KEYS", "RADIAL_KEYS", "SCENE_KEYS", "GRID_KEYS", "OUTPUT_KEYS",
+    "TOP_KEYS", "RADIAL_KEYS", "SCENE_KEYS", "GRID_KEYS", "OUTPUT_KEYS", "GEO_KEYS",
 ]
 
 #: Scene keys of every registered model kind.
 PARAMETER_KEYS = MappingProxyType({kind: spec.scene.key_names for kind, spec in MODEL_KINDS.items()})
 
-TOP_KEYS = ("scene", "grid", "output", "defaults", "layers", "radial")
+TOP_KEYS = ("scene", "grid", "geo", "output", "defaults", "layers", "radial")
+GEO_KEYS = ("origin_latlon", "time", "crs", "max_scale_error")
 RADIAL_KEYS = ("layers", "density_bearings_deg", "moments_max_deg", "moments_step_deg")
 SCENE_KEYS = ("name", "title", "description", "times")
 GRID_KEYS = ("x", "y", "step", "dx", "dy")
@@ -159,6 +161,11 @@ class Scene:
     warnings : tuple of str
         Likely mistakes found while loading (e.g. an angle that looks like degrees given in
         radians); each was also issued as a :class:`~bananagrid.BananagridWarning`.
+    geo : GeoFrame or None
+        The geographic frame (``[geo]``): where the local origin is on the Earth, the UTC time
+        of t = 0 and the projection; None for a scene in local metres only.
+    scale_error : float
+        The projection's largest relative scale error over the grid (0 without ``[geo]``).
     """
 
     name: str
@@ -179,6 +186,8 @@ class Scene:
     mass_levels: tuple = DEFAULT_MASS_LEVELS
     min_mass: float = DEFAULT_MIN_MASS
     warnings: tuple = ()
+    geo: GeoFrame | None = None
+    scale_error: float = 0.0
 
     def with_step(self, step: float) -> "Scene":
         """A copy whose grid covers the same bounds with square cells of ``step`` metres."""
@@ -251,6 +260,7 @@ def parse_scene(text: str, source: str = "<string>", *, kinds: Registry = MODEL_
 def _build(doc: dict, text: str, source: str, kinds: Registry) -> Scene:
     """Validate the parsed document table by table and assemble the Scene."""
     check_keys(doc, TOP_KEYS, "")
+    geo, max_scale_error = _geo(keys.table(doc, "geo")) if "geo" in doc else (None, 0.0)
     head = keys.table(doc, "scene", required=True)
     check_keys(head, SCENE_KEYS, "scene")
     name = keys.name(head.get("name"), "scene.name", required=True)
@@ -258,6 +268,13 @@ def _build(doc: dict, text: str, source: str, kinds: Registry) -> Scene:
     description = keys.text(head, "description", "scene", default="")
     times = _times(head["times"]) if "times" in head else None
     bounds, grid = _grid(keys.table(doc, "grid", required=True))
+    scale_error = 0.0
+    if geo is not None:
+        try:
+            x0, x1, y0, y1 = grid.extent
+            scale_error = geo.check_extent((x0, x1), (y0, y1), max_scale_error)
+        except BananagridError as exc:
+            raise SceneKeyError(str(exc)) from None
     output = _output(keys.table(doc, "output"))
     defaults = keys.table(doc, "defaults")
     every_key = tuple(dict.fromkeys(k for kind in kinds.values() for k in kind.scene.key_names))
@@ -267,15 +284,16 @@ def _build(doc: dict, text: str, source: str, kinds: Registry) -> Scene:
             f"defaults.t = {show(defaults['t'])}: not allowed when scene.times is given "
             "(every layer is computed at every time)"
         )
-    shared = keys.parameters(defaults, "defaults", keys.merged_keys(kind.scene.keys for kind in kinds.values()))
+    shared = keys.parameters(defaults, "defaults", keys.merged_keys(kind.scene.keys for kind in kinds.values()), geo)
     found: list[str] = []
-    layers = _layers(keys.table(doc, "layers", required=True), shared, times, kinds, found)
+    layers = _layers(keys.table(doc, "layers", required=True), shared, times, kinds, found, geo)
     radial = _radial(doc["radial"], layers) if "radial" in doc else None
     for message in found:
         warnings.warn(f"{source}: {message}", BananagridWarning, stacklevel=3)
     return Scene(
         name=name, title=title, description=description, text=text, source=source,
         grid=grid, bounds=bounds, layers=layers, times=times, radial=radial, warnings=tuple(found), **output,
+        geo=geo, scale_error=scale_error,
     )
 
 
@@ -412,7 +430,7 @@ def _colormaps() -> tuple[str, ...]:
     return colormaps()
 
 
-def _layers(tables: dict, shared: dict, times, kinds: Registry, found: list[str]) -> tuple[Layer, ...]:
+def _layers(tables: dict, shared: dict, times, kinds: Registry, found: list[str], geo=None) -> tuple[Layer, ...]:
     """``[layers.NAME]`` tables in file order, each merged over ``[defaults]`` and checked.
 
     ``shared`` holds the ``[defaults]`` parameters as returned by :func:`keys.parameters`;
@@ -427,13 +445,14 @@ def _layers(tables: dict, shared: dict, times, kinds: Registry, found: list[str]
             raise SceneKeyError(f"layers.{show(layer_name)}: a layer name must be letters, digits, _ and -")
         if not isinstance(body, dict):
             raise SceneKeyError(f"{path} = {show(body)}: expected a table [layers.{layer_name}]")
-        layers.append(_layer(layer_name, body, shared, times, kinds, found))
+        layers.append(_layer(layer_name, body, shared, times, kinds, found, geo))
     return tuple(layers)
 
 
-def _layer(layer_name: str, body: dict, shared: dict, times, kinds: Registry, found: list[str]) -> Layer:
+def _layer(layer_name: str, body: dict, shared: dict, times, kinds: Registry, found: list[str], geo=None) -> Layer:
     """Validate one layer: its keys, its values, and its model at every elapsed time; likely
-    mistakes (:func:`_radian_doubts`) are appended to ``found``."""
+    mistakes (:func:`_radian_doubts`) are appended to ``found``. In a geographic scene its
+    bearings are true bearings, turned into grid bearings where they are measured."""
     path = f"layers.{layer_name}"
     kind_name = body.get("model")
     if not isinstance(kind_name, str) or kind_name not in kinds:
@@ -452,7 +471,7 @@ def _layer(layer_name: str, body: dict, shared: dict, times, kinds: Registry, fo
     # Defaults of another model kind (k_sigma, variant) do not apply to this layer.
     own = {key.name: key for key in schema.keys}
     given = {p: v for p, v in shared.items() if p in own}
-    given.update(keys.parameters({k: v for k, v in body.items() if k != "model"}, path, own))
+    given.update(keys.parameters({k: v for k, v in body.items() if k != "model"}, path, own, geo))
     needed = schema.required if times is not None or not schema.timed else (*schema.required, "t")
     missing = [p for p in needed if p not in given]
     if schema.missing is not None:
@@ -465,7 +484,10 @@ def _layer(layer_name: str, body: dict, shared: dict, times, kinds: Registry, fo
             f"{p} (or {p}_{own[p].alias})" if p in own and own[p].alias else p for p in missing
         )
         raise SceneKeyError(f"{path}: missing {listed}: give each in [{path}] or [defaults]")
-    layer = Layer(name=layer_name, kind=kind_name, params={p: si for p, (_, _, si) in given.items()}, model_kind=kind)
+    params = {p: si for p, (_, _, si) in given.items()}
+    if geo is not None:
+        params = _grid_bearings(params, own, geo)
+    layer = Layer(name=layer_name, kind=kind_name, params=params, model_kind=kind)
     latest = max(times) if times is not None else given["t"][2] if "t" in given else None
     found += _radian_doubts(given, own, latest)
     if "t" in given and given["t"][2] >= MAX_ELAPSED_S:
@@ -479,6 +501,54 @@ def _layer(layer_name: str, body: dict, shared: dict, times, kinds: Registry, fo
             at = {} if t is None else {"t": (f"scene.times[{k}]", t, t)}
             raise SceneKeyError(_model_error(str(exc), path, {**given, **at}, schema.message_keys)) from None
     return layer
+
+
+def _grid_bearings(params: dict, own: Mapping, geo: GeoFrame) -> dict:
+    """Turn the true bearings of a geographic scene into grid bearings, each at the position
+    where it is measured (its key's ``bearing_at``; the local origin when that is not given)."""
+    out = dict(params)
+    for name, spec in own.items():
+        if spec.bearing_at is None or name not in params:
+            continue
+        at = params.get(spec.bearing_at, (0.0, 0.0)) if spec.bearing_at else (0.0, 0.0)
+        if spec.type == "numbers":
+            places = at if isinstance(at, list) else [at] * len(params[name])
+            # a count mismatch or a non-finite value is the model's to report; convert the rest
+            out[name] = [_grid_bearing(geo, b, p) for b, p in zip(params[name], places)] + list(params[name][len(places):])
+        else:
+            out[name] = _grid_bearing(geo, params[name], at)
+    return out
+
+
+def _grid_bearing(geo: GeoFrame, bearing: float, at) -> float:
+    """:meth:`GeoFrame.grid_bearing`, leaving non-finite values to the model's checks."""
+    if not (math.isfinite(bearing) and all(math.isfinite(v) for v in at)):
+        return bearing
+    return geo.grid_bearing(bearing, *at)
+
+
+def _geo(table: dict) -> tuple[GeoFrame, float]:
+    """``[geo]``: the origin in latitude and longitude, the UTC time of t = 0, the projection
+    and the largest scale error it may have over the grid."""
+    check_keys(table, GEO_KEYS, "geo")
+    if "origin_latlon" not in table:
+        raise SceneKeyError("geo.origin_latlon: missing; expected [latitude, longitude] in degrees of the local origin")
+    lat, lon = keys.pair(table, "origin_latlon", "geo", unit="degrees")
+    if not (-90.0 < lat < 90.0 and -180.0 <= lon <= 180.0):
+        raise SceneKeyError(
+            f"geo.origin_latlon = {show(table['origin_latlon'])}: expected [latitude in (-90, 90), "
+            "longitude in [-180, 180]] degrees"
+        )
+    limit = keys.number(table.get("max_scale_error", DEFAULT_MAX_SCALE_ERROR), "geo.max_scale_error")
+    if not 0.0 < limit < 1.0:
+        raise SceneKeyError(f"geo.max_scale_error = {show(table['max_scale_error'])}: must lie in (0, 1)")
+    crs = table.get("crs", "aeqd")
+    try:
+        if not isinstance(crs, str):
+            raise BananagridError(f"crs = {show(crs)}: expected \"aeqd\", \"utm\" or a projected CRS such as \"EPSG:32632\"")
+        return GeoFrame(lat, lon, time=table.get("time"), crs=crs), limit
+    except BananagridError as exc:
+        raise SceneKeyError(f"geo.{exc}") from None
 
 
 def _radian_doubts(given: dict, own: Mapping, t: float | None) -> list[str]:

@@ -1,6 +1,6 @@
 """Pictures of a scene's layers without a viewer (``bananagrid plot``): from the scene itself
-(computed as ``run`` computes it), from a recording ``run`` wrote, or from its ``.npz`` arrays;
-one map per layer at one time, in one PNG written atomically.
+(computed as ``run`` computes it), from a recording ``run`` wrote, or from its ``.npz`` arrays or
+CF NetCDF maps (``--netcdf``); one map per layer at one time, in one PNG written atomically.
 
 Each map is :func:`bananagrid.plotting.plot_raster`'s: log10 density in km, the
 probability-mass contours labelled with their areas, and what the layer's provenance names (a
@@ -24,6 +24,8 @@ import numpy as np
 from ..atomic import atomic_write
 from ..contours import DEFAULT_MASS_LEVELS, mass_levels as checked_levels
 from ..domains.grid import Grid
+from ..geo.dataset import read_maps
+from ..geo.frame import GeoFrame
 from ..plotting import figure_layout, format_time, map_frame, plot_raster, pyplot
 from ..recording.readback import read_rasters
 from ..results import Raster
@@ -35,7 +37,7 @@ from .run import compute
 __all__ = ["INPUTS", "Panel", "Picture", "check_picture_options", "read_picture", "write_picture"]
 
 #: What ``bananagrid plot`` reads, by file suffix.
-INPUTS = (".toml", ".rrd", ".npz")
+INPUTS = (".toml", ".rrd", ".npz", ".nc")
 
 #: Times closer than this (relative, absolute s) are the same time.
 _SAME_TIME = {"rtol": 1e-12, "atol": 1e-9}
@@ -71,7 +73,7 @@ def read_picture(source: str | os.PathLike, *, layers: Sequence[str] = (), t: fl
     ----------
     source : path-like
         A scene ``.toml`` (its layers at that time are computed, as ``bananagrid run`` does),
-        a recording ``.rrd`` or arrays ``.npz`` written by ``bananagrid run``.
+        a recording ``.rrd``, arrays ``.npz`` or maps ``.nc`` written by ``bananagrid run``.
     layers : sequence of str
         Layer names to keep, in the order given (default: all, in the file's order).
     t : float, optional
@@ -92,7 +94,7 @@ def read_picture(source: str | os.PathLike, *, layers: Sequence[str] = (), t: fl
     if suffix not in INPUTS:
         raise BananagridError(
             f"{path}: cannot plot a {suffix or 'suffix-less'} file; give one of {', '.join(INPUTS)} "
-            "(a scene, or a recording or arrays written by bananagrid run)"
+            "(a scene, or a recording, arrays or NetCDF maps written by bananagrid run)"
         )
     if not path.is_file():
         raise BananagridError(f"{path}: no such file")
@@ -105,6 +107,8 @@ def read_picture(source: str | os.PathLike, *, layers: Sequence[str] = (), t: fl
         heading, levels, found = _from_scene(path, t, threads, step)
     elif suffix == ".rrd":
         heading, found = path.stem, [Panel(r.layer, r.t, r.raster) for r in read_rasters(path)]
+    elif suffix == ".nc":
+        heading, found = _from_netcdf(path)
     else:
         heading, found = _from_npz(path)
     times = sorted({p.t for p in found})
@@ -211,6 +215,21 @@ def _from_scene(path: Path, t: float | None, threads: int | None,
             found.append(Panel(layer.name, time, raster))
     heading = scene.name if scene.title in ("", scene.name) else f"{scene.name}: {scene.title}"
     return heading, tuple(scene.mass_levels), found
+
+
+def _from_netcdf(path: Path) -> tuple[str, list[Panel]]:
+    """The maps of a NetCDF file ``run --netcdf`` wrote (:func:`bananagrid.geo.dataset.read_maps`)."""
+    title, maps = read_maps(path)
+    found = []
+    for item in maps:
+        described = item["grid"]
+        grid = Grid(origin=tuple(described["origin"]), dx=described["dx"], dy=described["dy"],
+                    nx=described["nx"], ny=described["ny"])
+        frame = None if item["frame"] is None else GeoFrame.from_identity(item["frame"])
+        raster = Raster(values=item["values"], grid=grid, mass=item["mass"], normalised=item["normalised"],
+                        provenance=item["provenance"], frame=frame)
+        found.append(Panel(item["layer"], item["t"], raster))
+    return (f"{path.stem}: {title}" if title else path.stem), found
 
 
 def _from_npz(path: Path) -> tuple[str, list[Panel]]:

@@ -13,6 +13,7 @@ import time
 import warnings
 import zipfile
 from collections.abc import Callable
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -22,8 +23,14 @@ from ..analysis.bearing_validation import format_table, summary, validation_tabl
 from ..analysis.coverage import coverage_warnings, level_warnings, peak_location
 from ..atomic import partial_path
 from ..engine.rasterise import rasterise
+from ..geo.dataset import raster_dataset, write_netcdf
+from ..geo.areas import search_areas
+from ..geo.geojson import write_geojson
+from ..geo.geotiff import write_geotiff
+from ..geo.libraries import require
 from ..protocol import DensityModel
 from ..recording.bearing import log_validation_table
+from ..recording.geomap import log_map_areas, log_map_marks, map_view
 from ..recording.core import (
     default_blueprint,
     focus_extent,
@@ -45,7 +52,7 @@ from .load import Layer, Scene
 from .presence import PresenceScene
 from .run_presence import run_presence_scene
 
-__all__ = ["run_scene", "compute", "array_key", "RUN_ONLY_PROVENANCE"]
+__all__ = ["run_scene", "compute", "array_key", "check_exports", "write_exports", "RUN_ONLY_PROVENANCE"]
 
 #: Provenance keys that describe the run rather than the result. They stay out of the
 #: recording, so that running a scene twice gives equal recordings; the summary rows and the
@@ -60,6 +67,9 @@ def run_scene(
     out_dir: str | os.PathLike,
     *,
     npz: bool = False,
+    netcdf: bool = False,
+    geotiff: bool = False,
+    geojson: bool = False,
     threads: int | None = None,
     progress: Progress | None = None,
 ) -> list[dict]:
@@ -75,6 +85,17 @@ def run_scene(
         Also write the arrays: ``x``, ``y`` (cell centres, m), one ``LAYER__tT`` array of
         shape ``(ny, nx)`` per layer and time (density per m^2, normalised when the scene
         says so, rows south to north) and ``provenance`` (a JSON string).
+    netcdf : bool, default False
+        Also write ``NAME.nc``: CF-1.10 NetCDF of every layer and time (projected x, y; with
+        ``[geo]`` also latitude, longitude, the CRS and UTC times), see
+        :func:`bananagrid.geo.dataset.raster_dataset`.
+    geotiff : bool, default False
+        Also write ``NAME.tif``: one georeferenced float32 band per layer and time
+        (:func:`bananagrid.geo.geotiff.write_geotiff`).
+    geojson : bool, default False
+        Also write ``NAME-areas.geojson``: the probability-mass regions at the scene's
+        ``mass_levels`` as WGS84 polygons (:func:`bananagrid.geo.geojson.write_geojson`); needs
+        ``[geo]``.
     threads : int, optional
         CPU threads per rasterisation (default: every core).
     progress : callable, optional
@@ -98,17 +119,20 @@ def run_scene(
         contour levels outside the map's range. The scene's own warnings and these are listed
         in the recording's summary document.
     """
+    check_exports(scene, netcdf=netcdf, geotiff=geotiff, geojson=geojson)
     if isinstance(scene, PresenceScene):  # an [array] scene: its own runner
         return run_presence_scene(scene, out_dir, npz=npz, threads=threads, progress=progress)
     out_dir = Path(out_dir)
     if not out_dir.is_dir():
         raise BananagridError(f"{out_dir}: output directory does not exist")
+    panels: list | None = [] if netcdf or geotiff or geojson else None
     rrd_path = out_dir / f"{scene.name}.rrd"
     npz_path = out_dir / f"{scene.name}.npz"
     archive = None
     rows: list[dict] = []
     found: list[str] = list(scene.warnings)
     frames: dict[str, list] = {}
+    areas: dict[tuple[str, float], list] = {}  # a geographic scene's search areas, by (layer, t)
 
     def build(rec) -> None:
         # Runs on this thread: set_elapsed is per thread.
@@ -138,8 +162,15 @@ def run_scene(
             )
             if scene.radial is not None and layer.name in scene.radial.layers:
                 _log_radial(rec, scene, layer, t, threads)
+            if scene.geo is not None:
+                if not any(name == layer.name for name, _ in areas):
+                    log_map_marks(rec, layer.name, model, scene.geo)
+                areas[layer.name, t] = search_areas(raster, scene.mass_levels)
+                log_map_areas(rec, layer.name, areas[layer.name, t], scene.geo)
             if archive is not None:
                 archive.add(layer.name, t, raster)
+            if panels is not None:
+                panels.append((layer.name, t, raster))
             rows.append(_row(scene, layer, t, raster, seconds, regions))
             if progress is not None:
                 progress(k + 1, len(jobs), label)
@@ -155,16 +186,63 @@ def run_scene(
     try:
         archive = _Archive(npz_path, scene) if npz else None
         write_recording(rrd_path, build, recording_id=_recording_id(scene))
-        if archive is not None:
-            try:
+        written = [rrd_path]
+        try:
+            if panels is not None:
+                written += write_exports(scene, out_dir, panels, netcdf=netcdf, geotiff=geotiff, geojson=geojson,
+                                         areas=areas)
+            if archive is not None:
                 archive.publish()
-            except BaseException:
-                rrd_path.unlink(missing_ok=True)  # all or nothing: no recording without its arrays
-                raise
+        except BaseException:
+            for path in written:  # all or nothing: no recording without the files asked for
+                path.unlink(missing_ok=True)
+            raise
     finally:
         if archive is not None:
             archive.discard()
     return rows
+
+
+def check_exports(scene: Scene | PresenceScene, *, netcdf: bool = False, geotiff: bool = False,
+                  geojson: bool = False) -> None:
+    """Refuse, before any computing, a map file the scene cannot give or whose library is
+    missing: an [array] scene maps angular cells, not a grid; GeoJSON search areas are in
+    latitude and longitude, so they need a geographic scene (``[geo]``)."""
+    asked = [option for option, wanted in (("--netcdf", netcdf), ("--geotiff", geotiff), ("--geojson", geojson))
+             if wanted]
+    if asked and isinstance(scene, PresenceScene):
+        raise BananagridError(f"{scene.source}: {', '.join(asked)}: an [array] scene maps angular cells, "
+                              "not a grid; its cell tables are in the .rrd and .npz")
+    for wanted, libraries in ((netcdf, ("xarray", "netCDF4")), (geotiff, ("rasterio",)), (geojson, ("shapely", "pyproj"))):
+        for library in libraries if wanted else ():
+            require(library, "map files (--netcdf, --geotiff, --geojson)")
+    if geojson and scene.geo is None:
+        raise BananagridError(
+            f"{scene.source}: --geojson: search areas are written in latitude and longitude, and this scene "
+            "has no [geo] table (geo.origin_latlon); --netcdf and --geotiff work in local metres"
+        )
+
+
+def write_exports(scene: Scene, out_dir: Path, panels: list, *, netcdf: bool = False, geotiff: bool = False,
+                  geojson: bool = False, areas: dict | None = None) -> list[Path]:
+    """The map files of a scene's ``panels`` (``(layer, t, raster)``), each written whole or
+    not at all; if one fails, those already written are removed. Returns their paths.
+    ``areas``: the panels' search areas by ``(layer, t)`` where already found."""
+    written: list[Path] = []
+    try:
+        if netcdf:
+            dataset = raster_dataset(panels, scene.geo, title=scene.title, source=scene.source)
+            written.append(write_netcdf(out_dir / f"{scene.name}.nc", dataset))
+        if geotiff:
+            written.append(write_geotiff(out_dir / f"{scene.name}.tif", panels, scene.geo, title=scene.title))
+        if geojson:
+            written.append(write_geojson(out_dir / f"{scene.name}-areas.geojson", panels, scene.geo, scene.mass_levels,
+                                         title=scene.title, areas=areas))
+    except BaseException:
+        for path in written:
+            path.unlink(missing_ok=True)
+        raise
+    return written
 
 
 def compute(scene: Scene, layer: Layer, t: float, *, threads: int | None = None,
@@ -182,6 +260,8 @@ def compute(scene: Scene, layer: Layer, t: float, *, threads: int | None = None,
                 "so it cannot be normalised; move or enlarge the grid, or set output.normalise = false"
             )
         raster = raster.normalise()
+    if scene.geo is not None:  # the frame travels in the provenance too: readers rebuild it
+        raster = replace(raster, frame=scene.geo, provenance={**raster.provenance, "geo": scene.geo.identity()})
     return raster, time.perf_counter() - start
 
 
@@ -206,6 +286,8 @@ def _blueprint(scene: Scene, frames: dict):
         extra_views=views,
         several_times=scene.times is not None and len(scene.times) > 1,
         frames=frames,
+        map_view=None if scene.geo is None else map_view(
+            scene.geo, scene.grid.extent, [(layer.name, layer.model(t0)) for layer in scene.layers]),
     )
 
 
@@ -226,10 +308,7 @@ def array_key(layer: str, t: float) -> str:
 def _recordable(raster: Raster) -> Raster:
     """The raster without run-dependent provenance (timings, threads)."""
     kept = {k: v for k, v in raster.provenance.items() if k not in RUN_ONLY_PROVENANCE}
-    return Raster(
-        values=raster.values, grid=raster.grid, mass=raster.mass,
-        normalised=raster.normalised, quantity=raster.quantity, provenance=kept,
-    )
+    return replace(raster, provenance=kept)
 
 
 def _recording_id(scene: Scene) -> str:
@@ -302,6 +381,7 @@ class _Archive:
             "title": scene.title,
             "source": scene.source,
             "grid": scene.grid.describe(),
+            "geo": None if scene.geo is None else scene.geo.describe(),
             "dtype": scene.dtype,
             "quantity": "density per m^2 at the cell centres (x[j], y[i]); rows south to north",
             "normalised": scene.normalise,

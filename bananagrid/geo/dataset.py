@@ -1,0 +1,423 @@
+"""Results as CF-1.10 xarray Datasets, and CF NetCDF files.
+
+:func:`raster_dataset` puts a scene's maps (its layers at its elapsed times, all on one grid)
+into one :class:`xarray.Dataset` that follows the CF conventions 1.10, so that xarray, ncdump,
+Panoply, QGIS and GDAL read it without help:
+
+* ``x``, ``y``: the projected coordinates of the cell centres, m (``projection_x_coordinate``,
+  ``projection_y_coordinate``; local metres about the origin when there is no frame), with
+  ``x_bounds``, ``y_bounds`` holding the cell edges;
+* with a :class:`~bananagrid.geo.frame.GeoFrame`: ``lat``, ``lon`` (y, x), the latitude and
+  longitude of every cell centre, and ``crs``, the grid mapping (pyproj's CF attributes and the
+  WKT2 as ``crs_wkt`` and ``spatial_ref``);
+* ``time``: with a frame time, the UTC times (decoded to datetime64 in memory, written as
+  ``seconds since`` the frame time), with the auxiliary coordinate ``elapsed`` (s since the
+  fix); without one, the time dimension is ``elapsed`` itself (units ``s``: CF keeps a
+  coordinate named ``time`` for ``seconds since`` a date);
+* one variable per layer, named for the layer: the density per m^2 at each cell centre,
+  dims (time, y, x), with ``LAYER_mass`` (the probability mass the grid captured before any
+  normalisation, per time) and ``LAYER_normalised`` (a 0/1 flag per time); the provenance of
+  each time as JSON in the attribute ``bananagrid_provenance``.
+
+Layers at different times: when every layer has the same elapsed times they share the
+dimension ``time``; otherwise each layer has its own time dimension and coordinates,
+``time_LAYER`` (and ``elapsed_LAYER``), so that no layer is padded with maps it does not have.
+Both layouts are plain CF (a variable's time coordinate is the one on its own dimension).
+
+:func:`polar_dataset` and :func:`cell_map_dataset` do the same, smaller, for a polar lattice and
+an angular cell lattice; :func:`write_netcdf` writes any of them (netCDF4 engine, zlib
+compression of the data variables) to a temporary name and renames it when complete, and
+:func:`read_maps` reads a scene's maps back from such a file (``bananagrid plot FILE.nc``).
+
+xarray, netCDF4 and pyproj are the ``geo`` extra, loaded when first used. Results are taken
+duck-typed (this package sits below :mod:`bananagrid.results`, whose ``to_xarray`` methods call
+these functions).
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from collections.abc import Sequence
+from pathlib import Path
+
+import numpy as np
+
+from ..validate import BananagridError
+from ..version import __version__
+from .files import writing
+from .libraries import require
+from .panels import check_panels, frame_of, provenance_json, variable_name
+
+__all__ = [
+    "CONVENTIONS", "DENSITY_UNITS", "ELAPSED_LONG_NAME", "NETCDF_PURPOSE", "raster_dataset", "polar_dataset",
+    "cell_map_dataset", "write_netcdf", "time_units", "read_maps",
+]
+
+CONVENTIONS = "CF-1.10"
+#: Density per square metre (UDUNITS).
+DENSITY_UNITS = "m-2"
+ELAPSED_LONG_NAME = "elapsed time since the fix"
+#: What the libraries of this module are needed for, in the message when one is missing.
+NETCDF_PURPOSE = "NetCDF and xarray export"
+#: zlib level of the data variables in a NetCDF file (4: most of level 9's gain, much faster).
+ZLIB_LEVEL = 4
+#: Names of the coordinates and grid mapping: a layer may not take one of them.
+RESERVED_NAMES = frozenset({"x", "y", "x_bounds", "y_bounds", "lat", "lon", "crs", "time", "elapsed"})
+CELL_UNITS = {"line": "m", "plane": "m2", "frustum": "m3"}
+
+
+def time_units(frame) -> str:
+    """The CF units of the time coordinate of a frame with a time: ``seconds since`` its UTC
+    time in ISO 8601 (``2026-11-24T06:00:00Z``), which UDUNITS, cftime and pandas all read."""
+    return f"seconds since {frame.describe()['time']}"
+
+
+def raster_dataset(panels: Sequence, frame=None, *, title: str = "", source: str = ""):
+    """A scene's maps as one CF-1.10 :class:`xarray.Dataset`.
+
+    Parameters
+    ----------
+    panels : sequence of (str, float, Raster)
+        ``(layer_name, t, raster)``: each layer's density at elapsed time ``t`` (s), all on one
+        grid. A layer name that is not a NetCDF name (letters, digits, ``_``, starting with a
+        letter) has its other characters replaced by ``_``; the name as given is kept in the
+        variable's ``bananagrid_layer`` attribute.
+    frame : GeoFrame, optional
+        Where the grid lies on the Earth; default the rasters' own ``frame``. Without one the
+        coordinates are local metres and there is no CRS, latitude, longitude or UTC time.
+    title, source : str
+        The global ``title`` and ``source`` attributes (``source`` defaults to
+        ``"bananagrid VERSION"``).
+
+    Returns
+    -------
+    xarray.Dataset
+        See the module's description for its variables.
+
+    Raises
+    ------
+    BananagridError
+        Bad panels (:func:`~bananagrid.geo.panels.check_panels`), a layer whose variable name
+        clashes with a coordinate or another layer, or xarray or pyproj missing.
+    """
+    xr = require("xarray", NETCDF_PURPOSE)
+    checked = check_panels(panels)
+    frame = frame_of(checked, frame)
+    grid = checked[0].raster.grid
+    layers: dict[str, list] = {}
+    for panel in checked:
+        layers.setdefault(panel.layer, []).append(panel)
+    for series in layers.values():
+        series.sort(key=lambda p: p.t)
+    taken = set(RESERVED_NAMES)
+    names = {}
+    for layer in layers:
+        names[layer] = variable_name(layer, taken)
+        taken.add(names[layer])
+    shared = len({tuple(p.t for p in series) for series in layers.values()}) == 1
+
+    coords, data_vars = _grid_variables(grid, frame)
+    for layer, series in layers.items():
+        var = names[layer]
+        derived = {"mass": f"{var}_mass", "normalised": f"{var}_normalised"}
+        if not shared:
+            derived.update(time=f"time_{var}", elapsed=f"elapsed_{var}")
+        for name in derived.values():
+            variable_name(name, taken)  # refuses a clash (derived names are valid NetCDF names)
+            taken.add(name)
+        tdim, elapsed = ("time", "elapsed") if shared else (derived["time"], derived["elapsed"])
+        if frame is None or frame.time is None:  # CF: a "time" needs "seconds since" a date
+            tdim = elapsed
+        if tdim not in coords:
+            coords.update(_time_variables(tdim, elapsed, [p.t for p in series], frame))
+        data_vars[var] = _layer_variable(xr, layer, series, tdim, elapsed, frame)
+        data_vars[derived["mass"]] = xr.Variable(
+            (tdim,), np.array([float(p.raster.mass) for p in series]),
+            {"long_name": f"probability mass the grid captured before normalisation: layer {layer}", "units": "1"},
+        )
+        data_vars[derived["normalised"]] = xr.Variable(
+            (tdim,), np.array([bool(getattr(p.raster, "normalised", False)) for p in series], dtype=np.int8),
+            {"long_name": f"whether the density of layer {layer} was divided by its captured mass",
+             "flag_values": np.array([0, 1], dtype=np.int8), "flag_meanings": "raw normalised"},
+        )
+    attrs = _global_attrs(title, source, frame)
+    attrs["bananagrid_grid"] = json.dumps(grid.describe())
+    attrs["comment"] = (
+        "Each layer variable holds the probability density of the target's position per square metre at the "
+        "cell centres (not a cell probability: multiply by the cell area for that). "
+        + ("Layers share the time dimension." if shared else "Each layer has its own time dimension (their times differ).")
+    )
+    return xr.Dataset(data_vars, coords=coords, attrs=attrs)
+
+
+def _grid_variables(grid, frame) -> tuple[dict, dict]:
+    xr = require("xarray", NETCDF_PURPOSE)
+    e0, n0 = (0.0, 0.0) if frame is None else frame.false_origin
+    x_edges = e0 + grid.origin[0] + grid.dx * np.arange(grid.nx + 1)
+    y_edges = n0 + grid.origin[1] + grid.dy * np.arange(grid.ny + 1)
+    where = "easting" if frame is not None else "x east of the local origin"
+    coords = {
+        "x": xr.Variable(("x",), e0 + grid.x, {
+            "standard_name": "projection_x_coordinate", "long_name": f"{where} of the cell centre",
+            "units": "m", "axis": "X", "bounds": "x_bounds"}),
+        "y": xr.Variable(("y",), n0 + grid.y, {
+            "standard_name": "projection_y_coordinate",
+            "long_name": ("northing" if frame is not None else "y north of the local origin") + " of the cell centre",
+            "units": "m", "axis": "Y", "bounds": "y_bounds"}),
+    }
+    data_vars = {
+        "x_bounds": xr.Variable(("x", "nv"), np.stack([x_edges[:-1], x_edges[1:]], axis=1)),
+        "y_bounds": xr.Variable(("y", "nv"), np.stack([y_edges[:-1], y_edges[1:]], axis=1)),
+    }
+    if frame is not None:
+        gx, gy = np.meshgrid(grid.x, grid.y)
+        lat, lon = frame.geographic(gx, gy)
+        coords["lat"] = xr.Variable(("y", "x"), lat, {
+            "standard_name": "latitude", "long_name": "latitude of the cell centre (WGS84)", "units": "degrees_north"})
+        coords["lon"] = xr.Variable(("y", "x"), lon, {
+            "standard_name": "longitude", "long_name": "longitude of the cell centre (WGS84)", "units": "degrees_east"})
+        data_vars["crs"] = xr.Variable((), np.int32(0), _crs_attrs(frame))
+    return coords, data_vars
+
+
+def _crs_attrs(frame) -> dict:
+    attrs = {}
+    for key, value in frame.crs.to_cf().items():
+        if isinstance(value, (str, int, float, np.number)):
+            attrs[key] = value
+        elif isinstance(value, (list, tuple)) and value and all(isinstance(v, (int, float)) for v in value):
+            attrs[key] = np.asarray(value, dtype=float)
+    attrs["crs_wkt"] = frame.wkt
+    attrs["spatial_ref"] = frame.wkt  # the name GDAL (and so QGIS) reads first
+    attrs["long_name"] = f"coordinate reference system of x and y ({frame.crs_name})"
+    return attrs
+
+
+def _time_variables(tdim: str, elapsed: str, times: list[float], frame) -> dict:
+    xr = require("xarray", NETCDF_PURPOSE)
+    seconds = np.asarray(times, dtype=float)
+    elapsed_attrs = {"long_name": ELAPSED_LONG_NAME, "units": "s"}
+    if frame is None or frame.time is None:
+        return {tdim: xr.Variable((tdim,), seconds, elapsed_attrs)}
+    start = np.datetime64(frame.time.replace(tzinfo=None), "ns")
+    utc = start + np.round(seconds * 1e9).astype("timedelta64[ns]")
+    time = xr.Variable((tdim,), utc, {"standard_name": "time", "long_name": "UTC time", "axis": "T"},
+                       encoding={"units": time_units(frame), "calendar": "standard", "dtype": "float64"})
+    return {tdim: time, elapsed: xr.Variable((tdim,), seconds, elapsed_attrs)}
+
+
+def _layer_variable(xr, layer: str, series: list, tdim: str, elapsed: str, frame):
+    values = np.stack([np.asarray(p.raster.values) for p in series])
+    models = sorted({str(p.raster.provenance.get("model", "?")) for p in series})
+    attrs = {
+        "long_name": f"probability density of the target's position at the cell centre: layer {layer}",
+        "units": DENSITY_UNITS,
+        "cell_methods": "area: point",
+        "bananagrid_layer": layer,
+        "model": ", ".join(models),
+        "bananagrid_provenance": "[" + ", ".join(provenance_json(p.raster.provenance) for p in series) + "]",
+    }
+    coordinates = [elapsed] if frame is not None and frame.time is not None else []
+    encoding = {}
+    if frame is not None:
+        attrs["grid_mapping"] = "crs"
+        coordinates += ["lat", "lon"]
+    if coordinates:
+        encoding["coordinates"] = " ".join(coordinates)
+    return xr.Variable((tdim, "y", "x"), values, attrs, encoding=encoding)
+
+
+def _global_attrs(title: str, source: str, frame) -> dict:
+    attrs = {
+        "Conventions": CONVENTIONS,
+        "title": str(title),
+        "source": str(source) or f"bananagrid {__version__}",
+        "history": f"created by bananagrid {__version__}",
+        "institution": f"bananagrid {__version__}",
+        "bananagrid_version": __version__,
+    }
+    if frame is not None:
+        attrs["bananagrid_frame"] = json.dumps(frame.describe())
+    return attrs
+
+
+def polar_dataset(polar, frame=None, *, title: str = "", source: str = ""):
+    """A :class:`~bananagrid.PolarRaster` as a CF-style :class:`xarray.Dataset`.
+
+    Dimensions ``range`` (m, outward) and ``bearing`` (rad, clockwise from the lattice's
+    heading), with ``range_bounds`` and ``bearing_bounds`` holding the cell edges; variables
+    ``density`` (per m per rad at the cell centre) and ``probability`` (of each cell); ``x``,
+    ``y`` (range, bearing) the cell centres in local metres (projected when there is a frame),
+    and with a frame ``lat``, ``lon`` of the cell centres. The captured mass, the normalised
+    flag, the lattice and the provenance are attributes. ``frame`` defaults to the raster's.
+    """
+    xr = require("xarray", NETCDF_PURPOSE)
+    frame = getattr(polar, "frame", None) if frame is None else frame
+    lattice = polar.lattice
+    r_edges, b_edges = lattice.range_edges, lattice.bearing_edges
+    wx, wy = lattice.world_centres
+    px, py = (wx, wy) if frame is None else frame.projected(wx, wy)
+    coords = {
+        "range": xr.Variable(("range",), lattice.range_centres, {
+            "long_name": "range from the lattice origin", "units": "m", "bounds": "range_bounds"}),
+        "bearing": xr.Variable(("bearing",), lattice.bearing_centres, {
+            "long_name": "bearing clockwise from the lattice heading", "units": "rad", "bounds": "bearing_bounds"}),
+        "x": xr.Variable(("range", "bearing"), px, {
+            "long_name": ("easting" if frame is not None else "x east of the local origin") + " of the cell centre",
+            "units": "m"}),
+        "y": xr.Variable(("range", "bearing"), py, {
+            "long_name": ("northing" if frame is not None else "y north of the local origin") + " of the cell centre",
+            "units": "m"}),
+    }
+    coordinates = "x y"
+    if frame is not None:
+        lat, lon = frame.geographic(wx, wy)
+        coords["lat"] = xr.Variable(("range", "bearing"), lat, {
+            "standard_name": "latitude", "long_name": "latitude of the cell centre (WGS84)", "units": "degrees_north"})
+        coords["lon"] = xr.Variable(("range", "bearing"), lon, {
+            "standard_name": "longitude", "long_name": "longitude of the cell centre (WGS84)", "units": "degrees_east"})
+        coordinates += " lat lon"
+    data_vars = {
+        "density": xr.Variable(("range", "bearing"), np.asarray(polar.density), {
+            "long_name": "probability density of the target per unit range and bearing at the cell centre",
+            "units": "m-1 rad-1"}, encoding={"coordinates": coordinates}),
+        "probability": xr.Variable(("range", "bearing"), np.asarray(polar.probability), {
+            "long_name": "probability of the cell", "units": "1"}, encoding={"coordinates": coordinates}),
+        "range_bounds": xr.Variable(("range", "nv"), np.stack([r_edges[:-1], r_edges[1:]], axis=1)),
+        "bearing_bounds": xr.Variable(("bearing", "nv"), np.stack([b_edges[:-1], b_edges[1:]], axis=1)),
+    }
+    attrs = _global_attrs(title, source, frame)
+    attrs.update(mass=float(polar.mass), normalised=np.int8(bool(polar.normalised)),
+                 bananagrid_lattice=json.dumps(lattice.describe()),
+                 bananagrid_provenance=provenance_json(polar.provenance),
+                 model=str(polar.provenance.get("model", "?")))
+    return xr.Dataset(data_vars, coords=coords, attrs=attrs)
+
+
+def cell_map_dataset(cell_map, frame=None, *, title: str = "", source: str = ""):
+    """A :class:`~bananagrid.CellMap` as a CF-style :class:`xarray.Dataset`.
+
+    Dimensions ``azimuth`` and (plane, frustum) ``elevation`` (rad, the direction cell centres;
+    elevation from +z, pi/2 the horizon, pi the nadir), with ``azimuth_bounds`` and
+    ``elevation_bounds`` holding the cell edges; variables ``probability`` (presence
+    probability of each cell given the region), ``error`` (its estimated absolute error, where
+    known), ``cell_size`` (m, m2 or m3; inf for a horizon cell) and the scalar
+    ``region_probability``. The lattice, the frame and the provenance are attributes.
+    """
+    xr = require("xarray", NETCDF_PURPOSE)
+    frame = getattr(cell_map, "frame", None) if frame is None else frame
+    lattice = cell_map.lattice
+    dims = ("azimuth",) if lattice.geometry == "line" else ("azimuth", "elevation")
+    a_edges = lattice.azimuth_edges
+    coords = {"azimuth": xr.Variable(("azimuth",), lattice.azimuths, {
+        "long_name": "azimuth of the direction cell", "units": "rad", "bounds": "azimuth_bounds"})}
+    data_vars = {"azimuth_bounds": xr.Variable(("azimuth", "nv"), np.stack([a_edges[:-1], a_edges[1:]], axis=1))}
+    if lattice.geometry != "line":
+        e_edges = lattice.elevation_edges
+        coords["elevation"] = xr.Variable(("elevation",), lattice.elevations, {
+            "long_name": "elevation of the direction cell from +z (pi/2 the horizon, pi the nadir)",
+            "units": "rad", "bounds": "elevation_bounds"})
+        data_vars["elevation_bounds"] = xr.Variable(("elevation", "nv"), np.stack([e_edges[:-1], e_edges[1:]], axis=1))
+    size = cell_map.clipped_sizes if cell_map.clipped_sizes is not None else lattice.sizes
+    data_vars["probability"] = xr.Variable(dims, np.asarray(cell_map.prob), {
+        "long_name": "presence probability of the cell given the region", "units": "1"})
+    if cell_map.error is not None:
+        data_vars["error"] = xr.Variable(dims, np.asarray(cell_map.error), {
+            "long_name": "estimated absolute error of the cell probability", "units": "1"})
+    data_vars["cell_size"] = xr.Variable(dims, np.asarray(size, dtype=float), {
+        "long_name": "length, area or volume of the cell" + (" within the region" if cell_map.clipped_sizes is not None else ""),
+        "units": CELL_UNITS[lattice.geometry]})
+    data_vars["region_probability"] = xr.Variable((), float(cell_map.region_probability), {
+        "long_name": "probability of the conditioning region (1 without one)", "units": "1"})
+    attrs = _global_attrs(title, source, frame)
+    attrs.update(bananagrid_lattice=json.dumps(lattice.describe()),
+                 bananagrid_provenance=provenance_json(cell_map.provenance),
+                 model=str(cell_map.provenance.get("model", "?")))
+    return xr.Dataset(data_vars, coords=coords, attrs=attrs)
+
+
+def write_netcdf(path: str | os.PathLike, dataset) -> Path:
+    """Write ``dataset`` as NetCDF-4 (netCDF4 engine, zlib level :data:`ZLIB_LEVEL` on the data
+    variables) to ``path``, whole or not at all: to a temporary name beside it, renamed when
+    complete.
+
+    Returns
+    -------
+    Path
+        ``path``.
+
+    Raises
+    ------
+    BananagridError
+        A missing directory, a failure while writing (nothing is left behind), or xarray or
+        netCDF4 missing.
+    """
+    xr = require("xarray", NETCDF_PURPOSE)
+    require("netCDF4", NETCDF_PURPOSE)
+    if not isinstance(dataset, xr.Dataset):
+        raise BananagridError(f"dataset: expected an xarray.Dataset, got {type(dataset).__name__}")
+    # no fill value: every cell holds a number (CF forbids missing values in coordinates); the
+    # variables' own encodings (the time's units) are kept, since this argument replaces them
+    encoding = {
+        name: {**{k: v for k, v in var.encoding.items() if k in ("units", "calendar", "dtype")}, "_FillValue": None}
+        for name, var in dataset.variables.items()
+    }
+    for name, var in dataset.data_vars.items():
+        if var.ndim >= 1 and not name.endswith("_bounds"):
+            encoding[name].update(zlib=True, complevel=ZLIB_LEVEL)
+    final = Path(path)
+    with writing(final, "NetCDF file", (RuntimeError,)) as partial:
+        dataset.to_netcdf(partial, engine="netcdf4", format="NETCDF4", encoding=encoding)
+    return final
+
+
+def read_maps(path: str | os.PathLike) -> tuple[str, list[dict]]:
+    """The maps of a NetCDF file :func:`write_netcdf` wrote from :func:`raster_dataset`.
+
+    Returns
+    -------
+    (str, list of dict)
+        The file's title, and per layer and time: ``layer`` (the name as given), ``t``
+        (elapsed s), ``values`` (float64, rows south to north), ``grid`` (the float64
+        description: ``origin``, ``dx``, ``dy``, ``nx``, ``ny``), ``mass``, ``normalised``,
+        ``provenance`` and ``frame`` (the frame's identity, or None).
+
+    Raises
+    ------
+    BananagridError
+        A file that does not open, or one without bananagrid's layer variables.
+    """
+    xr = require("xarray", NETCDF_PURPOSE)
+    require("netCDF4", NETCDF_PURPOSE)
+    try:
+        ds = xr.open_dataset(path, engine="netcdf4", decode_times=False)
+    except (OSError, ValueError) as exc:
+        raise BananagridError(f"{path}: not a NetCDF file ({type(exc).__name__}: {exc})") from None
+    with ds:
+        try:
+            grid = json.loads(ds.attrs["bananagrid_grid"])
+            described = json.loads(ds.attrs["bananagrid_frame"]) if "bananagrid_frame" in ds.attrs else None
+        except (KeyError, ValueError) as exc:
+            raise BananagridError(f"{path}: not a map file written by bananagrid (no {exc} attribute)") from None
+        frame = None if described is None else {
+            "lat": described["lat"], "lon": described["lon"], "time": described.get("time"), "crs": described["crs_name"],
+        }
+        maps = []
+        for name, var in ds.data_vars.items():
+            if "bananagrid_layer" not in var.attrs or var.dims[1:] != ("y", "x"):
+                continue
+            tdim = var.dims[0]
+            elapsed = ds[tdim] if tdim.startswith("elapsed") else ds[tdim.replace("time", "elapsed", 1)]
+            provenance = json.loads(var.attrs.get("bananagrid_provenance", "[]"))
+            masses, flags = ds[f"{name}_mass"].values, ds[f"{name}_normalised"].values
+            for k, t in enumerate(np.asarray(elapsed.values, dtype=float)):
+                maps.append({
+                    "layer": var.attrs["bananagrid_layer"], "t": float(t),
+                    "values": np.asarray(var.values[k], dtype=np.float64), "grid": grid,
+                    "mass": float(masses[k]), "normalised": bool(flags[k]),
+                    "provenance": provenance[k] if k < len(provenance) else {}, "frame": frame,
+                })
+        if not maps:
+            raise BananagridError(f"{path}: holds no bananagrid layer variables")
+        return str(ds.attrs.get("title", "")), maps
