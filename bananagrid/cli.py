@@ -24,13 +24,14 @@ from .analysis.sweep import FIGURE7_LEVELS, sweep
 from .atomic import Terminated, atomic_write, check_writable, signals_as_exceptions
 from .bench import runner as bench
 from .contours import DEFAULT_LEVELS, format_area, mass_levels
+from .engine.memory import memory_limit
 from .recording.compare import write_compare_recording, write_sweep_recording
 from .recording.core import recording_id_for
 from .recording.inspect import cell_map_summaries, format_inspection, inspect_recording, json_ready, layer_summaries
 from .scenes.examples import example_names, example_path, example_title, scene_source
 from .scenes.load import Scene, load_scene
 from .scenes.pictures import check_picture_options, read_picture, write_picture
-from .scenes.run import RUN_ONLY_PROVENANCE, check_exports, compute, run_scene
+from .scenes.run import RUN_ONLY_PROVENANCE, check_exports, check_run_memory, compute, run_scene
 from .validate import BananagridError, positive
 from .version import __version__
 
@@ -57,7 +58,7 @@ INSPECT_JSON_SCHEMA = """\
     regions: per level {probability, reached, cell_probability, enclosed, cells}
   timelines: {name: {kind, count, min, max, values}}  (seconds for durations)
   entities: {path: {archetypes, components, static_rows, temporal_rows,
-                    image_shapes, value_range, scalars, values}}
+                    image_shapes, value_range, non_finite, scalars, values}}
 """
 
 
@@ -125,6 +126,9 @@ def build_parser() -> tuple[argparse.ArgumentParser, dict[str, argparse.Argument
                      help="override the grid step of every scene, m (e.g. for a quick look)")
     run.add_argument("--threads", type=int, metavar="N",
                      help="CPU threads per rasterisation (default: every core)")
+    run.add_argument("--max-memory", type=float, metavar="GB",
+                     help="memory a scene's run may take, GB (default: what the system has available); "
+                     "a larger estimate is refused before computing")
     run.add_argument("--quiet", action="store_true", help="no progress lines on stderr")
     run.set_defaults(handler=_run)
 
@@ -242,8 +246,10 @@ def _run(args: argparse.Namespace) -> int:
         scenes = [scene.with_step(args.step) for scene in scenes]
     _check_unique_names(scenes)
     exports = {"netcdf": args.netcdf, "geotiff": args.geotiff, "geojson": args.geojson}
+    limit = None if args.max_memory is None else memory_limit(args.max_memory)
     for scene in scenes:
         check_exports(scene, **exports)
+        check_run_memory(scene, exports=any(exports.values()), limit=limit)
     args.out.mkdir(parents=True, exist_ok=True)
     check_writable(args.out)
     rows, written = [], []
@@ -251,7 +257,8 @@ def _run(args: argparse.Namespace) -> int:
         progress = None if args.quiet else _Progress(scene.name, sys.stderr)
         failed = True
         try:
-            rows += run_scene(scene, args.out, npz=args.npz, threads=args.threads, progress=progress, **exports)
+            rows += run_scene(scene, args.out, npz=args.npz, threads=args.threads, progress=progress,
+                              max_memory=limit, **exports)
             failed = False
         finally:
             if progress is not None:

@@ -291,6 +291,12 @@ class DensityModel(Protocol):
     def sample(self, n: int, rng) -> np.ndarray:
         """``n`` world positions from the model's generative story, shape ``(n, 2)``."""
 
+    @property
+    def integrates_to_one(self) -> bool:
+        """Whether the density is a probability density (its integral over the plane is 1), so
+        that a grid's captured mass above 1 can only be the cells' error; False for a map that
+        integrates to about one (the exact bearing likelihood)."""
+
     def landmarks(self) -> dict[str, np.ndarray]:
         """Where the model is anchored in the world, for maps (world metres): ``"fix"``, shape
         ``(1, 2)`` (a last fix, a start's mean, an estimated position), and for a model built on

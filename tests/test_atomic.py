@@ -2,6 +2,7 @@
 terminating signal in the middle of a run, and an output directory refused before computing."""
 
 import os
+import resource
 import signal
 import subprocess
 import sys
@@ -102,3 +103,22 @@ def test_a_failing_later_scene_names_the_files_already_written(tmp_path, monkeyp
     assert err == [f"bananagrid: written before the error: {tmp_path / 'figure1.rrd'}",
                    "bananagrid: error: folding.toml: the disk is on fire"]
     assert sorted(p.name for p in tmp_path.iterdir()) == ["figure1.rrd"]
+
+
+def _limit_file_size():
+    """In the child: files may not grow past 200 kB (writes beyond fail as on a full disk, EFBIG),
+    and SIGXFSZ is ignored so that the write fails instead of killing the process."""
+    resource.setrlimit(resource.RLIMIT_FSIZE, (200_000, 200_000))
+    signal.signal(signal.SIGXFSZ, signal.SIG_IGN)
+
+
+def test_a_write_that_fails_midway_ends_in_one_line_and_leaves_nothing(tmp_path):
+    """rerun's file writer stops when a write fails (a full disk; here a 200 kB file-size limit,
+    which needs no mount): the run ends with exit 2, our line last, and no file or temporary."""
+    run = run_cli("run", "scenes/figure1.toml", "--step", "5", "--out", str(tmp_path), "--quiet",
+                  preexec_fn=_limit_file_size)
+    out, err = run.communicate(timeout=300)
+    assert run.returncode == 2, err
+    last = err.strip().splitlines()[-1]
+    assert last.startswith(f"bananagrid: error: {tmp_path / 'figure1.rrd'}: cannot write the recording"), err
+    assert list(tmp_path.iterdir()) == []

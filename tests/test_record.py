@@ -10,16 +10,19 @@ from pathlib import Path
 import numpy as np
 import pyarrow as pa
 import pytest
+import rerun as rr
 from rerun.chunk import RrdReader
 
 from bananagrid import BananagridError, Grid, Raster
 from bananagrid.contours import contour_lines, mass_inside, mass_regions
 from bananagrid.recording.inspect import format_inspection, inspect_recording, read_depth_image
+from bananagrid.recording import core as core_module
 from bananagrid.recording.core import (
     default_blueprint,
     log_raster,
     log_scene_text,
     set_elapsed,
+    verify_recording,
     write_recording,
 )
 
@@ -248,3 +251,47 @@ def test_mass_inside_is_midpoint_sum_above_level(raster):
     level = 0.5 * raster.peak
     expected = raster.values[raster.values >= level].sum() * GRID.cell_area
     assert mass_inside(raster, level) == pytest.approx(expected, rel=1e-12)
+
+
+def test_inspect_counts_non_finite_pixels_instead_of_a_nan_range(tmp_path):
+    """A recording from elsewhere (bananagrid never logs NaN) with 3 NaN and 1 inf in an image:
+    the range covers the finite pixels and the counts are reported."""
+    image = np.arange(20, dtype=np.float32).reshape(4, 5)
+    image[0, :3] = np.nan
+    image[3, 4] = np.inf
+    path = tmp_path / "foreign.rrd"
+
+    def build(rec):
+        rec.log("img", rr.DepthImage(image))
+
+    write_recording(path, build, recording_id="foreign")
+    summary = inspect_recording(path)["entities"]["/img"]
+    assert summary["value_range"] == (3.0, 18.0)
+    assert summary["non_finite"] == {"nan": 3, "inf": 1}
+    text = format_inspection(inspect_recording(path))
+    assert "values 3 .. 18 (finite ones); 3 NaN, 1 infinite" in text
+
+
+def test_a_recording_cut_short_is_refused_before_it_is_named(tmp_path, raster, monkeypatch):
+    """The file is read back before the rename: cut to half after rerun closes it (a full disk
+    or a dying writer), it raises one line and leaves neither the file nor its temporary."""
+    real_close = core_module._close
+
+    def close_then_cut(rec, shown, **kwargs):
+        real_close(rec, shown, **kwargs)
+        (partial,) = tmp_path.glob(".*.partial")
+        with open(partial, "r+b") as f:
+            f.truncate(partial.stat().st_size // 2)
+
+    monkeypatch.setattr(core_module, "_close", close_then_cut)
+    with pytest.raises(BananagridError, match=r"a\.rrd: the recording written does not read back") as info:
+        write(tmp_path / "a.rrd", {1.0: raster})
+    assert "\n" not in str(info.value)
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_verify_recording_accepts_what_write_recording_wrote(tmp_path, raster):
+    path = write(tmp_path / "a.rrd", {1.0: raster})
+    verify_recording(path, "test-recording")
+    with pytest.raises(BananagridError, match="does not hold recording 'other' alone"):
+        verify_recording(path, "other")

@@ -14,9 +14,10 @@ import pytest
 import rerun.blueprint as rrb
 from rerun.chunk import RrdReader
 
+import bananagrid as bg
 from bananagrid import BananagridError, BananagridWarning, Raster
 from bananagrid import cli
-from bananagrid.analysis.coverage import coverage_warnings, leaking_edges, peak_location
+from bananagrid.analysis.coverage import MASS_EXCESS, coverage_warnings, leaking_edges, peak_location
 from bananagrid.contours import (
     DEFAULT_MASS_LEVELS,
     cell_regions,
@@ -431,3 +432,16 @@ def test_array_scene_outlines_and_warns_about_levels_above_its_total(tmp_path):
     (labels,) = cells(tmp_path / "room_frustum.rrd", "/presence/plane/regions/labels", "Points3D:labels")
     assert labels == [f"50 % · {half.cells:,} cells"]
     assert load_scene(root / "room_frustum.toml").mass_levels == (0.25, 0.5, 0.75)
+
+
+def test_a_mass_above_one_says_the_cells_are_too_coarse():
+    """A Butterly start of 100 m SD on 500 m cells: the midpoint sum over the centre densities
+    overcounts (a probability cannot exceed 1); a fine grid of the same start does not warn."""
+    start = bg.Butterly(mean=(0.0, 0.0), cov=np.diag([100.0**2, 100.0**2]), speeds=[0.0], t=1.0)
+    coarse = bg.rasterise(start, Grid.from_bounds((-2250.0, 2250.0), (-2250.0, 2250.0), 500.0))
+    assert coarse.mass > 1.0 + MASS_EXCESS
+    (message,) = coverage_warnings(coarse, mass_regions(coarse), where="coarse")
+    assert f"gives a mass of {coarse.mass:.4g}, above 1 + 0.001" in message and "refine the grid" in message
+    fine = bg.rasterise(start, Grid.from_bounds((-1000.0, 1000.0), (-1000.0, 1000.0), 20.0))
+    assert abs(fine.mass - 1.0) < MASS_EXCESS
+    assert coverage_warnings(fine, mass_regions(fine), where="fine") == []

@@ -9,10 +9,15 @@ from ..contours import MassRegion
 from ..results import Raster
 from ..validate import BananagridError, show
 
-__all__ = ["DEFAULT_MIN_MASS", "EDGES", "coverage_warnings", "leaking_edges", "level_warnings", "min_mass", "peak_location"]
+__all__ = ["DEFAULT_MIN_MASS", "MASS_EXCESS", "EDGES", "coverage_warnings", "leaking_edges", "level_warnings", "min_mass", "peak_location"]
 
 #: Captured mass below which a layer is reported as missing part of the target.
 DEFAULT_MIN_MASS = 0.99
+
+#: Captured mass above 1 + this is reported: a probability cannot exceed 1, so the midpoint sum
+#: of the centre densities overcounts, and the cells are too coarse for the density's peak or
+#: curvature (a Butterly start of 5 SDs across 1 cell gives 1.033).
+MASS_EXCESS = 1e-3
 
 #: Grid edges, in the order they are reported.
 EDGES = ("north", "east", "south", "west")
@@ -53,9 +58,11 @@ def leaking_edges(raster: Raster) -> list[str]:
             if held[edge] >= max(LEAK_FLOOR, LEAK_SHARE * largest)]
 
 
-def coverage_warnings(raster: Raster, regions: list[MassRegion], *, where: str, threshold: float = DEFAULT_MIN_MASS) -> list[str]:
+def coverage_warnings(raster: Raster, regions: list[MassRegion], *, where: str, threshold: float = DEFAULT_MIN_MASS,
+                      integrates_to_one: bool = True) -> list[str]:
     """A one-line warning (or none) about a layer's raster: mass the grid misses (and where it
-    leaks, or that the cells are too coarse), and probability-mass levels it cannot reach.
+    leaks, or that the cells are too coarse), a mass above ``1 + MASS_EXCESS`` (cells too coarse),
+    and probability-mass levels it cannot reach.
 
     Parameters
     ----------
@@ -67,6 +74,9 @@ def coverage_warnings(raster: Raster, regions: list[MassRegion], *, where: str, 
         Names the layer and time in the messages, e.g. ``"figure1: layer cat at t = 10 s"``.
     threshold : float
         Captured mass below which the grid is said to miss the target (0: never).
+    integrates_to_one : bool
+        Whether the layer's density is a probability density (the model's
+        ``integrates_to_one``); only then is a mass above ``1 + MASS_EXCESS`` reported.
     """
     parts = []
     if raster.mass < threshold:
@@ -78,6 +88,12 @@ def coverage_warnings(raster: Raster, regions: list[MassRegion], *, where: str, 
         else:
             advice = "nothing reaches the edges, so the cells are too coarse for the density: refine the grid"
         parts.append(f"the grid captured {raster.mass:.3g} of the probability (below {threshold:g}){normalised}; {advice}")
+    elif integrates_to_one and raster.mass > 1.0 + MASS_EXCESS:
+        normalised = ", then normalised to 1" if raster.normalised else ""
+        parts.append(
+            f"the cells' midpoint sum gives a mass of {raster.mass:.4g}, above 1 + {MASS_EXCESS:g}{normalised}: "
+            "a probability cannot exceed 1, so the cells are too coarse for the density: refine the grid"
+        )
     unreached = [r for r in regions if not r.reached]
     if unreached:
         parts.append(

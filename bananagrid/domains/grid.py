@@ -11,8 +11,10 @@ from ..validate import BananagridError, pair, point, positive, positive_int
 
 __all__ = ["Grid", "MAX_CELLS"]
 
-#: Largest grid accepted (cells). 2**28 cells are 2 GiB as float64, more than a 24 GiB machine
-#: should spend on one layer with its contour and log copies.
+#: Largest grid accepted (cells). 2**28 cells are 2 GiB per float64 map; a scene run holds
+#: several such arrays at once (about 60 bytes per cell measured, so some 16 GB here), and what a
+#: run will need is checked against the memory available before it starts
+#: (:mod:`bananagrid.engine.memory`).
 MAX_CELLS = 2**28
 
 
@@ -50,8 +52,8 @@ class Grid:
             gib = cells * 8 / 2**30
             raise BananagridError(
                 f"grid of {self.nx} x {self.ny} = {cells:,} cells would take {gib:.1f} GiB as "
-                f"float64; the limit is {MAX_CELLS:,} cells ({MAX_CELLS * 8 / 2**30:.0f} GiB): "
-                "use a larger step or smaller bounds"
+                f"float64; the limit is {MAX_CELLS:,} cells ({MAX_CELLS * 8 / 2**30:.0f} GiB per float64 map, "
+                "several times that for a run): use a larger step or smaller bounds"
             )
         for name, start, extent in (("x", self.origin[0], self.nx * self.dx), ("y", self.origin[1], self.ny * self.dy)):
             if not (math.isfinite(extent) and math.isfinite(start + extent)):
@@ -96,7 +98,7 @@ class Grid:
                 raise BananagridError(
                     f"{name} bounds ({lo}, {hi}) at step {d} give {count} cells in one axis, "
                     f"over {size} GiB as float64 for a single row; the limit is "
-                    f"{MAX_CELLS:,} cells ({MAX_CELLS * 8 / 2**30:.0f} GiB) in all"
+                    f"{MAX_CELLS:,} cells ({MAX_CELLS * 8 / 2**30:.0f} GiB per float64 map) in all"
                 )
             counts.append((lo, max(n, 1)))
         (x0, nx), (y0, ny) = counts

@@ -12,6 +12,7 @@ from ..domains.polar_lattice import PolarLattice
 from ..protocol import DensityModel
 from ..results import PolarRaster, Raster
 from ..validate import BananagridError
+from .memory import RASTERISE_BYTES_PER_CELL, check_memory
 from .points import check_finite, check_model
 from .polar_cells import rasterise_lattice
 from .warp_runtime import WarpContext
@@ -71,6 +72,9 @@ def rasterise(model: DensityModel, grid: Grid | PolarLattice, *, dtype=np.float6
         raise BananagridError(f"grid = {grid!r}: expected a bananagrid.Grid")
     ctx = WarpContext(dtype, device, threads)
     check_model(model)
+    if ctx.cpu:  # an allocation the machine cannot give would abort the process without a word
+        check_memory(grid.nx * grid.ny, RASTERISE_BYTES_PER_CELL,
+                     f"rasterise on a grid of {grid.nx} x {grid.ny} = {grid.nx * grid.ny:,} cells")
     start = time.perf_counter()
     binding = model.bind(ctx, GridExtent(grid), grid=True)
     ctx.load(binding.grid_kernel)

@@ -47,6 +47,9 @@ class Model:
     #: The model's local frame; None for models without one (motion models have a ``pose`` field).
     pose: Pose | None = None
 
+    #: A probability density (see :attr:`bananagrid.protocol.DensityModel.integrates_to_one`).
+    integrates_to_one: bool = True
+
     def landmarks(self) -> dict[str, np.ndarray]:
         """The last fix, the origin of the model's pose; nothing for a model without a pose
         (:meth:`bananagrid.protocol.DensityModel.landmarks`)."""

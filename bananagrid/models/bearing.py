@@ -422,6 +422,12 @@ class BearingFix(Model):
         cross = di[:, 0] * dj[:, 1] - di[:, 1] * dj[:, 0]
         return np.abs(cross) / (np.einsum("ij,ij->i", di, di) * np.einsum("ij,ij->i", dj, dj))
 
+    @property
+    def integrates_to_one(self) -> bool:
+        """Only the linear map is a probability density; the exact likelihood, divided by the
+        linearised normaliser, integrates to about one."""
+        return self.variant == "linear"
+
     def landmarks(self) -> dict[str, np.ndarray]:
         """The fix, the stations, and each bearing line from its station to 1.5 times the
         farthest station's range from the fix (as the recording draws them)."""

@@ -30,13 +30,16 @@ from __future__ import annotations
 import datetime
 import math
 import os
+import shutil
 import uuid
+import warnings
 from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
 from pathlib import Path
 
 import numpy as np
 import rerun as rr
 import rerun.blueprint as rrb
+from rerun.chunk import RrdReader
 from rerun.error_utils import catch_and_log_exceptions
 
 from ..contours import (
@@ -73,6 +76,7 @@ __all__ = [
     "strict",
     "union_extent",
     "values_from_image",
+    "verify_recording",
     "write_recording",
 ]
 
@@ -206,9 +210,41 @@ def write_recording(
         _open_file(rec, partial, blueprint)
         try:
             build(rec)
-        finally:
-            _close(rec)
+        except BaseException:
+            _close(rec, final, failing=True)  # the build's error is the one to report
+            raise
+        _close(rec, final)
+        verify_recording(partial, recording_id, shown=final)
     return final
+
+
+def verify_recording(path: Path, recording_id: str, *, shown: Path | None = None) -> None:
+    """Check that a just-written ``.rrd`` reads back whole: it has its footer (a file cut short
+    has none), every chunk of every store decodes, and it holds the recording ``recording_id``.
+
+    What it catches is a file that is short, damaged in its framing, or not the recording asked
+    for; a flipped bit inside a chunk's data can pass (a byte flipped in the middle of a
+    recording was measured to read back without error).
+
+    Raises
+    ------
+    BananagridError
+        One line naming ``shown`` (default ``path``) and what is wrong.
+    """
+    name = shown if shown is not None else path
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("error")  # "RRD file has no footer": the file was cut short
+            reader = RrdReader(path)
+            stores = reader.recordings()
+            for store in [*stores, *reader.blueprints()]:
+                for _ in reader.stream(store=store):
+                    pass
+    except (RuntimeError, ValueError, OSError, Warning) as exc:
+        first_line = (str(exc).splitlines() or [type(exc).__name__])[0]
+        raise BananagridError(f"{name}: the recording written does not read back ({first_line})") from None
+    if [store.recording_id for store in stores] != [recording_id]:
+        raise BananagridError(f"{name}: the recording written does not hold recording {recording_id!r} alone")
 
 
 def _open_file(rec: rr.RecordingStream, path: Path, blueprint: rrb.BlueprintLike | None) -> None:
@@ -219,10 +255,30 @@ def _open_file(rec: rr.RecordingStream, path: Path, blueprint: rrb.BlueprintLike
         raise BananagridError(f"{path}: cannot write recording: {exc}") from None
 
 
-def _close(rec: rr.RecordingStream) -> None:
-    """Flush everything logged and close the file sink (this writes the RRD footer)."""
-    rec.flush()
-    rec.disconnect()
+#: Free bytes below which a failed write is put down to a full disk.
+DISK_FULL_BYTES = 1 << 20
+
+
+def _close(rec: rr.RecordingStream, shown: Path, *, failing: bool = False) -> None:
+    """Flush everything logged and close the file sink (this writes the RRD footer).
+
+    rerun's file writer stops on a write error (a full disk, a file-size limit) and the flush
+    then raises; that becomes one line naming ``shown`` (and the full disk, if free space is
+    below ``DISK_FULL_BYTES``), unless ``failing`` (another error is already on its way)."""
+    try:
+        rec.flush()
+    except RuntimeError as exc:
+        if not failing:
+            reason = (str(exc).splitlines() or ["the file writer stopped"])[0]
+            try:
+                full = shutil.disk_usage(shown.parent).free < DISK_FULL_BYTES
+            except OSError:
+                full = False
+            reason = (f"no space left on the device (rerun: {reason})" if full
+                      else f"rerun: {reason}; its message above gives the cause")
+            raise BananagridError(f"{shown}: cannot write the recording: {reason}") from None
+    finally:
+        rec.disconnect()
 
 
 # --- blueprint --------------------------------------------------------------------------------

@@ -50,9 +50,11 @@ def inspect_recording(path: str | os.PathLike) -> dict:
         store is embedded), ``timelines`` ``{name: {kind, count, min, max, values}}`` (seconds
         for durations) and ``entities`` ``{path: summary}``. An entity summary has
         ``archetypes`` and ``components`` (sorted names), ``static_rows``, ``temporal_rows``,
-        and where present ``image_shapes`` (``(height, width)``) and ``value_range``
-        (min, max over all its images), ``scalars`` and ``values`` (AnyValues): lists of
-        ``{"times": {timeline: value}, "values": ...}`` in time order. Recordings store every
+        and where present ``image_shapes`` (``(height, width)``), ``value_range``
+        (min, max of the finite values over all its images), ``non_finite``
+        (``{"nan": count, "inf": count}``, only when some pixel is not finite), ``scalars``
+        and ``values`` (AnyValues): lists of ``{"times": {timeline: value}, "values": ...}``
+        in time order. Recordings store every
         number as a float (so that a key keeps one type across times); whole ones come back
         as ``int`` (``grid.nx = 1500``).
 
@@ -95,7 +97,7 @@ def _timeline_summary(timeline: dict) -> dict:
 def _new_entity() -> dict:
     """An empty per-entity accumulator."""
     return {"archetypes": set(), "components": set(), "static_rows": 0, "temporal_rows": 0,
-            "image_shapes": set(), "ranges": [], "scalars": [], "values": []}
+            "image_shapes": set(), "ranges": [], "nan": 0, "inf": 0, "scalars": [], "values": []}
 
 
 def _add_row(acc: dict, times: dict, cells: dict) -> None:
@@ -107,7 +109,12 @@ def _add_row(acc: dict, times: dict, cells: dict) -> None:
     if IMAGE_BUFFER in cells and IMAGE_FORMAT in cells:
         image = decode_image(cells[IMAGE_BUFFER][1], cells[IMAGE_FORMAT][1])
         acc["image_shapes"].add(image.shape)
-        acc["ranges"].append((float(np.min(image)), float(np.max(image))))
+        finite = image[np.isfinite(image)] if np.issubdtype(image.dtype, np.floating) else image
+        if finite.size:
+            acc["ranges"].append((float(np.min(finite)), float(np.max(finite))))
+        if finite.size < image.size:  # NaN and infinities are counted, never folded into the range
+            acc["nan"] += int(np.count_nonzero(np.isnan(image)))
+            acc["inf"] += int(np.count_nonzero(np.isinf(image)))
     if _SCALARS in cells:
         acc["scalars"].append({"times": when, "values": _whole(plain_cell(cells[_SCALARS][1]))})
     untyped = {
@@ -136,8 +143,11 @@ def _entity_summary(acc: dict) -> dict:
     }
     if acc["image_shapes"]:
         summary["image_shapes"] = sorted(acc["image_shapes"])
-        lows, highs = zip(*acc["ranges"])
-        summary["value_range"] = (min(lows), max(highs))
+        if acc["ranges"]:
+            lows, highs = zip(*acc["ranges"])
+            summary["value_range"] = (min(lows), max(highs))
+        if acc["nan"] or acc["inf"]:
+            summary["non_finite"] = {"nan": acc["nan"], "inf": acc["inf"]}
     for key in ("scalars", "values"):
         if acc[key]:
             summary[key] = sorted(acc[key], key=lambda sample: sorted(sample["times"].items()))
@@ -458,8 +468,14 @@ def _entity_lines(name: str, entity: dict) -> list[str]:
     indent = " " * (len(name) + 4)
     if "image_shapes" in entity:
         shapes = ", ".join(f"{h}x{w}" for h, w in entity["image_shapes"])
-        low, high = entity["value_range"]
-        lines.append(f"{indent}image {shapes} (rows x cols), values {low:.6g} .. {high:.6g}")
+        finite = ""
+        if "value_range" in entity:
+            low, high = entity["value_range"]
+            finite = f", values {low:.6g} .. {high:.6g}"
+        if "non_finite" in entity:
+            bad = entity["non_finite"]
+            finite += f"{' (finite ones)' if finite else ', no finite values'}; {bad['nan']:,} NaN, {bad['inf']:,} infinite"
+        lines.append(f"{indent}image {shapes} (rows x cols){finite}")
     for sample in entity.get("scalars", []):
         lines.append(f"{indent}{_when(sample['times'])}: {_show(sample['values'])}")
     if "values" in entity:

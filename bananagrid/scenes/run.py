@@ -22,6 +22,7 @@ import numpy as np
 from ..analysis.bearing_validation import format_table, summary, validation_table
 from ..analysis.coverage import coverage_warnings, level_warnings, peak_location
 from ..atomic import partial_path
+from ..engine.memory import check_memory
 from ..engine.rasterise import rasterise
 from ..geo.dataset import raster_dataset, write_netcdf
 from ..geo.areas import search_areas
@@ -72,6 +73,7 @@ def run_scene(
     geojson: bool = False,
     threads: int | None = None,
     progress: Progress | None = None,
+    max_memory: float | None = None,
 ) -> list[dict]:
     """Rasterise, record and optionally export every layer of ``scene`` at every time.
 
@@ -101,6 +103,9 @@ def run_scene(
     progress : callable, optional
         ``progress(done, total, label)``, called before each layer and time with ``done``
         items finished so far, and after it (computed and logged) with ``done + 1``.
+    max_memory : float, optional
+        Bytes the run may take (default: the memory the system has available); a grid whose
+        estimate (:func:`check_run_memory`) is larger is refused before any computing.
 
     Returns
     -------
@@ -120,6 +125,7 @@ def run_scene(
         in the recording's summary document.
     """
     check_exports(scene, netcdf=netcdf, geotiff=geotiff, geojson=geojson)
+    check_run_memory(scene, exports=netcdf or geotiff or geojson, limit=max_memory)
     if isinstance(scene, PresenceScene):  # an [array] scene: its own runner
         return run_presence_scene(scene, out_dir, npz=npz, threads=threads, progress=progress)
     out_dir = Path(out_dir)
@@ -152,7 +158,8 @@ def run_scene(
             )
             frames.setdefault(entity, []).append(focus_extent(raster, regions))
             where = f"{scene.name}: layer {layer.name} at t = {t:g} s"
-            for message in (coverage_warnings(raster, regions, where=where, threshold=scene.min_mass)
+            for message in (coverage_warnings(raster, regions, where=where, threshold=scene.min_mass,
+                                                 integrates_to_one=model.integrates_to_one)
                             + level_warnings(raster, scene.levels, where=where)):
                 warnings.warn(message, BananagridWarning, stacklevel=2)
                 found.append(message)
@@ -201,6 +208,28 @@ def run_scene(
         if archive is not None:
             archive.discard()
     return rows
+
+
+#: Peak bytes per grid cell of a scene run (rasters, the recording's float32 images, contours
+#: and regions), measured as a whole process's resident set: 41-49 (figure1, 3 CAT layers),
+#: 53 (ship_heading), 41 (bearing_coastal), 61 (rice_isotropic, Butterly) between 1 and 4
+#: million cells; rounded up to a bound.
+RUN_BYTES_PER_CELL = 96
+#: Further bytes per cell for each map kept for --netcdf, --geotiff or --geojson (the float64
+#: raster, and the file's copy while it is written).
+EXPORT_BYTES_PER_MAP_CELL = 24
+
+
+def check_run_memory(scene: Scene | PresenceScene, *, exports: bool = False, limit: float | None = None) -> float | None:
+    """Refuse a grid scene whose run would need more memory than ``limit`` (default: what the
+    system has available), before any computing; returns the estimate (None for an [array]
+    scene). See :mod:`bananagrid.engine.memory`."""
+    if isinstance(scene, PresenceScene):
+        return None
+    cells = scene.grid.nx * scene.grid.ny
+    per_cell = RUN_BYTES_PER_CELL + (EXPORT_BYTES_PER_MAP_CELL * len(scene.jobs()) if exports else 0)
+    return check_memory(cells, per_cell, f"{scene.source}: a grid of {scene.grid.nx} x {scene.grid.ny} = {cells:,} cells",
+                        limit=limit, option="--max-memory GB")
 
 
 def check_exports(scene: Scene | PresenceScene, *, netcdf: bool = False, geotiff: bool = False,
