@@ -8,6 +8,7 @@ to 15 nm), not the projection the frame uses.
 from __future__ import annotations
 
 import math
+import warnings
 from datetime import datetime, timezone
 from pathlib import Path
 
@@ -264,3 +265,14 @@ def test_a_utm_scene_turns_the_heading_by_the_convergence_at_the_origin():
     lat, lon = frame.geographic(*ship.params["origin"])
     gamma = pyproj.Proj(frame.crs).get_factors(float(lon), float(lat)).meridian_convergence
     assert math.degrees(ship.params["heading"]) == pytest.approx(30.0 - gamma, abs=1e-5)
+
+
+def test_a_grid_reaching_round_the_earth_has_no_finite_scale_error():
+    """Bounds beyond half the circumference (a step of 9.2e18 m) made the refinement run on
+    garbage with NumPy warnings; now the scale error is inf at once and the grid is refused."""
+    frame = GeoFrame(60.45, 4.6)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", RuntimeWarning)
+        assert frame.scale_error((-9.2e18, 9.2e18), (-1.0, 1.0)) == math.inf
+        with pytest.raises(BananagridError, match="scale error reaches inf"):
+            frame.check_extent((-3e7, 0.0), (0.0, 1.0))

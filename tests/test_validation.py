@@ -1,6 +1,7 @@
 """Bad input: one test per kind of bad parameter, each asserting its message."""
 
 import math
+import warnings
 
 import numpy as np
 import pytest
@@ -186,3 +187,26 @@ def test_grids_whose_numbers_overflow_are_refused(bounds, step, message):
     """Extreme steps and bounds: a message, not an OverflowError or a NaN mass later."""
     with pytest.raises(bg.BananagridError, match=message):
         bg.Grid.from_bounds(**bounds, step=step)
+
+
+@pytest.mark.parametrize("kwargs, match", [
+    (dict(sigmas=[1e-308, 0.01]), r"sigmas\[0\] = 1e-308: must be in \[1e-150, 1e\+150\] rad"),
+    (dict(sigmas=[0.01, 1e308]), r"sigmas\[1\] = 1e\+308: must be in"),
+    (dict(sensors=[[0.0, 0.0], [1e308, 0.0]]), r"sensors\[1\]\[0\] = 1e\+308: must be within \+-1e\+150 m"),
+])
+def test_bearing_values_whose_squares_overflow_are_refused(kwargs, match):
+    """1 / sigma^2 and squared ranges overflowed with a NumPy RuntimeWarning and went on."""
+    args = dict(sensors=[[0.0, 0.0], [10_000.0, 0.0]], bearings=[0.3, -0.3], sigmas=[0.01, 0.01]) | kwargs
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", RuntimeWarning)
+        with pytest.raises(bg.BananagridError, match=match):
+            bg.BearingFix(**args)
+
+
+@pytest.mark.parametrize("mean, sd", [(9.2e18, 0.8), (5.0, 1e-308)])
+def test_a_normal_speed_law_narrower_than_its_quadrature_is_refused(mean, sd):
+    """Nodes 20 SDs wide around 9.2e18 m/s coincide in float64 (the weights summed to 0)."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", RuntimeWarning)
+        with pytest.raises(bg.BananagridError, match=r"speeds\.sd = .*: below 1e-09 of the mean .* the law is one speed"):
+            bg.NormalSpeed(mean, sd)

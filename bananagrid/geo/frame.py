@@ -40,6 +40,8 @@ DEFAULT_MAX_SCALE_ERROR = 1e-3
 CRS_CHOICES = ("aeqd", "utm")
 #: Latitude and longitude on the WGS84 ellipsoid (degrees), as GeoJSON and GPS give them.
 WGS84 = "EPSG:4326"
+#: Half the Earth's circumference (m): no plane about a point reaches farther.
+HALF_CIRCUMFERENCE_M = 2.0004e7
 #: Points per side of the lattice on which the scale error over a grid is evaluated.
 SCALE_LATTICE = 17
 #: Length of the geodesic step that measures a bearing's grid direction, m: long enough that
@@ -244,6 +246,8 @@ class GeoFrame:
         """
         x0, x1 = map(float, x_bounds)
         y0, y1 = map(float, y_bounds)
+        if not max(abs(x0), abs(x1), abs(y0), abs(y1)) <= HALF_CIRCUMFERENCE_M:
+            return math.inf  # the rectangle reaches round the Earth: no projection holds it
         gx, gy = np.meshgrid(np.linspace(x0, x1, SCALE_LATTICE), np.linspace(y0, y1, SCALE_LATTICE))
         errors = self._scale_errors(gx.ravel(), gy.ravel())
         if not np.all(np.isfinite(errors)):

@@ -152,6 +152,12 @@ def _as_array(name: str, value, shape_text: str, ndim: int) -> np.ndarray:
     return array
 
 
+#: Bearing SDs (rad) and sensor coordinates (m) stay within these, so that squares and ratios
+#: (weights 1 / sigma^2, squared ranges) are normal float64 numbers.
+MIN_SIGMA, MAX_SIGMA = 1e-150, 1e150
+MAX_POSITION = 1e150
+
+
 @dataclass(frozen=True, eq=False)
 class BearingFix(Model):
     """A position fix from two or more bearings with independent normal errors.
@@ -188,10 +194,10 @@ class BearingFix(Model):
     float32_rtol = 1e-4
     scene = SceneSchema(
         keys=(
-            SceneKey("sensors", type="pairs", unit="m", allowed="at least 2, finite, no two coincident"),
+            SceneKey("sensors", type="pairs", unit="m", allowed="at least 2, within +-1e150, no two coincident"),
             SceneKey("bearings", type="numbers", unit="rad", alias="deg", bearing_at="sensors",
                      allowed="one per sensor, finite, clockwise from north (true north in a geographic scene)"),
-            SceneKey("sigmas", type="numbers", unit="rad", alias="deg", allowed="one per sensor, finite, > 0"),
+            SceneKey("sigmas", type="numbers", unit="rad", alias="deg", allowed="one per sensor, in [1e-150, 1e150]"),
             SceneKey("variant", type="choice", default='`"exact"`', choices=MAP_VARIANTS,
                      allowed='`"exact"` (the likelihood under a flat prior), `"linear"` (the linearised normal)'),
         ),
@@ -217,6 +223,14 @@ class BearingFix(Model):
         bad = np.flatnonzero(sigmas <= 0)
         if bad.size:
             raise BananagridError(f"sigmas[{bad[0]}] = {float(sigmas[bad[0]])!r}: must be > 0")
+        # weights 1 / sigma^2 and squared ranges must stay normal float64 numbers
+        bad = np.flatnonzero(~((sigmas >= MIN_SIGMA) & (sigmas <= MAX_SIGMA)))
+        if bad.size:
+            raise BananagridError(f"sigmas[{bad[0]}] = {float(sigmas[bad[0]])!r}: must be in [{MIN_SIGMA:g}, {MAX_SIGMA:g}] rad")
+        far = np.argwhere(~(np.abs(sensors) <= MAX_POSITION))
+        if far.size:
+            i, k = far[0]
+            raise BananagridError(f"sensors[{i}][{k}] = {float(sensors[i, k])!r}: must be within +-{MAX_POSITION:g} m")
         for i in range(n):
             for j in range(i + 1, n):
                 if np.hypot(*(sensors[i] - sensors[j])) <= 1e-9 * max(1.0, np.abs(sensors).max()):

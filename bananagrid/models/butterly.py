@@ -153,6 +153,9 @@ class UniformSpeed:
 #: Fastest speed a continuous speed law may reach, m/s: its quadrature panels and the ranges
 #: v t stay normal float64 numbers.
 MAX_SPEED = 1e100
+#: Smallest SD of a normal speed law relative to its mean: the law's quadrature spans 20 SDs,
+#: which must hold many float64 steps of the mean (2.2e-16 of it).
+MIN_RELATIVE_SD = 1e-9
 
 
 @dataclass(frozen=True)
@@ -172,6 +175,11 @@ class NormalSpeed:
         # the quadrature's nodes reach mean + NORMAL_SPAN sd: they must stay finite
         if not abs(self.mean) < MAX_SPEED:
             raise BananagridError(f"speeds.mean = {self.mean!r}: must be below {MAX_SPEED:g} m/s")
+        if not self.sd >= MIN_RELATIVE_SD * abs(self.mean):  # else the quadrature's nodes coincide
+            raise BananagridError(
+                f"speeds.sd = {self.sd!r}: below {MIN_RELATIVE_SD:g} of the mean {self.mean!r} the law is one "
+                "speed; give it as speeds = [mean]"
+            )
         if not abs(self.mean) + NORMAL_SPAN * self.sd < MAX_SPEED:
             raise BananagridError(
                 f"speeds.sd = {self.sd!r}: with mean = {self.mean!r} the law reaches "
@@ -449,7 +457,7 @@ class Butterly(Model):
             SceneKey("speed_mean", unit="m/s", alias="kn", default='required for `"normal"` (or `speed_mean_kn`)',
                      allowed="|mean| < 1e100; some of the law's mass above 0"),
             SceneKey("speed_sd", unit="m/s", alias="kn", default='required for `"normal"` (or `speed_sd_kn`)',
-                     allowed="> 0, with |mean| + 10 sd < 1e100"),
+                     allowed=">= 1e-9 |mean|, with |mean| + 10 sd < 1e100"),
             SceneKey("speed_density", type="numbers", unit="(relative)", default='required for `"table"`',
                      allowed="one per speed, >= 0, not all 0; normalised over the table"),
             SceneKey("course_kappa", default="`0`",

@@ -275,10 +275,7 @@ def _room(table: dict, lattice: AngularLattice) -> tuple[Region, tuple | None]:
 def _range(value, path: str) -> tuple[float, float]:
     if not isinstance(value, list) or len(value) != 2:
         raise SceneKeyError(f"{path} = {show(value)}: expected a pair of numbers [low, high] in m")
-    lo, hi = (keys.number(v, f"{path}[{k}]") for k, v in enumerate(value))
-    for k, v in enumerate((lo, hi)):
-        if not math.isfinite(v):
-            raise SceneKeyError(f"{path}[{k}] = {show(value[k])}: must be finite")
+    lo, hi = (_length(v, f"{path}[{k}]") for k, v in enumerate(value))
     if not hi > lo:
         raise SceneKeyError(f"{path} = {show(value)}: the upper bound must exceed the lower")
     return lo, hi
@@ -349,7 +346,7 @@ def _component(body: dict, path: str, axes, geometry: str):
         value = [value]
     if not isinstance(value, list) or len(value) != d:
         raise SceneKeyError(f"{path}.mean = {show(body['mean'])}: expected [{', '.join(axes)}] in m ({d} number(s))")
-    mean = [_finite(v, f"{path}.mean[{k}]") for k, v in enumerate(value)]
+    mean = [_length(v, f"{path}.mean[{k}]") for k, v in enumerate(value)]
     sd_keys = [k for k in body if k.startswith("sd_") or k == "rho"]
     if "cov" in body:
         if sd_keys:
@@ -360,6 +357,10 @@ def _component(body: dict, path: str, axes, geometry: str):
         if rows is None or len(rows) != d or any(not isinstance(r, list) or len(r) != d for r in rows):
             raise SceneKeyError(f"{path}.cov = {show(value)}: expected a {d} x {d} list of lists in m^2")
         cov = [[_finite(v, f"{path}.cov[{i}][{j}]") for j, v in enumerate(r)] for i, r in enumerate(rows)]
+        for i in range(d):
+            if not MIN_LENGTH**2 <= cov[i][i] <= MAX_LENGTH**2:
+                raise SceneKeyError(f"{path}.cov[{i}][{i}] = {show(rows[i][i])}: a variance must be in "
+                                    f"[{MIN_LENGTH**2:g}, {MAX_LENGTH**2:g}] m^2")
         return w, mean, cov
     missing = [f"sd_{a}" for a in axes if f"sd_{a}" not in body]
     if missing:
@@ -370,6 +371,8 @@ def _component(body: dict, path: str, axes, geometry: str):
         sd = _finite(body[f"sd_{a}"], f"{path}.sd_{a}")
         if not sd > 0.0:
             raise SceneKeyError(f"{path}.sd_{a} = {show(body[f'sd_{a}'])}: must be > 0 (m)")
+        if not MIN_LENGTH <= sd <= MAX_LENGTH:
+            raise SceneKeyError(f"{path}.sd_{a} = {show(body[f'sd_{a}'])}: must be in [{MIN_LENGTH:g}, {MAX_LENGTH:g}] m")
         sds.append(sd)
     cov = np.diag(np.square(sds))
     if d > 1:
@@ -378,6 +381,20 @@ def _component(body: dict, path: str, axes, geometry: str):
             raise SceneKeyError(f"{path}.rho = {show(body['rho'])}: must be in (-1, 1) (the x-y correlation)")
         cov[0, 1] = cov[1, 0] = rho * sds[0] * sds[1]
     return w, mean, cov.tolist()
+
+
+#: Positions and spreads of a room, in metres, stay within these magnitudes, so that their
+#: squares and ratios (standardised room bounds) are normal float64 numbers.
+MAX_LENGTH = 1e150
+MIN_LENGTH = 1e-150
+
+
+def _length(value, path: str) -> float:
+    """A position in metres: finite, |value| <= MAX_LENGTH."""
+    number = _finite(value, path)
+    if not abs(number) <= MAX_LENGTH:
+        raise SceneKeyError(f"{path} = {show(value)}: must be within +-{MAX_LENGTH:g} m")
+    return number
 
 
 def _finite(value, path: str) -> float:
