@@ -61,3 +61,19 @@ def test_butterly_at_the_extremes(sd, speed, t, rho):
         return bg.Butterly(mean=(0.0, 0.0), cov=cov, speeds=[speed], t=t)
 
     exercise(build)
+
+
+@SWEEP
+@given(EXTREMES, st.floats(-2.0, 2.0), st.floats(0.05, 3.0), EXTREMES, EXTREMES, st.booleans(),
+       st.sampled_from(["exact", "linear"]))
+def test_bearing_fixes_at_the_extremes(baseline, a, b, sigma_1, sigma_2, third, variant):
+    """Two or three stations a baseline apart (1e-300 to 1e300 m), a contact anywhere in front
+    of them, bearing SDs from 1e-300 to 1e300 rad (stations whose accuracies differ by up to
+    1e600 found a singular covariance before its determinant was taken by Cauchy-Binet)."""
+    def build():
+        sensors = [[0.0, 0.0], [baseline, 0.0]] + ([[0.5 * baseline, -baseline]] if third else [])
+        bearings = bg.bearing_to(np.array(sensors), np.array([a * baseline, b * baseline]))
+        sigmas = [sigma_1, sigma_2] + ([sigma_1] if third else [])
+        return bg.BearingFix(sensors=sensors, bearings=bearings, sigmas=sigmas, variant=variant)
+
+    exercise(build)

@@ -317,3 +317,19 @@ def test_inputs_are_copied_not_frozen():
     fix = BearingFix(STATIONS, bearings, SIGMAS)
     bearings[0] = 0.0  # the caller's array stays writable and the fix does not change
     assert fix.bearings[0] != 0.0 and not fix.bearings.flags.writeable
+
+
+@pytest.mark.parametrize("sigmas", [(1e-10, 1.0), (1.0, 1e-10), (0.01, 0.02)])
+def test_the_covariance_holds_when_the_stations_accuracies_differ_by_ten_orders(sigmas):
+    """With two stations the fix is the crossing, so C = G^-1 diag(sigma^2) G^-T (G the bearing
+    gradients, well conditioned whatever the sigmas): an independent route to the covariance.
+    Inverting G^T W G instead lost every digit at a sigma ratio of 1e10 (its determinant cancels)."""
+    sensors = np.array([[0.0, 0.0], [20_000.0, 0.0]])
+    target = np.array([6_000.0, 15_000.0])
+    fix = bg.BearingFix(sensors=sensors, bearings=bg.bearing_to(sensors, target), sigmas=list(sigmas))
+    d = target - sensors
+    g = np.column_stack((d[:, 1], -d[:, 0])) / np.einsum("ij,ij->i", d, d)[:, None]
+    g_inv = np.linalg.inv(g)
+    expected = g_inv @ np.diag(np.square(sigmas)) @ g_inv.T
+    np.testing.assert_allclose(fix.covariance, expected, rtol=1e-9, atol=1e-12 * np.abs(expected).max())
+    assert np.isfinite(fix.pdf(target[0], target[1])).all()

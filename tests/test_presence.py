@@ -12,11 +12,14 @@ import pytest
 from scipy import special, stats
 
 import presence_oracle as oracle
+import bananagrid as bg
 from bananagrid.domains.angular_lattice import AngularLattice
 from bananagrid.models.presence import cell_probabilities
 from bananagrid.domains.grid import Grid
 from bananagrid.domains.region import Region
-from bananagrid.models.presence import GaussianMixture, UniformPresence, _gl8, grid_probabilities
+from bananagrid.models.presence import (
+    RECTANGLE_ABS_ERROR, GaussianMixture, UniformPresence, _gl8, clip_rounding, grid_probabilities,
+)
 from bananagrid.engine.warp_runtime import warp as _warp
 from bananagrid.validate import BananagridError
 
@@ -490,3 +493,16 @@ def test_bad_presence():
         Region(x=(1.0, 1.0), y=(0.0, 1.0))
     with pytest.raises(BananagridError, match="needs 2"):
         cell_probabilities(MIX3, PLANE)
+
+
+def test_rounding_below_zero_is_clipped_and_nothing_else():
+    """At rho = 0.9999 the four orthant values of a cell far off the ridge cancel to about
+    -8e-47 (36 cells of this grid before the clip): rounding, within RECTANGLE_ABS_ERROR, so 0;
+    a value below that bound is an error, not a silent 0."""
+    mixture = bg.GaussianMixture(weights=[1.0], means=[[0.0, 0.0]], covs=[[[1.0, 0.9999], [0.9999, 1.0]]])
+    cells = bg.grid_probabilities(mixture, bg.Grid.from_bounds((-4.0, 4.0), (-4.0, 4.0), 0.1))
+    assert cells.probability.min() >= 0.0
+    assert clip_rounding(np.array([0.5, -8e-47, -RECTANGLE_ABS_ERROR]), "demo").tolist() == [0.5, 0.0, 0.0]
+    for bad in (-1e-13, np.nan):
+        with pytest.raises(bg.BananagridError, match="demo: a cell probability of .*rounding cannot explain"):
+            clip_rounding(np.array([0.5, bad]), "demo")

@@ -152,10 +152,15 @@ def _as_array(name: str, value, shape_text: str, ndim: int) -> np.ndarray:
     return array
 
 
-#: Bearing SDs (rad) and sensor coordinates (m) stay within these, so that squares and ratios
-#: (weights 1 / sigma^2, squared ranges) are normal float64 numbers.
-MIN_SIGMA, MAX_SIGMA = 1e-150, 1e150
+#: Bearing SDs (rad): float64 bearings and the fix computed from them carry rounding of about
+#: 1e-15 rad, which an SD below 1e-10 rad would count as misfit ((1e-15 / sigma)^2 in chi2_min);
+#: the upper bound keeps 1 / sigma^2 a normal float64 number.
+MIN_SIGMA, MAX_SIGMA = 1e-10, 1e150
+#: Sensor coordinates (m) stay within this, so that squared ranges are normal float64 numbers.
 MAX_POSITION = 1e150
+#: Range of a station's cross-range SD at the fix, r sigma (m), so that the information matrix's
+#: determinant, ~ (r sigma)^-4, stays a normal float64 number.
+MIN_CROSS_SD, MAX_CROSS_SD = 1e-75, 1e75
 
 
 @dataclass(frozen=True, eq=False)
@@ -197,7 +202,7 @@ class BearingFix(Model):
             SceneKey("sensors", type="pairs", unit="m", allowed="at least 2, within +-1e150, no two coincident"),
             SceneKey("bearings", type="numbers", unit="rad", alias="deg", bearing_at="sensors",
                      allowed="one per sensor, finite, clockwise from north (true north in a geographic scene)"),
-            SceneKey("sigmas", type="numbers", unit="rad", alias="deg", allowed="one per sensor, in [1e-150, 1e150]"),
+            SceneKey("sigmas", type="numbers", unit="rad", alias="deg", allowed="one per sensor, in [1e-10, 1e150]"),
             SceneKey("variant", type="choice", default='`"exact"`', choices=MAP_VARIANTS,
                      allowed='`"exact"` (the likelihood under a flat prior), `"linear"` (the linearised normal)'),
         ),
@@ -241,6 +246,7 @@ class BearingFix(Model):
         self._check_crossing()
         object.__setattr__(self, "_fix", self._solve())
         self._check_in_front()
+        self._check_scales()
 
     # -- geometry ------------------------------------------------------------------------------
 
@@ -296,6 +302,20 @@ class BearingFix(Model):
                 break
         return point
 
+    def _check_scales(self) -> None:
+        """Each station's cross-range SD at the fix, r_i sigma_i, between MIN_CROSS_SD and
+        MAX_CROSS_SD metres: the information matrix's determinant is a sum of products of four
+        of their inverses, which must stay a normal float64 number."""
+        cross = np.hypot(*(self._fix - self.sensors).T) * self.sigmas
+        bad = np.flatnonzero(~((cross >= MIN_CROSS_SD) & (cross <= MAX_CROSS_SD)))
+        if bad.size:
+            i = bad[0]
+            raise BananagridError(
+                f"sigmas[{i}] = {float(self.sigmas[i])!r}: at the fix's range "
+                f"{float(np.hypot(*(self._fix - self.sensors[i]))):.6g} m the cross-range SD is {float(cross[i]):.3g} m; "
+                f"it must be between {MIN_CROSS_SD:g} and {MAX_CROSS_SD:g} m (use units that keep it there)"
+            )
+
     def _check_in_front(self) -> None:
         along = np.einsum("ij,ij->i", self._fix - self.sensors, self.directions)
         behind = np.flatnonzero(along <= 0)
@@ -318,15 +338,30 @@ class BearingFix(Model):
     def chi2_min(self) -> float:
         """sum_i (wrap(beta_i(fix) - b_i) / sigma_i)^2: 0 for two sensors (the lines cross at the
         fix), the weighted misfit of the least-squares fix for more."""
+        if len(self.sensors) == 2:
+            return 0.0  # exactly: the fix is the lines' crossing (computed, it leaves rounding)
         residual = _wrap(bearing_to(self.sensors, self._fix) - self.bearings) / self.sigmas
         return float(np.sum(residual**2))
 
+    def _information(self) -> tuple[np.ndarray, float]:
+        """The fix's information matrix I = G^T W G = sum_i w_i g_i g_i^T (w_i = 1 / sigma_i^2,
+        g_i the bearing gradients) and its determinant by the Cauchy-Binet formula,
+        det I = sum_{i<j} w_i w_j (g_i x g_j)^2: a sum of non-negative terms, so it keeps full
+        relative precision where a_11 a_22 - a_12^2 would cancel (stations whose accuracies
+        differ by many orders of magnitude)."""
+        g = self._bearing_gradients(self._fix)
+        w = 1.0 / self.sigmas**2
+        info = g.T @ (g * w[:, None])
+        cross = g[:, None, 0] * g[None, :, 1] - g[:, None, 1] * g[None, :, 0]
+        pairs = np.triu(np.outer(w, w) * cross**2, k=1)
+        return info, float(pairs.sum())
+
     @property
     def covariance(self) -> np.ndarray:
-        """Linearised covariance of the fix, (G^T W G)^-1 = J diag(sigma^2) J^T, m^2."""
-        g = self._bearing_gradients(self._fix)
-        info = g.T @ (g / self.sigmas[:, None] ** 2)
-        return np.linalg.inv(info)
+        """Linearised covariance of the fix, (G^T W G)^-1 = J diag(sigma^2) J^T, m^2: the
+        information matrix's adjugate over its Cauchy-Binet determinant."""
+        info, det = self._information()
+        return np.array([[info[1, 1], -info[0, 1]], [-info[0, 1], info[0, 0]]]) / det
 
     @property
     def principal_variances(self) -> tuple[float, float]:
@@ -369,9 +404,8 @@ class BearingFix(Model):
 
     def kernel_parameters(self) -> np.ndarray:
         """The bearing kernels' parameter array (layout in ``kernels/bearing.py``)."""
-        cov = self.covariance
-        precision = np.linalg.inv(cov)
-        log_norm = -math.log(2.0 * math.pi * math.sqrt(np.linalg.det(cov)))
+        precision, det = self._information()  # the precision is the information matrix itself
+        log_norm = 0.5 * math.log(det) - math.log(2.0 * math.pi)  # -log(2 pi sqrt(det C))
         if self.variant == "exact":
             # Laplace normaliser of the likelihood: L(fix) 2 pi sqrt(det C). With three or more
             # bearings they do not all pass through the fix, L(fix) = exp(-chi2_min / 2) < 1.
