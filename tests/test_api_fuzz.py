@@ -77,3 +77,32 @@ def test_bearing_fixes_at_the_extremes(baseline, a, b, sigma_1, sigma_2, third, 
         return bg.BearingFix(sensors=sensors, bearings=bearings, sigmas=sigmas, variant=variant)
 
     exercise(build)
+
+
+@SWEEP
+@given(EXTREMES, EXTREMES, st.floats(-0.99, 0.99), st.sampled_from([1.0, -1.0]), EXTREMES)
+def test_gaussian_mixtures_at_the_extremes(sd_x, sd_y, rho, side, offset):
+    """A two-component plane mixture with spreads from 1e-300 to 1e300 m, one component
+    ``offset`` away: refused, or finite non-negative densities, finite samples, and cell
+    probabilities on a small grid about them that are finite, >= 0 and sum to at most 1."""
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            sx, sy = np.float64(sd_x), np.float64(sd_y)  # squares overflow to inf, not OverflowError
+            cov = [[sx * sx, rho * sx * sy], [rho * sx * sy, sy * sy]]
+            mixture = bg.GaussianMixture(weights=[0.5, 0.5], means=[[0.0, 0.0], [side * offset, offset]], covs=[cov] * 2)
+    except bg.BananagridError:
+        return
+    density = mixture.pdf(np.array([[0.0, 0.0], [1.0, 2.0], [side * offset, offset]]))
+    assert np.all(np.isfinite(density)) and np.all(density >= 0.0), density
+    pts = mixture.sample(50, np.random.default_rng(0))
+    assert pts.shape == (50, 2) and np.all(np.isfinite(pts))
+    lo, hi = pts.min(axis=0), pts.max(axis=0)
+    span = max(float(np.max(hi - lo)), 1e-6 * max(1.0, float(np.abs(lo).max())))
+    try:
+        grid = bg.Grid.from_bounds(x=(lo[0] - span, lo[0] + 2 * span), y=(lo[1] - span, lo[1] + 2 * span), step=span / 3)
+        cells = bg.grid_probabilities(mixture, grid)
+    except bg.BananagridError:
+        return
+    assert np.all(np.isfinite(cells.probability)) and np.all(cells.probability >= 0.0)
+    assert np.all(np.isfinite(cells.density)) and cells.mass <= 1.0 + 1e-12

@@ -210,3 +210,10 @@ def test_a_normal_speed_law_narrower_than_its_quadrature_is_refused(mean, sd):
         warnings.simplefilter("error", RuntimeWarning)
         with pytest.raises(bg.BananagridError, match=r"speeds\.sd = .*: below 1e-09 of the mean .* the law is one speed"):
             bg.NormalSpeed(mean, sd)
+
+
+@pytest.mark.parametrize("model", [bg.CAT, bg.PolarBanana])
+def test_a_heading_sd_whose_square_overflows_is_refused(model):
+    """sigma_heading_deg = 1e308 was accepted and overflowed in the polar coefficients (12)."""
+    with pytest.raises(bg.BananagridError, match=r"sigma_heading = 1\.7\d*e\+306: must be at most 1e\+150 rad"):
+        model(v0=8.0, t=60.0, sigma_a=0.02, sigma_omega=0.01, sigma_heading=math.radians(1e308))

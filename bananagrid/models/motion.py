@@ -22,6 +22,9 @@ from .base import RANGE_SDS, Model
 __all__ = ["MotionModel", "natural_scales", "MOTION_KEYS", "pose_arguments"]
 
 
+#: Largest heading SD (rad): its square must stay a normal float64 number.
+MAX_SIGMA_HEADING = 1e150
+
 def _sinc_slope_max(phi_max: float) -> tuple[float, float]:
     """Largest |sinc'| and |scc'| on [0, phi_max] (scc of eq. (7))."""
     phi = np.linspace(1e-6, phi_max, 512)
@@ -68,6 +71,11 @@ class MotionModel(Model):
         for name in ("v0", "t", "sigma_a", "sigma_omega"):
             object.__setattr__(self, name, positive(name, getattr(self, name)))
         object.__setattr__(self, "sigma_heading", non_negative("sigma_heading", self.sigma_heading))
+        if not self.sigma_heading <= MAX_SIGMA_HEADING:  # its square enters the heading law (12)
+            raise BananagridError(
+                f"sigma_heading = {self.sigma_heading!r}: must be at most {MAX_SIGMA_HEADING:g} rad "
+                "(an SD of many turns is a uniform heading already)"
+            )
         if not isinstance(self.pose, Pose):
             raise BananagridError(f"pose = {self.pose!r}: expected a bananagrid.Pose")
         self._check_scales()
@@ -137,7 +145,7 @@ MOTION_KEYS = {
     "sigma_a": SceneKey("sigma_a", unit="m/s^2", allowed="finite, > 0"),
     "sigma_omega": SceneKey("sigma_omega", unit="rad/s", allowed="finite, > 0", alias="deg"),
     "sigma_heading": SceneKey("sigma_heading", unit="rad", default="`0`", alias="deg",
-                              allowed="finite, >= 0: SD of a normal error on the initial heading (Section 7)"),
+                              allowed="in [0, 1e150]: SD of a normal error on the initial heading (Section 7)"),
     "origin": SceneKey("origin", type="pair", unit="m", default="`[0, 0]`", allowed="finite: the last fix"),
     "heading": SceneKey("heading", unit="rad", default="`0` (north)", alias="deg", bearing_at="origin",
                         allowed="finite; the initial heading, a bearing clockwise from north (true north in a "
