@@ -7,6 +7,7 @@ to 15 nm), not the projection the frame uses.
 
 from __future__ import annotations
 
+import importlib
 import math
 import warnings
 from datetime import datetime, timezone
@@ -17,6 +18,7 @@ import pyproj
 import pytest
 
 from bananagrid import BananagridError
+from bananagrid.geo import libraries
 from bananagrid.geo.frame import GeoFrame, parse_utc
 from bananagrid.scenes.load import load_scene, parse_scene
 
@@ -276,3 +278,21 @@ def test_a_grid_reaching_round_the_earth_has_no_finite_scale_error():
         assert frame.scale_error((-9.2e18, 9.2e18), (-1.0, 1.0)) == math.inf
         with pytest.raises(BananagridError, match="scale error reaches inf"):
             frame.check_extent((-3e7, 0.0), (0.0, 1.0))
+
+
+def test_a_geographic_scene_without_the_geo_extra_says_how_to_install_it(monkeypatch):
+    """Without pyproj (a plain `pip install .`) a [geo] scene is refused in one line naming the
+    table and the extra, not as if a key were wrong."""
+    real = importlib.import_module
+
+    def without_pyproj(name, *args, **kwargs):
+        if name.split(".")[0] == "pyproj":
+            raise ImportError(name)
+        return real(name, *args, **kwargs)
+
+    monkeypatch.setattr(libraries.importlib, "import_module", without_pyproj)
+    with pytest.raises(BananagridError) as info:
+        load_scene(SCENES / "geo_ship.toml")
+    assert str(info.value).endswith(
+        "geo_ship.toml: [geo]: geographic scenes and map files need pyproj: pip install 'bananagrid[geo]' "
+        "(or pip install pyproj)")

@@ -13,10 +13,10 @@ and longitude (WGS84, rerun's ``GeoPoints`` and ``GeoLineStrings``):
   ring names its level. A level the grid does not hold logs no rings.
 
 :func:`map_view` is the blueprint's map panel: one tab per layer, each a map view zoomed to
-hold the grid and the layer's marks, over OpenStreetMap tiles (the viewer fetches them;
-offline it shows the primitives on a blank map). Every line is
-drawn through the plane's points carried to the ellipsoid one by one (a bearing line every
-1/32 of its length), so it lies where the layer's own map puts it.
+hold the grid and the layer's landmarks, over OpenStreetMap tiles (the viewer fetches them;
+offline it shows the primitives on a blank map). Every line is drawn through the plane's points
+carried to the ellipsoid one by one (a bearing line every 1/32 of its length), so it lies where
+the layer's own map puts it.
 """
 
 from __future__ import annotations
@@ -44,7 +44,7 @@ BEARING_COLOUR = (255, 140, 0)
 LINE_POINTS = 33
 #: Ground metres per pixel at zoom 0 on the equator (Web Mercator, 256-pixel tiles).
 METRES_PER_PIXEL_Z0 = 156_543.034
-#: The map view opens with the grid and the marks about this many points across (a panel of
+#: The map view opens with the grid and the landmarks about this many points across (a panel of
 #: the default layout is about 300 points high).
 VIEW_PIXELS = 300.0
 

@@ -548,7 +548,10 @@ def _geo(table: dict) -> tuple[GeoFrame, float]:
             raise BananagridError(f"crs = {show(crs)}: expected \"aeqd\", \"utm\" or a projected CRS such as \"EPSG:32632\"")
         return GeoFrame(lat, lon, time=table.get("time"), crs=crs), limit
     except BananagridError as exc:
-        raise SceneKeyError(f"geo.{exc}") from None
+        # the frame's own messages start with its argument (lat, lon, time, crs): a key of [geo]
+        message = str(exc)
+        where = "geo." if message.split(" ", 1)[0] in ("lat", "lon", "time", "crs") else "[geo]: "
+        raise SceneKeyError(f"{where}{message}") from None
 
 
 def _radian_doubts(given: dict, own: Mapping, t: float | None) -> list[str]:
