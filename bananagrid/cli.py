@@ -31,7 +31,7 @@ from .recording.inspect import cell_map_summaries, format_inspection, inspect_re
 from .scenes.examples import example_names, example_path, example_title, scene_source
 from .scenes.load import Scene, load_scene
 from .scenes.pictures import check_picture_options, read_picture, write_picture
-from .scenes.run import RUN_ONLY_PROVENANCE, check_exports, check_run_memory, compute, run_scene
+from .scenes.run import RUN_ONLY_PROVENANCE, check_exports, check_run_memory, compute, export_paths, run_scene
 from .validate import BananagridError, positive
 from .version import __version__
 
@@ -268,9 +268,7 @@ def _run(args: argparse.Namespace) -> int:
         written.append(args.out / f"{scene.name}.rrd")
         if args.npz:
             written.append(args.out / f"{scene.name}.npz")
-        for suffix, wanted in ((".nc", args.netcdf), (".tif", args.geotiff), ("-areas.geojson", args.geojson)):
-            if wanted:
-                written.append(args.out / f"{scene.name}{suffix}")
+        written += export_paths(scene.name, args.out, **exports).values()
     print(format_summary(rows))
     print()
     for path in written:

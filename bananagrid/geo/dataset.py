@@ -46,6 +46,7 @@ import numpy as np
 from ..validate import BananagridError
 from ..version import __version__
 from .files import writing
+from .frame import iso_utc
 from .libraries import require
 from .panels import check_panels, frame_of, provenance_json, variable_name
 
@@ -70,7 +71,7 @@ CELL_UNITS = {"line": "m", "plane": "m2", "frustum": "m3"}
 def time_units(frame) -> str:
     """The CF units of the time coordinate of a frame with a time: ``seconds since`` its UTC
     time in ISO 8601 (``2026-11-24T06:00:00Z``), which UDUNITS, cftime and pandas all read."""
-    return f"seconds since {frame.describe()['time']}"
+    return f"seconds since {iso_utc(frame.time)}"
 
 
 def raster_dataset(panels: Sequence, frame=None, *, title: str = "", source: str = ""):
@@ -171,14 +172,20 @@ def _grid_variables(grid, frame) -> tuple[dict, dict]:
         "y_bounds": xr.Variable(("y", "nv"), np.stack([y_edges[:-1], y_edges[1:]], axis=1)),
     }
     if frame is not None:
-        gx, gy = np.meshgrid(grid.x, grid.y)
-        lat, lon = frame.geographic(gx, gy)
-        coords["lat"] = xr.Variable(("y", "x"), lat, {
-            "standard_name": "latitude", "long_name": "latitude of the cell centre (WGS84)", "units": "degrees_north"})
-        coords["lon"] = xr.Variable(("y", "x"), lon, {
-            "standard_name": "longitude", "long_name": "longitude of the cell centre (WGS84)", "units": "degrees_east"})
+        coords.update(_lat_lon(xr, ("y", "x"), frame, *np.meshgrid(grid.x, grid.y)))
         data_vars["crs"] = xr.Variable((), np.int32(0), _crs_attrs(frame))
     return coords, data_vars
+
+
+def _lat_lon(xr, dims: tuple, frame, x, y) -> dict:
+    """CF ``lat`` and ``lon`` auxiliary coordinates on ``dims`` of the local points (x, y)."""
+    lat, lon = frame.geographic(x, y)
+    return {
+        "lat": xr.Variable(dims, lat, {
+            "standard_name": "latitude", "long_name": "latitude of the cell centre (WGS84)", "units": "degrees_north"}),
+        "lon": xr.Variable(dims, lon, {
+            "standard_name": "longitude", "long_name": "longitude of the cell centre (WGS84)", "units": "degrees_east"}),
+    }
 
 
 def _crs_attrs(frame) -> dict:
@@ -272,11 +279,7 @@ def polar_dataset(polar, frame=None, *, title: str = "", source: str = ""):
     }
     coordinates = "x y"
     if frame is not None:
-        lat, lon = frame.geographic(wx, wy)
-        coords["lat"] = xr.Variable(("range", "bearing"), lat, {
-            "standard_name": "latitude", "long_name": "latitude of the cell centre (WGS84)", "units": "degrees_north"})
-        coords["lon"] = xr.Variable(("range", "bearing"), lon, {
-            "standard_name": "longitude", "long_name": "longitude of the cell centre (WGS84)", "units": "degrees_east"})
+        coords.update(_lat_lon(xr, ("range", "bearing"), frame, wx, wy))
         coordinates += " lat lon"
     data_vars = {
         "density": xr.Variable(("range", "bearing"), np.asarray(polar.density), {

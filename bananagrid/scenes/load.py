@@ -542,11 +542,8 @@ def _geo(table: dict) -> tuple[GeoFrame, float]:
     limit = keys.number(table.get("max_scale_error", DEFAULT_MAX_SCALE_ERROR), "geo.max_scale_error")
     if not 0.0 < limit < 1.0:
         raise SceneKeyError(f"geo.max_scale_error = {show(table['max_scale_error'])}: must lie in (0, 1)")
-    crs = table.get("crs", "aeqd")
-    try:
-        if not isinstance(crs, str):
-            raise BananagridError(f"crs = {show(crs)}: expected \"aeqd\", \"utm\" or a projected CRS such as \"EPSG:32632\"")
-        return GeoFrame(lat, lon, time=table.get("time"), crs=crs), limit
+    try:  # GeoFrame checks the crs (a string it knows) and the time
+        return GeoFrame(lat, lon, time=table.get("time"), crs=table.get("crs", "aeqd")), limit
     except BananagridError as exc:
         # the frame's own messages start with its argument (lat, lon, time, crs): a key of [geo]
         message = str(exc)

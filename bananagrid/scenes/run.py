@@ -53,7 +53,8 @@ from .load import Layer, Scene
 from .presence import PresenceScene
 from .run_presence import run_presence_scene
 
-__all__ = ["run_scene", "compute", "array_key", "check_exports", "write_exports", "RUN_ONLY_PROVENANCE"]
+__all__ = ["run_scene", "compute", "array_key", "check_exports", "check_run_memory", "export_paths", "write_exports",
+           "RUN_ONLY_PROVENANCE"]
 
 #: Provenance keys that describe the run rather than the result. They stay out of the
 #: recording, so that running a scene twice gives equal recordings; the summary rows and the
@@ -139,6 +140,7 @@ def run_scene(
     found: list[str] = list(scene.warnings)
     frames: dict[str, list] = {}
     areas: dict[tuple[str, float], list] = {}  # a geographic scene's search areas, by (layer, t)
+    marked: set[str] = set()  # layers whose landmarks are on the map (static, logged once)
 
     def build(rec) -> None:
         # Runs on this thread: set_elapsed is per thread.
@@ -170,8 +172,9 @@ def run_scene(
             if scene.radial is not None and layer.name in scene.radial.layers:
                 _log_radial(rec, scene, layer, t, threads)
             if scene.geo is not None:
-                if not any(name == layer.name for name, _ in areas):
+                if layer.name not in marked:
                     log_map_marks(rec, layer.name, model, scene.geo)
+                    marked.add(layer.name)
                 areas[layer.name, t] = search_areas(raster, scene.mass_levels)
                 log_map_areas(rec, layer.name, areas[layer.name, t], scene.geo)
             if archive is not None:
@@ -211,9 +214,9 @@ def run_scene(
 
 
 #: Peak bytes per grid cell of a scene run (rasters, the recording's float32 images, contours
-#: and regions), measured as a whole process's resident set: 41-49 (figure1, 3 CAT layers),
-#: 53 (ship_heading), 41 (bearing_coastal), 61 (rice_isotropic, Butterly) between 1 and 4
-#: million cells; rounded up to a bound.
+#: and regions): the growth of a process's peak resident set from a 10,000-cell run to a
+#: 2-million-cell one (tests/test_memory.py) measured 76.4 (rice_isotropic, Butterly), 75.2
+#: (ship_heading), 74.4 (figure1), 68.4 (submarine), 64.3 (bearing_coastal); rounded up to a bound.
 RUN_BYTES_PER_CELL = 96
 #: Further bytes per cell for each map kept for --netcdf, --geotiff or --geojson (the float64
 #: raster, and the file's copy while it is written).
@@ -252,20 +255,32 @@ def check_exports(scene: Scene | PresenceScene, *, netcdf: bool = False, geotiff
         )
 
 
+#: The map files' names after the scene's name, by option.
+EXPORT_SUFFIXES = {"netcdf": ".nc", "geotiff": ".tif", "geojson": "-areas.geojson"}
+
+
+def export_paths(name: str, out_dir: Path, *, netcdf: bool = False, geotiff: bool = False,
+                 geojson: bool = False) -> dict[str, Path]:
+    """``{option: path}`` of the map files asked for, for scene ``name`` in ``out_dir``."""
+    wanted = {"netcdf": netcdf, "geotiff": geotiff, "geojson": geojson}
+    return {option: Path(out_dir) / f"{name}{suffix}" for option, suffix in EXPORT_SUFFIXES.items() if wanted[option]}
+
+
 def write_exports(scene: Scene, out_dir: Path, panels: list, *, netcdf: bool = False, geotiff: bool = False,
                   geojson: bool = False, areas: dict | None = None) -> list[Path]:
     """The map files of a scene's ``panels`` (``(layer, t, raster)``), each written whole or
     not at all; if one fails, those already written are removed. Returns their paths.
     ``areas``: the panels' search areas by ``(layer, t)`` where already found."""
+    paths = export_paths(scene.name, out_dir, netcdf=netcdf, geotiff=geotiff, geojson=geojson)
     written: list[Path] = []
     try:
         if netcdf:
             dataset = raster_dataset(panels, scene.geo, title=scene.title, source=scene.source)
-            written.append(write_netcdf(out_dir / f"{scene.name}.nc", dataset))
+            written.append(write_netcdf(paths["netcdf"], dataset))
         if geotiff:
-            written.append(write_geotiff(out_dir / f"{scene.name}.tif", panels, scene.geo, title=scene.title))
+            written.append(write_geotiff(paths["geotiff"], panels, scene.geo, title=scene.title))
         if geojson:
-            written.append(write_geojson(out_dir / f"{scene.name}-areas.geojson", panels, scene.geo, scene.mass_levels,
+            written.append(write_geojson(paths["geojson"], panels, scene.geo, scene.mass_levels,
                                          title=scene.title, areas=areas))
     except BaseException:
         for path in written:
@@ -303,8 +318,9 @@ def _blueprint(scene: Scene, frames: dict):
         for name in scene.radial.layers:
             views += radial_views(f"radial/{name}", groups)
     t0 = scene.jobs()[0][1] if scene.times else None
-    for layer in scene.layers:
-        more_images, more_views = layer_views(f"layers/{layer.name}", layer.model_kind, layer.model(t0))
+    models = [(layer.name, layer.model(t0)) for layer in scene.layers]
+    for layer, (_, model) in zip(scene.layers, models):
+        more_images, more_views = layer_views(f"layers/{layer.name}", layer.model_kind, model)
         images += more_images
         views += more_views
     return default_blueprint(
@@ -315,8 +331,7 @@ def _blueprint(scene: Scene, frames: dict):
         extra_views=views,
         several_times=scene.times is not None and len(scene.times) > 1,
         frames=frames,
-        map_view=None if scene.geo is None else map_view(
-            scene.geo, scene.grid.extent, [(layer.name, layer.model(t0)) for layer in scene.layers]),
+        map_view=None if scene.geo is None else map_view(scene.geo, scene.grid.extent, models),
     )
 
 
