@@ -7,9 +7,11 @@ Errors a user can fix (bad scene, missing file, unwritable directory) are printe
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import os
 import sys
+import tempfile
 import time
 import tomllib
 import warnings
@@ -25,13 +27,14 @@ from .atomic import Terminated, atomic_write, check_writable, signals_as_excepti
 from .bench import runner as bench
 from .contours import DEFAULT_LEVELS, format_area, mass_levels
 from .engine.memory import memory_limit
+from .engine.work import work_limit
 from .recording.compare import write_compare_recording, write_sweep_recording
-from .recording.core import recording_id_for
+from .recording.core import RecordingWriteError, recording_id_for
 from .recording.inspect import cell_map_summaries, format_inspection, inspect_recording, json_ready, layer_summaries
 from .scenes.examples import example_names, example_path, example_title, scene_source
 from .scenes.load import Scene, load_scene
 from .scenes.pictures import check_picture_options, read_picture, write_picture
-from .scenes.run import RUN_ONLY_PROVENANCE, check_exports, check_run_memory, compute, export_paths, run_scene
+from .scenes.run import RUN_ONLY_PROVENANCE, check_exports, check_run_memory, check_run_work, compute, export_paths, run_scene
 from .validate import BananagridError, positive
 from .version import __version__
 
@@ -74,7 +77,7 @@ def main(argv: list[str] | None = None) -> int:
             else:
                 if rest:
                     commands[args.command].error(f"unrecognized arguments: {' '.join(rest)}")
-                with signals_as_exceptions():
+                with signals_as_exceptions(), native_log_held():
                     code = args.handler(args)
             sys.stdout.flush()  # here a reader that left raises below, not in the interpreter's exit
             return code
@@ -129,6 +132,9 @@ def build_parser() -> tuple[argparse.ArgumentParser, dict[str, argparse.Argument
     run.add_argument("--max-memory", type=float, metavar="GB",
                      help="memory a scene's run may take, GB (default: what the system has available); "
                      "a larger estimate is refused before computing")
+    run.add_argument("--max-seconds", type=float, metavar="S",
+                     help="computing a scene's run may take, wall-clock seconds (default 3600; inf for no "
+                     "limit); a larger estimate is refused before computing")
     run.add_argument("--quiet", action="store_true", help="no progress lines on stderr")
     run.set_defaults(handler=_run)
 
@@ -247,9 +253,11 @@ def _run(args: argparse.Namespace) -> int:
     _check_unique_names(scenes)
     exports = {"netcdf": args.netcdf, "geotiff": args.geotiff, "geojson": args.geojson}
     limit = None if args.max_memory is None else memory_limit(args.max_memory)
-    for scene in scenes:
+    max_seconds = None if args.max_seconds is None else work_limit(args.max_seconds)
+    for scene in scenes:  # every scene's checks before any computing
         check_exports(scene, **exports)
         check_run_memory(scene, exports=any(exports.values()), limit=limit)
+        check_run_work(scene, threads=args.threads, limit=max_seconds)
     args.out.mkdir(parents=True, exist_ok=True)
     check_writable(args.out)
     rows, written = [], []
@@ -258,7 +266,7 @@ def _run(args: argparse.Namespace) -> int:
         failed = True
         try:
             rows += run_scene(scene, args.out, npz=args.npz, threads=args.threads, progress=progress,
-                              max_memory=limit, **exports)
+                              max_memory=limit, max_seconds=max_seconds, **exports)
             failed = False
         finally:
             if progress is not None:
@@ -535,6 +543,45 @@ class _Progress:
         if line is not None and not line.broken:
             line.broken = True
             print(file=line.stream, flush=True)
+
+
+@contextlib.contextmanager
+def native_log_held():
+    """Hold what rerun's native logger writes to file descriptor 2 while a command runs, and
+    show it after, unless the recording could not be written: then our one line names the file
+    and the cause, and rerun's lines about the same failure are left out.
+
+    Python's own ``sys.stderr`` (progress, warnings, errors) is moved to a copy of the
+    descriptor meanwhile, so it is shown at once. Nothing is held where ``sys.stderr`` is not
+    descriptor 2 (e.g. under a test's capture)."""
+    try:
+        direct = sys.stderr.fileno() == 2
+    except (AttributeError, OSError, ValueError):
+        direct = False
+    if not direct:
+        yield
+        return
+    sys.stderr.flush()
+    saved = os.dup(2)
+    shown = sys.stderr
+    drop = False
+    with tempfile.TemporaryFile() as held:
+        os.dup2(held.fileno(), 2)
+        sys.stderr = open(saved, "w", encoding=shown.encoding, errors="backslashreplace", buffering=1, closefd=False)
+        try:
+            yield
+        except RecordingWriteError:
+            drop = True
+            raise
+        finally:
+            sys.stderr.close()  # flushes; the descriptor (closefd=False) is closed below
+            sys.stderr = shown
+            os.dup2(saved, 2)
+            os.close(saved)
+            held.seek(0)
+            text = held.read()
+            if text and not drop:
+                os.write(2, text)
 
 
 def _show_warning(message, category, filename, lineno, file=None, line=None) -> None:

@@ -303,6 +303,12 @@ class DensityModel(Protocol):
         sensors ``"stations"`` ``(n, 2)`` and ``"bearings"`` ``(n, 2, 2)`` (line segments);
         empty for a model anchored nowhere."""
 
+    def work_estimate(self, cells: int, extent: Extent) -> float:
+        """Estimated seconds of one CPU core (float64 kernels) to compute ``cells`` cells within
+        ``extent``, from the model's own work sizes (scan nodes, speed nodes, tables), calibrated
+        on cells where the density is not negligible and rounded up; checked before any launch
+        (:mod:`bananagrid.engine.work`)."""
+
     def polar_scales(self, origin: tuple[float, float]) -> tuple[float, float]:
         """Smallest widths of the density's features seen from ``origin`` (or from the model's
         own pose, if it has one): ``(radial_m, angular_rad)``."""

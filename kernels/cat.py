@@ -39,12 +39,6 @@ MAX_FOLD_SEARCH = 100
 #: those again (two levels: widths 1/8 and 1/64 of the node spacing).
 SPLIT = 8
 
-#: Widest node interval (in omega t, radians) that is split when its bounds cannot settle it.
-#: The scan's nodes are 0.1 apart unless their count is capped (sigma_omega t above ~51 rad);
-#: wider intervals make the bounds (which grow like width^2 and width^4) useless, and splitting
-#: them would multiply the cost by up to 64 for nothing: they get the fold search at once.
-MAX_SPLIT_WIDTH = 0.11
-
 #: Rounding allowance on computed values of F and dF/domega, in units of the dtype's epsilon
 #: times the largest term they sum (their table coefficients carry a few ulps each).
 ROUNDING_ULPS = 32.0
@@ -248,8 +242,8 @@ def cat_interval(
     split (``cat_split``). Values of F and F' carry rounding ``noise_f``, ``noise_g``, added to
     every margin. An interval still undecided at 1/64 of the node spacing has F, F' and F'' all
     near zero together (a cusp of the caustic, where three roots meet): there the fold search of
-    (ii) runs without the guarantee; so it does at once in node intervals wider than
-    MAX_SPLIT_WIDTH (only when the node count is capped, sigma_omega t above ~51 rad).
+    (ii) runs without the guarantee. The scan's nodes are never more than 0.1 apart in omega t
+    (``bananagrid.models.cat.NODE_SPACING``), so the bounds always get the chance to settle.
     """
     zero = type(x)(0.0)
     du = (hi - lo) * t
@@ -377,7 +371,7 @@ def cat_density_local(
             if not cat_negligible(table, k, x, y, a_cut):
                 part, settled = cat_interval(
                     x, y, w_prev, w_k, f_prev, g_prev, f_k, g_k, v0, t, sigma_a, sigma_omega, tol, r,
-                    noise_f, noise_g, width * t > type(x)(MAX_SPLIT_WIDTH),
+                    noise_f, noise_g, False,
                 )
                 if settled:
                     density += part

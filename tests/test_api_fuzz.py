@@ -106,3 +106,28 @@ def test_gaussian_mixtures_at_the_extremes(sd_x, sd_y, rho, side, offset):
         return
     assert np.all(np.isfinite(cells.probability)) and np.all(cells.probability >= 0.0)
     assert np.all(np.isfinite(cells.density)) and cells.mass <= 1.0 + 1e-12
+
+
+@SWEEP
+@given(st.sampled_from(["line", "plane", "frustum"]), EXTREMES, EXTREMES, st.floats(-1.0, 1.0), EXTREMES,
+       st.floats(0.05, 0.95))
+def test_uniform_presence_cells_at_the_extremes(geometry, size, height, shift, reach, thickness):
+    """A uniform room from 1e-300 to 1e300 m on a side, shifted by up to its size, under an
+    array at a height from 1e-300 to 1e300 m: refused, or finite densities and samples, and cell
+    probabilities that are finite, >= 0 and sum to at most 1 (the room's share seen by the cells)."""
+    dim = {"line": 1, "plane": 2, "frustum": 3}[geometry]
+    axes = {"x": (shift * size - size, shift * size + size), "y": (-size, reach), "z": (-2.0 * height, -0.5 * height)}
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            room = bg.UniformPresence(bg.Region(**{k: axes[k] for k in "xyz"[:dim]}))
+            kwargs = {"dh": thickness * height} if geometry == "frustum" else {}
+            lattice = bg.AngularLattice(geometry, h=height, azimuth_step=math.pi / 8,
+                                        elevation_step=None if geometry == "line" else math.pi / 16, **kwargs)
+            cells = bg.cell_probabilities(room, lattice)
+    except bg.BananagridError:
+        return
+    pts = room.sample(20, np.random.default_rng(0))
+    assert np.all(np.isfinite(pts)) and np.all(np.isfinite(room.pdf(pts)))
+    assert np.all(np.isfinite(cells.prob)) and np.all(cells.prob >= 0.0), cells.prob
+    assert float(np.sum(cells.prob)) <= 1.0 + 1e-12

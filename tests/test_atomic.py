@@ -119,6 +119,38 @@ def test_a_write_that_fails_midway_ends_in_one_line_and_leaves_nothing(tmp_path)
                   preexec_fn=_limit_file_size)
     out, err = run.communicate(timeout=300)
     assert run.returncode == 2, err
-    last = err.strip().splitlines()[-1]
-    assert last.startswith(f"bananagrid: error: {tmp_path / 'figure1.rrd'}: cannot write the recording"), err
+    # one line: the cause asked of the file system again; rerun's own lines about it held back
+    assert err.strip().splitlines() == [
+        f"bananagrid: error: {tmp_path / 'figure1.rrd'}: cannot write the recording: File too large "
+        "(rerun: File-writer thread shut down prematurely)"
+    ], err
     assert list(tmp_path.iterdir()) == []
+
+
+HOLD = """
+import os, sys
+from bananagrid.cli import native_log_held
+from bananagrid.recording.core import RecordingWriteError
+fail = sys.argv[1] == "fail"
+try:
+    with native_log_held():
+        os.write(2, b"native line\\n")  # as rerun's logger writes: to the descriptor
+        print("python line", file=sys.stderr)
+        if fail:
+            raise RecordingWriteError("x.rrd: cannot write the recording: No space left on device")
+except RecordingWriteError as exc:
+    print(exc, file=sys.stderr)
+"""
+
+
+@pytest.mark.parametrize("outcome", ["ok", "fail"])
+def test_native_log_lines_are_held_and_shown_unless_the_write_failed(outcome):
+    """rerun's native lines come after ours (held in a file meanwhile); after a failed write
+    they are dropped, since our line names the cause."""
+    run = subprocess.run([sys.executable, "-c", HOLD, outcome], cwd=ROOT, capture_output=True, text=True, timeout=120)
+    assert run.returncode == 0, run.stderr
+    lines = run.stderr.strip().splitlines()
+    if outcome == "ok":
+        assert lines == ["python line", "native line"]
+    else:
+        assert lines == ["python line", "x.rrd: cannot write the recording: No space left on device"]

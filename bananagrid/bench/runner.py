@@ -32,7 +32,7 @@ from ..atomic import atomic_write, check_writable
 from ..domains.angular_lattice import AngularLattice
 from ..domains.grid import Grid
 from ..engine.batch import frame, rasterise_batch
-from ..engine.rasterise import rasterise
+from ..engine.rasterise import GridExtent, rasterise
 from ..engine.warp_runtime import default_threads
 from ..models.bearing import bearing_to, two_bearing_variances
 from ..models.cat import clear_heading_tables, scan_nodes
@@ -290,6 +290,7 @@ def run(kernels, step: float, threads: int, repeat: int, stride: int, log=print)
         model = grid_model(name)
         grid = _grid_for(name, step)
         base = _baseline_seconds(name, model, grid, stride, repeat)
+        estimate = model.work_estimate(grid.nx * grid.ny, GridExtent(grid))  # one core's seconds
         for dtype in (np.float64, np.float32):
             rasterise(model, grid, dtype=dtype, threads=1)  # warm-up: compile or load the module
             for n_threads in sorted({1, threads}):
@@ -298,6 +299,7 @@ def run(kernels, step: float, threads: int, repeat: int, stride: int, log=print)
                     "kernel": name, "dtype": np.dtype(dtype).name, "threads": n_threads,
                     "cells": grid.nx * grid.ny, "seconds": seconds, "baseline_seconds": base,
                     "ratio": base / seconds, "mcells_per_s": grid.nx * grid.ny / seconds / 1e6,
+                    "estimate_seconds": estimate / n_threads,
                 }
                 records.append(record)
                 log(_row(record))
@@ -432,6 +434,10 @@ def main(argv: list[str] | None = None) -> int:
         if args.threads > 1:
             print(f"{name}: 1 -> {args.threads} threads speedup "
                   + ", ".join(f"{d} {one[d]['seconds'] / many[d]['seconds']:.2f}x" for d in one))
+    estimated = [r for r in records if "estimate_seconds" in r and r["dtype"] == "float64" and r["threads"] == 1]
+    if estimated:  # the work check before launches (bananagrid.engine.work) is meant to overestimate
+        print("work estimate / measured (float64, 1 thread): "
+              + ", ".join(f"{r['kernel']} {r['estimate_seconds'] / r['seconds']:.1f}x" for r in estimated))
     if "cat" in kernels and "cat-heading" in kernels:
         cost = {
             (r["dtype"], r["threads"]): r["seconds"] / next(

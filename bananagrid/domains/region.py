@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -50,6 +51,21 @@ class Region:
             if self.y is None:
                 raise BananagridError(f"region z = {self.z!r} given without y: a slab needs x, y and z ranges")
             object.__setattr__(self, "z", _interval("region z", self.z))
+        self._check_size()
+
+    def _check_size(self) -> None:
+        """|S| divides every uniform density and conditions every probability: it must be a
+        normal float64 number, in [1e-300, 1e300]."""
+        ranges = [r for r in (self.x, self.y, self.z) if r is not None]
+        # log10 of each width, halved first so that hi - lo cannot overflow
+        exponent = sum(math.log10(0.5 * hi - 0.5 * lo) + math.log10(2.0) for lo, hi in ranges)
+        if not (-300.0 <= exponent <= 300.0 and all(hi - lo < math.inf for lo, hi in ranges)):
+            unit = ("m", "m^2", "m^3")[len(ranges) - 1]
+            measure = ("length", "area", "volume")[len(ranges) - 1]
+            raise BananagridError(
+                f"region = {self.describe()}: its {measure} is about 1e{exponent:+.0f} {unit}, outside "
+                f"[1e-300, 1e300] {unit}; use units that keep it a normal number"
+            )
 
     @property
     def dim(self) -> int:

@@ -21,6 +21,7 @@ from ..results import PolarRaster
 from ..validate import BananagridError
 from .points import check_finite, check_model, evaluate_points
 from .warp_runtime import check_threads
+from .work import check_work
 
 __all__ = ["rasterise_lattice", "LatticeExtent", "GAUSS_TOL", "MAX_NODES"]
 
@@ -234,7 +235,8 @@ def _integrate(model: DensityModel, lattice: PolarLattice, plan: _Plan, *, dtype
 
 
 def rasterise_lattice(
-    model: DensityModel, lattice: PolarLattice, *, dtype=np.float64, device: str = "cpu", threads=None
+    model: DensityModel, lattice: PolarLattice, *, dtype=np.float64, device: str = "cpu", threads=None,
+    max_seconds: float | None = None,
 ) -> PolarRaster:
     r"""Densities at the cell centres and probabilities of the cells of a polar lattice.
 
@@ -258,8 +260,9 @@ def rasterise_lattice(
     ----------
     model : DensityModel
     lattice : PolarLattice
-    dtype, device, threads
-        As for :func:`bananagrid.rasterise`; probabilities are summed in float64.
+    dtype, device, threads, max_seconds
+        As for :func:`bananagrid.rasterise`; probabilities are summed in float64. The work
+        estimate counts the cell centres and the quadrature nodes.
 
     Returns
     -------
@@ -277,6 +280,11 @@ def rasterise_lattice(
     threads = check_threads(threads)
     start = time.perf_counter()
     plan = _plan(model, lattice)
+    if device == "cpu":
+        points = lattice.n_range * lattice.n_bearing + plan.total_nodes
+        check_work(model.work_estimate(points, LatticeExtent(lattice)), threads,
+                   f"{type(model).__name__}: a polar lattice of {lattice.n_range} x {lattice.n_bearing} cells "
+                   f"({plan.total_nodes:,} quadrature nodes)", limit=max_seconds, option="max_seconds=S")
     x, y = lattice.world_centres
     p = evaluate_points(model, x, y, dtype=dtype, device=device, threads=threads, extent=LatticeExtent(lattice))
     density = (lattice.range_centres[:, None] * p).astype(p.dtype, copy=False)

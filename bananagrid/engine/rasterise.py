@@ -14,6 +14,7 @@ from ..results import PolarRaster, Raster
 from ..validate import BananagridError
 from .memory import RASTERISE_BYTES_PER_CELL, check_memory
 from .points import check_finite, check_model
+from .work import check_work
 from .polar_cells import rasterise_lattice
 from .warp_runtime import WarpContext
 
@@ -38,7 +39,7 @@ class GridExtent:
 
 
 def rasterise(model: DensityModel, grid: Grid | PolarLattice, *, dtype=np.float64, device: str = "cpu",
-              threads=None) -> Raster | PolarRaster:
+              threads=None, max_seconds: float | None = None) -> Raster | PolarRaster:
     """Density of ``model`` at the cell centres of ``grid``, or on a polar lattice.
 
     With a :class:`~bananagrid.PolarLattice` the result is a :class:`~bananagrid.PolarRaster`:
@@ -59,6 +60,10 @@ def rasterise(model: DensityModel, grid: Grid | PolarLattice, *, dtype=np.float6
         CPU worker threads (default: every core). Rows are split into bands, each a launch; a
         Warp CPU launch uses one core and releases the GIL, so bands run in parallel. Results do
         not depend on the number of threads.
+    max_seconds : float, optional
+        Wall-clock seconds of estimated computing allowed (default
+        :data:`bananagrid.engine.work.DEFAULT_MAX_SECONDS`, one hour; ``math.inf`` for no
+        limit). The model's estimate (``work_estimate``) is checked before any launch on the CPU.
 
     Returns
     -------
@@ -67,14 +72,16 @@ def rasterise(model: DensityModel, grid: Grid | PolarLattice, *, dtype=np.float6
         (a PolarRaster for a PolarLattice).
     """
     if isinstance(grid, PolarLattice):
-        return rasterise_lattice(model, grid, dtype=dtype, device=device, threads=threads)
+        return rasterise_lattice(model, grid, dtype=dtype, device=device, threads=threads, max_seconds=max_seconds)
     if not isinstance(grid, Grid):
         raise BananagridError(f"grid = {grid!r}: expected a bananagrid.Grid")
     ctx = WarpContext(dtype, device, threads)
     check_model(model)
     if ctx.cpu:  # an allocation the machine cannot give would abort the process without a word
-        check_memory(grid.nx * grid.ny, RASTERISE_BYTES_PER_CELL,
-                     f"rasterise on a grid of {grid.nx} x {grid.ny} = {grid.nx * grid.ny:,} cells")
+        what = f"rasterise on a grid of {grid.nx} x {grid.ny} = {grid.nx * grid.ny:,} cells"
+        check_memory(grid.nx * grid.ny, RASTERISE_BYTES_PER_CELL, what)
+        check_work(model.work_estimate(grid.nx * grid.ny, GridExtent(grid)), ctx.launch_threads,
+                   f"{type(model).__name__}: {what}", limit=max_seconds, option="max_seconds=S")
     start = time.perf_counter()
     binding = model.bind(ctx, GridExtent(grid), grid=True)
     ctx.load(binding.grid_kernel)

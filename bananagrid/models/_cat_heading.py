@@ -49,6 +49,7 @@ from .motion import MotionModel, natural_scales
 __all__ = [
     "HeadingTable", "heading_table", "build_heading_table", "convolved_rows", "ray_densities",
     "convolve_heading", "table_binding", "clear_heading_tables", "interpolate_table", "RESOLUTION", "BEARING_RESOLUTION",
+    "first_table_nodes",
     "TARGET_ERROR", "CHECK_LEVEL",
 ]
 
@@ -194,6 +195,14 @@ def build_heading_table(model: MotionModel, r_lo: float, r_hi: float, *, threads
         stacklevel=6,
     )
     return table
+
+
+def first_table_nodes(model: MotionModel, r_lo: float, r_hi: float) -> int:
+    """Lattice nodes of the first table :func:`build_heading_table` evaluates for ranges
+    [r_lo, r_hi] (for the work estimate; a refinement, where the error estimate asks for it,
+    evaluates up to 4 and 16 times as many, within ``MAX_LATTICE_NODES``)."""
+    radial, angular = natural_scales(model)
+    return _rows(r_lo, r_hi, radial / RESOLUTION) * max(16, _even(2.0 * math.pi * BEARING_RESOLUTION / angular))
 
 
 def _rows(r_lo: float, r_hi: float, dr: float) -> int:

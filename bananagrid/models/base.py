@@ -50,6 +50,15 @@ class Model:
     #: A probability density (see :attr:`bananagrid.protocol.DensityModel.integrates_to_one`).
     integrates_to_one: bool = True
 
+    #: Seconds of one CPU core per cell assumed by the default :meth:`work_estimate`: above the
+    #: cost of the models without a scan or a table (the polar and bearing kernels take
+    #: 50-150 ns per cell on the reference machine, ``bananagrid bench``).
+    seconds_per_cell: float = 1e-6
+
+    def work_estimate(self, cells: int, extent) -> float:
+        """``cells * seconds_per_cell`` (:meth:`bananagrid.protocol.DensityModel.work_estimate`)."""
+        return float(cells) * self.seconds_per_cell
+
     def landmarks(self) -> dict[str, np.ndarray]:
         """The last fix, the origin of the model's pose; nothing for a model without a pose
         (:meth:`bananagrid.protocol.DensityModel.landmarks`)."""

@@ -30,7 +30,6 @@ from __future__ import annotations
 import datetime
 import math
 import os
-import shutil
 import uuid
 import warnings
 from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
@@ -57,6 +56,7 @@ from ..results import Raster
 from ..validate import BananagridError, non_negative, positive
 
 __all__ = [
+    "RecordingWriteError",
     "DEFAULT_LEVELS",
     "ELAPSED",
     "colormaps",
@@ -211,9 +211,9 @@ def write_recording(
         try:
             build(rec)
         except BaseException:
-            _close(rec, final, failing=True)  # the build's error is the one to report
+            _close(rec, final, partial, failing=True)  # the build's error is the one to report
             raise
-        _close(rec, final)
+        _close(rec, final, partial)
         verify_recording(partial, recording_id, shown=final)
     return final
 
@@ -255,30 +255,49 @@ def _open_file(rec: rr.RecordingStream, path: Path, blueprint: rrb.BlueprintLike
         raise BananagridError(f"{path}: cannot write recording: {exc}") from None
 
 
-#: Free bytes below which a failed write is put down to a full disk.
-DISK_FULL_BYTES = 1 << 20
+#: Bytes asked of the file system again when rerun's writer stopped, to learn why.
+PROBE_BYTES = 1 << 20
 
 
-def _close(rec: rr.RecordingStream, shown: Path, *, failing: bool = False) -> None:
+class RecordingWriteError(BananagridError):
+    """The file system refused the recording's bytes (a full disk, a file-size limit): the
+    message names the file and the cause."""
+
+
+def _close(rec: rr.RecordingStream, shown: Path, partial: Path, *, failing: bool = False) -> None:
     """Flush everything logged and close the file sink (this writes the RRD footer).
 
     rerun's file writer stops on a write error (a full disk, a file-size limit) and the flush
-    then raises; that becomes one line naming ``shown`` (and the full disk, if free space is
-    below ``DISK_FULL_BYTES``), unless ``failing`` (another error is already on its way)."""
+    then raises; that becomes one line naming ``shown`` and the cause (:func:`_write_failure`),
+    unless ``failing`` (another error is already on its way)."""
     try:
         rec.flush()
     except RuntimeError as exc:
         if not failing:
-            reason = (str(exc).splitlines() or ["the file writer stopped"])[0]
-            try:
-                full = shutil.disk_usage(shown.parent).free < DISK_FULL_BYTES
-            except OSError:
-                full = False
-            reason = (f"no space left on the device (rerun: {reason})" if full
-                      else f"rerun: {reason}; its message above gives the cause")
-            raise BananagridError(f"{shown}: cannot write the recording: {reason}") from None
+            rerun_says = (str(exc).splitlines() or ["the file writer stopped"])[0]
+            raise RecordingWriteError(
+                f"{shown}: cannot write the recording: {_write_failure(partial, rerun_says)}"
+            ) from None
     finally:
         rec.disconnect()
+
+
+def _write_failure(partial: Path, rerun_says: str) -> str:
+    """Why the file writer stopped: rerun's flush error does not say, so the same file is
+    asked for another ``PROBE_BYTES`` (it is removed after); the operating system's answer
+    (no space left on the device, file too large, quota) is the cause."""
+    try:
+        with open(partial, "ab") as fh:
+            size = fh.tell()
+            try:
+                fh.write(bytes(PROBE_BYTES))
+                fh.flush()
+                os.fsync(fh.fileno())
+            finally:
+                fh.truncate(size)
+    except OSError as exc:
+        return f"{exc.strerror or exc} (rerun: {rerun_says})"
+    return f"rerun: {rerun_says} (RUST_LOG=warn shows rerun's own messages)"
 
 
 # --- blueprint --------------------------------------------------------------------------------

@@ -8,6 +8,7 @@ leaves no file at the final paths.
 from __future__ import annotations
 
 import json
+import math
 import os
 import time
 import warnings
@@ -23,7 +24,9 @@ from ..analysis.bearing_validation import format_table, summary, validation_tabl
 from ..analysis.coverage import coverage_warnings, level_warnings, peak_location
 from ..atomic import partial_path
 from ..engine.memory import check_memory
-from ..engine.rasterise import rasterise
+from ..engine.rasterise import GridExtent, rasterise
+from ..engine.warp_runtime import check_threads
+from ..engine.work import check_work
 from ..geo.dataset import raster_dataset, write_netcdf
 from ..geo.areas import search_areas
 from ..geo.geojson import write_geojson
@@ -53,7 +56,7 @@ from .load import Layer, Scene
 from .presence import PresenceScene
 from .run_presence import run_presence_scene
 
-__all__ = ["run_scene", "compute", "array_key", "check_exports", "check_run_memory", "export_paths", "write_exports",
+__all__ = ["run_scene", "compute", "array_key", "check_exports", "check_run_memory", "check_run_work", "export_paths", "write_exports",
            "RUN_ONLY_PROVENANCE"]
 
 #: Provenance keys that describe the run rather than the result. They stay out of the
@@ -75,6 +78,7 @@ def run_scene(
     threads: int | None = None,
     progress: Progress | None = None,
     max_memory: float | None = None,
+    max_seconds: float | None = None,
 ) -> list[dict]:
     """Rasterise, record and optionally export every layer of ``scene`` at every time.
 
@@ -107,6 +111,10 @@ def run_scene(
     max_memory : float, optional
         Bytes the run may take (default: the memory the system has available); a grid whose
         estimate (:func:`check_run_memory`) is larger is refused before any computing.
+    max_seconds : float, optional
+        Wall-clock seconds of computing the run may take (default one hour,
+        :data:`bananagrid.engine.work.DEFAULT_MAX_SECONDS`; ``math.inf`` for no limit); a scene
+        whose estimate (:func:`check_run_work`) is larger is refused before any computing.
 
     Returns
     -------
@@ -127,6 +135,7 @@ def run_scene(
     """
     check_exports(scene, netcdf=netcdf, geotiff=geotiff, geojson=geojson)
     check_run_memory(scene, exports=netcdf or geotiff or geojson, limit=max_memory)
+    check_run_work(scene, threads=threads, limit=max_seconds)
     if isinstance(scene, PresenceScene):  # an [array] scene: its own runner
         return run_presence_scene(scene, out_dir, npz=npz, threads=threads, progress=progress)
     out_dir = Path(out_dir)
@@ -151,7 +160,7 @@ def run_scene(
             if progress is not None:
                 progress(k, len(jobs), label)
             model = layer.model(t)
-            raster, seconds = compute(scene, layer, t, threads=threads, model=model)
+            raster, seconds = compute(scene, layer, t, threads=threads, model=model, max_seconds=math.inf)
             set_elapsed(rec, t)
             entity = f"layers/{layer.name}"
             regions = log_raster(
@@ -167,7 +176,7 @@ def run_scene(
                 found.append(message)
             log_layer_extras(
                 rec, entity, layer.model_kind, model, raster,
-                compute=lambda other: compute(scene, layer, t, threads=threads, model=other)[0],
+                compute=lambda other: compute(scene, layer, t, threads=threads, model=other, max_seconds=math.inf)[0],
             )
             if scene.radial is not None and layer.name in scene.radial.layers:
                 _log_radial(rec, scene, layer, t, threads)
@@ -235,6 +244,22 @@ def check_run_memory(scene: Scene | PresenceScene, *, exports: bool = False, lim
                         limit=limit, option="--max-memory GB")
 
 
+def check_run_work(scene: Scene | PresenceScene, *, threads: int | None = None,
+                   limit: float | None = None) -> float | None:
+    """Refuse a grid scene whose layers' estimated computing (the sum of each layer's
+    ``work_estimate`` at each time, over ``threads``) exceeds ``limit`` wall-clock seconds
+    (default one hour), before any computing; returns the estimate (None for an [array] scene,
+    whose angular lattices are bounded in size). See :mod:`bananagrid.engine.work`."""
+    if isinstance(scene, PresenceScene):
+        return None
+    cells, extent = scene.grid.nx * scene.grid.ny, GridExtent(scene.grid)
+    jobs = scene.jobs()
+    core_seconds = sum(layer.model(t).work_estimate(cells, extent) for layer, t in jobs)
+    return check_work(core_seconds, check_threads(threads),
+                      f"{scene.source}: {len(jobs)} layer map{'s' * (len(jobs) != 1)} of {cells:,} cells",
+                      limit=limit, option="--max-seconds S")
+
+
 def check_exports(scene: Scene | PresenceScene, *, netcdf: bool = False, geotiff: bool = False,
                   geojson: bool = False) -> None:
     """Refuse, before any computing, a map file the scene cannot give or whose library is
@@ -290,13 +315,13 @@ def write_exports(scene: Scene, out_dir: Path, panels: list, *, netcdf: bool = F
 
 
 def compute(scene: Scene, layer: Layer, t: float, *, threads: int | None = None,
-            model: DensityModel | None = None) -> tuple[Raster, float]:
+            model: DensityModel | None = None, max_seconds: float | None = None) -> tuple[Raster, float]:
     """One layer at elapsed time ``t``: the raster (normalised if the scene says so) and seconds.
     ``model``: the layer's model at ``t`` if already built, or another model rasterised as the
-    layer is (e.g. for a difference map)."""
+    layer is (e.g. for a difference map); ``max_seconds`` as for :func:`bananagrid.rasterise`."""
     start = time.perf_counter()
     model = layer.model(t) if model is None else model
-    raster = rasterise(model, scene.grid, dtype=np.dtype(scene.dtype), threads=threads)
+    raster = rasterise(model, scene.grid, dtype=np.dtype(scene.dtype), threads=threads, max_seconds=max_seconds)
     if scene.normalise:
         if not raster.mass > 0.0:
             raise BananagridError(

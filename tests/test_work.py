@@ -1,0 +1,154 @@
+"""Work before it starts: models estimate their computing, enormous work is refused in one line
+before any launch, and the CAT scan stays in the domain where its proof holds."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+import bananagrid as bg
+from bananagrid import BananagridError, cli
+from bananagrid.engine import warp_runtime
+from bananagrid.engine.rasterise import GridExtent
+from bananagrid.engine.work import DEFAULT_MAX_SECONDS, check_work, format_duration, work_limit
+from bananagrid.models.cat import MAX_NODES, NODE_SPACING, scan_node_count, scan_nodes
+from bananagrid.scenes.examples import example_names, example_path
+from bananagrid.scenes.load import load_scene
+from bananagrid.scenes.presence import PresenceScene
+from bananagrid.scenes.run import check_run_work
+
+#: A CAT whose turn-rate SD is 5,000 rad over the minute: 800,001 scan nodes, about 32 ms a cell.
+WILD_CAT = dict(v0=8.0, t=100.0, sigma_a=0.05, sigma_omega=50.0)
+
+
+def no_launch(monkeypatch):
+    """Make any kernel launch fail the test: the refusal must come first."""
+    monkeypatch.setattr(warp_runtime.WarpContext, "launch",
+                        lambda *a, **k: pytest.fail("a kernel was launched"))
+
+
+def test_rasterise_refuses_enormous_work_before_any_launch(monkeypatch):
+    model = bg.CAT(**WILD_CAT)
+    grid = bg.Grid.from_bounds((-1000.0, 1000.0), (-1000.0, 1000.0), 2.0)  # 1000 x 1000 cells
+    estimate = model.work_estimate(grid.nx * grid.ny, GridExtent(grid))
+    assert estimate > 2 * DEFAULT_MAX_SECONDS  # so that 2 threads cannot bring it under the limit
+    no_launch(monkeypatch)
+    with pytest.raises(BananagridError) as error:
+        bg.rasterise(model, grid, threads=2)
+    message = str(error.value)
+    assert message.startswith("CAT: rasterise on a grid of 1000 x 1000 = 1,000,000 cells would take about ")
+    assert "more than the 1 h allowed" in message and "max_seconds=S to allow more" in message
+    assert "\n" not in message
+
+
+def test_max_seconds_raises_and_lowers_the_limit(monkeypatch):
+    model = bg.CAT(v0=8.0, t=60.0, sigma_a=0.02, sigma_omega=math.radians(0.5))
+    grid = bg.Grid.from_bounds((-400.0, 800.0), (-400.0, 800.0), 12.0)
+    assert bg.rasterise(model, grid, max_seconds=math.inf).mass > 0.9
+    with pytest.raises(BananagridError, match="more than the 1e-06 s allowed"):
+        bg.rasterise(model, grid, max_seconds=1e-6)
+    lattice = bg.PolarLattice(ranges=(0.0, 600.0), range_step=20.0, bearings=(-math.pi, math.pi),
+                              bearing_step=math.pi / 90, pose=model.pose)
+    with pytest.raises(BananagridError, match=r"CAT: a polar lattice of .* quadrature nodes\) would take"):
+        bg.rasterise(model, lattice, max_seconds=1e-6)
+
+
+def test_run_refuses_a_scene_above_the_limit_before_computing(tmp_path, capsys, monkeypatch):
+    monkeypatch.setattr(cli, "run_scene", lambda *a, **k: pytest.fail("run_scene was called"))
+    out = tmp_path / "out"
+    code = cli.main(["run", "scenes/figure1.toml", "--out", str(out), "--max-seconds", "0.01", "--threads", "2"])
+    assert code == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1
+    assert err[0].startswith("bananagrid: error: scenes/figure1.toml: 3 layer maps of 1,350,000 cells would take about ")
+    assert err[0].endswith("on 2 CPU threads (estimate), more than the 0.01 s allowed: use coarser cells, a smaller "
+                           "grid or gentler parameters, or --max-seconds S to allow more")
+    assert not out.exists()
+
+
+def test_a_refused_scene_leaves_nothing_and_computes_nothing(tmp_path, capsys, monkeypatch):
+    scene = tmp_path / "wild.toml"
+    scene.write_text(
+        '[scene]\nname = "wild"\n[grid]\nx = [-1000, 1000]\ny = [-1000, 1000]\nstep = 2\n'
+        "[layers.cat]\nmodel = \"cat\"\nv0 = 8\nt = 100\nsigma_a = 0.05\nsigma_omega = 50\n"
+    )
+    no_launch(monkeypatch)
+    out = tmp_path / "out"
+    out.mkdir()
+    assert cli.main(["run", str(scene), "--out", str(out)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err[-1].startswith(f"bananagrid: error: {scene}: 1 layer map of 1,000,000 cells would take about ")
+    assert "--max-seconds S" in err[-1]
+    assert list(out.iterdir()) == []
+
+
+@pytest.mark.filterwarnings("ignore:bearings cross at")  # a bundled scene shows a poor crossing on purpose
+def test_no_bundled_scene_is_refused_and_every_estimate_is_positive():
+    for name in example_names():
+        scene = load_scene(example_path(name))
+        if isinstance(scene, PresenceScene):
+            assert check_run_work(scene) is None
+            continue
+        seconds = check_run_work(scene, threads=1)
+        assert 0.0 < seconds < DEFAULT_MAX_SECONDS / 10, name  # far below the limit on one core
+
+
+@settings(max_examples=300, deadline=None, derandomize=True)
+@given(
+    k=st.floats(1.0, 38.0),
+    turn=st.floats(1e-12, 1e6),  # sigma_omega t, rad
+    t=st.floats(1e-3, 1e9),
+)
+def test_the_scan_nodes_are_never_wider_than_the_spacing_the_proof_needs(k, turn, t):
+    """The kernel's bounds settle every node interval only when nodes are at most NODE_SPACING
+    apart in omega t (kernels/cat.py); a scan that would need more than MAX_NODES is refused."""
+    sigma_omega = turn / t
+    n = scan_node_count(k, sigma_omega, t)
+    if n > MAX_NODES:
+        with pytest.raises(BananagridError, match="sigma_omega = .* nodes, above 4,194,304"):
+            bg.CAT(v0=1.0, t=t, sigma_a=1.0, sigma_omega=sigma_omega, k_sigma=k)
+        return
+    model = bg.CAT(v0=1.0, t=t, sigma_a=1.0, sigma_omega=sigma_omega, k_sigma=k)
+    nodes = scan_nodes(model)
+    assert len(nodes) == n
+    assert np.max(np.diff(nodes)) * t <= NODE_SPACING * (1.0 + 1e-12)  # rounding of linspace
+
+
+def test_the_scan_domain_is_refused_with_the_numbers():
+    with pytest.raises(BananagridError) as error:
+        bg.CAT(v0=8.0, t=9.2e18, sigma_a=0.05, sigma_omega=0.01)
+    message = str(error.value)
+    assert message.startswith("sigma_omega = 0.01 rad/s: over t = 9.2e+18 s the turn-rate SD is sigma_omega t = "
+                              "9.2e+16 rad")
+    assert "(k_sigma sigma_omega t <= 209,715 rad)" in message
+
+
+def test_the_estimate_follows_the_work_sizes():
+    narrow = bg.CAT(v0=8.0, t=100.0, sigma_a=0.05, sigma_omega=0.001)
+    wide = bg.CAT(v0=8.0, t=100.0, sigma_a=0.05, sigma_omega=1.0)
+    extent = GridExtent(bg.Grid.from_bounds((-1000.0, 1000.0), (-1000.0, 1000.0), 10.0))
+    # 64 nodes against 16,001: the scan term dominates
+    assert wide.work_estimate(1000, extent) > 50 * narrow.work_estimate(1000, extent)
+    assert narrow.work_estimate(2000, extent) == pytest.approx(2 * narrow.work_estimate(1000, extent))
+    one = bg.Butterly(mean=(0, 0), cov=[[100.0, 0], [0, 100.0]], speeds=[1.0], t=100.0)
+    many = bg.Butterly(mean=(0, 0), cov=[[100.0, 0], [0, 100.0]], speeds=list(np.linspace(1, 2, 50)),
+                        weights=[0.02] * 50, t=100.0)
+    assert many.work_estimate(1000, extent) > 5 * one.work_estimate(1000, extent)
+
+
+def test_format_duration_and_the_limit_option():
+    assert [format_duration(s) for s in (0.5, 42.0, 90.0, 5400.0, 86400.0 * 3, 1e17)] == [
+        "0.5 s", "42 s", "1.5 min", "1.5 h", "3 days", "3.2e+09 years"]
+    assert work_limit("inf") == math.inf and work_limit(2) == 2.0
+    for bad in ("abc", 0, -1, "nan", True):
+        with pytest.raises(BananagridError, match="--max-seconds"):
+            work_limit(bad)
+    assert check_work(10.0, 2, "x", limit=5.0) == 5.0
+    with pytest.raises(BananagridError, match="x would take about 10 s on 1 CPU thread "):
+        check_work(10.0, 1, "x", limit=5.0)
+    with pytest.raises(BananagridError):
+        check_work(math.nan, 1, "x")
