@@ -18,7 +18,12 @@ def test_bench_writes_records(tmp_path, capsys):
     for record in records:
         assert set(record) >= {"kernel", "dtype", "threads", "cells", "seconds", "baseline_seconds", "ratio"}
         assert record["cells"] == 30 * 18 and record["seconds"] > 0 and record["ratio"] > 0
-    assert "polar-improved" in capsys.readouterr().out
+        # the work check's figure for the row: the model's estimate over the row's threads
+        assert record["estimate_seconds"] > 0
+    out = capsys.readouterr().out
+    assert "polar-improved" in out
+    line = next(line for line in out.splitlines() if line.startswith("work estimate / measured (float64, 1 thread): "))
+    assert [part.split()[0] for part in line.split(": ", 1)[1].split(", ")] == ["cat", "polar-improved"]
 
 
 def test_bench_rejects_bad_arguments(capsys):
