@@ -277,9 +277,8 @@ def test_a_recording_cut_short_is_refused_before_it_is_named(tmp_path, raster, m
     or a dying writer), it raises one line and leaves neither the file nor its temporary."""
     real_close = core_module._close
 
-    def close_then_cut(rec, shown, **kwargs):
-        real_close(rec, shown, **kwargs)
-        (partial,) = tmp_path.glob(".*.partial")
+    def close_then_cut(rec, shown, partial, **kwargs):
+        real_close(rec, shown, partial, **kwargs)
         with open(partial, "r+b") as f:
             f.truncate(partial.stat().st_size // 2)
 
