@@ -31,7 +31,7 @@ import numpy as np
 from .domains.pose import Pose
 
 __all__ = [
-    "DensityModel", "BatchModel", "KernelBinding", "KernelContext", "Extent", "SceneKey", "SceneSchema",
+    "DensityModel", "BatchModel", "KernelBinding", "CellPlan", "KernelContext", "Extent", "SceneKey", "SceneSchema",
     "KEY_TYPES",
     "LATLON",
 ]
@@ -75,6 +75,17 @@ class KernelContext(Protocol):
 
     def numpy(self, array) -> np.ndarray:
         """A device array as a NumPy array (waits for the device)."""
+
+    def bands(self, n: int, per_thread: int = 1) -> list[tuple[int, int]]:
+        """Contiguous bands ``(start, stop)`` of ``n`` rows: ``per_thread`` per CPU thread, one on
+        a GPU."""
+
+    def run_bands(self, launch_band, bands: list[tuple[int, int]]) -> None:
+        """Call ``launch_band(start, stop)`` for every band, on the context's threads (the
+        kernel's module loaded first with :meth:`load`)."""
+
+    def load(self, kernel) -> None:
+        """Compile or load ``kernel``'s module before concurrent launches need it."""
 
 
 class Extent(Protocol):
@@ -128,6 +139,27 @@ class KernelBinding:
     scratch_width: int = 0
     quad_width: int = 0
     tile_rows: int = 0
+
+
+@dataclass(frozen=True)
+class CellPlan:
+    """A model's own way to the probabilities of a grid's cells (instead of the engine's
+    quadrature of its density), sized before anything runs.
+
+    Attributes
+    ----------
+    seconds : float
+        Estimated seconds of one CPU core, checked like :meth:`DensityModel.work_estimate`.
+    run : callable
+        ``run(ctx) -> (probability, notes)``: the probability of every cell, float64 of shape
+        ``(ny, nx)``, and provenance entries (method, nodes, the error claim).
+    method : str
+        One line naming the method, for provenance and messages.
+    """
+
+    seconds: float
+    run: Callable
+    method: str
 
 
 #: Value types of scene keys and how a scene writes them.
@@ -266,7 +298,9 @@ class DensityModel(Protocol):
         Its scene keys.
     float32_rtol : float
         Stated agreement of float32 with float64 kernels, relative, where the density exceeds
-        1e-6 of its peak (tested over every registered model).
+        1e-6 of its peak (tested over every registered model), beyond the float64 density's
+        own change over the float32 rounding of the point's coordinates, which no float32
+        kernel can resolve (tests/test_float32_sweep.py).
     """
 
     kind: ClassVar[str]
@@ -308,6 +342,16 @@ class DensityModel(Protocol):
         ``extent``, from the model's own work sizes (scan nodes, speed nodes, tables), calibrated
         on cells where the density is not negligible and rounded up; checked before any launch
         (:mod:`bananagrid.engine.work`)."""
+
+    def grid_cells(self, grid) -> CellPlan | None:
+        """The model's own method for the probabilities of the cells of ``grid`` (a
+        :class:`~bananagrid.Grid`), or None for the engine's quadrature of the density
+        (:func:`bananagrid.engine.grid_cells.probability_raster`)."""
+
+    def singular_points(self) -> np.ndarray:
+        """World points ``(k, 2)`` where the density is infinite like 1 / r (the origin of a polar
+        density), which the engine's quadrature integrates in polar coordinates about them;
+        empty for none."""
 
     def polar_scales(self, origin: tuple[float, float]) -> tuple[float, float]:
         """Smallest widths of the density's features seen from ``origin`` (or from the model's

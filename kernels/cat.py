@@ -133,12 +133,15 @@ def hermite_minimum(f0: Any, g0: Any, f1: Any, g1: Any, width: Any):
 @wp.func
 def cat_root_density(
     x: Any, y: Any, lo: Any, hi: Any, f_lo: Any, g_lo: Any, f_hi: Any, g_hi: Any,
-    v0: Any, t: Any, sigma_a: Any, sigma_omega: Any, tol: Any,
+    v0: Any, t: Any, sigma_a: Any, sigma_omega: Any, tol: Any, noise_g: Any,
 ):
     """g(a) g(omega) / |det J| at the root of F in [lo, hi] (F(lo), F(hi) of opposite sign).
 
     Newton from the Hermite estimate, kept inside the bracket (bisection when it leaves it);
     the density is taken from the last evaluation, whose omega is within ``tol`` of the root.
+    |det J| = |dF/domega| is taken as at least ``noise_g``, its rounding allowance: on a fold
+    caustic the density is infinite, and a point whose coordinates round onto it (in float32,
+    within ~1e-7 v0 t) gets the largest value its arithmetic can resolve, never inf.
     """
     zero = type(x)(0.0)
     a = lo
@@ -163,7 +166,7 @@ def cat_root_density(
             break
         w = w_new
         f, df, acc = cat_eval(x, y, w, v0, t)
-    return normal_pdf(acc, zero, sigma_a) * normal_pdf(w, zero, sigma_omega) / wp.abs(df)
+    return normal_pdf(acc, zero, sigma_a) * normal_pdf(w, zero, sigma_omega) / wp.max(wp.abs(df), noise_g)
 
 
 @wp.func
@@ -256,7 +259,8 @@ def cat_interval(
             type(x)(0.125) * m3w2 + noise_g
         )
         if monotone or wp.abs(g_hi - g_lo) > curvature or last:
-            return cat_root_density(x, y, lo, hi, f_lo, g_lo, f_hi, g_hi, v0, t, sigma_a, sigma_omega, tol), True
+            density = cat_root_density(x, y, lo, hi, f_lo, g_lo, f_hi, g_hi, v0, t, sigma_a, sigma_omega, tol, noise_g)
+            return density, True
         return zero, False
     chord = t2 * (r * type(x)(0.25) + v0 * t / type(x)(12.0)) * du2 * type(x)(0.125) + noise_f
     if wp.min(wp.abs(f_lo), wp.abs(f_hi)) > chord:
@@ -276,8 +280,8 @@ def cat_interval(
         w_min, f_min, g_min = cat_fold_minimum(x, y, lo, hi, g_lo, g_hi, v0, t, tol)
         if (f_min >= zero) != (f_hi >= zero):
             density = cat_root_density(
-                x, y, lo, w_min, f_lo, g_lo, f_min, g_min, v0, t, sigma_a, sigma_omega, tol
-            ) + cat_root_density(x, y, w_min, hi, f_min, g_min, f_hi, g_hi, v0, t, sigma_a, sigma_omega, tol)
+                x, y, lo, w_min, f_lo, g_lo, f_min, g_min, v0, t, sigma_a, sigma_omega, tol, noise_g
+            ) + cat_root_density(x, y, w_min, hi, f_min, g_min, f_hi, g_hi, v0, t, sigma_a, sigma_omega, tol, noise_g)
     return density, True
 
 

@@ -43,24 +43,20 @@ cost ulp(x) / dx of a cell's width (4e-5 for a 1024-cell row of that 6 m room). 
 whole cell in float64; only the stored density and probability take the output arrays' dtype
 (the float32 overload rounds each float64 result once: 2^-24 = 6e-8 relative).
 
-Precision: Warp has erf but no erfc; :func:`erfcx_pos` is the scaled complementary error
-function from Cephes' ndtr.c rational approximations (relative error a few ulps), so upper
-normal tails keep their relative accuracy far out.
+Precision: normal tails come from :func:`kernels.common.erfcx_pos` (Cephes' ndtr.c), so upper
+tails keep their relative accuracy far out.
 """
 
 from typing import Any
 
 import warp as wp
 
+from .common import INV_SQRT2, erfcx_pos, normal_cdf, normal_interval, normal_sf
+
 SQRT_2PI = 2.5066282746310002
 SQRT_HALF_PI = 1.2533141373155003
-INV_SQRT2 = 0.7071067811865476
 INV_2PI = 0.15915494309189535
 
-#: Below this the exp(-x^2) (1 - erf) form of erfcx is used (Cephes: erf by T/U there).
-ERFCX_SMALL = 1.0
-#: Cephes switches from the (P, Q) to the (R, S) rational function of erfcx here.
-ERFCX_LARGE = 8.0
 
 #: ray_moment integrates by 8-point Gauss-Legendre when (t1 - t0)(1 + max|t|) is below this:
 #: there the closed form's terms would cancel; the rule's error is below 1e-13 relative.
@@ -76,64 +72,6 @@ GK_NODES = 15
     C_VG1, C_VG2, C_GX, C_GY, C_MZ, C_SZ,
 ) = range(17)
 COMPONENT_COLUMNS = 17
-
-
-@wp.func
-def erfcx_pos(x: Any):
-    """exp(x^2) erfc(x) for x >= 0 (Cephes ndtr.c): x < 1 via erf = x T(x^2) / U(x^2);
-    1 <= x < 8: P(x) / Q(x); x >= 8: R(x) / S(x) (Q, S, U monic)."""
-    one = type(x)(1.0)
-    if x < type(x)(ERFCX_SMALL):
-        z = x * x
-        t = (((type(x)(9.60497373987051638749e0) * z + type(x)(9.00260197203842689217e1)) * z
-              + type(x)(2.23200534594684319226e3)) * z + type(x)(7.00332514112805075473e3)) * z + type(x)(5.55923013010394962768e4)
-        u = ((((z + type(x)(3.35617141647503099647e1)) * z + type(x)(5.21357949780152679795e2)) * z
-              + type(x)(4.59432382970980127987e3)) * z + type(x)(2.26290000613890934246e4)) * z + type(x)(4.92673942608635921086e4)
-        return wp.exp(z) * (one - x * t / u)
-    if x < type(x)(ERFCX_LARGE):
-        p = (((((((type(x)(2.46196981473530512524e-10) * x + type(x)(5.64189564831068821977e-1)) * x
-                  + type(x)(7.46321056442269912687e0)) * x + type(x)(4.86371970985681366614e1)) * x
-                + type(x)(1.96520832956077098242e2)) * x + type(x)(5.26445194995477358631e2)) * x
-              + type(x)(9.34528527171957607540e2)) * x + type(x)(1.02755188689515710272e3)) * x + type(x)(5.57535335369399327526e2)
-        q = (((((((x + type(x)(1.32281951154744992508e1)) * x + type(x)(8.67072140885989742329e1)) * x
-                 + type(x)(3.54937778887819891062e2)) * x + type(x)(9.75708501743205489753e2)) * x
-               + type(x)(1.82390916687909736289e3)) * x + type(x)(2.24633760818710981792e3)) * x
-             + type(x)(1.65666309194161350182e3)) * x + type(x)(5.57535340817727675546e2)
-        return p / q
-    r = ((((type(x)(5.64189583547755073984e-1) * x + type(x)(1.27536670759978104416e0)) * x
-           + type(x)(5.01905042251180477414e0)) * x + type(x)(6.16021097993053585195e0)) * x
-         + type(x)(7.40974269950448939160e0)) * x + type(x)(2.97886665372100240670e0)
-    s = (((((x + type(x)(2.26052863220117276590e0)) * x + type(x)(9.39603524938001434673e0)) * x
-           + type(x)(1.20489539808096656605e1)) * x + type(x)(1.70814450747565897222e1)) * x
-         + type(x)(9.60896809063285878198e0)) * x + type(x)(3.36907645100081516050e0)
-    return r / s
-
-
-@wp.func
-def normal_sf(t: Any):
-    """Q(t) = P(Z > t) for a standard normal, with relative accuracy in the upper tail:
-    Q(t) = erfcx(t / sqrt 2) exp(-t^2 / 2) / 2 for t >= 0, 1 - Q(-t) below."""
-    if t >= type(t)(0.0):
-        return type(t)(0.5) * erfcx_pos(t * type(t)(INV_SQRT2)) * wp.exp(type(t)(-0.5) * t * t)
-    u = -t
-    return type(t)(1.0) - type(t)(0.5) * erfcx_pos(u * type(t)(INV_SQRT2)) * wp.exp(type(t)(-0.5) * u * u)
-
-
-@wp.func
-def normal_cdf(t: Any):
-    """Phi(t) = Q(-t)."""
-    return normal_sf(-t)
-
-
-@wp.func
-def normal_interval(t0: Any, t1: Any):
-    """Phi(t1) - Phi(t0) for t0 <= t1, from the tail on the side away from zero (no
-    cancellation of two numbers near one)."""
-    if t0 >= type(t0)(0.0):
-        return normal_sf(t0) - normal_sf(t1)
-    if t1 <= type(t0)(0.0):
-        return normal_sf(-t1) - normal_sf(-t0)
-    return type(t0)(1.0) - normal_sf(-t0) - normal_sf(t1)
 
 
 @wp.func

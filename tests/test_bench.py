@@ -116,3 +116,24 @@ def test_bench_refuses_an_unwritable_json_path_before_timing(tmp_path, capsys, m
     assert bench.main(["--kernels", "polar-rough", "--json", str(tmp_path / "missing" / "b.json")]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "missing: cannot write there" in err[0], err
+
+
+def test_bench_times_cell_probabilities_against_their_densities(tmp_path, monkeypatch, capsys):
+    """The cell-probability rows: both dtypes, a baseline on a sample of cells, and each row's
+    cost against the densities on the same grid (timed in the same run; CAT's lines cost more
+    than its centre densities, as the README says)."""
+    monkeypatch.setattr(bench._ButterlyCellJob, "SIDE", 64)
+    out = tmp_path / "bench.json"
+    argv = ["--kernels", "cat-cells,butterly-cells", "--repeat", "1", "--threads", "1", "--baseline-stride", "4",
+            "--no-memory", "--json", str(out)]
+    assert bench.main(argv) == 0
+    records = json.loads(out.read_text())["records"]
+    assert [(r["kernel"], r["dtype"]) for r in records] == [
+        ("cat-cells", "float64"), ("cat-cells", "float32"), ("butterly-cells", "float64"), ("butterly-cells", "float32")
+    ]
+    for record in records:
+        assert record["baseline_seconds"] > 0 and record["density_seconds"] > 0
+        assert record["cost_vs_density"] == pytest.approx(record["seconds"] / record["density_seconds"])
+    assert records[0]["cells"] == 1500 * 900 and records[2]["cells"] == 64 * 64
+    assert records[0]["cost_vs_density"] > 1.0
+    assert "cell probabilities cost, against the densities on the same grid: cat-cells float64" in capsys.readouterr().out

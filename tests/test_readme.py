@@ -40,6 +40,7 @@ NOT_RUN = {
     "bananagrid bench --kernels presence-plane,presence-frustum --repeat 3": "minutes of timing (see tests/test_bench.py)",
     "bananagrid bench --kernels butterly-r1,butterly-r10,butterly-r100,butterly-r1000 --repeat 3": "minutes of timing (see tests/test_bench.py)",
     "bananagrid bench --kernels cat,cat-heading --repeat 3": "minutes of timing (see tests/test_bench.py)",
+    "bananagrid bench --kernels cat-cells,butterly-cells --repeat 3": "a minute of timing (see tests/test_bench.py)",
     "time bananagrid sweep": "about a minute; tests/test_compare.py runs the sweep at --n 2",
     "python -m bananagrid.scenes.docs --write docs/scenes.md": "rewrites the docs; the same generator runs with --check in tests/test_architecture.py",
     "python -m bananagrid ...": "an elision; tests/test_architecture.py runs python -m bananagrid from the root",
@@ -141,6 +142,8 @@ def test_python_blocks_run_and_give_the_figures_shown(workdir, monkeypatch):
     assert namespace["scores"].shape == (10_000, 2)
     assert namespace["cells"].prob.shape == (360, 91)
     assert math.isclose(namespace["cells"].prob.sum(), 1.0, rel_tol=1e-6)  # p(C | S) over the room
+    assert (namespace["at_sea"].quantity, f"{namespace['at_sea'].mass:.9f}") == ("probability", "1.000000000")
+    assert f"{namespace['bg'].rasterise(namespace['ship'], namespace['chart']).mass:.4f}" == "0.9846"
 
 
 def synopsis() -> list[str]:

@@ -35,7 +35,7 @@ from ..engine.batch import frame, rasterise_batch
 from ..engine.rasterise import GridExtent, rasterise
 from ..engine.warp_runtime import default_threads
 from ..models.bearing import bearing_to, two_bearing_variances
-from ..models.cat import clear_heading_tables, scan_nodes
+from ..models.cat import cell_turn_edges, clear_heading_tables, scan_nodes
 from ..models.containment import containment
 from ..models.presence import GaussianMixture, cell_probabilities, grid_probabilities
 from ..models.registry import MODEL_KINDS
@@ -210,10 +210,72 @@ class _BatchJob:
         return (time.perf_counter() - start) * self.HYPOTHESES / len(picks)
 
 
+class _CellJob:
+    """Cell probabilities, ``rasterise(model, grid, quantity="probability")``, with the
+    densities on the same grid timed alongside (``density_seconds``, ``cost_vs_density``)."""
+
+    dtypes = (np.float64, np.float32)
+    SAMPLE = 16
+
+    def __init__(self, model, grid: Grid):
+        self.model, self.grid = model, grid
+        self.cells = grid.nx * grid.ny
+
+    def work(self, dtype, threads):
+        rasterise(self.model, self.grid, quantity="probability", dtype=dtype, threads=threads)
+
+    def density(self, dtype, threads):
+        rasterise(self.model, self.grid, dtype=dtype, threads=threads)
+
+    def sample_cells(self, n: int) -> list[tuple[float, float, float, float]]:
+        """``n`` cells drawn uniformly (fixed seed) as world boxes."""
+        rng = np.random.default_rng(4)
+        (x0, _, y0, _), g = self.grid.extent, self.grid
+        return [(x0 + j * g.dx, x0 + (j + 1) * g.dx, y0 + i * g.dy, y0 + (i + 1) * g.dy)
+                for i, j in zip(rng.integers(0, g.ny, n), rng.integers(0, g.nx, n))]
+
+
+class _CatCellJob(_CellJob):
+    """``cat-cells``: the Figure 1 CAT's cell probabilities on the ``cat`` row's grid (the
+    Figure 1 frame at 4 m), exact in the acceleration; baseline: NumPy (``baselines.cat_cells``:
+    the lines at the midpoints of the same turn-rate intervals, each clipped against a cell at
+    once, the midpoint rule, a cheaper rule than the kernel's) on a sample of cells, scaled."""
+
+    def __init__(self):
+        super().__init__(grid_model("cat"), Grid.from_bounds(**FIG1_BOUNDS, step=4.0))
+
+    def baseline(self, stride: int, repeat: int) -> float:
+        edges = cell_turn_edges(self.model, min(self.grid.dx, self.grid.dy))
+        cells = self.sample_cells(max(4, self.SAMPLE // stride))
+        start = time.perf_counter()
+        baselines.cat_cells(self.model, cells, edges)
+        return (time.perf_counter() - start) * self.cells / len(cells)
+
+
+class _ButterlyCellJob(_CellJob):
+    """``butterly-cells``: the ``butterly-r10`` model's cell probabilities (the engine's
+    Gauss-Legendre rule) on its bench frame at 256 x 256 cells; baseline: SciPy ``dblquad``
+    of the NumPy twin (``baselines.density_cells``) on a sample of cells, scaled."""
+
+    SIDE = 256
+
+    def __init__(self):
+        x0, x1, y0, y1 = _grid_for("butterly-r10", 4.0).extent
+        side = (x1 - x0) / self.SIDE
+        super().__init__(grid_model("butterly-r10"), Grid.from_bounds(x=(x0, x1), y=(y0, y1), dx=side, dy=side))
+
+    def baseline(self, stride: int, repeat: int) -> float:
+        cells = self.sample_cells(max(4, self.SAMPLE // stride))
+        density = functools.partial(baselines.butterly_density, self.model)
+        start = time.perf_counter()
+        baselines.density_cells(density, cells)
+        return (time.perf_counter() - start) * self.cells / len(cells)
+
+
 #: Kernels timed on work other than one grid.
 JOBS = {
     "presence-plane": _PresenceJob, "presence-frustum": _PresenceFrustumJob, "presence-grid": _PresenceGridJob,
-    "polar-batch": _BatchJob,
+    "polar-batch": _BatchJob, "cat-cells": _CatCellJob, "butterly-cells": _ButterlyCellJob,
 }
 
 #: Every row of the bench, in order: a grid row's model factory, or None for a job.
@@ -319,6 +381,9 @@ def _run_job(name: str, threads: int, repeat: int, stride: int, log) -> list[dic
                 "seconds": seconds, "baseline_seconds": base, "ratio": base / seconds,
                 "mcells_per_s": job.cells / seconds / 1e6,
             }
+            if hasattr(job, "density"):  # cell probabilities: their cost against the densities
+                record["density_seconds"] = _best_of(repeat, lambda: job.density(dtype, n_threads))
+                record["cost_vs_density"] = seconds / record["density_seconds"]
             records.append(record)
             log(_row(record))
     return records
@@ -449,6 +514,10 @@ def main(argv: list[str] | None = None) -> int:
         print("cat-heading (sigma_0 = pi/15) costs "
               + ", ".join(f"{v:.2f}x" for v in cost.values()) + " the plain CAT ("
               + ", ".join(f"{d} {n} thr" for d, n in cost) + ")")
+    cells = [r for r in records if "cost_vs_density" in r]
+    if cells:
+        print("cell probabilities cost, against the densities on the same grid: "
+              + ", ".join(f"{r['kernel']} {r['dtype']} {r['threads']} thr {r['cost_vs_density']:.1f}x" for r in cells))
     if "bearing-exact" in kernels:
         timing = containment_timing(repeat=args.repeat)
         result["containment"] = timing

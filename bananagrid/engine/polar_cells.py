@@ -20,20 +20,11 @@ from ..protocol import DensityModel
 from ..results import PolarRaster
 from ..validate import BananagridError
 from .points import check_finite, check_model, evaluate_points
+from .quadrature import GAUSS_TOL, MAX_SUBINTERVALS, axis_plan, unit_rule
 from .warp_runtime import check_threads
 from .work import check_work
 
 __all__ = ["rasterise_lattice", "LatticeExtent", "GAUSS_TOL", "MAX_NODES"]
-
-#: Target Gauss-Legendre error per sub-interval and axis, for a normal feature whose SD equals
-#: the length scale, as a fraction of that feature's mass (see :func:`_gauss_error`).
-GAUSS_TOL = 1e-10
-
-#: Most Gauss-Legendre nodes per sub-interval.
-MAX_ORDER = 8
-
-#: Most sub-intervals per cell and axis (so at most MAX_SUBINTERVALS * MAX_ORDER nodes per axis).
-MAX_SUBINTERVALS = 256
 
 #: Most quadrature nodes over the whole lattice (about 30 s of CAT evaluations on two cores).
 #: Beyond it the sub-intervals are coarsened and a warning says what accuracy is left.
@@ -42,7 +33,6 @@ MAX_NODES = 2**26
 #: Points per evaluate_points call (bounds the memory of the node arrays: ~100 MB at 2**20).
 NODE_CHUNK = 2**20
 
-_TWO_PI = 2.0 * math.pi
 
 
 class LatticeExtent:
@@ -56,44 +46,6 @@ class LatticeExtent:
         offset = math.dist(origin, self.lattice.pose.origin)
         r_min, r_max = self.lattice.range_edges[0], self.lattice.range_edges[-1]
         return max(0.0, r_min - offset), r_max + offset
-
-
-def _error_constant(n: int) -> float:
-    """Gauss-Legendre remainder on [-1, 1]: E = K_n f^(2n)(xi), K_n = 2^(2n+1) (n!)^4 /
-    ((2n + 1) ((2n)!)^3)."""
-    return 2.0 ** (2 * n + 1) * math.factorial(n) ** 4 / ((2 * n + 1) * float(math.factorial(2 * n)) ** 3)
-
-
-def _gauss_error(n: int, q: float) -> float:
-    r"""Error bound of the n-point Gauss-Legendre rule on an interval of width ``q sigma`` for a
-    normal density of SD sigma (as a fraction of its unit mass).
-
-    .. math:: E \le K_n (q/2)^{2n+1} \max|\mathrm{He}_{2n}(z)\,\varphi(z)|
-              = K_n (q/2)^{2n+1} (2n-1)!! / \sqrt{2\pi}
-
-    (the maximum is at z = 0). With q = 1: 2.8e-4 (n = 2), 2.4e-8 (4), 7.8e-13 (6).
-    """
-    double_factorial = math.prod(range(1, 2 * n, 2))
-    return _error_constant(n) * (0.5 * q) ** (2 * n + 1) * double_factorial / math.sqrt(_TWO_PI)
-
-
-def _axis_plan(width: float, scale: float, cap: int) -> tuple[int, int, float]:
-    """``(m, n, error)``: m equal sub-intervals of at most ``scale`` (no more than ``cap``) with
-    the fewest nodes n <= MAX_ORDER whose :func:`_gauss_error` meets GAUSS_TOL."""
-    m = max(1, min(cap, math.ceil(width / scale * (1.0 - 1e-12))))
-    q = width / (m * scale)
-    for n in range(1, MAX_ORDER + 1):
-        err = _gauss_error(n, q)
-        if err <= GAUSS_TOL:
-            return m, n, err
-    return m, MAX_ORDER, min(err, 1.0)  # beyond q ~ 2 the bound says nothing: at most the mass
-
-
-def _unit_rule(m: int, n: int) -> tuple[np.ndarray, np.ndarray]:
-    """Composite Gauss-Legendre rule on [0, 1]: m sub-intervals of n nodes; (nodes, weights)."""
-    x, w = np.polynomial.legendre.leggauss(n)
-    nodes = (np.arange(m)[:, None] + 0.5 * (x[None, :] + 1.0)) / m
-    return nodes.ravel(), np.tile(0.5 * w / m, m)
 
 
 @dataclass(frozen=True)
@@ -125,8 +77,8 @@ def _plan(model: DensityModel, lattice: PolarLattice) -> _Plan:
     cells_per_row = lattice.n_bearing
     cap = MAX_SUBINTERVALS
     while True:
-        rm, rn, r_err = _axis_plan(dr, r_scale, cap)
-        rows = [_axis_plan(db, s, cap) for s in b_scales]
+        rm, rn, r_err = axis_plan(dr, r_scale, cap)
+        rows = [axis_plan(db, s, cap) for s in b_scales]
         total = rm * rn * cells_per_row * sum(m * n for m, n, _ in rows)
         if total <= MAX_NODES or cap == 1:
             break
@@ -197,8 +149,8 @@ def _groups(tasks):
 def _integrate(model: DensityModel, lattice: PolarLattice, plan: _Plan, *, dtype, device, threads) -> np.ndarray:
     """Cell probabilities: sum over nodes of w_r(r) r w_b p(O + r u(h + b)), float64."""
     r_edges, b_edges = lattice.range_edges, lattice.bearing_edges
-    r_nodes, r_weights = _unit_rule(*plan.radial)
-    b_rules = {mn: _unit_rule(*mn) for mn in set(plan.angular)}
+    r_nodes, r_weights = unit_rule(*plan.radial)
+    b_rules = {mn: unit_rule(*mn) for mn in set(plan.angular)}
     heading = lattice.pose.heading
     ox, oy = lattice.pose.origin
     probability = np.zeros(lattice.shape)
@@ -250,7 +202,7 @@ def rasterise_lattice(
     The integral is a tensor Gauss-Legendre rule over sub-cells no larger than the model's
     length scales (``model.polar_scales``): per axis, m equal sub-intervals of at most the scale
     and the fewest nodes n (<= 8) whose remainder bound for a normal feature of that SD is below
-    ``GAUSS_TOL`` = 1e-10 of its mass (:func:`_gauss_error`). Where the density is as smooth as
+    ``GAUSS_TOL`` = 1e-10 of its mass (:func:`gauss_error`). Where the density is as smooth as
     its scales say, each cell's probability is then within about 1e-9 of the model's total mass.
     Folds of a CAT banana (sigma_omega t beyond about 90 deg) have integrable infinite density
     and converge more slowly. Every node is evaluated by the model's own kernels through

@@ -14,11 +14,13 @@ from ..results import PolarRaster, Raster
 from ..validate import BananagridError
 from .memory import RASTERISE_BYTES_PER_CELL, check_memory
 from .points import check_finite, check_model
+from .precision import working_dtype
 from .work import check_work
+from .grid_cells import probability_raster
 from .polar_cells import rasterise_lattice
 from .warp_runtime import WarpContext
 
-__all__ = ["rasterise", "GridExtent"]
+__all__ = ["rasterise", "GridExtent", "QUANTITIES"]
 
 
 class GridExtent:
@@ -38,9 +40,14 @@ class GridExtent:
         return math.hypot(near_x, near_y), math.hypot(far_x, far_y)
 
 
-def rasterise(model: DensityModel, grid: Grid | PolarLattice, *, dtype=np.float64, device: str = "cpu",
-              threads=None, max_seconds: float | None = None) -> Raster | PolarRaster:
-    """Density of ``model`` at the cell centres of ``grid``, or on a polar lattice.
+#: What :func:`rasterise` computes on a grid.
+QUANTITIES = ("density", "probability")
+
+
+def rasterise(model: DensityModel, grid: Grid | PolarLattice, *, quantity: str = "density", dtype=np.float64,
+              device: str = "cpu", threads=None, max_seconds: float | None = None) -> Raster | PolarRaster:
+    """Density of ``model`` at the cell centres of ``grid`` or the probability of each cell, or
+    both on a polar lattice.
 
     With a :class:`~bananagrid.PolarLattice` the result is a :class:`~bananagrid.PolarRaster`:
     densities per (m, rad) at the cell centres and the probability integrated over each
@@ -52,8 +59,20 @@ def rasterise(model: DensityModel, grid: Grid | PolarLattice, *, dtype=np.float6
         Any model that follows :class:`bananagrid.protocol.DensityModel` (every kind of
         ``bananagrid.MODEL_KINDS``, or one of your own).
     grid : Grid or PolarLattice
+    quantity : {"density", "probability"}, default "density"
+        On a grid: ``"density"``, the density per m^2 at each cell centre; ``"probability"``,
+        the probability that the target is in each cell (a :class:`Raster` of ``quantity ==
+        "probability"`` whose values sum to its ``mass``, the probability inside the grid, never
+        above 1 but by rounding). CAT (without heading noise) computes them exactly in the
+        acceleration (``CAT.grid_cells``), caustic cells included; every other model by a
+        Gauss-Legendre rule over sub-cells no larger than its length scale, in polar coordinates
+        about a polar density's origin (:mod:`bananagrid.engine.grid_cells`). A polar lattice
+        always gives both.
     dtype : float32 or float64, default float64
-        Kernel precision (and of ``values``).
+        Precision of ``values``, and of the kernel where float32 coordinates resolve the model
+        (:func:`bananagrid.engine.precision.working_dtype`: elsewhere, far from the world
+        origin, float32 is computed in float64 and rounded; ``provenance["computed_in"]``
+        says which); cell probabilities are summed in float64 and returned in ``dtype``.
     device : str, default "cpu"
         Warp device; "cuda" where present runs the same kernel source.
     threads : int, optional
@@ -71,19 +90,25 @@ def rasterise(model: DensityModel, grid: Grid | PolarLattice, *, dtype=np.float6
         Raw (not normalised) densities per m^2, with the captured mass and provenance
         (a PolarRaster for a PolarLattice).
     """
+    if quantity not in QUANTITIES:
+        raise BananagridError(f"quantity = {quantity!r}: expected one of {', '.join(map(repr, QUANTITIES))}")
     if isinstance(grid, PolarLattice):
         return rasterise_lattice(model, grid, dtype=dtype, device=device, threads=threads, max_seconds=max_seconds)
     if not isinstance(grid, Grid):
         raise BananagridError(f"grid = {grid!r}: expected a bananagrid.Grid")
-    ctx = WarpContext(dtype, device, threads)
     check_model(model)
+    if quantity == "probability":
+        return probability_raster(model, grid, dtype=dtype, device=device, threads=threads, max_seconds=max_seconds)
+    asked = WarpContext(dtype, device, threads).dtype
+    extent = GridExtent(grid)
+    ctx = WarpContext(working_dtype(model, asked, extent.radii((0.0, 0.0))[1]), device, threads)
     if ctx.cpu:  # an allocation the machine cannot give would abort the process without a word
         what = f"rasterise on a grid of {grid.nx} x {grid.ny} = {grid.nx * grid.ny:,} cells"
         check_memory(grid.nx * grid.ny, RASTERISE_BYTES_PER_CELL, what)
-        check_work(model.work_estimate(grid.nx * grid.ny, GridExtent(grid)), ctx.launch_threads,
+        check_work(model.work_estimate(grid.nx * grid.ny, extent), ctx.launch_threads,
                    f"{type(model).__name__}: {what}", limit=max_seconds, option="max_seconds=S")
     start = time.perf_counter()
-    binding = model.bind(ctx, GridExtent(grid), grid=True)
+    binding = model.bind(ctx, extent, grid=True)
     ctx.load(binding.grid_kernel)
     xs = ctx.array(grid.x)
     ys = ctx.array(grid.y)
@@ -120,11 +145,13 @@ def rasterise(model: DensityModel, grid: Grid | PolarLattice, *, dtype=np.float6
         values = out.numpy()
     seconds = time.perf_counter() - start
     check_finite(values, model)
+    values = values.astype(asked, copy=False)
     mass = float(np.sum(values, dtype=np.float64) * grid.cell_area)
     provenance = {
         **model.parameters(),
         "kernel": binding.kernel_name,
-        "dtype": ctx.dtype.name,
+        "dtype": asked.name,
+        "computed_in": ctx.dtype.name,
         "device": ctx.device,
         "threads": ctx.launch_threads,
         "seconds": seconds,

@@ -14,6 +14,7 @@ import numpy as np
 
 from ..domains.pose import Pose
 from ..engine.points import evaluate_points
+from ..protocol import CellPlan
 from ..validate import BananagridError
 
 __all__ = ["Model", "check_n", "check_rng", "RANGE_SDS"]
@@ -58,6 +59,15 @@ class Model:
     def work_estimate(self, cells: int, extent) -> float:
         """``cells * seconds_per_cell`` (:meth:`bananagrid.protocol.DensityModel.work_estimate`)."""
         return float(cells) * self.seconds_per_cell
+
+    def grid_cells(self, grid) -> CellPlan | None:
+        """None: the engine integrates the density over each cell
+        (:meth:`bananagrid.protocol.DensityModel.grid_cells`)."""
+        return None
+
+    def singular_points(self) -> np.ndarray:
+        """No point of infinite density (:meth:`bananagrid.protocol.DensityModel.singular_points`)."""
+        return np.zeros((0, 2))
 
     def landmarks(self) -> dict[str, np.ndarray]:
         """The last fix, the origin of the model's pose; nothing for a model without a pose

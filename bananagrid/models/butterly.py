@@ -438,7 +438,8 @@ class Butterly(Model):
     _nodes: tuple = field(init=False, repr=False)
 
     kind = "butterly"
-    #: float32 agreement with float64 where the density exceeds 1e-6 of its peak.
+    #: float32 agreement with float64 where the density exceeds 1e-6 of its peak, beyond the
+    #: density's change over the point's float32 rounding (``DensityModel.float32_rtol``).
     float32_rtol = 1e-4
     scene = SceneSchema(
         keys=(

@@ -76,7 +76,8 @@ class PolarBanana(MotionModel):
     pose: Pose = field(default_factory=Pose)
 
     kind = "polar"
-    #: float32 agreement with float64 where the density exceeds 1e-6 of its peak.
+    #: float32 agreement with float64 where the density exceeds 1e-6 of its peak, beyond the
+    #: density's change over the point's float32 rounding (``DensityModel.float32_rtol``).
     float32_rtol = 6e-5
     scene = SceneSchema(
         keys=(
@@ -143,6 +144,12 @@ class PolarBanana(MotionModel):
         """Mass of the bearing (phi, or theta with heading noise) beyond +-pi, outside the plane
         density."""
         return float(erfc(math.pi / (self.sigma_theta * math.sqrt(2.0))))
+
+    def singular_points(self) -> np.ndarray:
+        """The origin of the pose: the plane density g(phi) g(r) / r is infinite there like 1 / r
+        wherever g(r = 0) is not negligible (cell probabilities integrate about it in polar
+        coordinates, :mod:`bananagrid.engine.grid_cells`)."""
+        return np.reshape(np.asarray(self.pose.origin, dtype=np.float64), (1, 2))
 
     def radial_law(self, phi) -> tuple[np.ndarray, np.ndarray]:
         """Mean and SD of r | phi for this variant, float64 arrays (through the kernel)."""

@@ -61,6 +61,7 @@ __all__ = [
     "ELAPSED",
     "colormaps",
     "default_blueprint",
+    "log_cell_probabilities",
     "elapsed_nanos",
     "entity_path",
     "flatten",
@@ -630,6 +631,16 @@ def _log_log10_density(
     image = rr.DepthImage(image_from_values(logs), meter=1.0, colormap=colormap, depth_range=(floor, top))
     rec.log(path, image, _pixel_to_world(raster))
     return top
+
+
+def log_cell_probabilities(rec: rr.RecordingStream, path: str, cells: Raster, *, colormap: str = "viridis") -> None:
+    """The probability of each cell (a :class:`Raster` of ``quantity == "probability"``) as an
+    image with range ``(0, largest cell)``, placed in world metres like the layer's density."""
+    if cells.quantity != "probability":
+        raise BananagridError(f"cells.quantity = {cells.quantity!r}: expected cell probabilities")
+    _check_values(cells)
+    with strict():
+        _log_density(rec, entity_path(path), cells, colormap)
 
 
 def log_signed_image(rec: rr.RecordingStream, path: str, values: np.ndarray, like: Raster) -> None:

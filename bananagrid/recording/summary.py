@@ -17,6 +17,10 @@ from .core import HOVER_NOTE, entity_path, strict
 __all__ = ["log_summary", "summary_markdown"]
 
 
+#: The cell probabilities' tab of a layer (``bananagrid.scenes.run.CELL_IMAGE``).
+CELL_TAB = "cell_probability"
+
+
 def summary_markdown(title: str, rows: Sequence[dict], warnings: Sequence[str]) -> str:
     """The summary as markdown.
 
@@ -27,7 +31,8 @@ def summary_markdown(title: str, rows: Sequence[dict], warnings: Sequence[str]) 
     rows : sequence of dict
         One per layer and time with ``layer``, ``t`` (s), ``mass`` (raw captured mass),
         ``peak`` (m^-2), ``peak_x``, ``peak_y`` (m) and ``regions`` (list of
-        :class:`~bananagrid.contours.MassRegion`).
+        :class:`~bananagrid.contours.MassRegion`); ``mass_from`` where the mass is not the
+        density's midpoint sum (e.g. ``"the cell probabilities"``).
     warnings : sequence of str
         One-line warnings of the run (empty: says so).
     """
@@ -55,6 +60,10 @@ def summary_markdown(title: str, rows: Sequence[dict], warnings: Sequence[str]) 
         "of a line reads (x, −y) in metres; over an image it reads the pixel (column from the "
         "west edge, row from the north edge).",
     ]
+    sources = sorted({row["mass_from"] for row in rows if row.get("mass_from")})
+    if sources:
+        out += ["", f"**Captured mass** is the sum of {' and '.join(sources)} (the tab `{CELL_TAB}` of each layer: "
+                "the probability that the target is in each cell), not the densities' midpoint sum."]
     return "\n".join(out) + "\n"
 
 

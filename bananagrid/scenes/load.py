@@ -45,7 +45,8 @@ GEO_KEYS = ("origin_latlon", "time", "crs", "max_scale_error")
 RADIAL_KEYS = ("layers", "density_bearings_deg", "moments_max_deg", "moments_step_deg")
 SCENE_KEYS = ("name", "title", "description", "times")
 GRID_KEYS = ("x", "y", "step", "dx", "dy")
-OUTPUT_KEYS = ("mass_levels", "contour_levels", "min_mass", "normalise", "dtype", "colormap", "bearing_validation")
+OUTPUT_KEYS = ("mass_levels", "contour_levels", "min_mass", "normalise", "dtype", "colormap", "bearing_validation",
+               "cell_probabilities")
 
 
 @dataclass(frozen=True)
@@ -166,6 +167,9 @@ class Scene:
         of t = 0 and the projection; None for a scene in local metres only.
     scale_error : float
         The projection's largest relative scale error over the grid (0 without ``[geo]``).
+    cell_probabilities : bool
+        Whether every layer's cell probabilities are computed too (``output.cell_probabilities``:
+        recorded, exported to the .npz, and the source of the captured mass).
     """
 
     name: str
@@ -188,6 +192,7 @@ class Scene:
     warnings: tuple = ()
     geo: GeoFrame | None = None
     scale_error: float = 0.0
+    cell_probabilities: bool = False
 
     def with_step(self, step: float) -> "Scene":
         """A copy whose grid covers the same bounds with square cells of ``step`` metres."""
@@ -375,8 +380,8 @@ def _grid(table: dict) -> tuple[tuple, Grid]:
 
 def _output(table: dict) -> dict:
     """``[output]``: contour levels (probability mass and fixed densities), the captured-mass
-    threshold, normalisation, dtype, colormap and whether to add the bearing-fix validation
-    table, with defaults; as keyword arguments of :class:`Scene`."""
+    threshold, normalisation, dtype, colormap, whether to add the bearing-fix validation
+    table and whether to compute cell probabilities, with defaults; as keyword arguments of :class:`Scene`."""
     check_keys(table, OUTPUT_KEYS, "output")
     levels: tuple = ()
     if "contour_levels" in table:
@@ -419,9 +424,13 @@ def _output(table: dict) -> dict:
     validation = table.get("bearing_validation", False)
     if not isinstance(validation, bool):
         raise SceneKeyError(f"output.bearing_validation = {show(validation)}: expected true or false")
+    cells = table.get("cell_probabilities", False)
+    if not isinstance(cells, bool):
+        raise SceneKeyError(f"output.cell_probabilities = {show(cells)}: expected true or false")
     return {
         "levels": tuple(float(v) for v in levels), "mass_levels": probabilities, "min_mass": threshold,
         "normalise": normalise, "dtype": dtype, "colormap": colormap.lower(), "bearing_validation": validation,
+        "cell_probabilities": cells,
     }
 
 

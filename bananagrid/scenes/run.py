@@ -23,6 +23,7 @@ import numpy as np
 from ..analysis.bearing_validation import format_table, summary, validation_table
 from ..analysis.coverage import coverage_warnings, level_warnings, peak_location
 from ..atomic import partial_path
+from ..engine.grid_cells import probability_work
 from ..engine.memory import check_memory
 from ..engine.rasterise import GridExtent, rasterise
 from ..engine.warp_runtime import check_threads
@@ -38,6 +39,7 @@ from ..recording.geomap import log_map_areas, log_map_marks, map_view
 from ..recording.core import (
     default_blueprint,
     focus_extent,
+    log_cell_probabilities,
     log_raster,
     log_scene_text,
     recording_id_for,
@@ -48,7 +50,7 @@ from ..recording.core import (
 )
 from ..recording.layers import layer_views, log_layer_extras
 from ..recording.radial import log_radial_curves, radial_groups, radial_views
-from ..recording.summary import log_summary
+from ..recording.summary import CELL_TAB, log_summary
 from ..results import Raster
 from ..validate import BananagridError, BananagridWarning
 from ..version import __version__
@@ -120,9 +122,11 @@ def run_scene(
     -------
     list of dict
         One row per layer and time: ``scene``, ``layer``, ``t`` (s), ``cells``, ``mass``
-        (raw captured mass), ``peak`` (largest recorded density, m^-2), ``peak_x``, ``peak_y``
-        (its cell centre, m), ``regions`` (the probability-mass regions at the scene's
-        ``mass_levels``, :class:`~bananagrid.contours.MassRegion`) and ``seconds`` (rasterise
+        (raw captured mass: the sum of the cell probabilities with ``output.cell_probabilities``,
+        else the densities' midpoint sum), ``mass_from`` (``"the cell probabilities"`` or ""),
+        ``peak`` (largest recorded density, m^-2), ``peak_x``, ``peak_y`` (its cell centre, m),
+        ``regions`` (the probability-mass regions at the scene's ``mass_levels``,
+        :class:`~bananagrid.contours.MassRegion`) and ``seconds`` (rasterise, cell probabilities
         and normalise, wall clock).
 
     Warns
@@ -161,8 +165,17 @@ def run_scene(
                 progress(k, len(jobs), label)
             model = layer.model(t)
             raster, seconds = compute(scene, layer, t, threads=threads, model=model, max_seconds=math.inf)
+            cells = None
+            if scene.cell_probabilities:  # the captured mass is then theirs, not the midpoint sum's
+                cells, more = compute(scene, layer, t, threads=threads, model=model, max_seconds=math.inf,
+                                      quantity="probability")
+                seconds += more
+                raster = replace(raster, mass=cells.mass,
+                                 provenance={**raster.provenance, "mass_from": "the cell probabilities"})
             set_elapsed(rec, t)
             entity = f"layers/{layer.name}"
+            if cells is not None:
+                log_cell_probabilities(rec, f"{entity}/{CELL_IMAGE}", _recordable(cells), colormap=scene.colormap)
             regions = log_raster(
                 rec, entity, _recordable(raster), levels=scene.levels, mass_levels=scene.mass_levels,
                 colormap=scene.colormap,
@@ -187,7 +200,7 @@ def run_scene(
                 areas[layer.name, t] = search_areas(raster, scene.mass_levels)
                 log_map_areas(rec, layer.name, areas[layer.name, t], scene.geo)
             if archive is not None:
-                archive.add(layer.name, t, raster)
+                archive.add(layer.name, t, raster, cells)
             if panels is not None:
                 panels.append((layer.name, t, raster))
             rows.append(_row(scene, layer, t, raster, seconds, regions))
@@ -230,6 +243,11 @@ RUN_BYTES_PER_CELL = 96
 #: Further bytes per cell for each map kept for --netcdf, --geotiff or --geojson (the float64
 #: raster, and the file's copy while it is written).
 EXPORT_BYTES_PER_MAP_CELL = 24
+#: Further bytes per cell with ``output.cell_probabilities``: their float64 sums and raster, the
+#: quadrature's per-cell plans, and the float32 image.
+PROBABILITY_BYTES_PER_CELL = 64
+#: The cell probabilities' image under a layer's entity (named in the summary's note).
+CELL_IMAGE = CELL_TAB
 
 
 def check_run_memory(scene: Scene | PresenceScene, *, exports: bool = False, limit: float | None = None) -> float | None:
@@ -239,7 +257,8 @@ def check_run_memory(scene: Scene | PresenceScene, *, exports: bool = False, lim
     if isinstance(scene, PresenceScene):
         return None
     cells = scene.grid.nx * scene.grid.ny
-    per_cell = RUN_BYTES_PER_CELL + (EXPORT_BYTES_PER_MAP_CELL * len(scene.jobs()) if exports else 0)
+    per_cell = (RUN_BYTES_PER_CELL + (EXPORT_BYTES_PER_MAP_CELL * len(scene.jobs()) if exports else 0)
+                + (PROBABILITY_BYTES_PER_CELL if scene.cell_probabilities else 0))
     return check_memory(cells, per_cell, f"{scene.source}: a grid of {scene.grid.nx} x {scene.grid.ny} = {cells:,} cells",
                         limit=limit, option="--max-memory GB")
 
@@ -255,6 +274,8 @@ def check_run_work(scene: Scene | PresenceScene, *, threads: int | None = None,
     cells, extent = scene.grid.nx * scene.grid.ny, GridExtent(scene.grid)
     jobs = scene.jobs()
     core_seconds = sum(layer.model(t).work_estimate(cells, extent) for layer, t in jobs)
+    if scene.cell_probabilities:
+        core_seconds += sum(probability_work(layer.model(t), scene.grid)[0] for layer, t in jobs)
     return check_work(core_seconds, check_threads(threads),
                       f"{scene.source}: {len(jobs)} layer map{'s' * (len(jobs) != 1)} of {cells:,} cells",
                       limit=limit, option="--max-seconds S")
@@ -315,13 +336,16 @@ def write_exports(scene: Scene, out_dir: Path, panels: list, *, netcdf: bool = F
 
 
 def compute(scene: Scene, layer: Layer, t: float, *, threads: int | None = None,
-            model: DensityModel | None = None, max_seconds: float | None = None) -> tuple[Raster, float]:
+            model: DensityModel | None = None, max_seconds: float | None = None,
+            quantity: str = "density") -> tuple[Raster, float]:
     """One layer at elapsed time ``t``: the raster (normalised if the scene says so) and seconds.
     ``model``: the layer's model at ``t`` if already built, or another model rasterised as the
-    layer is (e.g. for a difference map); ``max_seconds`` as for :func:`bananagrid.rasterise`."""
+    layer is (e.g. for a difference map); ``max_seconds`` and ``quantity`` as for
+    :func:`bananagrid.rasterise`."""
     start = time.perf_counter()
     model = layer.model(t) if model is None else model
-    raster = rasterise(model, scene.grid, dtype=np.dtype(scene.dtype), threads=threads, max_seconds=max_seconds)
+    raster = rasterise(model, scene.grid, quantity=quantity, dtype=np.dtype(scene.dtype), threads=threads,
+                       max_seconds=max_seconds)
     if scene.normalise:
         if not raster.mass > 0.0:
             raise BananagridError(
@@ -346,6 +370,8 @@ def _blueprint(scene: Scene, frames: dict):
     models = [(layer.name, layer.model(t0)) for layer in scene.layers]
     for layer, (_, model) in zip(scene.layers, models):
         more_images, more_views = layer_views(f"layers/{layer.name}", layer.model_kind, model)
+        if scene.cell_probabilities:
+            images.append(f"layers/{layer.name}/{CELL_IMAGE}")
         images += more_images
         views += more_views
     return default_blueprint(
@@ -369,9 +395,11 @@ def _log_radial(rec, scene: Scene, layer: Layer, t: float, threads) -> None:
     )
 
 
-def array_key(layer: str, t: float) -> str:
-    """Name of a layer's array at time ``t`` in the .npz: ``LAYER__tT`` (``T`` shortest form)."""
-    return f"{layer}__t{np.format_float_positional(float(t), trim='-')}"
+def array_key(layer: str, t: float, quantity: str = "density") -> str:
+    """Name of a layer's array at time ``t`` in the .npz: ``LAYER__tT`` (``T`` shortest form) for
+    the density, ``LAYER__tT__probability`` for the cell probabilities."""
+    key = f"{layer}__t{np.format_float_positional(float(t), trim='-')}"
+    return key if quantity == "density" else f"{key}__{quantity}"
 
 
 def _recordable(raster: Raster) -> Raster:
@@ -391,7 +419,7 @@ def _row(scene: Scene, layer: Layer, t: float, raster: Raster, seconds: float, r
     return {
         "scene": scene.name, "layer": layer.name, "t": float(t), "cells": scene.grid.nx * scene.grid.ny,
         "mass": raster.mass, "peak": raster.peak, "peak_x": x, "peak_y": y, "regions": regions,
-        "seconds": seconds,
+        "seconds": seconds, "mass_from": raster.provenance.get("mass_from", ""),
     }
 
 
@@ -415,14 +443,18 @@ class _Archive:
             self.discard()
             raise
 
-    def add(self, layer: str, t: float, raster: Raster) -> None:
-        """Store ``raster.values`` under :func:`array_key` and note its provenance."""
-        key = array_key(layer, t)
-        self._write(key, raster.values)
-        self.entries[key] = {
-            "layer": layer, "t": float(t), "mass": raster.mass, "peak": raster.peak,
-            "normalised": raster.normalised, "provenance": raster.provenance,
-        }
+    def add(self, layer: str, t: float, raster: Raster, cells: Raster | None = None) -> None:
+        """Store ``raster.values`` (and the cell probabilities ``cells``, if computed) under
+        :func:`array_key` and note their provenance."""
+        for item in (raster, cells):
+            if item is None:
+                continue
+            key = array_key(layer, t, item.quantity)
+            self._write(key, item.values)
+            self.entries[key] = {
+                "layer": layer, "t": float(t), "quantity": item.quantity, "mass": item.mass, "peak": item.peak,
+                "normalised": item.normalised, "provenance": item.provenance,
+            }
 
     def close(self) -> None:
         """Write the provenance and finish the zip (still under the temporary name)."""
@@ -452,7 +484,8 @@ class _Archive:
             "grid": scene.grid.describe(),
             "geo": None if scene.geo is None else scene.geo.describe(),
             "dtype": scene.dtype,
-            "quantity": "density per m^2 at the cell centres (x[j], y[i]); rows south to north",
+            "quantity": "density per m^2 at the cell centres (x[j], y[i]); rows south to north"
+                        + ("; arrays named __probability: the probability of each cell" if scene.cell_probabilities else ""),
             "normalised": scene.normalise,
             "arrays": self.entries,
             "text": scene.text,
