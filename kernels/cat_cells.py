@@ -31,8 +31,7 @@ from .common import cat_basis, normal_interval, normal_pdf
 #: Largest |z| walked: the normal mass beyond it, erfc(9 / sqrt 2) = 2.3e-19, is left out.
 Z_MAX = 9.0
 #: 3-point Gauss-Legendre on [-1, 1]: nodes 0, +-sqrt(3/5), weights 8/9 and 5/9 (module
-#: constants: inside a Warp function an expression of literals such as 8.0 / 9.0 is evaluated
-#: in float32, 7e-9 off).
+#: constants: a literal inside a Warp function is a float32 constant).
 GAUSS_NODE = 0.7745966692414834
 GAUSS_CENTRE_WEIGHT = 8.0 / 9.0
 GAUSS_SIDE_WEIGHT = 5.0 / 9.0

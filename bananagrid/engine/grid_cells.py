@@ -29,7 +29,7 @@ from ..results import Raster
 from ..validate import BananagridError
 from .memory import check_memory
 from .points import check_finite, evaluate_points
-from .quadrature import GAUSS_TOL, MAX_SUBINTERVALS, NODE_CHUNK, axis_plan, unit_rule
+from .quadrature import GAUSS_TOL, MAX_SUBINTERVALS, axis_plan, unit_rule
 from .warp_runtime import WarpContext
 from .work import check_work
 
@@ -38,6 +38,8 @@ __all__ = ["probability_raster", "probability_work", "MAX_NODES", "FAN_ORDER", "
 #: Most quadrature nodes of the tensor rule over a grid (about 10 s of polar-banana evaluations
 #: on two cores); beyond it the sub-cells are coarsened and a warning says so.
 MAX_NODES = 2**28
+#: Points per evaluation (bounds the node arrays' memory, ~100 MB).
+NODE_CHUNK = 2**20
 #: Gauss-Legendre nodes per sub-interval of the Duffy rule, and its most sub-intervals per axis.
 FAN_ORDER = 8
 FAN_MAX_SUBINTERVALS = 64
@@ -137,8 +139,6 @@ class _QuadraturePlan:
         # at most: four triangles of FAN_MAX_SUBINTERVALS^2 sub-cells of FAN_ORDER^2 nodes each
         self.fan_nodes = 4 * len(self.fan_cells) * (FAN_ORDER * FAN_MAX_SUBINTERVALS) ** 2
         self.error = max((px[2] + py[2] for px, py in self.plans.values()), default=0.0)
-        self.nodes = self.total + self.fan_nodes
-        self.seconds = model.work_estimate(self.nodes, _GridBox(grid))
 
 
 def probability_work(model: DensityModel, grid: Grid) -> tuple[float, str]:
@@ -148,14 +148,16 @@ def probability_work(model: DensityModel, grid: Grid) -> tuple[float, str]:
     if plan is not None:
         return plan.seconds, plan.method
     q = _QuadraturePlan(model, grid)
-    return q.seconds, f"{q.nodes:,} quadrature nodes at most"
+    nodes = q.total + q.fan_nodes
+    return model.work_estimate(nodes, _GridBox(grid)), f"{nodes:,} quadrature nodes at most"
 
 
 def _quadrature(model: DensityModel, grid: Grid, ctx, what: str, max_seconds) -> tuple[np.ndarray, dict]:
     q = _QuadraturePlan(model, grid)
+    nodes = q.total + q.fan_nodes
     if ctx.cpu:
-        check_work(q.seconds, ctx.launch_threads, f"{what} ({q.nodes:,} quadrature nodes at most)",
-                   limit=max_seconds, option="max_seconds=S")
+        check_work(model.work_estimate(nodes, _GridBox(grid)), ctx.launch_threads,
+                   f"{what} ({nodes:,} quadrature nodes at most)", limit=max_seconds, option="max_seconds=S")
     if q.error > 10.0 * GAUSS_TOL:
         warnings.warn(
             f"grid cell probabilities: the node cap ({MAX_NODES:,} nodes, {q.cap} sub-intervals per cell and "

@@ -6,7 +6,7 @@ import numpy as np
 
 from ..protocol import DensityModel, KernelBinding
 from ..validate import BananagridError
-from .precision import working_context
+from .precision import working_dtype
 from .warp_runtime import WarpContext
 
 __all__ = ["evaluate_points", "launch_points", "PointsExtent", "check_model", "check_finite", "POINT_CHUNK"]
@@ -65,13 +65,12 @@ def evaluate_points(model: DensityModel, x, y, *, dtype=np.float64, device: str 
         ) from None
     if not (np.isfinite(bx).all() and np.isfinite(by).all()):
         raise BananagridError("x, y: points must be finite (NaN or inf given)")
-    ctx = WarpContext(dtype, device, threads)
-    asked = ctx.dtype
+    asked = WarpContext(dtype, device, threads).dtype
     if bx.size == 0:
         return np.zeros(bx.shape, dtype=asked)
     check_model(model)
     extent = extent if extent is not None else PointsExtent(bx, by)
-    ctx = working_context(model, ctx, extent.radii((0.0, 0.0))[1])
+    ctx = WarpContext(working_dtype(model, asked, extent.radii((0.0, 0.0))[1]), device, threads)
     binding = model.bind(ctx, extent, grid=False)
     ctx.load(binding.grid_kernel)
     return launch_points(ctx, binding, bx, by).astype(asked, copy=False)

@@ -20,7 +20,7 @@ from ..protocol import DensityModel
 from ..results import PolarRaster
 from ..validate import BananagridError
 from .points import check_finite, check_model, evaluate_points
-from .quadrature import GAUSS_TOL, MAX_SUBINTERVALS, NODE_CHUNK, axis_plan, unit_rule
+from .quadrature import GAUSS_TOL, MAX_SUBINTERVALS, axis_plan, unit_rule
 from .warp_runtime import check_threads
 from .work import check_work
 
@@ -29,6 +29,10 @@ __all__ = ["rasterise_lattice", "LatticeExtent", "GAUSS_TOL", "MAX_NODES"]
 #: Most quadrature nodes over the whole lattice (about 30 s of CAT evaluations on two cores).
 #: Beyond it the sub-intervals are coarsened and a warning says what accuracy is left.
 MAX_NODES = 2**26
+
+#: Points per evaluate_points call (bounds the memory of the node arrays: ~100 MB at 2**20).
+NODE_CHUNK = 2**20
+
 
 
 class LatticeExtent:

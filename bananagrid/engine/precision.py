@@ -13,9 +13,8 @@ from __future__ import annotations
 import numpy as np
 
 from ..protocol import DensityModel
-from .warp_runtime import WarpContext
 
-__all__ = ["FLOAT32_RESOLUTION", "working_dtype", "working_context"]
+__all__ = ["FLOAT32_RESOLUTION", "working_dtype"]
 
 #: float32 is used only where the rounding of the farthest coordinate, 2^-24 of its size, is at
 #: most this fraction of the model's smallest feature (``feature_scale``): the density then
@@ -35,10 +34,3 @@ def working_dtype(model: DensityModel, dtype, farthest: float) -> np.dtype:
     if _FLOAT32_ULP * farthest > FLOAT32_RESOLUTION * float(model.feature_scale()):
         return np.dtype(np.float64)
     return dtype
-
-
-def working_context(model: DensityModel, ctx: WarpContext, farthest: float) -> WarpContext:
-    """``ctx``, or a float64 context on its device and threads where :func:`working_dtype`
-    says its float32 cannot resolve ``model`` within ``farthest`` metres of the world origin."""
-    dtype = working_dtype(model, ctx.dtype, farthest)
-    return ctx if dtype == ctx.dtype else WarpContext(dtype, ctx.device, ctx.threads)

@@ -7,7 +7,7 @@ import math
 
 import numpy as np
 
-__all__ = ["GAUSS_TOL", "MAX_ORDER", "MAX_SUBINTERVALS", "NODE_CHUNK", "gauss_error", "axis_plan", "unit_rule"]
+__all__ = ["GAUSS_TOL", "MAX_ORDER", "MAX_SUBINTERVALS", "gauss_error", "axis_plan", "unit_rule"]
 
 _TWO_PI = 2.0 * math.pi
 
@@ -20,9 +20,6 @@ MAX_ORDER = 8
 
 #: Most sub-intervals per cell and axis (so at most MAX_SUBINTERVALS * MAX_ORDER nodes per axis).
 MAX_SUBINTERVALS = 256
-
-#: Points per evaluate_points call (bounds the memory of the node arrays: ~100 MB at 2**20).
-NODE_CHUNK = 2**20
 
 
 def error_constant(n: int) -> float:

@@ -14,7 +14,7 @@ from ..results import PolarRaster, Raster
 from ..validate import BananagridError
 from .memory import RASTERISE_BYTES_PER_CELL, check_memory
 from .points import check_finite, check_model
-from .precision import working_context
+from .precision import working_dtype
 from .work import check_work
 from .grid_cells import probability_raster
 from .polar_cells import rasterise_lattice
@@ -99,10 +99,9 @@ def rasterise(model: DensityModel, grid: Grid | PolarLattice, *, quantity: str =
     check_model(model)
     if quantity == "probability":
         return probability_raster(model, grid, dtype=dtype, device=device, threads=threads, max_seconds=max_seconds)
-    ctx = WarpContext(dtype, device, threads)
-    asked = ctx.dtype
+    asked = WarpContext(dtype, device, threads).dtype
     extent = GridExtent(grid)
-    ctx = working_context(model, ctx, extent.radii((0.0, 0.0))[1])
+    ctx = WarpContext(working_dtype(model, asked, extent.radii((0.0, 0.0))[1]), device, threads)
     if ctx.cpu:  # an allocation the machine cannot give would abort the process without a word
         what = f"rasterise on a grid of {grid.nx} x {grid.ny} = {grid.nx * grid.ny:,} cells"
         check_memory(grid.nx * grid.ny, RASTERISE_BYTES_PER_CELL, what)

@@ -378,14 +378,6 @@ def _grid(table: dict) -> tuple[tuple, Grid]:
         raise SceneKeyError(keys.prefixed(str(exc), "grid", GRID_KEYS)) from None
 
 
-def _flag(table: dict, key: str, default: bool) -> bool:
-    """``output.KEY``, a boolean (``default`` when absent)."""
-    value = table.get(key, default)
-    if not isinstance(value, bool):
-        raise SceneKeyError(f"output.{key} = {show(value)}: expected true or false")
-    return value
-
-
 def _output(table: dict) -> dict:
     """``[output]``: contour levels (probability mass and fixed densities), the captured-mass
     threshold, normalisation, dtype, colormap, whether to add the bearing-fix validation
@@ -419,7 +411,9 @@ def _output(table: dict) -> dict:
             threshold = min_mass(table["min_mass"], key="output.min_mass")
         except BananagridError as exc:
             raise SceneKeyError(str(exc)) from None
-    normalise = _flag(table, "normalise", True)
+    normalise = table.get("normalise", True)
+    if not isinstance(normalise, bool):
+        raise SceneKeyError(f"output.normalise = {show(normalise)}: expected true or false")
     dtype = table.get("dtype", "float64")
     if dtype not in DTYPES:
         raise SceneKeyError(f"output.dtype = {show(dtype)}: must be one of {', '.join(map(show, DTYPES))}")
@@ -427,8 +421,12 @@ def _output(table: dict) -> dict:
     allowed = _colormaps()
     if not isinstance(colormap, str) or colormap.lower() not in allowed:
         raise SceneKeyError(f"output.colormap = {show(colormap)}: must be one of {', '.join(allowed)}")
-    validation = _flag(table, "bearing_validation", False)
-    cells = _flag(table, "cell_probabilities", False)
+    validation = table.get("bearing_validation", False)
+    if not isinstance(validation, bool):
+        raise SceneKeyError(f"output.bearing_validation = {show(validation)}: expected true or false")
+    cells = table.get("cell_probabilities", False)
+    if not isinstance(cells, bool):
+        raise SceneKeyError(f"output.cell_probabilities = {show(cells)}: expected true or false")
     return {
         "levels": tuple(float(v) for v in levels), "mass_levels": probabilities, "min_mass": threshold,
         "normalise": normalise, "dtype": dtype, "colormap": colormap.lower(), "bearing_validation": validation,
