@@ -13,6 +13,8 @@ from .domains.polar_lattice import PolarLattice
 from .domains.pose import Pose
 from .domains.region import Region
 from .engine.batch import pdf_batch, rasterise_batch
+from .engine.batch_shards import pdf_batch_shards, rasterise_batch_shards
+from .engine.cluster import dask_client
 from .engine.rasterise import rasterise
 from .geo.frame import GeoFrame
 from .models.base import Model
@@ -24,7 +26,7 @@ from .models.polar import PolarBanana
 from .models.presence import GaussianMixture, UniformPresence, cell_probabilities, grid_probabilities
 from .models.registry import MODEL_KINDS, ModelKind
 from .protocol import DensityModel
-from .results import BatchRaster, CellMap, GridPresence, PolarRaster, Raster
+from .results import BatchRaster, CellMap, GridPresence, PolarRaster, Raster, ShardedBatch, TiledRaster
 from .scenes.load import load_scene, parse_scene
 from .scenes.run import run_scene
 from .validate import BananagridError, BananagridWarning
@@ -38,8 +40,10 @@ __all__ = [
     "GaussianMixture", "UniformPresence",
     # computing them
     "rasterise", "cell_probabilities", "grid_probabilities", "rasterise_batch", "pdf_batch",
+    # on a Dask cluster
+    "rasterise_batch_shards", "pdf_batch_shards", "dask_client",
     # results
-    "Raster", "PolarRaster", "CellMap", "GridPresence", "BatchRaster",
+    "Raster", "TiledRaster", "PolarRaster", "CellMap", "GridPresence", "BatchRaster", "ShardedBatch",
     # analysis
     "radial_moments", "radial_density", "RadialMoments", "RadialDensity", "compare", "Comparison",
     "bearing_to", "containment", "containment_radius",

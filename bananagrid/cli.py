@@ -26,7 +26,9 @@ from .analysis.sweep import FIGURE7_LEVELS, sweep
 from .atomic import Terminated, atomic_write, check_writable, signals_as_exceptions
 from .bench import runner as bench
 from .contours import DEFAULT_LEVELS, format_area, mass_levels
+from .engine.cluster import dask_client
 from .engine.memory import memory_limit
+from .engine.tiles import DEFAULT_CHUNK
 from .engine.work import work_limit
 from .recording.compare import write_compare_recording, write_sweep_recording
 from .recording.core import RecordingWriteError, recording_id_for
@@ -34,6 +36,7 @@ from .recording.inspect import cell_map_summaries, format_inspection, inspect_re
 from .scenes.examples import example_names, example_path, example_title, scene_source
 from .scenes.load import Scene, load_scene
 from .scenes.pictures import check_picture_options, read_picture, write_picture
+from .scenes.run_tiled import check_tiled, format_tiled_summary, run_scene_tiled, tiled_maps
 from .scenes.run import RUN_ONLY_PROVENANCE, check_exports, check_run_memory, check_run_work, compute, export_paths, run_scene
 from .validate import BananagridError, positive
 from .version import __version__
@@ -136,6 +139,23 @@ def build_parser() -> tuple[argparse.ArgumentParser, dict[str, argparse.Argument
                      help="computing a scene's run may take, wall-clock seconds (default 3600; inf for no "
                      "limit); a larger estimate is refused before computing")
     run.add_argument("--quiet", action="store_true", help="no progress lines on stderr")
+    tiles = run.add_argument_group(
+        "tiles on a Dask cluster (the cluster extra)",
+        "With --zarr the scene's maps are computed in tiles by Dask workers and written to one Zarr store, "
+        "block by block (the grid may exceed memory: up to 2**38 cells); no .rrd is written. Tiles the "
+        "model proves below 1e-13 of its peak are not computed. The maps are raw densities with each "
+        "layer's captured mass beside it (LAYER_mass).",
+    )
+    tiles.add_argument("--zarr", type=Path, metavar="OUT.zarr",
+                       help="write the scene's maps to this Zarr store (one scene), read with xarray.open_zarr")
+    tiles.add_argument("--chunks", type=int, default=DEFAULT_CHUNK, metavar="N",
+                       help=f"tile side, cells (default {DEFAULT_CHUNK}; a multiple of 32 for Butterly)")
+    tiles.add_argument("--workers", type=int, metavar="N",
+                       help="worker processes of the local cluster (default: one per core)")
+    tiles.add_argument("--memory-limit", metavar="SIZE",
+                       help="memory per local worker, e.g. 4GiB (default: the machine's, shared)")
+    tiles.add_argument("--scheduler", metavar="ADDRESS",
+                       help="run on the existing Dask cluster at ADDRESS (tcp://host:8786) instead of a local one")
     run.set_defaults(handler=_run)
 
     examples = sub.add_parser(
@@ -247,6 +267,11 @@ def _run(args: argparse.Namespace) -> int:
     paths = [*args.scenes, *(example_path(name) for name in args.example)]
     if not paths:
         raise BananagridError("run: give at least one SCENE.toml or --example NAME (`bananagrid examples` lists them)")
+    if args.zarr is not None:
+        return _run_tiled(args, paths)
+    tiled_only = [f"--{k.replace('_', '-')}" for k in ("workers", "memory_limit", "scheduler") if getattr(args, k) is not None]
+    if tiled_only:
+        raise BananagridError(f"{', '.join(tiled_only)}: only with --zarr (tiles on a Dask cluster)")
     scenes = [load_scene(path) for path in paths]
     if args.step is not None:
         scenes = [scene.with_step(args.step) for scene in scenes]
@@ -281,6 +306,41 @@ def _run(args: argparse.Namespace) -> int:
     print()
     for path in written:
         print(f"wrote {path}")
+    return OK
+
+
+def _run_tiled(args: argparse.Namespace, paths: list[Path]) -> int:
+    """``bananagrid run SCENE --zarr OUT.zarr``: one scene in tiles on a Dask cluster, into Zarr."""
+    if len(paths) != 1:
+        raise BananagridError(f"--zarr {args.zarr}: writes one scene's store; {len(paths)} scenes given")
+    combined = [f"--{k}" for k in ("npz", "netcdf", "geotiff", "geojson") if getattr(args, k)]
+    if combined:
+        raise BananagridError(f"--zarr cannot be combined with {', '.join(combined)} (those files hold a grid in memory)")
+    if args.threads is not None:
+        raise BananagridError("--threads does not apply to --zarr: Dask runs the tiles (--workers N)")
+    if args.chunks < 1:
+        raise BananagridError(f"--chunks = {args.chunks}: must be >= 1")
+    if args.zarr.exists() and not args.zarr.is_dir():
+        raise BananagridError(f"--zarr {args.zarr}: exists and is not a directory")
+    if not args.zarr.parent.is_dir():
+        raise BananagridError(f"--zarr {args.zarr}: directory {args.zarr.parent} does not exist")
+    check_writable(args.zarr.parent)
+    scene = load_scene(paths[0], tiled=True)
+    if args.step is not None:
+        scene = scene.with_step(args.step, tiled=True)
+    check_tiled(scene)
+    max_seconds = None if args.max_seconds is None else work_limit(args.max_seconds)
+    tiled_maps(scene, args.chunks, max_seconds=max_seconds)  # every check (chunks, work) before a cluster starts
+    with dask_client(workers=args.workers, memory_limit=args.memory_limit, scheduler=args.scheduler) as client:
+        if not args.quiet:
+            where = args.scheduler or f"a local cluster of {len(client.scheduler_info()['workers'])} workers"
+            link = client.dashboard_link if args.scheduler else None
+            print(f"bananagrid: {scene.name}: tiles on {where}" + (f" (dashboard {link})" if link else ""),
+                  file=sys.stderr)
+        rows = run_scene_tiled(scene, args.zarr, args.chunks, progress=not args.quiet, max_seconds=max_seconds)
+    print(format_tiled_summary(rows))
+    print()
+    print(f"wrote {args.zarr}")
     return OK
 
 

@@ -76,9 +76,9 @@ class KernelContext(Protocol):
     def numpy(self, array) -> np.ndarray:
         """A device array as a NumPy array (waits for the device)."""
 
-    def bands(self, n: int, per_thread: int = 1) -> list[tuple[int, int]]:
+    def bands(self, n: int, per_thread: int = 1, align: int = 1) -> list[tuple[int, int]]:
         """Contiguous bands ``(start, stop)`` of ``n`` rows: ``per_thread`` per CPU thread, one on
-        a GPU."""
+        a GPU; each starts on a multiple of ``align`` rows."""
 
     def run_bands(self, launch_band, bands: list[tuple[int, int]]) -> None:
         """Call ``launch_band(start, stop)`` for every band, on the context's threads (the
@@ -102,7 +102,8 @@ class KernelBinding:
     The grid kernel takes ``(xs, ys, row0, *params, out)`` and computes one cell per thread
     over ``dim = (rows, nx)``; with ``row_loop`` it takes ``(xs, ys, row0, columns, *params,
     out)`` and loops over ``columns`` cells of a row per thread; with ``tile_rows`` as well,
-    ``(xs, ys, row0, row_end, rows, columns, *params, ...)`` for blocks of rows. The points
+    ``(xs, ys, row0, row_end, rows, columns, step_x, step_y, *params, ...)`` for blocks of rows
+    (``step_x``, ``step_y``: the grid's cell sizes). The points
     kernel takes ``(xs, ys, offset, *params, out)``.
 
     Attributes
@@ -347,6 +348,23 @@ class DensityModel(Protocol):
         """The model's own method for the probabilities of the cells of ``grid`` (a
         :class:`~bananagrid.Grid`), or None for the engine's quadrature of the density
         (:func:`bananagrid.engine.grid_cells.probability_raster`)."""
+
+    def density_bound(self, x0: float, x1: float, y0: float, y1: float) -> float:
+        """A proved (not sampled) upper bound of the density the model's grid kernel computes, in
+        float32 or float64, at any point of the closed rectangle ``[x0, x1] x [y0, y1]`` (world
+        metres): ``0.0`` where the kernel provably computes exact zeros, ``math.inf`` where the
+        model proves nothing (a rectangle holding a singular point, a model without a bound).
+        Tiled rasterising leaves a tile whose bound is at most :meth:`density_floor` at 0
+        without computing it (:mod:`bananagrid.engine.tiles`)."""
+
+    def density_floor(self) -> float:
+        """The density per m^2 at or below which tiled rasterising may leave a whole tile at 0:
+        :data:`bananagrid.models.base.ZERO_BELOW` times a lower bound of the density's maximum
+        (:meth:`peak_lower_bound`)."""
+
+    def peak_lower_bound(self) -> float:
+        """A lower bound of the density's maximum per m^2 (the largest of values the kernels
+        computed at chosen points)."""
 
     def singular_points(self) -> np.ndarray:
         """World points ``(k, 2)`` where the density is infinite like 1 / r (the origin of a polar

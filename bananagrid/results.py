@@ -4,7 +4,9 @@
 * :class:`PolarRaster` — densities and cell probabilities on a :class:`~bananagrid.PolarLattice`;
 * :class:`CellMap` — presence probabilities of the cells of an :class:`~bananagrid.AngularLattice`;
 * :class:`GridPresence` — a planar mixture's density and exact cell probabilities on a grid;
-* :class:`BatchRaster` — many hypotheses, each on its own grid.
+* :class:`TiledRaster` — a density on a grid too large for memory, lazily in Dask blocks;
+* :class:`BatchRaster` — many hypotheses, each on its own grid;
+* :class:`ShardedBatch` — the same lazily, in shards of hypotheses computed by Dask.
 
 Every array says what it holds: a density (per m^2, or per (m, rad) on a polar lattice) at a
 cell centre, or a probability integrated over a cell.
@@ -22,12 +24,13 @@ from .domains.grid import Grid
 from .domains.polar_lattice import PolarLattice
 from .domains.region import Region
 from .geo.dataset import cell_map_dataset, polar_dataset, raster_dataset
+from .geo.zarr_store import write_batch_zarr, write_zarr
 from .geo.frame import GeoFrame
 from . import plotting
 from .contours import DEFAULT_MASS_LEVELS
 from .validate import BananagridError, finite
 
-__all__ = ["Raster", "PolarRaster", "CellMap", "GridPresence", "BatchRaster"]
+__all__ = ["Raster", "TiledRaster", "PolarRaster", "CellMap", "GridPresence", "BatchRaster", "ShardedBatch"]
 
 _TWO_PI = 2.0 * math.pi
 
@@ -119,9 +122,7 @@ class Raster:
         :func:`bananagrid.geo.dataset.raster_dataset`; write it with
         :func:`bananagrid.geo.dataset.write_netcdf`.
         """
-        if t is None:
-            given = self.provenance.get("t", 0.0)
-            t = float(given) if isinstance(given, (int, float)) and not isinstance(given, bool) else 0.0
+        t = _default_t(self.provenance) if t is None else t
         return raster_dataset([(name, t, self)], self.frame if frame is None else frame)
 
     def normalise(self) -> "Raster":
@@ -343,6 +344,110 @@ class GridPresence:
     provenance: dict = field(default_factory=dict)
 
 
+def _block_sum(block: np.ndarray) -> np.ndarray:
+    """A block's sum in float64, as a 1 x 1 array; a skipped block (one value seen through every
+    cell, all strides 0) without reading each cell."""
+    if block.size and not any(block.strides):
+        total = float(block.flat[0]) * block.size
+    else:
+        total = np.sum(block, dtype=np.float64)
+    return np.full((1,) * block.ndim, total)
+
+
+def _default_t(provenance: dict) -> float:
+    given = provenance.get("t", 0.0)
+    return float(given) if isinstance(given, (int, float)) and not isinstance(given, bool) else 0.0
+
+
+@dataclass(frozen=True)
+class TiledRaster:
+    """A model's density at the cell centres of a grid, lazily, in blocks computed by Dask
+    (:func:`bananagrid.rasterise` with ``chunks=``; :mod:`bananagrid.engine.tiles`).
+
+    Attributes
+    ----------
+    values : dask.array.Array, shape (ny, nx)
+        Density per square metre at each cell centre (raw), in blocks of ``chunks``. Nothing is
+        computed until asked: :meth:`compute`, :meth:`to_zarr`, or Dask's own ``compute``.
+    grid : Grid
+    chunks : (int, int)
+        Block shape, cells.
+    skipped : ndarray of bool, (blocks in y, blocks in x)
+        Blocks the model proved to be at most ``floor`` everywhere: zeros, never computed.
+    floor : float
+        Density per m^2 at or below which a block was skipped (``-inf``: none was).
+    provenance : dict
+        As a :class:`Raster`'s, with the chunks and the tiles computed and skipped.
+    frame : GeoFrame or None
+    """
+
+    values: object
+    grid: Grid
+    chunks: tuple
+    skipped: np.ndarray
+    floor: float
+    provenance: dict = field(default_factory=dict)
+    frame: GeoFrame | None = None
+    quantity: str = "density"
+    normalised: bool = False
+
+    @property
+    def x(self) -> np.ndarray:
+        return self.grid.x
+
+    @property
+    def y(self) -> np.ndarray:
+        return self.grid.y
+
+    @property
+    def cells_skipped(self) -> int:
+        """Cells in skipped blocks (never computed)."""
+        return self.grid.nx * self.grid.ny - int(self.provenance["cells_computed"])
+
+    @property
+    def lazy_mass(self):
+        """The captured mass, ``sum(values) * dx * dy`` (summed block by block in float64), as a
+        lazy Dask scalar, computed with the values by :meth:`to_zarr` in the same pass."""
+        sums = self.values.map_blocks(_block_sum, chunks=tuple((1,) * len(c) for c in self.values.chunks),
+                                      dtype=np.float64)
+        return sums.sum() * self.grid.cell_area
+
+    @property
+    def mass(self) -> float:
+        """The captured mass; computes every block that is not skipped."""
+        return float(self.lazy_mass.compute())
+
+    def compute(self) -> Raster:
+        """The whole grid in memory, as a :class:`Raster` (at most
+        :data:`~bananagrid.domains.grid.MAX_CELLS` cells)."""
+        self.grid.check_in_memory()
+        values = np.asarray(self.values.compute())
+        mass = float(np.sum(values, dtype=np.float64) * self.grid.cell_area)
+        return Raster(values=values, grid=self.grid, mass=mass, provenance=dict(self.provenance), frame=self.frame)
+
+    def to_xarray(self, frame: GeoFrame | None = None, name: str = "density", t: float | None = None):
+        """A lazy CF-1.10 :class:`xarray.Dataset` of the raster (as :meth:`Raster.to_xarray`, with
+        Dask-backed values and mass)."""
+        t = _default_t(self.provenance) if t is None else t
+        return raster_dataset([(name, t, self)], self.frame if frame is None else frame)
+
+    def to_zarr(self, path, *, name: str = "density", t: float | None = None, frame: GeoFrame | None = None,
+                title: str = "", progress=None):
+        """Write the raster to a Zarr store at ``path`` block by block (Dask's scheduler: a
+        ``distributed.Client`` if one is active), skipping empty blocks, whole or not at all; see
+        :func:`bananagrid.geo.zarr_store.write_zarr`. Returns the path."""
+        t = _default_t(self.provenance) if t is None else t
+        return write_zarr(path, [(name, t, self)], self.frame if frame is None else frame, title=title,
+                          progress=progress)
+
+    def __repr__(self) -> str:
+        g = self.grid
+        skipped = int(self.skipped.sum())
+        return (f"TiledRaster({g.nx} x {g.ny} cells of {g.dx:g} x {g.dy:g} m in {self.skipped.size} blocks of "
+                f"{self.chunks[0]} x {self.chunks[1]}, {skipped} skipped (proved <= {self.floor:.3g} m^-2), "
+                f"model {self.provenance.get('model', '?')})")
+
+
 @dataclass(frozen=True)
 class BatchRaster:
     """Densities of H hypotheses on their own grids of one shape.
@@ -359,6 +464,55 @@ class BatchRaster:
     values: np.ndarray
     grids: tuple
     mass: np.ndarray
+
+
+@dataclass(frozen=True)
+class ShardedBatch:
+    """Densities of H hypotheses on their own framed grids, lazily, in shards computed by Dask
+    (:func:`bananagrid.engine.batch_shards.rasterise_batch_shards`).
+
+    Attributes
+    ----------
+    values : dask.array.Array (H, ny, nx)
+        Density per m^2 at each framed grid's cell centres (raw), in blocks of whole shards.
+    bounds : ndarray (H, 4)
+        Each hypothesis' grid, as its outer edges ``(x0, x1, y0, y1)``, m.
+    shape : (int, int)
+        ``(ny, nx)`` of every grid.
+    """
+
+    values: object
+    bounds: np.ndarray
+    shape: tuple
+
+    @property
+    def cell_areas(self) -> np.ndarray:
+        """Each grid's cell area, m^2 (as its :class:`Grid` computes it)."""
+        ny, nx = self.shape
+        return ((self.bounds[:, 1] - self.bounds[:, 0]) / nx) * ((self.bounds[:, 3] - self.bounds[:, 2]) / ny)
+
+    @property
+    def lazy_mass(self):
+        """Each hypothesis' captured mass, lazily (computed with the values by :meth:`to_zarr`)."""
+        return self.values.sum(axis=(1, 2), dtype=np.float64) * self.cell_areas
+
+    def compute(self) -> BatchRaster:
+        """Gather everything into a :class:`BatchRaster` (the grids built from :attr:`bounds`)."""
+        ny, nx = self.shape
+        values = np.asarray(self.values.compute())
+        grids = tuple(Grid.from_bounds(x=(x0, x1), y=(y0, y1), dx=(x1 - x0) / nx, dy=(y1 - y0) / ny)
+                      for x0, x1, y0, y1 in self.bounds)
+        return BatchRaster(values, grids, values.sum(axis=(1, 2), dtype=np.float64) * np.array([g.cell_area for g in grids]))
+
+    def to_zarr(self, path, *, progress: bool = False):
+        """Write the values, frames and masses to the Zarr store ``path`` shard by shard, whole or
+        not at all (:func:`bananagrid.geo.zarr_store.write_batch_zarr`). Returns the path."""
+        return write_batch_zarr(path, self.values, self.bounds, self.lazy_mass, progress=progress)
+
+    def __repr__(self) -> str:
+        h = self.bounds.shape[0]
+        return (f"ShardedBatch({h:,} hypotheses on {self.shape[0]} x {self.shape[1]} grids, "
+                f"{len(self.values.chunks[0])} shards)")
 
 
 def _short_repr(self) -> str:

@@ -654,6 +654,8 @@ def butterly_grid(
     row_end: int,
     rows: int,
     columns: int,
+    step_x: Any,
+    step_y: Any,
     params: wp.array(dtype=Any),
     n_speeds: int,
     scratch: wp.array2d(dtype=Any),
@@ -691,23 +693,16 @@ def butterly_grid(
         return
     cell_floor = params[LOG_CELL_FLOOR] - wp.log(type(params[0])(n_speeds))
     speed_floor = params[LOG_SPEED_FLOOR]
-    # the whitened steps of a column and a row (the grid is uniform), over the whole grid: the
-    # difference of neighbouring coordinates would carry their rounding (1e-5 of a step in float32)
-    nx = xs.shape[0]
-    ny = ys.shape[0]
-    za1, za2 = whiten(xs[0], ys[0], params)
-    zb1, zb2 = whiten(xs[nx - 1], ys[0], params)
-    zc1, zc2 = whiten(xs[0], ys[ny - 1], params)
-    dzx1 = zero
-    dzx2 = zero
-    dzy1 = zero
-    dzy2 = zero
-    if nx > 1:
-        dzx1 = (zb1 - za1) / type(params[0])(nx - 1)
-        dzx2 = (zb2 - za2) / type(params[0])(nx - 1)
-    if ny > 1:
-        dzy1 = (zc1 - za1) / type(params[0])(ny - 1)
-        dzy2 = (zc2 - za2) / type(params[0])(ny - 1)
+    # the whitened steps of a column and a row (the grid is uniform) from the grid's own steps
+    # (``step_x``, ``step_y``): the difference of neighbouring coordinates would carry their rounding
+    # (1e-5 of a step in float32), and steps taken from the ends of ``xs`` would differ between a
+    # block and the whole grid
+    q1x = params[Q1_X]
+    q1y = params[Q1_Y]
+    dzx1 = step_x * q1x * params[INV_SQRT_S1]
+    dzx2 = -step_x * q1y * params[INV_SQRT_S2]
+    dzy1 = step_y * q1y * params[INV_SQRT_S1]
+    dzy2 = step_y * q1x * params[INV_SQRT_S2]
     h = type(params[0])(0.5 * float(TILE - 1))
     # the cross factor C(r, m) = exp(-|(m - h) dzx + (r - h) dzy|^2 / 2) of every tile
     for r in range(TILE):
@@ -774,7 +769,8 @@ def _register_overloads():
         vec = wp.array(dtype=scalar)
         common = {"xs": vec, "ys": vec, "params": vec}
         quads = wp.array2d(dtype=wp.types.vector(4, scalar))
-        wp.overload(butterly_grid, {**common, "scratch": wp.array2d(dtype=scalar), "quads": quads, "out": wp.array2d(dtype=scalar)})
+        wp.overload(butterly_grid, {**common, "step_x": scalar, "step_y": scalar, "scratch": wp.array2d(dtype=scalar),
+                                     "quads": quads, "out": wp.array2d(dtype=scalar)})
         wp.overload(butterly_points, {**common, "out": vec})
 
 

@@ -137,3 +137,22 @@ def test_bench_times_cell_probabilities_against_their_densities(tmp_path, monkey
     assert records[0]["cells"] == 1500 * 900 and records[2]["cells"] == 64 * 64
     assert records[0]["cost_vs_density"] > 1.0
     assert "cell probabilities cost, against the densities on the same grid: cat-cells float64" in capsys.readouterr().out
+
+
+def test_bench_cluster_rows(tmp_path, capsys):
+    """The cluster rows at a small size: a 4096 x 4096 Butterly map into Zarr and 3,000 polar
+    hypotheses sharded over 2 workers; the records say what was computed and skipped."""
+    out = tmp_path / "cluster.json"
+    assert bench.main(["--cluster", "--cluster-side", "8192", "--hypotheses", "3000", "--json", str(out)]) == 0
+    text = capsys.readouterr().out
+    assert "zarr: 8,192 x 8,192 float32 Butterly" in text and "hypotheses: 3,000 polar bananas" in text
+    result = json.loads(out.read_text())
+    zarr = result["cluster_zarr"]
+    assert zarr["blocks"] == 16 and zarr["cells_computed"] + zarr["cells_skipped"] == 8192**2
+    assert 0 < zarr["blocks_skipped"] < zarr["blocks"]  # the 1.2 km ring reaches the central blocks only
+    assert len(zarr["worker_peak_rss_mib"]) == 2 and max(zarr["worker_peak_rss_mib"]) < 4096
+    hyps = result["cluster_hypotheses"]
+    assert hyps["hypotheses"] == 3000 and hyps["in_process"] == 3000 and hyps["sharded_seconds"] > 0
+    assert result["records"] == []  # --cluster alone: no kernel rows
+    assert bench.main(["--cluster", "--memory-limit", "lots"]) == 2
+    assert "--memory-limit: memory_limit = \"lots\"" in capsys.readouterr().err

@@ -52,6 +52,8 @@ NOT_RUN = {
     "rerun rrd verify": "named in prose; tests/test_cli.py runs it on recordings",
     "rerun rrd compare": "named in prose; tests/test_cli.py runs it on two runs of a scene",
     "pip install 'bananagrid[plot]'": "installs from the package index; the test extra installs matplotlib",
+    "pip install 'bananagrid[cluster]'": "installs from the package index; the test extra holds the cluster extra",
+    "bananagrid bench --cluster --json cluster.json": "minutes on a local cluster (see tests/test_bench.py for the cluster rows at a small size)",
     "pip install -q '.[geo]'": "installs the package these tests run against (the test extra holds the geo extra)",
     "python docs/make_pictures.py": "rewrites docs/pictures (thirteen scenes, about 20 s); tests/test_plot.py runs it on one scene into a temporary folder and checks that every picture exists",
     "bananagrid plot INPUT -o OUT.png": "placeholders; tests/test_plot.py runs plot on scenes, recordings and arrays",
@@ -144,6 +146,9 @@ def test_python_blocks_run_and_give_the_figures_shown(workdir, monkeypatch):
     assert math.isclose(namespace["cells"].prob.sum(), 1.0, rel_tol=1e-6)  # p(C | S) over the room
     assert (namespace["at_sea"].quantity, f"{namespace['at_sea'].mass:.9f}") == ("probability", "1.000000000")
     assert f"{namespace['bg'].rasterise(namespace['ship'], namespace['chart']).mass:.4f}" == "0.9846"
+    assert namespace["blocks"] == (252, 256)
+    single = namespace["bg"].rasterise_batch(namespace["tracks"])
+    assert (namespace["gathered"].values == single.values).all() and namespace["gathered"].grids == tuple(single.grids)
 
 
 def synopsis() -> list[str]:

@@ -13,7 +13,7 @@ from hypothesis import strategies as st
 import bananagrid as bg
 from bananagrid import BananagridError, cli
 from bananagrid.engine import warp_runtime
-from bananagrid.engine.rasterise import GridExtent
+from bananagrid.engine.grid_kernel import GridExtent
 from bananagrid.engine.work import DEFAULT_MAX_SECONDS, check_work, format_duration, work_limit
 from bananagrid.models.cat import MAX_NODES, NODE_SPACING, scan_node_count, scan_nodes
 from bananagrid.scenes.examples import example_names, example_path

@@ -32,7 +32,8 @@ from ..atomic import atomic_write, check_writable
 from ..domains.angular_lattice import AngularLattice
 from ..domains.grid import Grid
 from ..engine.batch import frame, rasterise_batch
-from ..engine.rasterise import GridExtent, rasterise
+from ..engine.grid_kernel import GridExtent
+from ..engine.rasterise import rasterise
 from ..engine.warp_runtime import default_threads
 from ..models.bearing import bearing_to, two_bearing_variances
 from ..models.cat import cell_turn_edges, clear_heading_tables, scan_nodes
@@ -41,7 +42,8 @@ from ..models.presence import GaussianMixture, cell_probabilities, grid_probabil
 from ..models.registry import MODEL_KINDS
 from ..protocol import DensityModel
 from ..validate import BananagridError
-from . import baselines
+from ..engine.cluster import check_memory_limit
+from . import baselines, cluster
 
 #: Figure 1 of the polar-banana paper.
 FIG1 = dict(v0=280.0, t=10.0, sigma_a=5.0 / 3.0, sigma_omega=math.pi / 54.0)
@@ -460,20 +462,44 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--baseline-stride", type=int, default=10, help="run the CAT and Butterly NumPy baselines on every N-th row and scale (default 10; 1 = all rows)")
     p.add_argument("--no-memory", action="store_true", help=f"skip the peak-memory probe ({MEMORY_SIDE} x {MEMORY_SIDE} float32)")
     p.add_argument("--json", metavar="FILE", help="also write the records as JSON to FILE")
+    c = p.add_argument_group(
+        "cluster rows (the cluster extra; minutes)",
+        "--cluster measures tiles and hypothesis shards on a fresh local Dask cluster: a Butterly map on a "
+        "SIDE x SIDE float32 grid into Zarr (seconds, blocks and cells computed and skipped, each worker's peak "
+        "memory), and N polar hypotheses on 64 x 64 grids sharded over the workers against the single-process "
+        "batch. Alone (without --kernels) it runs only these rows.",
+    )
+    c.add_argument("--cluster", action="store_true", help="run the cluster rows")
+    c.add_argument("--cluster-side", type=int, default=cluster.CLUSTER_SIDE, metavar="SIDE",
+                   help=f"side of the zarr row's grid, cells of 1 m (default {cluster.CLUSTER_SIDE})")
+    c.add_argument("--hypotheses", type=int, default=cluster.HYPOTHESES, metavar="N",
+                   help=f"hypotheses of the sharded row (default {cluster.HYPOTHESES:,}; the single-process batch "
+                   f"takes min(N, {cluster.IN_PROCESS_HYPOTHESES:,}))")
+    c.add_argument("--workers", type=int, default=2, metavar="N", help="worker processes (default 2)")
+    c.add_argument("--memory-limit", default="4GiB", metavar="SIZE", help="memory per worker (default 4GiB)")
     return p
 
 
 def main(argv: list[str] | None = None) -> int:
     """Entry point of ``bananagrid bench``; returns the exit code."""
     args = _parser().parse_args(argv)
+    if args.cluster and not any(a == "--kernels" or a.startswith("--kernels=") for a in (argv or sys.argv[1:])):
+        args.kernels = ""  # the cluster rows alone
     kernels = [k.strip() for k in args.kernels.split(",") if k.strip()]
     unknown = [k for k in kernels if k not in KERNELS]
     problems = []
-    if unknown or not kernels:
+    if unknown or not (kernels or args.cluster):
         problems.append(f"--kernels = {args.kernels!r}: choose from {', '.join(KERNELS)}")
-    for name in ("threads", "repeat", "baseline_stride"):
+    for name in ("threads", "repeat", "baseline_stride", "workers", "hypotheses"):
         if getattr(args, name) < 1:
             problems.append(f"--{name.replace('_', '-')} = {getattr(args, name)}: must be >= 1")
+    if args.cluster_side < 64:
+        problems.append(f"--cluster-side = {args.cluster_side}: must be >= 64")
+    if args.cluster:
+        try:
+            check_memory_limit(args.memory_limit)
+        except BananagridError as exc:
+            problems.append(f"--memory-limit: {exc}")
     if not (math.isfinite(args.step) and args.step > 0):
         problems.append(f"--step = {args.step}: must be > 0")
     if args.json and not problems:  # before minutes of timing, not after
@@ -485,14 +511,23 @@ def main(argv: list[str] | None = None) -> int:
         print(f"bananagrid: error: {problems[0]}", file=sys.stderr)
         return 2
     print(f"machine: {machine()}")
-    print(f"grids: Figure 1 frame at {args.step:g} m (banana kernels), {COASTAL_SIDE} x {COASTAL_SIDE} "
-          f"about the coastal fix (bearing), {BUTTERLY_SIDE} x {BUTTERLY_SIDE} about the ring +- 6 sigma "
-          f"(butterly-rN: three speeds, largest range N sigma_min); baseline: NumPy {np.__version__} float64 "
-          "(cat-heading: the plain CAT's, as it has no NumPy twin)"
-          + (f", CAT and Butterly on every {args.baseline_stride}th row, scaled" if args.baseline_stride > 1 else ""))
-    print(HEADER)
-    records = run(kernels, args.step, args.threads, args.repeat, args.baseline_stride)
+    if kernels:
+        print(f"grids: Figure 1 frame at {args.step:g} m (banana kernels), {COASTAL_SIDE} x {COASTAL_SIDE} "
+              f"about the coastal fix (bearing), {BUTTERLY_SIDE} x {BUTTERLY_SIDE} about the ring +- 6 sigma "
+              f"(butterly-rN: three speeds, largest range N sigma_min); baseline: NumPy {np.__version__} float64 "
+              "(cat-heading: the plain CAT's, as it has no NumPy twin)"
+              + (f", CAT and Butterly on every {args.baseline_stride}th row, scaled" if args.baseline_stride > 1 else ""))
+    records = []
+    if kernels:
+        print(HEADER)
+        records = run(kernels, args.step, args.threads, args.repeat, args.baseline_stride)
     result = {"machine": machine(), "step": args.step, "records": records}
+    if args.cluster:
+        result["cluster_zarr"] = cluster.zarr_row(side=args.cluster_side, workers=args.workers,
+                                                  memory_limit=args.memory_limit)
+        result["cluster_hypotheses"] = cluster.hypotheses_row(
+            hypotheses=args.hypotheses, in_process=min(args.hypotheses, cluster.IN_PROCESS_HYPOTHESES),
+            workers=args.workers, memory_limit=args.memory_limit)
     for name in kernels:
         one = {r["dtype"]: r for r in records if r["kernel"] == name and r["threads"] == 1}
         many = {r["dtype"]: r for r in records if r["kernel"] == name and r["threads"] == args.threads}
@@ -524,7 +559,7 @@ def main(argv: list[str] | None = None) -> int:
         print(f"containment: {timing['geometries']:,} two-bearing geometries (fix, variances, P(R = 1 km)) in "
               f"{timing['exact_seconds']:.2f} s (exact), {timing['series_seconds']:.2f} s (Robbins-Pitman series, "
               f"tol 1e-12); {timing['without_fix']:,} had no fix in front of both stations")
-    if not args.no_memory:
+    if not args.no_memory and kernels:
         mem = memory_probe()
         result["memory"] = mem
         print(f"memory: {mem['side']} x {mem['side']} float32 polar raster ({mem['raster_mib']:.0f} MiB of values): "

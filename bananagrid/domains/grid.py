@@ -9,13 +9,17 @@ import numpy as np
 
 from ..validate import BananagridError, pair, point, positive, positive_int
 
-__all__ = ["Grid", "MAX_CELLS"]
+__all__ = ["Grid", "MAX_CELLS", "MAX_TILED_CELLS"]
 
-#: Largest grid accepted (cells). 2**28 cells are 2 GiB per float64 map; a scene run holds
-#: several such arrays at once (about 60 bytes per cell measured, so some 16 GB here), and what a
-#: run will need is checked against the memory available before it starts
-#: (:mod:`bananagrid.engine.memory`).
+#: Largest grid computed in memory (cells). 2**28 cells are 2 GiB per float64 map; a scene run
+#: holds several such arrays at once (about 60 bytes per cell measured, so some 16 GB here), and
+#: what a run will need is checked against the memory available before it starts
+#: (:mod:`bananagrid.engine.memory`). Larger grids are rasterised in tiles (``chunks=``).
 MAX_CELLS = 2**28
+
+#: Largest grid at all (cells): 2**38, some 2.7e11 cells (a 500,000 x 500,000 basin), computed in
+#: tiles on Dask workers and written to Zarr (:mod:`bananagrid.engine.tiles`).
+MAX_TILED_CELLS = 2**38
 
 
 @dataclass(frozen=True)
@@ -32,7 +36,7 @@ class Grid:
     dx, dy : float
         Cell width (east) and height (north), m, > 0.
     nx, ny : int
-        Number of columns and rows, >= 1, with ``nx * ny <= MAX_CELLS``.
+        Number of columns and rows, >= 1, with ``nx * ny <= MAX_TILED_CELLS`` (``MAX_CELLS`` to compute it in memory).
     """
 
     origin: tuple[float, float]
@@ -48,12 +52,11 @@ class Grid:
         object.__setattr__(self, "nx", positive_int("nx", self.nx))
         object.__setattr__(self, "ny", positive_int("ny", self.ny))
         cells = self.nx * self.ny
-        if cells > MAX_CELLS:
-            gib = cells * 8 / 2**30
+        if cells > MAX_TILED_CELLS:
             raise BananagridError(
-                f"grid of {self.nx} x {self.ny} = {cells:,} cells would take {gib:.1f} GiB as "
-                f"float64; the limit is {MAX_CELLS:,} cells ({MAX_CELLS * 8 / 2**30:.0f} GiB per float64 map, "
-                "several times that for a run): use a larger step or smaller bounds"
+                f"grid of {self.nx} x {self.ny} = {cells:,} cells would take {cells * 8 / 2**30:.1f} GiB as "
+                f"float64; the limit is {MAX_TILED_CELLS:,} cells in tiles (chunks=) and {MAX_CELLS:,} "
+                f"({MAX_CELLS * 8 / 2**30:.0f} GiB per float64 map) in memory: use a larger step or smaller bounds"
             )
         for name, start, extent in (("x", self.origin[0], self.nx * self.dx), ("y", self.origin[1], self.ny * self.dy)):
             if not (math.isfinite(extent) and math.isfinite(start + extent)):
@@ -91,18 +94,29 @@ class Grid:
                 raise BananagridError(f"{name} bounds ({lo}, {hi}) at step {d}: the number of cells overflows")
             # a whole number of steps up to rounding stays whole; anything else rounds up
             n = round(span) if abs(span - round(span)) <= 1e-9 * max(1.0, span) else math.ceil(span)
-            if n > MAX_CELLS:
+            if n > MAX_TILED_CELLS:
                 count = f"{n:,}" if n < 1e15 else f"{float(n):.3g}"  # no 300-digit numbers
                 gib = n * 8 / 2**30
                 size = f"{gib:.1f}" if gib < 1e6 else f"{gib:.3g}"
                 raise BananagridError(
                     f"{name} bounds ({lo}, {hi}) at step {d} give {count} cells in one axis, "
                     f"over {size} GiB as float64 for a single row; the limit is "
-                    f"{MAX_CELLS:,} cells ({MAX_CELLS * 8 / 2**30:.0f} GiB per float64 map) in all"
+                    f"{MAX_TILED_CELLS:,} cells in all ({MAX_CELLS:,} in memory)"
                 )
             counts.append((lo, max(n, 1)))
         (x0, nx), (y0, ny) = counts
         return cls(origin=(x0, y0), dx=dx, dy=dy, nx=nx, ny=ny)
+
+    def check_in_memory(self) -> None:
+        """Refuse a grid too large for one array (more than :data:`MAX_CELLS` cells): compute it
+        in tiles instead (``chunks=``, ``bananagrid run --zarr``)."""
+        cells = self.nx * self.ny
+        if cells > MAX_CELLS:
+            raise BananagridError(
+                f"grid of {self.nx} x {self.ny} = {cells:,} cells would take {cells * 8 / 2**30:.1f} GiB as "
+                f"float64; the limit in memory is {MAX_CELLS:,} cells ({MAX_CELLS * 8 / 2**30:.0f} GiB per float64 "
+                "map): use a larger step or smaller bounds, or compute it in tiles (chunks=, or run --zarr)"
+            )
 
     @property
     def shape(self) -> tuple[int, int]:

@@ -21,7 +21,7 @@ from ..results import BatchRaster
 from ..validate import BananagridError, positive, positive_int
 from .warp_runtime import WarpContext
 
-__all__ = ["frame", "rasterise_batch", "pdf_batch", "FRAME_SDS"]
+__all__ = ["frame", "frame_bounds", "grids_in", "batch_models", "rasterise_batch", "pdf_batch", "FRAME_SDS"]
 
 #: A framed grid holds each hypothesis to this many SDs in range and bearing.
 FRAME_SDS = 4.0
@@ -31,17 +31,29 @@ def frame(models: Sequence[BatchModel], shape=(64, 64), *, sds: float = FRAME_SD
     """Grids of ``shape`` = (ny, nx) cells framing each hypothesis: the world box that holds it
     to ``sds`` standard deviations (the model kind's ``frame_bounds``, vectorised over the
     hypotheses), cut into ``shape`` cells."""
-    models = _models(models)
-    ny, nx = (positive_int("shape[0]", shape[0]), positive_int("shape[1]", shape[1]))
-    sds = positive("sds", sds)
-    bounds = type(models[0]).frame_bounds(models, sds)
+    models = batch_models(models)
+    return grids_in(frame_bounds(models, sds), _shape(shape))
+
+
+def frame_bounds(models: Sequence[BatchModel], sds: float = FRAME_SDS) -> np.ndarray:
+    """The world boxes ``(x0, x1, y0, y1)`` of :func:`frame`, shape ``(H, 4)``."""
+    return type(models[0]).frame_bounds(models, positive("sds", sds))
+
+
+def grids_in(bounds: np.ndarray, shape: tuple[int, int]) -> list[Grid]:
+    """Grids of ``shape`` = (ny, nx) cells over each box ``(x0, x1, y0, y1)`` of ``bounds``."""
+    ny, nx = shape
     return [
         Grid.from_bounds(x=(x0, x1), y=(y0, y1), dx=(x1 - x0) / nx, dy=(y1 - y0) / ny)
         for x0, x1, y0, y1 in bounds
     ]
 
 
-def _models(models: Sequence[BatchModel]) -> list[BatchModel]:
+def _shape(shape) -> tuple[int, int]:
+    return positive_int("shape[0]", shape[0]), positive_int("shape[1]", shape[1])
+
+
+def batch_models(models: Sequence[BatchModel]) -> list[BatchModel]:
     """The hypotheses as a list, all of one model kind that has batch kernels."""
     models = list(models)
     if not models:
@@ -63,7 +75,7 @@ def rasterise_batch(models: Sequence[BatchModel], grids: Sequence[Grid] | None =
     ``grids``: one per hypothesis, all of one shape; by default :func:`frame` of the
     hypotheses at ``shape``.
     """
-    models = _models(models)
+    models = batch_models(models)
     if grids is None:
         grids = frame(models, shape)
     grids = tuple(grids)
@@ -85,7 +97,7 @@ def rasterise_batch(models: Sequence[BatchModel], grids: Sequence[Grid] | None =
 
 def pdf_batch(models: Sequence[BatchModel], x, y, *, dtype=np.float64, device: str = "cpu", threads=None) -> np.ndarray:
     """Density of every world point (x, y broadcast to N points) under every hypothesis: (H, N)."""
-    models = _models(models)
+    models = batch_models(models)
     try:
         bx, by = np.broadcast_arrays(np.asarray(x, dtype=float), np.asarray(y, dtype=float))
     except ValueError:

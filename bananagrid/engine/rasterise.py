@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import math
 import time
 
 import numpy as np
@@ -10,34 +9,17 @@ import numpy as np
 from ..domains.grid import Grid
 from ..domains.polar_lattice import PolarLattice
 from ..protocol import DensityModel
-from ..results import PolarRaster, Raster
+from ..results import PolarRaster, Raster, TiledRaster
 from ..validate import BananagridError
 from .memory import RASTERISE_BYTES_PER_CELL, check_memory
 from .points import check_finite, check_model
-from .precision import working_dtype
 from .work import check_work
 from .grid_cells import probability_raster
 from .polar_cells import rasterise_lattice
-from .warp_runtime import WarpContext
+from .grid_kernel import grid_block, grid_context
+from .tiles import rasterise_tiles
 
-__all__ = ["rasterise", "GridExtent", "QUANTITIES"]
-
-
-class GridExtent:
-    """The cell centres of a grid, seen from an origin."""
-
-    def __init__(self, grid: Grid):
-        self.grid = grid
-
-    def radii(self, origin) -> tuple[float, float]:
-        """Least and greatest distance from ``origin`` to the grid's cell centres."""
-        ox, oy = origin
-        x0, x1 = self.grid.x[0] - ox, self.grid.x[-1] - ox
-        y0, y1 = self.grid.y[0] - oy, self.grid.y[-1] - oy
-        near_x = 0.0 if x0 <= 0.0 <= x1 else min(abs(x0), abs(x1))
-        near_y = 0.0 if y0 <= 0.0 <= y1 else min(abs(y0), abs(y1))
-        far_x, far_y = max(abs(x0), abs(x1)), max(abs(y0), abs(y1))
-        return math.hypot(near_x, near_y), math.hypot(far_x, far_y)
+__all__ = ["rasterise", "QUANTITIES"]
 
 
 #: What :func:`rasterise` computes on a grid.
@@ -45,7 +27,8 @@ QUANTITIES = ("density", "probability")
 
 
 def rasterise(model: DensityModel, grid: Grid | PolarLattice, *, quantity: str = "density", dtype=np.float64,
-              device: str = "cpu", threads=None, max_seconds: float | None = None) -> Raster | PolarRaster:
+              device: str = "cpu", threads=None, max_seconds: float | None = None,
+              chunks=None) -> Raster | PolarRaster | TiledRaster:
     """Density of ``model`` at the cell centres of ``grid`` or the probability of each cell, or
     both on a polar lattice.
 
@@ -83,6 +66,13 @@ def rasterise(model: DensityModel, grid: Grid | PolarLattice, *, quantity: str =
         Wall-clock seconds of estimated computing allowed (default
         :data:`bananagrid.engine.work.DEFAULT_MAX_SECONDS`, one hour; ``math.inf`` for no
         limit). The model's estimate (``work_estimate``) is checked before any launch on the CPU.
+    chunks : int or (int, int), optional
+        Rasterise the density lazily in blocks of ``(rows, columns)`` cells on Dask (the
+        ``cluster`` extra) and return a :class:`~bananagrid.results.TiledRaster`: grids up to
+        :data:`~bananagrid.domains.grid.MAX_TILED_CELLS` cells, each block bit-identical to this
+        function's values there, blocks the model proves negligible left at 0 without computing
+        (:func:`bananagrid.engine.tiles.rasterise_tiles`; ``threads`` does not apply: Dask runs
+        the blocks in parallel).
 
     Returns
     -------
@@ -96,12 +86,15 @@ def rasterise(model: DensityModel, grid: Grid | PolarLattice, *, quantity: str =
         return rasterise_lattice(model, grid, dtype=dtype, device=device, threads=threads, max_seconds=max_seconds)
     if not isinstance(grid, Grid):
         raise BananagridError(f"grid = {grid!r}: expected a bananagrid.Grid")
+    if chunks is not None:
+        if quantity != "density":
+            raise BananagridError(f"quantity = {quantity!r} with chunks: tiles compute densities only")
+        return rasterise_tiles(model, grid, chunks, dtype=dtype, device=device, max_seconds=max_seconds)
     check_model(model)
+    grid.check_in_memory()
     if quantity == "probability":
         return probability_raster(model, grid, dtype=dtype, device=device, threads=threads, max_seconds=max_seconds)
-    asked = WarpContext(dtype, device, threads).dtype
-    extent = GridExtent(grid)
-    ctx = WarpContext(working_dtype(model, asked, extent.radii((0.0, 0.0))[1]), device, threads)
+    asked, ctx, extent = grid_context(model, grid, dtype, device, threads)
     if ctx.cpu:  # an allocation the machine cannot give would abort the process without a word
         what = f"rasterise on a grid of {grid.nx} x {grid.ny} = {grid.nx * grid.ny:,} cells"
         check_memory(grid.nx * grid.ny, RASTERISE_BYTES_PER_CELL, what)
@@ -109,40 +102,7 @@ def rasterise(model: DensityModel, grid: Grid | PolarLattice, *, quantity: str =
                    f"{type(model).__name__}: {what}", limit=max_seconds, option="max_seconds=S")
     start = time.perf_counter()
     binding = model.bind(ctx, extent, grid=True)
-    ctx.load(binding.grid_kernel)
-    xs = ctx.array(grid.x)
-    ys = ctx.array(grid.y)
-    if ctx.cpu:
-        values = np.empty(grid.shape, dtype=ctx.dtype)  # every cell is written by the kernel
-        out = ctx.shared(values)
-    else:
-        out = ctx.zeros(grid.shape)
-
-    # row-looping kernels take whole rows per thread on the CPU, one cell per thread on a GPU
-    columns = (grid.nx if ctx.cpu else 1) if binding.row_loop else None
-    bands = ctx.bands(grid.ny, binding.bands_per_thread)
-    scratch, quads = None, None
-    if binding.scratch_width:  # one work row per band: a band's rows run one after another
-        scratch = ctx.empty((len(bands), binding.scratch_width))
-        band_of = {r0: k for k, (r0, _) in enumerate(bands)}
-    if binding.quad_width:
-        quads = ctx.empty((len(bands), binding.quad_width), dtype=ctx.vector(4))
-    rows = (binding.tile_rows if ctx.cpu else 1) if binding.tile_rows else None
-
-    def launch_band(r0, r1):
-        if columns is None:
-            dim, head = (r1 - r0, grid.nx), [xs, ys, r0]
-        elif rows is None:
-            dim, head = (r1 - r0, -(-grid.nx // columns)), [xs, ys, r0, columns]
-        else:
-            dim, head = (-(-(r1 - r0) // rows), -(-grid.nx // columns)), [xs, ys, r0, r1, rows, columns]
-        extra = [] if scratch is None else [scratch] + ([] if quads is None else [quads]) + [band_of[r0]]
-        ctx.launch(binding.grid_kernel, dim=dim, inputs=[*head, *binding.params, *extra, out])
-
-    ctx.run_bands(launch_band, bands)
-    ctx.synchronize()
-    if not ctx.cpu:
-        values = out.numpy()
+    values = grid_block(ctx, binding, grid)
     seconds = time.perf_counter() - start
     check_finite(values, model)
     values = values.astype(asked, copy=False)

@@ -69,10 +69,12 @@ def check_threads(threads) -> int:
     return int(threads)
 
 
-def bands(n_rows: int, threads: int, per_thread: int = 1) -> list[tuple[int, int]]:
-    """Split rows into ``threads * per_thread`` contiguous bands (fewer if rows run out)."""
-    n_bands = max(1, min(n_rows, threads * per_thread))
-    edges = np.linspace(0, n_rows, n_bands + 1).round().astype(int)
+def bands(n_rows: int, threads: int, per_thread: int = 1, align: int = 1) -> list[tuple[int, int]]:
+    """Split rows into ``threads * per_thread`` contiguous bands (fewer if rows run out), each
+    starting on a multiple of ``align`` rows (a kernel's tile side)."""
+    units = -(-n_rows // align)
+    n_bands = max(1, min(units, threads * per_thread))
+    edges = np.minimum(np.linspace(0, units, n_bands + 1).round().astype(int) * align, n_rows)
     return [(int(a), int(b)) for a, b in zip(edges[:-1], edges[1:]) if b > a]
 
 
@@ -183,10 +185,10 @@ class WarpContext:
         self.synchronize()
         return array.numpy()
 
-    def bands(self, n: int, per_thread: int = 1) -> list[tuple[int, int]]:
+    def bands(self, n: int, per_thread: int = 1, align: int = 1) -> list[tuple[int, int]]:
         """Bands of ``n`` rows for :meth:`run_bands`: ``per_thread`` per thread on the CPU, one on
-        a GPU."""
-        return bands(n, self.threads, per_thread) if self.cpu else [(0, n)]
+        a GPU; each starts on a multiple of ``align``."""
+        return bands(n, self.threads, per_thread, align) if self.cpu else [(0, n)]
 
     def run_bands(self, launch_band, band_list: list[tuple[int, int]]) -> None:
         run_bands(launch_band, band_list, self.launch_threads)

@@ -47,7 +47,7 @@ from ..validate import BananagridError
 from ..version import __version__
 from .files import writing
 from .frame import iso_utc
-from .libraries import require
+from .libraries import CLUSTER_EXTRA, CLUSTER_PURPOSE, require
 from .panels import check_panels, frame_of, provenance_json, variable_name
 
 __all__ = [
@@ -118,7 +118,7 @@ def raster_dataset(panels: Sequence, frame=None, *, title: str = "", source: str
         taken.add(names[layer])
     shared = len({tuple(p.t for p in series) for series in layers.values()}) == 1
 
-    coords, data_vars = _grid_variables(grid, frame)
+    coords, data_vars = _grid_variables(grid, frame, _chunks(checked))
     for layer, series in layers.items():
         var = names[layer]
         derived = {"mass": f"{var}_mass", "normalised": f"{var}_normalised"}
@@ -134,7 +134,8 @@ def raster_dataset(panels: Sequence, frame=None, *, title: str = "", source: str
             coords.update(_time_variables(tdim, elapsed, [p.t for p in series], frame))
         data_vars[var] = _layer_variable(xr, layer, series, tdim, elapsed, frame)
         data_vars[derived["mass"]] = xr.Variable(
-            (tdim,), np.array([float(p.raster.mass) for p in series]),
+            (tdim,), _stack([getattr(p.raster, "lazy_mass", None) if _lazy(p.raster.values) else float(p.raster.mass)
+                             for p in series]),
             {"long_name": f"probability mass the grid captured before normalisation: layer {layer}", "units": "1"},
         )
         data_vars[derived["normalised"]] = xr.Variable(
@@ -152,7 +153,30 @@ def raster_dataset(panels: Sequence, frame=None, *, title: str = "", source: str
     return xr.Dataset(data_vars, coords=coords, attrs=attrs)
 
 
-def _grid_variables(grid, frame) -> tuple[dict, dict]:
+def _lazy(values) -> bool:
+    """Whether ``values`` are a lazy Dask array (a tiled raster's)."""
+    return hasattr(values, "__dask_graph__")
+
+
+def _stack(items: list):
+    """The items stacked on a new first axis: a lazy Dask array if any is lazy (NumPy hands
+    ``np.stack`` of Dask arrays to Dask), else a NumPy array."""
+    if any(_lazy(item) for item in items):
+        return np.stack(items)
+    return np.stack([np.asarray(item) for item in items])
+
+
+def _chunks(panels) -> tuple | None:
+    """The block shape of the first lazy panel's values, or None when all are in memory."""
+    for panel in panels:
+        if _lazy(panel.raster.values):
+            return tuple(int(c[0]) for c in panel.raster.values.chunks)
+    return None
+
+
+def _grid_variables(grid, frame, chunks: tuple | None = None) -> tuple[dict, dict]:
+    """The coordinates and grid mapping; with ``chunks`` (tiled maps) the latitude and
+    longitude are lazy Dask arrays in those blocks, so that no array of the grid's size is held."""
     xr = require("xarray", NETCDF_PURPOSE)
     e0, n0 = (0.0, 0.0) if frame is None else frame.false_origin
     x_edges = e0 + grid.origin[0] + grid.dx * np.arange(grid.nx + 1)
@@ -172,20 +196,41 @@ def _grid_variables(grid, frame) -> tuple[dict, dict]:
         "y_bounds": xr.Variable(("y", "nv"), np.stack([y_edges[:-1], y_edges[1:]], axis=1)),
     }
     if frame is not None:
-        coords.update(_lat_lon(xr, ("y", "x"), frame, *np.meshgrid(grid.x, grid.y)))
+        if chunks is None:
+            coords.update(_lat_lon(xr, ("y", "x"), frame, *np.meshgrid(grid.x, grid.y)))
+        else:
+            coords.update(_lazy_lat_lon(xr, frame, grid, chunks))
         data_vars["crs"] = xr.Variable((), np.int32(0), _crs_attrs(frame))
     return coords, data_vars
 
 
 def _lat_lon(xr, dims: tuple, frame, x, y) -> dict:
-    """CF ``lat`` and ``lon`` auxiliary coordinates on ``dims`` of the local points (x, y)."""
-    lat, lon = frame.geographic(x, y)
+    """CF ``lat`` and ``lon`` auxiliary coordinates on ``dims`` of the local points (x, y)
+    (with ``frame`` None, ``x`` and ``y`` are the latitudes and longitudes already)."""
+    lat, lon = (x, y) if frame is None else frame.geographic(x, y)
     return {
         "lat": xr.Variable(dims, lat, {
             "standard_name": "latitude", "long_name": "latitude of the cell centre (WGS84)", "units": "degrees_north"}),
         "lon": xr.Variable(dims, lon, {
             "standard_name": "longitude", "long_name": "longitude of the cell centre (WGS84)", "units": "degrees_east"}),
     }
+
+
+def _lazy_lat_lon(xr, frame, grid, chunks: tuple) -> dict:
+    """:func:`_lat_lon` of every cell centre as Dask arrays in blocks of ``chunks``."""
+    da = require("dask.array", CLUSTER_PURPOSE, CLUSTER_EXTRA)
+    x, y = da.meshgrid(da.from_array(grid.x, chunks=chunks[1]), da.from_array(grid.y, chunks=chunks[0]))
+    lat = da.map_blocks(_latitudes, x, y, frame, dtype=np.float64)
+    lon = da.map_blocks(_longitudes, x, y, frame, dtype=np.float64)
+    return _lat_lon(xr, ("y", "x"), None, lat, lon)
+
+
+def _latitudes(x, y, frame) -> np.ndarray:
+    return frame.geographic(x, y)[0]
+
+
+def _longitudes(x, y, frame) -> np.ndarray:
+    return frame.geographic(x, y)[1]
 
 
 def _crs_attrs(frame) -> dict:
@@ -215,7 +260,7 @@ def _time_variables(tdim: str, elapsed: str, times: list[float], frame) -> dict:
 
 
 def _layer_variable(xr, layer: str, series: list, tdim: str, elapsed: str, frame):
-    values = np.stack([np.asarray(p.raster.values) for p in series])
+    values = _stack([p.raster.values for p in series])
     models = sorted({str(p.raster.provenance.get("model", "?")) for p in series})
     attrs = {
         "long_name": f"probability density of the target's position at the cell centre: layer {layer}",

@@ -36,6 +36,12 @@ class Panel:
     raster: object
 
 
+def _has(raster, name: str) -> bool:
+    """Whether ``raster`` has attribute ``name``, without evaluating a property (a tiled raster's
+    ``mass`` would compute the whole map)."""
+    return name in getattr(raster, "__dict__", {}) or hasattr(type(raster), name)
+
+
 def check_panels(panels: Sequence, what: str = "panels") -> list[Panel]:
     """The panels as :class:`Panel` objects, in the order given.
 
@@ -59,7 +65,7 @@ def check_panels(panels: Sequence, what: str = "panels") -> list[Panel]:
             raise BananagridError(f"{what}[{k}]: layer name {show(layer)} must be a non-empty string")
         if isinstance(t, bool) or not isinstance(t, (int, float, np.integer, np.floating)) or not math.isfinite(t):
             raise BananagridError(f"{what}[{k}] ({layer}): t = {show(t)} must be a finite number of seconds")
-        if not all(hasattr(raster, a) for a in ("values", "grid", "mass", "provenance")):
+        if not all(_has(raster, a) for a in ("values", "grid", "mass", "provenance")):
             raise BananagridError(f"{what}[{k}] ({layer}): {type(raster).__name__} is not a Raster")
         if np.shape(raster.values) != raster.grid.shape:
             raise BananagridError(

@@ -49,7 +49,7 @@ from .motion import MotionModel, natural_scales
 __all__ = [
     "HeadingTable", "heading_table", "build_heading_table", "convolved_rows", "ray_densities",
     "convolve_heading", "table_binding", "clear_heading_tables", "interpolate_table", "RESOLUTION", "BEARING_RESOLUTION",
-    "first_table_nodes",
+    "first_table_nodes", "table_spacing_limits", "interpolation_bound",
     "TARGET_ERROR", "CHECK_LEVEL",
 ]
 
@@ -74,6 +74,14 @@ REFINE_MARGIN = 1.1
 MAX_LATTICE_NODES = 1 << 23
 #: Tables at or below this value are treated as underflowed: interpolated linearly, not in log.
 FLOOR = {np.dtype(np.float64): 1.0e-290, np.dtype(np.float32): 1.0e-30}
+#: Over a stencil's offsets (fr, ft) in [0, 1]^2 the tensor cubic Lagrange weights sum to 1, their
+#: absolute values to at most 1.25^2 = 1.5625 (the Lebesgue constant, at fr = ft = 1/2) and their
+#: negative parts to at most 2 (1/8)(9/8) = 0.28125; these allow offsets 0.05 outside [0, 1]
+#: (a float32 range rounded past a stencil's end), where the values are lower still.
+STENCIL_LEBESGUE = 1.6
+STENCIL_NEGATIVE = 0.3
+#: Absolute rounding a stencil's sums may gain in the subnormal range (32 terms of a float32 ulp).
+SUBNORMAL_SLACK = 1e-43
 
 
 @dataclass(frozen=True)
@@ -203,6 +211,41 @@ def first_table_nodes(model: MotionModel, r_lo: float, r_hi: float) -> int:
     evaluates up to 4 and 16 times as many, within ``MAX_LATTICE_NODES``)."""
     radial, angular = natural_scales(model)
     return _rows(r_lo, r_hi, radial / RESOLUTION) * max(16, _even(2.0 * math.pi * BEARING_RESOLUTION / angular))
+
+
+def table_spacing_limits(model: MotionModel) -> tuple[float, int]:
+    """The largest range spacing and the most bearings of any table :func:`build_heading_table`
+    builds for ``model``, over any extent: its refinements only shrink dr = radial /
+    (RESOLUTION scale) and grow n_theta, with scale in [1, 2^MAX_REFINEMENTS]."""
+    radial, angular = natural_scales(model)
+    most = _even(2.0 * math.pi * BEARING_RESOLUTION * 2.0**MAX_REFINEMENTS / angular)
+    return radial / RESOLUTION, max(16, most)
+
+
+def interpolation_bound(value_bound: float) -> float:
+    """A bound of what ``kernels/tabulated.py`` returns, in float32 or float64, from a stencil
+    whose 16 table entries (float64, before the cast to the kernel's dtype) are at most
+    ``value_bound`` (0 from entries all 0: the linear branch sums zeros).
+
+    Linear branch (an entry at or below the floor): at most STENCIL_LEBESGUE max p. Log branch
+    (every entry above the floor f): with weights w summing to 1 and logs L in (log f, log P],
+    sum w L <= log P + STENCIL_NEGATIVE (log P - log f), so the value is at most
+    P (P / f)^STENCIL_NEGATIVE; that branch needs P > f. A 0.1 % allowance covers the float32
+    rounding of the entries, their logs and the weighted sum.
+    """
+    p = float(value_bound)
+    if p == 0.0:
+        return 0.0
+    if not p < 1e38:  # float32 entries would overflow; nothing useful to prove either
+        return math.inf
+    # the cast to float32 rounds up by an ulp, or to twice a value in its subnormal range
+    p = max(p * (1.0 + 1e-6), 2.0 * p if p < float(np.finfo(np.float32).tiny) else 0.0)
+    bound = STENCIL_LEBESGUE * p
+    for floor in FLOOR.values():
+        if p > floor:
+            bound = max(bound, p * (p / floor) ** STENCIL_NEGATIVE)
+    # subnormal sums round by up to half the smallest float32 subnormal (1.4e-45) a term
+    return bound * 1.001 + SUBNORMAL_SLACK
 
 
 def _rows(r_lo: float, r_hi: float, dr: float) -> int:

@@ -8,6 +8,7 @@ A model class derives from :class:`Model` and implements the rest of
 
 from __future__ import annotations
 
+import math
 from dataclasses import fields
 
 import numpy as np
@@ -17,11 +18,19 @@ from ..engine.points import evaluate_points
 from ..protocol import CellPlan
 from ..validate import BananagridError
 
-__all__ = ["Model", "check_n", "check_rng", "RANGE_SDS"]
+__all__ = ["Model", "check_n", "check_rng", "RANGE_SDS", "ZERO_BELOW", "PEAK_PROBES"]
 
 #: Rays scan a model out to this many of its widest SDs beyond where its mass lies (the density
 #: there is below e^-72 of its peak along the ray).
 RANGE_SDS = 12.0
+
+#: Tiled rasterising may leave a tile at 0 where the model proves its density at most this
+#: fraction of the density's maximum (10x below the 1e-12 under which no kernel promises
+#: relative accuracy; Butterly's grid kernel zeroes single cells at the same level).
+ZERO_BELOW = 1e-13
+
+#: Samples of the model's own story at which :meth:`Model.peak_lower_bound` evaluates the density.
+PEAK_PROBES = 1024
 
 
 def check_rng(rng) -> np.random.Generator:
@@ -64,6 +73,32 @@ class Model:
         """None: the engine integrates the density over each cell
         (:meth:`bananagrid.protocol.DensityModel.grid_cells`)."""
         return None
+
+    def density_bound(self, x0: float, x1: float, y0: float, y1: float) -> float:
+        """No bound proved: ``math.inf`` (:meth:`bananagrid.protocol.DensityModel.density_bound`);
+        tiled rasterising then computes every tile."""
+        return math.inf
+
+    def density_floor(self) -> float:
+        """ZERO_BELOW times :meth:`peak_lower_bound`
+        (:meth:`bananagrid.protocol.DensityModel.density_floor`)."""
+        return ZERO_BELOW * self.peak_lower_bound()
+
+    def peak_lower_bound(self) -> float:
+        """The largest density the kernels compute at PEAK_PROBES positions drawn from the model's
+        own story (a fixed seed) and at its last fix: any computed value is at most the maximum
+        (to rounding). Computed once per model."""
+        cached = self.__dict__.get("_peak_lower_bound")
+        if cached is not None:
+            return cached
+        points = [self.sample(PEAK_PROBES, np.random.default_rng(20261125))]
+        points += [np.asarray(v, dtype=float).reshape(-1, 2) for k, v in self.landmarks().items() if k == "fix"]
+        points = np.concatenate(points)
+        peak = float(np.max(self.pdf(points[:, 0], points[:, 1]), initial=0.0))
+        if not peak > 0.0:  # every probe underflowed: no floor
+            peak = float(np.finfo(float).smallest_subnormal)
+        self.__dict__["_peak_lower_bound"] = peak  # a frozen dataclass: its __dict__ caches
+        return peak
 
     def singular_points(self) -> np.ndarray:
         """No point of infinite density (:meth:`bananagrid.protocol.DensityModel.singular_points`)."""

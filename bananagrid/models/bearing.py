@@ -45,6 +45,19 @@ SAMPLE_PATIENCE = 1_000_000
 #: Gauss-Newton iterations for three or more sensors (each converges quadratically).
 MAX_ITERATIONS = 50
 
+#: float32's unit roundoff: :meth:`BearingFix.density_bound` allows for a float32 kernel in
+#: every term (a float64 kernel rounds 2^29 times less), so one bound serves both dtypes.
+UNIT_ROUNDOFF = 2.0**-24
+#: Error of the kernel's float32 ``atan2_fast``, in units of UNIT_ROUNDOFF * pi (measured at
+#: most 1.4 over 2e6 points spread over 12 decades and every quadrant; 16 leaves 11x of room).
+ATAN2_ROUNDOFFS = 16.0
+#: Relative margin of the bound for the kernel's exp (a few ulps in float32), its rounding of
+#: a float64 result to float32, and this bound's own float64 arithmetic.
+BOUND_MARGIN = 1e-5
+#: Added to every bound: an exp whose result underflows may come out as a few float32
+#: subnormals (2^-149 each), however small its argument.
+UNDERFLOW_SLACK = 4.0 * 2.0**-149
+
 
 def bearing_to(sensor, point) -> np.ndarray:
     """Bearing (radians clockwise from north, in (-pi, pi]) from ``sensor`` to ``point``."""
@@ -141,6 +154,59 @@ def two_bearing_variances(sensor1, sensor2, bearing1, bearing2, sigma1, sigma2):
 def _wrap(angle):
     """Angle difference wrapped to (-pi, pi]."""
     return np.angle(np.exp(1j * np.asarray(angle, dtype=float)))
+
+
+def _circular_distance(angle):
+    """|angle| wrapped to [0, pi] (float64; its rounding is far below the bound's slack)."""
+    return np.abs(np.remainder(np.asarray(angle, dtype=float) + np.pi, 2.0 * np.pi) - np.pi)
+
+
+def _least_bearing_gaps(sensors, bearings, x0, x1, y0, y1) -> np.ndarray:
+    """min over the closed rectangle [x0, x1] x [y0, y1] of the circular distance between the
+    bearing from each sensor to the point and that sensor's observed bearing, shape (n,): exact.
+
+    A sensor inside the rectangle (or on its edge) sees every bearing: 0. From a sensor outside,
+    the rectangle (convex) fills an arc of bearings narrower than pi that holds the bearing of
+    its centre theta_c and is spanned by its corners: relative to theta_c the corners' bearings
+    lie in (-pi, pi) without wrap-around, their least A and greatest B bound the arc, and the
+    distance from b to the arc is 0 inside it, else the nearer of its ends.
+    """
+    sx, sy = sensors[:, 0], sensors[:, 1]
+    corner_x = np.array([x0, x1, x0, x1])
+    corner_y = np.array([y0, y0, y1, y1])
+    centre = np.arctan2(0.5 * (x0 + x1) - sx, 0.5 * (y0 + y1) - sy)
+    corners = np.arctan2(corner_x[None, :] - sx[:, None], corner_y[None, :] - sy[:, None])
+    relative = np.remainder(corners - centre[:, None] + np.pi, 2.0 * np.pi) - np.pi
+    low, high = relative.min(axis=1), relative.max(axis=1)
+    seen = np.remainder(bearings - centre + np.pi, 2.0 * np.pi) - np.pi
+    gap = np.minimum(_circular_distance(seen - low), _circular_distance(seen - high))
+    inside = (x0 <= sx) & (sx <= x1) & (y0 <= sy) & (sy <= y1)
+    return np.where(inside | ((low <= seen) & (seen <= high)), 0.0, gap)
+
+
+def _box_quadratic_min(a, b, c, x0, x1, y0, y1) -> float:
+    """A lower bound, exact but for float64 rounding, of q(x, y) = a x^2 + 2 b x y + c y^2 over
+    the box [x0, x1] x [y0, y1], for any symmetric (a, b; b, c), definite or not.
+
+    An interior minimum of q is a critical point, a null vector of the form: the origin (where
+    q = 0), or a line through it along which q = 0 and which reaches the boundary at that value;
+    an indefinite form's only critical point is a saddle. So the minimum is the least of the
+    boundary's and, where the box holds the origin, 0. On each edge q is a quadratic in one
+    variable t, least at an end or at its vertex t* = -b s / (coefficient of t^2), clamped to the
+    edge. Each candidate's value is lowered by 1e-14 of the sum of its terms' magnitudes, more
+    than the rounding of the vertex and of the sum.
+    """
+    best = 0.0 if (x0 <= 0.0 <= x1 and y0 <= 0.0 <= y1) else math.inf
+    # edges x = s (t = y, coefficient c) and y = s (t = x, coefficient a)
+    for fixed_coef, free_coef, fixed_values, (lo, hi) in ((a, c, (x0, x1), (y0, y1)), (c, a, (y0, y1), (x0, x1))):
+        for s in fixed_values:
+            candidates = [lo, hi]
+            if free_coef > 0.0:
+                candidates.append(min(hi, max(lo, -b * s / free_coef)))
+            for t in candidates:
+                terms = (fixed_coef * s * s, 2.0 * b * s * t, free_coef * t * t)
+                best = min(best, sum(terms) - 1e-14 * sum(abs(v) for v in terms))
+    return best
 
 
 def _as_array(name: str, value, shape_text: str, ndim: int) -> np.ndarray:
@@ -429,6 +495,101 @@ class BearingFix(Model):
                   kernels.EXACT if self.variant == "exact" else kernels.LINEAR)
         return KernelBinding(kernels.bearing_grid, kernels.bearing_points, params, "bearing.bearing_grid",
                              {"variant": self.variant})
+
+    def _bound_terms(self) -> dict:
+        """What :meth:`density_bound` needs of the kernel's parameters, computed once per model:
+        each taken as the kernel may see it, from the float64 array or its float32 rounding."""
+        cached = self.__dict__.get("_density_bound_terms")
+        if cached is not None:
+            return cached
+        params = self.kernel_parameters()
+        rounded = params.astype(np.float32).astype(np.float64)
+        per_sensor = slice(kernels.HEAD + 3, None, kernels.PER_SENSOR)
+        bearings = self.bearings
+        n = len(self.sensors)
+        terms = {
+            "log_norm": float(max(params[0], rounded[0])),
+            # the kernel's log-density: n + 1 terms summed, each z^2 from two rounded products
+            "log_roundoffs": (2 * n + 8) * UNIT_ROUNDOFF,
+            "inv_sigma": np.minimum(params[per_sensor], rounded[per_sensor]),
+            # an upper bound of the kernel's error in wrap(beta - b): atan2_fast, the bearing's
+            # float32 rounding, the subtraction, and k 2 pi in wrap_angle (|k| <= |b| / 2 pi + 2)
+            "angle_slack": (UNIT_ROUNDOFF * (ATAN2_ROUNDOFFS * math.pi + 8.0 * (2.0 * math.pi + np.abs(bearings)))
+                            + np.abs(bearings.astype(np.float32).astype(np.float64) - bearings)),
+            # sensors and the fix, whose float32 rounding moves the point the kernel sees
+            "scale": float(max(np.abs(self.sensors).max(), np.abs(self._fix).max())),
+            "precision": tuple(float(v) for v in params[3:6]),
+        }
+        self.__dict__["_density_bound_terms"] = terms  # a frozen dataclass: its __dict__ caches
+        return terms
+
+    def density_bound(self, x0: float, x1: float, y0: float, y1: float) -> float:
+        r"""A proved upper bound of the density the grid kernel computes, in float32 or float64,
+        anywhere in the closed rectangle [x0, x1] x [y0, y1] (world metres)
+        (:meth:`bananagrid.protocol.DensityModel.density_bound`).
+
+        The kernel (``kernels/bearing.py``) computes exp(log_norm - q / 2) with
+
+        .. math::  q_{exact} = \sum_i z_i^2,\quad z_i = \mathrm{wrap}(\beta_i(P) - b_i) / \sigma_i,
+                   \qquad q_{linear} = (P - F)^T C^{-1} (P - F).
+
+        Rounding first: the offsets P - S_i (or P - F) the kernel forms from float32 coordinates
+        are the exact offsets of a point within 4 u (max(|x|, |y|) + max(|S_i|, |F|)) of P in each
+        coordinate, u = 2^-24, so the rectangle is widened by that; every other rounding
+        (atan2_fast, wrap_angle, the sums, the parameters' float32 values) is bounded in u and
+        taken off q or added to log_norm. float64 kernels round less, so the bound holds for both.
+
+        exact: each z_i^2 is at least ((g_i - eps_i)_+ / sigma_i)^2, g_i the least circular
+        distance from b_i to the bearings of the widened rectangle seen from sensor i (exact: an
+        arc spanned by the corners, or every bearing if the sensor is inside), eps_i the bearing
+        rounding; the sum of these minima bounds the minimum of the sum. A sensor inside the
+        rectangle contributes nothing, and the bound stays finite (at most the peak, exp(log_norm)).
+
+        linear: the rounding of q is at most 2 gamma (p_xx dx^2 + p_yy dy^2) (as
+        2 |p_xy dx dy| <= p_xx dx^2 + p_yy dy^2), so q is at least the form with p_xx, p_yy
+        scaled by (1 - 2 gamma), minimised exactly over the widened box about the fix.
+
+        The result, times 1 + ``BOUND_MARGIN`` plus ``UNDERFLOW_SLACK``, is never 0 (the kernel
+        computes no exact zeros but by underflow); ``math.inf`` only if the bound would overflow.
+        A rectangle with an infinite side gets the bound over the whole plane.
+
+        Raises
+        ------
+        BananagridError
+            For a NaN bound or x1 < x0 or y1 < y0.
+        """
+        x0, x1, y0, y1 = (float(v) for v in (x0, x1, y0, y1))
+        if not (x0 <= x1 and y0 <= y1):
+            raise BananagridError(f"density_bound: rectangle [{x0}, {x1}] x [{y0}, {y1}] must have x0 <= x1, y0 <= y1")
+        terms = self._bound_terms()
+        finite = all(math.isfinite(v) for v in (x0, x1, y0, y1))
+        if finite:
+            reach = max(abs(x0), abs(x1), abs(y0), abs(y1))
+            widen = 4.0 * UNIT_ROUNDOFF * (reach + terms["scale"]) + 1e-30
+            x0, x1, y0, y1 = x0 - widen, x1 + widen, y0 - widen, y1 + widen
+        log_norm = terms["log_norm"]
+        rounding = terms["log_roundoffs"]
+        if self.variant == "exact":
+            if finite:
+                gaps = _least_bearing_gaps(self.sensors, self.bearings, x0, x1, y0, y1)
+                z = np.maximum(gaps - terms["angle_slack"], 0.0) * terms["inv_sigma"]
+                q = float(np.dot(z, z))
+            else:
+                q = 0.0
+        else:
+            p_xx, p_xy, p_yy = terms["precision"]
+            shrink = 1.0 - 2.0 * 16.0 * UNIT_ROUNDOFF  # gamma = 16 u: 5 roundings of q, 1 of p
+            if finite:
+                fx, fy = self._fix
+                q = _box_quadratic_min(p_xx * shrink, p_xy, p_yy * shrink, x0 - fx, x1 - fx, y0 - fy, y1 - fy)
+            else:
+                definite = (p_xx * shrink) * (p_yy * shrink) >= p_xy * p_xy
+                q = 0.0 if definite else -math.inf
+        # q enters scaled by 1 -+ rounding, whichever is the smaller -q / 2
+        log_bound = log_norm + rounding * abs(log_norm) - 0.5 * q * (1.0 - math.copysign(rounding, q))
+        if not log_bound < 700.0:
+            return math.inf
+        return math.exp(log_bound) * (1.0 + BOUND_MARGIN) + UNDERFLOW_SLACK
 
     # -- scales (polar lattices and rays) ------------------------------------------------------
 

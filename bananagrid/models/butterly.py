@@ -686,6 +686,31 @@ class Butterly(Model):
             row_loop=True, scratch_width=kernels.SCRATCH, quad_width=kernels.QUAD_SCRATCH, tile_rows=kernels.TILE,
         )
 
+    def density_bound(self, x0: float, x1: float, y0: float, y1: float) -> float:
+        """A proved upper bound of the density on the rectangle [x0, x1] x [y0, y1].
+
+        The density is sum_i w_i E_c[N(p - r_i u(c); mean, cov)] over the speed nodes (ranges
+        r_i = V_i t, weights w_i, the course law c), so it is at most sum_i w_i max_c N(...). A
+        normal is at most exp(-d^2 / (2 S2)) / (2 pi sqrt(S1 S2)) at Euclidean distance d from its
+        mean (S2 the larger eigenvalue), and the smallest distance from a point p of the rectangle
+        to a point of the circle of radius r_i about the mean is d_i = max(near - r_i, r_i - far,
+        0), with near and far the least and greatest distances from the mean to the rectangle (the
+        rectangle is connected, so every distance between them is taken). The rectangle is widened
+        by the rounding of float32 coordinates and the bound doubled for the kernels' own error
+        (float32_rtol and the series' tolerance are far below 1).
+        """
+        mx, my = self.mean
+        pad = 2.0 ** -22 * (max(abs(x0), abs(x1)) + max(abs(y0), abs(y1)) + abs(mx) + abs(my))
+        x0, x1, y0, y1 = x0 - pad, x1 + pad, y0 - pad, y1 + pad
+        near = math.hypot(max(x0 - mx, 0.0, mx - x1), max(y0 - my, 0.0, my - y1))
+        far = math.hypot(max(abs(x0 - mx), abs(x1 - mx)), max(abs(y0 - my), abs(y1 - my)))
+        r = self.ranges
+        d = np.maximum(np.maximum(near - r, r - far), 0.0)
+        s1, s2, _ = self.axes
+        w = self._nodes[1]
+        total = float(np.sum(w * np.exp(-0.5 * d * d / s2)))
+        return 2.0 * total / (2.0 * math.pi * math.sqrt(s1) * math.sqrt(s2))
+
     # -- scales (polar lattices and rays) ----------------------------------------------------------
 
     def polar_scales(self, origin=(0.0, 0.0)) -> tuple[float, float]:

@@ -10,15 +10,19 @@ import numpy as np
 from scipy.special import erfc
 
 from ..domains.pose import Pose
+from ..engine.warp_runtime import WarpContext
 from ..kernels import cat as kernels
 from ..kernels import cat_cells
 from ..protocol import CellPlan, Extent, KernelBinding, KernelContext, SceneKey, SceneSchema
 from ..validate import BananagridError, positive
-from ._cat_heading import clear_heading_tables, first_table_nodes, heading_table, ray_densities, table_binding
+from ._cat_heading import (
+    clear_heading_tables, first_table_nodes, heading_table, interpolation_bound, ray_densities, table_binding,
+    table_spacing_limits,
+)
 from .base import check_n, check_rng
 from .motion import MOTION_KEYS, MotionModel, pose_arguments
 
-__all__ = ["CAT", "cat_position", "scan_nodes", "clear_heading_tables", "NODE_SPACING"]
+__all__ = ["CAT", "cat_position", "scan_nodes", "scan_table", "scan_bounds", "clear_heading_tables", "NODE_SPACING"]
 
 #: Turn-rate node spacing of the scan table, in units of omega t (radians). The kernel's bounds
 #: find every root at any spacing; at this one they are tight enough that few node intervals
@@ -38,6 +42,34 @@ SECONDS_PER_CELL = 2e-6
 SECONDS_PER_NODE = 40e-9
 #: And per cell interpolated in a heading table.
 SECONDS_PER_TABLE_CELL = 0.5e-6
+
+
+#: Density bounds (:meth:`CAT.density_bound`). Rounding allowance, in ulps of the kernel's
+#: dtype, on a computed acceleration (of (|P| + v0 t) / |h|) and a computed F (of
+#: |h| (|P| + v0 t)): table coefficients computed on another device, the scan's multiply-adds.
+BOUND_ULPS = 64.0
+#: Most roots one node interval of the scan contributes: ``cat_split``'s SPLIT x SPLIT parts,
+#: two roots each.
+ROOTS_PER_INTERVAL = 2 * kernels.SPLIT**2
+#: A region whose bound exceeds the density floor is split into 2 x 2 parts and bounded again,
+#: at most this many times (and only while the gain so far could reach the floor): each node's
+#: F and a range over a smaller part less, so more intervals are proved skipped or far.
+BOUND_REFINEMENTS = 3
+#: With heading noise, the circle of ranges a rectangle's stencils read is covered by this many
+#: sectors first, then refined as above.
+HEADING_BOUND_SECTORS = 32
+HEADING_BOUND_REFINEMENTS = 4
+#: The finite bound's Lipschitz argument runs on this many pieces of each node interval; their
+#: ends' line coefficients are cached up to this many values (5 arrays of 8 bytes a value).
+BOUND_SUBSTEPS = 8
+BOUND_PIECES_CACHED = 1 << 18
+#: Parts times scan nodes bounded per refinement level at most (the level's memory and time).
+BOUND_WORK = 1 << 21
+#: Rectangles reaching beyond this (metres from the world origin) get the whole plane's bound.
+FARTHEST_BOUNDED = 1e100
+#: Distance allowance on float32 local coordinates, in ulps of |x| + |y| + |origin| (the
+#: world coordinates and the pose rounded to float32, then the rotation).
+COORDINATE_ULPS = 8.0
 
 
 #: Exact-in-acceleration cell probabilities (:meth:`CAT.grid_cells`): turn-rate intervals
@@ -115,6 +147,305 @@ def scan_nodes(model: "CAT") -> np.ndarray:
     apart in omega t (at least ``MIN_NODES``)."""
     half = model.k_sigma * model.sigma_omega
     return np.linspace(-half, half, scan_node_count(model.k_sigma, model.sigma_omega, model.t))
+
+
+def scan_table(model: "CAT", ctx: KernelContext, omegas: np.ndarray | None = None):
+    """The scan's table (``kernels.cat_table``) at :func:`scan_nodes` (or at ``omegas``), in
+    ``ctx``'s dtype on its device: the one :meth:`CAT.bind` gives the grid and points kernels."""
+    omegas = scan_nodes(model) if omegas is None else omegas
+    table = ctx.zeros((len(omegas), kernels.TABLE_COLUMNS))
+    ctx.launch(kernels.cat_table, dim=len(omegas),
+               inputs=[ctx.array(omegas), ctx.scalar(model.v0), ctx.scalar(model.t), table])
+    return table
+
+
+def host_table(model: "CAT", dtype, omegas: np.ndarray | None = None) -> np.ndarray:
+    """:func:`scan_table` computed on the CPU, as a float64 NumPy array."""
+    ctx = WarpContext(dtype, "cpu", 1)
+    return ctx.numpy(scan_table(model, ctx, omegas)).astype(np.float64)
+
+
+@dataclass(frozen=True)
+class ScanBoundTable:
+    """What :func:`scan_bounds` needs of one dtype's scan table (as float64 arrays).
+
+    Attributes
+    ----------
+    eps : float
+        The dtype's machine epsilon.
+    omega : ndarray (n,)
+        The nodes as the kernel holds them.
+    f, a : ndarray (3, n)
+        F = hx y - hy x - c: (hx, hy, c); the line's acceleration a = ax x + ay y - a0: (ax, ay, a0).
+    h : ndarray (n,)
+        |h(omega)| at the float64 nodes, in float64.
+    """
+
+    eps: float
+    omega: np.ndarray
+    f: np.ndarray
+    a: np.ndarray
+    h: np.ndarray
+
+
+@dataclass(frozen=True)
+class BoundData:
+    """What :meth:`CAT.density_bound` computes once per model.
+
+    Attributes
+    ----------
+    tables : tuple of ScanBoundTable
+        The scan tables of the dtypes the kernels may run in.
+    nodes : ndarray (n,)
+        The float64 scan nodes.
+    pieces : tuple of ndarray (n - 1, BOUND_SUBSTEPS + 1), or None
+        omega, ax, ay, a0 and |h| (float64) at the ends of each node interval's pieces; None
+        beyond BOUND_PIECES_CACHED values (the bound then uses whole intervals only).
+    """
+
+    tables: tuple
+    nodes: np.ndarray
+    pieces: tuple | None
+
+
+def bound_data(model: "CAT", dtypes) -> BoundData:
+    """:class:`BoundData` for the scan tables of ``dtypes``, all from the kernels' own
+    ``cat_table`` (float64 |h| and piece coefficients: its series below |u| = 1 keep them
+    accurate to a few ulps, where closed forms would cancel)."""
+    nodes = scan_nodes(model)
+    h = np.hypot(*host_table(model, np.float64)[:, 1:3].T)
+    tables = []
+    for dtype in dtypes:
+        values = host_table(model, dtype)
+        tables.append(ScanBoundTable(float(np.finfo(dtype).eps), values[:, 0].copy(), values[:, 1:4].T.copy(),
+                                     values[:, 7:10].T.copy(), h))
+    pieces = None
+    if (len(nodes) - 1) * (BOUND_SUBSTEPS + 1) <= BOUND_PIECES_CACHED:
+        ends = np.linspace(0.0, 1.0, BOUND_SUBSTEPS + 1)
+        omega = nodes[:-1, None] + np.diff(nodes)[:, None] * ends
+        values = host_table(model, np.float64, omega.ravel()).reshape(*omega.shape, -1)
+        pieces = (omega, values[..., 7], values[..., 8], values[..., 9], np.hypot(values[..., 1], values[..., 2]))
+    return BoundData(tuple(tables), nodes, pieces)
+
+
+def scan_bounds(model: "CAT", data: BoundData, parts: np.ndarray, target: float = 0.0) -> np.ndarray:
+    r"""Bounds of the density ``cat_density_local`` computes with any of ``data``'s tables over
+    each of the local-frame rectangles ``parts`` (rows cx, cy, e1x, e1y, e2x, e2y, delta: the
+    points c + s e1 + q e2, |s|, |q| <= 1, each coordinate moved by up to delta by rounding):
+    0 where it computes exact zeros, else a finite bound (made tighter, at some cost, only
+    where that may bring it to ``target`` or below).
+
+    Exact zeros. The scan adds nothing on a node interval [w_(k-1), w_k] unless both (i) F has
+    a sign change or an end within the chord threshold (``chord_coef`` width^2 + noise_f) of
+    zero, and (ii) ``cat_negligible`` fails: the nodes' accelerations a_k = ax x + ay y - a0
+    are not both beyond +-a_cut = PRUNE_SIGMAS sigma_a on one side. At a node F and a are
+    affine in P, so over a rectangle their range is exactly the centre's value +- |L . e1|
+    +- |L . e2|; widened by the coordinates' rounding and BOUND_ULPS of their scales, and
+    with the thresholds at their largest over the rectangle, "F is beyond the threshold on one
+    side at both ends" or "a is beyond a_cut on one side at both ends" proves the interval
+    skipped at every point of the rectangle.
+
+    Finite bound. An interval not skipped adds at most ROOTS_PER_INTERVAL roots, each
+    g(a(w); sigma_a) g(w; sigma_omega) / max(|dF/domega|, noise_g) at some w of the interval
+    (Newton stays in its bracket), noise_g >= ROUNDING_ULPS eps t^3 (7/12) v0 t. With
+    Q = P - v0 f = alpha h/|h| + beta h_perp/|h| and h . df/domega = 0,
+
+    .. math:: \frac{da}{d\omega} = \frac{h' \cdot Q}{|h|^2} - \frac{2 (h \cdot Q)(h \cdot h')}{|h|^4}
+              = \frac{\beta h'_\perp - \alpha h'_\parallel}{|h|^2},
+              \qquad \left|\frac{da}{d\omega}\right| \le \frac{|Q|\, |h'|}{|h|^2},
+
+    |Q| <= |P| + v0 t, |h'| = t^3 |(C', D')| <= t^3 min(1/3, (u^2 + 2|u| + 4) / |u|^3) (the
+    smaller |u| of the piece), and |h| at least its smaller end value less |h'| times half the
+    piece. On a piece of the interval |a(w)| is then at least the mean of its ends' minima
+    (exact ranges, as above) less that slope times half the piece, a Lipschitz bound that holds
+    where a changes sign too, and |w| at least the piece's nearest end to 0; the interval's
+    bound is the largest over its pieces. The pieces are the whole interval (the table's own
+    nodes) first, then, where that bound exceeds ``target`` and the nodes' own values do not
+    already (no piece can do better than the node nearer the rectangle), BOUND_SUBSTEPS pieces
+    (``data.pieces``: the kernels' float64 coefficients, within the nodes' rounding of the
+    dtype's interval).
+    """
+    parts = np.asarray(parts, dtype=np.float64)
+    out = np.zeros(len(parts))
+    chunk = max(1, BOUND_WORK // len(data.nodes))
+    for start in range(0, len(parts), chunk):
+        block = parts[start:start + chunk]
+        out[start:start + chunk] = np.max(
+            [_scan_bounds(model, data, table, block, target) for table in data.tables], axis=0)
+    return out
+
+
+def _affine_ranges(parts: tuple, lx, ly, l0, margin):
+    """Range (lo, hi) of lx x + ly y - l0 over each rectangle of ``parts`` (broadcast), widened
+    by the coordinates' rounding and ``margin``."""
+    cx, cy, e1x, e1y, e2x, e2y, delta = parts
+    mid = cx * lx + cy * ly - l0
+    half = (np.abs(e1x * lx + e1y * ly) + np.abs(e2x * lx + e2y * ly) + delta * (np.abs(lx) + np.abs(ly))
+            + margin)
+    return mid - half, mid + half
+
+
+def _least_accelerations(parts: tuple, ax, ay, a0, h, eps: float, scale) -> np.ndarray:
+    """The least |a| over each rectangle on each line (broadcast), less the rounding of a."""
+    a_lo, a_hi = _affine_ranges(parts, ax, ay, a0, BOUND_ULPS * eps * scale / h)
+    return np.maximum(0.0, np.maximum(a_lo, -a_hi))
+
+
+def _piece_exponents(model: "CAT", eps: float, scale, end_min, omega, h) -> np.ndarray:
+    """The largest exponent -(a_min / sigma_a)^2 / 2 - (w_min / sigma_omega)^2 / 2 over the pieces
+    between consecutive columns of ``omega`` (rows: live intervals), from the least |a| at the
+    pieces' ends ``end_min`` and |h| there (see :func:`scan_bounds`)."""
+    t = model.t
+    t3 = t * t * t
+    lo, hi = omega[:, :-1], omega[:, 1:]
+    # w rounded (and u = w t in float32) stays within widen of [lo, hi], and so do the turn
+    # rates the table's rows hold (its nodes rounded, u rounded): a w lies within span / 2 of
+    # one and within span of both together
+    widen = 8.0 * eps * (np.abs(lo) + np.abs(hi))
+    span = hi - lo + 4.0 * widen
+    straddle = (lo - widen <= 0.0) & (hi + widen >= 0.0)
+    w_min = np.where(straddle, 0.0, np.minimum(np.abs(lo), np.abs(hi)) - widen)
+    u = t * w_min
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+        turn = np.where(u > 3.0, np.minimum(1.0 / 3.0, (u * u + 2.0 * u + 4.0) / u**3), 1.0 / 3.0)
+    h_lo = np.minimum(h[:, :-1], h[:, 1:]) * (1.0 - 1e-12) - t3 * turn * 0.5 * span  # |h| rounded by ulps
+    positive_h = h_lo > 0.0
+    h_safe = np.where(positive_h, h_lo, 1.0)
+    slope = t3 * turn * scale / (h_safe * h_safe)
+    a_min = 0.5 * (end_min[:, :-1] + end_min[:, 1:] - slope * span) - BOUND_ULPS * eps * scale / h_safe
+    a_min = np.where(positive_h, np.maximum(a_min, 0.0), 0.0)
+    exponent = -0.5 * (a_min / model.sigma_a) ** 2 - 0.5 * (w_min / model.sigma_omega) ** 2
+    return exponent.max(axis=1)
+
+
+def _scan_bounds(model: "CAT", data: BoundData, table: ScanBoundTable, parts: np.ndarray, target: float) -> np.ndarray:
+    """:func:`scan_bounds` of one chunk of parts with one table."""
+    eps, v0, t = table.eps, model.v0, model.t
+    t2 = t * t
+    reach = v0 * t
+    columns = tuple(parts[:, i, None] for i in range(7))
+    cx, cy, e1x, e1y, e2x, e2y, delta = columns
+    r = np.hypot(cx, cy) + np.hypot(e1x, e1y) + np.hypot(e2x, e2y) + math.sqrt(2.0) * delta  # largest |P|
+    scale = r + reach  # bounds |P - v0 f|
+    # the nodes' accelerations and F over each part (F = hx y - hy x - c)
+    a_lo, a_hi = _affine_ranges(columns, *table.a, BOUND_ULPS * eps * scale / table.h)
+    hx, hy, c = table.f
+    f_lo, f_hi = _affine_ranges(columns, -hy, hx, c, BOUND_ULPS * eps * scale * table.h)
+    width = np.diff(table.omega)
+    # the kernel's thresholds at their largest over the part (|x| + |y| <= sqrt(2) r)
+    chord = t2 * t2 * (0.25 * r + reach / 12.0) * 0.125 * width * width
+    noise_f = kernels.ROUNDING_ULPS * eps * t2 * 0.5 * (math.sqrt(2.0) * r + reach)
+    threshold = (chord + noise_f) * (1.0 + 16.0 * eps)
+    no_root = ((f_lo[:, :-1] > threshold) & (f_lo[:, 1:] > threshold)) | (
+        (f_hi[:, :-1] < -threshold) & (f_hi[:, 1:] < -threshold))
+    a_cut = kernels.PRUNE_SIGMAS * model.sigma_a * (1.0 + 4.0 * eps)
+    pruned = ((a_lo[:, :-1] > a_cut) & (a_lo[:, 1:] > a_cut)) | ((a_hi[:, :-1] < -a_cut) & (a_hi[:, 1:] < -a_cut))
+    part, k = np.nonzero(~(no_root | pruned))
+    m = len(parts)
+    if len(part) == 0:
+        return np.zeros(m)
+    noise_g = kernels.ROUNDING_ULPS * eps * t2 * t * reach * (7.0 / 12.0) * (1.0 - 1e-3)
+    log_peak = math.log(ROOTS_PER_INTERVAL / (2.0 * math.pi * model.sigma_a * model.sigma_omega * noise_g))
+    live = tuple(column[part] for column in columns)
+    scale = scale[part]
+    # the whole interval as one piece, on the table's nodes
+    ends = np.column_stack((k, k + 1))
+    node_min = np.maximum(0.0, np.maximum(a_lo, -a_hi))[part[:, None], ends]
+    exponent = _piece_exponents(model, eps, scale, node_min, table.omega[ends], table.h[ends])
+    bound = np.bincount(part, weights=np.exp(log_peak + exponent), minlength=m)
+    # BOUND_SUBSTEPS pieces where they may bring a part to target: not where the nodes alone,
+    # the largest any piece bound can reach, leave it above
+    w_far = np.maximum(np.abs(table.omega[k]), np.abs(table.omega[k + 1]))
+    best_case = log_peak - 0.5 * (node_min.min(axis=1) / model.sigma_a) ** 2 - 0.5 * (w_far / model.sigma_omega) ** 2
+    hopeful = (bound > target) & (np.bincount(part, weights=np.exp(best_case), minlength=m) <= target)
+    pick = hopeful[part]
+    if data.pieces is not None and pick.any():
+        omega, ax, ay, a0, h = (v[k[pick]] for v in data.pieces)
+        chosen = tuple(column[pick] for column in live)
+        end_min = _least_accelerations(chosen, ax, ay, a0, h, eps, scale[pick])
+        exponent_fine = _piece_exponents(model, eps, scale[pick], end_min, omega, h)
+        fine = np.bincount(part[pick], weights=np.exp(log_peak + exponent_fine), minlength=m)
+        bound = np.where(hopeful, np.minimum(bound, fine), bound)
+    bound *= 1.001
+    # not proved exact: never 0 (the kernel's exp may round up to a subnormal)
+    return np.where(np.bincount(part, minlength=m) > 0, np.maximum(bound, np.finfo(np.float64).smallest_subnormal), 0.0)
+
+
+def plane_bound(model: "CAT", data: BoundData) -> float:
+    """:func:`scan_bounds` over the whole plane: every node interval live, with a = 0."""
+    bound = 0.0
+    for table in data.tables:
+        eps, t = table.eps, model.t
+        lo, hi = table.omega[:-1], table.omega[1:]
+        widen = 8.0 * eps * (np.abs(lo) + np.abs(hi))
+        straddle = (lo - widen <= 0.0) & (hi + widen >= 0.0)
+        w_min = np.where(straddle, 0.0, np.minimum(np.abs(lo), np.abs(hi)) - widen)
+        noise_g = kernels.ROUNDING_ULPS * eps * t**4 * model.v0 * (7.0 / 12.0) * (1.0 - 1e-3)
+        peak = ROOTS_PER_INTERVAL / (2.0 * math.pi * model.sigma_a * model.sigma_omega * noise_g)
+        bound = max(bound, float(np.sum(peak * np.exp(-0.5 * (w_min / model.sigma_omega) ** 2))) * 1.001)
+    return bound
+
+
+def refined_bound(model: "CAT", data: BoundData, parts: np.ndarray, target: float, refinements: int) -> float:
+    """The largest of :func:`scan_bounds` over ``parts``, the parts above ``target`` split into
+    2 x 2 and bounded again up to ``refinements`` times (any level's largest is a bound: its
+    parts cover the region). Refining stops where it cannot reach ``target``: when even the
+    last level's gain, repeated at every level left, would leave the bound above it."""
+    best = math.inf
+    settled = 0.0  # the largest bound of the parts no longer split
+    for level in range(refinements + 1):
+        bounds = scan_bounds(model, data, parts, target)
+        largest = max(settled, float(bounds.max()))
+        gain = best / largest if largest > 0.0 else math.inf
+        best = min(best, largest)
+        hot = bounds > target
+        if (best <= target or level == refinements or 4 * int(hot.sum()) * len(data.nodes) > BOUND_WORK
+                or (level > 0 and min(gain, 1e30) ** (refinements - level) * target < best)):
+            break
+        settled = max(settled, float(bounds[~hot].max(initial=0.0)))
+        parts = split_parts(parts[hot])
+    return best
+
+
+def split_parts(parts: np.ndarray) -> np.ndarray:
+    """Each rectangle (cx, cy, e1x, e1y, e2x, e2y, delta) as its four quarters."""
+    out = []
+    for s1 in (-0.5, 0.5):
+        for s2 in (-0.5, 0.5):
+            q = parts.copy()
+            q[:, 0] += s1 * parts[:, 2] + s2 * parts[:, 4]
+            q[:, 1] += s1 * parts[:, 3] + s2 * parts[:, 5]
+            q[:, 2:6] *= 0.5
+            out.append(q)
+    return np.concatenate(out)
+
+
+def annulus_parts(inner: float, outer: float, sectors: int, delta: float) -> np.ndarray:
+    """Rectangles covering the ranges [inner, outer] about the origin: each sector of
+    2 pi / sectors in its bounding box (along its middle bearing from inner cos(half) to
+    outer, across it +-outer sin(half))."""
+    half = math.pi / sectors
+    bearing = (np.arange(sectors) + 0.5) * 2.0 * half
+    ux, uy = np.sin(bearing), np.cos(bearing)  # bearings clockwise from the local +y
+    near, far = inner * math.cos(half), outer
+    mid, radial, across = 0.5 * (near + far), 0.5 * (far - near), far * math.sin(half)
+    return np.column_stack((mid * ux, mid * uy, radial * ux, radial * uy, across * uy, -across * ux,
+                            np.full(sectors, delta)))
+
+
+def _row_target(floor: float, n_theta: int) -> float:
+    """The largest base-density bound B of a table row with interpolation_bound(n_theta B) <=
+    floor (bisection in log B; a target for the refinement only, not part of any proof)."""
+    lo, hi = -745.0, math.log(max(floor, 1e-300))
+    if interpolation_bound(n_theta * math.exp(lo)) > floor:
+        return 0.0
+    for _ in range(60):
+        mid = 0.5 * (lo + hi)
+        if interpolation_bound(n_theta * math.exp(mid)) <= floor:
+            lo = mid
+        else:
+            hi = mid
+    return math.exp(lo)
 
 
 def _rotate(local: np.ndarray, theta0: np.ndarray) -> np.ndarray:
@@ -221,17 +552,14 @@ class CAT(MotionModel):
             return table_binding(ctx, table, pose, {
                 "k_sigma": self.k_sigma, "truncated_mass": self.truncated_mass, **table.notes(),
             })
-        omegas = scan_nodes(self)
-        table = ctx.zeros((len(omegas), kernels.TABLE_COLUMNS))
-        ctx.launch(kernels.cat_table, dim=len(omegas),
-                   inputs=[ctx.array(omegas), ctx.scalar(self.v0), ctx.scalar(self.t), table])
+        table = scan_table(self, ctx)
         # Newton stops when its step is below a few ulps of the searched range.
         tol = 8.0 * np.finfo(ctx.dtype).eps * self.k_sigma * self.sigma_omega
         params = (
             table, ctx.scalar(self.v0), ctx.scalar(self.t), ctx.scalar(self.sigma_a),
             ctx.scalar(self.sigma_omega), pose, ctx.scalar(tol), ctx.scalar(np.finfo(ctx.dtype).eps),
         )
-        notes = {"scan_nodes": len(omegas), "k_sigma": self.k_sigma, "truncated_mass": self.truncated_mass}
+        notes = {"scan_nodes": table.shape[0], "k_sigma": self.k_sigma, "truncated_mass": self.truncated_mass}
         return KernelBinding(kernels.cat_grid, kernels.cat_points, params, "cat.cat_grid", notes)
 
     def work_estimate(self, cells: int, extent: Extent) -> float:
@@ -304,6 +632,69 @@ class CAT(MotionModel):
             return ctx.numpy(out), notes
 
         return CellPlan(seconds=seconds, run=run, method="CAT lines exact in the acceleration")
+
+    def density_bound(self, x0: float, x1: float, y0: float, y1: float) -> float:
+        """A proved bound of the density the grid kernel computes, in float32 or float64, at any
+        point of the world rectangle [x0, x1] x [y0, y1]; 0.0 where it computes exact zeros
+        (:meth:`bananagrid.protocol.DensityModel.density_bound`). A side at infinity (or beyond
+        FARTHEST_BOUNDED) gets the whole plane's bound, :func:`plane_bound`.
+
+        Without heading noise: :func:`scan_bounds` on the rectangle in the local frame, against
+        the float64 and float32 scan tables (computed once by the kernels' own ``cat_table`` and
+        cached on the model), refined into quarters while above :meth:`density_floor`. A node
+        interval adds nothing where F keeps its sign beyond the kernel's chord threshold or the
+        acceleration is beyond PRUNE_SIGMAS sigma_a on one side at both nodes: exact zeros beyond
+        the fan of lines and beyond 38 sigma_a along them. Elsewhere the bound is finite, and
+        below the floor where every line needs some 12 to 20 sigma_a.
+
+        With heading noise the kernel interpolates a table built for the extent given to
+        ``bind`` (one holding every queried point, so the stencils are centred: the kernel
+        extrapolates beyond its rows, it does not return 0 there), not at hand here. Any such
+        table's stencil reads rows within 2 dr of the point's range, dr <= dr_max
+        (:func:`table_spacing_limits`). A row is the float64 base kernel on a full circle,
+        convolved by FFT: exactly 0 where the base kernel is 0 at every bearing, else at most
+        n_theta times its largest value (|irfft(G rfft(p))_j| <= sum |p| as |G| <= 1). So the
+        base kernel is bounded over the ranges [near - 2.5 dr_max, far + 2.5 dr_max] (half a row
+        and ``delta`` for the float32 row index) by sectors of that annulus, and
+        :func:`interpolation_bound` carries the bound through the log-cubic stencils. The bound
+        is useful only at ranges where no bearing holds the banana (a row through the banana
+        has FFT rounding of the banana's peak at every bearing; nothing proves less there).
+        """
+        x0, x1, y0, y1 = (float(v) for v in (x0, x1, y0, y1))
+        if not (x0 <= x1 and y0 <= y1):
+            raise BananagridError(f"density_bound: rectangle [{x0}, {x1}] x [{y0}, {y1}] must have x0 <= x1, y0 <= y1")
+        ox, oy = self.pose.origin
+        # float32 world coordinates and pose, and the rotation, move a local point by this much
+        # (the float64 kernels' rounding is far smaller)
+        world = max(abs(x0), abs(x1)) + max(abs(y0), abs(y1)) + abs(ox) + abs(oy)
+        delta = COORDINATE_ULPS * float(np.finfo(np.float32).eps) * world
+        data = self.__dict__.get("_bound_data")
+        if data is None:
+            # the heading table is built from the float64 kernel alone
+            dtypes = (np.float64,) if self.sigma_heading > 0.0 else (np.float64, np.float32)
+            data = self.__dict__["_bound_data"] = bound_data(self, dtypes)  # a frozen dataclass: __dict__ caches
+        if not world < FARTHEST_BOUNDED:  # an infinite side, or squares that would overflow
+            whole = plane_bound(self, data)
+            return interpolation_bound(table_spacing_limits(self)[1] * whole) if self.sigma_heading > 0.0 else whole
+        floor = self.density_floor()
+        if self.sigma_heading > 0.0:
+            dr, n_theta = table_spacing_limits(self)
+            near_x = 0.0 if x0 <= ox <= x1 else min(abs(x0 - ox), abs(x1 - ox))
+            near_y = 0.0 if y0 <= oy <= y1 else min(abs(y0 - oy), abs(y1 - oy))
+            near = math.hypot(near_x, near_y) - delta
+            far = math.hypot(max(abs(x0 - ox), abs(x1 - ox)), max(abs(y0 - oy), abs(y1 - oy))) + delta
+            # 2 dr of stencil, half a row more for the rounding of the row index
+            inner, outer = max(0.0, near - 2.5 * dr), far + 2.5 * dr
+            # the lattice's float64 points, in the base model's own frame
+            parts = annulus_parts(inner, outer, HEADING_BOUND_SECTORS, 4.0 * float(np.finfo(np.float64).eps) * outer)
+            row = refined_bound(self, data, parts, _row_target(floor, n_theta), HEADING_BOUND_REFINEMENTS)
+            return 0.0 if row == 0.0 else interpolation_bound(n_theta * row)
+        c, s = math.cos(self.pose.heading), math.sin(self.pose.heading)
+        dx, dy = 0.5 * (x0 + x1) - ox, 0.5 * (y0 + y1) - oy
+        hx, hy = 0.5 * (x1 - x0), 0.5 * (y1 - y0)
+        # world_to_local: (dx c - dy s, dx s + dy c)
+        part = np.array([[dx * c - dy * s, dx * s + dy * c, hx * c, hx * s, -hy * s, hy * c, delta]])
+        return refined_bound(self, data, part, floor, BOUND_REFINEMENTS)
 
     def sample(self, n: int, rng) -> np.ndarray:
         """Draw ``n`` world positions: a and omega from their normal laws, then eq. (1), turned

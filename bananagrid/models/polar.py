@@ -32,6 +32,128 @@ def _angles(name: str, values) -> np.ndarray:
     return values
 
 
+# --- proved density bounds (PolarBanana.density_bound) ------------------------------------------
+# Closed intervals are (lo, hi) tuples of float64. Each helper that stands for one kernel operation
+# widens its exact range outward by one float32 rounding (2^-24 relative, doubled for the float64
+# arithmetic of the endpoints, plus float32's smallest subnormal for an underflow): the float32 or
+# float64 value the kernel computes from operands inside the argument intervals then lies inside.
+
+#: float32's unit roundoff (float64's is finer, so what holds in float32 holds in float64).
+_U = 2.0**-24
+#: float32's smallest subnormal: the absolute error of an operation that underflows.
+_TINY = 2.0**-149
+#: Absolute error of the kernels' sinc derivatives (``common.sinc_derivatives``) at |x| <= 4 in
+#: float32: about 10 u measured; 128 u assumed.
+_SINC_SLACK = 128.0 * _U
+#: Relative error of ``common.atan2_fast`` in float32: 2.5 u measured over 2e6 points (its result
+#: is a rational function of |x| / |y| and pi / 2, pi sums of magnitude >= pi / 4); 16 u assumed.
+_ATAN_SLACK = 16.0 * _U
+#: Intermediates of the kernel stay below this magnitude (or no bound is given): far from
+#: float32's overflow at 3.4e38, so every operation rounds by at most _U relative.
+_NO_OVERFLOW = 1e36
+
+
+def _rounded(lo: float, hi: float) -> tuple[float, float]:
+    """[lo, hi] widened by one float32 rounding."""
+    return lo - 2.0 * _U * abs(lo) - _TINY, hi + 2.0 * _U * abs(hi) + _TINY
+
+
+def _f32(c: float) -> tuple[float, float]:
+    """A float64 constant rounded to float32 (subnormal included)."""
+    return _rounded(c, c)
+
+
+def _add(a, b):
+    return _rounded(a[0] + b[0], a[1] + b[1])
+
+
+def _sub(a, b):
+    return _rounded(a[0] - b[1], a[1] - b[0])
+
+
+def _mul(a, b):
+    p = (a[0] * b[0], a[0] * b[1], a[1] * b[0], a[1] * b[1])
+    return _rounded(min(p), max(p))
+
+
+def _scale(a, k: float):
+    """``a`` times an exact constant ``k`` (a float literal of the kernel)."""
+    return _rounded(min(a[0] * k, a[1] * k), max(a[0] * k, a[1] * k))
+
+
+def _sq(a):
+    """x * x for one x in ``a`` (not the product of two independent values of ``a``): >= 0."""
+    lo, hi = a
+    low = 0.0 if lo <= 0.0 <= hi else min(lo * lo, hi * hi)
+    low, top = _rounded(low, max(lo * lo, hi * hi))
+    return max(0.0, low), top
+
+
+def _widen(a, slack: float):
+    return a[0] - slack, a[1] + slack
+
+
+def _sinc_derivatives(x: float, n: int) -> list[float]:
+    """sinc(x) = sin(x) / x and its derivatives 1..n (n <= 5) in float64: the upward recurrence
+    x s_k + k s_(k-1) = sin^(k)(x) for |x| >= 1.5, the series sum_j (-1)^j x^(2j) / (2j+1)!
+    differentiated term by term below (as ``common.sinc_derivatives``; errors below 1e-14)."""
+    if abs(x) >= 1.5:
+        trig = (math.sin(x), math.cos(x), -math.sin(x), -math.cos(x))
+        out = [trig[0] / x]
+        for k in range(1, n + 1):
+            out.append((trig[k % 4] - k * out[-1]) / x)
+        return out
+    out = [0.0] * (n + 1)
+    a = 1.0  # (-1)^j / (2j+1)!
+    for j in range(14):  # at |x| = 1.5 the 14th term is below 1e-22
+        m = 2 * j
+        falling = 1.0  # m (m-1) ... (m-k+1): d^k/dx^k x^m = falling x^(m-k)
+        for k in range(min(n, m) + 1):
+            out[k] += a * falling * x ** (m - k)
+            falling *= m - k
+        a = -a / ((m + 2) * (m + 3))
+    return out
+
+
+def _span(lo: float, hi: float) -> tuple[float, float]:
+    """Midpoint c and a radius h >= |x - c| for every x of [lo, hi] (float64 rounding included)."""
+    c = 0.5 * (lo + hi)
+    return c, max(hi - c, c - lo) + 1e-15 * (abs(lo) + abs(hi))
+
+
+def _sinc_enclosure(lo: float, hi: float, n: int) -> list[tuple[float, float]]:
+    """Intervals holding sinc^(k)(x), k = 0..n, for every x of [lo, hi].
+
+    sinc(x) = int_0^1 cos(x t) dt, so sinc^(k)(x) = int_0^1 t^k cos^(k)(x t) dt and
+    |sinc^(k)| <= 1 / (k + 1) everywhere. By Taylor's theorem about the midpoint c, with h the
+    half-width, sinc^(k)(x) is within min(h / (k + 2), |sinc^(k+1)(c)| h + h^2 / (2 (k + 3)))
+    of sinc^(k)(c).
+    """
+    c, h = _span(lo, hi)
+    d = _sinc_derivatives(c, n + 1)
+    out = []
+    for k in range(n + 1):
+        top = 1.0 / (k + 1)
+        w = min(h / (k + 2), abs(d[k + 1]) * h + 0.5 * h * h / (k + 3)) + 1e-14
+        out.append((max(-top, d[k] - w), min(top, d[k] + w)))
+    return out
+
+
+def _trig_enclosure(lo: float, hi: float) -> tuple[tuple[float, float], tuple[float, float]]:
+    """Intervals holding cos(x) and sin(x) for every x of [lo, hi] (Taylor about the midpoint,
+    |cos''|, |sin''| <= 1)."""
+    c, h = _span(lo, hi)
+    cc, sc = math.cos(c), math.sin(c)
+    wc = min(h, abs(sc) * h + 0.5 * h * h) + 1e-15
+    ws = min(h, abs(cc) * h + 0.5 * h * h) + 1e-15
+    return (max(-1.0, cc - wc), min(1.0, cc + wc)), (max(-1.0, sc - ws), min(1.0, sc + ws))
+
+
+def _wrap(angle: float) -> float:
+    """``angle`` modulo 2 pi in [-pi, pi)."""
+    return (angle + math.pi) % (2.0 * math.pi) - math.pi
+
+
 @dataclass(frozen=True)
 class PolarBanana(MotionModel):
     """Polar approximation of the CAT density (Sections 2 and 5 of the polar-banana paper).
@@ -220,6 +342,207 @@ class PolarBanana(MotionModel):
             local = np.column_stack((r[keep] * np.sin(angle[ok][keep]), r[keep] * np.cos(angle[ok][keep])))
             out = np.vstack((out, local))
         return self.pose.to_world(out[:n])
+
+    # --- proved bounds (tiled rasterising) -------------------------------------------------------
+
+    def density_bound(self, x0: float, x1: float, y0: float, y1: float) -> float:
+        """A proved upper bound of the density the grid kernel computes, in float32 or float64,
+        at any point of the world rectangle ``[x0, x1] x [y0, y1]``
+        (:meth:`bananagrid.protocol.DensityModel.density_bound`).
+
+        The kernel computes  NORM / (sd r) exp(-(z_phi^2 + z_r^2) / 2),  z_phi = phi / sigma_phi,
+        z_r = (r - mu) / sd,  with mu, sd the rough law or P_mu (8), P_sigma (11) at phi; with
+        heading noise the angle's SD is sigma_theta and mu, sd are E[r | theta], SD[r | theta]
+        of (15)-(16) (order 2, or 4 with the terms after Figure 8) at theta_bar (12). Over the
+        rectangle (u = 2^-24, float32's unit roundoff; float64 rounds less):
+
+        1. r lies in [r_lo, r_hi], the distances of the rectangle's nearest and farthest points
+           from the pose origin, and phi in the arc its corners span seen from there (in two
+           pieces where it crosses +-pi); both are widened for the float32 rounding of the
+           kernel's local point (8 u of the coordinates' sizes), of its sqrt and of its atan2.
+        2. mu and sd are enclosed by interval arithmetic that follows the kernel's operations
+           one by one, each widened by a float32 rounding, from enclosures of sinc, its
+           derivatives, cos and sin over the arc: Taylor's theorem about the arc's midpoint
+           with |sinc^(k)| <= 1 / (k + 1) (sinc(x) = int_0^1 cos(x t) dt) and |cos''| <= 1,
+           plus the kernels' own errors.
+        3. With phi_min the least |phi| of the arc, d the distance from [r_lo, r_hi] to the
+           interval of mu and sd in [sd_lo, sd_hi] (sd_lo > 0), the density is at most
+
+               NORM (1 + 16 u) / (s r_lo) exp(-(1 - 16 u) (phi_min^2 / sigma_phi^2 + d^2 / s^2) / 2)
+
+           with s = d sqrt(1 - 16 u) clamped to [sd_lo, sd_hi] (where (1 / s) exp(-c d^2 / s^2)
+           is largest), plus the float32 subnormals an underflowing exp or product rounds to.
+
+        Returns
+        -------
+        float
+            The bound; ``0.0`` where the kernel provably computes exact zeros: its SD not
+            positive (the improved variant beyond ``sigma_positive_limit``) or its exp below
+            e^-760 (0 in float32 and float64) over the whole rectangle; ``math.inf`` where the
+            rectangle comes within rounding of the pose origin (the density grows like 1 / r
+            there), where the SD may come arbitrarily near 0 (the edge of the improved
+            variant's domain), for non-finite corners, and for parameters whose float32
+            intermediates could overflow.
+        """
+        consts = self._bound_constants()
+        box = (float(x0), float(x1), float(y0), float(y1))
+        if consts is None or not all(map(math.isfinite, box)):
+            return math.inf
+        x0, x1 = sorted(box[:2])
+        y0, y1 = sorted(box[2:])
+        ox, oy = self.pose.origin
+        ex0, ex1, ey0, ey1 = x0 - ox, x1 - ox, y0 - oy, y1 - oy
+        wide_x, wide_y = max(abs(ex0), abs(ex1)), max(abs(ey0), abs(ey1))
+        near = math.hypot(max(ex0, 0.0, -ex1), max(ey0, 0.0, -ey1))
+        far = math.hypot(wide_x, wide_y)
+        # the kernel's local point is within delta of the exact one: float32 world coordinates and
+        # origin (u of each), their difference, the rounded cos and sin of the heading, the rotation
+        delta = 8.0 * _U * (max(abs(x0), abs(x1)) + max(abs(y0), abs(y1)) + abs(ox) + abs(oy) + wide_x + wide_y)
+        if not near > max(2.0 * delta, 1e-18):
+            return math.inf  # at the origin the density grows like 1 / r (float32 x^2 underflows)
+        r_lo = (near - delta) * (1.0 - 4.0 * _U)  # and the kernel's sqrt(x^2 + y^2) rounds
+        r_hi = (far + delta) * (1.0 + 4.0 * _U)
+        # a convex set that misses the origin subtends less than pi: the arc of bearings about
+        # its centre's bearing runs between two of its corners
+        centre = math.atan2(0.5 * (ex0 + ex1), 0.5 * (ey0 + ey1))
+        offsets = [_wrap(math.atan2(ex, ey) - centre) for ex in (ex0, ex1) for ey in (ey0, ey1)]
+        slack = math.asin(delta / near) + 1e-15 + 4e-16 * abs(self.pose.heading)
+        mid = _wrap(centre - self.pose.heading)  # phi = world bearing - heading
+        lo, hi = mid + min(offsets) - slack, mid + max(offsets) + slack
+        if lo < -math.pi:  # atan2 gives angles in [-pi, pi]: an arc across +-pi is two
+            arcs = ((lo + 2.0 * math.pi, math.pi), (-math.pi, hi))
+        elif hi > math.pi:
+            arcs = ((lo, math.pi), (-math.pi, hi - 2.0 * math.pi))
+        else:
+            arcs = ((lo, hi),)
+        return max(self._arc_bound(consts, a, b, r_lo, r_hi) for a, b in arcs)
+
+    def _bound_constants(self):
+        """``(coefficients, their float32 intervals)`` of the kernels, computed once; None where
+        the kernel's intermediates could come near float32's overflow (no bound is proved)."""
+        if "_density_bound_constants" in self.__dict__:
+            return self.__dict__["_density_bound_constants"]
+        coef = kernels.coefficients(self.v0, self.t, self.sigma_a, self.sigma_omega, self.sigma_heading)
+        a, k, isp, scale, curv, t_term, iso, _, ist, _, _, sb2 = coef
+        top = 1.01 * math.pi  # |phi| and |theta_bar| (<= |theta|) the kernel can see
+        inv2 = isp * isp
+        if self.variant == "rough":
+            mean_top, sd_top = a, scale
+        else:  # |sinc^(k)| <= 1 and |scc^(k)| <= 5 / 3 in P_mu (8), P_sigma (11) and derivatives
+            mean_top = a + k * (top * top * inv2 + 1.0 + 8.0 * top * inv2 + 12.0 * inv2) * 5.0 / 3.0
+            sd_top = scale * (1.0 + curv * (t_term + top * top * iso) + 6.0 * curv * iso * top) * 5.0 / 3.0
+        var_top = sd_top * sd_top * (1.0 + 2.0 * sb2) + mean_top * mean_top * (sb2 + sb2 * sb2)
+        biggest = max(mean_top * mean_top, sd_top * sd_top, var_top, top * top * inv2, top * ist * top * ist,
+                      *map(abs, coef))
+        consts = (coef, [_f32(c) for c in coef]) if 4.0 * biggest < _NO_OVERFLOW else None
+        self.__dict__["_density_bound_constants"] = consts  # a frozen dataclass: its __dict__ caches
+        return consts
+
+    def _arc_bound(self, consts, a: float, b: float, r_lo: float, r_hi: float) -> float:
+        """The bound of :meth:`density_bound` where the exact bearing of the kernel's local
+        point lies in [a, b] (within [-pi, pi]) and its computed range in [r_lo, r_hi]."""
+        coef, c32 = consts
+        phi = (a - _ATAN_SLACK * abs(a), b + _ATAN_SLACK * abs(b))  # the kernel's atan2
+        if self.kernel_order == 0:
+            mean, sd = self._law_enclosure(c32, a, b, phi)
+            norm, inv_sigma = coef[kernels.NORM], coef[kernels.INV_SIGMA_PHI]
+        else:
+            mean, var, s0 = self._heading_enclosure(c32, phi)
+            if s0[1] <= 0.0 or var[1] <= 0.0:
+                return 0.0  # the kernel's SD is 0 there, and its density 0
+            sd = (math.sqrt(max(var[0], 0.0)) * (1.0 - _U), math.sqrt(var[1]) * (1.0 + _U))
+            norm, inv_sigma = coef[kernels.THETA_NORM], coef[kernels.INV_SIGMA_THETA]
+        if sd[1] <= 0.0:
+            return 0.0  # the kernel returns 0 where its SD is not positive
+        factor = norm * (1.0 + 16.0 * _U)  # NORM, 1 / sd, 1 / r, exp and three products round
+        if not (sd[0] > 1e-30 and factor / sd[0] < _NO_OVERFLOW):
+            return math.inf  # 1 / sd unbounded, or NORM / sd near float32's overflow
+        most = factor / (sd[0] * r_lo)  # the largest NORM / (sd r)
+        if not most < _NO_OVERFLOW:
+            return math.inf
+        phi_min = 0.0 if phi[0] <= 0.0 <= phi[1] else min(abs(phi[0]), abs(phi[1]))
+        z_phi = phi_min * inv_sigma
+        gap = max(r_lo - mean[1], mean[0] - r_hi, 0.0)
+        shrink = 1.0 - 16.0 * _U  # the rounding of z_phi^2 + z_r^2
+        s = min(max(gap * math.sqrt(shrink), sd[0]), sd[1])
+        z_r = gap / s
+        bound = factor / (s * r_lo) * math.exp(-0.5 * shrink * (z_phi * z_phi + z_r * z_r))
+        z_r = gap / sd[1]
+        least = 0.5 * shrink * (z_phi * z_phi + z_r * z_r)  # the kernel's exponent is at least this
+        # an exp that underflows is exact to 2 subnormals, the product it enters to one (libm's
+        # exp is 0 beyond its underflow threshold: 104 in float32, 746 in float64); a float64
+        # value rounded to float32 to one more
+        if least < 110.0:
+            bound += 4.0 * _TINY * (most + 1.0)
+        elif least < 760.0:
+            bound += 2.0**-1072 * (most + 1.0)
+        if bound > 2.0**-152:
+            bound = bound * (1.0 + _U) + _TINY
+        return bound
+
+    def _law_enclosure(self, c32, a: float, b: float, phi):
+        """Intervals of the kernel's mean and SD of r (``polar_mean_sd``: the rough law, or P_mu
+        (8) and P_sigma (11)) where the exact bearing lies in [a, b] and the computed one in
+        ``phi``. The kernel's sinc is sin / phi with sin = x / r (within 40 u of sinc), its cos
+        y / r (8 u)."""
+        sinc = _widen(_sinc_enclosure(a, b, 0)[0], 40.0 * _U)
+        if self.variant == "rough":
+            return _mul(c32[kernels.MEAN_SINC], sinc), c32[kernels.SD_SCALE]
+        cos = _widen(_trig_enclosure(a, b)[0], 8.0 * _U)
+        one = (1.0, 1.0)
+        scc = _mul(_sub(_scale(sinc, 4.0), cos), _f32(1.0 / 3.0))  # (7), as common.scc_of
+        z = _mul(phi, c32[kernels.INV_SIGMA_PHI])
+        mean = _add(_mul(c32[kernels.MEAN_SINC], sinc), _mul(_mul(c32[kernels.MEAN_SCC], _sub(_sq(z), one)), scc))
+        width = _sub(c32[kernels.SD_T_TERM], _mul(_sq(phi), c32[kernels.INV_SIGMA_OMEGA_SQ]))
+        sd = _mul(_mul(c32[kernels.SD_SCALE], _add(one, _mul(c32[kernels.SD_CURVATURE], width))), scc)
+        return mean, sd
+
+    def _heading_enclosure(self, c32, phi):
+        """Intervals of the kernel's E[r | theta] and Var[r | theta] ((15), (16), order 4's terms)
+        and of P_sigma(theta_bar) where the computed angle lies in ``phi``
+        (``polar_law_derivatives`` and ``polar_heading_mean_sd``, operation by operation)."""
+        x = _mul(phi, c32[kernels.SHRINK])  # theta_bar (12)
+        d = [_widen(iv, _SINC_SLACK) for iv in _sinc_enclosure(x[0], x[1], 4)]
+        a = c32[kernels.MEAN_SINC]
+        zero, one = (0.0, 0.0), (1.0, 1.0)
+        if self.variant == "rough":
+            m0, m1, m2, m3, m4 = (_mul(a, dk) for dk in d)
+            s0, s1, s2 = c32[kernels.SD_SCALE], zero, zero
+        else:
+            cos, sin = (_widen(iv, 4.0 * _U) for iv in _trig_enclosure(x[0], x[1]))
+            c0 = _scale(_sub(_scale(d[0], 4.0), cos), 1.0 / 3.0)  # scc and its derivatives (7)
+            c1 = _scale(_add(_scale(d[1], 4.0), sin), 1.0 / 3.0)
+            c2 = _scale(_add(_scale(d[2], 4.0), cos), 1.0 / 3.0)
+            c3 = _scale(_sub(_scale(d[3], 4.0), sin), 1.0 / 3.0)
+            c4 = _scale(_sub(_scale(d[4], 4.0), cos), 1.0 / 3.0)
+            inv_sp2 = _sq(c32[kernels.INV_SIGMA_PHI])
+            q = _sub(_mul(_sq(x), inv_sp2), one)
+            q1 = _mul(_scale(x, 2.0), inv_sp2)
+            q2 = _scale(inv_sp2, 2.0)
+            k = c32[kernels.MEAN_SCC]
+            m0 = _add(_mul(a, d[0]), _mul(_mul(k, q), c0))
+            m1 = _add(_mul(a, d[1]), _mul(k, _add(_mul(q, c1), _mul(q1, c0))))
+            m2 = _add(_mul(a, d[2]), _mul(k, _add(_add(_mul(q, c2), _mul(_scale(q1, 2.0), c1)), _mul(q2, c0))))
+            m3 = _add(_mul(a, d[3]), _mul(k, _add(_add(_mul(q, c3), _mul(_scale(q1, 3.0), c2)),
+                                                  _mul(_scale(q2, 3.0), c1))))
+            m4 = _add(_mul(a, d[4]), _mul(k, _add(_add(_mul(q, c4), _mul(_scale(q1, 4.0), c3)),
+                                                  _mul(_scale(q2, 6.0), c2))))
+            curv, u = c32[kernels.SD_CURVATURE], c32[kernels.INV_SIGMA_OMEGA_SQ]
+            w = _add(one, _mul(curv, _sub(c32[kernels.SD_T_TERM], _mul(_sq(x), u))))
+            w2 = _mul(_scale(curv, -2.0), u)
+            w1 = _mul(w2, x)
+            scale = c32[kernels.SD_SCALE]
+            s0 = _mul(_mul(scale, w), c0)
+            s1 = _mul(scale, _add(_mul(w, c1), _mul(w1, c0)))
+            s2 = _mul(scale, _add(_add(_mul(w, c2), _mul(_scale(w1, 2.0), c1)), _mul(w2, c0)))
+        sb2 = c32[kernels.SIGMA_BAR_SQ]
+        mean = _add(m0, _mul(_scale(m2, 0.5), sb2))
+        var = _add(_sq(s0), _mul(_sq(m1), sb2))
+        if self.kernel_order == 4:
+            mean = _add(mean, _mul(_mul(_scale(m4, 0.125), sb2), sb2))
+            fourth = _add(_scale(_sq(m2), 0.5), _mul(m1, m3))
+            var = _add(_add(var, _mul(_add(_sq(s1), _mul(s0, s2)), sb2)), _mul(_mul(fourth, sb2), sb2))
+        return mean, var, s0
 
     # --- kernels ------------------------------------------------------------------------------
 

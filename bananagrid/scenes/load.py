@@ -194,12 +194,15 @@ class Scene:
     scale_error: float = 0.0
     cell_probabilities: bool = False
 
-    def with_step(self, step: float) -> "Scene":
-        """A copy whose grid covers the same bounds with square cells of ``step`` metres."""
+    def with_step(self, step: float, *, tiled: bool = False) -> "Scene":
+        """A copy whose grid covers the same bounds with square cells of ``step`` metres (larger
+        than memory takes only when ``tiled``)."""
         step = positive("step", step)
         x, y = self.bounds
         try:
             grid = Grid.from_bounds(x=x, y=y, step=step)
+            if not tiled:
+                grid.check_in_memory()
         except BananagridError as exc:
             raise BananagridError(f"{self.source}: grid at step {step:g} m: {exc}") from None
         return replace(self, grid=grid)
@@ -215,8 +218,8 @@ class Scene:
 # --- entry points -----------------------------------------------------------------------------
 
 
-def load_scene(path: str | os.PathLike, *, kinds: Registry = MODEL_KINDS) -> Scene | PresenceScene:
-    """Read and validate the scene file at ``path`` (``kinds`` as for :func:`parse_scene`).
+def load_scene(path: str | os.PathLike, *, kinds: Registry = MODEL_KINDS, tiled: bool = False) -> Scene | PresenceScene:
+    """Read and validate the scene file at ``path`` (``kinds`` and ``tiled`` as for :func:`parse_scene`).
 
     Raises
     ------
@@ -236,11 +239,15 @@ def load_scene(path: str | os.PathLike, *, kinds: Registry = MODEL_KINDS) -> Sce
         text = data.decode("utf-8")
     except UnicodeDecodeError as exc:
         raise BananagridError(f"{path}: not UTF-8 text (byte {exc.start})") from None
-    return parse_scene(text, source=str(path), kinds=kinds)
+    return parse_scene(text, source=str(path), kinds=kinds, tiled=tiled)
 
 
-def parse_scene(text: str, source: str = "<string>", *, kinds: Registry = MODEL_KINDS) -> Scene | PresenceScene:
+def parse_scene(text: str, source: str = "<string>", *, kinds: Registry = MODEL_KINDS,
+                tiled: bool = False) -> Scene | PresenceScene:
     """Parse and validate scene TOML ``text``; ``source`` names it in error messages.
+
+    ``tiled``: the scene will be computed in tiles (``bananagrid run --zarr``), so its grid may
+    exceed :data:`~bananagrid.domains.grid.MAX_CELLS` (up to ``MAX_TILED_CELLS``).
 
     ``kinds``: the model kinds layers may use (default: the registry's; e.g.
     ``MODEL_KINDS.with_kinds(ModelKind("mine", Mine))`` adds a model of your own).
@@ -254,7 +261,7 @@ def parse_scene(text: str, source: str = "<string>", *, kinds: Registry = MODEL_
     try:
         if "array" in doc:  # a presence scene: bananagrid.scenes.presence
             return build_presence_scene(doc, text, source)
-        return _build(doc, text, source, kinds)
+        return _build(doc, text, source, kinds, tiled)
     except SceneKeyError as exc:
         raise BananagridError(f"{source}: {exc}") from None
 
@@ -262,7 +269,7 @@ def parse_scene(text: str, source: str = "<string>", *, kinds: Registry = MODEL_
 # --- building the scene -----------------------------------------------------------------------
 
 
-def _build(doc: dict, text: str, source: str, kinds: Registry) -> Scene:
+def _build(doc: dict, text: str, source: str, kinds: Registry, tiled: bool = False) -> Scene:
     """Validate the parsed document table by table and assemble the Scene."""
     check_keys(doc, TOP_KEYS, "")
     geo, max_scale_error = _geo(keys.table(doc, "geo")) if "geo" in doc else (None, 0.0)
@@ -272,7 +279,7 @@ def _build(doc: dict, text: str, source: str, kinds: Registry) -> Scene:
     title = keys.text(head, "title", "scene", default=name)
     description = keys.text(head, "description", "scene", default="")
     times = _times(head["times"]) if "times" in head else None
-    bounds, grid = _grid(keys.table(doc, "grid", required=True))
+    bounds, grid = _grid(keys.table(doc, "grid", required=True), tiled)
     scale_error = 0.0
     if geo is not None:
         try:
@@ -362,8 +369,9 @@ def _times(value) -> tuple[float, ...]:
     return times
 
 
-def _grid(table: dict) -> tuple[tuple, Grid]:
-    """``[grid]``: bounds ``x``, ``y`` and ``step`` (or ``dx`` and ``dy``), all metres."""
+def _grid(table: dict, tiled: bool = False) -> tuple[tuple, Grid]:
+    """``[grid]``: bounds ``x``, ``y`` and ``step`` (or ``dx`` and ``dy``), all metres; a grid
+    larger than memory takes only when ``tiled``."""
     check_keys(table, GRID_KEYS, "grid")
     x = keys.pair(table, "x", "grid", required=True)
     y = keys.pair(table, "y", "grid", required=True)
@@ -373,7 +381,10 @@ def _grid(table: dict) -> tuple[tuple, Grid]:
     if "step" not in steps and len(steps) != 2:
         raise SceneKeyError("grid: step (m) is required (or both dx and dy)")
     try:
-        return (x, y), Grid.from_bounds(x=x, y=y, **steps)
+        grid = Grid.from_bounds(x=x, y=y, **steps)
+        if not tiled:
+            grid.check_in_memory()
+        return (x, y), grid
     except BananagridError as exc:
         raise SceneKeyError(keys.prefixed(str(exc), "grid", GRID_KEYS)) from None
 

@@ -25,7 +25,8 @@ from ..analysis.coverage import coverage_warnings, level_warnings, peak_location
 from ..atomic import partial_path
 from ..engine.grid_cells import probability_work
 from ..engine.memory import check_memory
-from ..engine.rasterise import GridExtent, rasterise
+from ..engine.grid_kernel import GridExtent
+from ..engine.rasterise import rasterise
 from ..engine.warp_runtime import check_threads
 from ..engine.work import check_work
 from ..geo.dataset import raster_dataset, write_netcdf

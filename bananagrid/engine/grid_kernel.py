@@ -1,0 +1,91 @@
+"""The grid kernel of a model over a whole grid or a block of one: one context, one binding."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from ..domains.grid import Grid
+from ..protocol import DensityModel
+from .precision import working_dtype
+from .warp_runtime import WarpContext
+
+__all__ = ["GridExtent", "grid_context", "grid_block"]
+
+
+class GridExtent:
+    """The cell centres of a grid, seen from an origin."""
+
+    def __init__(self, grid: Grid):
+        self.grid = grid
+
+    def radii(self, origin) -> tuple[float, float]:
+        """Least and greatest distance from ``origin`` to the grid's cell centres."""
+        ox, oy = origin
+        x0, x1 = self.grid.x[0] - ox, self.grid.x[-1] - ox
+        y0, y1 = self.grid.y[0] - oy, self.grid.y[-1] - oy
+        near_x = 0.0 if x0 <= 0.0 <= x1 else min(abs(x0), abs(x1))
+        near_y = 0.0 if y0 <= 0.0 <= y1 else min(abs(y0), abs(y1))
+        far_x, far_y = max(abs(x0), abs(x1)), max(abs(y0), abs(y1))
+        return math.hypot(near_x, near_y), math.hypot(far_x, far_y)
+
+
+def grid_context(model: DensityModel, grid: Grid, dtype=np.float64, device: str = "cpu", threads=None):
+    """``(asked dtype, context, extent)`` of a rasterise of ``model`` on ``grid``: the kernels run in
+    the working dtype of the whole grid (:func:`~bananagrid.engine.precision.working_dtype`), so
+    that a tile of it computes exactly what the whole grid computes there."""
+    asked = WarpContext(dtype, device, threads).dtype
+    extent = GridExtent(grid)
+    ctx = WarpContext(working_dtype(model, asked, extent.radii((0.0, 0.0))[1]), device, threads)
+    return asked, ctx, extent
+
+
+def grid_block(ctx: WarpContext, binding, grid: Grid, rows: tuple[int, int] | None = None,
+               cols: tuple[int, int] | None = None) -> np.ndarray:
+    """The grid kernel of ``binding`` at the cell centres of rows ``rows[0]:rows[1]`` and
+    columns ``cols[0]:cols[1]`` of ``grid`` (default all), in the context's dtype.
+
+    Each cell's value depends on its coordinates only, except for kernels that work in tiles of
+    ``binding.tile_rows`` cells (Butterly): their bands start on multiples of the tile side and
+    they take the grid's steps, so that a block whose corner lies on such a multiple computes
+    the same tiles as the whole grid.
+    """
+    rows = (0, grid.ny) if rows is None else rows
+    cols = (0, grid.nx) if cols is None else cols
+    xs_host, ys_host = grid.x[cols[0]:cols[1]], grid.y[rows[0]:rows[1]]
+    ny, nx = len(ys_host), len(xs_host)
+    ctx.load(binding.grid_kernel)
+    xs = ctx.array(xs_host)
+    ys = ctx.array(ys_host)
+    if ctx.cpu:
+        values = np.empty((ny, nx), dtype=ctx.dtype)  # every cell is written by the kernel
+        out = ctx.shared(values)
+    else:
+        out = ctx.zeros((ny, nx))
+
+    # row-looping kernels take whole rows per thread on the CPU, one cell per thread on a GPU
+    columns = (nx if ctx.cpu else 1) if binding.row_loop else None
+    bands = ctx.bands(ny, binding.bands_per_thread, align=max(1, binding.tile_rows))
+    scratch, quads = None, None
+    if binding.scratch_width:  # one work row per band: a band's rows run one after another
+        scratch = ctx.empty((len(bands), binding.scratch_width))
+        band_of = {r0: k for k, (r0, _) in enumerate(bands)}
+    if binding.quad_width:
+        quads = ctx.empty((len(bands), binding.quad_width), dtype=ctx.vector(4))
+    tile = (binding.tile_rows if ctx.cpu else 1) if binding.tile_rows else None
+
+    def launch_band(r0, r1):
+        if columns is None:
+            dim, head = (r1 - r0, nx), [xs, ys, r0]
+        elif tile is None:
+            dim, head = (r1 - r0, -(-nx // columns)), [xs, ys, r0, columns]
+        else:
+            dim = (-(-(r1 - r0) // tile), -(-nx // columns))
+            head = [xs, ys, r0, r1, tile, columns, ctx.scalar(grid.dx), ctx.scalar(grid.dy)]
+        extra = [] if scratch is None else [scratch] + ([] if quads is None else [quads]) + [band_of[r0]]
+        ctx.launch(binding.grid_kernel, dim=dim, inputs=[*head, *binding.params, *extra, out])
+
+    ctx.run_bands(launch_band, bands)
+    ctx.synchronize()
+    return values if ctx.cpu else out.numpy()

@@ -1,0 +1,211 @@
+"""Zarr stores of maps too large for memory, written block by block, whole or not at all.
+
+:func:`write_zarr` writes a scene's maps (panels ``(layer, t, raster)``; tiled rasters with lazy
+Dask values, or rasters in memory) as the CF dataset of :func:`~bananagrid.geo.dataset.raster_dataset`
+(coordinates, CRS, latitude and longitude, times, provenance) to a Zarr v3 store that
+``xarray.open_zarr`` reads. The map variables are chunked as the tiles were computed
+(``(1, rows, columns)``), a block that is all zeros (a skipped tile) is not written (Zarr's fill
+value is 0, so it reads as zeros), and each layer's captured mass is computed in the same
+pass as its blocks. The store is written under a hidden temporary name beside ``path`` and
+renamed when complete; on any failure (a worker lost for good, a full disk, an interrupt) the
+temporary store is removed and ``path`` is left as it was.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import shutil
+import sys
+import warnings
+from collections.abc import Sequence
+from pathlib import Path
+
+import numpy as np
+
+from ..atomic import partial_path
+from ..validate import BananagridError
+from ..version import __version__
+from .dataset import DENSITY_UNITS, raster_dataset
+from .libraries import CLUSTER_EXTRA, CLUSTER_PURPOSE, require
+
+__all__ = ["write_zarr", "write_batch_zarr", "ZARR_FORMAT", "compute_with_progress"]
+
+#: Zarr format of the stores (v3: its ``fill_value`` is separate from CF's ``_FillValue``, so a
+#: block never written reads as 0 and no zero is read as missing).
+ZARR_FORMAT = 3
+
+
+def compute_with_progress(*collections, progress: bool = False):
+    """``dask.compute(*collections)`` on the active scheduler (a ``distributed.Client`` if one is
+    current), with a progress bar on stderr when ``progress``."""
+    dask = require("dask", CLUSTER_PURPOSE, CLUSTER_EXTRA)
+    client = _current_client()
+    if client is None:
+        diagnostics = require("dask.diagnostics", CLUSTER_PURPOSE, CLUSTER_EXTRA)
+        bar = diagnostics.ProgressBar(out=sys.stderr) if progress else contextlib.nullcontext()
+        with bar:
+            return dask.compute(*collections)
+    futures = client.compute(list(collections))
+    if progress:
+        bar = require("distributed.diagnostics.progressbar", CLUSTER_PURPOSE, CLUSTER_EXTRA)
+        with contextlib.redirect_stdout(sys.stderr):  # the summary table owns stdout
+            bar.progress(futures, notebook=False)
+            print(file=sys.stderr)
+    return tuple(client.gather(futures))
+
+
+def _current_client():
+    """The ``distributed.Client`` Dask would compute on now, or None (Dask's own threads or
+    processes, as ``dask.config`` says: a ``dask.config.set(scheduler=...)`` overrides a client)."""
+    base = require("dask.base", CLUSTER_PURPOSE, CLUSTER_EXTRA)
+    client = getattr(base.get_scheduler(), "__self__", None)
+    try:
+        distributed = require("distributed", CLUSTER_PURPOSE, CLUSTER_EXTRA)
+    except BananagridError:
+        return None
+    return client if isinstance(client, distributed.Client) else None
+
+
+def write_zarr(path: str | os.PathLike, panels: Sequence, frame=None, *, title: str = "", source: str = "",
+               progress: bool = False) -> Path:
+    """Write a scene's maps to the Zarr store ``path`` (a directory), whole or not at all.
+
+    Parameters
+    ----------
+    path : path-like
+        The store; its parent directory must exist. An existing store there is replaced once
+        the new one is complete.
+    panels : sequence of (str, float, Raster or TiledRaster)
+        As for :func:`~bananagrid.geo.dataset.raster_dataset`.
+    frame : GeoFrame, optional
+        Default: the rasters' own.
+    title, source : str
+        Global attributes.
+    progress : bool
+        A progress bar on stderr while the blocks are computed and written.
+
+    Returns
+    -------
+    Path
+        ``path``.
+
+    Raises
+    ------
+    BananagridError
+        A missing directory, ``path`` an existing file, a missing library of the ``cluster``
+        extra, or any failure while computing or writing (one line; nothing is left behind).
+    """
+    xr = require("xarray", CLUSTER_PURPOSE, CLUSTER_EXTRA)
+    final = _check_target(path)
+    dataset = raster_dataset(panels, frame, title=title, source=source)
+    if not isinstance(dataset, xr.Dataset):  # pragma: no cover - raster_dataset always returns one
+        raise BananagridError("write_zarr: expected the maps as an xarray.Dataset")
+    encoding = {}
+    for name, var in dataset.variables.items():
+        keep = {k: v for k, v in var.encoding.items() if k in ("units", "calendar", "dtype")}
+        if var.chunks is not None and name in dataset.data_vars and var.ndim == 3:
+            # fill value 0: the blocks Zarr does not write (all zeros) read back as zeros
+            keep.update(fill_value=np.zeros((), dtype=var.dtype)[()], chunks=tuple(c[0] for c in var.chunks),
+                        compressors=_compressors())
+        encoding[name] = keep
+    _write_dataset(dataset, final, encoding, progress)
+    return final
+
+
+def write_batch_zarr(path: str | os.PathLike, values, bounds: np.ndarray, mass, *, progress: bool = False) -> Path:
+    """Write a sharded batch to the Zarr store ``path``, whole or not at all: ``density``
+    (hypothesis, y, x), the density per m^2 at the cell centres of each hypothesis' own grid;
+    ``bounds`` (hypothesis, edge), its grid's outer edges x0, x1, y0, y1 (m); ``mass``
+    (hypothesis), its captured mass. Errors as for :func:`write_zarr`."""
+    xr = require("xarray", CLUSTER_PURPOSE, CLUSTER_EXTRA)
+    final = _check_target(path)
+    h, ny, nx = values.shape
+    dataset = xr.Dataset(
+        {
+            "density": (("hypothesis", "y", "x"), values, {
+                "long_name": "probability density of the target's position at the cell centre of the hypothesis' grid",
+                "units": DENSITY_UNITS}),
+            "bounds": (("hypothesis", "edge"), bounds, {
+                "long_name": "outer edges x0, x1, y0, y1 of the hypothesis' grid of ny x nx cells", "units": "m"}),
+            "mass": (("hypothesis",), mass, {"long_name": "probability mass the grid captured", "units": "1"}),
+        },
+        attrs={"title": f"{h:,} hypotheses on grids of {ny} x {nx} cells", "source": f"bananagrid {__version__}",
+               "bananagrid_version": __version__},
+    )
+    encoding = {"density": {"chunks": tuple(c[0] for c in values.chunks), "compressors": _compressors()}}
+    _write_dataset(dataset, final, encoding, progress)
+    return final
+
+
+def _compressors() -> tuple:
+    """Blosc LZ4 with byte shuffling: GB/s per core, so that writing never holds up the kernels
+    (Zarr's default Zstandard took as long as computing a polar batch)."""
+    codecs = require("zarr.codecs", CLUSTER_PURPOSE, CLUSTER_EXTRA)
+    return (codecs.BloscCodec(cname="lz4", clevel=5, shuffle="shuffle"),)
+
+
+def _check_target(path) -> Path:
+    require("zarr", CLUSTER_PURPOSE, CLUSTER_EXTRA)
+    final = Path(path)
+    if not final.parent.is_dir():
+        raise BananagridError(f"{final}: cannot write the Zarr store: directory {final.parent} does not exist")
+    if final.exists() and not final.is_dir():
+        raise BananagridError(f"{final}: cannot write the Zarr store: it is a file")
+    return final
+
+
+def _write_dataset(dataset, final: Path, encoding: dict, progress: bool) -> None:
+    """Write ``dataset`` to a temporary store beside ``final``, computing its Dask variables in
+    one pass, and rename it to ``final`` when complete; on any failure remove it."""
+    partial = partial_path(final)
+    try:
+        with warnings.catch_warnings():
+            # consolidated metadata (one read opens the store) is zarr-python's extension of v3: it warns
+            warnings.filterwarnings("ignore", message=".*[Cc]onsolidated metadata.*")
+            # the structure, the attributes and the variables in memory; the lazy ones (a map's blocks,
+            # masses, latitudes) are stored below, so that a skipped block is never handed to Zarr
+            dataset.to_zarr(partial, mode="w-", zarr_format=ZARR_FORMAT, consolidated=True, compute=False,
+                            encoding=encoding)
+        lazy = {name: var.data for name, var in dataset.variables.items() if var.chunks is not None}
+        if lazy:
+            da = require("dask.array", CLUSTER_PURPOSE, CLUSTER_EXTRA)
+            zarr = require("zarr", CLUSTER_PURPOSE, CLUSTER_EXTRA)
+            group = zarr.open_group(partial, mode="r+", zarr_format=ZARR_FORMAT)
+            stored = da.store(list(lazy.values()), [_SkipZeros(group[name]) for name in lazy], lock=False,
+                              compute=False)
+            compute_with_progress(stored, progress=progress)
+        _replace(partial, final)
+    except BaseException as exc:
+        shutil.rmtree(partial, ignore_errors=True)
+        if isinstance(exc, (BananagridError, KeyboardInterrupt, SystemExit)) or not isinstance(exc, Exception):
+            raise
+        reason = (str(exc) or type(exc).__name__).splitlines()[0]
+        raise BananagridError(f"{final}: cannot write the Zarr store ({type(exc).__name__}: {reason})") from None
+
+
+class _SkipZeros:
+    """A Zarr array as a target of ``dask.array.store`` that leaves out the blocks of a skipped
+    tile: :class:`~bananagrid.engine.tiles.TilePlan` gives them as one zero seen through the whole
+    block (every stride 0), and Zarr's fill value 0 already reads as such a block. Handing Zarr
+    16 MiB of zeros only for it to find them empty cost 26 ms a block."""
+
+    def __init__(self, array):
+        self.array = array
+
+    def __setitem__(self, key, value) -> None:
+        if value.size and not any(value.strides) and not value.flat[0]:
+            return
+        self.array[key] = value
+
+
+def _replace(partial: Path, final: Path) -> None:
+    """Make the complete store ``partial`` the store ``final``: a directory cannot be renamed
+    over a non-empty one, so an old store is first moved aside, then removed."""
+    old = None
+    if final.exists():
+        old = partial_path(final).with_suffix(".old")
+        os.replace(final, old)
+    os.replace(partial, final)
+    if old is not None:
+        shutil.rmtree(old, ignore_errors=True)
