@@ -344,16 +344,6 @@ class GridPresence:
     provenance: dict = field(default_factory=dict)
 
 
-def _block_sum(block: np.ndarray) -> np.ndarray:
-    """A block's sum in float64, as a 1 x 1 array; a skipped block (one value seen through every
-    cell, all strides 0) without reading each cell."""
-    if block.size and not any(block.strides):
-        total = float(block.flat[0]) * block.size
-    else:
-        total = np.sum(block, dtype=np.float64)
-    return np.full((1,) * block.ndim, total)
-
-
 def _default_t(provenance: dict) -> float:
     given = provenance.get("t", 0.0)
     return float(given) if isinstance(given, (int, float)) and not isinstance(given, bool) else 0.0
@@ -404,13 +394,22 @@ class TiledRaster:
         """Cells in skipped blocks (never computed)."""
         return self.grid.nx * self.grid.ny - int(self.provenance["cells_computed"])
 
+    def computed_blocks(self):
+        """``(i, j, (row0, row1), (col0, col1))`` of every block that is not skipped."""
+        edges = [np.concatenate(([0], np.cumsum(c))) for c in self.values.chunks]
+        for i, j in zip(*np.nonzero(~self.skipped)):
+            yield (int(i), int(j), (int(edges[0][i]), int(edges[0][i + 1])),
+                   (int(edges[1][j]), int(edges[1][j + 1])))
+
     @property
     def lazy_mass(self):
-        """The captured mass, ``sum(values) * dx * dy`` (summed block by block in float64), as a
-        lazy Dask scalar, computed with the values by :meth:`to_zarr` in the same pass."""
-        sums = self.values.map_blocks(_block_sum, chunks=tuple((1,) * len(c) for c in self.values.chunks),
-                                      dtype=np.float64)
-        return sums.sum() * self.grid.cell_area
+        """The captured mass, ``sum(values) * dx * dy`` (each computed block summed in float64;
+        the skipped ones are 0 and not even tasks), as a lazy Dask scalar, computed with the
+        values by :meth:`to_zarr` in the same pass."""
+        sums = [self.values.blocks[i, j].sum(dtype=np.float64) for i, j, _, _ in self.computed_blocks()]
+        if not sums:
+            return self.values[:0, :0].sum(dtype=np.float64)
+        return np.stack(sums).sum() * self.grid.cell_area
 
     @property
     def mass(self) -> float:

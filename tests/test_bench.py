@@ -140,10 +140,11 @@ def test_bench_times_cell_probabilities_against_their_densities(tmp_path, monkey
 
 
 def test_bench_cluster_rows(tmp_path, capsys):
-    """The cluster rows at a small size: a 4096 x 4096 Butterly map into Zarr and 3,000 polar
-    hypotheses sharded over 2 workers; the records say what was computed and skipped."""
+    """The cluster rows at a small size: an 8192 x 8192 Butterly map into Zarr, a 4096 x 4096 one
+    its support fills, and 3,000 polar hypotheses sharded over 2 workers; the records say what was computed and skipped."""
     out = tmp_path / "cluster.json"
-    assert bench.main(["--cluster", "--cluster-side", "8192", "--hypotheses", "3000", "--json", str(out)]) == 0
+    assert bench.main(["--cluster", "--cluster-side", "8192", "--dense-side", "4096", "--hypotheses", "3000",
+                       "--json", str(out)]) == 0
     text = capsys.readouterr().out
     assert "zarr: 8,192 x 8,192 float32 Butterly" in text and "hypotheses: 3,000 polar bananas" in text
     result = json.loads(out.read_text())
@@ -151,6 +152,10 @@ def test_bench_cluster_rows(tmp_path, capsys):
     assert zarr["blocks"] == 16 and zarr["cells_computed"] + zarr["cells_skipped"] == 8192**2
     assert 0 < zarr["blocks_skipped"] < zarr["blocks"]  # the 1.2 km ring reaches the central blocks only
     assert len(zarr["worker_peak_rss_mib"]) == 2 and max(zarr["worker_peak_rss_mib"]) < 4096
+    dense = result["cluster_dense"]
+    assert dense["blocks"] == 4 and dense["blocks_skipped"] == 0 and dense["cells_computed"] == 4096**2
+    assert dense["in_memory_seconds"] > 0 and dense["computed_cells_per_second_per_core"] > 0
+    assert "zarr-dense: 4,096 x 4,096 float32 cells inside the same ring" in text
     hyps = result["cluster_hypotheses"]
     assert hyps["hypotheses"] == 3000 and hyps["in_process"] == 3000 and hyps["sharded_seconds"] > 0
     assert result["records"] == []  # --cluster alone: no kernel rows

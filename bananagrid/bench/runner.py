@@ -466,12 +466,15 @@ def _parser() -> argparse.ArgumentParser:
         "cluster rows (the cluster extra; minutes)",
         "--cluster measures tiles and hypothesis shards on a fresh local Dask cluster: a Butterly map on a "
         "SIDE x SIDE float32 grid into Zarr (seconds, blocks and cells computed and skipped, each worker's peak "
-        "memory), and N polar hypotheses on 64 x 64 grids sharded over the workers against the single-process "
+        "memory), the same map on a grid its support fills (a computed cell's cost into Zarr against the "
+        "in-memory rasterise on one thread), and N polar hypotheses on 64 x 64 grids sharded over the workers against the single-process "
         "batch. Alone (without --kernels) it runs only these rows.",
     )
     c.add_argument("--cluster", action="store_true", help="run the cluster rows")
     c.add_argument("--cluster-side", type=int, default=cluster.CLUSTER_SIDE, metavar="SIDE",
                    help=f"side of the zarr row's grid, cells of 1 m (default {cluster.CLUSTER_SIDE})")
+    c.add_argument("--dense-side", type=int, default=cluster.DENSE_SIDE, metavar="SIDE",
+                   help=f"side of the zarr-dense row's grid, every block computed (default {cluster.DENSE_SIDE})")
     c.add_argument("--hypotheses", type=int, default=cluster.HYPOTHESES, metavar="N",
                    help=f"hypotheses of the sharded row (default {cluster.HYPOTHESES:,}; the single-process batch "
                    f"takes min(N, {cluster.IN_PROCESS_HYPOTHESES:,}))")
@@ -493,8 +496,9 @@ def main(argv: list[str] | None = None) -> int:
     for name in ("threads", "repeat", "baseline_stride", "workers", "hypotheses"):
         if getattr(args, name) < 1:
             problems.append(f"--{name.replace('_', '-')} = {getattr(args, name)}: must be >= 1")
-    if args.cluster_side < 64:
-        problems.append(f"--cluster-side = {args.cluster_side}: must be >= 64")
+    for name in ("cluster_side", "dense_side"):
+        if getattr(args, name) < 64:
+            problems.append(f"--{name.replace('_', '-')} = {getattr(args, name)}: must be >= 64")
     if args.cluster:
         try:
             check_memory_limit(args.memory_limit)
@@ -525,6 +529,8 @@ def main(argv: list[str] | None = None) -> int:
     if args.cluster:
         result["cluster_zarr"] = cluster.zarr_row(side=args.cluster_side, workers=args.workers,
                                                   memory_limit=args.memory_limit)
+        result["cluster_dense"] = cluster.dense_row(side=args.dense_side, workers=args.workers,
+                                                    memory_limit=args.memory_limit)
         result["cluster_hypotheses"] = cluster.hypotheses_row(
             hypotheses=args.hypotheses, in_process=min(args.hypotheses, cluster.IN_PROCESS_HYPOTHESES),
             workers=args.workers, memory_limit=args.memory_limit)

@@ -27,6 +27,7 @@ from ..atomic import partial_path
 from ..validate import BananagridError
 from ..version import __version__
 from .dataset import DENSITY_UNITS, raster_dataset
+from .panels import check_panels
 from .libraries import CLUSTER_EXTRA, CLUSTER_PURPOSE, require
 
 __all__ = ["write_zarr", "write_batch_zarr", "ZARR_FORMAT", "compute_with_progress"]
@@ -109,8 +110,29 @@ def write_zarr(path: str | os.PathLike, panels: Sequence, frame=None, *, title: 
             keep.update(fill_value=np.zeros((), dtype=var.dtype)[()], chunks=tuple(c[0] for c in var.chunks),
                         compressors=_compressors())
         encoding[name] = keep
-    _write_dataset(dataset, final, encoding, progress)
+    _write_dataset(dataset, final, encoding, progress, _computed_pieces(dataset, check_panels(panels)))
     return final
+
+
+def _computed_pieces(dataset, panels: list) -> dict:
+    """``{variable: [(block, region), ...]}``: for each layer all of whose maps are tiled, the
+    blocks that are not skipped and where each goes, so that a skipped block is not even a task
+    (the layer's times in ``raster_dataset``'s order: by ``t``)."""
+    names = {var.attrs["bananagrid_layer"]: name for name, var in dataset.data_vars.items()
+             if "bananagrid_layer" in var.attrs}
+    series: dict[str, list] = {}
+    for panel in panels:
+        series.setdefault(panel.layer, []).append(panel)
+    pieces = {}
+    for layer, maps in series.items():
+        if not all(hasattr(p.raster, "computed_blocks") for p in maps):
+            continue
+        maps.sort(key=lambda p: p.t)
+        pieces[names[layer]] = [
+            (p.raster.values.blocks[i, j], (k, slice(*rows), slice(*cols)))
+            for k, p in enumerate(maps) for i, j, rows, cols in p.raster.computed_blocks()
+        ]
+    return pieces
 
 
 def write_batch_zarr(path: str | os.PathLike, values, bounds: np.ndarray, mass, *, progress: bool = False) -> Path:
@@ -155,9 +177,11 @@ def _check_target(path) -> Path:
     return final
 
 
-def _write_dataset(dataset, final: Path, encoding: dict, progress: bool) -> None:
+def _write_dataset(dataset, final: Path, encoding: dict, progress: bool, pieces: dict | None = None) -> None:
     """Write ``dataset`` to a temporary store beside ``final``, computing its Dask variables in
-    one pass, and rename it to ``final`` when complete; on any failure remove it."""
+    one pass, and rename it to ``final`` when complete; on any failure remove it. ``pieces``:
+    variables written only in the given blocks and regions (the rest is Zarr's fill value)."""
+    pieces = pieces or {}
     partial = partial_path(final)
     try:
         with warnings.catch_warnings():
@@ -167,13 +191,23 @@ def _write_dataset(dataset, final: Path, encoding: dict, progress: bool) -> None
             # masses, latitudes) are stored below, so that a skipped block is never handed to Zarr
             dataset.to_zarr(partial, mode="w-", zarr_format=ZARR_FORMAT, consolidated=True, compute=False,
                             encoding=encoding)
-        lazy = {name: var.data for name, var in dataset.variables.items() if var.chunks is not None}
-        if lazy:
-            da = require("dask.array", CLUSTER_PURPOSE, CLUSTER_EXTRA)
-            zarr = require("zarr", CLUSTER_PURPOSE, CLUSTER_EXTRA)
-            group = zarr.open_group(partial, mode="r+", zarr_format=ZARR_FORMAT)
-            stored = da.store(list(lazy.values()), [_SkipZeros(group[name]) for name in lazy], lock=False,
-                              compute=False)
+        zarr = require("zarr", CLUSTER_PURPOSE, CLUSTER_EXTRA)
+        da = require("dask.array", CLUSTER_PURPOSE, CLUSTER_EXTRA)
+        group = zarr.open_group(partial, mode="r+", zarr_format=ZARR_FORMAT)
+        sources, targets, regions = [], [], []
+        for name, var in dataset.variables.items():
+            if name in pieces:  # only the blocks computed, each into its region
+                target = _SkipZeros(group[name])
+                for block, region in pieces[name]:
+                    sources.append(block)
+                    targets.append(target)
+                    regions.append(region)
+            elif var.chunks is not None:
+                sources.append(var.data)
+                targets.append(_SkipZeros(group[name]))
+                regions.append(None)
+        if sources:
+            stored = da.store(sources, targets, regions=regions, lock=False, compute=False)
             compute_with_progress(stored, progress=progress)
         _replace(partial, final)
     except BaseException as exc:
