@@ -14,6 +14,7 @@ from scipy.special import erfc
 from ..domains.pose import Pose
 from ..engine.warp_runtime import WarpContext
 from ..kernels import polar as kernels
+from ..kernels import polar_lanes
 from ..protocol import Extent, KernelBinding, KernelContext, SceneKey, SceneSchema
 from ..validate import BananagridError
 from .base import check_n, check_rng
@@ -568,15 +569,17 @@ class PolarBanana(MotionModel):
         return ctx.numpy(mean).reshape(phi.shape), ctx.numpy(sd).reshape(phi.shape)
 
     def bind(self, ctx: KernelContext, extent: Extent, *, grid: bool = False) -> KernelBinding:
-        """The closed-form kernels (``kernels/polar.py``): one row per CPU thread."""
+        """The closed-form kernels (``kernels/polar.py``): one row per CPU thread; on the CPU in
+        float64 without heading noise, eight cells or points at a time (``kernels/polar_lanes.py``)."""
         params = (self._coefficients(ctx), self._law(), self.kernel_order, ctx.array(self.pose.as_array()))
         notes = {"variant": self.variant, "truncated_mass": self.truncated_mass}
         if self.sigma_heading > 0.0:
             notes["heading_order"] = self.heading_order
-        return KernelBinding(
-            kernels.polar_grid, kernels.polar_points, params, "polar.polar_grid", notes, row_loop=True,
-            bands_per_thread=1,
-        )
+        if ctx.device == "cpu" and np.dtype(ctx.dtype) == np.float64 and self.kernel_order == 0:
+            return KernelBinding(polar_lanes.polar_grid_lanes, polar_lanes.polar_points_lanes, params,
+                                 "polar_lanes.polar_grid_lanes", notes, row_loop=True, bands_per_thread=1)
+        return KernelBinding(kernels.polar_grid, kernels.polar_points, params, "polar.polar_grid", notes, row_loop=True,
+                             bands_per_thread=1)
 
     # --- batches (bananagrid.engine.batch) ----------------------------------------------------
 
@@ -616,4 +619,7 @@ class PolarBanana(MotionModel):
         poses = np.array([m.pose.as_array() for m in models])
         params = (ctx.array(coefs), ctx.array(variants, dtype=np.int32), ctx.array(orders, dtype=np.int32),
                   ctx.array(poses))
+        if ctx.device == "cpu" and np.dtype(ctx.dtype) == np.float64:  # the grids of bind(), row for row
+            return KernelBinding(polar_lanes.polar_batch_grid_lanes, polar_lanes.polar_batch_points_lanes, params,
+                                 "polar_lanes.polar_batch_grid_lanes")
         return KernelBinding(kernels.polar_batch_grid, kernels.polar_batch_points, params, "polar.polar_batch_grid")
