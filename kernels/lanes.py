@@ -1,4 +1,4 @@
-"""CPU lane arithmetic: eight float64 values per Warp vector, one AVX-512 register.
+"""CPU lane arithmetic: a Warp vector of 8 float64 or 16 float32 values, one AVX-512 register.
 
 Warp compiles scalar kernel code to scalar instructions (``vmulsd``, a libm call per ``exp``).
 Its vector types do compile to SIMD arithmetic, but Warp has no per-lane select, no
@@ -6,125 +6,155 @@ round-to-integer or bit-cast builtin and no vector sqrt, and helpers that loop o
 for those left the polar kernel half scalar (62 Mcells/s on one core, against 116 with the
 helpers below). The helpers are therefore ``wp.func_native`` snippets written with the
 compiler's vector extension (``vector_size``), which give whole-register instructions
-(``vblendmpd``, ``vsqrtpd``, ``vdivpd``; two ymm halves on a CPU without AVX-512). They are C++ for the CPU only: a kernel that calls
-them lives in a module never launched on a GPU (the models bind them on the CPU alone).
+(``vblendmpd``, ``vsqrtpd``, ``vdivpd``; two ymm halves on a CPU without AVX-512). Each is
+defined twice, for ``lanes64`` and ``lanes32`` (Warp overloads them by argument type), from one
+template. They are C++ for the CPU only: a kernel that calls them lives in a module never
+launched on a GPU (the models bind them on the CPU alone).
 
 Accuracy (``tests/test_lanes.py`` measures each over its reduced range and the whole domain
-against long double references): :func:`lane_exp_neg` within 3 ulp, :func:`lane_atan2`
-within 2 ulp (Cephes' rational function, as the scalar ``common.atan2_fast``).
+against long double references): :func:`lane_exp_neg` within 3 ulp (float64) and 2 ulp
+(float32), :func:`lane_atan2` within 2 ulp (Cephes' rational function, as the scalar
+``common.atan2_fast``); :func:`lane_sqrt` is correctly rounded.
 """
+
+import math
+import re
+from dataclasses import dataclass
 
 import warp as wp
 
-#: Lanes per vector: 8 float64 = 512 bits.
-LANES = 8
-lanes64 = wp.types.vector(LANES, wp.float64)
-
-_PROLOGUE = "typedef double d8 __attribute__((vector_size(64)));\n"
-_EPILOGUE = "\nwp::vec_t<8, double> out; __builtin_memcpy(&out, &res, 64);\nreturn out;\n"
-
-
-def _snippet(names: str, body: str) -> str:
-    """A native body over ``d8`` copies of the vector arguments ``names`` that leaves ``res``."""
-    copies = "".join(f"d8 v{n}; __builtin_memcpy(&v{n}, &{n}, 64);\n" for n in names.split())
-    return _PROLOGUE + copies + body + _EPILOGUE
+#: Lanes per vector: 8 float64 or 16 float32 = 512 bits.
+LANES64 = 8
+LANES32 = 16
+lanes64 = wp.types.vector(LANES64, wp.float64)
+lanes32 = wp.types.vector(LANES32, wp.float32)
 
 
-#: exp(x) for x <= 0 (0 below -745.2, where libm's exp is 0 too): Cody-Waite reduction
-#: x = n ln2 + r, |r| <= ln2 / 2, with ln2 split in fdlibm's ln2_hi (33 bits, so n ln2_hi is
-#: exact) and ln2_lo; n by the 1.5 * 2^52 shifter (round to nearest in one add); exp(r) by its
-#: degree-12 Taylor polynomial (truncation below (ln2/2)^13 / 13! = 1.7e-16); 2^n as two
-#: factors 2^(n/2) built from their exponent bits, so that results below 2^-1022 underflow
-#: gradually to subnormals as libm's do (one factor 2^n would wrap its exponent there).
-_EXP_NEG = _snippet("x", """
-d8 zero = {};
-d8 v = vx < -745.2 ? zero - 745.2 : vx;
-const double shifter = 6755399441055744.0;
-d8 n = (v * 1.4426950408889634 + shifter) - shifter;
-d8 r = (v - n * 0.6931471803691238) - n * 1.9082149292705877e-10;
-d8 p = r * 2.08767569878680989792e-09 + 2.50521083854417187751e-08;
-p = p * r + 2.75573192239858906526e-07;
-p = p * r + 2.75573192239858906526e-06;
-p = p * r + 2.48015873015873015873e-05;
-p = p * r + 1.98412698412698412698e-04;
-p = p * r + 1.38888888888888888889e-03;
-p = p * r + 8.33333333333333333333e-03;
-p = p * r + 4.16666666666666666667e-02;
-p = p * r + 1.66666666666666666667e-01;
-p = p * r + 0.5;
-p = p * r + 1.0;
-p = p * r + 1.0;
-typedef long long l8 __attribute__((vector_size(64)));
-l8 whole = __builtin_convertvector(n, l8);
-l8 half = whole >> 1;
-d8 res = (p * (d8)((half + 1023) << 52)) * (d8)((whole - half + 1023) << 52);
-res = vx < -745.2 ? zero : res;""")
+@dataclass(frozen=True)
+class _Format:
+    """What the templates need of a lane format."""
+
+    scalar: str  # C type of a lane
+    integer: str  # C integer type of the same width
+    lanes: int
+    suffix: str  # of a C literal of the scalar type
+    mantissa: int  # stored mantissa bits
+    bias: int  # exponent bias
+    ln2_hi: float  # ln 2 rounded so that n ln2_hi is exact for every n of the domain
+    ln2_lo: float  # ln 2 - ln2_hi
+    exp_floor: float  # below this exp(x) is 0 in the format
+    taylor: int  # degree of exp(r)'s Taylor polynomial on |r| <= ln2 / 2
+    sqrt: str  # C builtin
+
+    def literal(self, value: float) -> str:
+        return f"{value!r}{self.suffix}"
 
 
-@wp.func_native(_EXP_NEG)
-def lane_exp_neg(x: lanes64) -> lanes64: ...
+# float64: fdlibm's ln2_hi has 33 significant bits, |n| <= 1075 needs 11; Taylor degree 12
+# leaves (ln2/2)^13 / 13! = 1.7e-16. float32: fdlibm expf's ln2_hi has 16 bits, |n| <= 150
+# needs 8; degree 7 leaves (ln2/2)^8 / 8! = 5.3e-9 (eps = 6e-8).
+F64 = _Format("double", "long long", LANES64, "", 52, 1023, 6.93147180369123816490e-01, 1.90821492927058770002e-10,
+              -745.2, 12, "__builtin_sqrt")
+F32 = _Format("float", "int", LANES32, "f", 23, 127, 6.9314575195e-01, 1.4286067653e-06, -104.0, 7, "__builtin_sqrtf")
+
+
+def _snippet(fmt: _Format, names: str, body: str) -> str:
+    """A native body over ``vt`` copies of the vector arguments ``names`` that leaves ``res``
+    (``vt``: the lanes as a compiler vector; ``vi``: integers of the same width); ``L(value)``
+    in ``body`` becomes a literal of the lane type."""
+    size = 64
+    head = (f"typedef {fmt.scalar} vt __attribute__((vector_size({size})));\n"
+            f"typedef {fmt.integer} vi __attribute__((vector_size({size})));\n"
+            "vt zero = {};\n")
+    copies = "".join(f"vt v{n}; __builtin_memcpy(&v{n}, &{n}, {size});\n" for n in names.split())
+    tail = f"\nwp::vec_t<{fmt.lanes}, {fmt.scalar}> out; __builtin_memcpy(&out, &res, {size});\nreturn out;\n"
+    return head + copies + re.sub(r"L\(([^()]+)\)", lambda m: fmt.literal(float(m.group(1))), body) + tail
+
+
+def _exp_neg(fmt: _Format) -> str:
+    """exp(x) for x <= 0, 0 below the format's floor (where libm's exp is 0 too): Cody-Waite
+    reduction x = n ln2 + r, |r| <= ln2 / 2, ln 2 split in two so that n ln2_hi is exact; n by
+    the 1.5 * 2^mantissa shifter (round to nearest in one add); exp(r) by its Taylor polynomial;
+    2^n as two factors 2^(n/2) built from their exponent bits, so that results below the
+    smallest normal underflow gradually to subnormals as libm's do (one factor 2^n would wrap
+    its exponent there)."""
+    shifter = 1.5 * 2.0**fmt.mantissa
+    floor = f"L({fmt.exp_floor!r})"
+    horner = "".join(f"p = p * r + L({1.0 / math.factorial(k)!r});\n" for k in range(fmt.taylor - 2, -1, -1))
+    return _snippet(fmt, "x", (
+        f"vt v = vx < {floor} ? zero + {floor} : vx;\n"
+        f"vt n = (v * L({1 / math.log(2)!r}) + L({shifter!r})) - L({shifter!r});\n"
+        f"vt r = (v - n * L({fmt.ln2_hi!r})) - n * L({fmt.ln2_lo!r});\n"
+        f"vt p = r * L({1.0 / math.factorial(fmt.taylor)!r}) + L({1.0 / math.factorial(fmt.taylor - 1)!r});\n"
+        + horner +
+        "vi whole = __builtin_convertvector(n, vi);\n"
+        "vi half = whole >> 1;\n"
+        f"vt res = (p * (vt)((half + {fmt.bias}) << {fmt.mantissa})) * (vt)((whole - half + {fmt.bias}) << {fmt.mantissa});\n"
+        f"res = vx < {floor} ? zero : res;"
+    ))
 
 
 #: atan2(x, y), the angle of (y, x) from the +y axis toward +x, lane by lane; the same steps as
 #: ``common.atan2_fast``/``atan_unit`` (Cephes: z = min/max of |x|, |y|; above 0.66 atan(z) =
 #: pi/4 + atan((z - 1) / (z + 1)); P(s) / Q(s) in s = w^2), every branch a select.
-_ATAN2 = _snippet("x y", """
-d8 zero = {};
-d8 ax = vx < 0.0 ? -vx : vx;
-d8 ay = vy < 0.0 ? -vy : vy;
-d8 big = ax > ay ? ax : ay;
-d8 z = big > 0.0 ? (ax > ay ? ay : ax) / big : zero;
-d8 w = z > 0.66 ? (z - 1.0) / (z + 1.0) : z;
-d8 s = w * w;
-d8 p = s * -8.750608600031904122785e-1 - 1.615753718733365076637e1;
-p = p * s - 7.500855792314704667340e1;
-p = p * s - 1.228866684490136173410e2;
-p = p * s - 6.485021904942025371773e1;
-d8 q = s + 2.485846490142306297962e1;
-q = q * s + 1.650270098316988542046e2;
-q = q * s + 4.328810604912902668951e2;
-q = q * s + 4.853903996359136964868e2;
-q = q * s + 1.945506571482613964425e2;
-d8 a = w + w * (s * p / q);
-a = z > 0.66 ? 0.7853981633974483 + (a + 3.0616169978683830e-17) : a;
-a = ax > ay ? 1.5707963267948966 - a : a;
-a = vy < 0.0 ? 3.141592653589793 - a : a;
-d8 res = vx < 0.0 ? -a : a;""")
-
-
-@wp.func_native(_ATAN2)
-def lane_atan2(x: lanes64, y: lanes64) -> lanes64: ...
-
-
-_SQRT = _snippet("x", "d8 res;\nfor (int k = 0; k < 8; ++k) res[k] = __builtin_sqrt(vx[k]);")
-
-
-@wp.func_native(_SQRT)
-def lane_sqrt(x: lanes64) -> lanes64: ...
-
+_ATAN2 = """vt ax = vx < 0 ? -vx : vx;
+vt ay = vy < 0 ? -vy : vy;
+vt big = ax > ay ? ax : ay;
+vt z = big > 0 ? (ax > ay ? ay : ax) / big : zero;
+vt w = z > L(0.66) ? (z - 1) / (z + 1) : z;
+vt s = w * w;
+vt p = s * L(-8.750608600031904122785e-1) + L(-1.615753718733365076637e1);
+p = p * s + L(-7.500855792314704667340e1);
+p = p * s + L(-1.228866684490136173410e2);
+p = p * s + L(-6.485021904942025371773e1);
+vt q = s + L(2.485846490142306297962e1);
+q = q * s + L(1.650270098316988542046e2);
+q = q * s + L(4.328810604912902668951e2);
+q = q * s + L(4.853903996359136964868e2);
+q = q * s + L(1.945506571482613964425e2);
+vt a = w + w * (s * p / q);
+a = z > L(0.66) ? L(0.7853981633974483) + (a + L(3.061616997868383e-17)) : a;
+a = ax > ay ? L(1.5707963267948966) - a : a;
+a = vy < 0 ? L(3.141592653589793) - a : a;
+vt res = vx < 0 ? -a : a;"""
 
 #: sin(phi) / phi from a known sin(phi) (unnormalised sinc; 1 - phi^2 / 6 below |phi| = 1e-4,
 #: as ``common.sinc_of``).
-_SINC_OF = _snippet("phi sin_phi", """
-d8 a = vphi < 0.0 ? -vphi : vphi;
-d8 res = a < 1.0e-4 ? 1.0 - vphi * vphi / 6.0 : vsin_phi / vphi;""")
+_SINC_OF = """vt a = vphi < 0 ? -vphi : vphi;
+vt res = a < L(1.0e-4) ? 1 - vphi * vphi / 6 : vsin_phi / vphi;"""
+
+_WHERE_POSITIVE = "vt res = vc > 0 ? va : zero;"
 
 
-@wp.func_native(_SINC_OF)
+def _sqrt(fmt: _Format) -> str:
+    return _snippet(fmt, "x", f"vt res;\nfor (int k = 0; k < {fmt.lanes}; ++k) res[k] = {fmt.sqrt}(vx[k]);")
+
+
+# --- float64 lanes ---------------------------------------------------------------------------
+
+@wp.func_native(_exp_neg(F64))
+def lane_exp_neg(x: lanes64) -> lanes64: ...
+
+
+@wp.func_native(_snippet(F64, "x y", _ATAN2))
+def lane_atan2(x: lanes64, y: lanes64) -> lanes64: ...
+
+
+@wp.func_native(_sqrt(F64))
+def lane_sqrt(x: lanes64) -> lanes64: ...
+
+
+@wp.func_native(_snippet(F64, "phi sin_phi", _SINC_OF))
 def lane_sinc_of(phi: lanes64, sin_phi: lanes64) -> lanes64: ...
 
 
-_WHERE_POSITIVE = _snippet("c a", "d8 zero = {};\nd8 res = vc > 0.0 ? va : zero;")
-
-
-@wp.func_native(_WHERE_POSITIVE)
+@wp.func_native(_snippet(F64, "c a", _WHERE_POSITIVE))
 def lane_where_positive(c: lanes64, a: lanes64) -> lanes64: ...
 
 
 @wp.func
-def splat(value: wp.float64):
-    """Every lane ``value``."""
-    return lanes64(value)
+def lane_count(values: lanes64):
+    return LANES64
 
 
 @wp.func
@@ -135,4 +165,45 @@ def load_lanes(values: wp.array(dtype=wp.float64), start: int):
         values[wp.min(start, last)], values[wp.min(start + 1, last)], values[wp.min(start + 2, last)],
         values[wp.min(start + 3, last)], values[wp.min(start + 4, last)], values[wp.min(start + 5, last)],
         values[wp.min(start + 6, last)], values[wp.min(start + 7, last)],
+    )
+
+
+# --- float32 lanes: the same functions (Warp overloads them by the argument types) -------------
+
+@wp.func_native(_exp_neg(F32))
+def lane_exp_neg(x: lanes32) -> lanes32: ...  # noqa: F811
+
+
+@wp.func_native(_snippet(F32, "x y", _ATAN2))
+def lane_atan2(x: lanes32, y: lanes32) -> lanes32: ...  # noqa: F811
+
+
+@wp.func_native(_sqrt(F32))
+def lane_sqrt(x: lanes32) -> lanes32: ...  # noqa: F811
+
+
+@wp.func_native(_snippet(F32, "phi sin_phi", _SINC_OF))
+def lane_sinc_of(phi: lanes32, sin_phi: lanes32) -> lanes32: ...  # noqa: F811
+
+
+@wp.func_native(_snippet(F32, "c a", _WHERE_POSITIVE))
+def lane_where_positive(c: lanes32, a: lanes32) -> lanes32: ...  # noqa: F811
+
+
+@wp.func
+def lane_count(values: lanes32):  # noqa: F811
+    return LANES32
+
+
+@wp.func
+def load_lanes(values: wp.array(dtype=wp.float32), start: int):  # noqa: F811
+    """values[start .. start + 15], the index clamped to the last element past the end."""
+    last = values.shape[0] - 1
+    return lanes32(
+        values[wp.min(start, last)], values[wp.min(start + 1, last)], values[wp.min(start + 2, last)],
+        values[wp.min(start + 3, last)], values[wp.min(start + 4, last)], values[wp.min(start + 5, last)],
+        values[wp.min(start + 6, last)], values[wp.min(start + 7, last)], values[wp.min(start + 8, last)],
+        values[wp.min(start + 9, last)], values[wp.min(start + 10, last)], values[wp.min(start + 11, last)],
+        values[wp.min(start + 12, last)], values[wp.min(start + 13, last)], values[wp.min(start + 14, last)],
+        values[wp.min(start + 15, last)],
     )

@@ -1,21 +1,24 @@
-"""The polar-banana grid kernel in CPU lanes: eight float64 cells at a time, end to end.
+"""The polar-banana kernels in CPU lanes: 8 float64 or 16 float32 cells at a time, end to end.
 
 The same density as ``polar.polar_density_local`` without heading noise (rough and improved
 variants; the formulas are in ``kernels/polar.py``): r by a lane sqrt, phi by the lane atan2,
 sinc(phi) = (x / r) / phi, cos(phi) = y / r, P_mu (8) and P_sigma (11) in lane arithmetic with
 the host's coefficients, and one lane exp for both normal factors. The scalar kernel's branches
 are selects: 0 at r = 0 and where the improved P_sigma is not positive. Values agree with the
-scalar kernel to about 1e-14 relative (``tests/test_lanes.py`` sweeps the parameter domain).
+scalar kernel to about 1e-14 relative in float64 where the density is well conditioned
+(``tests/test_lanes.py`` sweeps the parameter domain).
 
-CPU only (see ``kernels/lanes.py``); the GPU, float32 and heading-noise paths use
-``polar.polar_grid``. The batch kernel runs the same rows, so that a batch equals its
-hypotheses' one-at-a-time grids bit for bit.
+CPU only (see ``kernels/lanes.py``); the GPU and heading-noise paths use ``polar.polar_grid``.
+The grid, points and batch kernels share :func:`polar_world_lanes`, so that ``rasterise``,
+``pdf`` and the batches agree bit for bit.
 """
+
+from typing import Any
 
 import warp as wp
 
-from .lanes import LANES, lane_atan2, lane_exp_neg, lane_sinc_of, lane_sqrt, lane_where_positive, lanes64, load_lanes, splat
 from .common import world_to_local
+from .lanes import lane_atan2, lane_count, lane_exp_neg, lane_sinc_of, lane_sqrt, lane_where_positive, load_lanes
 from .polar import (
     INV_SIGMA_OMEGA_SQ, INV_SIGMA_PHI, MEAN_SCC, MEAN_SINC, NORM, ROUGH, SD_CURVATURE, SD_SCALE, SD_T_TERM,
     polar_density_local,
@@ -25,72 +28,72 @@ ONE_THIRD = 1.0 / 3.0
 
 
 @wp.func
-def polar_density_lanes(x: lanes64, y: lanes64, coef: wp.array(dtype=wp.float64), variant: int):
-    """Density per m^2 at eight local points: g(phi; 0, sigma_phi) g(r; mu, sd) / r."""
-    one = splat(wp.float64(1.0))
+def polar_density_lanes(x: Any, y: Any, coef: wp.array(dtype=Any), variant: int):
+    """Density per m^2 at a vector of local points: g(phi; 0, sigma_phi) g(r; mu, sd) / r."""
+    one = type(x)(1.0)
     r = lane_sqrt(wp.cw_mul(x, x) + wp.cw_mul(y, y))
     inv_r = wp.cw_div(one, r)
     phi = lane_atan2(x, y)
     sinc_phi = lane_sinc_of(phi, wp.cw_mul(x, inv_r))
     mu = sinc_phi * coef[MEAN_SINC]
-    sd = splat(coef[SD_SCALE])
+    sd = type(x)(coef[SD_SCALE])
     if variant != ROUGH:
         phi2 = wp.cw_mul(phi, phi)
-        scc = (sinc_phi * wp.float64(4.0) - wp.cw_mul(y, inv_r)) * wp.float64(ONE_THIRD)
+        scc = wp.cw_mul(wp.cw_mul(sinc_phi, type(x)(4.0)) - wp.cw_mul(y, inv_r), type(x)(ONE_THIRD))
         z2 = phi2 * (coef[INV_SIGMA_PHI] * coef[INV_SIGMA_PHI])
         mu = mu + wp.cw_mul((z2 - one) * coef[MEAN_SCC], scc)
-        sd = wp.cw_mul((one + (splat(coef[SD_T_TERM]) - phi2 * coef[INV_SIGMA_OMEGA_SQ]) * coef[SD_CURVATURE])
+        sd = wp.cw_mul((one + (type(x)(coef[SD_T_TERM]) - phi2 * coef[INV_SIGMA_OMEGA_SQ]) * coef[SD_CURVATURE])
                        * coef[SD_SCALE], scc)
     inv_sd = wp.cw_div(one, sd)
     z_phi = phi * coef[INV_SIGMA_PHI]
     z_r = wp.cw_mul(r - mu, inv_sd)
-    e = lane_exp_neg((wp.cw_mul(z_phi, z_phi) + wp.cw_mul(z_r, z_r)) * wp.float64(-0.5))
+    e = lane_exp_neg(wp.cw_mul(wp.cw_mul(z_phi, z_phi) + wp.cw_mul(z_r, z_r), type(x)(-0.5)))
     density = wp.cw_mul(wp.cw_mul(inv_sd, inv_r), e) * coef[NORM]
     return lane_where_positive(sd, lane_where_positive(r, density))
 
 
 @wp.func
-def polar_world_lanes(dx: lanes64, dy: lanes64, coef: wp.array(dtype=wp.float64), variant: int,
-                      pose: wp.array(dtype=wp.float64)):
-    """The density at eight world offsets from the pose origin (``common.world_to_local``'s
+def polar_world_lanes(dx: Any, dy: Any, coef: wp.array(dtype=Any), variant: int, pose: wp.array(dtype=Any)):
+    """The density at a vector of world offsets from the pose origin (``common.world_to_local``'s
     rotation), one expression for the grid and the points kernels so that they agree bit for bit."""
     return polar_density_lanes(dx * pose[2] - dy * pose[3], dx * pose[3] + dy * pose[2], coef, variant)
 
 
 @wp.func
 def polar_row_lanes(
-    xs: wp.array(dtype=wp.float64),
-    y_world: wp.float64,
+    xs: wp.array(dtype=Any),
+    y_world: Any,
     j0: int,
     j1: int,
-    coef: wp.array(dtype=wp.float64),
+    coef: wp.array(dtype=Any),
     variant: int,
-    pose: wp.array(dtype=wp.float64),
-    out: wp.array(dtype=wp.float64),
+    pose: wp.array(dtype=Any),
+    out: wp.array(dtype=Any),
 ):
-    """out[j] for j0 <= j < j1: the density at (xs[j], y_world), eight cells at a time."""
-    dy = splat(y_world - pose[1])
+    """out[j] for j0 <= j < j1: the density at (xs[j], y_world), a vector of cells at a time."""
+    dy = y_world - pose[1]
     j = j0
     while j < j1:
-        values = polar_world_lanes(load_lanes(xs, j) - splat(pose[0]), dy, coef, variant, pose)
-        for k in range(wp.min(LANES, j1 - j)):
+        dx = load_lanes(xs, j)
+        values = polar_world_lanes(dx - type(dx)(pose[0]), type(dx)(dy), coef, variant, pose)
+        for k in range(wp.min(lane_count(values), j1 - j)):
             out[j + k] = values[k]
-        j += LANES
+        j += lane_count(values)
 
 
 @wp.kernel
 def polar_grid_lanes(
-    xs: wp.array(dtype=wp.float64),
-    ys: wp.array(dtype=wp.float64),
+    xs: wp.array(dtype=Any),
+    ys: wp.array(dtype=Any),
     row0: int,
     columns: int,
-    coef: wp.array(dtype=wp.float64),
+    coef: wp.array(dtype=Any),
     variant: int,
     order: int,
-    pose: wp.array(dtype=wp.float64),
-    out: wp.array2d(dtype=wp.float64),
+    pose: wp.array(dtype=Any),
+    out: wp.array2d(dtype=Any),
 ):
-    """Density at the cell centres of a band of rows, ``columns`` cells per thread, eight at a
+    """Density at the cell centres of a band of rows, ``columns`` cells per thread, a vector at a
     time (the arguments of ``polar.polar_grid``; ``order`` must be 0)."""
     i, block = wp.tid()
     row = row0 + i
@@ -100,37 +103,38 @@ def polar_grid_lanes(
 
 @wp.kernel
 def polar_points_lanes(
-    xs: wp.array(dtype=wp.float64),
-    ys: wp.array(dtype=wp.float64),
+    xs: wp.array(dtype=Any),
+    ys: wp.array(dtype=Any),
     start: int,
-    coef: wp.array(dtype=wp.float64),
+    coef: wp.array(dtype=Any),
     variant: int,
     order: int,
-    pose: wp.array(dtype=wp.float64),
-    out: wp.array(dtype=wp.float64),
+    pose: wp.array(dtype=Any),
+    out: wp.array(dtype=Any),
 ):
-    """``polar.polar_points`` in lanes: the thread of every eighth point (counted from the first
-    of all, so that a group is computed once even where it straddles two launches' chunks)
-    fills it and the next seven; the others return."""
+    """``polar.polar_points`` in lanes: the thread of every lane-count-th point (counted from the
+    first of all, so that a group is computed once even where it straddles two launches'
+    chunks) fills it and the next ones; the others return."""
     k = start + wp.tid()
-    if k % LANES != 0:
+    dx = load_lanes(xs, k)
+    width = lane_count(dx)
+    if k % width != 0:
         return
-    values = polar_world_lanes(load_lanes(xs, k) - splat(pose[0]), load_lanes(ys, k) - splat(pose[1]), coef,
-                               variant, pose)
-    for j in range(wp.min(LANES, xs.shape[0] - k)):
+    values = polar_world_lanes(dx - type(dx)(pose[0]), load_lanes(ys, k) - type(dx)(pose[1]), coef, variant, pose)
+    for j in range(wp.min(width, xs.shape[0] - k)):
         out[k + j] = values[j]
 
 
 @wp.kernel
 def polar_batch_grid_lanes(
-    xs: wp.array2d(dtype=wp.float64),
-    ys: wp.array2d(dtype=wp.float64),
+    xs: wp.array2d(dtype=Any),
+    ys: wp.array2d(dtype=Any),
     h0: int,
-    coefs: wp.array2d(dtype=wp.float64),
+    coefs: wp.array2d(dtype=Any),
     variants: wp.array(dtype=wp.int32),
     orders: wp.array(dtype=wp.int32),
-    poses: wp.array2d(dtype=wp.float64),
-    out: wp.array3d(dtype=wp.float64),
+    poses: wp.array2d(dtype=Any),
+    out: wp.array3d(dtype=Any),
 ):
     """``polar.polar_batch_grid`` in lanes: thread (h, i) fills row i of hypothesis h0 + h; a
     hypothesis with heading noise takes the scalar density (as its one-at-a-time grid does)."""
@@ -150,17 +154,17 @@ def polar_batch_grid_lanes(
 
 @wp.kernel
 def polar_batch_points_lanes(
-    xs: wp.array(dtype=wp.float64),
-    ys: wp.array(dtype=wp.float64),
+    xs: wp.array(dtype=Any),
+    ys: wp.array(dtype=Any),
     h0: int,
-    coefs: wp.array2d(dtype=wp.float64),
+    coefs: wp.array2d(dtype=Any),
     variants: wp.array(dtype=wp.int32),
     orders: wp.array(dtype=wp.int32),
-    poses: wp.array2d(dtype=wp.float64),
-    out: wp.array2d(dtype=wp.float64),
+    poses: wp.array2d(dtype=Any),
+    out: wp.array2d(dtype=Any),
 ):
-    """``polar.polar_batch_points`` in lanes: thread h fills out[h0 + h, :], eight points at a
-    time (the scalar density for a hypothesis with heading noise, as its one-at-a-time pdf)."""
+    """``polar.polar_batch_points`` in lanes: thread h fills out[h0 + h, :], a vector of points
+    at a time (the scalar density for a hypothesis with heading noise, as its one-at-a-time pdf)."""
     h = h0 + wp.tid()
     order = int(orders[h])
     variant = int(variants[h])
@@ -169,12 +173,28 @@ def polar_batch_points_lanes(
     if order == 0:
         k = int(0)
         while k < n:
-            values = polar_world_lanes(load_lanes(xs, k) - splat(pose[0]), load_lanes(ys, k) - splat(pose[1]),
-                                       coefs[h], variant, pose)
-            for j in range(wp.min(LANES, n - k)):
+            dx = load_lanes(xs, k)
+            values = polar_world_lanes(dx - type(dx)(pose[0]), load_lanes(ys, k) - type(dx)(pose[1]), coefs[h],
+                                       variant, pose)
+            for j in range(wp.min(lane_count(values), n - k)):
                 out[h, k + j] = values[j]
-            k += LANES
+            k += lane_count(values)
     else:
         for k in range(n):
             x, y = world_to_local(xs[k], ys[k], pose)
             out[h, k] = polar_density_local(x, y, coefs[h], variant, order)
+
+
+def _register_overloads():
+    for scalar in (wp.float32, wp.float64):
+        vec = wp.array(dtype=scalar)
+        mat = wp.array2d(dtype=scalar)
+        common = {"xs": vec, "ys": vec, "coef": vec, "pose": vec}
+        wp.overload(polar_grid_lanes, {**common, "out": mat})
+        wp.overload(polar_points_lanes, {**common, "out": vec})
+        batch = {"coefs": mat, "poses": mat}
+        wp.overload(polar_batch_grid_lanes, {"xs": mat, "ys": mat, **batch, "out": wp.array3d(dtype=scalar)})
+        wp.overload(polar_batch_points_lanes, {"xs": vec, "ys": vec, **batch, "out": mat})
+
+
+_register_overloads()
