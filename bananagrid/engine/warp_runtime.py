@@ -12,6 +12,7 @@ import functools
 import os
 import sys
 import tempfile
+import threading
 from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
@@ -79,15 +80,32 @@ def bands(n_rows: int, threads: int, per_thread: int = 1, align: int = 1) -> lis
 
 
 def run_bands(launch_band, bands: list[tuple[int, int]], threads: int) -> None:
-    """Call ``launch_band(start, stop)`` for every band; on several threads, from a pool.
-    The kernel's module must already be loaded (concurrent first launches would each build it)."""
-    if threads == 1 or len(bands) == 1:
+    """Call ``launch_band(start, stop)`` for every band; on several threads, the calling one
+    among them, each taking the next band when it finishes one (the cost of a band follows the
+    density). The kernel's module must already be loaded (concurrent first launches would each
+    build it)."""
+    workers = min(threads, len(bands))
+    if workers == 1:
         for band in bands:
             launch_band(*band)
         return
-    with ThreadPoolExecutor(max_workers=threads) as pool:
-        for future in [pool.submit(launch_band, a, b) for a, b in bands]:
-            future.result()
+    pending = iter(bands)
+    lock = threading.Lock()
+
+    def drain():
+        while True:
+            with lock:
+                band = next(pending, None)
+            if band is None:
+                return
+            launch_band(*band)
+
+    # the caller drains too: one thread fewer to start, and no core idles while it waits
+    with ThreadPoolExecutor(max_workers=workers - 1) as pool:
+        helpers = [pool.submit(drain) for _ in range(workers - 1)]
+        drain()
+        for helper in helpers:
+            helper.result()
 
 
 class WarpContext:
