@@ -127,6 +127,7 @@ _WHERE_POSITIVE = "vt res = vc > 0 ? va : zero;"
 
 
 def _sqrt(fmt: _Format) -> str:
+    """sqrt lane by lane: a loop the compiler turns into one ``vsqrtpd`` / ``vsqrtps``."""
     return _snippet(fmt, "x", f"vt res;\nfor (int k = 0; k < {fmt.lanes}; ++k) res[k] = {fmt.sqrt}(vx[k]);")
 
 
@@ -154,6 +155,7 @@ def lane_where_positive(c: lanes64, a: lanes64) -> lanes64: ...
 
 @wp.func
 def lane_count(values: lanes64):
+    """Lanes in a vector of this format (8)."""
     return LANES64
 
 
@@ -192,6 +194,7 @@ def lane_where_positive(c: lanes32, a: lanes32) -> lanes32: ...  # noqa: F811
 
 @wp.func
 def lane_count(values: lanes32):  # noqa: F811
+    """Lanes in a vector of this format (16)."""
     return LANES32
 
 
