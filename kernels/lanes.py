@@ -154,8 +154,8 @@ def lane_where_positive(c: lanes64, a: lanes64) -> lanes64: ...
 
 
 @wp.func
-def lane_count(values: lanes64):
-    """Lanes in a vector of this format (8)."""
+def lane_count(values: wp.array(dtype=wp.float64)):
+    """Lanes in the vectors :func:`load_lanes` makes of ``values`` (8)."""
     return LANES64
 
 
@@ -193,8 +193,8 @@ def lane_where_positive(c: lanes32, a: lanes32) -> lanes32: ...  # noqa: F811
 
 
 @wp.func
-def lane_count(values: lanes32):  # noqa: F811
-    """Lanes in a vector of this format (16)."""
+def lane_count(values: wp.array(dtype=wp.float32)):  # noqa: F811
+    """Lanes in the vectors :func:`load_lanes` makes of ``values`` (16)."""
     return LANES32
 
 

@@ -184,6 +184,42 @@ def polar_density_local(x: Any, y: Any, coef: wp.array(dtype=Any), variant: int,
     return coef[NORM] * inv_sd * inv_r * wp.exp(type(x)(-0.5) * (z_phi * z_phi + z_r * z_r))
 
 
+@wp.func
+def polar_row(
+    xs: wp.array(dtype=Any),
+    y_world: Any,
+    j0: int,
+    j1: int,
+    coef: wp.array(dtype=Any),
+    variant: int,
+    order: int,
+    pose: wp.array(dtype=Any),
+    out: wp.array(dtype=Any),
+):
+    """out[j] for j0 <= j < j1: the density at (xs[j], y_world)."""
+    for j in range(j0, j1):
+        x, y = world_to_local(xs[j], y_world, pose)
+        out[j] = polar_density_local(x, y, coef, variant, order)
+
+
+@wp.func
+def polar_point_range(
+    xs: wp.array(dtype=Any),
+    ys: wp.array(dtype=Any),
+    k0: int,
+    k1: int,
+    coef: wp.array(dtype=Any),
+    variant: int,
+    order: int,
+    pose: wp.array(dtype=Any),
+    out: wp.array(dtype=Any),
+):
+    """out[k] for k0 <= k < k1: the density at (xs[k], ys[k])."""
+    for k in range(k0, k1):
+        x, y = world_to_local(xs[k], ys[k], pose)
+        out[k] = polar_density_local(x, y, coef, variant, order)
+
+
 @wp.kernel
 def polar_grid(
     xs: wp.array(dtype=Any),
@@ -203,11 +239,8 @@ def polar_grid(
     """
     i, block = wp.tid()
     row = row0 + i
-    y_world = ys[row]
-    j_end = wp.min((block + 1) * columns, xs.shape[0])
-    for j in range(block * columns, j_end):
-        x, y = world_to_local(xs[j], y_world, pose)
-        out[row, j] = polar_density_local(x, y, coef, variant, order)
+    polar_row(xs, ys[row], block * columns, wp.min((block + 1) * columns, xs.shape[0]), coef, variant, order, pose,
+              out[row])
 
 
 @wp.kernel
@@ -285,12 +318,7 @@ def polar_batch_grid(
     whose cell centres are xs[h], ys[h] and whose parameters are row h of coefs and poses."""
     hh, i = wp.tid()
     h = h0 + hh
-    coef = coefs[h]
-    pose = poses[h]
-    y_world = ys[h, i]
-    for j in range(xs.shape[1]):
-        x, y = world_to_local(xs[h, j], y_world, pose)
-        out[h, i, j] = polar_density_local(x, y, coef, int(variants[h]), int(orders[h]))
+    polar_row(xs[h], ys[h, i], 0, xs.shape[1], coefs[h], int(variants[h]), int(orders[h]), poses[h], out[h, i])
 
 
 @wp.kernel
@@ -307,27 +335,30 @@ def polar_batch_points(
     """Every point under every hypothesis: thread h fills out[h0 + h, :] (the tracker's score of
     every plot against every track)."""
     h = h0 + wp.tid()
-    coef = coefs[h]
-    pose = poses[h]
-    variant = int(variants[h])
-    order = int(orders[h])
-    for k in range(xs.shape[0]):
-        x, y = world_to_local(xs[k], ys[k], pose)
-        out[h, k] = polar_density_local(x, y, coef, variant, order)
+    polar_point_range(xs, ys, 0, xs.shape[0], coefs[h], int(variants[h]), int(orders[h]), poses[h], out[h])
+
+
+def overload_density_kernels(grid, points, batch_grid, batch_points) -> None:
+    """Register float32 and float64 overloads of a family of kernels with the arguments of
+    ``polar_grid``, ``polar_points``, ``polar_batch_grid`` and ``polar_batch_points`` (these and
+    their lane twins in ``polar_lanes``)."""
+    for scalar in (wp.float32, wp.float64):
+        vec = wp.array(dtype=scalar)
+        mat = wp.array2d(dtype=scalar)
+        common = {"xs": vec, "ys": vec, "coef": vec, "pose": vec}
+        wp.overload(grid, {**common, "out": mat})
+        wp.overload(points, {**common, "out": vec})
+        batch = {"coefs": mat, "poses": mat}
+        wp.overload(batch_grid, {"xs": mat, "ys": mat, **batch, "out": wp.array3d(dtype=scalar)})
+        wp.overload(batch_points, {"xs": vec, "ys": vec, **batch, "out": mat})
 
 
 def _register_overloads():
+    overload_density_kernels(polar_grid, polar_points, polar_batch_grid, polar_batch_points)
     for scalar in (wp.float32, wp.float64):
         vec = wp.array(dtype=scalar)
-        common = {"xs": vec, "ys": vec, "coef": vec, "pose": vec}
-        wp.overload(polar_grid, {**common, "out": wp.array2d(dtype=scalar)})
-        wp.overload(polar_points, {**common, "out": vec})
         wp.overload(polar_moments, {"phis": vec, "coef": vec, "mean": vec, "sd": vec})
         wp.overload(polar_derivatives, {"phis": vec, "coef": vec, "out": wp.array2d(dtype=scalar)})
-        mat = wp.array2d(dtype=scalar)
-        batch = {"coefs": mat, "poses": mat}
-        wp.overload(polar_batch_grid, {"xs": mat, "ys": mat, **batch, "out": wp.array3d(dtype=scalar)})
-        wp.overload(polar_batch_points, {"xs": vec, "ys": vec, **batch, "out": mat})
 
 
 _register_overloads()

@@ -17,11 +17,10 @@ from typing import Any
 
 import warp as wp
 
-from .common import world_to_local
 from .lanes import lane_atan2, lane_count, lane_exp_neg, lane_sinc_of, lane_sqrt, lane_where_positive, load_lanes
 from .polar import (
     INV_SIGMA_OMEGA_SQ, INV_SIGMA_PHI, MEAN_SCC, MEAN_SINC, NORM, ROUGH, SD_CURVATURE, SD_SCALE, SD_T_TERM,
-    polar_density_local,
+    overload_density_kernels, polar_point_range, polar_row,
 )
 
 ONE_THIRD = 1.0 / 3.0
@@ -72,13 +71,31 @@ def polar_row_lanes(
 ):
     """out[j] for j0 <= j < j1: the density at (xs[j], y_world), a vector of cells at a time."""
     dy = y_world - pose[1]
+    width = lane_count(xs)
     j = j0
     while j < j1:
         dx = load_lanes(xs, j)
         values = polar_world_lanes(dx - type(dx)(pose[0]), type(dx)(dy), coef, variant, pose)
-        for k in range(wp.min(lane_count(values), j1 - j)):
+        for k in range(wp.min(width, j1 - j)):
             out[j + k] = values[k]
-        j += lane_count(values)
+        j += width
+
+
+@wp.func
+def polar_point_lanes(
+    xs: wp.array(dtype=Any),
+    ys: wp.array(dtype=Any),
+    k: int,
+    coef: wp.array(dtype=Any),
+    variant: int,
+    pose: wp.array(dtype=Any),
+    out: wp.array(dtype=Any),
+):
+    """out[k ..]: the density at the vector of points from (xs[k], ys[k]) (as many as remain)."""
+    dx = load_lanes(xs, k)
+    values = polar_world_lanes(dx - type(dx)(pose[0]), load_lanes(ys, k) - type(dx)(pose[1]), coef, variant, pose)
+    for j in range(wp.min(lane_count(xs), xs.shape[0] - k)):
+        out[k + j] = values[j]
 
 
 @wp.kernel
@@ -116,13 +133,8 @@ def polar_points_lanes(
     first of all, so that a group is computed once even where it straddles two launches'
     chunks) fills it and the next ones; the others return."""
     k = start + wp.tid()
-    dx = load_lanes(xs, k)
-    width = lane_count(dx)
-    if k % width != 0:
-        return
-    values = polar_world_lanes(dx - type(dx)(pose[0]), load_lanes(ys, k) - type(dx)(pose[1]), coef, variant, pose)
-    for j in range(wp.min(width, xs.shape[0] - k)):
-        out[k + j] = values[j]
+    if k % lane_count(xs) == 0:
+        polar_point_lanes(xs, ys, k, coef, variant, pose, out)
 
 
 @wp.kernel
@@ -145,11 +157,7 @@ def polar_batch_grid_lanes(
     if order == 0:
         polar_row_lanes(xs[h], ys[h, i], 0, xs.shape[1], coefs[h], variant, poses[h], out[h, i])
     else:
-        pose = poses[h]
-        y_world = ys[h, i]
-        for j in range(xs.shape[1]):
-            x, y = world_to_local(xs[h, j], y_world, pose)
-            out[h, i, j] = polar_density_local(x, y, coefs[h], variant, order)
+        polar_row(xs[h], ys[h, i], 0, xs.shape[1], coefs[h], variant, order, poses[h], out[h, i])
 
 
 @wp.kernel
@@ -168,33 +176,13 @@ def polar_batch_points_lanes(
     h = h0 + wp.tid()
     order = int(orders[h])
     variant = int(variants[h])
-    pose = poses[h]
-    n = xs.shape[0]
     if order == 0:
         k = int(0)
-        while k < n:
-            dx = load_lanes(xs, k)
-            values = polar_world_lanes(dx - type(dx)(pose[0]), load_lanes(ys, k) - type(dx)(pose[1]), coefs[h],
-                                       variant, pose)
-            for j in range(wp.min(lane_count(values), n - k)):
-                out[h, k + j] = values[j]
-            k += lane_count(values)
+        while k < xs.shape[0]:
+            polar_point_lanes(xs, ys, k, coefs[h], variant, poses[h], out[h])
+            k += lane_count(xs)
     else:
-        for k in range(n):
-            x, y = world_to_local(xs[k], ys[k], pose)
-            out[h, k] = polar_density_local(x, y, coefs[h], variant, order)
+        polar_point_range(xs, ys, 0, xs.shape[0], coefs[h], variant, order, poses[h], out[h])
 
 
-def _register_overloads():
-    for scalar in (wp.float32, wp.float64):
-        vec = wp.array(dtype=scalar)
-        mat = wp.array2d(dtype=scalar)
-        common = {"xs": vec, "ys": vec, "coef": vec, "pose": vec}
-        wp.overload(polar_grid_lanes, {**common, "out": mat})
-        wp.overload(polar_points_lanes, {**common, "out": vec})
-        batch = {"coefs": mat, "poses": mat}
-        wp.overload(polar_batch_grid_lanes, {"xs": mat, "ys": mat, **batch, "out": wp.array3d(dtype=scalar)})
-        wp.overload(polar_batch_points_lanes, {"xs": vec, "ys": vec, **batch, "out": mat})
-
-
-_register_overloads()
+overload_density_kernels(polar_grid_lanes, polar_points_lanes, polar_batch_grid_lanes, polar_batch_points_lanes)

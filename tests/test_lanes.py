@@ -163,6 +163,26 @@ def _scalar_kernel(model, x, y, dtype=np.float64, inputs=None):
     return out.numpy().reshape(np.shape(x))
 
 
+@st.composite
+def _swept_cases(draw):
+    """A polar banana and a 157 x 157 grid about its pose origin, over the domain: speeds 0.5-2000
+    m/s, times to 10 min, acceleration noise 1e-3 to 20 % of the speed per second, turn noise
+    1e-4 to 1 rad over the time, any heading and place, grids from inside the banana to three
+    times its range (the origin, r = 0, is on some of them)."""
+    v0, t = draw(st.floats(0.5, 2000.0)), draw(st.floats(0.5, 600.0))
+    accel, turn = draw(st.floats(1e-3, 20.0)), draw(st.floats(1e-4, 1.0))
+    heading, variant = draw(st.floats(-math.pi, math.pi)), draw(st.sampled_from(["rough", "improved"]))
+    origin = draw(st.tuples(st.floats(-1e5, 1e5), st.floats(-1e5, 1e5)))
+    reach = draw(st.floats(0.3, 3.0)) * v0 * t
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # the improved variant warns where P_sigma can be <= 0
+        model = bg.PolarBanana(v0=v0, t=t, sigma_a=accel * v0 / 100.0, sigma_omega=turn / t, variant=variant,
+                               pose=bg.Pose(origin=origin, heading=heading))
+    grid = bg.Grid.from_bounds(x=(origin[0] - reach, origin[0] + reach), y=(origin[1] - reach, origin[1] + reach),
+                               step=2 * reach / 157)
+    return model, grid
+
+
 def _centres(grid):
     return np.meshgrid(grid.origin[0] + grid.dx * (np.arange(grid.nx) + 0.5),
                        grid.origin[1] + grid.dy * (np.arange(grid.ny) + 0.5))
@@ -170,26 +190,13 @@ def _centres(grid):
 
 @settings(max_examples=300, deadline=None, derandomize=True, database=None,
           suppress_health_check=[HealthCheck.too_slow])
-@given(
-    v0=st.floats(0.5, 2000.0), t=st.floats(0.5, 600.0), accel=st.floats(1e-3, 20.0),
-    turn=st.floats(1e-4, 1.0), heading=st.floats(-math.pi, math.pi), variant=st.sampled_from(["rough", "improved"]),
-    origin=st.tuples(st.floats(-1e5, 1e5), st.floats(-1e5, 1e5)), span=st.floats(0.3, 3.0),
-)
-def test_lane_grid_matches_the_scalar_kernel_across_the_domain(v0, t, accel, turn, heading, variant, origin, span):
+@given(case=_swept_cases())
+def test_lane_grid_matches_the_scalar_kernel_across_the_domain(case):
     """rasterise (the lane kernel on the CPU in float64) against the scalar kernel at the same
-    cell centres, over speeds, times, noise ratios from 1e-4 to 40, any heading and place, and
-    grids from inside the banana to three times its range (the origin, r = 0, is on some of
-    them). Compared relatively where the density is at least 1e-10 of the peak and a normal
+    cell centres over the swept domain. Compared relatively where the density is at least 1e-10 of the peak and a normal
     float64 with headroom (>= 1e-290: a subnormal carries fewer bits than its neighbours)."""
-    sigma_a = accel * v0 / 100.0
-    sigma_omega = turn / t
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")  # the improved variant warns where P_sigma can be <= 0
-        model = bg.PolarBanana(v0=v0, t=t, sigma_a=sigma_a, sigma_omega=sigma_omega, variant=variant,
-                               pose=bg.Pose(origin=origin, heading=heading))
-    reach = span * v0 * t
-    grid = bg.Grid.from_bounds(x=(origin[0] - reach, origin[0] + reach), y=(origin[1] - reach, origin[1] + reach),
-                               step=2 * reach / 157)
+    model, grid = case
+    origin, heading = model.pose.origin, model.pose.heading
     lanes = bg.rasterise(model, grid, threads=1)
     assert lanes.provenance["kernel"] == "polar_lanes.polar_grid_lanes"
     x, y = _centres(grid)
@@ -246,24 +253,15 @@ def _condition(model, dx, dy, heading):
 
 @settings(max_examples=150, deadline=None, derandomize=True, database=None,
           suppress_health_check=[HealthCheck.too_slow])
-@given(
-    v0=st.floats(0.5, 2000.0), t=st.floats(0.5, 600.0), accel=st.floats(1e-3, 20.0),
-    turn=st.floats(1e-4, 1.0), heading=st.floats(-math.pi, math.pi), variant=st.sampled_from(["rough", "improved"]),
-    origin=st.tuples(st.floats(-1e5, 1e5), st.floats(-1e5, 1e5)), span=st.floats(0.3, 3.0),
-)
-def test_float32_lanes_within_the_rounding_of_float32(v0, t, accel, turn, heading, variant, origin, span):
+@given(case=_swept_cases())
+def test_float32_lanes_within_the_rounding_of_float32(case):
     """The float32 lane grid against the scalar kernel in float64 on the float32-rounded inputs
     (the error of float32 arithmetic alone; the inputs' own rounding is the same for every
     float32 kernel): within 64 eps32 kappa where the density is at least 1e-6 of the peak (300
     random cases reached 18 eps32 kappa, as did the scalar float32 kernel), and below 4e-6 of the
     peak elsewhere."""
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        model = bg.PolarBanana(v0=v0, t=t, sigma_a=accel * v0 / 100.0, sigma_omega=turn / t, variant=variant,
-                               pose=bg.Pose(origin=origin, heading=heading))
-    reach = span * v0 * t
-    grid = bg.Grid.from_bounds(x=(origin[0] - reach, origin[0] + reach), y=(origin[1] - reach, origin[1] + reach),
-                               step=2 * reach / 157)
+    model, grid = case
+    origin, heading = model.pose.origin, model.pose.heading
     lanes = bg.rasterise(model, grid, dtype=np.float32, threads=1)
     assert lanes.provenance["kernel"] == "polar_lanes.polar_grid_lanes" and lanes.values.dtype == np.float32
     # grids that float32 cannot resolve (cells far smaller than the coordinates' float32 spacing,
