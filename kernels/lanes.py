@@ -9,7 +9,15 @@ compiler's vector extension (``vector_size``), which give whole-register instruc
 (``vblendmpd``, ``vsqrtpd``, ``vdivpd``; two ymm halves on a CPU without AVX-512). Each is
 defined twice, for ``lanes64`` and ``lanes32`` (Warp overloads them by argument type), from one
 template. They are C++ for the CPU only: a kernel that calls them lives in a module never
-launched on a GPU (the models bind them on the CPU alone).
+launched on a GPU (the models bind them on the CPU alone). :func:`load_lanes` and
+:func:`store_lanes` move a whole vector in one unaligned load or store where it lies in a
+contiguous array (lane by lane they cost a third of the float32 kernel's time).
+
+Warp compiles without contracting a * b + c into one fused multiply-add; the exp snippet asks
+for it (``#pragma clang fp contract(fast)``): its Horner steps become FMAs, one rounding fewer
+each. The atan2 snippet does not: its rounding is then the scalar ``common.atan2_fast``'s, step
+for step, and phi feeds P_sigma, which is ill conditioned near its zero (an FMA there moved the
+density 3e-13 from the scalar kernel's).
 
 Accuracy (``tests/test_lanes.py`` measures each over its reduced range and the whole domain
 against long double references): :func:`lane_exp_neg` within 3 ulp (float64) and 2 ulp
@@ -58,12 +66,17 @@ F64 = _Format("double", "long long", LANES64, "", 52, 1023, 6.931471803691238164
 F32 = _Format("float", "int", LANES32, "f", 23, 127, 6.9314575195e-01, 1.4286067653e-06, -104.0, 7, "__builtin_sqrtf")
 
 
-def _snippet(fmt: _Format, names: str, body: str) -> str:
+#: Lets the compiler fuse a * b + c in one snippet (the pragma must open its block).
+CONTRACT = "#pragma clang fp contract(fast)\n"
+
+
+def _snippet(fmt: _Format, names: str, body: str, contract: bool = False) -> str:
     """A native body over ``vt`` copies of the vector arguments ``names`` that leaves ``res``
     (``vt``: the lanes as a compiler vector; ``vi``: integers of the same width); ``L(value)``
-    in ``body`` becomes a literal of the lane type."""
+    in ``body`` becomes a literal of the lane type; ``contract`` allows fused multiply-adds."""
     size = 64
-    head = (f"typedef {fmt.scalar} vt __attribute__((vector_size({size})));\n"
+    head = ((CONTRACT if contract else "") +
+            f"typedef {fmt.scalar} vt __attribute__((vector_size({size})));\n"
             f"typedef {fmt.integer} vi __attribute__((vector_size({size})));\n"
             "vt zero = {};\n")
     copies = "".join(f"vt v{n}; __builtin_memcpy(&v{n}, &{n}, {size});\n" for n in names.split())
@@ -81,7 +94,7 @@ def _exp_neg(fmt: _Format) -> str:
     shifter = 1.5 * 2.0**fmt.mantissa
     floor = f"L({fmt.exp_floor!r})"
     horner = "".join(f"p = p * r + L({1.0 / math.factorial(k)!r});\n" for k in range(fmt.taylor - 2, -1, -1))
-    return _snippet(fmt, "x", (
+    return _snippet(fmt, "x", contract=True, body=(
         f"vt v = vx < {floor} ? zero + {floor} : vx;\n"
         f"vt n = (v * L({1 / math.log(2)!r}) + L({shifter!r})) - L({shifter!r});\n"
         f"vt r = (v - n * L({fmt.ln2_hi!r})) - n * L({fmt.ln2_lo!r});\n"
@@ -131,6 +144,34 @@ def _sqrt(fmt: _Format) -> str:
     return _snippet(fmt, "x", f"vt res;\nfor (int k = 0; k < {fmt.lanes}; ++k) res[k] = {fmt.sqrt}(vx[k]);")
 
 
+def _load(fmt: _Format) -> str:
+    """values[start ..] as one vector: one unaligned vector load where the whole vector lies in a
+    contiguous array, else lane by lane with the index clamped to the last element."""
+    return (
+        f"wp::vec_t<{fmt.lanes}, {fmt.scalar}> out;\n"
+        f"if (start + {fmt.lanes} <= values.shape[0] && values.strides[0] == sizeof({fmt.scalar})) {{\n"
+        f"  __builtin_memcpy(&out, wp::address(values, start), sizeof(out));\n"
+        "} else {\n"
+        "  int last = values.shape[0] - 1;\n"
+        f"  for (int k = 0; k < {fmt.lanes}; ++k) {{ out[k] = wp::index(values, start + k < last ? start + k : last); }}\n"
+        "}\n"
+        "return out;\n"
+    )
+
+
+def _store(fmt: _Format) -> str:
+    """out[start .. start + min(count, lanes) - 1] = the first lanes: one unaligned vector store
+    where all of them go and the array is contiguous, else lane by lane."""
+    return (
+        f"int n = count < {fmt.lanes} ? count : {fmt.lanes};\n"
+        f"if (n == {fmt.lanes} && out.strides[0] == sizeof({fmt.scalar})) {{\n"
+        "  __builtin_memcpy(wp::address(out, start), &values, sizeof(values));\n"
+        "} else {\n"
+        "  for (int k = 0; k < n; ++k) { *wp::address(out, start + k) = values[k]; }\n"
+        "}\n"
+    )
+
+
 # --- float64 lanes ---------------------------------------------------------------------------
 
 @wp.func_native(_exp_neg(F64))
@@ -159,15 +200,16 @@ def lane_count(values: wp.array(dtype=wp.float64)):
     return LANES64
 
 
-@wp.func
-def load_lanes(values: wp.array(dtype=wp.float64), start: int):
+@wp.func_native(_load(F64))
+def load_lanes(values: wp.array(dtype=wp.float64), start: int) -> lanes64:
     """values[start .. start + 7], the index clamped to the last element past the end."""
-    last = values.shape[0] - 1
-    return lanes64(
-        values[wp.min(start, last)], values[wp.min(start + 1, last)], values[wp.min(start + 2, last)],
-        values[wp.min(start + 3, last)], values[wp.min(start + 4, last)], values[wp.min(start + 5, last)],
-        values[wp.min(start + 6, last)], values[wp.min(start + 7, last)],
-    )
+    ...
+
+
+@wp.func_native(_store(F64))
+def store_lanes(out: wp.array(dtype=wp.float64), start: int, values: lanes64, count: int):
+    """out[start + k] = values[k] for k < min(count, 8)."""
+    ...
 
 
 # --- float32 lanes: the same functions (Warp overloads them by the argument types) -------------
@@ -198,15 +240,13 @@ def lane_count(values: wp.array(dtype=wp.float32)):  # noqa: F811
     return LANES32
 
 
-@wp.func
-def load_lanes(values: wp.array(dtype=wp.float32), start: int):  # noqa: F811
+@wp.func_native(_load(F32))
+def load_lanes(values: wp.array(dtype=wp.float32), start: int) -> lanes32:  # noqa: F811
     """values[start .. start + 15], the index clamped to the last element past the end."""
-    last = values.shape[0] - 1
-    return lanes32(
-        values[wp.min(start, last)], values[wp.min(start + 1, last)], values[wp.min(start + 2, last)],
-        values[wp.min(start + 3, last)], values[wp.min(start + 4, last)], values[wp.min(start + 5, last)],
-        values[wp.min(start + 6, last)], values[wp.min(start + 7, last)], values[wp.min(start + 8, last)],
-        values[wp.min(start + 9, last)], values[wp.min(start + 10, last)], values[wp.min(start + 11, last)],
-        values[wp.min(start + 12, last)], values[wp.min(start + 13, last)], values[wp.min(start + 14, last)],
-        values[wp.min(start + 15, last)],
-    )
+    ...
+
+
+@wp.func_native(_store(F32))
+def store_lanes(out: wp.array(dtype=wp.float32), start: int, values: lanes32, count: int):  # noqa: F811
+    """out[start + k] = values[k] for k < min(count, 16)."""
+    ...

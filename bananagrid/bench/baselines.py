@@ -131,23 +131,28 @@ def cat_density(x, y, v0, t, sigma_a, sigma_omega, omegas, *, prune_sigmas=38.0,
     return out
 
 
-def polar_density(x, y, v0, t, sigma_a, sigma_omega, variant="improved"):
-    """Polar-banana density at local points: g(phi) g(r; mean, sd) / r, eqs. (8), (11)."""
-    x = np.asarray(x, dtype=float)
-    y = np.asarray(y, dtype=float)
-    r = np.hypot(x, y)
-    phi = np.arctan2(x, y)
+def polar_density(x, y, v0, t, sigma_a, sigma_omega, variant="improved", xp=np):
+    """Polar-banana density at local points: g(phi) g(r; mean, sd) / r, eqs. (8), (11).
+
+    ``xp`` is the array library: NumPy (the baseline) or ``jax.numpy`` (the JAX peer of
+    :mod:`bananagrid.bench.peers`, traced under ``jax.jit``); the formula is written once for both.
+    """
+    r = xp.hypot(x, y)
+    phi = xp.arctan2(x, y)
+    sinc = xp.sinc(phi / np.pi)  # the library's sinc is the normalised one
+    sigma_phi = 0.5 * sigma_omega * t
     if variant == "rough":
-        mean = v0 * t * _sinc(phi)
-        sd = np.full_like(r, 0.5 * sigma_a * t * t)
+        mean = v0 * t * sinc
+        sd = xp.full_like(r, 0.5 * sigma_a * t * t)
     else:
-        scc = (4 * _sinc(phi) - np.cos(phi)) / 3
-        ratio = phi / (0.5 * sigma_omega * t)
-        mean = v0 * t * _sinc(phi) + sigma_a**2 * t**3 / (12 * v0) * (ratio**2 - 1) * scc
+        scc = (4 * sinc - xp.cos(phi)) / 3
+        ratio = phi / sigma_phi
+        mean = v0 * t * sinc + sigma_a**2 * t**3 / (12 * v0) * (ratio**2 - 1) * scc
         sd = 0.5 * sigma_a * t * t * (1 + sigma_a**2 / (6 * v0**2) * (t**2 / 12 - phi**2 / sigma_omega**2)) * scc
+    z_phi, z_r = phi / sigma_phi, (r - mean) / sd
     with np.errstate(divide="ignore", invalid="ignore"):
-        dens = _normal_pdf(phi, 0.0, 0.5 * sigma_omega * t) * _normal_pdf(r, mean, sd) / r
-    return np.where((r > 0) & (sd > 0), dens, 0.0)
+        dens = _INV_SQRT_2PI**2 / (sigma_phi * sd * r) * xp.exp(-0.5 * (z_phi * z_phi + z_r * z_r))
+    return xp.where((r > 0) & (sd > 0), dens, 0.0)
 
 
 def bearing_density(x, y, fix) -> np.ndarray:

@@ -43,7 +43,7 @@ from ..models.registry import MODEL_KINDS
 from ..protocol import DensityModel
 from ..validate import BananagridError
 from ..engine.cluster import check_memory_limit
-from . import baselines, cluster
+from . import baselines, cluster, peers
 
 #: Figure 1 of the polar-banana paper.
 FIG1 = dict(v0=280.0, t=10.0, sigma_a=5.0 / 3.0, sigma_omega=math.pi / 54.0)
@@ -370,6 +370,30 @@ def run(kernels, step: float, threads: int, repeat: int, stride: int, log=print)
     return records
 
 
+def peer_table(names: list[str], step: float, repeat: int, log=print) -> list[dict]:
+    """The polar rows ``names`` against the installed peers (:func:`bananagrid.bench.peers.compare`),
+    both dtypes; logs the table and returns its records ([] when no peer is installed)."""
+    found = peers.installed()
+    if not found:
+        log(f"peers: none installed ({peers.PEERS_EXTRA} adds Numba and JAX)")
+        return []
+    records = []
+    for name in names:
+        model, grid = grid_model(name), _grid_for(name, step)
+        for dtype in (np.float64, np.float32):
+            rows = peers.compare(model, grid, dtype, repeat)
+            if not records:
+                log(f"peers on one core (CPU {rows[0]['cpu']}), {', '.join(found)} against rasterise and the NumPy twin "
+                    f"on the same grid, values checked equal first, rows alternated, best of {repeat} "
+                    "(spread: worst / best - 1; ours x: our best over this row's best)")
+                log(peers.PEER_HEADER)
+            for record in rows:
+                record["kernel"] = name
+                log(peers.peer_row(record))
+            records += rows
+    return records
+
+
 def _run_job(name: str, threads: int, repeat: int, stride: int, log) -> list[dict]:
     job = JOBS[name]()
     base = job.baseline(stride, repeat)
@@ -440,6 +464,22 @@ def memory_probe(side: int = MEMORY_SIDE) -> dict:
     return {"side": side, "peak_rss_mib": peak / 1024, "raster_mib": nbytes / 2**20}
 
 
+def vector_width() -> str:
+    """The widest SIMD registers the CPU offers (from /proc/cpuinfo's flags) and the lanes they
+    hold: the lane kernels' 512-bit vectors run as one register with AVX-512, as two halves with
+    AVX2."""
+    try:
+        with open("/proc/cpuinfo") as fh:
+            flags = set(next(line.split(":", 1)[1].split() for line in fh if line.startswith(("flags", "Features"))))
+    except (OSError, StopIteration):
+        return "vector width unknown"
+    for flag, bits, name in (("avx512f", 512, "AVX-512"), ("avx2", 256, "AVX2"), ("avx", 256, "AVX"),
+                             ("asimd", 128, "NEON"), ("sse2", 128, "SSE2")):
+        if flag in flags:
+            return f"{bits}-bit vectors ({name}: {bits // 64} float64 / {bits // 32} float32 lanes)"
+    return "no SIMD flags found"
+
+
 def machine() -> str:
     model = platform.processor() or platform.machine()
     try:
@@ -447,7 +487,8 @@ def machine() -> str:
             model = next(line.split(":", 1)[1].strip() for line in fh if line.startswith("model name"))
     except (OSError, StopIteration):
         pass
-    return f"{model}, {default_threads()} cores usable, Python {platform.python_version()}, {platform.system()}"
+    return (f"{model}, {vector_width()}, {default_threads()} cores usable, Python {platform.python_version()}, "
+            f"{platform.system()}")
 
 
 def _parser() -> argparse.ArgumentParser:
@@ -460,6 +501,9 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--threads", type=int, default=default_threads(), help="threads for the all-cores rows (default: every usable core)")
     p.add_argument("--repeat", type=int, default=3, help="timed runs per row; the best is reported (default 3)")
     p.add_argument("--baseline-stride", type=int, default=10, help="run the CAT and Butterly NumPy baselines on every N-th row and scale (default 10; 1 = all rows)")
+    p.add_argument("--no-peers", action="store_true",
+                   help="skip the peers table (the polar rows against Numba and JAX on one core, when the peers extra "
+                        f"is installed: {peers.PEERS_EXTRA})")
     p.add_argument("--no-memory", action="store_true", help=f"skip the peak-memory probe ({MEMORY_SIDE} x {MEMORY_SIDE} float32)")
     p.add_argument("--json", metavar="FILE", help="also write the records as JSON to FILE")
     c = p.add_argument_group(
@@ -534,6 +578,9 @@ def main(argv: list[str] | None = None) -> int:
         result["cluster_hypotheses"] = cluster.hypotheses_row(
             hypotheses=args.hypotheses, in_process=min(args.hypotheses, cluster.IN_PROCESS_HYPOTHESES),
             workers=args.workers, memory_limit=args.memory_limit)
+    polar_rows = [name for name in kernels if name in GRID_ROWS and GRID_ROWS[name][0] == "polar"]
+    if polar_rows and not args.no_peers:
+        result["peers"] = peer_table(polar_rows, args.step, args.repeat)
     for name in kernels:
         one = {r["dtype"]: r for r in records if r["kernel"] == name and r["threads"] == 1}
         many = {r["dtype"]: r for r in records if r["kernel"] == name and r["threads"] == args.threads}
