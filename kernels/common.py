@@ -44,48 +44,136 @@ SINC_SERIES_SWITCH = 1.5
 SINC_SERIES_TERMS = 15
 
 
-@wp.func
-def sinc_derivatives(x: Any):
-    """sinc and its first four derivatives at x (unnormalised sinc, sin(x) / x).
+#: A vector of cells: 8 float64 or 16 float32 lanes, one 512-bit register (``kernels/lanes.py``).
+LANES64 = 8
+LANES32 = 16
+lanes64 = wp.types.vector(LANES64, wp.float64)
+lanes32 = wp.types.vector(LANES32, wp.float32)
 
-    Differentiating x sinc(x) = sin(x) n times gives  x s_n + n s_(n-1) = sin^(n)(x),  used
-    upward for |x| >= SINC_SERIES_SWITCH. Below it the series  sinc = sum_k (-1)^k x^(2k) /
-    (2k+1)!  is differentiated term by term (no 0/0, no cancellation at x = 0).
-    """
-    zero = type(x)(0.0)
-    one = type(x)(1.0)
-    if wp.abs(x) >= type(x)(SINC_SERIES_SWITCH):
-        sn = wp.sin(x)
-        cs = wp.cos(x)
-        inv = one / x
-        s0 = sn * inv
-        s1 = (cs - s0) * inv
-        s2 = (-sn - type(x)(2.0) * s1) * inv
-        s3 = (-cs - type(x)(3.0) * s2) * inv
-        s4 = (sn - type(x)(4.0) * s3) * inv
-        return s0, s1, s2, s3, s4
-    z = x * x
-    s0 = zero
-    s1 = zero
-    s2 = zero
-    s3 = zero
-    s4 = zero
+
+# --- arithmetic generic over one value and a vector of lanes -------------------------------------
+# Warp's * and / between two vectors are not lane by lane. These are, and between scalars they
+# are the plain operators: one function body then serves the scalar kernels and the lane
+# kernels with the same roundings. ``lane0`` gives a value of the scalar type, whose type makes
+# constants (``type(lane0(x))(2.0) * v`` scales a vector; ``type(v)(1.0)`` fills one).
+
+@wp.func
+def each_mul(a: wp.float64, b: wp.float64):
+    """a * b."""
+    return a * b
+
+
+@wp.func
+def each_mul(a: wp.float32, b: wp.float32):  # noqa: F811
+    return a * b
+
+
+@wp.func
+def each_mul(a: lanes64, b: lanes64):  # noqa: F811
+    return wp.cw_mul(a, b)
+
+
+@wp.func
+def each_mul(a: lanes32, b: lanes32):  # noqa: F811
+    return wp.cw_mul(a, b)
+
+
+@wp.func
+def each_div(a: wp.float64, b: wp.float64):
+    """a / b."""
+    return a / b
+
+
+@wp.func
+def each_div(a: wp.float32, b: wp.float32):  # noqa: F811
+    return a / b
+
+
+@wp.func
+def each_div(a: lanes64, b: lanes64):  # noqa: F811
+    return wp.cw_div(a, b)
+
+
+@wp.func
+def each_div(a: lanes32, b: lanes32):  # noqa: F811
+    return wp.cw_div(a, b)
+
+
+@wp.func
+def lane0(x: wp.float64):
+    """x itself, or a vector's first lane: a value of the scalar type."""
+    return x
+
+
+@wp.func
+def lane0(x: wp.float32):  # noqa: F811
+    return x
+
+
+@wp.func
+def lane0(x: lanes64):  # noqa: F811
+    return x[0]
+
+
+@wp.func
+def lane0(x: lanes32):  # noqa: F811
+    return x[0]
+
+
+@wp.func
+def sinc_derivatives_recurrence(x: Any, sin_x: Any, cos_x: Any):
+    """sinc and its first four derivatives at x by the upward recurrence (for |x| >=
+    SINC_SERIES_SWITCH): differentiating x sinc(x) = sin(x) n times gives
+    x s_n + n s_(n-1) = sin^(n)(x). Generic over a value and a vector of lanes."""
+    inv = each_div(type(x)(1.0), x)
+    s0 = each_mul(sin_x, inv)
+    s1 = each_mul(cos_x - s0, inv)
+    s2 = each_mul(-sin_x - type(lane0(x))(2.0) * s1, inv)
+    s3 = each_mul(-cos_x - type(lane0(x))(3.0) * s2, inv)
+    s4 = each_mul(sin_x - type(lane0(x))(4.0) * s3, inv)
+    return s0, s1, s2, s3, s4
+
+
+@wp.func
+def sinc_derivatives_series(x: Any):
+    """sinc and its first four derivatives at x by the series sinc = sum_k (-1)^k x^(2k) /
+    (2k+1)! differentiated term by term (for |x| < SINC_SERIES_SWITCH: no 0/0, no cancellation
+    at x = 0). Generic over a value and a vector of lanes."""
+    one = type(lane0(x))(1.0)
+    two = type(lane0(x))(2.0)
+    three = type(lane0(x))(3.0)
+    z = each_mul(x, x)
+    s0 = type(x)(0.0)
+    s1 = type(x)(0.0)
+    s2 = type(x)(0.0)
+    s3 = type(x)(0.0)
+    s4 = type(x)(0.0)
     a = one  # (-1)^k / (2k+1)!
-    p0 = one  # z^k
-    p1 = zero  # z^(k-1)
-    p2 = zero  # z^(k-2)
+    p0 = type(x)(1.0)  # z^k
+    p1 = type(x)(0.0)  # z^(k-1)
+    p2 = type(x)(0.0)  # z^(k-2)
     for k in range(SINC_SERIES_TERMS):
-        m = type(x)(2.0) * type(x)(float(k))  # the power 2k of x
-        s0 += a * p0
-        s1 += a * m * x * p1
-        s2 += a * m * (m - one) * p1
-        s3 += a * m * (m - one) * (m - type(x)(2.0)) * x * p2
-        s4 += a * m * (m - one) * (m - type(x)(2.0)) * (m - type(x)(3.0)) * p2
+        m = two * type(lane0(x))(float(k))  # the power 2k of x
+        s0 = s0 + a * p0
+        s1 = s1 + each_mul(a * m * x, p1)
+        s2 = s2 + a * m * (m - one) * p1
+        s3 = s3 + each_mul(a * m * (m - one) * (m - two) * x, p2)
+        s4 = s4 + a * m * (m - one) * (m - two) * (m - three) * p2
         p2 = p1
         p1 = p0
-        p0 = p0 * z
-        a = -a / ((m + type(x)(2.0)) * (m + type(x)(3.0)))
+        p0 = each_mul(p0, z)
+        a = -a / ((m + two) * (m + three))
     return s0, s1, s2, s3, s4
+
+
+@wp.func
+def sinc_derivatives(x: Any):
+    """sinc and its first four derivatives at x (unnormalised sinc, sin(x) / x): the upward
+    recurrence for |x| >= SINC_SERIES_SWITCH, the series below it (the lane kernels compute
+    both and select)."""
+    if wp.abs(x) >= type(x)(SINC_SERIES_SWITCH):
+        return sinc_derivatives_recurrence(x, wp.sin(x), wp.cos(x))
+    return sinc_derivatives_series(x)
 
 
 @wp.func

@@ -20,7 +20,7 @@ for step, and phi feeds P_sigma, which is ill conditioned near its zero (an FMA 
 density 3e-13 from the scalar kernel's).
 
 Accuracy (``tests/test_lanes.py`` measures each over its reduced range and the whole domain
-against long double references): :func:`lane_exp_neg` within 3 ulp (float64) and 2 ulp
+against long double references): :func:`lane_exp` within 3 ulp (float64) and 2 ulp
 (float32), :func:`lane_atan2` within 2 ulp (Cephes' rational function, as the scalar
 ``common.atan2_fast``); :func:`lane_sqrt` is correctly rounded.
 """
@@ -31,11 +31,7 @@ from dataclasses import dataclass
 
 import warp as wp
 
-#: Lanes per vector: 8 float64 or 16 float32 = 512 bits.
-LANES64 = 8
-LANES32 = 16
-lanes64 = wp.types.vector(LANES64, wp.float64)
-lanes32 = wp.types.vector(LANES32, wp.float32)
+from .common import LANES32, LANES64, lanes32, lanes64  # noqa: F401 (the lane types, defined with the generic arithmetic)
 
 
 @dataclass(frozen=True)
@@ -51,8 +47,14 @@ class _Format:
     ln2_hi: float  # ln 2 rounded so that n ln2_hi is exact for every n of the domain
     ln2_lo: float  # ln 2 - ln2_hi
     exp_floor: float  # below this exp(x) is 0 in the format
+    exp_ceiling: float  # above this (ln of the largest finite value) exp(x) is inf
+    infinity: str  # C expression of +inf in the format
     taylor: int  # degree of exp(r)'s Taylor polynomial on |r| <= ln2 / 2
-    sqrt: str  # C builtin
+    sqrt: str  # C builtins
+    floor: str
+    pio2: tuple  # pi / 2 in parts, each times |n| <= 3 exact: the sine's Cody-Waite reduction
+    sin_coefficients: tuple  # Cephes' sin(r) = r + r^3 S(r^2) and cos(r) = 1 - r^2 / 2 + r^4 C(r^2)
+    cos_coefficients: tuple  # on |r| <= pi / 4, highest degree first
 
     def literal(self, value: float) -> str:
         return f"{value!r}{self.suffix}"
@@ -62,8 +64,17 @@ class _Format:
 # leaves (ln2/2)^13 / 13! = 1.7e-16. float32: fdlibm expf's ln2_hi has 16 bits, |n| <= 150
 # needs 8; degree 7 leaves (ln2/2)^8 / 8! = 5.3e-9 (eps = 6e-8).
 F64 = _Format("double", "long long", LANES64, "", 52, 1023, 6.93147180369123816490e-01, 1.90821492927058770002e-10,
-              -745.2, 12, "__builtin_sqrt")
-F32 = _Format("float", "int", LANES32, "f", 23, 127, 6.9314575195e-01, 1.4286067653e-06, -104.0, 7, "__builtin_sqrtf")
+              -745.2, 709.782712893384, "__builtin_huge_val()", 12, "__builtin_sqrt",
+              "__builtin_floor", (1.57079632673412561417e+00, 6.07710050630396597660e-11, 2.02226624879595063154e-21),
+              (1.58962301576546568060e-10, -2.50507477628578072866e-8, 2.75573136213857245213e-6,
+               -1.98412698295895385996e-4, 8.33333333332211858878e-3, -1.66666666666666307295e-1),
+              (-1.13585365213876817300e-11, 2.08757008419747316778e-9, -2.75573141792967388112e-7,
+               2.48015872888517045348e-5, -1.38888888888730564116e-3, 4.16666666666665929218e-2))
+F32 = _Format("float", "int", LANES32, "f", 23, 127, 6.9314575195e-01, 1.4286067653e-06, -104.0, 88.72283905206835,
+             "__builtin_huge_valf()", 7, "__builtin_sqrtf", "__builtin_floorf",
+             (1.5703125, 4.837512969970703125e-4, 7.54978995489188216e-8),
+             (-1.9515295891e-4, 8.3321608736e-3, -1.6666654611e-1),
+             (2.443315711809948e-5, -1.388731625493765e-3, 4.166664568298827e-2))
 
 
 #: Lets the compiler fuse a * b + c in one snippet (the pragma must open its block).
@@ -84,18 +95,18 @@ def _snippet(fmt: _Format, names: str, body: str, contract: bool = False) -> str
     return head + copies + re.sub(r"L\(([^()]+)\)", lambda m: fmt.literal(float(m.group(1))), body) + tail
 
 
-def _exp_neg(fmt: _Format) -> str:
-    """exp(x) for x <= 0, 0 below the format's floor (where libm's exp is 0 too): Cody-Waite
-    reduction x = n ln2 + r, |r| <= ln2 / 2, ln 2 split in two so that n ln2_hi is exact; n by
-    the 1.5 * 2^mantissa shifter (round to nearest in one add); exp(r) by its Taylor polynomial;
-    2^n as two factors 2^(n/2) built from their exponent bits, so that results below the
-    smallest normal underflow gradually to subnormals as libm's do (one factor 2^n would wrap
-    its exponent there)."""
+def _exp(fmt: _Format) -> str:
+    """exp(x): 0 below the format's floor (where libm's exp is 0 too), inf above its ceiling, NaN
+    for NaN. Cody-Waite reduction x = n ln2 + r, |r| <= ln2 / 2, ln 2 split in two so that
+    n ln2_hi is exact; n by the 1.5 * 2^mantissa shifter (round to nearest in one add); exp(r)
+    by its Taylor polynomial; 2^n as two factors 2^(n/2) built from their exponent bits, so that
+    results below the smallest normal underflow gradually to subnormals as libm's do and
+    n = 1024 (x near the ceiling) still has a factor (one factor 2^n would wrap its exponent)."""
     shifter = 1.5 * 2.0**fmt.mantissa
-    floor = f"L({fmt.exp_floor!r})"
+    floor, ceiling = f"L({fmt.exp_floor!r})", f"L({fmt.exp_ceiling!r})"
     horner = "".join(f"p = p * r + L({1.0 / math.factorial(k)!r});\n" for k in range(fmt.taylor - 2, -1, -1))
     return _snippet(fmt, "x", contract=True, body=(
-        f"vt v = vx < {floor} ? zero + {floor} : vx;\n"
+        f"vt v = vx < {floor} ? zero + {floor} : (vx > {ceiling} ? zero + {ceiling} : vx);\n"
         f"vt n = (v * L({1 / math.log(2)!r}) + L({shifter!r})) - L({shifter!r});\n"
         f"vt r = (v - n * L({fmt.ln2_hi!r})) - n * L({fmt.ln2_lo!r});\n"
         f"vt p = r * L({1.0 / math.factorial(fmt.taylor)!r}) + L({1.0 / math.factorial(fmt.taylor - 1)!r});\n"
@@ -103,7 +114,8 @@ def _exp_neg(fmt: _Format) -> str:
         "vi whole = __builtin_convertvector(n, vi);\n"
         "vi half = whole >> 1;\n"
         f"vt res = (p * (vt)((half + {fmt.bias}) << {fmt.mantissa})) * (vt)((whole - half + {fmt.bias}) << {fmt.mantissa});\n"
-        f"res = vx < {floor} ? zero : res;"
+        f"res = vx < {floor} ? zero : res;\n"
+        f"res = vx > {ceiling} ? zero + {fmt.infinity} : res;"
     ))
 
 
@@ -138,10 +150,54 @@ vt res = a < L(1.0e-4) ? 1 - vphi * vphi / 6 : vsin_phi / vphi;"""
 
 _WHERE_POSITIVE = "vt res = vc > 0 ? va : zero;"
 
+_WHERE_NOT_NEGATIVE = "vt res = vc >= 0 ? va : vb;"
+
+_ABS = "vt res = vx < 0 ? -vx : vx;"
+
+
+def _horner(var: str, coefficients) -> str:
+    """The polynomial with ``coefficients`` (highest degree first) in ``var``, nested."""
+    text = f"L({coefficients[0]!r})"
+    for c in coefficients[1:]:
+        text = f"({text} * {var} + L({c!r}))"
+    return text
+
+
+def _sine(fmt: _Format, cosine: bool) -> str:
+    """sin(x) or cos(x) for |x| <= 4 (enough for |x| <= pi): x = n pi/2 + r, |r| <= pi/4, by
+    Cody-Waite with pi/2 in three parts (n by the shifter, as the exp); Cephes' polynomials of r;
+    the quadrant n mod 4 picks +-sin r or +-cos r."""
+    shifter = 1.5 * 2.0**fmt.mantissa
+    p1, p2, p3 = (f"L({v!r})" for v in fmt.pio2)
+    sin_poly, cos_poly = (_horner("z", c) for c in (fmt.sin_coefficients, fmt.cos_coefficients))
+    pick = ("q == 0 ? c : (q == 1 ? -s : (q == 2 ? -c : s))" if cosine else
+            "q == 0 ? s : (q == 1 ? c : (q == 2 ? -s : -c))")
+    return _snippet(fmt, "x", contract=True, body=(
+        f"vt n = (vx * L({2 / math.pi!r}) + L({shifter!r})) - L({shifter!r});\n"
+        f"vt r = ((vx - n * {p1}) - n * {p2}) - n * {p3};\n"
+        "vt z = r * r;\n"
+        f"vt s = r + r * z * {sin_poly};\n"
+        f"vt c = (1 - L(0.5) * z) + z * z * {cos_poly};\n"
+        "vi q = __builtin_convertvector(n, vi) & 3;\n"
+        f"vt res = {pick};"
+    ))
+
+
 
 def _sqrt(fmt: _Format) -> str:
     """sqrt lane by lane: a loop the compiler turns into one ``vsqrtpd`` / ``vsqrtps``."""
     return _snippet(fmt, "x", f"vt res;\nfor (int k = 0; k < {fmt.lanes}; ++k) res[k] = {fmt.sqrt}(vx[k]);")
+
+
+def _wrap_angle(fmt: _Format) -> str:
+    """d wrapped to [-pi, pi], d - 2 pi floor((d + pi) / (2 pi)) with the scalar
+    ``bearing.wrap_angle``'s roundings; the floor loop becomes one ``vrndscalepd``."""
+    two_pi, pi = "L(6.283185307179586)", "L(3.141592653589793)"
+    return _snippet(fmt, "d", (
+        f"vt q = (vd + {pi}) / {two_pi};\n"
+        f"vt res;\nfor (int k = 0; k < {fmt.lanes}; ++k) res[k] = {fmt.floor}(q[k]);\n"
+        f"res = vd - {two_pi} * res;"
+    ))
 
 
 def _load(fmt: _Format) -> str:
@@ -174,8 +230,8 @@ def _store(fmt: _Format) -> str:
 
 # --- float64 lanes ---------------------------------------------------------------------------
 
-@wp.func_native(_exp_neg(F64))
-def lane_exp_neg(x: lanes64) -> lanes64: ...
+@wp.func_native(_exp(F64))
+def lane_exp(x: lanes64) -> lanes64: ...
 
 
 @wp.func_native(_snippet(F64, "x y", _ATAN2))
@@ -192,6 +248,26 @@ def lane_sinc_of(phi: lanes64, sin_phi: lanes64) -> lanes64: ...
 
 @wp.func_native(_snippet(F64, "c a", _WHERE_POSITIVE))
 def lane_where_positive(c: lanes64, a: lanes64) -> lanes64: ...
+
+
+@wp.func_native(_wrap_angle(F64))
+def lane_wrap_angle(d: lanes64) -> lanes64: ...
+
+
+@wp.func_native(_snippet(F64, "c a b", _WHERE_NOT_NEGATIVE))
+def lane_where_not_negative(c: lanes64, a: lanes64, b: lanes64) -> lanes64: ...
+
+
+@wp.func_native(_snippet(F64, "x", _ABS))
+def lane_abs(x: lanes64) -> lanes64: ...
+
+
+@wp.func_native(_sine(F64, cosine=False))
+def lane_sin(x: lanes64) -> lanes64: ...
+
+
+@wp.func_native(_sine(F64, cosine=True))
+def lane_cos(x: lanes64) -> lanes64: ...
 
 
 @wp.func
@@ -214,8 +290,8 @@ def store_lanes(out: wp.array(dtype=wp.float64), start: int, values: lanes64, co
 
 # --- float32 lanes: the same functions (Warp overloads them by the argument types) -------------
 
-@wp.func_native(_exp_neg(F32))
-def lane_exp_neg(x: lanes32) -> lanes32: ...  # noqa: F811
+@wp.func_native(_exp(F32))
+def lane_exp(x: lanes32) -> lanes32: ...  # noqa: F811
 
 
 @wp.func_native(_snippet(F32, "x y", _ATAN2))
@@ -232,6 +308,26 @@ def lane_sinc_of(phi: lanes32, sin_phi: lanes32) -> lanes32: ...  # noqa: F811
 
 @wp.func_native(_snippet(F32, "c a", _WHERE_POSITIVE))
 def lane_where_positive(c: lanes32, a: lanes32) -> lanes32: ...  # noqa: F811
+
+
+@wp.func_native(_wrap_angle(F32))
+def lane_wrap_angle(d: lanes32) -> lanes32: ...  # noqa: F811
+
+
+@wp.func_native(_snippet(F32, "c a b", _WHERE_NOT_NEGATIVE))
+def lane_where_not_negative(c: lanes32, a: lanes32, b: lanes32) -> lanes32: ...  # noqa: F811
+
+
+@wp.func_native(_snippet(F32, "x", _ABS))
+def lane_abs(x: lanes32) -> lanes32: ...  # noqa: F811
+
+
+@wp.func_native(_sine(F32, cosine=False))
+def lane_sin(x: lanes32) -> lanes32: ...  # noqa: F811
+
+
+@wp.func_native(_sine(F32, cosine=True))
+def lane_cos(x: lanes32) -> lanes32: ...  # noqa: F811
 
 
 @wp.func

@@ -36,7 +36,7 @@ from typing import Any
 
 import warp as wp
 
-from .common import atan2_fast, scc_of, sinc_derivatives, sinc_of, world_to_local
+from .common import atan2_fast, each_mul, lane0, scc_of, sinc_derivatives, sinc_of, world_to_local
 
 ROUGH = 0
 IMPROVED = 1
@@ -89,8 +89,12 @@ def polar_mean_sd(phi: Any, sinc_phi: Any, cos_phi: Any, coef: wp.array(dtype=An
 
 
 @wp.func
-def polar_law_derivatives(phi: Any, coef: wp.array(dtype=Any), variant: int):
-    """P_mu and its first four derivatives, P_sigma and its first two, at phi.
+def polar_law_of(
+    phi: Any, d0: Any, d1: Any, d2: Any, d3: Any, d4: Any, sin_phi: Any, cos_phi: Any, coef: wp.array(dtype=Any),
+    variant: int,
+):
+    """P_mu and its first four derivatives, P_sigma and its first two, at phi, from sinc's
+    derivatives d0..d4 and sin, cos at phi. Generic over a value and a vector of lanes.
 
     Improved: P_mu = A sinc + K q scc with q = (phi / sigma_phi)^2 - 1, and
     P_sigma = S w scc with w = 1 + c (T - phi^2 / sigma_omega^2). q and w are quadratics, so by
@@ -98,55 +102,77 @@ def polar_law_derivatives(phi: Any, coef: wp.array(dtype=Any), variant: int):
     scc^(n) = (4 sinc^(n) - cos^(n)) / 3 by (7). Rough: P_mu = A sinc, P_sigma = S (constant).
     """
     zero = type(phi)(0.0)
-    two = type(phi)(2.0)
-    three = type(phi)(3.0)
-    four = type(phi)(4.0)
-    d0, d1, d2, d3, d4 = sinc_derivatives(phi)
+    two = type(lane0(phi))(2.0)
+    three = type(lane0(phi))(3.0)
+    four = type(lane0(phi))(4.0)
     a = coef[MEAN_SINC]
     if variant == ROUGH:
-        return a * d0, a * d1, a * d2, a * d3, a * d4, coef[SD_SCALE], zero, zero
-    cos_phi = wp.cos(phi)
-    sin_phi = wp.sin(phi)
+        return a * d0, a * d1, a * d2, a * d3, a * d4, type(phi)(coef[SD_SCALE]), zero, zero
     c0 = (four * d0 - cos_phi) / three
     c1 = (four * d1 + sin_phi) / three
     c2 = (four * d2 + cos_phi) / three
     c3 = (four * d3 - sin_phi) / three
     c4 = (four * d4 - cos_phi) / three
     inv_sp2 = coef[INV_SIGMA_PHI] * coef[INV_SIGMA_PHI]
-    q = phi * phi * inv_sp2 - type(phi)(1.0)
+    q = each_mul(phi, phi) * inv_sp2 - type(phi)(1.0)
     q1 = two * phi * inv_sp2
     q2 = two * inv_sp2
     k = coef[MEAN_SCC]
-    m0 = a * d0 + k * q * c0
-    m1 = a * d1 + k * (q * c1 + q1 * c0)
-    m2 = a * d2 + k * (q * c2 + two * q1 * c1 + q2 * c0)
-    m3 = a * d3 + k * (q * c3 + three * q1 * c2 + three * q2 * c1)
-    m4 = a * d4 + k * (q * c4 + four * q1 * c3 + type(phi)(6.0) * q2 * c2)
+    m0 = a * d0 + each_mul(k * q, c0)
+    m1 = a * d1 + k * (each_mul(q, c1) + each_mul(q1, c0))
+    m2 = a * d2 + k * (each_mul(q, c2) + each_mul(two * q1, c1) + q2 * c0)
+    m3 = a * d3 + k * (each_mul(q, c3) + each_mul(three * q1, c2) + three * q2 * c1)
+    m4 = a * d4 + k * (each_mul(q, c4) + each_mul(four * q1, c3) + type(lane0(phi))(6.0) * q2 * c2)
     curv = coef[SD_CURVATURE]
     u = coef[INV_SIGMA_OMEGA_SQ]
-    w = type(phi)(1.0) + curv * (coef[SD_T_TERM] - phi * phi * u)
+    w = type(phi)(1.0) + curv * (type(phi)(coef[SD_T_TERM]) - each_mul(phi, phi) * u)
     w1 = -two * curv * u * phi
     w2 = -two * curv * u
     scale = coef[SD_SCALE]
-    s0 = scale * w * c0
-    s1 = scale * (w * c1 + w1 * c0)
-    s2 = scale * (w * c2 + two * w1 * c1 + w2 * c0)
+    s0 = each_mul(scale * w, c0)
+    s1 = scale * (each_mul(w, c1) + each_mul(w1, c0))
+    s2 = scale * (each_mul(w, c2) + each_mul(two * w1, c1) + w2 * c0)
     return m0, m1, m2, m3, m4, s0, s1, s2
 
 
 @wp.func
-def polar_heading_mean_sd(theta: Any, coef: wp.array(dtype=Any), variant: int, order: int):
-    """E[r | theta] and SD[r | theta] with initial-heading noise: (15) and (16) at order 2, with
-    the fourth-order terms at order 4. SD is 0 where P_sigma(theta_bar) <= 0 (outside the
-    approximation's domain, as without heading noise) or the variance is not positive."""
-    zero = type(theta)(0.0)
+def polar_law_derivatives(phi: Any, coef: wp.array(dtype=Any), variant: int):
+    """P_mu and its first four derivatives, P_sigma and its first two, at phi
+    (:func:`polar_law_of`)."""
+    d0, d1, d2, d3, d4 = sinc_derivatives(phi)
+    sin_phi = type(phi)(0.0)
+    cos_phi = type(phi)(0.0)
+    if variant != ROUGH:
+        cos_phi = wp.cos(phi)
+        sin_phi = wp.sin(phi)
+    return polar_law_of(phi, d0, d1, d2, d3, d4, sin_phi, cos_phi, coef, variant)
+
+
+@wp.func
+def polar_heading_moments(
+    m0: Any, m1: Any, m2: Any, m3: Any, m4: Any, s0: Any, s1: Any, s2: Any, coef: wp.array(dtype=Any), order: int
+):
+    """E[r | theta] and Var[r | theta] from the law's derivatives at theta_bar: (15) and (16)
+    at order 2, with the fourth-order terms at order 4. Generic over a value and a vector of
+    lanes."""
     sb2 = coef[SIGMA_BAR_SQ]
-    m0, m1, m2, m3, m4, s0, s1, s2 = polar_law_derivatives(theta * coef[SHRINK], coef, variant)
-    mean = m0 + type(theta)(0.5) * m2 * sb2
-    var = s0 * s0 + m1 * m1 * sb2
+    half = type(lane0(m0))(0.5)
+    mean = m0 + half * m2 * sb2
+    var = each_mul(s0, s0) + each_mul(m1, m1) * sb2
     if order == 4:
-        mean = mean + type(theta)(0.125) * m4 * sb2 * sb2
-        var = var + (s1 * s1 + s0 * s2) * sb2 + (type(theta)(0.5) * m2 * m2 + m1 * m3) * sb2 * sb2
+        mean = mean + type(lane0(m0))(0.125) * m4 * sb2 * sb2
+        var = var + (each_mul(s1, s1) + each_mul(s0, s2)) * sb2 + (half * each_mul(m2, m2) + each_mul(m1, m3)) * sb2 * sb2
+    return mean, var
+
+
+@wp.func
+def polar_heading_mean_sd(theta: Any, coef: wp.array(dtype=Any), variant: int, order: int):
+    """E[r | theta] and SD[r | theta] with initial-heading noise (:func:`polar_heading_moments`).
+    SD is 0 where P_sigma(theta_bar) <= 0 (outside the approximation's domain, as without
+    heading noise) or the variance is not positive."""
+    zero = type(theta)(0.0)
+    m0, m1, m2, m3, m4, s0, s1, s2 = polar_law_derivatives(theta * coef[SHRINK], coef, variant)
+    mean, var = polar_heading_moments(m0, m1, m2, m3, m4, s0, s1, s2, coef, order)
     if s0 <= zero or var <= zero:
         return mean, zero
     return mean, wp.sqrt(var)

@@ -29,7 +29,7 @@ def test_bench_writes_records(tmp_path, capsys):
 def test_bench_rejects_bad_arguments(capsys):
     assert bench.main(["--kernels", "banana"]) == 2
     assert (
-        "--kernels = 'banana': choose from cat, cat-heading, polar-rough, polar-improved, bearing-exact, "
+        "--kernels = 'banana': choose from cat, cat-heading, polar-rough, polar-improved, polar-heading, bearing-exact, "
         "butterly-r1, butterly-r10, butterly-r100, butterly-r1000"
     ) in capsys.readouterr().err
     assert bench.main(["--repeat", "0"]) == 2

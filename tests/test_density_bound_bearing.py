@@ -32,7 +32,11 @@ def kernel_values(model, xs, ys, dtype) -> np.ndarray:
     binding = model.bind(ctx, None, grid=True)
     ctx.load(binding.grid_kernel)
     out = ctx.zeros((len(ys), len(xs)))
-    ctx.launch(binding.grid_kernel, dim=(len(ys), len(xs)), inputs=[ctx.array(xs), ctx.array(ys), 0, *binding.params, out])
+    if binding.row_loop:  # the lane kernel: a whole row per thread
+        dim, head = (len(ys), 1), [ctx.array(xs), ctx.array(ys), 0, len(xs)]
+    else:
+        dim, head = (len(ys), len(xs)), [ctx.array(xs), ctx.array(ys), 0]
+    ctx.launch(binding.grid_kernel, dim=dim, inputs=[*head, *binding.params, out])
     return ctx.numpy(out).astype(np.float64)
 
 

@@ -12,9 +12,9 @@ from hypothesis import HealthCheck, assume, given, settings
 from hypothesis import strategies as st
 
 import bananagrid as bg
-from bananagrid.kernels import polar
+from bananagrid.kernels import bearing, polar
 from bananagrid.kernels.lanes import (
-    LANES32, LANES64, lane_atan2, lane_exp_neg, lane_sinc_of, lane_sqrt, lanes32, lanes64,
+    LANES32, LANES64, lane_atan2, lane_cos, lane_exp, lane_sin, lane_sinc_of, lane_sqrt, lanes32, lanes64,
 )
 
 # np.longdouble is the x87 80-bit format here (64-bit mantissa, 11 bits beyond float64): a
@@ -28,9 +28,13 @@ FORMATS = {np.float64: (lanes64, LANES64), np.float32: (lanes32, LANES32)}
 def _unary(op: int, xs: wp.array(dtype=Any), out: wp.array(dtype=Any)):
     k = wp.tid()
     if op == 0:
-        out[k] = lane_exp_neg(xs[k])
+        out[k] = lane_exp(xs[k])
     elif op == 1:
         out[k] = lane_sqrt(xs[k])
+    elif op == 2:
+        out[k] = lane_sin(xs[k])
+    else:
+        out[k] = lane_cos(xs[k])
 
 
 @wp.kernel
@@ -78,6 +82,20 @@ def test_exp_within_3_ulp_over_the_reduced_range_and_the_whole_domain():
     assert got[x == 0.0].tolist() == [1.0] * int((x == 0.0).sum())
 
 
+def test_exp_of_positive_arguments_and_overflow():
+    # the bearing kernel's log density can be positive (a fix sharper than 1 / (2 pi) m^2)
+    x = np.concatenate([np.random.default_rng(5).uniform(0, 709.78, 200_000), [1e-300, 1.0, 700.0, 709.78]])
+    worst = _ulps(_run(_unary, 0, x), np.exp(x.astype(np.longdouble))).max()
+    assert worst <= 3.0, worst  # the same reduction and polynomial as below 0 (measured 2.4)
+    over = np.array([709.7828, 710.0, 1e5, np.inf])
+    assert _run(_unary, 0, over).tolist() == [np.inf] * 4
+    assert np.isnan(_run(_unary, 0, np.array([np.nan])))[0]
+    x32 = np.random.default_rng(6).uniform(0, 88.72, 100_000).astype(np.float32)
+    worst = _ulps(_run(_unary, 0, x32, dtype=np.float32), np.exp(x32.astype(np.longdouble)), np.float32).max()
+    assert worst <= 2.0, worst
+    assert _run(_unary, 0, np.array([88.73, 1e4], dtype=np.float32), dtype=np.float32).tolist() == [np.inf] * 2
+
+
 def test_exp_underflows_gradually_like_libm():
     # below -708 the result is subnormal: within one subnormal step (4.9e-324) of NumPy's
     x = -np.concatenate([np.linspace(708.0, 745.1, 5000), [709.78, 744.44, 745.13]])
@@ -86,6 +104,24 @@ def test_exp_underflows_gradually_like_libm():
     assert np.all(got[x > -744.4] > 0)
     x = np.array([-745.21, -746.0, -1e5, -1e300, -np.inf])
     assert _run(_unary, 0, x).tolist() == [0.0] * len(x)  # where libm's exp is 0 as well
+
+
+@pytest.mark.parametrize("dtype", [np.float64, np.float32])
+def test_sin_and_cos_over_the_heading_range(dtype):
+    # the heading kernels take them at theta_bar in [-pi, pi]: quadrant edges, zeros, tiny angles
+    rng = np.random.default_rng(7)
+    edges = np.array([0.0, 1e-300, 1e-8, math.pi / 4, math.pi / 2, 3 * math.pi / 4, math.pi, 2.0, 3.0])
+    x = np.concatenate([rng.uniform(-math.pi, math.pi, 200_000), edges, -edges]).astype(dtype)
+    xl = x.astype(np.longdouble)
+    for op, reference in ((2, np.sin(xl)), (3, np.cos(xl))):
+        got = _run(_unary, op, x, dtype=dtype)
+        # within 2 units of the format's spacing at 1 (an absolute bound: the law takes sin and
+        # cos in sums with terms of order 1), and within 2 ulp relative away from the zeros
+        eps = np.finfo(dtype).eps
+        assert np.max(np.abs(got - reference)) <= 2 * eps / 2, np.max(np.abs(got - reference)) / eps
+        away = np.abs(reference) > 0.1
+        worst = _ulps(got[away], reference[away], dtype).max()
+        assert worst <= 2.0, worst
 
 
 def test_sqrt_is_correctly_rounded():
@@ -154,12 +190,12 @@ def _scalar_kernel(model, x, y, dtype=np.float64, inputs=None):
         rounded = np.ascontiguousarray(values, dtype=inputs).ravel().astype(dtype)
         return wp.array(rounded, dtype=scalar, device="cpu")
 
-    coef = polar.coefficients(model.v0, model.t, model.sigma_a, model.sigma_omega)
+    coef = polar.coefficients(model.v0, model.t, model.sigma_a, model.sigma_omega, model.sigma_heading)
     law = polar.ROUGH if model.variant == "rough" else polar.IMPROVED
     xs, ys = device_array(x), device_array(y)
     out = wp.zeros(xs.shape[0], dtype=scalar, device="cpu")
     wp.launch(polar.polar_points, dim=xs.shape[0], device="cpu", inputs=[
-        xs, ys, 0, device_array(coef), law, 0, device_array(model.pose.as_array()), out])
+        xs, ys, 0, device_array(coef), law, model.kernel_order, device_array(model.pose.as_array()), out])
     return out.numpy().reshape(np.shape(x))
 
 
@@ -262,7 +298,14 @@ def test_float32_lanes_within_the_rounding_of_float32(case):
     peak elsewhere."""
     model, grid = case
     origin, heading = model.pose.origin, model.pose.heading
-    lanes = bg.rasterise(model, grid, dtype=np.float32, threads=1)
+    try:
+        lanes = bg.rasterise(model, grid, dtype=np.float32, threads=1)
+    except bg.BananagridError as exc:
+        # a cell centre within ~1e-80 m of the origin: 1/r takes the density past float32's range,
+        # which rasterise refuses (an error, not inf); float64 shows that it does exceed it
+        assert "exceed float32's range" in str(exc)
+        assert bg.rasterise(model, grid, threads=1).values.max() > np.finfo(np.float32).max
+        assume(False)
     assert lanes.provenance["kernel"] == "polar_lanes.polar_grid_lanes" and lanes.values.dtype == np.float32
     # grids that float32 cannot resolve (cells far smaller than the coordinates' float32 spacing,
     # a cell centre within rounding of the pose origin) are computed in float64: not this test's
@@ -300,3 +343,175 @@ def test_lane_grid_at_the_origin_and_past_the_improved_domain(variant, dtype):
     inside = scalar >= 1e-10 * scalar.max()
     rel = np.max(np.abs(lanes.values[inside] - scalar[inside]) / scalar[inside])
     assert rel <= (1e-13 if dtype == np.float64 else 1e-4), rel  # float32: FLOAT32_BOUND's scale
+
+
+def _scalar_bearing(model, x, y, dtype):
+    """The bearing density by the scalar kernel (``bearing.bearing_points``, the GPU path's),
+    launched here directly in ``dtype`` (``model.pdf`` takes the lane kernel on the CPU)."""
+    scalar = wp.float64 if dtype == np.float64 else wp.float32
+    xs = wp.array(np.ravel(x).astype(dtype), dtype=scalar, device="cpu")
+    ys = wp.array(np.ravel(y).astype(dtype), dtype=scalar, device="cpu")
+    out = wp.zeros(xs.shape[0], dtype=scalar, device="cpu")
+    params = wp.array(model.kernel_parameters().astype(dtype), dtype=scalar, device="cpu")
+    law = bearing.EXACT if model.variant == "exact" else bearing.LINEAR
+    wp.launch(bearing.bearing_points, dim=xs.shape[0], device="cpu",
+              inputs=[xs, ys, 0, params, len(model.sensors), law, out])
+    return out.numpy().reshape(np.shape(x))
+
+
+@st.composite
+def _bearing_cases(draw):
+    """A fix from 2-4 stations 1-50 km from a contact, bearing SDs 1e-4 to 0.2 rad (the observed
+    bearings off the true ones by up to 2 SDs), either variant, and a 131 x 127 grid from inside
+    the fix's ellipse to 10 times its size."""
+    n = draw(st.integers(2, 4))
+    target = np.array([draw(st.floats(-1e4, 1e4)), draw(st.floats(-1e4, 1e4))])
+    angles = sorted(draw(st.lists(st.floats(0.0, 2 * math.pi), min_size=n, max_size=n)))
+    assume(min(np.diff(angles + [angles[0] + 2 * math.pi])) > 0.2)  # stations not in line with the contact
+    ranges = [draw(st.floats(1e3, 5e4)) for _ in range(n)]
+    sensors = np.array([target + r * np.array([math.sin(a), math.cos(a)]) for a, r in zip(angles, ranges)])
+    sigmas = np.array([draw(st.floats(1e-4, 0.2)) for _ in range(n)])
+    offsets = np.array([draw(st.floats(-2.0, 2.0)) for _ in range(n)])
+    bearings = bg.bearing_to(sensors, target) + offsets * sigmas
+    variant = draw(st.sampled_from(["exact", "linear"]))
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            model = bg.BearingFix(sensors=sensors, bearings=bearings, sigmas=sigmas, variant=variant)
+    except bg.BananagridError:
+        assume(False)  # lines that cross behind a station: no fix to map
+    # a fix whose chi^2 is far above what bearings within 2 SDs of the truth give is not the
+    # likelihood's maximum (the fix's solver stopped in another basin, seen with a station
+    # within 1 km): the Laplace normaliser exp(-chi^2 / 2) then overflows both kernels' densities
+    assume(model.chi2_min <= 4.0 * n)
+    half = draw(st.floats(0.3, 10.0)) * 4.0 * math.sqrt(max(np.linalg.eigvalsh(model.covariance)))
+    fx, fy = model.fix
+    grid = bg.Grid.from_bounds(x=(fx - half, fx + half), y=(fy - half, fy + half), dx=2 * half / 131, dy=2 * half / 127)
+    return model, grid
+
+
+@settings(max_examples=200, deadline=None, derandomize=True, database=None,
+          suppress_health_check=[HealthCheck.too_slow, HealthCheck.filter_too_much])
+@given(case=_bearing_cases())
+def test_bearing_lanes_match_the_scalar_kernel_across_the_domain(case):
+    """The lane kernels compute the log density with the scalar kernel's roundings, step for step
+    (the lane atan2 is ``atan2_fast``'s steps, the wrap the same expression); only the exp
+    differs: the lane exp within 3 ulp, libm's within 1, so 4 ulp of relative difference where
+    the density is a normal number, a few subnormal steps below. Both dtypes, as rasterise
+    computes them."""
+    model, grid = case
+    x, y = _centres(grid)
+    for dtype in (np.float64, np.float32):
+        lanes = bg.rasterise(model, grid, dtype=dtype, threads=1)
+        assert lanes.provenance["kernel"] == "bearing_lanes.bearing_grid_lanes"
+        computed = np.dtype(lanes.provenance["computed_in"]).type
+        assert np.array_equal(model.pdf(x, y, dtype=dtype), lanes.values)  # the points take the same lanes
+        scalar = _scalar_bearing(model, x, y, computed).astype(dtype)
+        eps, tiny = np.finfo(computed).eps, np.finfo(computed).tiny
+        normal = scalar >= tiny
+        rel = np.abs(lanes.values[normal].astype(float) - scalar[normal]) / scalar[normal]
+        assert np.all(rel <= 4 * eps), rel.max() / eps
+        assert np.all(np.abs(lanes.values[~normal].astype(float) - scalar[~normal]) <= 4 * tiny * eps)
+
+
+def _heading_condition(model, dx, dy):
+    """``_condition`` with initial-heading noise: how much rounding each input and term by one unit
+    moves log(density) to first order, from (15)-(16) at theta_bar (the law's derivatives and
+    the moments by the model's scalar kernel):
+
+        kappa = 1 + (1 + |z_theta|)^2 / sigma_theta + [ |z_r| M + (1 + z_r^2) V / (2 SD) ] / SD
+
+    with M = r + |A sinc| + |K| (z^2 + 1) m + |Pm_2| sb2 / 2 + |Pm_4| sb2^2 / 8 (the mean's terms;
+    improved only for the K term) and V = 2 |Ps| S_terms + Pm_1^2 sb2 + (Ps_1^2 + |Ps Ps_2|) sb2
+    + (Pm_2^2 / 2 + |Pm_1 Pm_3|) sb2^2 (the variance's), S_terms as in ``_condition``."""
+    c, s = math.cos(model.pose.heading), math.sin(model.pose.heading)
+    x, y = dx * c - dy * s, dx * s + dy * c
+    r, theta = np.hypot(x, y), np.arctan2(x, y)
+    bar = theta * model.sigma_phi**2 / model.sigma_theta**2
+    sb2 = model.sigma_bar**2
+    m0, m1, m2, m3, m4, s0, s1, s2 = np.moveaxis(model.law_derivatives(bar), -1, 0)
+    mean, sd = model.conditional_moments(theta)
+    v0, t, sigma_a, sigma_omega = model.v0, model.t, model.sigma_a, model.sigma_omega
+    sinc = np.where(bar == 0, 1.0, np.sin(bar) / np.where(bar == 0, 1.0, bar))
+    big_a, big_s = v0 * t, sigma_a * t**2 / 2
+    mean_terms = r + np.abs(big_a * sinc) + np.abs(m2) * sb2 / 2 + np.abs(m4) * sb2**2 / 8
+    s_terms = np.full_like(bar, big_s)
+    if model.variant == "improved":
+        z = bar / model.sigma_phi
+        k, curv = sigma_a**2 * t**3 / (12 * v0), sigma_a**2 / (6 * v0**2)
+        scc, m = (4 * sinc - np.cos(bar)) / 3, (4 * np.abs(sinc) + np.abs(np.cos(bar))) / 3
+        w = 1 + curv * (t**2 / 12 - bar**2 / sigma_omega**2)
+        mean_terms = mean_terms + abs(k) * (z**2 + 1) * m
+        s_terms = big_s * (np.abs(w) * m + np.abs(scc) * (1 + curv * t**2 / 12 + curv * bar**2 / sigma_omega**2))
+    var_terms = (2 * np.abs(s0) * s_terms + m1**2 * sb2 + (s1**2 + np.abs(s0 * s2)) * sb2
+                 + (m2**2 / 2 + np.abs(m1 * m3)) * sb2**2)
+    z_r = (r - mean) / sd
+    z_theta = theta / model.sigma_theta
+    return (1 + (1 + np.abs(z_theta)) ** 2 / model.sigma_theta
+            + (np.abs(z_r) * mean_terms + (1 + z_r**2) * var_terms / (2 * sd)) / sd)
+
+
+@st.composite
+def _heading_cases(draw):
+    """A polar banana with initial-heading noise (sigma_0 from 1e-4 to 0.6 rad, order 2 or 4) over
+    the swept domain of ``_swept_cases``."""
+    model, grid = draw(_swept_cases())
+    sigma_heading, order = draw(st.floats(1e-4, 0.6)), draw(st.sampled_from([2, 4]))
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        model = bg.PolarBanana(v0=model.v0, t=model.t, sigma_a=model.sigma_a, sigma_omega=model.sigma_omega,
+                               variant=model.variant, sigma_heading=sigma_heading, heading_order=order, pose=model.pose)
+    return model, grid
+
+
+@settings(max_examples=200, deadline=None, derandomize=True, database=None,
+          suppress_health_check=[HealthCheck.too_slow])
+@given(case=_heading_cases())
+def test_heading_lanes_match_the_scalar_kernel_across_the_domain(case):
+    """With heading noise the lane kernel computes (15)-(16) with the scalar kernel's own generic
+    functions; only sin, cos (lane sine against libm) and exp differ, by a few ulp each, and
+    the final product's order. Compared relatively inside 1e-10 of the peak."""
+    model, grid = case
+    lanes = bg.rasterise(model, grid, threads=1)
+    assert lanes.provenance["kernel"] == "polar_lanes.polar_grid_lanes"
+    x, y = _centres(grid)
+    assert np.array_equal(model.pdf(x, y), lanes.values)  # the points take the same lanes
+    scalar = _scalar_kernel(model, x, y)
+    peak = scalar.max()
+    inside = scalar >= max(1e-10 * peak, 1e-290)
+    rel = np.abs(lanes.values[inside] - scalar[inside]) / scalar[inside]
+    kappa = _heading_condition(model, x[inside] - model.pose.origin[0], y[inside] - model.pose.origin[1])
+    # 1e-13 where well conditioned, and 16 eps kappa where (r - E[r | theta]) / SD cancels: the
+    # lane sine and libm's differ by an ulp, which kappa's terms carry (the sweep reached
+    # 0.5 eps kappa: up to 1e-12 relative where sigma_a / v0 is 0.005)
+    assert np.all(rel <= 1e-13 + 16 * EPS * kappa), (rel / (EPS * kappa)).max()
+    assert np.all(np.abs(lanes.values[~inside] - scalar[~inside]) <= 1e-13 * peak + 1e-300)
+
+
+@settings(max_examples=100, deadline=None, derandomize=True, database=None,
+          suppress_health_check=[HealthCheck.too_slow])
+@given(case=_heading_cases())
+def test_float32_heading_lanes_within_the_rounding_of_float32(case):
+    """As the float32 sweep without heading noise: the float32 lane grid against the scalar
+    kernel in float64 on the float32-rounded inputs, within 64 eps32 kappa where the density is
+    at least 1e-6 of the peak (100 cases reached 3.8 eps32 kappa)."""
+    model, grid = case
+    try:
+        lanes = bg.rasterise(model, grid, dtype=np.float32, threads=1)
+    except bg.BananagridError as exc:  # the 1/r singularity past float32's range, as above
+        assert "exceed float32's range" in str(exc)
+        assume(False)
+    assume(lanes.provenance["computed_in"] == "float32")
+    x, y = _centres(grid)
+    reference = _scalar_kernel(model, x, y, np.float64, inputs=np.float32)
+    peak = reference.max()
+    assume(peak >= 1e-20)
+    origin = model.pose.origin
+    f32 = np.float32
+    near_origin = np.hypot(x.astype(f32) - f32(origin[0]), y.astype(f32) - f32(origin[1]), dtype=float) < 1e-15
+    inside = (reference >= 1e-6 * peak) & ~near_origin
+    rel = np.abs(lanes.values[inside] - reference[inside]) / reference[inside]
+    kappa = _heading_condition(model, x[inside] - origin[0], y[inside] - origin[1])
+    assert np.all(rel <= 64 * EPS32 * kappa), (rel / (EPS32 * kappa)).max()
+    outside = ~inside & ~near_origin
+    assert np.abs(lanes.values[outside] - reference[outside]).max(initial=0.0) <= 4e-6 * peak

@@ -82,6 +82,8 @@ GRID_ROWS = {
     "cat-heading": ("cat", {**FIG1, "sigma_heading": math.pi / 15}),
     "polar-rough": ("polar", {**FIG1, "variant": "rough"}),
     "polar-improved": ("polar", {**FIG1, "variant": "improved"}),
+    # Figure 8's widest heading error, sigma_0 = pi/15, at order 4 (no NumPy twin: the improved row's)
+    "polar-heading": ("polar", {**FIG1, "variant": "improved", "sigma_heading": math.pi / 15, "heading_order": 4}),
     "bearing-exact": ("bearing_fix", COASTAL),
     **{f"butterly-r{n}": ("butterly", butterly_parameters(n)) for n in BUTTERLY_RATIOS},
 }
@@ -313,7 +315,8 @@ def _best_of(repeat: int, fn) -> float:
 
 def _baseline_seconds(name: str, model: DensityModel, grid: Grid, stride: int, repeat: int) -> float:
     """NumPy float64 time for the whole grid (scaled from every ``stride``-th row for CAT and
-    Butterly). The heading-convolved CAT has no NumPy twin: its baseline is the plain CAT's.
+    Butterly). The heading-convolved CAT and polar banana have no NumPy twin: their baselines
+    are the plain CAT's and the improved polar banana's (the same formula without heading noise).
     Butterly's twin skips the same negligible cells as the kernel (``floors``)."""
     cat = name.startswith("cat")
     butterly = name.startswith("butterly")
@@ -563,7 +566,7 @@ def main(argv: list[str] | None = None) -> int:
         print(f"grids: Figure 1 frame at {args.step:g} m (banana kernels), {COASTAL_SIDE} x {COASTAL_SIDE} "
               f"about the coastal fix (bearing), {BUTTERLY_SIDE} x {BUTTERLY_SIDE} about the ring +- 6 sigma "
               f"(butterly-rN: three speeds, largest range N sigma_min); baseline: NumPy {np.__version__} float64 "
-              "(cat-heading: the plain CAT's, as it has no NumPy twin)"
+              "(cat-heading, polar-heading: the plain CAT's and the improved polar's, as they have no NumPy twin)"
               + (f", CAT and Butterly on every {args.baseline_stride}th row, scaled" if args.baseline_stride > 1 else ""))
     records = []
     if kernels:
@@ -578,7 +581,8 @@ def main(argv: list[str] | None = None) -> int:
         result["cluster_hypotheses"] = cluster.hypotheses_row(
             hypotheses=args.hypotheses, in_process=min(args.hypotheses, cluster.IN_PROCESS_HYPOTHESES),
             workers=args.workers, memory_limit=args.memory_limit)
-    polar_rows = [name for name in kernels if name in GRID_ROWS and GRID_ROWS[name][0] == "polar"]
+    polar_rows = [name for name in kernels if name in GRID_ROWS and GRID_ROWS[name][0] == "polar"
+                  and not GRID_ROWS[name][1].get("sigma_heading")]  # the peers compute (8) and (11) only
     if polar_rows and not args.no_peers:
         result["peers"] = peer_table(polar_rows, args.step, args.repeat)
     for name in kernels:

@@ -42,9 +42,14 @@ def grid_context(model: DensityModel, grid: Grid, dtype=np.float64, device: str 
 
 
 def grid_block(ctx: WarpContext, binding, grid: Grid, rows: tuple[int, int] | None = None,
-               cols: tuple[int, int] | None = None) -> np.ndarray:
+               cols: tuple[int, int] | None = None, *, with_sum: bool = False):
     """The grid kernel of ``binding`` at the cell centres of rows ``rows[0]:rows[1]`` and
     columns ``cols[0]:cols[1]`` of ``grid`` (default all), in the context's dtype.
+
+    With ``with_sum``, returns ``(values, total)``: ``total`` the float64 sum of the values,
+    taken on the CPU band by band by the thread that computed the band, right after its launch
+    (in parallel, and while the band is in that core's cache: one serial pass over the grid
+    after the kernel held the 1 -> 2 thread speedup of the fastest kernels to 1.5x).
 
     Each cell's value depends on its coordinates only, except for kernels that work in tiles of
     ``binding.tile_rows`` cells (Butterly): their bands start on multiples of the tile side and
@@ -74,6 +79,7 @@ def grid_block(ctx: WarpContext, binding, grid: Grid, rows: tuple[int, int] | No
     if binding.quad_width:
         quads = ctx.empty((len(bands), binding.quad_width), dtype=ctx.vector(4))
     tile = (binding.tile_rows if ctx.cpu else 1) if binding.tile_rows else None
+    band_sums = {}
 
     def launch_band(r0, r1):
         if columns is None:
@@ -85,7 +91,14 @@ def grid_block(ctx: WarpContext, binding, grid: Grid, rows: tuple[int, int] | No
             head = [xs, ys, r0, r1, tile, columns, ctx.scalar(grid.dx), ctx.scalar(grid.dy)]
         extra = [] if scratch is None else [scratch] + ([] if quads is None else [quads]) + [band_of[r0]]
         ctx.launch(binding.grid_kernel, dim=dim, inputs=[*head, *binding.params, *extra, out])
+        if with_sum and ctx.cpu:  # a CPU launch has finished when it returns
+            band_sums[r0] = np.sum(values[r0:r1], dtype=np.float64)
 
     ctx.run_bands(launch_band, bands)
     ctx.synchronize()
-    return values if ctx.cpu else out.numpy()
+    if not ctx.cpu:
+        values = out.numpy()
+    if not with_sum:
+        return values
+    total = sum(band_sums[r0] for r0, _ in bands) if ctx.cpu else np.sum(values, dtype=np.float64)
+    return values, float(total)

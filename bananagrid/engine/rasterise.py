@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 import time
 
 import numpy as np
@@ -24,6 +25,21 @@ __all__ = ["rasterise", "QUANTITIES"]
 
 #: What :func:`rasterise` computes on a grid.
 QUANTITIES = ("density", "probability")
+
+
+def narrow(values: np.ndarray, dtype: np.dtype, total: float, model: DensityModel) -> np.ndarray:
+    """``values`` cast to ``dtype``; an error, not inf, where a density exceeds its range
+    (checked only when their sum ``total`` does)."""
+    if total <= np.finfo(dtype).max:
+        return values.astype(dtype)
+    with np.errstate(over="ignore"):
+        cast = values.astype(dtype)
+    if not np.isfinite(cast).all():
+        raise BananagridError(
+            f"{type(model).__name__}: densities up to {float(values.max()):.3g} per m^2 exceed {dtype.name}'s range "
+            f"({float(np.finfo(dtype).max):.3g}); rasterise with dtype=np.float64"
+        )
+    return cast
 
 
 def rasterise(model: DensityModel, grid: Grid | PolarLattice, *, quantity: str = "density", dtype=np.float64,
@@ -102,11 +118,13 @@ def rasterise(model: DensityModel, grid: Grid | PolarLattice, *, quantity: str =
                    f"{type(model).__name__}: {what}", limit=max_seconds, option="max_seconds=S")
     start = time.perf_counter()
     binding = model.bind(ctx, extent, grid=True)
-    values = grid_block(ctx, binding, grid)
+    values, total = grid_block(ctx, binding, grid, with_sum=True)
     seconds = time.perf_counter() - start
-    check_finite(values, model)
-    values = values.astype(asked, copy=False)
-    mass = float(np.sum(values, dtype=np.float64) * grid.cell_area)
+    if not math.isfinite(total):
+        check_finite(values, model)
+    if asked != ctx.dtype:  # float32 asked, computed in float64 (engine.precision)
+        values = narrow(values, asked, total, model)
+    mass = total * grid.cell_area
     provenance = {
         **model.parameters(),
         "kernel": binding.kernel_name,

@@ -18,6 +18,7 @@ import numpy as np
 
 from ..domains.pose import Pose
 from ..kernels import bearing as kernels
+from ..kernels import bearing_lanes
 from ..protocol import Extent, KernelBinding, KernelContext, SceneKey, SceneSchema
 from ..validate import BananagridError, real_array
 from .base import RANGE_SDS, Model, check_n, check_rng
@@ -490,9 +491,13 @@ class BearingFix(Model):
         return out
 
     def bind(self, ctx: KernelContext, extent: Extent, *, grid: bool = False) -> KernelBinding:
-        """The bearing kernels (``kernels/bearing.py``) of ``variant``."""
+        """The bearing kernels (``kernels/bearing.py``) of ``variant``; on the CPU their lane twins."""
         params = (ctx.array(self.kernel_parameters()), len(self.sensors),
                   kernels.EXACT if self.variant == "exact" else kernels.LINEAR)
+        if ctx.device == "cpu":  # a vector of cells or points at a time (kernels/bearing_lanes.py)
+            return KernelBinding(bearing_lanes.bearing_grid_lanes, bearing_lanes.bearing_points_lanes, params,
+                                 "bearing_lanes.bearing_grid_lanes", {"variant": self.variant}, row_loop=True,
+                                 bands_per_thread=4)
         return KernelBinding(kernels.bearing_grid, kernels.bearing_points, params, "bearing.bearing_grid",
                              {"variant": self.variant})
 

@@ -569,13 +569,13 @@ class PolarBanana(MotionModel):
         return ctx.numpy(mean).reshape(phi.shape), ctx.numpy(sd).reshape(phi.shape)
 
     def bind(self, ctx: KernelContext, extent: Extent, *, grid: bool = False) -> KernelBinding:
-        """The closed-form kernels (``kernels/polar.py``): one row per CPU thread; on the CPU without
-        heading noise, a vector of cells or points at a time (``kernels/polar_lanes.py``)."""
+        """The closed-form kernels (``kernels/polar.py``): one row per CPU thread; on the CPU a vector
+        of cells or points at a time (``kernels/polar_lanes.py``)."""
         params = (self._coefficients(ctx), self._law(), self.kernel_order, ctx.array(self.pose.as_array()))
         notes = {"variant": self.variant, "truncated_mass": self.truncated_mass}
         if self.sigma_heading > 0.0:
             notes["heading_order"] = self.heading_order
-        if ctx.device == "cpu" and self.kernel_order == 0:
+        if ctx.device == "cpu":
             return KernelBinding(polar_lanes.polar_grid_lanes, polar_lanes.polar_points_lanes, params,
                                  "polar_lanes.polar_grid_lanes", notes, row_loop=True, bands_per_thread=1)
         return KernelBinding(kernels.polar_grid, kernels.polar_points, params, "polar.polar_grid", notes, row_loop=True,
