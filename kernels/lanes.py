@@ -13,16 +13,18 @@ launched on a GPU (the models bind them on the CPU alone). :func:`load_lanes` an
 :func:`store_lanes` move a whole vector in one unaligned load or store where it lies in a
 contiguous array (lane by lane they cost a third of the float32 kernel's time).
 
-Warp compiles without contracting a * b + c into one fused multiply-add; the exp snippet asks
-for it (``#pragma clang fp contract(fast)``): its Horner steps become FMAs, one rounding fewer
-each. The atan2 snippet does not: its rounding is then the scalar ``common.atan2_fast``'s, step
-for step, and phi feeds P_sigma, which is ill conditioned near its zero (an FMA there moved the
-density 3e-13 from the scalar kernel's).
+Warp compiles without contracting a * b + c into one fused multiply-add; the exp and sine
+snippets ask for it (``#pragma clang fp contract(fast)``): their Horner steps become FMAs, one
+rounding fewer each. The atan2 snippet does not: its rounding is then the scalar
+``common.atan2_fast``'s, step for step, and phi feeds P_sigma, which is ill conditioned near its
+zero (an FMA there moved the density 3e-13 from the scalar kernel's).
 
 Accuracy (``tests/test_lanes.py`` measures each over its reduced range and the whole domain
 against long double references): :func:`lane_exp` within 3 ulp (float64) and 2 ulp
 (float32), :func:`lane_atan2` within 2 ulp (Cephes' rational function, as the scalar
-``common.atan2_fast``); :func:`lane_sqrt` is correctly rounded.
+``common.atan2_fast``), :func:`lane_sin` and :func:`lane_cos` within 2 ulp away from their zeros
+and one unit of 1 absolute on [-pi, pi]; :func:`lane_sqrt` is correctly rounded; the wrap and
+the selects are exact.
 """
 
 import math
@@ -31,7 +33,8 @@ from dataclasses import dataclass
 
 import warp as wp
 
-from .common import LANES32, LANES64, lanes32, lanes64  # noqa: F401 (the lane types, defined with the generic arithmetic)
+# the lane types live with the arithmetic generic over them (common.each_mul, ...)
+from .common import LANES32, LANES64, lanes32, lanes64  # noqa: F401
 
 
 @dataclass(frozen=True)
@@ -85,7 +88,7 @@ def _snippet(fmt: _Format, names: str, body: str, contract: bool = False) -> str
     """A native body over ``vt`` copies of the vector arguments ``names`` that leaves ``res``
     (``vt``: the lanes as a compiler vector; ``vi``: integers of the same width); ``L(value)``
     in ``body`` becomes a literal of the lane type; ``contract`` allows fused multiply-adds."""
-    size = 64
+    size = fmt.lanes * (8 if fmt.scalar == "double" else 4)  # bytes: 64, one AVX-512 register
     head = ((CONTRACT if contract else "") +
             f"typedef {fmt.scalar} vt __attribute__((vector_size({size})));\n"
             f"typedef {fmt.integer} vi __attribute__((vector_size({size})));\n"
@@ -181,7 +184,6 @@ def _sine(fmt: _Format, cosine: bool) -> str:
         "vi q = __builtin_convertvector(n, vi) & 3;\n"
         f"vt res = {pick};"
     ))
-
 
 
 def _sqrt(fmt: _Format) -> str:

@@ -1,16 +1,19 @@
 """The polar-banana kernels in CPU lanes: 8 float64 or 16 float32 cells at a time, end to end.
 
-The same density as ``polar.polar_density_local`` without heading noise (rough and improved
+The same density as ``polar.polar_density_local``. Without heading noise (rough and improved
 variants; the formulas are in ``kernels/polar.py``): r by a lane sqrt, phi by the lane atan2,
 sinc(phi) = (x / r) / phi, cos(phi) = y / r, P_mu (8) and P_sigma (11) in lane arithmetic with
-the host's coefficients, and one lane exp for both normal factors. The scalar kernel's branches
-are selects: 0 at r = 0 and where the improved P_sigma is not positive. Values agree with the
-scalar kernel to about 1e-14 relative in float64 where the density is well conditioned
-(``tests/test_lanes.py`` sweeps the parameter domain).
+the host's coefficients, and one lane exp for both normal factors. With initial-heading noise
+(order 2 or 4): the law's derivatives at theta_bar and the moments (15)-(16) by the generic
+functions the scalar kernel runs too (``polar.polar_law_of``, ``polar.polar_heading_moments``),
+with the lane sine and both branches of the sinc derivatives selected per lane. The scalar
+kernel's branches are selects: 0 at r = 0 and where P_sigma (or the variance) is not positive.
+Values agree with the scalar kernel to about 1e-14 relative in float64 where the density is well
+conditioned (``tests/test_lanes.py`` sweeps the parameter domain).
 
-CPU only (see ``kernels/lanes.py``); the GPU and heading-noise paths use ``polar.polar_grid``.
-The grid, points and batch kernels share :func:`polar_world_lanes`, so that ``rasterise``,
-``pdf`` and the batches agree bit for bit.
+CPU only (see ``kernels/lanes.py``); the GPU path uses ``polar.polar_grid``. The grid, points
+and batch kernels share :func:`polar_world_lanes`, so that ``rasterise``, ``pdf`` and the batches
+agree bit for bit.
 """
 
 from typing import Any
