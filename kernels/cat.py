@@ -333,6 +333,44 @@ def cat_split(
 
 
 @wp.func
+def cat_scan_noise(x: Any, y: Any, v0: Any, t: Any, eps: Any):
+    """The scan's rounding allowances on F and dF/domega at (x, y), and the chord bound's
+    coefficient (M2 / 8 per squared node spacing, ``cat_interval``)."""
+    r = wp.sqrt(x * x + y * y)
+    t2 = t * t
+    noise_f = type(x)(ROUNDING_ULPS) * eps * t2 * type(x)(0.5) * (wp.abs(x) + wp.abs(y) + v0 * t)
+    noise_g = type(x)(ROUNDING_ULPS) * eps * t2 * t * (
+        (wp.abs(x) + wp.abs(y)) / type(x)(3.0) + v0 * t * type(x)(7.0 / 12.0)
+    )
+    chord_coef = t2 * t2 * (r * type(x)(0.25) + v0 * t / type(x)(12.0)) * type(x)(0.125)
+    return r, noise_f, noise_g, chord_coef
+
+
+@wp.func
+def cat_node_interval(
+    x: Any, y: Any, table: wp.array2d(dtype=Any), k: int, v0: Any, t: Any, sigma_a: Any, sigma_omega: Any,
+    tol: Any, r: Any, noise_f: Any, noise_g: Any,
+):
+    """The density of the roots in the node interval [k - 1, k] that the scan's cheap test
+    flagged (0 where both ends' accelerations are beyond PRUNE_SIGMAS on one side): settled by
+    ``cat_interval``, or split by ``cat_split``. Shared by the scalar and the lane scans."""
+    if cat_negligible(table, k, x, y, type(x)(PRUNE_SIGMAS) * sigma_a):
+        return type(x)(0.0)
+    w_prev = table[k - 1, 0]
+    f_prev = table[k - 1, 1] * y - table[k - 1, 2] * x - table[k - 1, 3]
+    g_prev = table[k - 1, 4] * y - table[k - 1, 5] * x - table[k - 1, 6]
+    w_k = table[k, 0]
+    f_k = table[k, 1] * y - table[k, 2] * x - table[k, 3]
+    g_k = table[k, 4] * y - table[k, 5] * x - table[k, 6]
+    part, settled = cat_interval(
+        x, y, w_prev, w_k, f_prev, g_prev, f_k, g_k, v0, t, sigma_a, sigma_omega, tol, r, noise_f, noise_g, False,
+    )
+    if settled:
+        return part
+    return cat_split(x, y, w_prev, w_k, f_prev, g_prev, f_k, g_k, v0, t, sigma_a, sigma_omega, tol, r, noise_f, noise_g)
+
+
+@wp.func
 def cat_density_local(
     x: Any,
     y: Any,
@@ -347,46 +385,26 @@ def cat_density_local(
     """Exact CAT density at a point of the local frame: scan the table, refine every root.
 
     Intervals with a sign change, and those whose smaller |F| at an end is within the chord
-    bound of zero (``cat_interval``), are examined; the rest cannot hold a root.
+    bound of zero (``cat_interval``), are examined (``cat_node_interval``); the rest cannot hold
+    a root.
     """
+    density = type(x)(0.0)
+    r, noise_f, noise_g, chord_coef = cat_scan_noise(x, y, v0, t, eps)
     zero = type(x)(0.0)
-    density = zero
-    a_cut = type(x)(PRUNE_SIGMAS) * sigma_a
-    r = wp.sqrt(x * x + y * y)
-    t2 = t * t
-    noise_f = type(x)(ROUNDING_ULPS) * eps * t2 * type(x)(0.5) * (wp.abs(x) + wp.abs(y) + v0 * t)
-    noise_g = type(x)(ROUNDING_ULPS) * eps * t2 * t * (
-        (wp.abs(x) + wp.abs(y)) / type(x)(3.0) + v0 * t * type(x)(7.0 / 12.0)
-    )
-    chord_coef = t2 * t2 * (r * type(x)(0.25) + v0 * t / type(x)(12.0)) * type(x)(0.125)
     n = table.shape[0]
     w_prev = table[0, 0]
     f_prev = table[0, 1] * y - table[0, 2] * x - table[0, 3]
-    g_prev = table[0, 4] * y - table[0, 5] * x - table[0, 6]
     for k in range(1, n):
         w_k = table[k, 0]
         f_k = table[k, 1] * y - table[k, 2] * x - table[k, 3]
-        g_k = table[k, 4] * y - table[k, 5] * x - table[k, 6]
         width = w_k - w_prev
         # cheap test first: a sign change, or an end within the chord bound M2 w^2 / 8 of zero
         if (f_k >= zero) != (f_prev >= zero) or wp.min(wp.abs(f_prev), wp.abs(f_k)) <= (
             chord_coef * width * width + noise_f
         ):
-            if not cat_negligible(table, k, x, y, a_cut):
-                part, settled = cat_interval(
-                    x, y, w_prev, w_k, f_prev, g_prev, f_k, g_k, v0, t, sigma_a, sigma_omega, tol, r,
-                    noise_f, noise_g, False,
-                )
-                if settled:
-                    density += part
-                else:
-                    density += cat_split(
-                        x, y, w_prev, w_k, f_prev, g_prev, f_k, g_k, v0, t, sigma_a, sigma_omega, tol, r,
-                        noise_f, noise_g,
-                    )
+            density += cat_node_interval(x, y, table, k, v0, t, sigma_a, sigma_omega, tol, r, noise_f, noise_g)
         w_prev = w_k
         f_prev = f_k
-        g_prev = g_k
     return density
 
 

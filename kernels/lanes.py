@@ -202,6 +202,31 @@ def _wrap_angle(fmt: _Format) -> str:
     ))
 
 
+def _scan_group(fmt: _Format) -> str:
+    """The CAT scan's cheap test on one group of node intervals (``cat_lanes.node_groups``), as
+    ``cat.cat_density_local`` computes it: F = hx y - hy x - c at the group's nodes and at their
+    predecessors, the chord bound (chord (w - w_prev)) (w - w_prev) + noise; bit k set where F
+    changes sign over interval k or the smaller |F| at its ends is within the bound (of the
+    first ``count`` intervals). One snippet, so that all of it is vector code."""
+    size = fmt.lanes * (8 if fmt.scalar == "double" else 4)
+    rows = "".join(f"vt r{i}; __builtin_memcpy(&r{i}, &wp::index(groups, {i}, g), {size});\n" for i in range(8))
+    return (
+        f"typedef {fmt.scalar} vt __attribute__((vector_size({size})));\n" + rows +
+        "vt f = (r1 * y - r2 * x) - r3;\n"
+        "vt f_prev = (r5 * y - r6 * x) - r7;\n"
+        "vt spacing = r0 - r4;\n"
+        "vt bound = (spacing * chord) * spacing + noise;\n"
+        f"typedef {fmt.integer} vi __attribute__((vector_size({size})));\n"
+        "vt a = f_prev < 0 ? -f_prev : f_prev;\n"
+        "vt b = f < 0 ? -f : f;\n"
+        "vi hit = ((f >= 0) != (f_prev >= 0)) | ((a < b ? a : b) <= bound);\n"
+        f"int n = count < {fmt.lanes} ? count : {fmt.lanes};\n"
+        "int flags = 0;\n"
+        f"for (int k = 0; k < {fmt.lanes}; ++k) flags |= (hit[k] != 0) << k;\n"
+        "return flags & ((1 << n) - 1);\n"
+    )
+
+
 def _load(fmt: _Format) -> str:
     """values[start ..] as one vector: one unaligned vector load where the whole vector lies in a
     contiguous array, else lane by lane with the index clamped to the last element."""
@@ -272,6 +297,11 @@ def lane_sin(x: lanes64) -> lanes64: ...
 def lane_cos(x: lanes64) -> lanes64: ...
 
 
+@wp.func_native(_scan_group(F64))
+def cat_scan_group(groups: wp.array2d(dtype=lanes64), g: int, x: wp.float64, y: wp.float64, chord: wp.float64,
+                   noise: wp.float64, count: int) -> int: ...
+
+
 @wp.func
 def lane_count(values: wp.array(dtype=wp.float64)):
     """Lanes in the vectors :func:`load_lanes` makes of ``values`` (8)."""
@@ -330,6 +360,11 @@ def lane_sin(x: lanes32) -> lanes32: ...  # noqa: F811
 
 @wp.func_native(_sine(F32, cosine=True))
 def lane_cos(x: lanes32) -> lanes32: ...  # noqa: F811
+
+
+@wp.func_native(_scan_group(F32))
+def cat_scan_group(groups: wp.array2d(dtype=lanes32), g: int, x: wp.float32, y: wp.float32,  # noqa: F811
+                   chord: wp.float32, noise: wp.float32, count: int) -> int: ...
 
 
 @wp.func

@@ -43,6 +43,7 @@ NOT_RUN = {
     "bananagrid bench --kernels polar-rough,polar-improved,polar-heading,bearing-exact --step 2 --repeat 15 --no-peers --no-memory":
         "a minute of timing (see tests/test_bench.py)",
     "bananagrid bench --kernels butterly-r1000 --repeat 5 --baseline-stride 100": "a minute of timing (see tests/test_bench.py)",
+    "bananagrid bench --kernels cat,cat-heading,cat-cells --repeat 3": "minutes of timing (see tests/test_bench.py)",
     "pip install 'bananagrid[peers]'": "installs from the package index; the test extra installs Numba and JAX",
     "time bananagrid sweep": "about a minute; tests/test_compare.py runs the sweep at --n 2",
     "python -m bananagrid.scenes.docs --write docs/scenes.md": "rewrites the docs; the same generator runs with --check in tests/test_architecture.py",

@@ -12,6 +12,8 @@ from scipy.special import erfc
 from ..domains.pose import Pose
 from ..engine.warp_runtime import WarpContext
 from ..kernels import cat as kernels
+from ..kernels import cat_lanes
+from ..kernels.common import LANES32, LANES64
 from ..kernels import cat_cells
 from ..protocol import CellPlan, Extent, KernelBinding, KernelContext, SceneKey, SceneSchema
 from ..validate import BananagridError, positive
@@ -560,6 +562,11 @@ class CAT(MotionModel):
             ctx.scalar(self.sigma_omega), pose, ctx.scalar(tol), ctx.scalar(np.finfo(ctx.dtype).eps),
         )
         notes = {"scan_nodes": table.shape[0], "k_sigma": self.k_sigma, "truncated_mass": self.truncated_mass}
+        if ctx.device == "cpu":  # the scan over nodes in lanes (kernels/cat_lanes.py)
+            lanes = LANES64 if ctx.dtype == np.float64 else LANES32
+            groups = ctx.array(cat_lanes.node_groups(table.numpy(), lanes), dtype=ctx.vector(lanes))
+            return KernelBinding(cat_lanes.cat_grid_lanes, cat_lanes.cat_points_lanes, (table, groups, *params[1:]),
+                                 "cat_lanes.cat_grid_lanes", notes)
         return KernelBinding(kernels.cat_grid, kernels.cat_points, params, "cat.cat_grid", notes)
 
     def work_estimate(self, cells: int, extent: Extent) -> float:

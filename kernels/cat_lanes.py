@@ -1,0 +1,144 @@
+"""The CAT scan in CPU lanes: F at 8 (float64) or 16 (float32) turn-rate nodes at a time.
+
+The exact CAT kernel (``kernels/cat.py``) scans every cell's turn-rate nodes for intervals that
+can hold a root: F = hx y - hy x - c at each node, and a cheap test on each interval (a sign
+change, or an end within the chord bound of zero). That scan took about half of the kernel's
+time (0.34 s of 0.73 s on the bench's Figure 1 grid, one core). Here the test runs on a group of
+intervals at once (``lanes.cat_scan_group``: F at the group's nodes and at their predecessors,
+from the table's columns regrouped into vectors by :func:`node_groups`, with the scalar scan's
+arithmetic), and each flagged interval is examined by the scalar kernel's own
+``cat.cat_node_interval``, in node order. The density is therefore the scalar kernel's, bit for
+bit (``tests/test_lanes.py`` checks it).
+
+CPU only (see ``kernels/lanes.py``); the GPU path uses ``cat.cat_grid``.
+"""
+
+from typing import Any
+
+import numpy as np
+import warp as wp
+
+from .cat import cat_node_interval, cat_scan_noise
+from .common import lanes32, lanes64, world_to_local
+from .lanes import cat_scan_group
+
+# No adjoints: nothing differentiates these kernels (see ``polar_lanes``).
+wp.set_module_options({"enable_backward": False})
+
+#: Rows of the node groups: omega, hx, hy, c at nodes 1 + L g .. L (g + 1), then the same at the
+#: nodes before them.
+GROUP_ROWS = 8
+
+
+def node_groups(table: np.ndarray, lanes: int) -> np.ndarray:
+    """The scan table's omega, hx, hy and c columns at nodes 1 .. n - 1 and at their predecessors
+    0 .. n - 2, in groups of ``lanes`` (the last padded with its last node, which the count of
+    live intervals then leaves out): shape (GROUP_ROWS, groups, lanes)."""
+    n = table.shape[0]
+    groups = -(-(n - 1) // lanes)
+    out = np.empty((GROUP_ROWS, groups * lanes), dtype=table.dtype)
+    for c in range(4):
+        for row, nodes in ((c, table[1:, c]), (4 + c, table[:-1, c])):
+            out[row, : n - 1] = nodes
+            out[row, n - 1 :] = nodes[-1]
+    return out.reshape(GROUP_ROWS, groups, lanes)
+
+
+@wp.func
+def group_width(groups: wp.array2d(dtype=lanes64)):
+    """Intervals per group (8 float64 lanes)."""
+    return 8
+
+
+@wp.func
+def group_width(groups: wp.array2d(dtype=lanes32)):  # noqa: F811
+    return 16
+
+
+@wp.func
+def cat_density_lanes(
+    x: Any,
+    y: Any,
+    table: wp.array2d(dtype=Any),
+    groups: wp.array2d(dtype=Any),
+    v0: Any,
+    t: Any,
+    sigma_a: Any,
+    sigma_omega: Any,
+    tol: Any,
+    eps: Any,
+):
+    """``cat.cat_density_local`` with its scan over nodes in lanes (``groups``: :func:`node_groups`)."""
+    density = type(x)(0.0)
+    r, noise_f, noise_g, chord_coef = cat_scan_noise(x, y, v0, t, eps)
+    n = table.shape[0]
+    width = group_width(groups)
+    for g in range(groups.shape[1]):
+        k = 1 + g * width  # the node that the group's first interval ends at
+        flags = cat_scan_group(groups, g, x, y, chord_coef, noise_f, n - k)
+        if flags != 0:
+            for j in range(width):
+                if ((flags >> j) & 1) != 0:
+                    density += cat_node_interval(x, y, table, k + j, v0, t, sigma_a, sigma_omega, tol, r, noise_f,
+                                                 noise_g)
+    return density
+
+
+@wp.kernel
+def cat_grid_lanes(
+    xs: wp.array(dtype=Any),
+    ys: wp.array(dtype=Any),
+    row0: int,
+    table: wp.array2d(dtype=Any),
+    groups: wp.array2d(dtype=Any),
+    v0: Any,
+    t: Any,
+    sigma_a: Any,
+    sigma_omega: Any,
+    pose: wp.array(dtype=Any),
+    tol: Any,
+    eps: Any,
+    out: wp.array2d(dtype=Any),
+):
+    """``cat.cat_grid`` with the lane scan (``groups``: :func:`node_groups`)."""
+    i, j = wp.tid()
+    row = row0 + i
+    x, y = world_to_local(xs[j], ys[row], pose)
+    out[row, j] = cat_density_lanes(x, y, table, groups, v0, t, sigma_a, sigma_omega, tol, eps)
+
+
+@wp.kernel
+def cat_points_lanes(
+    xs: wp.array(dtype=Any),
+    ys: wp.array(dtype=Any),
+    start: int,
+    table: wp.array2d(dtype=Any),
+    groups: wp.array2d(dtype=Any),
+    v0: Any,
+    t: Any,
+    sigma_a: Any,
+    sigma_omega: Any,
+    pose: wp.array(dtype=Any),
+    tol: Any,
+    eps: Any,
+    out: wp.array(dtype=Any),
+):
+    """``cat.cat_points`` with the lane scan."""
+    k = start + wp.tid()
+    x, y = world_to_local(xs[k], ys[k], pose)
+    out[k] = cat_density_lanes(x, y, table, groups, v0, t, sigma_a, sigma_omega, tol, eps)
+
+
+def _register_overloads():
+    for scalar, lanes in ((wp.float32, lanes32), (wp.float64, lanes64)):
+        vec = wp.array(dtype=scalar)
+        mat = wp.array2d(dtype=scalar)
+        common = {
+            "xs": vec, "ys": vec, "table": mat, "groups": wp.array2d(dtype=lanes), "v0": scalar, "t": scalar,
+            "sigma_a": scalar, "sigma_omega": scalar, "pose": vec, "tol": scalar, "eps": scalar,
+        }
+        wp.overload(cat_grid_lanes, {**common, "out": mat})
+        wp.overload(cat_points_lanes, {**common, "out": vec})
+
+
+_register_overloads()
