@@ -79,12 +79,14 @@ def bearing_points(
     out[k] = wp.exp(bearing_log_density(xs[k], ys[k], params, n_sensors, variant))
 
 
-def _register_overloads():
+def overload_bearing_kernels(grid, points) -> None:
+    """Register float32 and float64 overloads of a grid and a points kernel with the arguments of
+    ``bearing_grid`` and ``bearing_points`` (these and their lane twins in ``bearing_lanes``)."""
     for scalar in (wp.float32, wp.float64):
         vec = wp.array(dtype=scalar)
         common = {"xs": vec, "ys": vec, "params": vec}
-        wp.overload(bearing_grid, {**common, "out": wp.array2d(dtype=scalar)})
-        wp.overload(bearing_points, {**common, "out": vec})
+        wp.overload(grid, {**common, "out": wp.array2d(dtype=scalar)})
+        wp.overload(points, {**common, "out": vec})
 
 
-_register_overloads()
+overload_bearing_kernels(bearing_grid, bearing_points)

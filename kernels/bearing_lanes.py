@@ -15,7 +15,7 @@ from typing import Any
 
 import warp as wp
 
-from .bearing import HEAD, LINEAR, PER_SENSOR
+from .bearing import HEAD, LINEAR, PER_SENSOR, overload_bearing_kernels
 from .lanes import lane_atan2, lane_count, lane_exp, lane_wrap_angle, load_lanes, store_lanes
 
 # No adjoints: nothing differentiates these kernels (see ``polar_lanes``).
@@ -85,12 +85,4 @@ def bearing_points_lanes(
         store_lanes(out, k, values, xs.shape[0] - k)
 
 
-def _register_overloads():
-    for scalar in (wp.float32, wp.float64):
-        vec = wp.array(dtype=scalar)
-        common = {"xs": vec, "ys": vec, "params": vec}
-        wp.overload(bearing_grid_lanes, {**common, "out": wp.array2d(dtype=scalar)})
-        wp.overload(bearing_points_lanes, {**common, "out": vec})
-
-
-_register_overloads()
+overload_bearing_kernels(bearing_grid_lanes, bearing_points_lanes)

@@ -472,17 +472,27 @@ def cat_points(
     out[k] = cat_density_local(x, y, table, v0, t, sigma_a, sigma_omega, tol, eps)
 
 
-def _register_overloads():
+def overload_scan_kernels(grid, points, extra=None) -> None:
+    """Register float32 and float64 overloads of a grid and a points kernel with the arguments of
+    ``cat_grid`` and ``cat_points`` (these and their lane twins in ``cat_lanes``); ``extra`` maps
+    each scalar type to the annotations of further arguments (the lane kernels' node groups)."""
     for scalar in (wp.float32, wp.float64):
         vec = wp.array(dtype=scalar)
         mat = wp.array2d(dtype=scalar)
-        wp.overload(cat_table, {"omegas": vec, "v0": scalar, "t": scalar, "table": mat})
         common = {
             "xs": vec, "ys": vec, "table": mat, "v0": scalar, "t": scalar,
             "sigma_a": scalar, "sigma_omega": scalar, "pose": vec, "tol": scalar, "eps": scalar,
+            **(extra[scalar] if extra else {}),
         }
-        wp.overload(cat_grid, {**common, "out": mat})
-        wp.overload(cat_points, {**common, "out": vec})
+        wp.overload(grid, {**common, "out": mat})
+        wp.overload(points, {**common, "out": vec})
+
+
+def _register_overloads():
+    for scalar in (wp.float32, wp.float64):
+        wp.overload(cat_table, {"omegas": wp.array(dtype=scalar), "v0": scalar, "t": scalar,
+                                "table": wp.array2d(dtype=scalar)})
+    overload_scan_kernels(cat_grid, cat_points)
 
 
 _register_overloads()

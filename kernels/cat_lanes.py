@@ -18,8 +18,8 @@ from typing import Any
 import numpy as np
 import warp as wp
 
-from .cat import cat_node_interval, cat_scan_noise
-from .common import lanes32, lanes64, world_to_local
+from .cat import cat_node_interval, cat_scan_noise, overload_scan_kernels
+from .common import LANES32, LANES64, lanes32, lanes64, world_to_local
 from .lanes import cat_scan_group
 
 # No adjoints: nothing differentiates these kernels (see ``polar_lanes``).
@@ -47,12 +47,12 @@ def node_groups(table: np.ndarray, lanes: int) -> np.ndarray:
 @wp.func
 def group_width(groups: wp.array2d(dtype=lanes64)):
     """Intervals per group (8 float64 lanes)."""
-    return 8
+    return LANES64
 
 
 @wp.func
 def group_width(groups: wp.array2d(dtype=lanes32)):  # noqa: F811
-    return 16
+    return LANES32
 
 
 @wp.func
@@ -129,16 +129,6 @@ def cat_points_lanes(
     out[k] = cat_density_lanes(x, y, table, groups, v0, t, sigma_a, sigma_omega, tol, eps)
 
 
-def _register_overloads():
-    for scalar, lanes in ((wp.float32, lanes32), (wp.float64, lanes64)):
-        vec = wp.array(dtype=scalar)
-        mat = wp.array2d(dtype=scalar)
-        common = {
-            "xs": vec, "ys": vec, "table": mat, "groups": wp.array2d(dtype=lanes), "v0": scalar, "t": scalar,
-            "sigma_a": scalar, "sigma_omega": scalar, "pose": vec, "tol": scalar, "eps": scalar,
-        }
-        wp.overload(cat_grid_lanes, {**common, "out": mat})
-        wp.overload(cat_points_lanes, {**common, "out": vec})
-
-
-_register_overloads()
+overload_scan_kernels(cat_grid_lanes, cat_points_lanes, extra={
+    wp.float32: {"groups": wp.array2d(dtype=lanes32)}, wp.float64: {"groups": wp.array2d(dtype=lanes64)},
+})

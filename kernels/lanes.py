@@ -62,6 +62,11 @@ class _Format:
     def literal(self, value: float) -> str:
         return f"{value!r}{self.suffix}"
 
+    @property
+    def bytes(self) -> int:
+        """Bytes of a vector: 64, one AVX-512 register."""
+        return self.lanes * (8 if self.scalar == "double" else 4)
+
 
 # float64: fdlibm's ln2_hi has 33 significant bits, |n| <= 1075 needs 11; Taylor degree 12
 # leaves (ln2/2)^13 / 13! = 1.7e-16. float32: fdlibm expf's ln2_hi has 16 bits, |n| <= 150
@@ -88,7 +93,7 @@ def _snippet(fmt: _Format, names: str, body: str, contract: bool = False) -> str
     """A native body over ``vt`` copies of the vector arguments ``names`` that leaves ``res``
     (``vt``: the lanes as a compiler vector; ``vi``: integers of the same width); ``L(value)``
     in ``body`` becomes a literal of the lane type; ``contract`` allows fused multiply-adds."""
-    size = fmt.lanes * (8 if fmt.scalar == "double" else 4)  # bytes: 64, one AVX-512 register
+    size = fmt.bytes
     head = ((CONTRACT if contract else "") +
             f"typedef {fmt.scalar} vt __attribute__((vector_size({size})));\n"
             f"typedef {fmt.integer} vi __attribute__((vector_size({size})));\n"
@@ -208,7 +213,7 @@ def _scan_group(fmt: _Format) -> str:
     predecessors, the chord bound (chord (w - w_prev)) (w - w_prev) + noise; bit k set where F
     changes sign over interval k or the smaller |F| at its ends is within the bound (of the
     first ``count`` intervals). One snippet, so that all of it is vector code."""
-    size = fmt.lanes * (8 if fmt.scalar == "double" else 4)
+    size = fmt.bytes
     rows = "".join(f"vt r{i}; __builtin_memcpy(&r{i}, &wp::index(groups, {i}, g), {size});\n" for i in range(8))
     return (
         f"typedef {fmt.scalar} vt __attribute__((vector_size({size})));\n" + rows +
