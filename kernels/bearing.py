@@ -15,6 +15,11 @@ import warp as wp
 
 from .common import PI, atan2_fast
 
+# No adjoints: nothing differentiates these kernels, and the backward kernels Warp would
+# generate for every launch kernel are most of a module's code (the CAT module's CUDA build:
+# see the note in kernels/__init__.py).
+wp.set_module_options({"enable_backward": False})
+
 EXACT = 0
 LINEAR = 1
 

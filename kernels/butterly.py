@@ -69,6 +69,11 @@ from typing import Any
 
 import warp as wp
 
+# No adjoints: nothing differentiates these kernels, and the backward kernels Warp would
+# generate for every launch kernel are most of a module's code (the CAT module's CUDA build:
+# see the note in kernels/__init__.py).
+wp.set_module_options({"enable_backward": False})
+
 #: Layout of the parameter array: a head, then PER_SPEED values for each travelled range.
 (
     MEAN_X, MEAN_Y, Q1_X, Q1_Y, INV_SQRT_S1, INV_SQRT_S2, KAPPA, COS_THETA0, SIN_THETA0, LOG_TOL, STOP,

@@ -39,6 +39,12 @@ MAX_FOLD_SEARCH = 100
 #: those again (two levels: widths 1/8 and 1/64 of the node spacing).
 SPLIT = 8
 
+# No adjoints: nothing differentiates these kernels. And the split loops stay loops: unrolled
+# (Warp unrolls constant loops up to ``max_unroll``, 16 by default), every kernel held
+# 1 + 8 + 64 inlined copies of ``cat_interval`` with its root and fold searches, and NVRTC took
+# minutes to build the module for a GPU (see the note in kernels/__init__.py).
+wp.set_module_options({"enable_backward": False, "max_unroll": SPLIT - 1})
+
 #: Rounding allowance on computed values of F and dF/domega, in units of the dtype's epsilon
 #: times the largest term they sum (their table coefficients carry a few ulps each).
 ROUNDING_ULPS = 32.0

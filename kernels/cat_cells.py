@@ -28,6 +28,11 @@ import warp as wp
 
 from .common import cat_basis, normal_interval, normal_pdf
 
+# No adjoints: nothing differentiates these kernels, and the backward kernels Warp would
+# generate for every launch kernel are most of a module's code (the CAT module's CUDA build:
+# see the note in kernels/__init__.py).
+wp.set_module_options({"enable_backward": False})
+
 #: Largest |z| walked: the normal mass beyond it, erfc(9 / sqrt 2) = 2.3e-19, is left out.
 Z_MAX = 9.0
 #: 3-point Gauss-Legendre on [-1, 1]: nodes 0, +-sqrt(3/5), weights 8/9 and 5/9 (module

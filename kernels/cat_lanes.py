@@ -18,12 +18,13 @@ from typing import Any
 import numpy as np
 import warp as wp
 
-from .cat import cat_node_interval, cat_scan_noise, overload_scan_kernels
+from .cat import SPLIT, cat_node_interval, cat_scan_noise, overload_scan_kernels
 from .common import LANES32, LANES64, lanes32, lanes64, world_to_local
 from .lanes import cat_scan_group
 
-# No adjoints: nothing differentiates these kernels (see ``polar_lanes``).
-wp.set_module_options({"enable_backward": False})
+# No adjoints: nothing differentiates these kernels (see ``polar_lanes``); the scan's split
+# loops stay loops, as in ``cat`` (its module options say why).
+wp.set_module_options({"enable_backward": False, "max_unroll": SPLIT - 1})
 
 #: Rows of the node groups: omega, hx, hy, c at nodes 1 + L g .. L (g + 1), then the same at the
 #: nodes before them.

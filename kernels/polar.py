@@ -38,6 +38,11 @@ import warp as wp
 
 from .common import atan2_fast, each_mul, lane0, scc_of, sinc_derivatives, sinc_of, world_to_local
 
+# No adjoints: nothing differentiates these kernels, and the backward kernels Warp would
+# generate for every launch kernel are most of a module's code (the CAT module's CUDA build:
+# see the note in kernels/__init__.py).
+wp.set_module_options({"enable_backward": False})
+
 ROUGH = 0
 IMPROVED = 1
 

@@ -66,6 +66,12 @@ RAY_GAUSS_SWITCH = 1.0
 #: weights (0 where the node is Kronrod only).
 GK_NODES = 15
 
+# No adjoints: nothing differentiates these kernels. And the loops over the GK_NODES nodes of a
+# panel stay loops: unrolled (Warp unrolls constant loops up to ``max_unroll``, 16 by default),
+# each held 15 inlined copies of the ray integrals with their own unrolled 8-point rules, and
+# the module's CUDA build took minutes (see the note in kernels/__init__.py).
+wp.set_module_options({"enable_backward": False, "max_unroll": GK_NODES - 1})
+
 #: Layout of a 2-D (conditional) component row, see bananagrid.presence.
 (
     C_LOGW, C_NORM, C_B11, C_B21, C_B22, C_V1, C_V2, C_MX, C_MY, C_SMIN, C_SMAX,

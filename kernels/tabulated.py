@@ -17,6 +17,11 @@ import warp as wp
 
 from .common import atan2_fast, world_to_local
 
+# No adjoints: nothing differentiates these kernels, and the backward kernels Warp would
+# generate for every launch kernel are most of a module's code (the CAT module's CUDA build:
+# see the note in kernels/__init__.py).
+wp.set_module_options({"enable_backward": False})
+
 
 @wp.func
 def lagrange4(f: Any):

@@ -36,6 +36,21 @@ def test_bench_rejects_bad_arguments(capsys):
     assert "--repeat = 0: must be >= 1" in capsys.readouterr().err
 
 
+def test_bench_refuses_a_device_it_cannot_use(capsys):
+    """--device is checked before any timing: one line naming it and what is here (a GPU row is
+    run by tests/test_cuda.py where a GPU is)."""
+    from bananagrid.engine.warp_runtime import warp
+
+    if not any(d.is_cuda for d in warp().get_devices()):
+        assert bench.main(["--kernels", "polar-rough", "--device", "cuda"]) == 2
+        err = capsys.readouterr().err.strip()
+        assert err == "bananagrid: error: --device: device = 'cuda': not available here (available: cpu)"
+    assert bench.main(["--kernels", "polar-rough", "--device", "tpu"]) == 2
+    assert "--device: device = 'tpu': not available here" in capsys.readouterr().err
+    assert bench.main(["--cluster", "--device", "cuda"]) == 2
+    assert "the cluster rows run on the CPU" in capsys.readouterr().err
+
+
 def test_bench_reports_heading_cost(tmp_path, capsys):
     out = tmp_path / "bench.json"
     argv = ["--kernels", "cat,cat-heading", "--step", "200", "--repeat", "1", "--threads", "1", "--no-memory", "--json", str(out)]

@@ -34,7 +34,7 @@ from ..domains.grid import Grid
 from ..engine.batch import frame, rasterise_batch
 from ..engine.grid_kernel import GridExtent
 from ..engine.rasterise import rasterise
-from ..engine.warp_runtime import default_threads
+from ..engine.warp_runtime import default_threads, device_name
 from ..models.bearing import bearing_to, two_bearing_variances
 from ..models.cat import cell_turn_edges, clear_heading_tables, scan_nodes
 from ..models.containment import containment
@@ -113,8 +113,8 @@ class _PresenceJob:
         self.lattice = AngularLattice.integer_degrees("plane", h=1.8)
         self.cells = self.lattice.n_azimuth * self.lattice.n_elevation
 
-    def work(self, dtype, threads):
-        cell_probabilities(self.mixture, self.lattice, dtype=dtype, threads=threads)
+    def work(self, dtype, threads, device="cpu"):
+        cell_probabilities(self.mixture, self.lattice, dtype=dtype, threads=threads, device=device)
 
     def baseline(self, stride: int, repeat: int) -> float:
         n = max(8, self.cells // (100 * stride))
@@ -139,8 +139,8 @@ class _PresenceGridJob(_PresenceJob):
         self.grid = Grid.from_bounds(x=(-3.0, 3.0), y=(-2.5, 2.5), dx=6.0 / 1024, dy=5.0 / 1024)
         self.cells = self.grid.nx * self.grid.ny
 
-    def work(self, dtype, threads):
-        grid_probabilities(self.mixture, self.grid, dtype=dtype, threads=threads)
+    def work(self, dtype, threads, device="cpu"):
+        grid_probabilities(self.mixture, self.grid, dtype=dtype, threads=threads, device=device)
 
     def baseline(self, stride: int, repeat: int) -> float:
         n = max(16, 2560 // stride)
@@ -168,8 +168,8 @@ class _PresenceFrustumJob:
         self.lattice = AngularLattice.integer_degrees("frustum", h=1.55, dh=0.25)
         self.cells = self.lattice.n_azimuth * self.lattice.n_elevation
 
-    def work(self, dtype, threads):
-        cell_probabilities(self.mixture, self.lattice, dtype=dtype, threads=threads)
+    def work(self, dtype, threads, device="cpu"):
+        cell_probabilities(self.mixture, self.lattice, dtype=dtype, threads=threads, device=device)
 
     def baseline(self, stride: int, repeat: int) -> float:
         rng = np.random.default_rng(3)
@@ -199,8 +199,8 @@ class _BatchJob:
         self.grids = frame(self.models)
         self.cells = self.HYPOTHESES * 64 * 64
 
-    def work(self, dtype, threads):
-        rasterise_batch(self.models, self.grids, dtype=dtype, threads=threads)
+    def work(self, dtype, threads, device="cpu"):
+        rasterise_batch(self.models, self.grids, dtype=dtype, threads=threads, device=device)
 
     def baseline(self, stride: int, repeat: int) -> float:
         picks = range(0, self.HYPOTHESES, stride)
@@ -225,11 +225,11 @@ class _CellJob:
         self.model, self.grid = model, grid
         self.cells = grid.nx * grid.ny
 
-    def work(self, dtype, threads):
-        rasterise(self.model, self.grid, quantity="probability", dtype=dtype, threads=threads)
+    def work(self, dtype, threads, device="cpu"):
+        rasterise(self.model, self.grid, quantity="probability", dtype=dtype, threads=threads, device=device)
 
-    def density(self, dtype, threads):
-        rasterise(self.model, self.grid, dtype=dtype, threads=threads)
+    def density(self, dtype, threads, device="cpu"):
+        rasterise(self.model, self.grid, dtype=dtype, threads=threads, device=device)
 
     def sample_cells(self, n: int) -> list[tuple[float, float, float, float]]:
         """``n`` cells drawn uniformly (fixed seed) as world boxes."""
@@ -340,34 +340,47 @@ def _baseline_seconds(name: str, model: DensityModel, grid: Grid, stride: int, r
     return seconds * grid.ny / len(rows)
 
 
-def _cold_rasterise(model: DensityModel, grid: Grid, dtype, threads: int):
+def _cold_rasterise(model: DensityModel, grid: Grid, dtype, threads: int, device: str = "cpu"):
     """rasterise with nothing remembered from an earlier call: a CAT with heading noise keeps
     its last tables, which would leave their cost out of the time."""
     clear_heading_tables()
-    return rasterise(model, grid, dtype=dtype, threads=threads)
+    return rasterise(model, grid, dtype=dtype, threads=threads, device=device)
 
 
-def run(kernels, step: float, threads: int, repeat: int, stride: int, log=print) -> list[dict]:
-    """Time every kernel in both dtypes on 1 and ``threads`` threads; return the records."""
+def _timed(fn) -> float:
+    start = time.perf_counter()
+    fn()
+    return time.perf_counter() - start
+
+
+def run(kernels, step: float, threads: int, repeat: int, stride: int, log=print, device: str = "cpu") -> list[dict]:
+    """Time every kernel in both dtypes on 1 and ``threads`` threads (on a GPU: one row per
+    dtype, results copied back to the host included, and the first call, which builds or loads
+    the kernel module, timed as ``first_call_seconds``); return the records."""
     records = []
+    gpu = device != "cpu"
     for name in kernels:
         if name in JOBS:
-            records += _run_job(name, threads, repeat, stride, log)
+            records += _run_job(name, threads, repeat, stride, log, device)
             continue
         model = grid_model(name)
         grid = _grid_for(name, step)
         base = _baseline_seconds(name, model, grid, stride, repeat)
         estimate = model.work_estimate(grid.nx * grid.ny, GridExtent(grid))  # one core's seconds
         for dtype in (np.float64, np.float32):
-            rasterise(model, grid, dtype=dtype, threads=1)  # warm-up: compile or load the module
-            for n_threads in sorted({1, threads}):
-                seconds = _best_of(repeat, lambda: _cold_rasterise(model, grid, dtype, n_threads))
+            # warm-up: compile or load the module
+            first = _timed(lambda: rasterise(model, grid, dtype=dtype, threads=1, device=device))
+            for n_threads in ([1] if gpu else sorted({1, threads})):
+                seconds = _best_of(repeat, lambda: _cold_rasterise(model, grid, dtype, n_threads, device))
                 record = {
-                    "kernel": name, "dtype": np.dtype(dtype).name, "threads": n_threads,
+                    "kernel": name, "dtype": np.dtype(dtype).name, "threads": n_threads, "device": device,
                     "cells": grid.nx * grid.ny, "seconds": seconds, "baseline_seconds": base,
                     "ratio": base / seconds, "mcells_per_s": grid.nx * grid.ny / seconds / 1e6,
-                    "estimate_seconds": estimate / n_threads,
                 }
+                if gpu:
+                    record["first_call_seconds"] = first
+                else:
+                    record["estimate_seconds"] = estimate / n_threads
                 records.append(record)
                 log(_row(record))
     return records
@@ -397,21 +410,24 @@ def peer_table(names: list[str], step: float, repeat: int, log=print) -> list[di
     return records
 
 
-def _run_job(name: str, threads: int, repeat: int, stride: int, log) -> list[dict]:
+def _run_job(name: str, threads: int, repeat: int, stride: int, log, device: str = "cpu") -> list[dict]:
     job = JOBS[name]()
     base = job.baseline(stride, repeat)
     records = []
+    gpu = device != "cpu"
     for dtype in job.dtypes:
-        job.work(dtype, 1)  # warm-up: compile or load the module
-        for n_threads in sorted({1, threads}):
-            seconds = _best_of(repeat, lambda: job.work(dtype, n_threads))
+        first = _timed(lambda: job.work(dtype, 1, device))  # warm-up: compile or load the module
+        for n_threads in ([1] if gpu else sorted({1, threads})):
+            seconds = _best_of(repeat, lambda: job.work(dtype, n_threads, device))
             record = {
-                "kernel": name, "dtype": np.dtype(dtype).name, "threads": n_threads, "cells": job.cells,
-                "seconds": seconds, "baseline_seconds": base, "ratio": base / seconds,
+                "kernel": name, "dtype": np.dtype(dtype).name, "threads": n_threads, "device": device,
+                "cells": job.cells, "seconds": seconds, "baseline_seconds": base, "ratio": base / seconds,
                 "mcells_per_s": job.cells / seconds / 1e6,
             }
+            if gpu:
+                record["first_call_seconds"] = first
             if hasattr(job, "density"):  # cell probabilities: their cost against the densities
-                record["density_seconds"] = _best_of(repeat, lambda: job.density(dtype, n_threads))
+                record["density_seconds"] = _best_of(repeat, lambda: job.density(dtype, n_threads, device))
                 record["cost_vs_density"] = seconds / record["density_seconds"]
             records.append(record)
             log(_row(record))
@@ -422,10 +438,14 @@ HEADER = f"{'kernel':<16} {'dtype':<8} {'threads':>7} {'cells':>10} {'seconds':>
 
 
 def _row(r: dict) -> str:
-    return (
-        f"{r['kernel']:<16} {r['dtype']:<8} {r['threads']:>7} {r['cells']:>10} {r['seconds']:>9.4f} "
+    gpu = r.get("device", "cpu") != "cpu"
+    line = (
+        f"{r['kernel']:<16} {r['dtype']:<8} {'gpu' if gpu else r['threads']:>7} {r['cells']:>10} {r['seconds']:>9.4f} "
         f"{r['mcells_per_s']:>9.2f} {r['baseline_seconds']:>9.3f} {r['ratio']:>7.1f}"
     )
+    if gpu:
+        line += f"  (first call {r['first_call_seconds']:.1f} s)"
+    return line
 
 
 def containment_timing(n: int = CONTAINMENT_GEOMETRIES, seed: int = 0, repeat: int = 3) -> dict:
@@ -509,6 +529,11 @@ def _parser() -> argparse.ArgumentParser:
                         f"is installed: {peers.PEERS_EXTRA})")
     p.add_argument("--no-memory", action="store_true", help=f"skip the peak-memory probe ({MEMORY_SIDE} x {MEMORY_SIDE} float32)")
     p.add_argument("--json", metavar="FILE", help="also write the records as JSON to FILE")
+    p.add_argument("--device", default="cpu",
+                   help="Warp device of the kernel rows: cpu (default) or cuda. On cuda each row runs once per dtype "
+                        "(results copied back to the host included), its first call (building or loading the kernel "
+                        "module) is reported beside it, the baseline is still NumPy on the CPU, and the CPU-only "
+                        "parts (peers, thread scaling, containment, memory probe) are skipped")
     c = p.add_argument_group(
         "cluster rows (the cluster extra; minutes)",
         "--cluster measures tiles and hypothesis shards on a fresh local Dask cluster: a Butterly map on a "
@@ -553,6 +578,15 @@ def main(argv: list[str] | None = None) -> int:
             problems.append(f"--memory-limit: {exc}")
     if not (math.isfinite(args.step) and args.step > 0):
         problems.append(f"--step = {args.step}: must be > 0")
+    gpu = args.device != "cpu"
+    device = "cpu"
+    if gpu and args.cluster:
+        problems.append(f"--device = {args.device!r}: the cluster rows run on the CPU; drop --cluster or --device")
+    if not problems:
+        try:
+            device = device_name(args.device)
+        except BananagridError as exc:
+            problems.append(f"--device: {exc}")
     if args.json and not problems:  # before minutes of timing, not after
         try:
             check_writable(Path(args.json).resolve().parent)
@@ -562,6 +596,8 @@ def main(argv: list[str] | None = None) -> int:
         print(f"bananagrid: error: {problems[0]}", file=sys.stderr)
         return 2
     print(f"machine: {machine()}")
+    if gpu:
+        print(f"device: {device} (kernel rows; baselines on the CPU above)")
     if kernels:
         print(f"grids: Figure 1 frame at {args.step:g} m (banana kernels), {COASTAL_SIDE} x {COASTAL_SIDE} "
               f"about the coastal fix (bearing), {BUTTERLY_SIDE} x {BUTTERLY_SIDE} about the ring +- 6 sigma "
@@ -571,8 +607,8 @@ def main(argv: list[str] | None = None) -> int:
     records = []
     if kernels:
         print(HEADER)
-        records = run(kernels, args.step, args.threads, args.repeat, args.baseline_stride)
-    result = {"machine": machine(), "step": args.step, "records": records}
+        records = run(kernels, args.step, args.threads, args.repeat, args.baseline_stride, device=args.device)
+    result = {"machine": machine(), "device": device, "step": args.step, "records": records}
     if args.cluster:
         result["cluster_zarr"] = cluster.zarr_row(side=args.cluster_side, workers=args.workers,
                                                   memory_limit=args.memory_limit)
@@ -583,12 +619,12 @@ def main(argv: list[str] | None = None) -> int:
             workers=args.workers, memory_limit=args.memory_limit)
     polar_rows = [name for name in kernels if name in GRID_ROWS and GRID_ROWS[name][0] == "polar"
                   and not GRID_ROWS[name][1].get("sigma_heading")]  # the peers compute (8) and (11) only
-    if polar_rows and not args.no_peers:
+    if polar_rows and not args.no_peers and not gpu:
         result["peers"] = peer_table(polar_rows, args.step, args.repeat)
     for name in kernels:
         one = {r["dtype"]: r for r in records if r["kernel"] == name and r["threads"] == 1}
         many = {r["dtype"]: r for r in records if r["kernel"] == name and r["threads"] == args.threads}
-        if args.threads > 1:
+        if args.threads > 1 and not gpu:
             print(f"{name}: 1 -> {args.threads} threads speedup "
                   + ", ".join(f"{d} {one[d]['seconds'] / many[d]['seconds']:.2f}x" for d in one))
     estimated = [r for r in records if "estimate_seconds" in r and r["dtype"] == "float64" and r["threads"] == 1]
@@ -610,13 +646,13 @@ def main(argv: list[str] | None = None) -> int:
     if cells:
         print("cell probabilities cost, against the densities on the same grid: "
               + ", ".join(f"{r['kernel']} {r['dtype']} {r['threads']} thr {r['cost_vs_density']:.1f}x" for r in cells))
-    if "bearing-exact" in kernels:
+    if "bearing-exact" in kernels and not gpu:
         timing = containment_timing(repeat=args.repeat)
         result["containment"] = timing
         print(f"containment: {timing['geometries']:,} two-bearing geometries (fix, variances, P(R = 1 km)) in "
               f"{timing['exact_seconds']:.2f} s (exact), {timing['series_seconds']:.2f} s (Robbins-Pitman series, "
               f"tol 1e-12); {timing['without_fix']:,} had no fix in front of both stations")
-    if not args.no_memory and kernels:
+    if not args.no_memory and kernels and not gpu:
         mem = memory_probe()
         result["memory"] = mem
         print(f"memory: {mem['side']} x {mem['side']} float32 polar raster ({mem['raster_mib']:.0f} MiB of values): "

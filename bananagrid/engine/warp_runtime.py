@@ -53,6 +53,22 @@ def warp():
     return wp
 
 
+def device_name(device: str) -> str:
+    """What ``device`` is, for reports: the CPU, or the GPU's name and compute capability
+    (``"cuda:0 NVIDIA H100 80GB HBM3, sm_90"``). Raises BananagridError if it is not here."""
+    wp_ = warp()
+    try:
+        if device.startswith("cuda") and not wp_.is_cuda_available():
+            raise LookupError(device)  # asking Warp would print its driver errors first
+        d = wp_.get_device(device)
+    except Exception:
+        available = ", ".join(str(x) for x in wp_.get_devices())
+        raise BananagridError(f"device = {device!r}: not available here (available: {available})") from None
+    if not d.is_cuda:
+        return str(d)
+    return f"{d} {d.name}, sm_{d.arch}"
+
+
 def default_threads() -> int:
     """Worker threads for CPU launches: every core this process may use."""
     try:
