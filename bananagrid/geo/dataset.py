@@ -38,6 +38,7 @@ from __future__ import annotations
 
 import json
 import os
+from datetime import datetime, timezone
 from collections.abc import Sequence
 from pathlib import Path
 
@@ -66,6 +67,12 @@ ZLIB_LEVEL = 4
 #: Names of the coordinates and grid mapping: a layer may not take one of them.
 RESERVED_NAMES = frozenset({"x", "y", "x_bounds", "y_bounds", "lat", "lon", "crs", "time", "elapsed"})
 CELL_UNITS = {"line": "m", "plane": "m2", "frustum": "m3"}
+#: The first and last whole seconds datetime64[ns] holds (numpy: 1677-09-21T00:12:43.145 to
+#: 2262-04-11T23:47:16.854, 2**63 ns either side of 1970).
+NS_FIRST = datetime(1677, 9, 21, 0, 12, 44, tzinfo=timezone.utc)
+NS_LAST = datetime(2262, 4, 11, 23, 47, 16, tzinfo=timezone.utc)
+#: The first day of the Gregorian calendar; CF's "standard" calendar is Julian before it.
+GREGORIAN_START = datetime(1582, 10, 15, tzinfo=timezone.utc)
 
 
 def time_units(frame) -> str:
@@ -178,6 +185,9 @@ def _grid_variables(grid, frame, chunks: tuple | None = None) -> tuple[dict, dic
     """The coordinates and grid mapping; with ``chunks`` (tiled maps) the latitude and
     longitude are lazy Dask arrays in those blocks, so that no array of the grid's size is held."""
     xr = require("xarray", NETCDF_PURPOSE)
+    if frame is not None:  # coordinates that place every cell where the model put it, to a millimetre
+        x0, x1, y0, y1 = grid.extent
+        frame.check_round_trip((x0, x1), (y0, y1))
     e0, n0 = (0.0, 0.0) if frame is None else frame.false_origin
     x_edges = e0 + grid.origin[0] + grid.dx * np.arange(grid.nx + 1)
     y_edges = n0 + grid.origin[1] + grid.dy * np.arange(grid.ny + 1)
@@ -252,10 +262,17 @@ def _time_variables(tdim: str, elapsed: str, times: list[float], frame) -> dict:
     elapsed_attrs = {"long_name": ELAPSED_LONG_NAME, "units": "s"}
     if frame is None or frame.time is None:
         return {tdim: xr.Variable((tdim,), seconds, elapsed_attrs)}
-    start = np.datetime64(frame.time.replace(tzinfo=None), "ns")
-    utc = start + np.round(seconds * 1e9).astype("timedelta64[ns]")
+    instants = [frame.utc(t) for t in seconds]  # refuses a time outside the calendar, years 1 to 9999
+    # datetime64[ns] holds 1677-09-21 to 2262-04-11 and wraps round silently beyond: other
+    # times are held to the microsecond (as Python's datetime holds them)
+    unit, per_second = ("ns", 1e9) if all(NS_FIRST <= u <= NS_LAST for u in instants) else ("us", 1e6)
+    start = np.datetime64(frame.time.replace(tzinfo=None), unit)
+    utc = start + np.round(seconds * per_second).astype(f"timedelta64[{unit}]")
+    # ISO 8601 counts days in the proleptic Gregorian calendar; CF's "standard" calendar is
+    # Julian before 1582-10-15, so a time before that date is written with the calendar it is in
+    calendar = "standard" if min(instants) >= GREGORIAN_START else "proleptic_gregorian"
     time = xr.Variable((tdim,), utc, {"standard_name": "time", "long_name": "UTC time", "axis": "T"},
-                       encoding={"units": time_units(frame), "calendar": "standard", "dtype": "float64"})
+                       encoding={"units": time_units(frame), "calendar": calendar, "dtype": "float64"})
     return {tdim: time, elapsed: xr.Variable((tdim,), seconds, elapsed_attrs)}
 
 

@@ -95,6 +95,9 @@ def write_geotiff(path: str | os.PathLike, panels: Sequence, frame=None, *, titl
     checked = check_panels(panels)
     frame = frame_of(checked, frame)
     grid = checked[0].raster.grid
+    if frame is not None:  # a transform that places every pixel where the model put it, to a millimetre
+        x0, x1, y0, y1 = grid.extent
+        frame.check_round_trip((x0, x1), (y0, y1))
     e0, n0 = (0.0, 0.0) if frame is None else frame.false_origin
     west, north = e0 + grid.origin[0], n0 + grid.origin[1] + grid.ny * grid.dy
     profile = {
