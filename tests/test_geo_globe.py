@@ -90,7 +90,7 @@ def test_moving_a_scene_keeps_its_maps():
 
 
 @pytest.mark.parametrize("name", sorted(SCENES))
-@pytest.mark.parametrize("lat, lon", ORIGINS, ids=[f"{a:g},{o:g}" for a, o in ORIGINS])
+@pytest.mark.parametrize("lat, lon", ORIGINS, ids=[f"{a!r},{o!r}" for a, o in ORIGINS])
 def test_bundled_geo_scenes_over_the_globe_with_every_export(tmp_path, capsys, name, lat, lon):
     path = tmp_path / f"{name}.toml"
     path.write_text(moved(name, lat, lon))

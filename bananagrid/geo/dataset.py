@@ -13,7 +13,10 @@ Panoply, QGIS and GDAL read it without help:
 * ``time``: with a frame time, the UTC times (decoded to datetime64 in memory, written as
   ``seconds since`` the frame time), with the auxiliary coordinate ``elapsed`` (s since the
   fix); without one, the time dimension is ``elapsed`` itself (units ``s``: CF keeps a
-  coordinate named ``time`` for ``seconds since`` a date);
+  coordinate named ``time`` for ``seconds since`` a date). Any time of years 1 to 9999: held
+  as datetime64[ns] within its range (1677 to 2262), as datetime64[us] beyond it; the calendar
+  is CF's ``standard``, or ``proleptic_gregorian`` for a time before 1582-10-15 (where
+  ``standard`` is Julian, and ISO 8601 is not);
 * one variable per layer, named for the layer: the density per m^2 at each cell centre,
   dims (time, y, x), with ``LAYER_mass`` (the probability mass the grid captured before any
   normalisation, per time) and ``LAYER_normalised`` (a 0/1 flag per time); the provenance of
@@ -107,7 +110,9 @@ def raster_dataset(panels: Sequence, frame=None, *, title: str = "", source: str
     ------
     BananagridError
         Bad panels (:func:`~bananagrid.geo.panels.check_panels`), a layer whose variable name
-        clashes with a coordinate or another layer, or xarray or pyproj missing.
+        clashes with a coordinate or another layer, a frame whose CRS's round trip over the
+        grid is off by more than 1 mm (:meth:`GeoFrame.check_round_trip`; its coordinates would
+        misplace the cells), a UTC time outside the calendar, or xarray or pyproj missing.
     """
     xr = require("xarray", NETCDF_PURPOSE)
     checked = check_panels(panels)

@@ -18,6 +18,15 @@ bearings a scene gives are true bearings (clockwise from true north) and are tur
 bearings where they are measured (:meth:`GeoFrame.grid_bearing`), exactly, from a geodesic step.
 :meth:`GeoFrame.scale_error` states the projection's distortion over a grid, and a scene refuses
 a grid where it exceeds the scene's bound.
+
+Any CRS is refused unless it holds the grid: PROJ must transform with it, map the origin, and
+take every point of the grid to latitude and longitude and back to within a millimetre
+(:meth:`GeoFrame.check_round_trip`, at the grid's corners, edge midpoints and centre, both ways).
+A false easting of 1e20 m (float64 cannot tell points 16 km apart there), a UTM zone far from
+the origin or a polar projection of the other hemisphere fails that or the scale bound.
+
+UTC times are those of ISO 8601 in Python's calendar, years 1 to 9999: a frame time, and every
+elapsed time after it, outside it is refused in one line (:meth:`GeoFrame.check_elapsed`).
 """
 
 from __future__ import annotations
@@ -110,11 +119,14 @@ class GeoFrame:
     ----------
     lat, lon : float
         The origin (the local (0, 0), usually the last fix), degrees; latitude in (-90, 90)
-        (a pole has no north), longitude in [-180, 180].
+        (a pole has no north), longitude in [-180, 180]. A grid about an origin near a pole
+        may hold the pole.
     time : datetime or str, optional
         UTC time of elapsed t = 0 (an ISO 8601 string with its offset, or an aware datetime).
     crs : str, default "aeqd"
-        ``"aeqd"``, ``"utm"`` or a projected CRS in metres that pyproj accepts.
+        ``"aeqd"``, ``"utm"`` or a projected CRS in metres that pyproj accepts, whose round trip
+        at the origin is accurate to a millimetre (a grid's is checked by :meth:`check_extent`
+        and by each map file's writer).
 
     Examples
     --------

@@ -7,7 +7,27 @@ and probability level, in that order. Each feature's geometry is the level's sea
 vertex by vertex (pyproj), as a ``MultiPolygon``: exterior rings counter-clockwise, holes
 clockwise (RFC 7946, section 3.1.6), coordinates rounded to 1e-7 degrees (about 1 cm; section
 11.2) with validity kept (shapely ``set_precision``). A level the grid does not hold has a
-``null`` geometry and ``reached: false``.
+``null`` geometry and ``reached: false``; an area that vanishes at that precision (a grid of
+sub-centimetre cells) is refused, not written empty.
+
+Anywhere on the globe:
+
+* **the antimeridian**: an area that crosses it is cut there (RFC 7946, section 3.1.9), in the
+  plane, along the meridian's trace, so that each part lies on one side, its vertices on the
+  cut at exactly +180 or -180: a MultiPolygon whose longitudes all lie in [-180, 180];
+* **the poles**: an area that holds a pole is cut also along that pole's meridian 0/180 (both
+  halves, through the pole), and each part's corner at the pole is drawn along the pole's
+  latitude between the meridians of its neighbours. Merged again at longitude 0, the area is one
+  polygon spanning -180 to 180 whose exterior runs along the area's edge, up the antimeridian,
+  along latitude 90 (or -90) and down again: the cap that RFC 7946 leaves to the writer
+  (section 3.1.9 asks only that geometries not cross the antimeridian), the form GIS tools,
+  pyproj's geodesic areas and Natural Earth's Antarctica use; it contains the pole, and
+  shapely finds it valid. An area with the pole in a hole is cut the same way;
+* an edge that turns more than 1 degree of longitude round a pole is divided, so that the
+  straight edges in longitude and latitude follow the plane's outline.
+
+The maps' origin itself cannot be a pole (true north has no direction there), but a grid about
+an origin near one may hold it.
 
 Properties of each feature:
 
@@ -64,6 +84,12 @@ def area_features(layer: str, t: float, areas: Iterable[SearchArea], frame) -> l
         geometry, area_km2 = None, None
         if area.reached and not area.geometry.is_empty:
             lonlat = _to_lonlat(area.geometry, frame, shapely)
+            if lonlat.is_empty:
+                raise BananagridError(
+                    f"GeoJSON: the {area.level:g} search area of layer {layer} at t = {t:g} s "
+                    f"({area.area:.3g} m2 in the plane) vanishes at the {10.0 ** -COORDINATE_DECIMALS:g} degree "
+                    "precision of GeoJSON coordinates (about 1 cm): use a grid whose areas are larger (grid.step)"
+                )
             geometry = shapely.geometry.mapping(lonlat)
             # Oriented counter-clockwise outside, clockwise holes: the signed area is the area.
             area_km2 = geod.geometry_area_perimeter(lonlat)[0] / 1e6
@@ -115,8 +141,10 @@ def write_geojson(path: str | os.PathLike, panels: Sequence, frame=None,
     Raises
     ------
     BananagridError
-        No frame (GeoJSON is longitude and latitude), bad panels or levels, or a failure while
-        writing (nothing is left behind).
+        No frame (GeoJSON is longitude and latitude), a frame whose CRS's round trip over the
+        grid is off by more than 1 mm (:meth:`GeoFrame.check_round_trip`), bad panels or levels,
+        a search area smaller than the coordinates' precision, or a failure while writing
+        (nothing is left behind).
     """
     checked = check_panels(panels)
     frame = frame_of(checked, frame)

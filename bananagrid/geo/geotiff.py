@@ -87,8 +87,9 @@ def write_geotiff(path: str | os.PathLike, panels: Sequence, frame=None, *, titl
     Raises
     ------
     BananagridError
-        Bad panels (:func:`~bananagrid.geo.panels.check_panels`), a missing directory, a failure
-        while writing (nothing is left behind), or rasterio missing.
+        Bad panels (:func:`~bananagrid.geo.panels.check_panels`), a frame whose CRS's round trip
+        over the grid is off by more than 1 mm (:meth:`GeoFrame.check_round_trip`), a missing
+        directory, a failure while writing (nothing is left behind), or rasterio missing.
     """
     rasterio = require("rasterio", GEOTIFF_PURPOSE)
     transform_of = require("rasterio.transform", GEOTIFF_PURPOSE).from_origin
