@@ -295,13 +295,13 @@ ABSURD = [
     ((60.45, 4.6), "+proj=tmerc +lon_0=4.6 +x_0=1e20 +datum=WGS84 +units=m", "its round trip over the grid x = [-7000, 5000] m, y = [-7500, 1500] m (local metres to latitude and longitude and back) is off by 7e+03 m"),
     ((60.45, 4.6), "+proj=tmerc +lon_0=4.6 +y_0=-1e19 +datum=WGS84 +units=m", "is off by 952 m"),
     ((60.45, 4.6), "+proj=tmerc +lon_0=4.6 +k=1e-20 +datum=WGS84 +units=m", "PROJ cannot transform with it"),
-    ((60.45, 4.6), "+proj=tmerc +lon_0=4.6 +k=1000 +datum=WGS84 +units=m", "projection's scale error reaches 999"),
+    ((60.45, 4.6), "+proj=tmerc +lon_0=4.6 +k=1000 +datum=WGS84 +units=m", "reaches 999 over it"),
     ((60.45, 4.6), "+proj=tmerc +lon_0=4.6 +k=1e-6 +datum=WGS84 +units=m", "is off by inf m"),
-    ((30.0, 60.0), "EPSG:32631", "projection's scale error reaches 0.456"),  # UTM 31 (3 E), 57 degrees off
+    ((30.0, 60.0), "EPSG:32631", "reaches 0.456 over it"),  # UTM 31 (3 E), 57 degrees off
     ((10.0, 80.0), "EPSG:32631", "its round trip at the origin (local metres to latitude and longitude and back) is off by 0.0834 m"),
     ((0.5, 95.0), "EPSG:32631", "the origin lat 0.5, lon 95 is outside it"),
-    ((60.45, 4.6), "+proj=stere +lat_0=-90 +lat_ts=-71 +datum=WGS84 +units=m", "projection's scale error reaches 13.8"),
-    ((-60.45, 4.6), "EPSG:3413", "projection's scale error reaches 13.7"),  # NSIDC north polar, south
+    ((60.45, 4.6), "+proj=stere +lat_0=-90 +lat_ts=-71 +datum=WGS84 +units=m", "reaches 13.8 over it"),
+    ((-60.45, 4.6), "EPSG:3413", "reaches 13.7 over it"),  # NSIDC north polar, south
 ]
 
 
@@ -313,9 +313,11 @@ def test_absurd_crs_strings_are_refused_with_the_measured_error(origin, crs, say
         parse_scene(text, source="s.toml")
     message = str(info.value)
     assert "\n" not in message
-    assert crs in message and says in message, message
-    if "round trip" in says or "PROJ" in says or "outside" in says:
+    assert f'geo.crs = "{crs}"' in message and says in message, message
+    if "reaches" not in says:  # the round trip, PROJ, the origin: the CRS alone is at fault
         assert message.startswith(f's.toml: geo.crs = "{crs}": '), message
+    else:  # the scale error: the grid and the CRS together (and the bound, geo.max_scale_error)
+        assert message.startswith("s.toml: grid x = [") and "(geo.max_scale_error)" in message, message
 
 
 def test_a_frame_whose_round_trip_fails_over_a_grid_writes_no_map_file(tmp_path):

@@ -217,7 +217,7 @@ def check_geo(name: str, key: str, value) -> object:
         assert "\n" not in message, message
         # a CRS whose scale error over the grid is above geo.max_scale_error: the grid and the
         # projection (named by its value) are refused together
-        scale = key == "crs" and message.startswith(f"{name}: grid x = ") and f"the {value} projection's scale error" in message
+        scale = key == "crs" and message.startswith(f"{name}: grid x = ") and f'geo.crs = "{value}", reaches' in message
         assert message.startswith(f"{name}: geo.{key}") or scale, message
         return None
 

@@ -185,9 +185,12 @@ def _to_lonlat(geometry, frame, shapely):
         if _continuous(rings) and not any(shapely.contains_xy(polygon, px, py) for px, py, _ in poles):
             pieces.append(shapely.Polygon(rings[0], rings[1:]))  # the plain case: nothing to cut
             continue
-        cut, antimeridian = _cut(polygon, frame, poles, shapely)
-        for piece in cut:
-            pieces += _piece_lonlat(piece, frame, poles, antimeridian, shapely)
+        try:
+            cut, antimeridian = _cut(polygon, frame, poles, shapely)
+            for piece in cut:
+                pieces += _piece_lonlat(piece, frame, poles, antimeridian, shapely)
+        except shapely.errors.GEOSException as exc:  # a safety net: GEOS refusing the cut
+            raise BananagridError(f"GeoJSON: a search area could not be cut at the antimeridian or a pole ({exc})") from None
     if not pieces:
         return shapely.MultiPolygon()
     merged = shapely.union_all(pieces) if len(pieces) > 1 else pieces[0]
@@ -274,7 +277,10 @@ def _cut(polygon, frame, poles, shapely) -> tuple[list, object]:
     box = shapely.box(x0 - span, y0 - span, x1 + span, y1 + span)
     edge = np.asarray(box.exterior.segmentize(span / 16.0).coords)
     lat = frame.geographic(edge[:, 0], edge[:, 1])[0]
-    low, high = float(np.nanmin(lat)), float(np.nanmax(lat))
+    lat = lat[np.isfinite(lat)]
+    if not lat.size:  # the box lies outside the projection: nothing to cut it by
+        return [polygon], None
+    low, high = float(np.min(lat)), float(np.max(lat))
     near = [(px, py, plat) for px, py, plat in poles if shapely.contains_xy(box, px, py)]
     if near:  # one line: the antimeridian from the far side to the pole, then the meridian 0 away
         px, py, plat = near[0]
@@ -321,6 +327,10 @@ def _piece_lonlat(piece, frame, poles, antimeridian, shapely) -> list:
         if antimeridian is not None:
             on = shapely.distance(shapely.points(xy), antimeridian) <= ON_CUT_M
             lonlat[on & ~pole, 0] = side * 180.0
+        # a vertex within the coordinates' precision of the antimeridian, on the cut's far side of
+        # the meridian's true trace (the cut follows it by chords): this piece's side of it
+        astray = (np.abs(lonlat[:, 0]) > 180.0 - 10.0 ** -COORDINATE_DECIMALS) & (np.sign(lonlat[:, 0]) != side)
+        lonlat[astray & ~pole, 0] = side * 180.0
         points = []
         n = len(xy)
         for k in range(n):
