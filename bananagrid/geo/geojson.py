@@ -340,7 +340,12 @@ def _piece_lonlat(piece, frame, poles, antimeridian, shapely) -> list:
             before, after = lonlat[(k - 1) % n], lonlat[(k + 1) % n]
             points.append((before[0], lonlat[k, 1]))
             points.append((after[0], lonlat[k, 1]))
-        rings.append(np.asarray(points, dtype=float))
+        points = np.asarray(points, dtype=float)
+        # the cut's vertices between two others on the antimeridian add nothing to the
+        # straight edge along it (the meridian's trace was cut by a few thousand chords)
+        edge = points[:, 0] == side * 180.0
+        points = points[~(edge & np.roll(edge, 1) & np.roll(edge, -1))]
+        rings.append(points)
     if len(rings[0]) < 3:
         return []
     polygon = shapely.Polygon(rings[0], [r for r in rings[1:] if len(r) >= 3])
