@@ -405,9 +405,8 @@ class GeoFrame:
         if not error <= limit:
             raise BananagridError(
                 f"{key} x = [{x_bounds[0]:g}, {x_bounds[1]:g}] m, y = [{y_bounds[0]:g}, {y_bounds[1]:g}] m: "
-                f"the scale error of its projection, geo.crs = {show(self.crs_name)}, reaches {error:.3g} over it, above "
-                f"the bound "
-                f"{limit:g} (geo.max_scale_error); use a smaller grid, a CRS suited to it, or a larger bound"
+                f"the scale error of its projection, geo.crs = {show(self.crs_name)}, reaches {error:.3g} over it, "
+                f"above the bound {limit:g} (geo.max_scale_error); use a smaller grid, a CRS suited to it, or a larger bound"
             )
         return error
 

@@ -20,9 +20,10 @@ Anywhere on the globe:
   latitude between the meridians of its neighbours. Merged again at longitude 0, the area is one
   polygon spanning -180 to 180 whose exterior runs along the area's edge, up the antimeridian,
   along latitude 90 (or -90) and down again: the cap that RFC 7946 leaves to the writer
-  (section 3.1.9 asks only that geometries not cross the antimeridian), the form GIS tools,
-  pyproj's geodesic areas and Natural Earth's Antarctica use; it contains the pole, and
-  shapely finds it valid. An area with the pole in a hole is cut the same way;
+  (section 3.1.9 asks only that geometries not cross the antimeridian), the form Natural
+  Earth's Antarctica takes and pyproj's geodesic area measures as the cap; it contains the
+  pole in longitude and latitude, and shapely finds it valid. An area with the pole in a hole
+  is cut the same way;
 * an edge that turns more than 1 degree of longitude round a pole is divided, so that the
   straight edges in longitude and latitude follow the plane's outline.
 
