@@ -41,6 +41,7 @@ from bananagrid.geo.dataset import raster_dataset, write_netcdf
 from bananagrid.geo.frame import GeoFrame, iso_utc
 from bananagrid.geo.geojson import area_features, write_geojson
 from bananagrid.geo.geotiff import write_geotiff
+from bananagrid.recording.readback import open_recording, recording_rows
 from bananagrid.scenes.load import parse_scene
 from geo_cases import (GEOD, check_area, check_geojson, check_geojson_geometry, check_geotiff, check_netcdf, moved_doc,
                        one_line_naming)
@@ -111,6 +112,7 @@ def test_bundled_geo_scenes_over_the_globe_with_every_export(tmp_path, capsys, n
         return
     assert code == 0, err
     scene = parse_scene(path.read_text()).with_step(STEPS[name])
+    check_map_lines(out / f"{name}.rrd")
     check_geojson(out / f"{name}-areas.geojson")
     check_netcdf(out / f"{name}.nc", scene)
     check_geotiff(out / f"{name}.tif", scene)
@@ -129,6 +131,20 @@ def test_bundled_geo_scenes_load_at_every_origin(name):
             continue
         assert scene.geo.round_trip_error(*np.reshape(scene.grid.extent, (2, 2)))[0] < 1e-6  # see the test below
         assert scene.scale_error < 1e-3
+
+
+def check_map_lines(rrd: Path) -> None:
+    """The recording's map view (rerun's GeoLineStrings: search areas, bearing lines) draws no
+    segment the long way round the Earth: each strip steps by less than 180 degrees of longitude."""
+    reader, store = open_recording(rrd)
+    strips = 0
+    for entity, _, cells in recording_rows(reader, store):
+        if entity.startswith("/map/") and "GeoLineStrings:line_strings" in cells:
+            for strip in cells["GeoLineStrings:line_strings"][1].as_py() or []:
+                lon = np.asarray(strip, dtype=float)[:, 1]
+                assert np.all(np.abs(np.diff(lon)) <= 180.0), entity
+                strips += 1
+    assert strips > 0
 
 
 # --- search areas over the whole globe ------------------------------------------------------------
