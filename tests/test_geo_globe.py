@@ -358,3 +358,22 @@ def test_good_projections_round_trip_to_a_micrometre(lat, lon, crs):
     a micrometre leaves a margin of 1000)."""
     error, _, _ = GeoFrame(lat, lon, crs=crs).round_trip_error((-7000.0, 5000.0), (-7500.0, 1500.0))
     assert error < 1e-6
+
+
+def test_a_scene_in_year_one_runs_with_every_export_and_inspects(tmp_path, capsys):
+    """geo_bearing dated 0001-01-01 (before datetime64[ns], and before the Gregorian reform):
+    every file written, the NetCDF's time read back by netCDF4 in its proleptic Gregorian
+    calendar, and `inspect` naming the time with its four-digit year."""
+    path = tmp_path / "geo_bearing.toml"
+    path.write_text(SCENES["geo_bearing"].replace('time = "2026-11-24T06:10:00Z"', 'time = "0001-01-01T00:00:00Z"'))
+    argv = ["run", str(path), "--out", str(tmp_path), "--step", "500", "--quiet", "--netcdf", "--geotiff", "--geojson"]
+    assert cli.main(argv) == 0
+    with netCDF4.Dataset(tmp_path / "geo_bearing.nc") as nc:
+        var = nc["time"]
+        (when,) = netCDF4.num2date(var[:], var.units, var.calendar, only_use_cftime_datetimes=True)
+        assert (var.calendar, when.isoformat()) == ("proleptic_gregorian", "0001-01-01T00:00:00")
+    features = json.loads((tmp_path / "geo_bearing-areas.geojson").read_text())["features"]
+    assert {f["properties"]["time_utc"] for f in features} == {"0001-01-01T00:00:00Z"}
+    capsys.readouterr()
+    assert cli.main(["inspect", str(tmp_path / "geo_bearing.rrd")]) == 0
+    assert "0001-01-01T00:00:00Z" in capsys.readouterr().out
