@@ -376,4 +376,4 @@ def test_a_scene_in_year_one_runs_with_every_export_and_inspects(tmp_path, capsy
     assert {f["properties"]["time_utc"] for f in features} == {"0001-01-01T00:00:00Z"}
     capsys.readouterr()
     assert cli.main(["inspect", str(tmp_path / "geo_bearing.rrd")]) == 0
-    assert "0001-01-01T00:00:00Z" in capsys.readouterr().out
+    assert "exact at t = 0 s (0001-01-01T00:00:00Z)" in capsys.readouterr().out
