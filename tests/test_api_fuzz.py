@@ -1,17 +1,25 @@
 """The Python API at the extremes: motion models and Butterly built from parameters anywhere
 from 1e-300 to 1e300 are either refused with a BananagridError or give finite, non-negative
-densities at points, finite samples, and a finite raster on a small grid about those samples.
+densities at points, finite samples, and a finite raster on a small grid about those samples;
+geographic frames anywhere on the globe, at any time, in any CRS, are refused in one line or
+give map files (NetCDF, GeoTIFF, GeoJSON) that are valid or refused in one line.
 A derandomised property-based sweep (deterministic in CI); each example is bounded in work by
 its small grid."""
 
 import math
 import warnings
+from datetime import datetime, timedelta, timezone
+from types import SimpleNamespace
 
 import numpy as np
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 import bananagrid as bg
+from bananagrid.geo.dataset import raster_dataset, write_netcdf
+from bananagrid.geo.geojson import write_geojson
+from bananagrid.geo.geotiff import write_geotiff
+from geo_cases import check_geojson_geometry, check_geotiff, check_netcdf
 
 EXTREMES = st.one_of(
     st.sampled_from([1e-300, 1e-30, 1e-6, 1e-3, 1.0, 1e3, 1e6, 1e30, 1e300]),
@@ -131,3 +139,63 @@ def test_uniform_presence_cells_at_the_extremes(geometry, size, height, shift, r
     assert np.all(np.isfinite(pts)) and np.all(np.isfinite(room.pdf(pts)))
     assert np.all(np.isfinite(cells.prob)) and np.all(cells.prob >= 0.0), cells.prob
     assert float(np.sum(cells.prob)) <= 1.0 + 1e-12
+
+
+LATITUDES = st.one_of(st.sampled_from([-90.0, -89.9999, 0.0, 89.9999, 90.0, 90.0000001, math.nan, math.inf]),
+                      st.floats(-90.0, 90.0))
+LONGITUDES = st.one_of(st.sampled_from([-180.0, -179.9999, 179.9999, 180.0, 180.0000001, -math.inf]),
+                       st.floats(-180.0, 180.0))
+TIMES = st.one_of(
+    st.none(),
+    st.sampled_from(["0001-01-01T00:00:00Z", "0001-01-01T00:00:00+01:00", "2262-04-11T23:47:16Z",
+                     "9999-12-31T23:59:59Z", "1677-09-21T00:12:43Z", "not a time"]),
+    st.datetimes(min_value=datetime(1, 1, 1), max_value=datetime(9999, 12, 31),
+                 timezones=st.sampled_from([timezone.utc, timezone(timedelta(hours=-12))])),
+)
+CRSS = st.sampled_from(["aeqd", "utm", "EPSG:32601", "EPSG:3413", "EPSG:3031", "EPSG:4326", "+proj=merc +datum=WGS84",
+                        "+proj=tmerc +x_0=1e20 +datum=WGS84", "+proj=tmerc +k=1e-20 +datum=WGS84",
+                        "+proj=tmerc +k=1000 +datum=WGS84", "+proj=stere +lat_0=-90 +datum=WGS84", ""])
+
+
+@settings(max_examples=30, deadline=None, derandomize=True, database=None, suppress_health_check=list(HealthCheck))
+@given(LATITUDES, LONGITUDES, TIMES, CRSS, st.sampled_from([1.0, 1e3, 1e5, 3e6]), st.floats(1e-3, 1e9))
+def test_geographic_frames_and_map_files_at_the_extremes(tmp_path_factory, lat, lon, time, crs, half, t):
+    """A frame at an origin anywhere (the poles, the antimeridian, beyond them, NaN), at a time
+    anywhere in the calendar, in a CRS that holds the grid or not; a blob on a grid 1 m to 6,000 km
+    wide about the origin, at elapsed time t (up to 30 years): each map file is written and valid
+    (NetCDF and GeoTIFF coordinates stepping by the grid's step, GeoJSON per RFC 7946) or refused
+    in one line with nothing left behind."""
+    try:
+        frame = bg.GeoFrame(lat, lon, time=time, crs=crs)
+    except bg.BananagridError as exc:
+        assert "\n" not in str(exc), str(exc)
+        return
+    grid = bg.Grid.from_bounds(x=(-half, half), y=(-half, half), step=half / 8)
+    raster = bg.rasterise(bg.Butterly(mean=(0.0, 0.0), cov=[[(half / 4) ** 2, 0.0], [0.0, (half / 5) ** 2]],
+                                      speeds=[0.0], t=1.0), grid)
+    panels = [("a", t, raster)]
+    scene = SimpleNamespace(grid=grid, geo=frame, jobs=lambda: [(None, t)])
+    out = tmp_path_factory.mktemp("geo")
+    writers = {
+        "a.nc": (lambda path: write_netcdf(path, raster_dataset(panels, frame)), lambda path: check_netcdf(path, scene)),
+        "a.tif": (lambda path: write_geotiff(path, panels, frame), lambda path: check_geotiff(path, scene)),
+        "a.geojson": (lambda path: write_geojson(path, panels, frame), check_features),
+    }
+    for name, (write, check) in writers.items():
+        try:
+            with warnings.catch_warnings():
+                warnings.simplefilter("error", RuntimeWarning)  # an overflow on the way is a value not refused
+                write(out / name)
+        except bg.BananagridError as exc:
+            assert "\n" not in str(exc), str(exc)
+            assert not (out / name).exists()
+            continue
+        check(out / name)
+
+
+def check_features(path) -> None:
+    import json
+
+    for feature in json.loads(path.read_text())["features"]:
+        if feature["properties"]["reached"]:
+            check_geojson_geometry(feature["geometry"])

@@ -1,7 +1,9 @@
 """Every key of every bundled scene, mutated by type and value: the parser (which also builds
 each layer's model at each time) either accepts the scene or refuses it with one line that
 names the key; never another exception. A derandomised property-based sweep, so CI is
-deterministic, plus the exhaustive table of one mutation of each kind per key."""
+deterministic, plus the exhaustive table of one mutation of each kind per key. The geographic
+keys (origin, UTC time, CRS) are also set to the ends of their domains, and accepted mutated
+scenes are run, geographic ones with every map file they can write."""
 
 import math
 import warnings
@@ -15,6 +17,7 @@ from hypothesis import strategies as st
 from bananagrid import BananagridError
 from bananagrid.scenes.load import parse_scene
 from bananagrid.scenes.run import run_scene
+from geo_cases import check_geojson, check_geotiff, check_netcdf, moved_doc
 
 SCENES = sorted((Path(__file__).resolve().parents[1] / "scenes").glob("*.toml"))
 DOCS = {path.name: tomllib.loads(path.read_text()) for path in SCENES}
@@ -150,13 +153,93 @@ def test_an_accepted_mutated_scene_runs_on_a_small_grid(tmp_path_factory, case, 
     if hasattr(scene, "grid"):
         x0, x1, y0, y1 = scene.grid.extent
         scene = scene.with_step(max(x1 - x0, y1 - y0) / SMALL_GRID_CELLS)
-    out = tmp_path_factory.mktemp("run")
+    run_with_exports(scene, tmp_path_factory.mktemp("run"))
+
+
+def run_with_exports(scene, out: Path) -> None:
+    """Run ``scene`` into ``out`` (a geographic scene with every map file: NetCDF, GeoTIFF,
+    GeoJSON): the files written and valid, or a one-line refusal with nothing left behind."""
+    geographic = getattr(scene, "geo", None) is not None
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
-            run_scene(scene, out)
+            run_scene(scene, out, netcdf=geographic, geotiff=geographic, geojson=geographic)
     except BananagridError as exc:
         assert "\n" not in str(exc), str(exc)
         assert list(out.iterdir()) == []  # nothing half-written
         return
     assert (out / f"{scene.name}.rrd").stat().st_size > 0
+    if geographic:
+        check_geojson(out / f"{scene.name}-areas.geojson")
+        check_netcdf(out / f"{scene.name}.nc", scene)
+        check_geotiff(out / f"{scene.name}.tif", scene)
+
+
+#: The geographic keys of the bundled geographic scenes, with values at the ends of their
+#: domains: origins at and beside the poles and the antimeridian (the scene's other positions
+#: moved with the origin), UTC times at the ends of the calendar and of datetime64[ns], and CRSs
+#: that hold the grid or do not (a false easting of 1e20 m, absurd scales, a UTM zone and polar
+#: stereographic projections far from it, a geographic CRS).
+GEO_VALUES = {
+    "origin_latlon": [(90.0, None), (-90.0, None), (89.9999, None), (-89.9999, None), (0.0, None),
+                      (None, 180.0), (None, -180.0), (None, 179.9999), (None, -179.9999), (None, 180.0000001),
+                      (math.nan, None), (None, math.inf)],
+    "time": ["0001-01-01T00:00:00Z", "0001-01-01T00:00:00+01:00", "1582-10-04T12:00:00Z", "1677-09-21T00:12:43Z",
+             "2262-04-11T23:47:16Z", "9999-12-31T23:00:00Z", "9999-12-31T23:59:59Z", "10000-01-01T00:00:00Z"],
+    "crs": ["utm", "aeqd", "EPSG:32601", "EPSG:3413", "EPSG:3031", "EPSG:4326", "+proj=merc +datum=WGS84",
+            "+proj=tmerc +x_0=1e20 +datum=WGS84", "+proj=tmerc +k=1e-20 +datum=WGS84",
+            "+proj=tmerc +k=1000 +datum=WGS84", "+proj=stere +lat_0=-90 +datum=WGS84"],
+}
+GEO_CASES = [(name, key, value) for name, doc in DOCS.items() if "geo" in doc
+             for key, values in GEO_VALUES.items() for value in values]
+
+
+def geo_mutated(name: str, key: str, value) -> str:
+    """The scene with ``geo.KEY`` set to ``value``; an origin (lat or lon, the other kept) moves
+    the scene's other positions with it where it is a finite place that is not a pole."""
+    doc = DOCS[name]
+    if key != "origin_latlon":
+        return mutated(name, ("geo", key), value)
+    lat, lon = (v if v is not None else old for v, old in zip(value, doc["geo"]["origin_latlon"]))
+    if math.isfinite(lat) and math.isfinite(lon) and abs(lat) < 90.0 and abs(lon) <= 180.0:
+        return toml_text(moved_doc(doc, lat, lon))
+    return mutated(name, ("geo", key), [lat, lon])
+
+
+def check_geo(name: str, key: str, value) -> object:
+    """Parse the mutated scene: the Scene, or None after a one-line refusal naming ``geo.KEY``."""
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("error", RuntimeWarning)
+            return parse_scene(geo_mutated(name, key, value), source=name)
+    except BananagridError as exc:
+        message = str(exc)
+        assert "\n" not in message, message
+        # a CRS whose scale error over the grid is above geo.max_scale_error: the grid and the
+        # projection (named by its value) are refused together
+        scale = key == "crs" and message.startswith(f"{name}: grid x = ") and f'geo.crs = "{value}", reaches' in message
+        assert message.startswith(f"{name}: geo.{key}") or scale, message
+        return None
+
+
+@pytest.mark.parametrize("name, key, value", GEO_CASES, ids=[f"{n}-{k}-{v}" for n, k, v in GEO_CASES])
+def test_every_geographic_key_at_the_ends_of_its_domain(name, key, value):
+    """Each geographic key of each geographic scene at each of its extreme values: accepted, or
+    refused in one line that starts with the key (a pole, a time outside the calendar, a CRS
+    whose round trip over the grid is off by more than a millimetre)."""
+    check_geo(name, key, value)
+
+
+@settings(max_examples=6, deadline=None, derandomize=True, database=None,
+          suppress_health_check=[HealthCheck.too_slow, HealthCheck.function_scoped_fixture])
+@given(st.sampled_from([case for case in GEO_CASES if case[1] != "time"]))
+def test_a_mutated_geographic_scene_runs_with_every_export(tmp_path_factory, case):
+    """A geographic key mutated (an origin at a pole or the antimeridian, a CRS), the scene run on
+    a small grid with --netcdf --geotiff --geojson: valid files (GeoJSON per RFC 7946, NetCDF and
+    GeoTIFF coordinates stepping by the grid's step) or a one-line refusal. (The times are run
+    through the NetCDF writer in test_geo_globe.py.)"""
+    scene = check_geo(*case)
+    if scene is None:
+        return
+    x0, x1, y0, y1 = scene.grid.extent
+    run_with_exports(scene.with_step(max(x1 - x0, y1 - y0) / SMALL_GRID_CELLS), tmp_path_factory.mktemp("geo"))

@@ -13,7 +13,10 @@ Panoply, QGIS and GDAL read it without help:
 * ``time``: with a frame time, the UTC times (decoded to datetime64 in memory, written as
   ``seconds since`` the frame time), with the auxiliary coordinate ``elapsed`` (s since the
   fix); without one, the time dimension is ``elapsed`` itself (units ``s``: CF keeps a
-  coordinate named ``time`` for ``seconds since`` a date);
+  coordinate named ``time`` for ``seconds since`` a date). Any time of years 1 to 9999: held
+  as datetime64[ns] within its range (1677 to 2262), as datetime64[us] beyond it; the calendar
+  is CF's ``standard``, or ``proleptic_gregorian`` for a time before 1582-10-15 (where
+  ``standard`` is Julian, and ISO 8601 is not);
 * one variable per layer, named for the layer: the density per m^2 at each cell centre,
   dims (time, y, x), with ``LAYER_mass`` (the probability mass the grid captured before any
   normalisation, per time) and ``LAYER_normalised`` (a 0/1 flag per time); the provenance of
@@ -38,6 +41,7 @@ from __future__ import annotations
 
 import json
 import os
+from datetime import datetime, timezone
 from collections.abc import Sequence
 from pathlib import Path
 
@@ -66,6 +70,12 @@ ZLIB_LEVEL = 4
 #: Names of the coordinates and grid mapping: a layer may not take one of them.
 RESERVED_NAMES = frozenset({"x", "y", "x_bounds", "y_bounds", "lat", "lon", "crs", "time", "elapsed"})
 CELL_UNITS = {"line": "m", "plane": "m2", "frustum": "m3"}
+#: The first and last whole seconds datetime64[ns] holds (numpy: 1677-09-21T00:12:43.145 to
+#: 2262-04-11T23:47:16.854, 2**63 ns either side of 1970).
+NS_FIRST = datetime(1677, 9, 21, 0, 12, 44, tzinfo=timezone.utc)
+NS_LAST = datetime(2262, 4, 11, 23, 47, 16, tzinfo=timezone.utc)
+#: The first day of the Gregorian calendar; CF's "standard" calendar is Julian before it.
+GREGORIAN_START = datetime(1582, 10, 15, tzinfo=timezone.utc)
 
 
 def time_units(frame) -> str:
@@ -100,7 +110,9 @@ def raster_dataset(panels: Sequence, frame=None, *, title: str = "", source: str
     ------
     BananagridError
         Bad panels (:func:`~bananagrid.geo.panels.check_panels`), a layer whose variable name
-        clashes with a coordinate or another layer, or xarray or pyproj missing.
+        clashes with a coordinate or another layer, a frame whose CRS's round trip over the
+        grid is off by more than 1 mm (:meth:`GeoFrame.check_round_trip`; its coordinates would
+        misplace the cells), a UTC time outside the calendar, or xarray or pyproj missing.
     """
     xr = require("xarray", NETCDF_PURPOSE)
     checked = check_panels(panels)
@@ -178,6 +190,9 @@ def _grid_variables(grid, frame, chunks: tuple | None = None) -> tuple[dict, dic
     """The coordinates and grid mapping; with ``chunks`` (tiled maps) the latitude and
     longitude are lazy Dask arrays in those blocks, so that no array of the grid's size is held."""
     xr = require("xarray", NETCDF_PURPOSE)
+    if frame is not None:  # coordinates that place every cell where the model put it, to a millimetre
+        x0, x1, y0, y1 = grid.extent
+        frame.check_round_trip((x0, x1), (y0, y1))
     e0, n0 = (0.0, 0.0) if frame is None else frame.false_origin
     x_edges = e0 + grid.origin[0] + grid.dx * np.arange(grid.nx + 1)
     y_edges = n0 + grid.origin[1] + grid.dy * np.arange(grid.ny + 1)
@@ -252,10 +267,17 @@ def _time_variables(tdim: str, elapsed: str, times: list[float], frame) -> dict:
     elapsed_attrs = {"long_name": ELAPSED_LONG_NAME, "units": "s"}
     if frame is None or frame.time is None:
         return {tdim: xr.Variable((tdim,), seconds, elapsed_attrs)}
-    start = np.datetime64(frame.time.replace(tzinfo=None), "ns")
-    utc = start + np.round(seconds * 1e9).astype("timedelta64[ns]")
+    instants = [frame.utc(t) for t in seconds]  # refuses a time outside the calendar, years 1 to 9999
+    # datetime64[ns] holds 1677-09-21 to 2262-04-11 and wraps round silently beyond: other
+    # times are held to the microsecond (as Python's datetime holds them)
+    unit, per_second = ("ns", 1e9) if all(NS_FIRST <= u <= NS_LAST for u in instants) else ("us", 1e6)
+    start = np.datetime64(frame.time.replace(tzinfo=None), unit)
+    utc = start + np.round(seconds * per_second).astype(f"timedelta64[{unit}]")
+    # ISO 8601 counts days in the proleptic Gregorian calendar; CF's "standard" calendar is
+    # Julian before 1582-10-15, so a time before that date is written with the calendar it is in
+    calendar = "standard" if min(instants) >= GREGORIAN_START else "proleptic_gregorian"
     time = xr.Variable((tdim,), utc, {"standard_name": "time", "long_name": "UTC time", "axis": "T"},
-                       encoding={"units": time_units(frame), "calendar": "standard", "dtype": "float64"})
+                       encoding={"units": time_units(frame), "calendar": calendar, "dtype": "float64"})
     return {tdim: time, elapsed: xr.Variable((tdim,), seconds, elapsed_attrs)}
 
 

@@ -18,6 +18,15 @@ bearings a scene gives are true bearings (clockwise from true north) and are tur
 bearings where they are measured (:meth:`GeoFrame.grid_bearing`), exactly, from a geodesic step.
 :meth:`GeoFrame.scale_error` states the projection's distortion over a grid, and a scene refuses
 a grid where it exceeds the scene's bound.
+
+Any CRS is refused unless it holds the grid: PROJ must transform with it, map the origin, and
+take every point of the grid to latitude and longitude and back to within a millimetre
+(:meth:`GeoFrame.check_round_trip`, at the grid's corners, edge midpoints and centre, both ways).
+A false easting of 1e20 m (float64 cannot tell points 16 km apart there), a UTM zone far from
+the origin or a polar projection of the other hemisphere fails that or the scale bound.
+
+UTC times are those of ISO 8601 in Python's calendar, years 1 to 9999: a frame time, and every
+elapsed time after it, outside it is refused in one line (:meth:`GeoFrame.check_elapsed`).
 """
 
 from __future__ import annotations
@@ -32,7 +41,8 @@ import numpy as np
 from ..validate import BananagridError, show
 from .libraries import require
 
-__all__ = ["GeoFrame", "parse_utc", "iso_utc", "DEFAULT_MAX_SCALE_ERROR", "CRS_CHOICES", "WGS84"]
+__all__ = ["GeoFrame", "parse_utc", "iso_utc", "DEFAULT_MAX_SCALE_ERROR", "CRS_CHOICES", "WGS84", "FIRST_UTC", "LAST_UTC",
+           "MAX_ROUND_TRIP_M"]
 
 #: The largest relative scale error of the projection over a scene's grid, by default (0.1 %).
 DEFAULT_MAX_SCALE_ERROR = 1e-3
@@ -50,10 +60,21 @@ SCALE_LATTICE = 17
 BEARING_STEP_M = 1.0
 
 
+#: The first and the last instant an ISO 8601 time of Python's calendar (years 1 to 9999) holds.
+FIRST_UTC = datetime.min.replace(tzinfo=timezone.utc)
+LAST_UTC = datetime.max.replace(tzinfo=timezone.utc)
+#: The largest error (m) of a CRS's round trip over a grid (local -> latitude and longitude ->
+#: local, and back to latitude and longitude) that a frame accepts: a map file's coordinates
+#: then place every cell where the model put it, to a millimetre.
+MAX_ROUND_TRIP_M = 1e-3
+
+
 def iso_utc(when: datetime) -> str:
     """A UTC time as ISO 8601 with ``Z``, the seconds' fraction only where there is one:
-    ``2026-11-24T05:45:00Z``."""
-    return when.strftime("%Y-%m-%dT%H:%M:%S.%fZ").replace(".000000Z", "Z")
+    ``2026-11-24T05:45:00Z``; years below 1000 with four digits (``0001-01-01T00:00:00Z``),
+    which ``strftime`` drops on some platforms."""
+    plain = when.astimezone(timezone.utc).replace(tzinfo=None)
+    return plain.isoformat(timespec="microseconds" if plain.microsecond else "seconds") + "Z"
 
 
 def parse_utc(value, key: str = "geo.time") -> datetime:
@@ -81,7 +102,13 @@ def parse_utc(value, key: str = "geo.time") -> datetime:
             f"{key} = {show(value)}: give the UTC offset (\"Z\" for UTC, or e.g. \"+01:00\"); "
             "a time without one could be any zone"
         )
-    return when.astimezone(timezone.utc)
+    try:
+        return when.astimezone(timezone.utc)
+    except OverflowError:  # e.g. 0001-01-01T00:00:00+01:00, an hour before the calendar starts
+        raise BananagridError(
+            f"{key} = {show(value)}: in UTC it falls outside the calendar; UTC times must lie in "
+            f"[{iso_utc(FIRST_UTC)}, {iso_utc(LAST_UTC)}]"
+        ) from None
 
 
 @dataclass(frozen=True, init=False)
@@ -92,11 +119,14 @@ class GeoFrame:
     ----------
     lat, lon : float
         The origin (the local (0, 0), usually the last fix), degrees; latitude in (-90, 90)
-        (a pole has no north), longitude in [-180, 180].
+        (a pole has no north), longitude in [-180, 180]. A grid about an origin near a pole
+        may hold the pole.
     time : datetime or str, optional
         UTC time of elapsed t = 0 (an ISO 8601 string with its offset, or an aware datetime).
     crs : str, default "aeqd"
-        ``"aeqd"``, ``"utm"`` or a projected CRS in metres that pyproj accepts.
+        ``"aeqd"``, ``"utm"`` or a projected CRS in metres that pyproj accepts, whose round trip
+        at the origin is accurate to a millimetre (a grid's is checked by :meth:`check_extent`
+        and by each map file's writer).
 
     Examples
     --------
@@ -119,7 +149,9 @@ class GeoFrame:
         object.__setattr__(self, "lon", lon)
         object.__setattr__(self, "time", None if time is None else parse_utc(time, "time"))
         object.__setattr__(self, "crs_name", crs.strip())
-        self.crs  # noqa: B018 -- an unknown or unsuitable CRS is refused here, not at first use
+        # an unknown or unsuitable CRS is refused here, not at first use: one PROJ cannot
+        # transform with, one that cannot place the origin, or one whose round trip there fails
+        self.check_round_trip((0.0, 0.0), (0.0, 0.0))
 
     # --- the projection -----------------------------------------------------------------------
 
@@ -163,11 +195,19 @@ class GeoFrame:
 
     @cached_property
     def _forward(self):
-        return require("pyproj").Transformer.from_crs(WGS84, self.crs, always_xy=True)
+        return self._transformer(WGS84, self.crs)
 
     @cached_property
     def _inverse(self):
-        return require("pyproj").Transformer.from_crs(self.crs, WGS84, always_xy=True)
+        return self._transformer(self.crs, WGS84)
+
+    def _transformer(self, source, target):
+        pyproj = require("pyproj")
+        try:
+            return pyproj.Transformer.from_crs(source, target, always_xy=True)
+        except pyproj.exceptions.ProjError as exc:
+            reason = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+            raise BananagridError(f"crs = {show(self.crs_name)}: PROJ cannot transform with it ({reason})") from None
 
     @cached_property
     def false_origin(self) -> tuple[float, float]:
@@ -228,10 +268,96 @@ class GeoFrame:
         return bearing + math.remainder(turned - bearing, 2.0 * math.pi)
 
     def utc(self, t: float) -> datetime | None:
-        """The UTC time of elapsed time ``t`` (s), or None without a frame time."""
-        return None if self.time is None else self.time + timedelta(seconds=float(t))
+        """The UTC time of elapsed time ``t`` (s), or None without a frame time.
+
+        Raises
+        ------
+        BananagridError
+            A time past the end of the calendar (9999-12-31T23:59:59.999999Z) or before its
+            start (:meth:`check_elapsed` says so at a scene's load).
+        """
+        if self.time is None:
+            return None
+        try:
+            return self.time + timedelta(seconds=float(t))
+        except (OverflowError, ValueError):
+            raise BananagridError(self._calendar_message(float(t))) from None
+
+    def check_elapsed(self, times) -> None:
+        """Refuse elapsed times (s) whose UTC time falls outside the calendar, years 1 to 9999
+        (:data:`FIRST_UTC`, :data:`LAST_UTC`); nothing to check without a frame time."""
+        if self.time is None:
+            return
+        for t in times:
+            self.utc(t)
+
+    def _calendar_message(self, t: float) -> str:
+        return (f"time = {show(iso_utc(self.time))}: t = {t:g} s after it falls outside the calendar; UTC times "
+                f"must lie in [{iso_utc(FIRST_UTC)}, {iso_utc(LAST_UTC)}]: give a time that leaves room for every "
+                "elapsed time")
+
+    def project_points(self, lat, lon) -> tuple[np.ndarray, np.ndarray]:
+        """Local x east, y north (m) of points in degrees, NaN where the projection cannot map
+        one (:meth:`local` refuses such points instead)."""
+        with np.errstate(invalid="ignore", over="ignore"):
+            e, n = self._forward.transform(np.asarray(lon, dtype=float), np.asarray(lat, dtype=float))
+            e0, n0 = self.false_origin
+            x, y = np.asarray(e, dtype=float) - e0, np.asarray(n, dtype=float) - n0
+        bad = ~(np.isfinite(x) & np.isfinite(y))
+        return np.where(bad, np.nan, x), np.where(bad, np.nan, y)
 
     # --- accuracy -----------------------------------------------------------------------------
+
+    def round_trip_error(self, x_bounds, y_bounds) -> tuple[float, float, float]:
+        """How far the projection's round trip moves a point of a rectangle of local metres:
+        ``(error, x, y)``, the largest error (m) and the local point where it occurs.
+
+        At the rectangle's corners, the midpoints of its edges and its centre, a local point
+        ``P`` is taken to latitude and longitude ``G`` (inverse) and back to ``P'`` (forward),
+        and ``P'`` to ``G'`` (inverse again); the error is the larger of ``|P' - P|`` in the
+        plane and the geodesic distance from ``G`` to ``G'`` on the ellipsoid. A projection
+        that cannot hold the rectangle (a point outside its domain, coordinates so large that
+        float64 cannot tell the cells apart, a false easting of 1e20 m) has a large or
+        infinite error.
+        """
+        x0, x1 = map(float, x_bounds)
+        y0, y1 = map(float, y_bounds)
+        gx, gy = np.meshgrid([x0, 0.5 * (x0 + x1), x1], [y0, 0.5 * (y0 + y1), y1])
+        x, y = gx.ravel(), gy.ravel()
+        with np.errstate(all="ignore"):
+            e0, n0 = self.false_origin
+            lon, lat = self._inverse.transform(x + e0, y + n0)
+            e, n = self._forward.transform(lon, lat)
+            x2, y2 = np.asarray(e, dtype=float) - e0, np.asarray(n, dtype=float) - n0
+            lon2, lat2 = self._inverse.transform(x2 + e0, y2 + n0)
+            lon, lat, lon2, lat2 = (np.asarray(v, dtype=float) for v in (lon, lat, lon2, lat2))
+            plane = np.hypot(x2 - x, y2 - y)
+        finite = (np.isfinite(plane) & np.isfinite(lon) & np.isfinite(lat) & np.isfinite(lon2) & np.isfinite(lat2)
+                  & (np.abs(lat) <= 90.0) & (np.abs(lat2) <= 90.0))
+        errors = np.full(x.shape, math.inf)
+        if np.any(finite):
+            ground = require("pyproj").Geod(ellps="WGS84").inv(lon[finite], lat[finite], lon2[finite], lat2[finite])[2]
+            errors[finite] = np.maximum(plane[finite], np.asarray(ground, dtype=float))
+        errors[~np.isfinite(errors)] = math.inf
+        worst = int(np.argmax(errors))
+        return float(errors[worst]), float(x[worst]), float(y[worst])
+
+    def check_round_trip(self, x_bounds, y_bounds, limit: float = MAX_ROUND_TRIP_M) -> float:
+        """:meth:`round_trip_error` over the rectangle, refused above ``limit`` (m, default
+        :data:`MAX_ROUND_TRIP_M`); returns it."""
+        self.false_origin  # noqa: B018 -- an origin outside the projection is its own message
+        error, x, y = self.round_trip_error(x_bounds, y_bounds)
+        if not error <= limit:
+            origin = x_bounds[0] == x_bounds[1] and y_bounds[0] == y_bounds[1]
+            where = "at the origin" if origin else (
+                f"over the grid x = [{x_bounds[0]:g}, {x_bounds[1]:g}] m, y = [{y_bounds[0]:g}, {y_bounds[1]:g}] m")
+            raise BananagridError(
+                f"crs = {show(self.crs_name)}: its round trip {where} (local metres to latitude and longitude and "
+                f"back) is off by {error:.3g} m at x = {x:g} m, y = {y:g} m, above {limit * 1e3:g} mm: the "
+                f"projection does not hold the {'origin' if origin else 'grid'}; use a CRS whose domain holds it"
+                + ("" if self.crs_name.lower() == "aeqd" else " (\"aeqd\" about the origin)")
+            )
+        return error
 
     def scale_error(self, x_bounds, y_bounds) -> float:
         """The largest relative scale error ``|k - 1|`` of the projection over a rectangle of
@@ -270,13 +396,17 @@ class GeoFrame:
 
     def check_extent(self, x_bounds, y_bounds, limit: float = DEFAULT_MAX_SCALE_ERROR, *,
                      key: str = "grid") -> float:
-        """:meth:`scale_error` over the rectangle, refused above ``limit``; returns it."""
+        """:meth:`scale_error` over the rectangle, refused above ``limit``; returns it. The
+        projection's round trip over it is checked first (:meth:`check_round_trip`), unless the
+        rectangle reaches round the Earth (then no projection holds it: the grid is at fault)."""
+        if max(map(abs, (*x_bounds, *y_bounds))) <= HALF_CIRCUMFERENCE_M:
+            self.check_round_trip(x_bounds, y_bounds)
         error = self.scale_error(x_bounds, y_bounds)
         if not error <= limit:
             raise BananagridError(
                 f"{key} x = [{x_bounds[0]:g}, {x_bounds[1]:g}] m, y = [{y_bounds[0]:g}, {y_bounds[1]:g}] m: "
-                f"the {self.crs_name} projection's scale error reaches {error:.3g} over it, above the bound "
-                f"{limit:g} (geo.max_scale_error); use a smaller grid, a CRS suited to it, or a larger bound"
+                f"the scale error of its projection, geo.crs = {show(self.crs_name)}, reaches {error:.3g} over it, "
+                f"above the bound {limit:g} (geo.max_scale_error); use a smaller grid, a CRS suited to it, or a larger bound"
             )
         return error
 

@@ -87,14 +87,18 @@ def write_geotiff(path: str | os.PathLike, panels: Sequence, frame=None, *, titl
     Raises
     ------
     BananagridError
-        Bad panels (:func:`~bananagrid.geo.panels.check_panels`), a missing directory, a failure
-        while writing (nothing is left behind), or rasterio missing.
+        Bad panels (:func:`~bananagrid.geo.panels.check_panels`), a frame whose CRS's round trip
+        over the grid is off by more than 1 mm (:meth:`GeoFrame.check_round_trip`), a missing
+        directory, a failure while writing (nothing is left behind), or rasterio missing.
     """
     rasterio = require("rasterio", GEOTIFF_PURPOSE)
     transform_of = require("rasterio.transform", GEOTIFF_PURPOSE).from_origin
     checked = check_panels(panels)
     frame = frame_of(checked, frame)
     grid = checked[0].raster.grid
+    if frame is not None:  # a transform that places every pixel where the model put it, to a millimetre
+        x0, x1, y0, y1 = grid.extent
+        frame.check_round_trip((x0, x1), (y0, y1))
     e0, n0 = (0.0, 0.0) if frame is None else frame.false_origin
     west, north = e0 + grid.origin[0], n0 + grid.origin[1] + grid.ny * grid.dy
     profile = {

@@ -56,6 +56,13 @@ def _lat_lon(frame, xy: np.ndarray) -> np.ndarray:
     return np.column_stack([lat, lon])
 
 
+def _strips(lat_lon: np.ndarray) -> list[np.ndarray]:
+    """A line in (lat, lon) split where it crosses the antimeridian (a step of more than 180
+    degrees of longitude), so that the map draws no segment the long way round the Earth."""
+    jumps = np.flatnonzero(np.abs(np.diff(lat_lon[:, 1])) > 180.0) + 1
+    return [part for part in np.split(lat_lon, jumps) if len(part) >= 2]
+
+
 def log_map_marks(rec: rr.RecordingStream, name: str, model, frame) -> None:
     """Log where layer ``name``'s model is anchored (its ``landmarks()``: the fix, a bearing
     fix's stations and lines), static."""
@@ -69,7 +76,8 @@ def log_map_marks(rec: rr.RecordingStream, name: str, model, frame) -> None:
         if "bearings" in found:
             # straight in the plane: drawn through LINE_POINTS of it, each carried to the ellipsoid
             along = np.linspace(0.0, 1.0, LINE_POINTS)[:, None]
-            lines = [_lat_lon(frame, start + along * (end - start)) for start, end in found["bearings"]]
+            lines = [strip for start, end in found["bearings"]
+                     for strip in _strips(_lat_lon(frame, start + along * (end - start)))]
             rec.log(f"{entity}/bearings", rr.GeoLineStrings(lat_lon=lines, colors=BEARING_COLOUR,
                                                             radii=rr.Radius.ui_points(1.5)), static=True)
         if "fix" in found:
@@ -88,8 +96,8 @@ def log_map_areas(rec: rr.RecordingStream, name: str, areas: Sequence, frame) ->
     with strict():
         for k, area in enumerate(areas):
             rings = [] if not area.reached else [
-                _lat_lon(frame, np.asarray(ring.coords))
-                for polygon in area.geometry.geoms for ring in (polygon.exterior, *polygon.interiors)
+                strip for polygon in area.geometry.geoms for ring in (polygon.exterior, *polygon.interiors)
+                for strip in _strips(_lat_lon(frame, np.asarray(ring.coords)))
             ]
             rec.log(f"{MAP_ENTITY}/{entity_path(name)}/areas/{level_entity(area.level)}",
                     rr.GeoLineStrings(lat_lon=rings, colors=AREA_COLOURS[k % len(AREA_COLOURS)],

@@ -213,8 +213,9 @@ def layer_summaries(path: str | os.PathLike, levels: Iterable[float] = DEFAULT_M
 
 
 def _iso(when) -> str:
-    """A UTC time as ISO 8601 with ``Z``, to the millisecond when it has fractions."""
-    text = when.strftime("%Y-%m-%dT%H:%M:%S.%f")[:-3].removesuffix(".000")
+    """A UTC time as ISO 8601 with ``Z``, to the millisecond when it has fractions; a year
+    below 1000 with four digits (``strftime`` drops them on some platforms)."""
+    text = when.replace(tzinfo=None).isoformat(timespec="milliseconds").removesuffix(".000")
     return text + "Z"
 
 

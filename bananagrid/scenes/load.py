@@ -282,11 +282,11 @@ def _build(doc: dict, text: str, source: str, kinds: Registry, tiled: bool = Fal
     bounds, grid = _grid(keys.table(doc, "grid", required=True), tiled)
     scale_error = 0.0
     if geo is not None:
-        try:
+        try:  # the CRS's round trip over the grid, then its scale error
             x0, x1, y0, y1 = grid.extent
             scale_error = geo.check_extent((x0, x1), (y0, y1), max_scale_error)
         except BananagridError as exc:
-            raise SceneKeyError(str(exc)) from None
+            raise SceneKeyError(_geo_message(str(exc), "")) from None
     output = _output(keys.table(doc, "output"))
     defaults = keys.table(doc, "defaults")
     every_key = tuple(dict.fromkeys(k for kind in kinds.values() for k in kind.scene.key_names))
@@ -300,6 +300,11 @@ def _build(doc: dict, text: str, source: str, kinds: Registry, tiled: bool = Fal
     found: list[str] = []
     layers = _layers(keys.table(doc, "layers", required=True), shared, times, kinds, found, geo)
     radial = _radial(doc["radial"], layers) if "radial" in doc else None
+    if geo is not None:  # every UTC time of the scene inside the calendar
+        try:
+            geo.check_elapsed(times or [layer.params.get("t", 0.0) for layer in layers])
+        except BananagridError as exc:
+            raise SceneKeyError(_geo_message(str(exc), "")) from None
     for message in found:
         warnings.warn(f"{source}: {message}", BananagridWarning, stacklevel=3)
     return Scene(
@@ -554,6 +559,12 @@ def _geo(table: dict) -> tuple[GeoFrame, float]:
     if "origin_latlon" not in table:
         raise SceneKeyError("geo.origin_latlon: missing; expected [latitude, longitude] in degrees of the local origin")
     lat, lon = keys.pair(table, "origin_latlon", "geo", unit="degrees")
+    if abs(lat) == 90.0 and -180.0 <= lon <= 180.0:
+        raise SceneKeyError(
+            f"geo.origin_latlon = {show(table['origin_latlon'])}: latitude {lat:g} is a pole, where true north (of "
+            "the scene's courses and bearings) has no direction; give a latitude in (-90, 90), e.g. "
+            f"{math.copysign(89.9999, lat):g} (a grid about it may hold the pole)"
+        )
     if not (-90.0 < lat < 90.0 and -180.0 <= lon <= 180.0):
         raise SceneKeyError(
             f"geo.origin_latlon = {show(table['origin_latlon'])}: expected [latitude in (-90, 90), "
@@ -565,10 +576,13 @@ def _geo(table: dict) -> tuple[GeoFrame, float]:
     try:  # GeoFrame checks the crs (a string it knows) and the time
         return GeoFrame(lat, lon, time=table.get("time"), crs=table.get("crs", "aeqd")), limit
     except BananagridError as exc:
-        # the frame's own messages start with its argument (lat, lon, time, crs): a key of [geo]
-        message = str(exc)
-        where = "geo." if message.split(" ", 1)[0] in ("lat", "lon", "time", "crs") else "[geo]: "
-        raise SceneKeyError(f"{where}{message}") from None
+        raise SceneKeyError(_geo_message(str(exc))) from None
+
+
+def _geo_message(message: str, other: str = "[geo]: ") -> str:
+    """A :class:`GeoFrame` message as a scene's: the frame's own messages start with its
+    argument (lat, lon, time, crs), a key of ``[geo]``; others get ``other`` in front."""
+    return ("geo." if message.split(" ", 1)[0] in ("lat", "lon", "time", "crs") else other) + message
 
 
 def _radian_doubts(given: dict, own: Mapping, t: float | None) -> list[str]:
