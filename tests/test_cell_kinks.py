@@ -163,6 +163,7 @@ def test_polar_kinks_over_the_domain(variant, sigma_phi, range_sd, heading, wher
     _check(model, grid, _polar_oracle(model, model.seams()[:, 2]), min_checked=0)
 
 
+@pytest.mark.filterwarnings("ignore:P_sigma")
 def test_polar_heading_cells_at_the_seam_and_the_edge():
     """With heading noise (order 2) the improved edge is a jump (SD[r | theta] stays positive to
     it): cells on it and behind the start, against nested ``quad`` of ``pdf`` about the origin
