@@ -371,6 +371,21 @@ class DensityModel(Protocol):
         density), which the engine's quadrature integrates in polar coordinates about them;
         empty for none."""
 
+    def seams(self) -> np.ndarray:
+        """World rays ``(k, 3)``, rows ``(x, y, bearing)`` (a half-line from ``(x, y)`` at a
+        bearing clockwise from north), along which the density has a kink or a jump (where an
+        angle wraps at +-pi behind a start or a station, where the domain of an approximation
+        ends), and where a ray starts, a point about which the density changes with the
+        direction; empty for none. The engine's quadrature makes them breaks of its rules
+        (:mod:`bananagrid.engine.grid_cells`, :mod:`bananagrid.engine.polar_cells`)."""
+
+    def polar_law(self, origin: tuple[float, float]) -> Callable | None:
+        """Where the density, in polar coordinates (r, theta) about ``origin`` (theta a bearing
+        clockwise from north), is g(theta) N(r; mu(theta), sd(theta)) / r for r > 0 (a polar
+        banana about its start): ``law(theta) -> (g, mu, sd)``, float64 arrays of theta's shape
+        (sd <= 0: no mass at that bearing), so that the engine integrates cells swept about
+        ``origin`` exactly in r; else None."""
+
     def polar_scales(self, origin: tuple[float, float]) -> tuple[float, float]:
         """Smallest widths of the density's features seen from ``origin`` (or from the model's
         own pose, if it has one): ``(radial_m, angular_rad)``."""

@@ -96,3 +96,111 @@ def pdf_cell(model, cell, eps=1e-12):
     f = lambda y, x: float(model.pdf(np.array([x]), np.array([y]))[0])  # noqa: E731
     value, _ = integrate.dblquad(f, x0, x1, y0, y1, epsabs=eps, epsrel=1e-9)
     return value
+
+
+# --- swept cells: polar coordinates about a point, the kinks as breakpoints --------------------
+
+
+def ray_segment(point, cell, theta):
+    """``(r_in, r_out)`` of the ray from ``point`` at bearing ``theta`` (clockwise from north)
+    inside the world cell ``(x0, x1, y0, y1)`` (equal where it misses)."""
+    x0, x1, y0, y1 = cell
+    lo, hi = 0.0, math.inf
+    for start, step, a, b in ((point[0], math.sin(theta), x0, x1), (point[1], math.cos(theta), y0, y1)):
+        if abs(step) < 1e-300:
+            if not a <= start <= b:
+                return 0.0, 0.0
+            continue
+        ra, rb = sorted(((a - start) / step, (b - start) / step))
+        lo, hi = max(lo, ra), min(hi, rb)
+    return lo, max(lo, hi)
+
+
+def bearing_span(point, cell, seams=()):
+    """The bearings ``[t0, t1]`` the cell subtends about ``point`` (the whole circle where it holds
+    the point) and the breakpoints inside: the corners' bearings and ``seams``, unwrapped."""
+    x0, x1, y0, y1 = cell
+    px, py = point
+    corners = [math.atan2(cx - px, cy - py) for cx, cy in ((x0, y0), (x1, y0), (x1, y1), (x0, y1))]
+    if x0 <= px <= x1 and y0 <= py <= y1:
+        t0 = corners[0]
+        t1 = t0 + 2.0 * math.pi
+        unwrap = lambda b: t0 + (b - t0) % (2.0 * math.pi)  # noqa: E731
+    else:
+        centre = math.atan2(0.5 * (x0 + x1) - px, 0.5 * (y0 + y1) - py)
+        unwrap = lambda b: centre + (b - centre + math.pi) % (2.0 * math.pi) - math.pi  # noqa: E731
+        rel = [unwrap(c) for c in corners]
+        t0, t1 = min(rel), max(rel)
+    inner = sorted({unwrap(b) for b in (*corners, *seams)} - {t0, t1})
+    return t0, t1, [b for b in inner if t0 < b < t1]
+
+
+def polar_law_cell(law, point, cell, seams=(), eps=1e-11):
+    """The probability of a world cell under a density that is, in polar coordinates about
+    ``point``, g(theta) N(r; mu(theta), sd(theta)) / r (a polar banana about its origin):
+    ``law(theta) -> (g, mu, sd)`` (sd <= 0: no mass at that bearing). Exact in r (normal CDFs
+    at the ray's entry and exit), SciPy's adaptive ``quad`` over the bearing with the corners'
+    bearings and ``seams`` as breakpoints."""
+    t0, t1, breaks = bearing_span(point, cell, seams)
+
+    def f(theta):
+        g, mu, sd = law(theta)
+        if not sd > 0.0 or g == 0.0:
+            return 0.0
+        r_in, r_out = ray_segment(point, cell, theta)
+        if r_out <= r_in:
+            return 0.0
+        z_in, z_out = (r_in - mu) / sd, (r_out - mu) / sd
+        share = ndtr(-z_in) - ndtr(-z_out) if z_in > 0.0 else ndtr(z_out) - ndtr(z_in)
+        return g * share
+
+    with warnings.catch_warnings():  # roundoff notes where the integrand is 1e-300
+        warnings.simplefilter("ignore", integrate.IntegrationWarning)
+        value, _ = integrate.quad(f, t0, t1, points=breaks or None, epsabs=0.0, epsrel=eps, limit=500)
+    return value
+
+
+def polar_banana_law(model):
+    """``law(theta)`` of :func:`polar_law_cell` for a rough or improved PolarBanana without
+    heading noise, eqs. (7), (8), (11) of the polar-banana paper written with ``math``: phi is
+    the bearing from the heading wrapped to (-pi, pi], g its normal density N(0, sigma_omega t / 2)."""
+    v0, t, sa, sw = model.v0, model.t, model.sigma_a, model.sigma_omega
+    s_phi = 0.5 * sw * t
+    heading = model.pose.heading
+
+    def law(theta):
+        phi = (theta - heading + math.pi) % (2.0 * math.pi) - math.pi
+        if phi == -math.pi:
+            phi = math.pi
+        sinc = math.sin(phi) / phi if phi != 0.0 else 1.0
+        if model.variant == "rough":
+            mu, sd = v0 * t * sinc, 0.5 * sa * t * t
+        else:
+            scc = (4.0 * sinc - math.cos(phi)) / 3.0
+            mu = v0 * t * sinc + sa**2 * t**3 / (12.0 * v0) * (phi**2 / s_phi**2 - 1.0) * scc
+            sd = 0.5 * sa * t * t * (1.0 + sa**2 / (6.0 * v0**2) * (t * t / 12.0 - phi**2 / sw**2)) * scc
+        g = math.exp(-0.5 * (phi / s_phi) ** 2) / (math.sqrt(2.0 * math.pi) * s_phi)
+        return g, mu, sd
+
+    return law
+
+
+def pdf_polar_cell(model, point, cell, seams=(), eps=1e-10):
+    """The probability of a world cell by nested adaptive ``quad`` of ``model.pdf`` in polar
+    coordinates about ``point`` (r p r dr dtheta), the corners' bearings and ``seams`` as
+    breakpoints of the outer integral: for densities without a closed radial law."""
+    t0, t1, breaks = bearing_span(point, cell, seams)
+    px, py = point
+
+    def inner(theta):
+        r_in, r_out = ray_segment(point, cell, theta)
+        if r_out <= r_in:
+            return 0.0
+        s, c = math.sin(theta), math.cos(theta)
+        f = lambda r: float(model.pdf(np.array([px + r * s]), np.array([py + r * c]))[0]) * r  # noqa: E731
+        return integrate.quad(f, r_in, r_out, epsabs=0.0, epsrel=eps, limit=200)[0]
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", integrate.IntegrationWarning)
+        value, _ = integrate.quad(inner, t0, t1, points=breaks or None, epsabs=0.0, epsrel=eps, limit=200)
+    return value

@@ -19,7 +19,7 @@ from ..domains.grid import Grid
 from ..protocol import BatchModel
 from ..results import BatchRaster
 from ..validate import BananagridError, positive, positive_int
-from .warp_runtime import WarpContext
+from .warp_runtime import WarpContext, row_sums
 
 __all__ = ["frame", "frame_bounds", "grids_in", "batch_models", "rasterise_batch", "pdf_batch", "FRAME_SDS"]
 
@@ -118,7 +118,8 @@ def _launch(which: str, models: list[BatchModel], x, y, out_shape, rows, *, dtyp
 
     On the CPU the kernels write every value into a NumPy array they share (zeroing 328 MB for
     10,000 64 x 64 float64 grids first took 0.17 s, on one thread), and each band's sums are
-    taken by the thread that computed it, right after its launch."""
+    taken by the thread that computed it, right after its launch: each hypothesis's sum alone
+    (:func:`~bananagrid.engine.warp_runtime.row_sums`), the same bits for any banding."""
     ctx = WarpContext(dtype, device, threads)
     binding = type(models[0]).batch_binding(ctx, models)
     kernel = binding.grid_kernel if which == "grid" else binding.points_kernel
@@ -131,16 +132,15 @@ def _launch(which: str, models: list[BatchModel], x, y, out_shape, rows, *, dtyp
     else:
         out = ctx.zeros(out_shape)
     sums = np.empty(len(models))
-    per_hypothesis = tuple(range(1, len(out_shape)))
 
     def launch_band(a, b):
         dim = b - a if rows is None else (b - a, rows)
         ctx.launch(kernel, dim=dim, inputs=[x_arr, y_arr, a, *binding.params, out])
         if ctx.cpu:  # a CPU launch has finished when it returns
-            sums[a:b] = values[a:b].sum(axis=per_hypothesis, dtype=np.float64)
+            sums[a:b] = row_sums(values[a:b].reshape(b - a, -1))
 
     ctx.run_bands(launch_band, ctx.bands(len(models), 4))
     if not ctx.cpu:
         values = ctx.numpy(out)
-        sums = values.sum(axis=per_hypothesis, dtype=np.float64)
+        sums = row_sums(values.reshape(len(models), -1))
     return values, sums

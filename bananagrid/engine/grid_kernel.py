@@ -9,7 +9,7 @@ import numpy as np
 from ..domains.grid import Grid
 from ..protocol import DensityModel
 from .precision import working_dtype
-from .warp_runtime import WarpContext
+from .warp_runtime import WarpContext, row_sums
 
 __all__ = ["GridExtent", "grid_context", "grid_block"]
 
@@ -47,9 +47,12 @@ def grid_block(ctx: WarpContext, binding, grid: Grid, rows: tuple[int, int] | No
     columns ``cols[0]:cols[1]`` of ``grid`` (default all), in the context's dtype.
 
     With ``with_sum``, returns ``(values, total)``: ``total`` the float64 sum of the values,
-    taken on the CPU band by band by the thread that computed the band, right after its launch
-    (in parallel, and while the band is in that core's cache: one serial pass over the grid
-    after the kernel held the 1 -> 2 thread speedup of the fastest kernels to 1.5x).
+    the same bits for any number of threads: each row is summed on its own
+    (:func:`~bananagrid.engine.warp_runtime.row_sums`; on the CPU by the thread that computed its
+    band, right after the launch, in parallel and while the band is in that core's cache: one
+    serial pass over the grid after the kernel held the 1 -> 2 thread speedup of the fastest
+    kernels to 1.5x), and the rows' sums are added exactly (``math.fsum``), so neither the
+    bands' boundaries nor their order can change a bit of it.
 
     Each cell's value depends on its coordinates only, except for kernels that work in tiles of
     ``binding.tile_rows`` cells (Butterly): their bands start on multiples of the tile side and
@@ -79,7 +82,7 @@ def grid_block(ctx: WarpContext, binding, grid: Grid, rows: tuple[int, int] | No
     if binding.quad_width:
         quads = ctx.empty((len(bands), binding.quad_width), dtype=ctx.vector(4))
     tile = (binding.tile_rows if ctx.cpu else 1) if binding.tile_rows else None
-    band_sums = {}
+    sums = np.empty(ny) if with_sum else None
 
     def launch_band(r0, r1):
         if columns is None:
@@ -92,7 +95,7 @@ def grid_block(ctx: WarpContext, binding, grid: Grid, rows: tuple[int, int] | No
         extra = [] if scratch is None else [scratch] + ([] if quads is None else [quads]) + [band_of[r0]]
         ctx.launch(binding.grid_kernel, dim=dim, inputs=[*head, *binding.params, *extra, out])
         if with_sum and ctx.cpu:  # a CPU launch has finished when it returns
-            band_sums[r0] = np.sum(values[r0:r1], dtype=np.float64)
+            sums[r0:r1] = row_sums(values[r0:r1])
 
     ctx.run_bands(launch_band, bands)
     ctx.synchronize()
@@ -100,5 +103,6 @@ def grid_block(ctx: WarpContext, binding, grid: Grid, rows: tuple[int, int] | No
         values = out.numpy()
     if not with_sum:
         return values
-    total = sum(band_sums[r0] for r0, _ in bands) if ctx.cpu else np.sum(values, dtype=np.float64)
-    return values, float(total)
+    if not ctx.cpu:
+        sums = row_sums(values)
+    return values, math.fsum(sums)

@@ -2,7 +2,9 @@
 model's own length scales.
 
 The sub-cells are no larger than the model's length scales (``model.polar_scales``, through
-the model protocol); every node is evaluated by the model's own kernels through
+the model protocol), and a cell that a seam of the model's density crosses along a bearing of
+the lattice (``model.seams``: a polar density's angle wrapping at +-pi behind its start) is
+integrated on each side of it; every node is evaluated by the model's own kernels through
 :func:`bananagrid.engine.points.evaluate_points`.
 """
 
@@ -20,7 +22,7 @@ from ..protocol import DensityModel
 from ..results import PolarRaster
 from ..validate import BananagridError
 from .points import check_finite, check_model, evaluate_points
-from .quadrature import GAUSS_TOL, MAX_SUBINTERVALS, axis_plan, unit_rule
+from .quadrature import GAUSS_TOL, MAX_SUBINTERVALS, axis_plan, graded_rule, narrowing, normal_shares, unit_rule
 from .warp_runtime import check_threads
 from .work import check_work
 
@@ -29,6 +31,9 @@ __all__ = ["rasterise_lattice", "LatticeExtent", "GAUSS_TOL", "MAX_NODES"]
 #: Most quadrature nodes over the whole lattice (about 30 s of CAT evaluations on two cores).
 #: Beyond it the sub-intervals are coarsened and a warning says what accuracy is left.
 MAX_NODES = 2**26
+
+#: Bearings per piece at which a radial law's SD is sampled.
+LAW_PROBES = 33
 
 #: Points per evaluate_points call (bounds the memory of the node arrays: ~100 MB at 2**20).
 NODE_CHUNK = 2**20
@@ -112,12 +117,12 @@ def _plan(model: DensityModel, lattice: PolarLattice) -> _Plan:
 # --------------------------------------------------------------------------------------------
 
 
-def _tasks(lattice: PolarLattice, plan: _Plan):
-    """Blocks ``(row, j0, j1, a0, a1)`` of at most NODE_CHUNK nodes: bearing cells j0:j1 of
+def _tasks(n_pieces: int, plan: _Plan):
+    """Blocks ``(row, j0, j1, a0, a1)`` of at most NODE_CHUNK nodes: bearing pieces j0:j1 of
     ``row`` with radial nodes a0:a1."""
     rm, rn = plan.radial
     n_r_nodes = rm * rn
-    nb = lattice.n_bearing
+    nb = n_pieces
     for row, (m, n) in enumerate(plan.angular):
         k = m * n
         if n_r_nodes * k <= NODE_CHUNK:
@@ -129,6 +134,65 @@ def _tasks(lattice: PolarLattice, plan: _Plan):
             for j in range(nb):
                 for a0 in range(0, n_r_nodes, per_a):
                     yield row, j, j + 1, a0, min(n_r_nodes, a0 + per_a)
+
+
+def _bearing_pieces(model: DensityModel, lattice: PolarLattice) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``(lo, hi, column)``: the bearing intervals the rule integrates, each cell's interval cut
+    at the bearings of the model's seams (:meth:`~bananagrid.protocol.DensityModel.seams`) that
+    start at the lattice's origin and pass through it (a kink of the density there becomes a
+    break of the rule, like a cell edge). Seams from other points cross the lattice's cells
+    along curves and are not cut."""
+    edges = lattice.bearing_edges
+    origin = np.asarray(lattice.pose.origin, dtype=float)
+    cuts = []
+    for x, y, bearing in np.asarray(model.seams(), dtype=float).reshape(-1, 3):
+        if np.array_equal(np.array([x, y]), origin):
+            cuts.append(bearing - lattice.pose.heading)
+    lo, hi, column, seam = [], [], [], []
+    two_pi = 2.0 * math.pi
+    for j in range(lattice.n_bearing):
+        a, b = float(edges[j]), float(edges[j + 1])
+        at = {a + (c - a) % two_pi for c in cuts}
+        inside = sorted(at - {a})
+        breaks = [a] + [c for c in inside if c < b] + [b]
+        on = at | {c - two_pi for c in at}
+        for u, v in zip(breaks[:-1], breaks[1:]):
+            lo.append(u), hi.append(v), column.append(j), seam.append((u in on, v in on))
+    return np.array(lo), np.array(hi), np.array(column), seam
+
+
+def _law_cells(model: DensityModel, lattice: PolarLattice, law) -> np.ndarray:
+    """Cell probabilities exact in r for a density that is g(theta) N(r; mu, sd) / r about the
+    lattice's origin (``model.polar_law``): per bearing piece, sum over bearing nodes of
+    w g [Phi((r_(i+1) - mu) / sd) - Phi((r_i - mu) / sd)], every row at once. The nodes are
+    :func:`~bananagrid.engine.quadrature.graded_rule`'s, their sub-intervals no wider than the
+    model's angular scale nor than half the law's least SD on the piece over the lattice's
+    outer range (where the ridge crosses a range edge, a share turns over sd / r), graded
+    toward the seams (the improved variant's P_sigma = 0 edge)."""
+    p_lo, p_hi, p_column, seam = _bearing_pieces(model, lattice)
+    r_edges = lattice.range_edges
+    far = max(float(r_edges[-1]), 1e-300)
+    angular = model.polar_scales(lattice.pose.origin)[1]
+    heading = lattice.pose.heading
+    # one evaluation of the law for every piece's probes, one for every piece's nodes
+    probes = np.linspace(p_lo, p_hi, LAW_PROBES, axis=1)
+    _, _, sd_probes = law(heading + probes.ravel())
+    rules = []
+    for k, (a, b, graded) in enumerate(zip(p_lo, p_hi, seam)):
+        sd = sd_probes[k * LAW_PROBES:(k + 1) * LAW_PROBES]
+        live = sd[sd > 0.0]
+        scale = min(angular, 0.5 * float(live.min()) / far) if live.size else angular
+        narrow = narrowing(sd)  # graded only toward a seam where the SD falls (P_sigma = 0)
+        rules.append(graded_rule(float(a), float(b), scale, (graded[0] and narrow[0], graded[1] and narrow[1])))
+    g, mu, sd = law(heading + np.concatenate([nodes for nodes, _ in rules]))
+    probability = np.zeros(lattice.shape)
+    start = 0
+    for (nodes, w), j in zip(rules, p_column):
+        part = slice(start, start + nodes.size)
+        start += nodes.size
+        shares = normal_shares(g[None, part], mu[None, part], sd[None, part], r_edges[:-1, None], r_edges[1:, None])
+        probability[:, j] += shares @ w
+    return probability
 
 
 def _groups(tasks):
@@ -147,8 +211,13 @@ def _groups(tasks):
 
 
 def _integrate(model: DensityModel, lattice: PolarLattice, plan: _Plan, *, dtype, device, threads) -> np.ndarray:
-    """Cell probabilities: sum over nodes of w_r(r) r w_b p(O + r u(h + b)), float64."""
-    r_edges, b_edges = lattice.range_edges, lattice.bearing_edges
+    """Cell probabilities: sum over nodes of w_r(r) r w_b p(O + r u(h + b)), float64, the
+    bearing cut at the model's seams through the origin (:func:`_bearing_pieces`)."""
+    r_edges = lattice.range_edges
+    law = model.polar_law(lattice.pose.origin)
+    if law is not None:
+        return _law_cells(model, lattice, law)
+    p_lo, p_hi, p_column, _ = _bearing_pieces(model, lattice)
     r_nodes, r_weights = unit_rule(*plan.radial)
     b_rules = {mn: unit_rule(*mn) for mn in set(plan.angular)}
     heading = lattice.pose.heading
@@ -156,7 +225,7 @@ def _integrate(model: DensityModel, lattice: PolarLattice, plan: _Plan, *, dtype
     probability = np.zeros(lattice.shape)
 
     def expand():
-        for row, j0, j1, a0, a1 in _tasks(lattice, plan):
+        for row, j0, j1, a0, a1 in _tasks(len(p_lo), plan):
             yield row, j0, j1, a0, a1, len(b_rules[plan.angular[row]][0])
 
     extent = LatticeExtent(lattice)
@@ -167,7 +236,7 @@ def _integrate(model: DensityModel, lattice: PolarLattice, plan: _Plan, *, dtype
             r = r0 + (r1 - r0) * r_nodes[a0:a1]
             w_r = (r1 - r0) * r_weights[a0:a1] * r  # the polar area element r dr
             v, w_v = b_rules[plan.angular[row]]
-            lo, hi = b_edges[j0:j1, None], b_edges[j0 + 1 : j1 + 1, None]
+            lo, hi = p_lo[j0:j1, None], p_hi[j0:j1, None]
             theta = heading + lo + (hi - lo) * v[None, :]  # (J, K)
             w_b = (hi - lo) * w_v[None, :]
             s, c = np.sin(theta), np.cos(theta)
@@ -182,7 +251,8 @@ def _integrate(model: DensityModel, lattice: PolarLattice, plan: _Plan, *, dtype
         for row, j0, j1, w_r, w_b, a, (J, K) in parts:
             block = values[start : start + a * J * K].reshape(a, J, K)
             start += a * J * K
-            probability[row, j0:j1] += np.einsum("a,ajk,jk->j", w_r, block, w_b, dtype=np.float64)
+            pieces = np.einsum("a,ajk,jk->j", w_r, block, w_b, dtype=np.float64)
+            np.add.at(probability[row], p_column[j0:j1], pieces)  # in piece order: no thread dependence
     return probability
 
 
@@ -199,7 +269,10 @@ def rasterise_lattice(
 
     with ``(x, y) = O + r (sin(h + b), cos(h + b))`` and p the model's density per m^2.
 
-    The integral is a tensor Gauss-Legendre rule over sub-cells no larger than the model's
+    Where the model's density about the lattice's origin is g(theta) N(r; mu, sd) / r (a polar
+    banana on a lattice at its start: ``model.polar_law``), each cell is exact in r and
+    Gauss-Legendre in the bearing (:func:`_law_cells`), cut at the model's seams. Otherwise the
+    integral is a tensor Gauss-Legendre rule over sub-cells no larger than the model's
     length scales (``model.polar_scales``): per axis, m equal sub-intervals of at most the scale
     and the fewest nodes n (<= 8) whose remainder bound for a normal feature of that SD is below
     ``GAUSS_TOL`` = 1e-10 of its mass (:func:`gauss_error`). Where the density is as smooth as
@@ -252,7 +325,8 @@ def rasterise_lattice(
         "device": device,
         "threads": threads if device == "cpu" else 1,
         "seconds": seconds,
-        "quadrature": "tensor Gauss-Legendre over sub-cells",
+        "quadrature": ("exact in range (the model's radial law), Gauss-Legendre in bearing"
+                       if model.polar_law(lattice.pose.origin) is not None else "tensor Gauss-Legendre over sub-cells"),
         "scale_rule": plan.rule,
         "length_scales": {"radial_m": plan.scales[0], "angular_rad": plan.scales[1]},
         "radial_nodes_per_cell": rm * rn,

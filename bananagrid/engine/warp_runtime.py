@@ -20,7 +20,7 @@ import warp as wp
 
 from ..validate import BananagridError
 
-__all__ = ["WarpContext", "warp", "default_threads", "check_threads", "bands", "run_bands"]
+__all__ = ["WarpContext", "warp", "default_threads", "check_threads", "bands", "run_bands", "row_sums"]
 
 _DTYPES = {np.dtype(np.float32): wp.float32, np.dtype(np.float64): wp.float64}
 _FIXED = {np.dtype(np.float64): wp.float64, np.dtype(np.int32): wp.int32}
@@ -93,6 +93,17 @@ def bands(n_rows: int, threads: int, per_thread: int = 1, align: int = 1) -> lis
     n_bands = max(1, min(units, threads * per_thread))
     edges = np.minimum(np.linspace(0, units, n_bands + 1).round().astype(int) * align, n_rows)
     return [(int(a), int(b)) for a, b in zip(edges[:-1], edges[1:]) if b > a]
+
+
+def row_sums(block: np.ndarray) -> np.ndarray:
+    """float64 sums of each row of a 2-D array (float32 or float64): ``(rows,)``.
+
+    A row's sum is NumPy's pairwise sum of that row alone, whatever rows surround it (the
+    reduction runs along each contiguous row, casting in buffers that restart at every row), so
+    sums taken band by band equal, bit for bit, those of the whole array at once
+    (``tests/test_thread_bits.py`` checks it over shapes, slices and both dtypes): results summed
+    from them in a fixed order do not depend on how rows were split between threads."""
+    return np.ascontiguousarray(block).sum(axis=1, dtype=np.float64)
 
 
 def run_bands(launch_band, bands: list[tuple[int, int]], threads: int) -> None:

@@ -104,6 +104,14 @@ class Model:
         """No point of infinite density (:meth:`bananagrid.protocol.DensityModel.singular_points`)."""
         return np.zeros((0, 2))
 
+    def seams(self) -> np.ndarray:
+        """No ray of kinks (:meth:`bananagrid.protocol.DensityModel.seams`)."""
+        return np.zeros((0, 3))
+
+    def polar_law(self, origin):
+        """None: no closed radial law (:meth:`bananagrid.protocol.DensityModel.polar_law`)."""
+        return None
+
     def landmarks(self) -> dict[str, np.ndarray]:
         """The last fix, the origin of the model's pose; nothing for a model without a pose
         (:meth:`bananagrid.protocol.DensityModel.landmarks`)."""

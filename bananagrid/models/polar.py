@@ -274,6 +274,44 @@ class PolarBanana(MotionModel):
         coordinates, :mod:`bananagrid.engine.grid_cells`)."""
         return np.reshape(np.asarray(self.pose.origin, dtype=np.float64), (1, 2))
 
+    def seams(self) -> np.ndarray:
+        """Rays from the origin of the pose (:meth:`bananagrid.protocol.DensityModel.seams`):
+        behind the start, where the angle (phi, or theta with heading noise) wraps from pi to
+        -pi (the density is continuous there, its slope across the ray is not); for the
+        improved variant, where P_sigma (11) reaches 0 inside (-pi, pi) (beyond it the density
+        is 0: a jump with heading noise, the ridge's limit without), |phi| =
+        :attr:`sigma_positive_limit`, |theta| = that over theta_bar / theta."""
+        x, y = self.pose.origin
+        h = self.pose.heading
+        rays = [(x, y, _wrap(h + math.pi))]
+        if self.variant == "improved":
+            edge = self.sigma_positive_limit
+            if self.kernel_order:
+                edge *= (self.sigma_theta / self.sigma_phi) ** 2  # theta_bar = theta sigma_phi^2 / sigma_theta^2
+            if edge < math.pi:
+                rays += [(x, y, _wrap(h + edge)), (x, y, _wrap(h - edge))]
+        return np.array(rays, dtype=np.float64)
+
+    def polar_law(self, origin):
+        """About the origin of the pose, the density is g(angle) N(r; mean, sd) / r
+        (:meth:`bananagrid.protocol.DensityModel.polar_law`): the angle phi (theta with heading
+        noise) is the bearing from the heading wrapped to (-pi, pi], g its normal density
+        (SD sigma_phi, or sigma_theta), mean and sd the kernel's law of r given it
+        (:meth:`conditional_moments`); None about any other point."""
+        if tuple(float(c) for c in origin) != tuple(float(c) for c in self.pose.origin):
+            return None
+        sd_angle = self.sigma_theta
+        heading = self.pose.heading
+
+        def law(theta):
+            theta = np.asarray(theta, dtype=np.float64)
+            angle = np.pi - (np.pi - (theta - heading)) % (2.0 * np.pi)  # in (-pi, pi]
+            g = np.exp(-0.5 * (angle / sd_angle) ** 2) / (math.sqrt(2.0 * math.pi) * sd_angle)
+            mean, sd = self.conditional_moments(angle)
+            return g, mean, sd
+
+        return law
+
     def radial_law(self, phi) -> tuple[np.ndarray, np.ndarray]:
         """Mean and SD of r | phi for this variant, float64 arrays (through the kernel)."""
         return self._moments(phi)
