@@ -486,17 +486,17 @@ class BearingFix(Model):
             a = np.column_stack((u[:, 1], -u[:, 0]))
             rhs = u[:, 1] * self.sensors[:, 0] - u[:, 0] * self.sensors[:, 1]
             point = np.linalg.lstsq(a, rhs, rcond=None)[0]
-        else:
-            point = _global_minimum(self.sensors, self.bearings, self.sigmas)
-            if point is not None:
-                point = self._polish(point)
+            return point, point, None  # chi^2 = 0 there: no station's limit is lower
+        point = _global_minimum(self.sensors, self.bearings, self.sigmas)
+        if point is not None:
+            point = self._polish(point)
         highest = min(self.station_lumps(), key=lambda lump: lump[1], default=None)
         if highest is not None:
             k, limit, _, mean_range = highest
-            least = 0.0 if len(u) == 2 else math.inf  # two lines cross at chi^2 = 0
-            if point is not None and len(u) > 2:
+            least = math.inf
+            if point is not None:
                 least = _chi2(self.sensors, self.bearings, 1.0 / self.sigmas, point[None, :])[0]
-            if point is None or limit < least:
+            if limit < least:
                 return self.sensors[k] + mean_range * u[k], point, k
         if point is None:
             raise BananagridError(
