@@ -60,12 +60,15 @@ def ellipse_mass(model, sds=6.0, m=241):
 
 @st.composite
 def geometries(draw):
-    """2-5 stations 50 m to 100 km from a contact in random directions, bearing SDs 1e-3 to 0.3
-    rad, the observed bearings drawn with their normal noise."""
+    """2-5 stations 50 m to 100 km from a contact in random directions (not all in line with
+    it), bearing SDs 1e-3 to 0.3 rad, the observed bearings drawn with their normal noise."""
     n = draw(st.integers(2, 5))
     contact = np.array([draw(st.floats(-1e4, 1e4)), draw(st.floats(-1e4, 1e4))])
     ranges = np.array([10.0 ** draw(st.floats(math.log10(50.0), 5.0)) for _ in range(n)])
     angles = np.array([draw(st.floats(0.0, 2 * math.pi)) for _ in range(n)])
+    # some two stations see the contact 10 deg or more apart (not all in line with it, where
+    # the likelihood has no finite maximum)
+    assume(np.max(np.abs(np.sin(angles[:, None] - angles[None, :]))) >= math.sin(math.radians(10.0)))
     sensors = contact + ranges[:, None] * np.column_stack((np.sin(angles), np.cos(angles)))
     sigmas = np.array([10.0 ** draw(st.floats(-3.0, math.log10(0.3))) for _ in range(n)])
     noise = np.random.default_rng(draw(st.integers(0, 2**32 - 1))).normal(size=n)

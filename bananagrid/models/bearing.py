@@ -508,7 +508,9 @@ class BearingFix(Model):
 
     def _polish(self, point) -> np.ndarray:
         """Gauss-Newton from the search's point to full precision in world coordinates (the
-        search works about the stations' centre); a step is kept only if chi^2 does not grow."""
+        search works about the stations' centre); a step is kept only if chi^2 does not grow
+        and it is a polish, under 1e-6 of the distance to the nearest station (where chi^2 only
+        falls towards infinity, a full step would run off along the valley)."""
         weights = 1.0 / self.sigmas**2
         best = _chi2(self.sensors, self.bearings, 1.0 / self.sigmas, point[None, :])[0]
         for _ in range(MAX_ITERATIONS):
@@ -520,7 +522,8 @@ class BearingFix(Model):
                 break
             trial = point + step
             value = _chi2(self.sensors, self.bearings, 1.0 / self.sigmas, trial[None, :])[0]
-            if not (np.isfinite(step).all() and value <= best):
+            near = np.hypot(*(point - self.sensors).T).min()
+            if not (np.isfinite(step).all() and value <= best and np.hypot(*step) <= 1e-6 * near):
                 break
             point, best = trial, value
             if np.hypot(*step) <= 1e-15 * max(np.abs(point).max(), np.hypot(*(point - self.sensors).T).min()):
