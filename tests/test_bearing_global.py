@@ -82,10 +82,9 @@ def geometries(draw):
 def test_the_fix_is_the_global_maximum_and_the_maps_stay_finite(case):
     sensors, bearings, sigmas, contact = case
     try:
-        with warnings.catch_warnings(record=True) as caught:
-            warnings.simplefilter("always")
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")  # crossings under 20 deg, a fix behind a station
             model = BearingFix(sensors, bearings, sigmas)
-        poor = any("cross at" in str(w.message) for w in caught)
     except bg.BananagridError as error:
         # coincident stations, nearly parallel lines, or two stations' lines crossing behind
         # one: refused; never a geometry of three or more that has a fix
@@ -110,14 +109,14 @@ def test_the_fix_is_the_global_maximum_and_the_maps_stay_finite(case):
         for dtype in (np.float64, np.float32):
             raster = bg.rasterise(model.with_variant(variant), grid, dtype=dtype)
             assert np.isfinite(raster.values).all() and math.isfinite(raster.mass)
-    # the exact map's mass about the fix: near one (the normaliser is the Laplace mass of the
-    # best maximum plus the stations' lumps), off by the nonlinear shape's factor (measured 0.89
-    # to 6.5 over this sweep: bearing SDs of 0.1-0.2 rad 100 m from two stations bend it into a
-    # banana); a wrong mode or an overflowing normaliser is off by e^50 and more.
-    # Lines crossing under 20 deg (warned) with bearing SDs of 0.1 rad leave a likelihood barely
-    # localised along them (10 to 40 times the Laplace mass within 6 to 12 SDs): finite only.
+    # the exact map's mass about the fix: near one where the linearisation holds (the normaliser
+    # is the Laplace mass of the best maximum plus the stations' lumps); the nonlinear shape
+    # moves it by factors measured from 0.26 to 60 over 1,400 geometries of this sweep (bearing
+    # SDs of 0.1 rad with two stations 100 m from the contact and in line with it spread the
+    # likelihood along a wedge; lines crossing under 20 deg, 10-40). A wrong mode or an
+    # overflowing normaliser is off by e^(delta chi^2 / 2), e^50 to e^190 in the failures seen.
     mass = ellipse_mass(model)
-    assert (0.05 < mass < 20.0) if not poor else (0.0 < mass < math.inf), mass
+    assert 1e-3 < mass < 1e3, mass
 
 
 def test_a_station_near_the_contact():
