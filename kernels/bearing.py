@@ -3,9 +3,11 @@
 exact:  p(P) proportional to prod_i exp(-wrap(beta_i(P) - b_i)^2 / (2 sigma_i^2)), beta_i(P) the
         bearing from sensor i to P (clockwise from north), b_i the observed bearing: the
         bearings' likelihood under a flat prior. Its normaliser has no closed form; the kernel
-        divides by the Laplace approximation L(fix) 2 pi sqrt(det C) (L(fix) = 1 for two
-        sensors, exp(-chi2_min / 2) for more), so the grid's captured mass shows how far the
-        true shape departs from the ellipse, and normalising over the grid gives the posterior.
+        divides by the Laplace approximation L(fix) 2 pi sqrt(det C) at the likelihood's global
+        maximum (L(fix) = 1 for two sensors, exp(-chi2_min / 2) for more), plus the lumps of
+        likelihood at stations the other bearings point at (``BearingFix.station_lumps``), so
+        the grid's captured mass shows how far the true shape departs from the ellipse, and
+        normalising over the grid gives the posterior.
 linear: p(P) = N(P; fix, C), C the linearised covariance of the fix.
 """
 

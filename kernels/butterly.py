@@ -185,20 +185,27 @@ def second_peak(a: Any, b: Any, four_f: Any, eps: Any, depth: Any):
     ``depth``. It exists iff (|a|^(2/3) + |b|^(2/3))^(3/2) < 4F; its multiplier mu lies in (mu_min, 0),
     where h is convex and increasing (mu_min = -4F |b|^(2/3) / (|a|^(2/3) + |b|^(2/3)) is h's
     minimum), so Newton on h - 1 from the right (h >= 1 at max(-|b|, mu_min / 2)) descends
-    monotonically to it.
+    monotonically to it. Newton stops at a step below ``eps`` of |mu| (relative: near the
+    astroid's cusps on the a axis, |b| << F, the two maxima are mirror images a hair apart with
+    |mu| ~ |b|, and a step tolerance on the scale of F stopped at the start, far from the
+    peak, which was then lost: half the density). Where b^2 underflows, the peak is b = 0's.
     """
     zero = type(a)(0.0)
     one = type(a)(1.0)
     if four_f <= zero or wp.abs(a) >= four_f or wp.abs(b) >= four_f:
         return int(0), one, zero
-    if b == zero:
+    bb = b * b
+    if bb == zero:  # b = 0 (or b^2 underflows: the same peak to far below a node's spacing)
         x = a / four_f
-        return int(1), x, -wp.sqrt(wp.max(zero, one - x * x))
+        y = -wp.sqrt(wp.max(zero, one - x * x))
+        if b >= zero:  # on the half circle opposite to the global maximum's (+ for b = 0)
+            return int(1), x, y
+        return int(1), x, -y
     ratio = a / four_f
     if wp.abs(b) * wp.sqrt(one - ratio * ratio) > depth:
         return int(0), one, zero
     ca = wp.cbrt(a * a)  # |a|^(2/3)
-    cb = wp.cbrt(b * b)
+    cb = wp.cbrt(bb)
     sum_c = ca + cb
     if sum_c * wp.sqrt(sum_c) >= four_f:
         return int(0), one, zero
@@ -214,7 +221,7 @@ def second_peak(a: Any, b: Any, four_f: Any, eps: Any, depth: Any):
             break
         step = f / slope
         mu = mu - step
-        if wp.abs(step) <= eps * four_f:
+        if wp.abs(step) <= eps * wp.abs(mu):
             break
     x = a / (mu + four_f)
     y = b / mu

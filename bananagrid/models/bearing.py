@@ -2,7 +2,8 @@
 
 Each sensor at S_i reports a bearing b_i (radians clockwise from north) to the contact with an
 independent normal error of standard deviation sigma_i. The fix is the crossing of the bearing
-lines (two sensors) or their weighted least-squares point (three or more, beyond Walsh); its
+lines (two sensors) or the likelihood's global maximum (three or more, beyond Walsh: a
+multistart search, chi^2 being multimodal where a station is near the contact); its
 linearised covariance is J diag(sigma^2) J^T with J the Jacobian of the fix with respect to the
 bearing errors (ERRATA), equivalently (G^T W G)^-1 with G the gradients of the bearings with
 respect to position and W = diag(1 / sigma^2).
@@ -15,6 +16,7 @@ import warnings
 from dataclasses import dataclass, replace
 
 import numpy as np
+from scipy import special
 
 from ..domains.pose import Pose
 from ..kernels import bearing as kernels
@@ -43,8 +45,26 @@ SAMPLE_SIGMAS = 10.0
 SAMPLE_MIN_ACCEPTANCE = 1e-4
 SAMPLE_PATIENCE = 1_000_000
 
-#: Gauss-Newton iterations for three or more sensors (each converges quadratically).
+#: Gauss-Newton iterations polishing the fix of three or more sensors (quadratic convergence).
 MAX_ITERATIONS = 50
+#: The global search for the fix of three or more sensors starts, besides every pair's line
+#: crossing, at points along each bearing ray at these ranges in units of the stations' spread
+#: D (6 per decade from 1e-6 D, a contact almost on a station, to 1e4 D, far beyond the
+#: farthest): chi^2 is multimodal (a station near the contact swings its bearing through every
+#: value within a few of its SDs of the contact), and every basin of a minimum that fits each
+#: bearing within a few SDs reaches a ray near the contact's range.
+START_RANGES = 10.0 ** (np.arange(-36, 25) / 6.0)
+#: A start that comes within this many D of a station is sliding into it (along its bearing,
+#: where the station's own residual is 0 and the others' fall): not a minimum, dropped.
+INTO_STATION = 1e-9
+#: A station whose likelihood lump (see :meth:`BearingFix.station_lumps`) is below exp(-72) of
+#: the fix's Laplace mass is left out of the normaliser.
+LUMP_DEPTH = 72.0
+#: Levenberg-Marquardt iterations of each start of the global search.
+SEARCH_ITERATIONS = 300
+#: A start that wanders beyond this many D from the stations' centre is heading for a minimum
+#: at infinity (bearings that only meet there): it is dropped.
+RUNAWAY = 1e7
 
 #: float32's unit roundoff: :meth:`BearingFix.density_bound` allows for a float32 kernel in
 #: every term (a float64 kernel rounds 2^29 times less), so one bound serves both dtypes.
@@ -210,6 +230,102 @@ def _box_quadratic_min(a, b, c, x0, x1, y0, y1) -> float:
     return best
 
 
+def _misfit(sensors, bearings, inv_sigma, points):
+    """Bearing residuals z_i = wrap(beta_i(P) - b_i) / sigma_i at each point, shape (m, n), and
+    their gradients dz_i / dP = (dy, -dx) / (r^2 sigma_i), shape (m, n, 2) (inf on a station)."""
+    d = points[:, None, :] - sensors[None, :, :]
+    r2 = d[..., 0] ** 2 + d[..., 1] ** 2
+    z = (np.remainder(np.arctan2(d[..., 0], d[..., 1]) - bearings + np.pi, 2.0 * np.pi) - np.pi) * inv_sigma
+    with np.errstate(divide="ignore", invalid="ignore"):
+        jac = np.stack((d[..., 1], -d[..., 0]), axis=-1) * (inv_sigma / r2)[..., None]
+    return z, jac
+
+
+def _chi2(sensors, bearings, inv_sigma, points) -> np.ndarray:
+    """chi^2(P) = sum_i z_i^2 at each point, shape (m,)."""
+    z = (np.remainder(np.arctan2(points[:, None, 0] - sensors[None, :, 0], points[:, None, 1] - sensors[None, :, 1])
+                      - bearings + np.pi, 2.0 * np.pi) - np.pi) * inv_sigma
+    return np.einsum("mn,mn->m", z, z)
+
+
+def _global_minimum(sensors, bearings, sigmas):
+    """The global minimum of chi^2(P) = sum_i (wrap(beta_i(P) - b_i) / sigma_i)^2 over the plane
+    less the stations (the bearings' likelihood's highest maximum), or None if every start runs
+    off to infinity or into a station.
+
+    chi^2 has no value at a station (the bearing from it is undefined); approached along the
+    station's bearing it tends to the others' misfit there, which may be lower than at any
+    point off the stations (the other bearings point at the station): that supremum of the
+    likelihood is no maximum and has no linearisation, so starts that slide into a station are
+    dropped, and :meth:`BearingFix.station_lumps` accounts for its mass instead.
+
+    chi^2 is multimodal: near a station its bearing swings through every value, so each station
+    within a few of its cross-range SDs of the contact adds basins, and the least-squares point
+    of the lines can sit in a basin whose chi^2 is a hundred times the contact's. So the search
+    starts everywhere a minimum can hide: at each pair's line crossing (ahead of or behind the
+    stations), at the lines' least-squares point, and along each bearing ray at ``START_RANGES``
+    (log-spaced, in units of the stations' spread D), and refines every start at once by
+    Levenberg-Marquardt (a step is kept only if chi^2 falls, so no start climbs out of its
+    basin). The work is done about the stations' centre in units of D (a power of two, exact),
+    so any scale of units gives the same starts; the caller polishes the best point in metres.
+    """
+    centre = sensors.mean(axis=0)
+    spread = float(np.max(np.hypot(*(sensors - centre).T)))
+    scale = math.ldexp(1.0, -math.frexp(spread)[1])  # 1 / D rounded to a power of two
+    s = (sensors - centre) * scale
+    inv_sigma = 1.0 / sigmas
+    u = np.column_stack((np.sin(bearings), np.cos(bearings)))
+    n = len(s)
+    starts = [(s[:, None, :] + START_RANGES[None, :, None] * u[:, None, :]).reshape(-1, 2)]
+    i, j = np.triu_indices(n, k=1)
+    den = u[i, 0] * u[j, 1] - u[i, 1] * u[j, 0]
+    dx, dy = (s[j] - s[i]).T
+    with np.errstate(divide="ignore", invalid="ignore"):
+        along = (dx * u[j, 1] - dy * u[j, 0]) / den
+    starts.append((s[i] + along[:, None] * u[i])[np.isfinite(along)])
+    a = np.column_stack((u[:, 1], -u[:, 0]))
+    starts.append(np.linalg.lstsq(a, u[:, 1] * s[:, 0] - u[:, 0] * s[:, 1], rcond=None)[0][None, :])
+    points = np.concatenate(starts)
+    points = points[np.isfinite(points).all(axis=1) & (np.hypot(*points.T) < RUNAWAY)]
+    chi2 = _chi2(s, bearings, inv_sigma, points)
+    chi2[~np.isfinite(chi2)] = np.inf
+    damping = np.full(len(points), 1e-3)
+    active = np.isfinite(chi2)
+    eye = np.eye(2)
+    for _ in range(SEARCH_ITERATIONS):
+        k = np.flatnonzero(active)
+        if k.size == 0:
+            break
+        z, jac = _misfit(s, bearings, inv_sigma, points[k])
+        h = np.einsum("mni,mnj->mij", jac, jac)
+        grad = np.einsum("mni,mn->mi", jac, z)
+        # Marquardt's damping scales the diagonal; the trace term keeps a singular h solvable
+        lhs = h + damping[k, None, None] * (h * eye + 1e-12 * np.trace(h, axis1=1, axis2=2)[:, None, None] * eye)
+        with np.errstate(invalid="ignore", over="ignore", divide="ignore"):
+            ok = np.isfinite(lhs).all(axis=(1, 2)) & np.isfinite(grad).all(axis=1)
+            det = lhs[:, 0, 0] * lhs[:, 1, 1] - lhs[:, 0, 1] * lhs[:, 1, 0]
+            step = np.column_stack((lhs[:, 0, 1] * grad[:, 1] - lhs[:, 1, 1] * grad[:, 0],
+                                    lhs[:, 1, 0] * grad[:, 0] - lhs[:, 0, 0] * grad[:, 1])) / det[:, None]
+            trial = points[k] + step
+            ok &= np.isfinite(trial).all(axis=1)
+            value = np.full(k.size, np.inf)
+            value[ok] = _chi2(s, bearings, inv_sigma, trial[ok])
+        better = value < chi2[k]
+        points[k[better]] = trial[better]
+        chi2[k[better]] = value[better]
+        damping[k] = np.where(better, damping[k] * 0.2, damping[k] * 10.0)
+        near = np.hypot(points[k, None, 0] - s[None, :, 0], points[k, None, 1] - s[None, :, 1]).min(axis=1)
+        small = np.hypot(*step.T) <= 1e-10 * near
+        away = (np.hypot(*points[k].T) >= RUNAWAY) | (near <= INTO_STATION)
+        chi2[k[away]] = np.inf
+        # done: a tiny step taken, no step that lowers chi^2 however short, or gone to infinity
+        active[k[(better & small) | (damping[k] > 1e16) | away | ~np.isfinite(chi2[k])]] = False
+    best = int(np.argmin(chi2))
+    if not np.isfinite(chi2[best]):
+        return None
+    return points[best] / scale + centre
+
+
 def _as_array(name: str, value, shape_text: str, ndim: int) -> np.ndarray:
     array = real_array(name, value, f"{shape_text} of numbers")  # a copy: frozen below, not the caller's
     if array.ndim != ndim or (ndim == 2 and array.shape[1] != 2):
@@ -311,7 +427,10 @@ class BearingFix(Model):
             value.setflags(write=False)
             object.__setattr__(self, name, value)
         self._check_crossing()
-        object.__setattr__(self, "_fix", self._solve())
+        fix, interior, at_station = self._solve()
+        object.__setattr__(self, "_fix", fix)
+        object.__setattr__(self, "_interior", interior)
+        object.__setattr__(self, "_at_station", at_station)
         self._check_in_front()
         self._check_scales()
 
@@ -324,8 +443,17 @@ class BearingFix(Model):
 
     @property
     def fix(self) -> np.ndarray:
-        """The fix (x, y), metres: the crossing (2 sensors) or the weighted least-squares point."""
+        """The fix (x, y), metres: where the likelihood is highest. The crossing (2 sensors) or
+        the global maximum of the likelihood off the stations (the global minimum of chi^2); or,
+        where the other bearings point at a station and the likelihood rises higher towards it
+        along its bearing (:attr:`at_station`), the mean point of that lump on the bearing."""
         return self._fix.copy()
+
+    @property
+    def at_station(self) -> int | None:
+        """The station whose lump of likelihood (:meth:`station_lumps`) the fix stands for, or
+        None where the fix is a maximum of the likelihood off the stations."""
+        return self._at_station
 
     def _check_crossing(self) -> None:
         # the best-crossing pair decides whether any fix is possible
@@ -342,30 +470,63 @@ class BearingFix(Model):
                 "covariance and containment are optimistic", stacklevel=4,
             )
 
-    def _solve(self) -> np.ndarray:
-        """Crossing of the lines (exact for two), refined by Gauss-Newton on the bearings."""
+    def _solve(self) -> tuple[np.ndarray, np.ndarray | None, int | None]:
+        """(fix, the likelihood's best maximum off the stations or None, the station whose lump
+        is the fix or None).
+
+        Two sensors: the crossing of the lines (chi^2 = 0 there). More: the global minimum of
+        chi^2 off the stations (:func:`_global_minimum`), polished by Gauss-Newton in world
+        metres; but where the likelihood rises higher towards a station (the limit c_k of a
+        lump, :meth:`station_lumps`, is below that minimum), or no such minimum exists, the
+        fix is the highest lump's mean point, S_k + s_k u_k, on station k's bearing.
+        """
         u = self.directions
-        # each line: cross(u_i, P - S_i) = 0, i.e. u_y P_x - u_x P_y = u_y S_x - u_x S_y
-        a = np.column_stack((u[:, 1], -u[:, 0]))
-        rhs = u[:, 1] * self.sensors[:, 0] - u[:, 0] * self.sensors[:, 1]
-        point = np.linalg.lstsq(a, rhs, rcond=None)[0]
         if len(u) == 2:
-            return point
+            # each line: cross(u_i, P - S_i) = 0, i.e. u_y P_x - u_x P_y = u_y S_x - u_x S_y
+            a = np.column_stack((u[:, 1], -u[:, 0]))
+            rhs = u[:, 1] * self.sensors[:, 0] - u[:, 0] * self.sensors[:, 1]
+            point = np.linalg.lstsq(a, rhs, rcond=None)[0]
+            return point, point, None  # chi^2 = 0 there: no station's limit is lower
+        point = _global_minimum(self.sensors, self.bearings, self.sigmas)
+        if point is not None:
+            point = self._polish(point)
+        highest = min(self.station_lumps(), key=lambda lump: lump[1], default=None)
+        if highest is not None:
+            k, limit, _, mean_range = highest
+            least = math.inf
+            if point is not None:
+                least = _chi2(self.sensors, self.bearings, 1.0 / self.sigmas, point[None, :])[0]
+            if limit < least:
+                return self.sensors[k] + mean_range * u[k], point, k
+        if point is None:
+            raise BananagridError(
+                f"bearings: the lines of the {len(u)} sensors do not meet near one point (the "
+                "bearings' misfit falls without end away from the stations): check the bearings, "
+                "sensors and their order"
+            )
+        return point, point, None
+
+    def _polish(self, point) -> np.ndarray:
+        """Gauss-Newton from the search's point to full precision in world coordinates (the
+        search works about the stations' centre); a step is kept only if chi^2 does not grow
+        and it is a polish, under 1e-6 of the distance to the nearest station (where chi^2 only
+        falls towards infinity, a full step would run off along the valley)."""
         weights = 1.0 / self.sigmas**2
+        best = _chi2(self.sensors, self.bearings, 1.0 / self.sigmas, point[None, :])[0]
         for _ in range(MAX_ITERATIONS):
             residual = _wrap(bearing_to(self.sensors, point) - self.bearings)
             g = self._bearing_gradients(point)
             try:
                 step = np.linalg.solve(g.T @ (weights[:, None] * g), -(g.T @ (weights * residual)))
             except np.linalg.LinAlgError:
-                step = np.full(2, np.nan)
-            if not np.isfinite(step).all():  # an iterate on a sensor, or lines with no common point
-                raise BananagridError(
-                    f"bearings: the lines of the {len(u)} sensors do not meet near one point (the "
-                    "least-squares fix diverges): check the bearings, sensors and their order"
-                )
-            point = point + step
-            if np.hypot(*step) <= 1e-12 * max(1.0, np.hypot(*point)):
+                break
+            trial = point + step
+            value = _chi2(self.sensors, self.bearings, 1.0 / self.sigmas, trial[None, :])[0]
+            near = np.hypot(*(point - self.sensors).T).min()
+            if not (np.isfinite(step).all() and value <= best and np.hypot(*step) <= 1e-6 * near):
+                break
+            point, best = trial, value
+            if np.hypot(*step) <= 1e-15 * max(np.abs(point).max(), np.hypot(*(point - self.sensors).T).min()):
                 break
         return point
 
@@ -384,14 +545,19 @@ class BearingFix(Model):
             )
 
     def _check_in_front(self) -> None:
+        """Two sensors whose lines cross behind one have no fix: refused. With more, the fix is
+        the likelihood's maximum, which may lie behind a station whose bearing is off by more
+        than 90 deg there: a warning names it."""
         along = np.einsum("ij,ij->i", self._fix - self.sensors, self.directions)
         behind = np.flatnonzero(along <= 0)
         if behind.size:
             i = behind[0]
-            raise BananagridError(
-                f"bearings[{i}] = {float(self.bearings[i])!r}: the fix {tuple(np.round(self._fix, 3))} lies "
-                f"behind sensor {i} (the lines cross on the far side of the station)"
-            )
+            text = (f"bearings[{i}] = {float(self.bearings[i])!r}: the fix {tuple(np.round(self._fix, 3))} lies "
+                    f"behind sensor {i}")
+            if len(self.sensors) == 2:
+                raise BananagridError(text + " (the lines cross on the far side of the station)")
+            warnings.warn(text + " (its bearing is off by more than 90 deg at the likelihood's maximum): "
+                          "check it", stacklevel=4)
 
     def _bearing_gradients(self, point) -> np.ndarray:
         """d bearing_i / d(x, y) at ``point``: (dy, -dx) / r^2, shape (n, 2)."""
@@ -404,19 +570,80 @@ class BearingFix(Model):
     @property
     def chi2_min(self) -> float:
         """sum_i (wrap(beta_i(fix) - b_i) / sigma_i)^2: 0 for two sensors (the lines cross at the
-        fix), the weighted misfit of the least-squares fix for more."""
-        if len(self.sensors) == 2:
+        fix), for more the weighted misfit at the fix (the least over the plane off the
+        stations, unless the fix is a station's lump, :attr:`at_station`)."""
+        if len(self.sensors) == 2 and self._at_station is None:
             return 0.0  # exactly: the fix is the lines' crossing (computed, it leaves rounding)
         residual = _wrap(bearing_to(self.sensors, self._fix) - self.bearings) / self.sigmas
         return float(np.sum(residual**2))
 
-    def _information(self) -> tuple[np.ndarray, float]:
+    def station_lumps(self) -> list[tuple[int, float, float, float]]:
+        r"""The stations at which the likelihood has a supremum of its own: (k, c_k, log m_k,
+        s_k) for each station k that the likelihood rises towards along its own bearing.
+
+        Close to station k its bearing is undefined, and approached along that bearing chi^2
+        tends to the other stations' misfit there, c_k = sum_{i != k} z_i(S_k)^2. Where that
+        misfit falls towards the station (slope a_k > 0 of chi^2 along the ray at s = 0+), the
+        likelihood has a lump at the station that no point off the stations reaches, nor any
+        linearisation; in polar coordinates (s, phi) about the station, chi^2 ~ c_k + a_k s +
+        b_k s^2 / 2 + (phi / sigma_k)^2 (b_k the Gauss-Newton curvature along the ray), so its
+        mass is
+
+        .. math::  m_k = e^{-c_k / 2} \sqrt{2 \pi} \sigma_k \int_0^\infty s\,
+                   e^{-(a_k s + b_k s^2 / 2) / 2} ds
+
+        and s_k is its mean range from the station. The exact map's normaliser adds the lumps
+        within exp(-``LUMP_DEPTH``) of the largest mass, so that the map stays finite and its
+        mass near one where the other bearings point at a station (a contact next to it).
+        """
+        out = []
+        n = len(self.sensors)
+        for k in range(n):
+            others = np.arange(n) != k
+            d = self.sensors[k] - self.sensors[others]
+            sigmas = self.sigmas[others]
+            r2 = np.einsum("ij,ij->i", d, d)
+            z = _wrap(np.arctan2(d[:, 0], d[:, 1]) - self.bearings[others]) / sigmas
+            slope = (d[:, 1] * self.directions[k, 0] - d[:, 0] * self.directions[k, 1]) / (r2 * sigmas)
+            a, b = 2.0 * float(np.dot(z, slope)), 2.0 * float(np.dot(slope, slope))
+            if not a > 0.0:
+                continue
+            # with t = alpha s: I_m = int_0^inf t^m exp(-t - g t^2) dt, alpha = a / 2, g = b / a^2;
+            # I_0 = sqrt(pi) x erfcx(x) (x = 1 / (2 sqrt g)), and integrating by parts
+            # I_0 + 2 g I_1 = 1, I_1 + 2 g I_2 = I_0; their Taylor series where those cancel
+            alpha, g = 0.5 * a, b / (a * a)
+            if g < 1e-3:
+                i1 = 1.0 - g * (6.0 - g * (60.0 - 840.0 * g))
+                i2 = 2.0 - g * (24.0 - g * (360.0 - 6720.0 * g))
+            else:
+                x = 0.5 / math.sqrt(g)
+                i0 = math.sqrt(math.pi) * x * float(special.erfcx(x))
+                i1 = (1.0 - i0) / (2.0 * g)
+                i2 = (i0 - i1) / (2.0 * g)
+            c = float(np.dot(z, z))
+            log_mass = -0.5 * c + math.log(math.sqrt(2.0 * math.pi) * self.sigmas[k] * i1) - 2.0 * math.log(alpha)
+            out.append((k, c, log_mass, i2 / (alpha * i1)))
+        return out
+
+    def _log_mass(self) -> float:
+        """log of the exact map's normaliser: the Laplace mass of the likelihood at its best
+        maximum off the stations, L(P) 2 pi sqrt(det C(P)), and the stations' lumps
+        (:meth:`station_lumps`), those below exp(-LUMP_DEPTH) of the largest left out."""
+        terms = [log_lump for _, _, log_lump, _ in self.station_lumps()]
+        if self._interior is not None:
+            _, det = self._information(self._interior)
+            chi2 = _chi2(self.sensors, self.bearings, 1.0 / self.sigmas, self._interior[None, :])[0]
+            terms.append(-0.5 * (chi2 if len(self.sensors) > 2 else 0.0) + math.log(2.0 * math.pi) - 0.5 * math.log(det))
+        top = max(terms)
+        return float(np.logaddexp.reduce([t for t in terms if t > top - LUMP_DEPTH]))
+
+    def _information(self, point=None) -> tuple[np.ndarray, float]:
         """The fix's information matrix I = G^T W G = sum_i w_i g_i g_i^T (w_i = 1 / sigma_i^2,
         g_i the bearing gradients) and its determinant by the Cauchy-Binet formula,
         det I = sum_{i<j} w_i w_j (g_i x g_j)^2: a sum of non-negative terms, so it keeps full
         relative precision where a_11 a_22 - a_12^2 would cancel (stations whose accuracies
         differ by many orders of magnitude)."""
-        g = self._bearing_gradients(self._fix)
+        g = self._bearing_gradients(self._fix if point is None else point)
         w = 1.0 / self.sigmas**2
         info = g.T @ (g * w[:, None])
         cross = g[:, None, 0] * g[None, :, 1] - g[:, None, 1] * g[None, :, 0]
@@ -474,9 +701,10 @@ class BearingFix(Model):
         precision, det = self._information()  # the precision is the information matrix itself
         log_norm = 0.5 * math.log(det) - math.log(2.0 * math.pi)  # -log(2 pi sqrt(det C))
         if self.variant == "exact":
-            # Laplace normaliser of the likelihood: L(fix) 2 pi sqrt(det C). With three or more
-            # bearings they do not all pass through the fix, L(fix) = exp(-chi2_min / 2) < 1.
-            log_norm += 0.5 * self.chi2_min
+            # Laplace normaliser of the likelihood: L(fix) 2 pi sqrt(det C) (with three or more
+            # bearings they do not all pass through the fix, L(fix) = exp(-chi2_min / 2) < 1),
+            # plus the lumps at stations the other bearings point at
+            log_norm = -self._log_mass()
         head = [log_norm, *self._fix, precision[0, 0], precision[0, 1], precision[1, 1]]
         sensors = np.column_stack((self.sensors, self.bearings, 1.0 / self.sigmas)).ravel()
         return np.concatenate((head, sensors))
