@@ -209,22 +209,14 @@ def test_polar_lattice_cells_cut_at_the_seam():
 # --- bearing fixes: the wrap behind a station, a station inside a cell ------------------------
 
 
-class _SeamedFix(bg.BearingFix):
-    """The exact fix declaring its seams (:meth:`bananagrid.protocol.DensityModel.seams`): the ray
-    behind each station, where its bearing error wraps, starting at the station, about which
-    its factor changes with the direction only. ``BearingFix`` itself does not declare them yet
-    (models/bearing.py is outside this change): this is the method it needs."""
-
-    def seams(self):
-        return np.array([(x, y, b + math.pi) for (x, y), b in zip(self.sensors, self.bearings)])
-
-
 def test_bearing_cells_at_a_station_and_behind_it():
     """A broad exact two-station fix (bearing SDs 0.5 and 0.6 rad, so the density reaches its
     stations): cells holding a station and straddling the ray behind it, against nested
-    ``quad`` of ``pdf`` about the station, once the model declares its seams (without them the
-    cell holding the station was off by 24 %)."""
-    model = _SeamedFix(sensors=[(0.0, 0.0), (1000.0, 0.0)], bearings=[0.5, -0.4], sigmas=[0.5, 0.6])
+    ``quad`` of ``pdf`` about the station: the exact fix declares its seams, the rays behind its
+    stations (without them the cell holding the station was off by 24 %); the linear fix none."""
+    assert bg.BearingFix(sensors=[(0.0, 0.0), (1000.0, 0.0)], bearings=[0.5, -0.4], sigmas=[0.5, 0.6],
+                         variant="linear").seams().shape == (0, 3)
+    model = bg.BearingFix(sensors=[(0.0, 0.0), (1000.0, 0.0)], bearings=[0.5, -0.4], sigmas=[0.5, 0.6])
     oracle = lambda cell: cell_oracle.pdf_polar_cell(model, (0.0, 0.0), cell, [0.5 - math.pi])  # noqa: E731
     _check(model, _around((0.0, 0.0), 60.0, n=2), oracle)
 

@@ -843,6 +843,16 @@ class BearingFix(Model):
         distance = math.dist(pose.origin, tuple(self.fix))
         return math.sqrt(small), distance + RANGE_SDS * math.sqrt(large)
 
+    def seams(self) -> np.ndarray:
+        """For the exact map, the ray behind each station (:meth:`bananagrid.protocol.DensityModel.seams`):
+        there its bearing error wraps from pi to -pi (the factor's slope jumps across it), and at
+        the station the factor changes with the direction only. The linear map is a normal law:
+        none."""
+        if self.variant != "exact":
+            return np.zeros((0, 3))
+        return np.array([(x, y, float(_wrap(b + math.pi))) for (x, y), b in zip(self.sensors, self.bearings)],
+                        dtype=np.float64)
+
     # -- sampling -----------------------------------------------------------------------------
 
     def _best_pair(self) -> tuple[int, int]:
