@@ -8,11 +8,14 @@ from __future__ import annotations
 
 import json
 import math
+import os
+import stat
 from numbers import Real
+from pathlib import Path
 
 import numpy as np
 
-__all__ = ["finite", "positive", "non_negative", "positive_int", "pair", "point", "real_array", "show", "BananagridError", "BananagridWarning"]
+__all__ = ["finite", "positive", "non_negative", "positive_int", "pair", "point", "real_array", "show", "BananagridError", "BananagridWarning", "regular_file"]
 
 
 class BananagridError(ValueError):
@@ -118,3 +121,23 @@ def show(value) -> str:
     if isinstance(value, dict):
         return "{" + ", ".join(f"{k} = {show(v)}" for k, v in value.items()) + "}"
     return str(value)
+
+
+def regular_file(path, what: str = "a file"):
+    """``path`` as a :class:`pathlib.Path` if it names a regular file (symbolic links followed),
+    else raise one line naming it and what it is: missing, a directory, a FIFO (opening one
+    would wait for a writer), a device or a socket. ``what`` names what was expected
+    (``"a recording"``)."""
+    path = Path(path)
+    try:
+        mode = os.stat(path).st_mode
+    except FileNotFoundError:
+        raise BananagridError(f"{path}: no such file") from None
+    except OSError as exc:
+        raise BananagridError(f"{path}: cannot read it ({exc.strerror or exc})") from None
+    if not stat.S_ISREG(mode):
+        kind = ("a directory" if stat.S_ISDIR(mode) else "a FIFO" if stat.S_ISFIFO(mode)
+                else "a socket" if stat.S_ISSOCK(mode) else "a device" if stat.S_ISCHR(mode) or stat.S_ISBLK(mode)
+                else "not a regular file")
+        raise BananagridError(f"{path}: {kind}, not {what}")
+    return path
