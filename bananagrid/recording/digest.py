@@ -297,6 +297,8 @@ class DigestCheck:
                 "bananagrid): damage to it cannot be detected", BananagridWarning, stacklevel=2,
             )
             return
+        if not footer:  # bananagrid's writer checks the footer of every file it names
+            raise BananagridError(f"{where}: recording is damaged (rerun's footer is missing or damaged)")
         if len(self._manifests) != 1:
             found = "no manifest (cut short?)" if not self._manifests else f"{len(self._manifests)} manifests"
             raise BananagridError(f"{where}: recording is damaged ({found})")

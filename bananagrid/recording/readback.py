@@ -23,7 +23,6 @@ from __future__ import annotations
 
 import math
 import os
-import signal
 import warnings
 from collections.abc import Iterator
 from dataclasses import dataclass, field
@@ -38,7 +37,7 @@ from ..domains.angular_lattice import AngularLattice
 from ..domains.grid import Grid
 from ..geo.frame import GeoFrame
 from ..results import Raster
-from ..validate import BananagridError, regular_file
+from ..validate import BananagridError, checked_in_child, regular_file
 from .core import ELAPSED, elapsed_nanos, values_from_image
 from .digest import DigestCheck, chunk_rows
 
@@ -100,12 +99,12 @@ _CHECKED: set[tuple] = set()
 
 def check_in_child(path: Path) -> None:
     """Read the recording at ``path`` whole and check it against its digests in a forked child
-    process, once per version of the file (path, inode, size, modification time) per process.
+    process (:func:`bananagrid.validate.checked_in_child`), once per version of the file (path,
+    inode, size, modification time) per process.
 
     rerun's reader decodes chunks on threads of its own, and a damaged chunk can make one panic
     and abort the whole process (measured: 1 in 150 random damages of a recording), which no
-    ``except`` catches; a child that dies so says the file is damaged. Where there is no
-    ``os.fork`` the check is the reader's own, in this process.
+    ``except`` catches; a child that dies so says the file is damaged.
 
     Raises
     ------
@@ -114,46 +113,16 @@ def check_in_child(path: Path) -> None:
     """
     info = path.stat()
     key = (str(path.resolve()), info.st_dev, info.st_ino, info.st_size, info.st_mtime_ns)
-    if key in _CHECKED or not hasattr(os, "fork"):
+    if key in _CHECKED:
         return
-    read_end, write_end = os.pipe()
-    pid = os.fork()
-    if pid == 0:  # the child: read it all, say what is wrong on the pipe, exit without cleanup
-        code, message = 0, ""
-        try:
-            os.close(read_end)
-            devnull = os.open(os.devnull, os.O_WRONLY)
-            os.dup2(devnull, 2)  # a panic's backtrace is not for people
-            with warnings.catch_warnings():
-                warnings.simplefilter("ignore")  # the parent warns, reading it again
-                reader, store = _open(path)
-                for _ in recording_rows(reader, store):
-                    pass
-        except BananagridError as exc:
-            code, message = 2, str(exc)
-        except BaseException as exc:  # noqa: BLE001 - any failure is the file's: say which
-            code, message = 3, f"{type(exc).__name__}: {exc}"
-        finally:
-            try:
-                os.write(write_end, message.encode()[:4096])
-            finally:
-                os._exit(code)
-    os.close(write_end)
-    try:
-        with os.fdopen(read_end, "rb") as pipe:
-            message = pipe.read().decode(errors="replace")
-    finally:
-        _, status = os.waitpid(pid, 0)
-    first_line = (message.splitlines() or [""])[0]
-    if os.WIFSIGNALED(status):
-        name = signal.Signals(os.WTERMSIG(status)).name
-        raise BananagridError(f"{path}: a damaged .rrd file (rerun's reader crashed on it: {name})")
-    code = os.WEXITSTATUS(status)
-    if code == 2:
-        raise BananagridError(first_line)
-    if code != 0:
-        raise BananagridError(f"{path}: a damaged .rrd file ({first_line or f'exit code {code}'})")
+    checked_in_child(path, _read_whole)
     _CHECKED.add(key)
+
+
+def _read_whole(path: Path) -> None:
+    reader, store = _open(path)
+    for _ in recording_rows(reader, store):
+        pass
 
 
 def recording_rows(reader: RrdReader, store: StoreEntry) -> Iterator[tuple[str, dict, dict]]:
