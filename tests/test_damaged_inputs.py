@@ -144,6 +144,17 @@ def whole(files, tmp_path_factory):
     return results
 
 
+_REFERENCES: dict[str, tuple] = {}
+
+
+def reference_outcome(capfd, whole, key: str) -> tuple:
+    """The command's result on the whole file (computed once per module)."""
+    if key not in _REFERENCES:
+        _REFERENCES[key] = outcome(capfd, whole[key])
+        assert _REFERENCES[key][0] == 0, _REFERENCES[key]
+    return _REFERENCES[key]
+
+
 @pytest.mark.parametrize("key, suffix, folder, examples", [
     ("inspect", ".rrd", "inspect", 60), ("plot-rrd", ".rrd", "plot", 10), (".npz", ".npz", "plot", 30),
     (".nc", ".nc", "plot", 30),
@@ -153,10 +164,10 @@ def test_damage_is_an_error_or_changes_nothing(files, whole, tmp_path_factory, c
     """Cut short, a bit flipped or a block of up to 4 KiB zeroed anywhere: exit 2 with one line,
     or (damage in bytes the reader does not use: rerun's footer index, zip and HDF5 slack) the
     very output of the whole file. A read that does not come back (HDF5 loops on some zeroed
-    B-tree nodes) is given 5 s here: the whole file's check takes under 0.2 s in its child."""
-    monkeypatch.setattr(validate, "CHILD_SECONDS", 5.0)
-    reference = outcome(capfd, whole[key])
-    assert reference[0] == 0
+    B-tree nodes) is given 2 s here (the whole file's check takes under 0.2 s in its child; a
+    damaged file that is merely slow is then an error, which the assertion allows)."""
+    reference = reference_outcome(capfd, whole, key)
+    monkeypatch.setattr(validate, "CHILD_SECONDS", 2.0)
 
     @settings(SWEEP, max_examples=examples)
     @given(damage=DAMAGE)
@@ -210,7 +221,7 @@ def test_special_files_are_one_line_errors(files, whole, tmp_path_factory, capfd
     code, out, err, picture = outcome(capfd, path)
     if what == "unreadable" and code == 0:  # root reads anything
         assert os.geteuid() == 0
-        reference = outcome(capfd, whole["inspect" if suffix == ".rrd" else suffix])
+        reference = reference_outcome(capfd, whole, "inspect" if suffix == ".rrd" else suffix)
         assert (out, picture) == (reference[1], reference[3])
         return
     assert code == 2, (code, err)
