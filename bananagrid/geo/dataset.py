@@ -500,7 +500,7 @@ def _check_digest(path: Path) -> None:
             found = netcdf_digest(nc)
     except _READ_ERRORS as exc:
         first = (str(exc).splitlines() or [""])[0]
-        raise BananagridError(f"{path}: damaged, or not a NetCDF file ({type(exc).__name__}: {first})") from None
+        raise BananagridError(f"{path}: not a NetCDF file, or damaged ({type(exc).__name__}: {first})") from None
     if stored is None:
         raise BananagridError(
             f"{path}: no {DIGEST_ATTRIBUTE} attribute: damaged, or not written by this bananagrid "

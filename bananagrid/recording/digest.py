@@ -39,7 +39,8 @@ import rerun as rr
 from ..validate import BananagridError, BananagridWarning
 
 __all__ = [
-    "DIGESTS", "MANIFEST", "DigestCheck", "DigestingRecording", "array_digest", "chunk_rows", "row_digest",
+    "DIGESTS", "MANIFEST", "DigestCheck", "DigestingRecording", "array_digest", "chunk_rows", "is_internal",
+    "row_digest", "warn_undigested",
 ]
 
 #: Entity of the per-row digests; :data:`MANIFEST` holds the summary. Neither is in any view of
@@ -82,7 +83,7 @@ def array_digest(hasher, array: pa.Array) -> None:
     elif pa.types.is_integer(kind) or pa.types.is_floating(kind) or pa.types.is_boolean(kind):
         values = np.ascontiguousarray(array.to_numpy(zero_copy_only=False))
         hasher.update(values.dtype.str.encode())
-        hasher.update(values.tobytes() if values.dtype != object else repr(values.tolist()).encode())
+        hasher.update(values.view(np.uint8).ravel() if values.dtype != object else repr(values.tolist()).encode())
     else:  # strings, binaries, unions: small in bananagrid's recordings
         hasher.update(str(kind).encode())
         hasher.update(repr(array.to_pylist()).encode())
@@ -98,6 +99,11 @@ def row_digest(entity: str, components: Iterable[tuple[str, str, pa.Array]]) -> 
         hasher.update(f"{name}\0{archetype}\0".encode())
         array_digest(hasher, values)
     return hasher.hexdigest()
+
+
+def is_internal(entity: str) -> bool:
+    """Whether a row read at ``entity`` is a digest or the manifest, not data."""
+    return entity in _INTERNAL
 
 
 def _entity(path) -> str:
@@ -232,6 +238,17 @@ def _when(times: tuple) -> str:
                      for name, kind, value in times)
 
 
+def warn_undigested(where: str) -> None:
+    """Warn (once per file and process) that the recording ``where`` holds no digests."""
+    if where in _WARNED:
+        return
+    _WARNED.add(where)
+    warnings.warn(
+        f"{where}: holds none of bananagrid's content digests (written by another program or an older "
+        "bananagrid): damage to it cannot be detected", BananagridWarning, stacklevel=3,
+    )
+
+
 class DigestCheck:
     """Checks the rows of one recording store against their digests and the manifest.
 
@@ -289,13 +306,7 @@ class DigestCheck:
                 raise BananagridError(
                     f"{where}: recording is damaged (cut short: no footer, and none of bananagrid's digests)"
                 )
-            if where in _WARNED:
-                return
-            _WARNED.add(where)
-            warnings.warn(
-                f"{where}: holds none of bananagrid's content digests (written by another program or an older "
-                "bananagrid): damage to it cannot be detected", BananagridWarning, stacklevel=2,
-            )
+            warn_undigested(where)
             return
         if not footer:  # bananagrid's writer checks the footer of every file it names
             raise BananagridError(f"{where}: recording is damaged (rerun's footer is missing or damaged)")

@@ -39,7 +39,7 @@ from ..geo.frame import GeoFrame
 from ..results import Raster
 from ..validate import BananagridError, checked_in_child, regular_file
 from .core import ELAPSED, elapsed_nanos, values_from_image
-from .digest import DigestCheck, chunk_rows
+from .digest import DigestCheck, chunk_rows, is_internal, warn_undigested
 
 __all__ = [
     "IMAGE_BUFFER", "IMAGE_FORMAT", "CheckedReader", "RecordedCellMap", "RecordedRaster", "check_in_child", "decode_image", "open_recording",
@@ -63,6 +63,7 @@ class CheckedReader(RrdReader):
     :func:`recording_rows` needs to tell a file cut short from another program's)."""
 
     def __init__(self, path: str | os.PathLike) -> None:
+        self.checked = False  # set by open_recording once a child read it whole
         with warnings.catch_warnings(record=True) as caught:  # "RRD file has no footer": read by a full scan
             warnings.simplefilter("always")
             super().__init__(path)
@@ -78,7 +79,9 @@ def open_recording(path: str | os.PathLike) -> tuple[RrdReader, StoreEntry]:
     (:func:`check_in_child`), since rerun's reader aborts the process on some damaged chunks."""
     path = regular_file(path, "a recording")
     check_in_child(path)
-    return _open(path)
+    reader, store = _open(path)
+    reader.checked = True  # whole, in the child: recording_rows need not hash it again
+    return reader, store
 
 
 def _open(path: Path) -> tuple[CheckedReader, StoreEntry]:
@@ -128,7 +131,8 @@ def _read_whole(path: Path) -> None:
 def recording_rows(reader: RrdReader, store: StoreEntry) -> Iterator[tuple[str, dict, dict]]:
     """Yield ``(entity_path, times, components)`` for every row of the recording store, then
     check the rows against the digests bananagrid logged beside them
-    (:mod:`bananagrid.recording.digest`; those rows are not yielded).
+    (:mod:`bananagrid.recording.digest`; those rows are not yielded). A reader from
+    :func:`open_recording` was checked whole by a child already, and is not hashed again.
 
     ``times`` maps timeline name to ``(kind, value)`` (empty for static rows); ``components``
     maps component name to ``(archetype, arrow list value)`` for the non-null cells. Read every
@@ -141,11 +145,18 @@ def recording_rows(reader: RrdReader, store: StoreEntry) -> Iterator[tuple[str, 
         are missing (a damaged file), naming the file. A whole recording without any digest
         (another program's) warns once instead (:class:`~bananagrid.validate.BananagridWarning`).
     """
-    check = DigestCheck(str(reader.path))
+    check = None if getattr(reader, "checked", False) else DigestCheck(str(reader.path))
+    digests = 0
     try:
         for entity, times, cells in chunk_rows(reader, store, footer=getattr(reader, "footer", False)):
-            if not check.add(entity, times, cells):
+            internal = check.add(entity, times, cells) if check is not None else is_internal(entity)
+            digests += internal
+            if not internal:
                 yield entity, times, cells
+        if check is None:  # checked whole by a child: only its warning is left to give
+            if not digests:
+                warn_undigested(str(reader.path))
+            return
         blueprint = bool(reader.blueprints())
     except (RuntimeError, ValueError, IndexError, TypeError, KeyError, OSError, pa.ArrowException) as exc:
         if isinstance(exc, BananagridError):
