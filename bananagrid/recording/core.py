@@ -134,8 +134,9 @@ def new_recording(application_id: str = "bananagrid", *, recording_id: str) -> r
 
     The recording id is the caller's (see :func:`recording_id_for`), never a random one.
     Every row logged carries a digest (:class:`bananagrid.recording.digest.DigestingRecording`),
-    so that a reader can tell a damaged file from a whole one. The ``elapsed`` timeline starts at 0 on the calling thread, so no row is ever logged
-    without a timeline (rerun would then decide on its own whether it is static).
+    so that a reader can tell a damaged file from a whole one. The ``elapsed`` timeline starts
+    at 0 on the calling thread, so no row is ever logged without a timeline (rerun would then
+    decide on its own whether it is static).
 
     Parameters
     ----------
@@ -256,7 +257,8 @@ def verify_recording(path: Path, recording_id: str, *, shown: Path | None = None
         check.finish(application_id=stores[0].application_id, recording_id=recording_id,
                      blueprint=bool(reader.blueprints()), footer=True)
     except BananagridError as exc:
-        raise BananagridError(f"{name}: the recording written does not read back: {str(exc).removeprefix(f'{name}: ')}") from None
+        found = str(exc).removeprefix(f"{name}: ")
+        raise BananagridError(f"{name}: the recording written does not read back: {found}") from None
 
 
 def _open_file(rec: rr.RecordingStream, path: Path, blueprint: rrb.BlueprintLike | None) -> None:
