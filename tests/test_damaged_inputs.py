@@ -156,8 +156,8 @@ def reference_outcome(capfd, whole, key: str) -> tuple:
 
 
 @pytest.mark.parametrize("key, suffix, folder, examples", [
-    ("inspect", ".rrd", "inspect", 60), ("plot-rrd", ".rrd", "plot", 10), (".npz", ".npz", "plot", 30),
-    (".nc", ".nc", "plot", 30),
+    ("inspect", ".rrd", "inspect", 120), ("plot-rrd", ".rrd", "plot", 15), (".npz", ".npz", "plot", 40),
+    (".nc", ".nc", "plot", 40),
 ])
 def test_damage_is_an_error_or_changes_nothing(files, whole, tmp_path_factory, capfd, monkeypatch, key, suffix,
                                               folder, examples):
