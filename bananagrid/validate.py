@@ -8,11 +8,19 @@ from __future__ import annotations
 
 import json
 import math
+import os
+import select
+import signal
+import stat
+import time
+import warnings
+from collections.abc import Callable
 from numbers import Real
+from pathlib import Path
 
 import numpy as np
 
-__all__ = ["finite", "positive", "non_negative", "positive_int", "pair", "point", "real_array", "show", "BananagridError", "BananagridWarning"]
+__all__ = ["finite", "positive", "non_negative", "positive_int", "pair", "point", "real_array", "show", "BananagridError", "BananagridWarning", "regular_file", "checked_in_child"]
 
 
 class BananagridError(ValueError):
@@ -118,3 +126,96 @@ def show(value) -> str:
     if isinstance(value, dict):
         return "{" + ", ".join(f"{k} = {show(v)}" for k, v in value.items()) + "}"
     return str(value)
+
+
+def regular_file(path, what: str = "a file"):
+    """``path`` as a :class:`pathlib.Path` if it names a regular file (symbolic links followed),
+    else raise one line naming it and what it is: missing, a directory, a FIFO (opening one
+    would wait for a writer), a device or a socket. ``what`` names what was expected
+    (``"a recording"``)."""
+    path = Path(path)
+    try:
+        mode = os.stat(path).st_mode
+    except FileNotFoundError:
+        raise BananagridError(f"{path}: no such file") from None
+    except OSError as exc:
+        raise BananagridError(f"{path}: cannot read it ({exc.strerror or exc})") from None
+    if not stat.S_ISREG(mode):
+        kind = ("a directory" if stat.S_ISDIR(mode) else "a FIFO" if stat.S_ISFIFO(mode)
+                else "a socket" if stat.S_ISSOCK(mode) else "a device" if stat.S_ISCHR(mode) or stat.S_ISBLK(mode)
+                else "not a regular file")
+        raise BananagridError(f"{path}: {kind}, not {what}")
+    return path
+
+
+#: Seconds a child of :func:`checked_in_child` may take on an empty file, and the bytes per
+#: second it must read beyond that (a tenth of what zlib inflates: slow disks, busy machines).
+CHILD_SECONDS = 30.0
+CHILD_BYTES_PER_SECOND = 5e6
+
+
+def checked_in_child(path: Path, check: Callable[[Path], None]) -> None:
+    """Run ``check(path)`` (a whole read of a file by a library that may not come back from a
+    damaged one) in a forked child process and raise what it raised, as one line.
+
+    Native readers can crash the process on a damaged file (rerun's reader panics and aborts
+    on a damaged chunk) or never return (HDF5 loops on a zeroed B-tree node): no ``except``
+    catches either. The child's death or its running past ``CHILD_SECONDS`` plus one second
+    per ``CHILD_BYTES_PER_SECOND`` of the file is reported as a damaged file; the child is
+    killed. Where there is no ``os.fork``, ``check`` runs here.
+
+    Raises
+    ------
+    BananagridError
+        ``check``'s own message, or one naming ``path`` and what became of the child.
+    """
+    if not hasattr(os, "fork"):
+        check(path)
+        return
+    seconds = CHILD_SECONDS + os.stat(path).st_size / CHILD_BYTES_PER_SECOND
+    read_end, write_end = os.pipe()
+    pid = os.fork()
+    if pid == 0:  # the child: check, say what is wrong on the pipe, exit without any cleanup
+        code, message = 0, ""
+        try:
+            os.close(read_end)
+            devnull = os.open(os.devnull, os.O_WRONLY)
+            os.dup2(devnull, 2)  # a panic's backtrace and HDF5's error stack are not for people
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")  # the parent warns, reading it again
+                check(path)
+        except BananagridError as exc:
+            code, message = 2, str(exc)
+        except BaseException as exc:  # noqa: BLE001 - any failure is the file's: say which
+            code, message = 3, f"{type(exc).__name__}: {exc}"
+        finally:
+            try:
+                os.write(write_end, message.encode()[:4096])
+            finally:
+                os._exit(code)
+    os.close(write_end)
+    chunks, deadline, finished = [], time.monotonic() + seconds, False
+    try:
+        while (left := deadline - time.monotonic()) > 0:
+            if select.select([read_end], [], [], left)[0]:
+                chunk = os.read(read_end, 4096)
+                if not chunk:
+                    finished = True
+                    break
+                chunks.append(chunk)
+    finally:
+        os.close(read_end)
+        if not finished:
+            os.kill(pid, signal.SIGKILL)
+        _, status = os.waitpid(pid, 0)
+    if not finished:
+        raise BananagridError(f"{path}: damaged, or too slow to read (no result after {seconds:.0f} s)")
+    first_line = (b"".join(chunks).decode(errors="replace").splitlines() or [""])[0]
+    if os.WIFSIGNALED(status):
+        name = signal.Signals(os.WTERMSIG(status)).name
+        raise BananagridError(f"{path}: damaged (its reader crashed on it: {name})")
+    code = os.WEXITSTATUS(status)
+    if code == 2:
+        raise BananagridError(first_line)
+    if code != 0:
+        raise BananagridError(f"{path}: damaged ({first_line or f'exit code {code}'})")

@@ -19,6 +19,7 @@ import rerun as rr
 from bananagrid import BananagridError, Raster, cli, rasterise
 from bananagrid.analysis.coverage import peak_location
 from bananagrid.contours import mass_regions
+from bananagrid.recording.core import set_elapsed, write_recording
 from bananagrid.recording.inspect import json_ready
 from bananagrid.recording.readback import read_cell_maps, read_layers, read_rasters
 from bananagrid.scenes.load import parse_scene
@@ -78,14 +79,12 @@ def bare_layer(path: Path, values: np.ndarray) -> Path:
     """A recording of one layer ``bare`` at 1.5 s: only its density image (``values`` rows south
     first) and the pixel-to-world transform of 2.5 m x 1.5 m cells whose north-west corner is
     (100, 54.5) m."""
-    rec = rr.RecordingStream("bananagrid")
-    rec.save(path)
-    rec.set_time("elapsed", duration=1.5)
-    rec.log("layers/bare/density", rr.DepthImage(np.flipud(values).astype(np.float32)),
-            rr.Transform3D(translation=(100.0, 54.5, 0.0), scale=(2.5, -1.5, 1.0)))
-    rec.flush()
-    rec.disconnect()
-    return path
+    def build(rec):
+        set_elapsed(rec, 1.5)
+        rec.log("layers/bare/density", rr.DepthImage(np.flipud(values).astype(np.float32)),
+                rr.Transform3D(translation=(100.0, 54.5, 0.0), scale=(2.5, -1.5, 1.0)))
+
+    return write_recording(path, build, recording_id="bare")
 
 
 # --- reading layers back ----------------------------------------------------------------------

@@ -39,6 +39,7 @@ these functions).
 
 from __future__ import annotations
 
+import hashlib
 import json
 import os
 from datetime import datetime, timezone
@@ -47,7 +48,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..validate import BananagridError
+from ..validate import BananagridError, checked_in_child, regular_file
 from ..version import __version__
 from .files import writing
 from .frame import iso_utc
@@ -56,7 +57,7 @@ from .panels import check_panels, frame_of, provenance_json, variable_name
 
 __all__ = [
     "CONVENTIONS", "DENSITY_UNITS", "ELAPSED_LONG_NAME", "NETCDF_PURPOSE", "raster_dataset", "polar_dataset",
-    "cell_map_dataset", "write_netcdf", "time_units", "read_maps",
+    "cell_map_dataset", "write_netcdf", "time_units", "read_maps", "check_netcdf", "netcdf_digest", "DIGEST_ATTRIBUTE",
 ]
 
 CONVENTIONS = "CF-1.10"
@@ -437,9 +438,100 @@ def write_netcdf(path: str | os.PathLike, dataset) -> Path:
         if var.ndim >= 1 and not name.endswith("_bounds"):
             encoding[name].update(zlib=True, complevel=ZLIB_LEVEL)
     final = Path(path)
+    netcdf4 = require("netCDF4", NETCDF_PURPOSE)
     with writing(final, "NetCDF file", (RuntimeError,)) as partial:
         dataset.to_netcdf(partial, engine="netcdf4", format="NETCDF4", encoding=encoding)
+        with netcdf4.Dataset(partial, "a") as nc:  # the digest of what the file holds, as read back
+            nc.setncattr(DIGEST_ATTRIBUTE, netcdf_digest(nc))
     return final
+
+
+#: The global attribute holding :func:`netcdf_digest` of everything else in the file.
+DIGEST_ATTRIBUTE = "bananagrid_digest"
+
+#: What netCDF4 and HDF5 raise on a damaged or foreign file (HDF errors are RuntimeError; a
+#: damaged size can ask for an impossible array).
+_READ_ERRORS = (OSError, RuntimeError, ValueError, KeyError, IndexError, TypeError, AttributeError, MemoryError,
+                OverflowError)
+
+
+def netcdf_digest(nc) -> str:
+    """BLAKE2b hex digest of an open :class:`netCDF4.Dataset`: every group's attributes
+    (but :data:`DIGEST_ATTRIBUTE`), dimensions and variables (name, type, dimensions,
+    attributes and the values as stored, without scaling or masking), in name order.
+
+    HDF5 keeps no checksum of the values or the attributes (without its Fletcher-32 filter), so
+    a flipped digit in ``bananagrid_grid`` or in a map would read back as another number; a
+    file whose digest does not match is damaged. (Measured before the digest, on a 100 x 100
+    map file: random damages also ended in tracebacks, ``RuntimeError: NetCDF: HDF error``,
+    and one zeroed block made netCDF4 loop for ever on opening.)"""
+    hasher = hashlib.blake2b(digest_size=16)
+
+    def feed(value) -> None:
+        array = np.asarray(value)
+        if array.dtype == object or array.dtype.kind in "US":
+            hasher.update(f"{type(value).__name__}:{value!r};".encode())
+        else:
+            hasher.update(f"{array.dtype.str}{array.shape};".encode())
+            hasher.update(np.ascontiguousarray(array).tobytes())
+
+    def group(g) -> None:
+        for name in sorted(g.ncattrs()):
+            if name != DIGEST_ATTRIBUTE:
+                hasher.update(f"attr {name};".encode())
+                feed(g.getncattr(name))
+        for name, dim in sorted(g.dimensions.items()):
+            hasher.update(f"dim {name} {len(dim)} {dim.isunlimited()};".encode())
+        for name, var in sorted(g.variables.items()):
+            var.set_auto_maskandscale(False)
+            hasher.update(f"var {name} {var.dtype} {var.dimensions};".encode())
+            for attr in sorted(var.ncattrs()):
+                hasher.update(f"attr {attr};".encode())
+                feed(var.getncattr(attr))
+            feed(var[...])
+        for name, child in sorted(g.groups.items()):
+            hasher.update(f"group {name};".encode())
+            group(child)
+
+    group(nc)
+    return hasher.hexdigest()
+
+
+def check_netcdf(path: str | os.PathLike) -> Path:
+    """Raise unless ``path`` is a regular file that netCDF4 reads whole and whose
+    :data:`DIGEST_ATTRIBUTE` matches its contents (:func:`write_netcdf` writes it).
+
+    A file without the attribute is refused too: it is damaged there, or written by a
+    bananagrid before digests (its scene, run again with ``--netcdf``, writes it anew); reading
+    it anyway could give a wrong number without a word.
+
+    Raises
+    ------
+    BananagridError
+        One line naming the file and what is wrong with it.
+    """
+    path = regular_file(path, "a NetCDF file")
+    require("netCDF4", NETCDF_PURPOSE)
+    checked_in_child(path, _check_digest)  # HDF5 can loop for ever on a damaged B-tree
+    return path
+
+
+def _check_digest(path: Path) -> None:
+    netcdf4 = require("netCDF4", NETCDF_PURPOSE)
+    try:
+        with netcdf4.Dataset(path, "r") as nc:
+            stored = nc.getncattr(DIGEST_ATTRIBUTE) if DIGEST_ATTRIBUTE in nc.ncattrs() else None
+            found = netcdf_digest(nc)
+    except _READ_ERRORS as exc:
+        first = (str(exc).splitlines() or [""])[0]
+        raise BananagridError(f"{path}: not a NetCDF file, or damaged ({type(exc).__name__}: {first})") from None
+    if stored is None:
+        raise BananagridError(
+            f"{path}: no {DIGEST_ATTRIBUTE} attribute: damaged, or not written by this bananagrid "
+            "(run its scene again with --netcdf)"
+        )
+    if stored != found:
+        raise BananagridError(f"{path}: damaged (its contents do not match its {DIGEST_ATTRIBUTE})")
 
 
 def read_maps(path: str | os.PathLike) -> tuple[str, list[dict]]:
@@ -456,13 +548,14 @@ def read_maps(path: str | os.PathLike) -> tuple[str, list[dict]]:
     Raises
     ------
     BananagridError
-        A file that does not open, or one without bananagrid's layer variables.
+        A file that does not open, is damaged (:func:`check_netcdf`), or holds no bananagrid
+        layer variables.
     """
     xr = require("xarray", NETCDF_PURPOSE)
-    require("netCDF4", NETCDF_PURPOSE)
+    path = check_netcdf(path)
     try:
         ds = xr.open_dataset(path, engine="netcdf4", decode_times=False)
-    except (OSError, ValueError) as exc:
+    except _READ_ERRORS as exc:
         raise BananagridError(f"{path}: not a NetCDF file ({type(exc).__name__}: {exc})") from None
     with ds:
         try:

@@ -54,6 +54,7 @@ from ..contours import (
 from ..atomic import atomic_write
 from ..results import Raster
 from ..validate import BananagridError, non_negative, positive
+from .digest import DigestCheck, DigestingRecording, chunk_rows
 
 __all__ = [
     "RecordingWriteError",
@@ -132,8 +133,10 @@ def new_recording(application_id: str = "bananagrid", *, recording_id: str) -> r
     - :data:`DETERMINISTIC_BATCHING` cuts chunks by size only, never by the clock.
 
     The recording id is the caller's (see :func:`recording_id_for`), never a random one.
-    The ``elapsed`` timeline starts at 0 on the calling thread, so no row is ever logged
-    without a timeline (rerun would then decide on its own whether it is static).
+    Every row logged carries a digest (:class:`bananagrid.recording.digest.DigestingRecording`),
+    so that a reader can tell a damaged file from a whole one. The ``elapsed`` timeline starts
+    at 0 on the calling thread, so no row is ever logged without a timeline (rerun would then
+    decide on its own whether it is static).
 
     Parameters
     ----------
@@ -144,7 +147,7 @@ def new_recording(application_id: str = "bananagrid", *, recording_id: str) -> r
     """
     if not isinstance(recording_id, str) or not recording_id:
         raise BananagridError(f"recording_id = {recording_id!r}: expected a non-empty string")
-    rec = rr.RecordingStream(application_id, recording_id=recording_id, send_properties=False,
+    rec = DigestingRecording(application_id, recording_id=recording_id, send_properties=False,
                              batcher_config=DETERMINISTIC_BATCHING)
     rec.set_log_time_enabled(False)
     rec.set_log_tick_enabled(False)
@@ -214,6 +217,7 @@ def write_recording(
         except BaseException:
             _close(rec, final, partial, failing=True)  # the build's error is the one to report
             raise
+        rec.log_manifest(blueprint=blueprint is not None)
         _close(rec, final, partial)
         verify_recording(partial, recording_id, shown=final)
     return final
@@ -224,8 +228,8 @@ def verify_recording(path: Path, recording_id: str, *, shown: Path | None = None
     has none), every chunk of every store decodes, and it holds the recording ``recording_id``.
 
     What it catches is a file that is short, damaged in its framing, or not the recording asked
-    for; a flipped bit inside a chunk's data can pass (a byte flipped in the middle of a
-    recording was measured to read back without error).
+    for, and (rerun's chunks carry no checksum) any row whose values do not match the digest
+    logged beside it (:class:`bananagrid.recording.digest.DigestCheck`): what a reader will check.
 
     Raises
     ------
@@ -246,6 +250,15 @@ def verify_recording(path: Path, recording_id: str, *, shown: Path | None = None
         raise BananagridError(f"{name}: the recording written does not read back ({first_line})") from None
     if [store.recording_id for store in stores] != [recording_id]:
         raise BananagridError(f"{name}: the recording written does not hold recording {recording_id!r} alone")
+    check = DigestCheck(str(name))
+    try:
+        for row in chunk_rows(reader, stores[0], footer=True):
+            check.add(*row)
+        check.finish(application_id=stores[0].application_id, recording_id=recording_id,
+                     blueprint=bool(reader.blueprints()), footer=True)
+    except BananagridError as exc:
+        found = str(exc).removeprefix(f"{name}: ")
+        raise BananagridError(f"{name}: the recording written does not read back: {found}") from None
 
 
 def _open_file(rec: rr.RecordingStream, path: Path, blueprint: rrb.BlueprintLike | None) -> None:

@@ -15,6 +15,8 @@ from __future__ import annotations
 import json
 import os
 import textwrap
+import zipfile
+import zlib
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -29,7 +31,7 @@ from ..geo.frame import GeoFrame
 from ..plotting import figure_layout, format_time, map_frame, plot_raster, pyplot
 from ..recording.readback import read_rasters
 from ..results import Raster
-from ..validate import BananagridError, positive, show
+from ..validate import BananagridError, positive, regular_file, show
 from .load import load_scene
 from .presence import PresenceScene
 from .run import compute
@@ -96,8 +98,7 @@ def read_picture(source: str | os.PathLike, *, layers: Sequence[str] = (), t: fl
             f"{path}: cannot plot a {suffix or 'suffix-less'} file; give one of {', '.join(INPUTS)} "
             "(a scene, or a recording, arrays or NetCDF maps written by bananagrid run)"
         )
-    if not path.is_file():
-        raise BananagridError(f"{path}: no such file")
+    regular_file(path, "a file to plot")  # a FIFO would wait for a writer
     if t is not None and not (isinstance(t, (int, float)) and np.isfinite(t)):
         raise BananagridError(f"--t = {show(t)}: expected a finite time in seconds")
     if step is not None and suffix != ".toml":
@@ -232,14 +233,29 @@ def _from_netcdf(path: Path) -> tuple[str, list[Panel]]:
     return (f"{path.stem}: {title}" if title else path.stem), found
 
 
+#: What reading a damaged or foreign .npz raises (zipfile, zlib, NumPy's header parser).
+_NPZ_ERRORS = (OSError, ValueError, KeyError, TypeError, EOFError, zipfile.BadZipFile, zlib.error,
+               NotImplementedError, OverflowError, MemoryError, IndexError, AttributeError)
+
+
 def _from_npz(path: Path) -> tuple[str, list[Panel]]:
+    """The layers of an ``.npz`` that ``run --npz`` wrote. Each member of the zip archive
+    carries a CRC-32 of its bytes; every one is checked first (``testzip`` reads them all), so
+    a damaged archive is an error before NumPy parses any header of it."""
     try:
+        with zipfile.ZipFile(path) as archive:
+            bad = archive.testzip()
+        if bad is not None:
+            raise zipfile.BadZipFile(f"bad CRC-32 for {bad}")
         with np.load(path, allow_pickle=False) as archive:
             provenance = json.loads(str(archive["provenance"]))
             x, y = archive["x"], archive["y"]
             arrays = {key: archive[key] for key in provenance["arrays"]}
-    except (OSError, ValueError, KeyError, TypeError, json.JSONDecodeError) as exc:
-        raise BananagridError(f"{path}: not an .npz written by bananagrid run --npz ({type(exc).__name__}: {exc})") from None
+    except _NPZ_ERRORS as exc:
+        first = (str(exc).splitlines() or [""])[0]
+        raise BananagridError(
+            f"{path}: damaged, or not an .npz written by bananagrid run --npz ({type(exc).__name__}: {first})"
+        ) from None
     try:  # the float64 grid of the provenance, checked against the cell centres
         described = provenance["grid"]
         grid = Grid(origin=tuple(described["origin"]), dx=described["dx"], dy=described["dy"], nx=described["nx"],
