@@ -51,7 +51,7 @@ from ..contours import (
     label_positions,
     mass_regions,
 )
-from ..atomic import atomic_write
+from ..atomic import OutputWriteError, atomic_write, check_target
 from ..results import Raster
 from ..validate import BananagridError, non_negative, positive
 
@@ -176,6 +176,7 @@ def write_recording(
     recording_id: str,
     blueprint: rrb.BlueprintLike | None = None,
     application_id: str = "bananagrid",
+    stage: Callable | None = None,
 ) -> Path:
     """Write a recording to ``path`` atomically.
 
@@ -197,25 +198,39 @@ def write_recording(
         Embedded as the default blueprint of the file (see :func:`default_blueprint`).
     application_id : str
         Passed to :func:`new_recording`.
+    stage : callable, optional
+        ``stage(path)``, a context manager giving the temporary path: default
+        :func:`~bananagrid.atomic.atomic_write` (renamed when complete); a run passes its
+        :meth:`~bananagrid.atomic.OutputSet.stage` to rename it with its other files.
 
     Returns
     -------
     Path
         The final path.
+
+    Raises
+    ------
+    BananagridError
+        ``path`` is not a regular file (a directory, a link), or the recording cannot be
+        written or does not read back (:class:`RecordingWriteError`: the file system refused
+        its bytes); nothing is left behind.
     """
-    final = Path(path)
+    final = check_target(path, "recording")
     rec = new_recording(application_id, recording_id=recording_id)
     if not rec.is_enabled():
         raise BananagridError(f"{final}: rerun logging is disabled (is RERUN=off set?)")
-    with atomic_write(final) as partial:
-        _open_file(rec, partial, blueprint)
-        try:
-            build(rec)
-        except BaseException:
-            _close(rec, final, partial, failing=True)  # the build's error is the one to report
-            raise
-        _close(rec, final, partial)
-        verify_recording(partial, recording_id, shown=final)
+    try:
+        with (stage or atomic_write)(final) as partial:
+            _open_file(rec, partial, blueprint, shown=final)
+            try:
+                build(rec)
+            except BaseException:
+                _close(rec, final, partial, failing=True)  # the build's error is the one to report
+                raise
+            _close(rec, final, partial)
+            verify_recording(partial, recording_id, shown=final)
+    except OSError as exc:  # the file system refused the temporary file or its rename: name the target
+        raise RecordingWriteError(f"{final}: cannot write the recording ({exc.strerror or exc})") from None
     return final
 
 
@@ -248,19 +263,21 @@ def verify_recording(path: Path, recording_id: str, *, shown: Path | None = None
         raise BananagridError(f"{name}: the recording written does not hold recording {recording_id!r} alone")
 
 
-def _open_file(rec: rr.RecordingStream, path: Path, blueprint: rrb.BlueprintLike | None) -> None:
-    """Start streaming ``rec`` to ``path``; rerun writes the blueprint as its own store."""
+def _open_file(rec: rr.RecordingStream, path: Path, blueprint: rrb.BlueprintLike | None, *, shown: Path) -> None:
+    """Start streaming ``rec`` to ``path`` (messages name ``shown``, the final path); rerun
+    writes the blueprint as its own store."""
     try:
         rec.save(path, default_blueprint=blueprint)
     except RuntimeError as exc:
-        raise BananagridError(f"{path}: cannot write recording: {exc}") from None
+        reason = (str(exc).splitlines() or [type(exc).__name__])[0]
+        raise OutputWriteError(f"{shown}: cannot write the recording ({reason})") from None
 
 
 #: Bytes asked of the file system again when rerun's writer stopped, to learn why.
 PROBE_BYTES = 1 << 20
 
 
-class RecordingWriteError(BananagridError):
+class RecordingWriteError(OutputWriteError):
     """The file system refused the recording's bytes (a full disk, a file-size limit): the
     message names the file and the cause."""
 
