@@ -23,7 +23,7 @@ import numpy as np
 
 from .analysis.compare import compare
 from .analysis.sweep import FIGURE7_LEVELS, sweep
-from .atomic import OutputWriteError, Terminated, atomic_write, check_writable, signals_as_exceptions
+from .atomic import OutputWriteError, Terminated, atomic_write, check_target, check_writable, signals_as_exceptions
 from .bench import runner as bench
 from .contours import DEFAULT_LEVELS, format_area, mass_levels
 from .engine.cluster import dask_client
@@ -373,6 +373,7 @@ def _plot(args: argparse.Namespace) -> int:
         positive("--step", args.step)
     check_picture_options(args.output, args.dpi)
     check_writable(args.output.parent if str(args.output.parent) else Path("."))
+    check_target(args.output, "PNG")  # a directory or a link there: refused before computing
     source = scene_source(args.input, args.example, what="INPUT")
     picture = read_picture(source, layers=args.layer, t=args.t, threads=args.threads, step=args.step)
     out = write_picture(args.output, picture, mass_levels=levels, dpi=args.dpi)
@@ -440,14 +441,14 @@ def _compare(args: argparse.Namespace) -> int:
             raise BananagridError(f"--{option} {name}: no such layer in {scene.source} (layers: {', '.join(layers)})")
     reference, model = layers[args.reference], layers[args.model]
     t = _compare_time(scene, reference, model, args.t)
+    _out_dir(args.out)  # and the recording's target, before computing
+    path = check_target(args.out / f"{scene.name}-{model.name}-vs-{reference.name}.rrd", "recording")
     # the scene's fixed levels, else Figure 7's densities (compare reports fixed levels)
     levels = (scene.levels or DEFAULT_LEVELS) if args.levels is None else _parse_levels(args.levels)
     plain = _raw(scene)
     ref_raster, _ = compute(plain, reference, t, threads=args.threads)
     model_raster, _ = compute(plain, model, t, threads=args.threads)
     comparison = compare(ref_raster, model_raster, levels=levels, threshold=args.threshold)
-    _out_dir(args.out)
-    path = args.out / f"{scene.name}-{model.name}-vs-{reference.name}.rrd"
     write_compare_recording(
         path, recording_id=recording_id_for(f"{scene.text}\n{reference.name}\n{model.name}\n{t}\n{levels}"),
         scene_text=scene.text, names=(reference.name, model.name),
@@ -496,6 +497,8 @@ def _sweep(args: argparse.Namespace) -> int:
     _threads(args.threads)
     args.out = _path_option(args.out, "--out")
     _out_dir(args.out)
+    rrd = check_target(args.out / "sweep.rrd", "recording")  # before computing
+    npz = check_target(args.out / "sweep.npz", ".npz arrays")
 
     def progress(done, total):
         if not args.quiet:
@@ -503,8 +506,6 @@ def _sweep(args: argparse.Namespace) -> int:
 
     result = sweep(args.n, threshold=args.threshold, threads=args.threads, progress=progress)
     claim = result.claim()
-    rrd = args.out / "sweep.rrd"
-    npz = args.out / "sweep.npz"
     write_sweep_recording(rrd, result, recording_id=recording_id_for(f"sweep {args.n} {args.threshold}"), levels=FIGURE7_LEVELS)
     with atomic_write(npz) as tmp, open(tmp, "wb") as fh:
         np.savez(fh, alpha=result.alpha, beta=result.beta, goodness=result.goodness,

@@ -277,6 +277,32 @@ def test_a_zarr_target_that_is_not_ours_is_refused_before_computing(
     assert temporaries(tmp_path) == []
 
 
+#: The other commands' outputs: (argv, the target's name in OUT, what the error calls it).
+OTHER_COMMANDS = {
+    "compare": (["compare", "{tiny}", "--reference", "cat", "--model", "cat", "--out", "{out}"], "tiny-cat-vs-cat.rrd",
+                "recording"),
+    "sweep recording": (["sweep", "--n", "2", "--out", "{out}"], "sweep.rrd", "recording"),
+    "sweep arrays": (["sweep", "--n", "2", "--out", "{out}"], "sweep.npz", ".npz arrays"),
+    "plot": (["plot", "{tiny}", "-o", "{out}/map.png"], "map.png", "PNG"),
+}
+
+
+@pytest.mark.parametrize("occupant", ["a directory holding a user's file", "a link to a user's file", "a named pipe"])
+@pytest.mark.parametrize("command", list(OTHER_COMMANDS))
+def test_the_other_commands_refuse_such_targets_before_computing(command, occupant, tiny, tmp_path, monkeypatch,
+                                                                  capsys):
+    for name in ("compute", "sweep", "read_picture"):
+        monkeypatch.setattr(cli, name, lambda *a, **k: pytest.fail("computed before the target was checked"))
+    argv, name, what = OTHER_COMMANDS[command]
+    out, home = tmp_path / "out", tmp_path / "home"
+    out.mkdir(), home.mkdir()
+    NOT_A_FILE[occupant](out / name, home)
+    before = snapshot(tmp_path)
+    assert cli.main([a.format(tiny=tiny, out=out) for a in argv]) == 2
+    assert f"{out / name}: cannot write the {what}" in one_error_line(capsys.readouterr().err)
+    assert snapshot(tmp_path) == before
+
+
 def test_the_reported_case_a_users_directory_at_zarr_is_kept(tmp_path, no_computing, capsys):
     """`mkdir d; echo keep > d/notes.txt; bananagrid run scenes/geo_ship.toml --zarr d`."""
     d = tmp_path / "d"

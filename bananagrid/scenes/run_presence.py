@@ -85,7 +85,10 @@ def run_presence_scene(scene: PresenceScene, out_dir: str | os.PathLike, *, npz:
             warnings.warn(message, BananagridWarning, stacklevel=2)
         if npz:
             with outputs.stage(npz_path) as partial:
-                _write_npz(partial, npz_path, scene, cm)
+                try:
+                    _write_npz(partial, scene, cm)
+                except OSError as exc:  # a full disk, a file-size limit: one line naming the file
+                    raise OutputWriteError(f"{npz_path}: cannot write the .npz arrays ({exc.strerror or exc})") from None
         rows.append({"scene": scene.name, "layer": f"{lattice.geometry}/{scene.kind}", "t": 0.0,
                      "cells": int(cm.prob.size), "mass": float(np.sum(cm.prob)), "peak": float(np.max(cm.prob)),
                      "peak_unit": "per cell", "regions": regions, "seconds": seconds})
@@ -100,9 +103,8 @@ def run_presence_scene(scene: PresenceScene, out_dir: str | os.PathLike, *, npz:
     return rows
 
 
-def _write_npz(path: Path, shown: Path, scene: PresenceScene, cm: CellMap) -> None:
-    """The arrays of :func:`run_presence_scene` into ``path`` (the caller renames it to
-    ``shown``, which errors name)."""
+def _write_npz(path: Path, scene: PresenceScene, cm: CellMap) -> None:
+    """The arrays of :func:`run_presence_scene` into ``path`` (the caller renames it)."""
     lat = cm.lattice
     idx = cm.degree_indices()
     arrays = {
@@ -124,11 +126,8 @@ def _write_npz(path: Path, shown: Path, scene: PresenceScene, cm: CellMap) -> No
         "provenance": cm.provenance, "text": scene.text,
     }
     arrays["provenance"] = np.array(json.dumps(provenance, default=str))
-    try:
-        with open(path, "wb") as fh:
-            np.savez_compressed(fh, **arrays)
-    except OSError as exc:
-        raise OutputWriteError(f"{shown}: cannot write the .npz arrays ({exc.strerror or exc})") from None
+    with open(path, "wb") as fh:
+        np.savez_compressed(fh, **arrays)
 
 
 def _unreached(regions, where: str) -> list[str]:
