@@ -29,8 +29,8 @@ from .contours import DEFAULT_LEVELS, format_area, mass_levels
 from .engine.cluster import dask_client
 from .engine.memory import memory_limit
 from .engine.tiles import DEFAULT_CHUNK
-from .geo.zarr_store import check_store_target
 from .engine.work import work_limit
+from .geo.zarr_store import check_store_target
 from .recording.compare import write_compare_recording, write_sweep_recording
 from .recording.core import recording_id_for
 from .recording.inspect import cell_map_summaries, format_inspection, inspect_recording, json_ready, layer_summaries
@@ -441,10 +441,10 @@ def _compare(args: argparse.Namespace) -> int:
             raise BananagridError(f"--{option} {name}: no such layer in {scene.source} (layers: {', '.join(layers)})")
     reference, model = layers[args.reference], layers[args.model]
     t = _compare_time(scene, reference, model, args.t)
-    _out_dir(args.out)  # and the recording's target, before computing
-    path = check_target(args.out / f"{scene.name}-{model.name}-vs-{reference.name}.rrd", "recording")
     # the scene's fixed levels, else Figure 7's densities (compare reports fixed levels)
     levels = (scene.levels or DEFAULT_LEVELS) if args.levels is None else _parse_levels(args.levels)
+    _out_dir(args.out)  # and the recording's target, before computing
+    path = check_target(args.out / f"{scene.name}-{model.name}-vs-{reference.name}.rrd", "recording")
     plain = _raw(scene)
     ref_raster, _ = compute(plain, reference, t, threads=args.threads)
     model_raster, _ = compute(plain, model, t, threads=args.threads)
