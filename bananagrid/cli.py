@@ -23,7 +23,8 @@ import numpy as np
 
 from .analysis.compare import compare
 from .analysis.sweep import FIGURE7_LEVELS, sweep
-from .atomic import OutputWriteError, Terminated, atomic_write, check_target, check_writable, signals_as_exceptions
+from .atomic import (OutputSet, OutputWriteError, Terminated, check_target, check_writable,
+                     signals_as_exceptions)
 from .bench import runner as bench
 from .contours import DEFAULT_LEVELS, format_area, mass_levels
 from .engine.cluster import dask_client
@@ -497,8 +498,9 @@ def _sweep(args: argparse.Namespace) -> int:
     _threads(args.threads)
     args.out = _path_option(args.out, "--out")
     _out_dir(args.out)
-    rrd = check_target(args.out / "sweep.rrd", "recording")  # before computing
-    npz = check_target(args.out / "sweep.npz", ".npz arrays")
+    outputs = OutputSet()  # both checked before computing, replaced together
+    rrd = outputs.add(args.out / "sweep.rrd", "recording")
+    npz = outputs.add(args.out / "sweep.npz", ".npz arrays")
 
     def progress(done, total):
         if not args.quiet:
@@ -506,10 +508,16 @@ def _sweep(args: argparse.Namespace) -> int:
 
     result = sweep(args.n, threshold=args.threshold, threads=args.threads, progress=progress)
     claim = result.claim()
-    write_sweep_recording(rrd, result, recording_id=recording_id_for(f"sweep {args.n} {args.threshold}"), levels=FIGURE7_LEVELS)
-    with atomic_write(npz) as tmp, open(tmp, "wb") as fh:
-        np.savez(fh, alpha=result.alpha, beta=result.beta, goodness=result.goodness,
-                 threshold=result.threshold, contour_999_beta_deg=claim["contour_999_beta_deg"])
+    with outputs:
+        write_sweep_recording(rrd, result, recording_id=recording_id_for(f"sweep {args.n} {args.threshold}"),
+                              levels=FIGURE7_LEVELS, stage=outputs.stage)
+        try:
+            with outputs.stage(npz) as tmp, open(tmp, "wb") as fh:
+                np.savez(fh, alpha=result.alpha, beta=result.beta, goodness=result.goodness,
+                         threshold=result.threshold, contour_999_beta_deg=claim["contour_999_beta_deg"])
+        except OSError as exc:
+            raise OutputWriteError(f"{npz}: cannot write the .npz arrays ({exc.strerror or exc})") from None
+        outputs.commit()
     print(f"{args.n} x {args.n} settings in {result.seconds:.1f} s; goodness from {result.goodness.min():.6f} "
           f"to {result.goodness.max():.6f}")
     verdict = "holds" if claim["claim_holds_on_grid"] else "does NOT hold"

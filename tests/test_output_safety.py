@@ -627,3 +627,22 @@ def test_a_file_size_limit_on_a_cluster_keeps_the_old_store_and_says_one_line(tm
     line = one_error_line(run.stderr)
     assert line.startswith(f"bananagrid: error: {store}: cannot write the Zarr store") and "File too large" in line
     assert snapshot(tmp_path) == before and temporaries(tmp_path) == []
+
+
+def test_the_sweeps_two_files_are_replaced_together(tmp_path, monkeypatch, capsys):
+    """sweep.rrd and sweep.npz: a failure writing the arrays keeps the previous pair, a success
+    replaces both."""
+    out = tmp_path / "out"
+    assert cli.main(["sweep", "--n", "2", "--out", str(out), "--quiet"]) == 0
+    before = snapshot(out)
+    with monkeypatch.context() as patch:
+        _fail_when_staged(patch, "sweep.npz")
+        assert cli.main(["sweep", "--n", "3", "--out", str(out), "--quiet"]) == 2
+    assert one_error_line(capsys.readouterr().err) == (
+        f"bananagrid: error: {out / 'sweep.npz'}: cannot write the .npz arrays (No space left on device)")
+    assert snapshot(out) == before and temporaries(out) == []
+    assert cli.main(["sweep", "--n", "3", "--out", str(out), "--quiet"]) == 0
+    after = snapshot(out)
+    assert sorted(after) == sorted(before) and all(after[p] != before[p] for p in after)
+    with np.load(out / "sweep.npz") as arrays:
+        assert arrays["goodness"].shape == (3, 3)
