@@ -14,7 +14,6 @@ from contextlib import AbstractContextManager, contextmanager
 from pathlib import Path
 
 from ..atomic import OutputWriteError, atomic_write, check_target
-from ..validate import BananagridError
 
 #: How a writer turns its target into the temporary path it writes: :func:`atomic_write`
 #: (renamed when the block completes) or :meth:`bananagrid.atomic.OutputSet.stage` (renamed

@@ -25,7 +25,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..atomic import OutputSet, OutputWriteError, check_target
+from ..atomic import OutputSet, OutputWriteError
 from ..validate import BananagridError
 from ..version import __version__
 from .dataset import DENSITY_UNITS, raster_dataset
