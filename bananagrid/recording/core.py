@@ -30,6 +30,7 @@ from __future__ import annotations
 import datetime
 import math
 import os
+import threading
 import uuid
 import warnings
 from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
@@ -273,6 +274,8 @@ def _open_file(rec: rr.RecordingStream, path: Path, blueprint: rrb.BlueprintLike
         raise OutputWriteError(f"{shown}: cannot write the recording ({reason})") from None
 
 
+#: Seconds a discarded recording's file is given to close (:func:`_let_go`).
+LET_GO_SECONDS = 5.0
 #: Bytes asked of the file system again when rerun's writer stopped, to learn why.
 PROBE_BYTES = 1 << 20
 
@@ -287,7 +290,11 @@ def _close(rec: rr.RecordingStream, shown: Path, partial: Path, *, failing: bool
 
     rerun's file writer stops on a write error (a full disk, a file-size limit) and the flush
     then raises; that becomes one line naming ``shown`` and the cause (:func:`_write_failure`),
-    unless ``failing`` (another error is already on its way)."""
+    unless ``failing`` (another error is already on its way: the file is discarded, and
+    :func:`_let_go` closes it without waiting for ever)."""
+    if failing:
+        _let_go(rec)
+        return
     try:
         rec.flush()
     except RuntimeError as exc:
@@ -298,6 +305,26 @@ def _close(rec: rr.RecordingStream, shown: Path, partial: Path, *, failing: bool
             ) from None
     finally:
         rec.disconnect()
+
+
+def _let_go(rec: rr.RecordingStream) -> None:
+    """Close the file of a recording being discarded, without waiting for ever.
+
+    rerun 0.41's flush and disconnect can wait for ever when its file writer stops while they
+    wait (a full disk or a file-size limit that an .npz written beside the recording hit first:
+    seen in about one run in four under a 4 kB limit). The close runs on a daemon thread; if it
+    has not ended within :data:`LET_GO_SECONDS` it is left behind, and rerun's exit handler,
+    which would wait on the same writer again, is unregistered, so that the run can end with
+    its one-line error."""
+    try:
+        rec.flush(timeout_sec=0.0)  # started, not waited for
+    except RuntimeError:
+        pass
+    closer = threading.Thread(target=rec.disconnect, name="bananagrid-let-go", daemon=True)
+    closer.start()
+    closer.join(LET_GO_SECONDS)
+    if closer.is_alive():
+        rr.unregister_shutdown()
 
 
 def _write_failure(partial: Path, rerun_says: str) -> str:
