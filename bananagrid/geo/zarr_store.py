@@ -19,6 +19,7 @@ import contextlib
 import json
 import os
 import sys
+import time
 import warnings
 from collections.abc import Sequence
 from pathlib import Path
@@ -88,12 +89,37 @@ def compute_with_progress(*collections, progress: bool = False):
         with bar:
             return dask.compute(*collections)
     futures = client.compute(list(collections))
-    if progress:
-        bar = require("distributed.diagnostics.progressbar", CLUSTER_PURPOSE, CLUSTER_EXTRA)
-        with contextlib.redirect_stdout(sys.stderr):  # the summary table owns stdout
-            bar.progress(futures, notebook=False)
-            print(file=sys.stderr)
-    return tuple(client.gather(futures))
+    try:
+        if progress:
+            bar = require("distributed.diagnostics.progressbar", CLUSTER_PURPOSE, CLUSTER_EXTRA)
+            with contextlib.redirect_stdout(sys.stderr):  # the summary table owns stdout
+                bar.progress(futures, notebook=False)
+                print(file=sys.stderr)
+        return tuple(client.gather(futures))
+    except BaseException:
+        client.cancel(futures)
+        _settle(client)
+        raise
+
+
+#: Seconds a failed computation waits for the tasks its workers are still running.
+SETTLE_SECONDS = 30.0
+
+
+def _settle(client, seconds: float = SETTLE_SECONDS) -> None:
+    """Wait until no worker is executing a task (or ``seconds`` passed). When one task of a
+    store fails, the tasks already running on other workers run on to their end, still writing
+    blocks into the temporary store: it is removed only after them, or they would leave part of
+    it behind."""
+    deadline = time.monotonic() + seconds
+    while time.monotonic() < deadline:
+        try:
+            busy = client.run(lambda dask_worker: dask_worker.state.executing_count)
+        except Exception:  # the cluster is gone: nothing runs any more
+            return
+        if not any(busy.values()):
+            return
+        time.sleep(0.05)
 
 
 def _current_client():
