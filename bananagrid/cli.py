@@ -11,7 +11,7 @@ import contextlib
 import json
 import os
 import sys
-import tempfile
+import threading
 import time
 import tomllib
 import warnings
@@ -23,21 +23,24 @@ import numpy as np
 
 from .analysis.compare import compare
 from .analysis.sweep import FIGURE7_LEVELS, sweep
-from .atomic import Terminated, atomic_write, check_writable, signals_as_exceptions
+from .atomic import (OutputSet, OutputWriteError, Terminated, check_target, check_writable,
+                     signals_as_exceptions)
 from .bench import runner as bench
 from .contours import DEFAULT_LEVELS, format_area, mass_levels
 from .engine.cluster import dask_client
 from .engine.memory import memory_limit
 from .engine.tiles import DEFAULT_CHUNK
 from .engine.work import work_limit
+from .geo.zarr_store import check_store_target
 from .recording.compare import write_compare_recording, write_sweep_recording
-from .recording.core import RecordingWriteError, recording_id_for
+from .recording.core import recording_id_for
 from .recording.inspect import cell_map_summaries, format_inspection, inspect_recording, json_ready, layer_summaries
 from .scenes.examples import example_names, example_path, example_title, scene_source
 from .scenes.load import Scene, load_scene
 from .scenes.pictures import check_picture_options, read_picture, write_picture
 from .scenes.run_tiled import check_tiled, format_tiled_summary, run_scene_tiled, tiled_maps
-from .scenes.run import RUN_ONLY_PROVENANCE, check_exports, check_run_memory, check_run_work, compute, export_paths, run_scene
+from .scenes.run import (RUN_ONLY_PROVENANCE, check_exports, check_run_memory, check_run_work, compute, export_paths,
+                         plan_outputs, run_scene)
 from .validate import BananagridError, positive
 from .version import __version__
 
@@ -119,7 +122,7 @@ def build_parser() -> tuple[argparse.ArgumentParser, dict[str, argparse.Argument
     run.add_argument("scenes", nargs="*", metavar="SCENE.toml", type=Path, help="scene files")
     run.add_argument("--example", action="append", default=[], metavar="NAME",
                      help="also run the bundled scene NAME (repeatable; `bananagrid examples` lists them)")
-    run.add_argument("--out", type=Path, default=Path("out"), metavar="DIR",
+    run.add_argument("--out", default="out", metavar="DIR",
                      help="output directory, created if missing (default: ./out)")
     run.add_argument("--npz", action="store_true", help="also write the arrays to NAME.npz")
     run.add_argument("--netcdf", action="store_true",
@@ -146,7 +149,7 @@ def build_parser() -> tuple[argparse.ArgumentParser, dict[str, argparse.Argument
         "model proves below 1e-13 of its peak are not computed. The maps are raw densities with each "
         "layer's captured mass beside it (LAYER_mass).",
     )
-    tiles.add_argument("--zarr", type=Path, metavar="OUT.zarr",
+    tiles.add_argument("--zarr", metavar="OUT.zarr",
                        help="write the scene's maps to this Zarr store (one scene), read with xarray.open_zarr")
     tiles.add_argument("--chunks", type=int, default=DEFAULT_CHUNK, metavar="N",
                        help=f"tile side, cells (default {DEFAULT_CHUNK}; a multiple of 32 for Butterly)")
@@ -225,7 +228,7 @@ def build_parser() -> tuple[argparse.ArgumentParser, dict[str, argparse.Argument
     compare.add_argument("--levels", metavar="L1,L2,...",
                          help="contour levels, m^-2 (default: the scene's contour_levels)")
     compare.add_argument("--step", type=float, metavar="S", help="override the grid step, m")
-    compare.add_argument("--out", type=Path, default=Path("out"), metavar="DIR",
+    compare.add_argument("--out", default="out", metavar="DIR",
                          help="output directory, created if missing (default: ./out)")
     compare.add_argument("--threads", type=int, metavar="N", help="CPU threads (default: every core)")
     compare.set_defaults(handler=_compare)
@@ -240,7 +243,7 @@ def build_parser() -> tuple[argparse.ArgumentParser, dict[str, argparse.Argument
     sweep.add_argument("--n", type=int, default=50, help="settings per axis (default 50; the paper used 200)")
     sweep.add_argument("--threshold", type=float, default=0.05, metavar="X",
                        help="relative error that ends the goodness contour (default 0.05)")
-    sweep.add_argument("--out", type=Path, default=Path("out"), metavar="DIR",
+    sweep.add_argument("--out", default="out", metavar="DIR",
                        help="output directory, created if missing (default: ./out)")
     sweep.add_argument("--threads", type=int, metavar="N", help="CPU threads (default: every core)")
     sweep.add_argument("--quiet", action="store_true", help="no progress lines on stderr")
@@ -262,6 +265,9 @@ def _run(args: argparse.Namespace) -> int:
         raise BananagridError(f"--threads = {args.threads}: must be >= 1")
     if args.step is not None:
         positive("--step", args.step)
+    args.out = _path_option(args.out, "--out")
+    if args.zarr is not None:
+        args.zarr = _path_option(args.zarr, "--zarr")
     if args.out.exists() and not args.out.is_dir():
         raise BananagridError(f"--out {args.out}: exists and is not a directory")
     paths = [*args.scenes, *(example_path(name) for name in args.example)]
@@ -285,6 +291,8 @@ def _run(args: argparse.Namespace) -> int:
         check_run_work(scene, threads=args.threads, limit=max_seconds)
     args.out.mkdir(parents=True, exist_ok=True)
     check_writable(args.out)
+    for scene in scenes:  # and every file's target: nothing of anyone's is replaced but a regular file
+        plan_outputs(scene, args.out, npz=args.npz, **exports)
     rows, written = [], []
     for scene in scenes:
         progress = None if args.quiet else _Progress(scene.name, sys.stderr)
@@ -320,11 +328,9 @@ def _run_tiled(args: argparse.Namespace, paths: list[Path]) -> int:
         raise BananagridError("--threads does not apply to --zarr: Dask runs the tiles (--workers N)")
     if args.chunks < 1:
         raise BananagridError(f"--chunks = {args.chunks}: must be >= 1")
-    if args.zarr.exists() and not args.zarr.is_dir():
-        raise BananagridError(f"--zarr {args.zarr}: exists and is not a directory")
     if not args.zarr.parent.is_dir():
         raise BananagridError(f"--zarr {args.zarr}: directory {args.zarr.parent} does not exist")
-    check_writable(args.zarr.parent)
+    check_store_target(args.zarr)  # a file, a link or someone else's directory there: refused now
     scene = load_scene(paths[0], tiled=True)
     if args.step is not None:
         scene = scene.with_step(args.step, tiled=True)
@@ -368,6 +374,7 @@ def _plot(args: argparse.Namespace) -> int:
         positive("--step", args.step)
     check_picture_options(args.output, args.dpi)
     check_writable(args.output.parent if str(args.output.parent) else Path("."))
+    check_target(args.output, "PNG")  # a directory or a link there: refused before computing
     source = scene_source(args.input, args.example, what="INPUT")
     picture = read_picture(source, layers=args.layer, t=args.t, threads=args.threads, step=args.step)
     out = write_picture(args.output, picture, mass_levels=levels, dpi=args.dpi)
@@ -401,6 +408,14 @@ def _inspect(args: argparse.Namespace) -> int:
     return OK
 
 
+def _path_option(value: str | Path, option: str) -> Path:
+    """A path option's value; an empty one (which would mean the current directory) is refused."""
+    if str(value) == "":
+        raise BananagridError(f"{option} {str(value)!r}: an empty path; give a directory or file name "
+                              f"(e.g. {option} out; {option} . for the current directory)")
+    return Path(value)
+
+
 def _out_dir(out: Path) -> None:
     if out.exists() and not out.is_dir():
         raise BananagridError(f"--out {out}: exists and is not a directory")
@@ -416,6 +431,7 @@ def _threads(threads) -> None:
 def _compare(args: argparse.Namespace) -> int:
     """``bananagrid compare``: two layers of a scene, their table and the error map."""
     _threads(args.threads)
+    args.out = _path_option(args.out, "--out")
     scene = load_scene(scene_source(args.scene, args.example))
     if args.step is not None:
         scene = scene.with_step(positive("--step", args.step))
@@ -428,12 +444,12 @@ def _compare(args: argparse.Namespace) -> int:
     t = _compare_time(scene, reference, model, args.t)
     # the scene's fixed levels, else Figure 7's densities (compare reports fixed levels)
     levels = (scene.levels or DEFAULT_LEVELS) if args.levels is None else _parse_levels(args.levels)
+    _out_dir(args.out)  # and the recording's target, before computing
+    path = check_target(args.out / f"{scene.name}-{model.name}-vs-{reference.name}.rrd", "recording")
     plain = _raw(scene)
     ref_raster, _ = compute(plain, reference, t, threads=args.threads)
     model_raster, _ = compute(plain, model, t, threads=args.threads)
     comparison = compare(ref_raster, model_raster, levels=levels, threshold=args.threshold)
-    _out_dir(args.out)
-    path = args.out / f"{scene.name}-{model.name}-vs-{reference.name}.rrd"
     write_compare_recording(
         path, recording_id=recording_id_for(f"{scene.text}\n{reference.name}\n{model.name}\n{t}\n{levels}"),
         scene_text=scene.text, names=(reference.name, model.name),
@@ -480,7 +496,11 @@ def _parse_levels(text: str) -> tuple[float, ...]:
 def _sweep(args: argparse.Namespace) -> int:
     """``bananagrid sweep``: the Figure 7 study."""
     _threads(args.threads)
+    args.out = _path_option(args.out, "--out")
     _out_dir(args.out)
+    outputs = OutputSet()  # both checked before computing, replaced together
+    rrd = outputs.add(args.out / "sweep.rrd", "recording")
+    npz = outputs.add(args.out / "sweep.npz", ".npz arrays")
 
     def progress(done, total):
         if not args.quiet:
@@ -488,12 +508,16 @@ def _sweep(args: argparse.Namespace) -> int:
 
     result = sweep(args.n, threshold=args.threshold, threads=args.threads, progress=progress)
     claim = result.claim()
-    rrd = args.out / "sweep.rrd"
-    npz = args.out / "sweep.npz"
-    write_sweep_recording(rrd, result, recording_id=recording_id_for(f"sweep {args.n} {args.threshold}"), levels=FIGURE7_LEVELS)
-    with atomic_write(npz) as tmp, open(tmp, "wb") as fh:
-        np.savez(fh, alpha=result.alpha, beta=result.beta, goodness=result.goodness,
-                 threshold=result.threshold, contour_999_beta_deg=claim["contour_999_beta_deg"])
+    with outputs:
+        write_sweep_recording(rrd, result, recording_id=recording_id_for(f"sweep {args.n} {args.threshold}"),
+                              levels=FIGURE7_LEVELS, stage=outputs.stage)
+        try:
+            with outputs.stage(npz) as tmp, open(tmp, "wb") as fh:
+                np.savez(fh, alpha=result.alpha, beta=result.beta, goodness=result.goodness,
+                         threshold=result.threshold, contour_999_beta_deg=claim["contour_999_beta_deg"])
+        except OSError as exc:
+            raise OutputWriteError(f"{npz}: cannot write the .npz arrays ({exc.strerror or exc})") from None
+        outputs.commit()
     print(f"{args.n} x {args.n} settings in {result.seconds:.1f} s; goodness from {result.goodness.min():.6f} "
           f"to {result.goodness.max():.6f}")
     verdict = "holds" if claim["claim_holds_on_grid"] else "does NOT hold"
@@ -605,15 +629,25 @@ class _Progress:
             print(file=line.stream, flush=True)
 
 
+#: At most this much of the native log is held (the rest is dropped), and the held lines are
+#: waited for this long after a command.
+HELD_BYTES = 1 << 20
+HELD_WAIT_SECONDS = 2.0
+
+
 @contextlib.contextmanager
 def native_log_held():
-    """Hold what rerun's native logger writes to file descriptor 2 while a command runs, and
-    show it after, unless the recording could not be written: then our one line names the file
-    and the cause, and rerun's lines about the same failure are left out.
+    """Hold what native code writes to file descriptor 2 while a command runs (rerun's logger,
+    Dask's worker processes), and show it after, unless an output could not be written
+    (:class:`~bananagrid.atomic.OutputWriteError`: a full disk, a file-size limit): then our one
+    line names the file and the cause, and their lines about the same failure are left out.
 
     Python's own ``sys.stderr`` (progress, warnings, errors) is moved to a copy of the
     descriptor meanwhile, so it is shown at once. Nothing is held where ``sys.stderr`` is not
-    descriptor 2 (e.g. under a test's capture)."""
+    descriptor 2 (e.g. under a test's capture).
+
+    The lines are held in a pipe drained by a thread, not in a file: under a file-size limit
+    a held file could not grow, and rerun's logger, refused, stopped the run for ever."""
     try:
         direct = sys.stderr.fileno() == 2
     except (AttributeError, OSError, ValueError):
@@ -625,23 +659,35 @@ def native_log_held():
     saved = os.dup(2)
     shown = sys.stderr
     drop = False
-    with tempfile.TemporaryFile() as held:
-        os.dup2(held.fileno(), 2)
-        sys.stderr = open(saved, "w", encoding=shown.encoding, errors="backslashreplace", buffering=1, closefd=False)
-        try:
-            yield
-        except RecordingWriteError:
-            drop = True
-            raise
-        finally:
-            sys.stderr.close()  # flushes; the descriptor (closefd=False) is closed below
-            sys.stderr = shown
-            os.dup2(saved, 2)
-            os.close(saved)
-            held.seek(0)
-            text = held.read()
-            if text and not drop:
-                os.write(2, text)
+    held = bytearray()
+    read_end, write_end = os.pipe()
+
+    def drain() -> None:
+        while chunk := os.read(read_end, 1 << 16):  # b"" once no process holds the write end
+            held.extend(chunk[:max(0, HELD_BYTES - len(held))])
+
+    reader = threading.Thread(target=drain, name="bananagrid-held-log", daemon=True)
+    reader.start()
+    os.dup2(write_end, 2)
+    os.close(write_end)
+    sys.stderr = open(saved, "w", encoding=shown.encoding, errors="backslashreplace", buffering=1, closefd=False)
+    try:
+        yield
+    except OutputWriteError:
+        drop = True
+        raise
+    finally:
+        sys.stderr.close()  # flushes; the descriptor (closefd=False) is closed below
+        sys.stderr = shown
+        os.dup2(saved, 2)
+        os.close(saved)
+        # the pipe ends when the last holder of its write end closes it (a worker process still
+        # alive keeps it open: then what arrived so far is shown)
+        reader.join(HELD_WAIT_SECONDS)
+        if not reader.is_alive():
+            os.close(read_end)
+        if held and not drop:
+            os.write(2, bytes(held))
 
 
 def _show_warning(message, category, filename, lineno, file=None, line=None) -> None:

@@ -398,5 +398,6 @@ def test_failure_while_exporting_leaves_no_file(tmp_path, capsys, monkeypatch):
     monkeypatch.setattr(sp, "_write_npz", half_written)
     out = tmp_path / "out"
     assert main(["run", str(SCENES["line_section4"]), "--out", str(out), "--npz", "--quiet"]) == 2
-    assert capsys.readouterr().err.strip().splitlines()[-1].endswith("No space left on device")
+    assert capsys.readouterr().err.strip().splitlines()[-1] == (
+        f"bananagrid: error: {out / 'line_section4.npz'}: cannot write the .npz arrays (No space left on device)")
     assert sorted(p.name for p in out.iterdir()) == []

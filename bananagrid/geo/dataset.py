@@ -408,10 +408,11 @@ def cell_map_dataset(cell_map, frame=None, *, title: str = "", source: str = "")
     return xr.Dataset(data_vars, coords=coords, attrs=attrs)
 
 
-def write_netcdf(path: str | os.PathLike, dataset) -> Path:
+def write_netcdf(path: str | os.PathLike, dataset, *, stage=None) -> Path:
     """Write ``dataset`` as NetCDF-4 (netCDF4 engine, zlib level :data:`ZLIB_LEVEL` on the data
     variables) to ``path``, whole or not at all: to a temporary name beside it, renamed when
-    complete.
+    complete (``stage``: a run's :meth:`bananagrid.atomic.OutputSet.stage`, renamed with its
+    other files).
 
     Returns
     -------
@@ -439,7 +440,7 @@ def write_netcdf(path: str | os.PathLike, dataset) -> Path:
             encoding[name].update(zlib=True, complevel=ZLIB_LEVEL)
     final = Path(path)
     netcdf4 = require("netCDF4", NETCDF_PURPOSE)
-    with writing(final, "NetCDF file", (RuntimeError,)) as partial:
+    with writing(final, "NetCDF file", (RuntimeError,), stage=stage) as partial:
         dataset.to_netcdf(partial, engine="netcdf4", format="NETCDF4", encoding=encoding)
         with netcdf4.Dataset(partial, "a") as nc:  # the digest of what the file holds, as read back
             nc.setncattr(DIGEST_ATTRIBUTE, netcdf_digest(nc))

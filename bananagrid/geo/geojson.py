@@ -116,7 +116,7 @@ def area_features(layer: str, t: float, areas: Iterable[SearchArea], frame) -> l
 
 def write_geojson(path: str | os.PathLike, panels: Sequence, frame=None,
                   levels: Iterable[float] = DEFAULT_MASS_LEVELS, *, title: str = "",
-                  areas: Mapping | None = None) -> Path:
+                  areas: Mapping | None = None, stage=None) -> Path:
     """Write the search areas of a scene's maps as one GeoJSON file (see the module).
 
     Parameters
@@ -133,6 +133,9 @@ def write_geojson(path: str | os.PathLike, panels: Sequence, frame=None,
         The scene's title, in the collection's ``bananagrid`` member.
     areas : mapping of (layer, t) to list of SearchArea, optional
         Search areas already found (at ``levels``) for some panels; the others are found here.
+    stage : callable, optional
+        Default: written to a temporary name and renamed when complete; a run passes its
+        :meth:`bananagrid.atomic.OutputSet.stage` to rename it with its other files.
 
     Returns
     -------
@@ -170,7 +173,7 @@ def write_geojson(path: str | os.PathLike, panels: Sequence, frame=None,
                        "quantity": "smallest areas holding each probability level of the target's position"},
         "features": features,
     }
-    with writing(path, "GeoJSON file") as partial:
+    with writing(path, "GeoJSON file", stage=stage) as partial:
         partial.write_text(json.dumps(collection, allow_nan=False) + "\n", encoding="utf-8")
     return Path(path)
 

@@ -64,7 +64,7 @@ def band_tags(layer: str, t: float, raster, frame) -> dict:
     return tags
 
 
-def write_geotiff(path: str | os.PathLike, panels: Sequence, frame=None, *, title: str = "") -> Path:
+def write_geotiff(path: str | os.PathLike, panels: Sequence, frame=None, *, title: str = "", stage=None) -> Path:
     """Write a scene's maps as one multi-band float32 GeoTIFF (see the module's description).
 
     Parameters
@@ -78,6 +78,9 @@ def write_geotiff(path: str | os.PathLike, panels: Sequence, frame=None, *, titl
         file has no CRS.
     title : str
         The scene's title, a dataset tag.
+    stage : callable, optional
+        Default: written to a temporary name and renamed when complete; a run passes its
+        :meth:`bananagrid.atomic.OutputSet.stage` to rename it with its other files.
 
     Returns
     -------
@@ -114,7 +117,7 @@ def write_geotiff(path: str | os.PathLike, panels: Sequence, frame=None, *, titl
     if frame is not None:
         tags["bananagrid_frame"] = json.dumps(frame.describe())
     final = Path(path)
-    with writing(final, "GeoTIFF", (rasterio.errors.RasterioError,)) as partial:
+    with writing(final, "GeoTIFF", (rasterio.errors.RasterioError,), stage=stage) as partial:
         with rasterio.open(partial, "w", **profile) as dst:
             dst.update_tags(**tags)
             for band, panel in enumerate(checked, start=1):

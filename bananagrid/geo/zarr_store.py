@@ -8,33 +8,74 @@ Dask values, or rasters in memory) as the CF dataset of :func:`~bananagrid.geo.d
 value is 0, so it reads as zeros), and each layer's captured mass is computed in the same
 pass as its blocks. The store is written under a hidden temporary name beside ``path`` and
 renamed when complete; on any failure (a worker lost for good, a full disk, an interrupt) the
-temporary store is removed and ``path`` is left as it was.
+temporary store is removed and ``path`` is left as it was. An existing ``path`` is replaced only
+if it is a store of ours (:func:`is_bananagrid_store`) or an empty directory: anything else
+there is refused before any computing (:func:`check_store_target`), never emptied.
 """
 
 from __future__ import annotations
 
 import contextlib
+import json
 import os
-import shutil
 import sys
+import time
 import warnings
 from collections.abc import Sequence
 from pathlib import Path
 
 import numpy as np
 
-from ..atomic import partial_path
+from ..atomic import OutputSet, OutputWriteError
 from ..validate import BananagridError
 from ..version import __version__
 from .dataset import DENSITY_UNITS, raster_dataset
 from .panels import check_panels
 from .libraries import CLUSTER_EXTRA, CLUSTER_PURPOSE, require
 
-__all__ = ["write_zarr", "write_batch_zarr", "ZARR_FORMAT", "compute_with_progress"]
+__all__ = ["write_zarr", "write_batch_zarr", "ZARR_FORMAT", "compute_with_progress", "is_bananagrid_store",
+           "check_store_target", "STORE"]
 
 #: Zarr format of the stores (v3: its ``fill_value`` is separate from CF's ``_FillValue``, so a
 #: block never written reads as 0 and no zero is read as missing).
 ZARR_FORMAT = 3
+#: What a store is called in messages (and in a run's :class:`~bananagrid.atomic.OutputSet`).
+STORE = "Zarr store"
+#: The root attribute every store of ours carries (:func:`~bananagrid.geo.dataset.raster_dataset`
+#: and :func:`write_batch_zarr` set it).
+OWN_ATTRIBUTE = "bananagrid_version"
+
+
+def is_bananagrid_store(path: str | os.PathLike) -> bool:
+    """Whether the directory ``path`` is a Zarr store this package wrote, and nothing else: a
+    v3 group whose ``zarr.json`` carries the ``bananagrid_version`` attribute, beside which are
+    only its arrays (directories each with its ``zarr.json`` and the chunk tree ``c``). A store
+    someone added a file to, or any other directory, is not, so it is never replaced."""
+    path = Path(path)
+    try:
+        meta = json.loads((path / "zarr.json").read_text(encoding="utf-8"))
+        if not (isinstance(meta, dict) and meta.get("zarr_format") == ZARR_FORMAT and meta.get("node_type") == "group"
+                and OWN_ATTRIBUTE in (meta.get("attributes") or {})):
+            return False
+        for entry in path.iterdir():
+            if entry.name == "zarr.json":
+                continue
+            if entry.is_symlink() or not entry.is_dir() or not (entry / "zarr.json").is_file():
+                return False
+            if any(inner.name not in ("zarr.json", "c") or inner.is_symlink() for inner in entry.iterdir()):
+                return False
+    except (OSError, ValueError, UnicodeDecodeError):
+        return False
+    return True
+
+
+def check_store_target(path: str | os.PathLike) -> Path:
+    """Refuse now, before any computing, a ``path`` a store may not be written to: its directory
+    missing or not writable, a file or a link there, or a directory that is neither empty nor a
+    store of ours (:func:`is_bananagrid_store`). Needs zarr (the cluster extra)."""
+    require("zarr", CLUSTER_PURPOSE, CLUSTER_EXTRA)
+    outputs = OutputSet()
+    return outputs.add(path, STORE, ours=is_bananagrid_store)
 
 
 def compute_with_progress(*collections, progress: bool = False):
@@ -48,12 +89,37 @@ def compute_with_progress(*collections, progress: bool = False):
         with bar:
             return dask.compute(*collections)
     futures = client.compute(list(collections))
-    if progress:
-        bar = require("distributed.diagnostics.progressbar", CLUSTER_PURPOSE, CLUSTER_EXTRA)
-        with contextlib.redirect_stdout(sys.stderr):  # the summary table owns stdout
-            bar.progress(futures, notebook=False)
-            print(file=sys.stderr)
-    return tuple(client.gather(futures))
+    try:
+        if progress:
+            bar = require("distributed.diagnostics.progressbar", CLUSTER_PURPOSE, CLUSTER_EXTRA)
+            with contextlib.redirect_stdout(sys.stderr):  # the summary table owns stdout
+                bar.progress(futures, notebook=False)
+                print(file=sys.stderr)
+        return tuple(client.gather(futures))
+    except BaseException:
+        client.cancel(futures)
+        _settle(client)
+        raise
+
+
+#: Seconds a failed computation waits for the tasks its workers are still running.
+SETTLE_SECONDS = 30.0
+
+
+def _settle(client, seconds: float = SETTLE_SECONDS) -> None:
+    """Wait until no worker is executing a task (or ``seconds`` passed). When one task of a
+    store fails, the tasks already running on other workers run on to their end, still writing
+    blocks into the temporary store: it is removed only after them, or they would leave part of
+    it behind."""
+    deadline = time.monotonic() + seconds
+    while time.monotonic() < deadline:
+        try:
+            busy = client.run(lambda dask_worker: dask_worker.state.executing_count)
+        except Exception:  # the cluster is gone: nothing runs any more
+            return
+        if not any(busy.values()):
+            return
+        time.sleep(0.05)
 
 
 def _current_client():
@@ -69,14 +135,14 @@ def _current_client():
 
 
 def write_zarr(path: str | os.PathLike, panels: Sequence, frame=None, *, title: str = "", source: str = "",
-               progress: bool = False) -> Path:
+               progress: bool = False, stage=None) -> Path:
     """Write a scene's maps to the Zarr store ``path`` (a directory), whole or not at all.
 
     Parameters
     ----------
     path : path-like
-        The store; its parent directory must exist. An existing store there is replaced once
-        the new one is complete.
+        The store; its parent directory must exist. An existing store of ours there (or an empty
+        directory) is replaced once the new one is complete; anything else there is refused.
     panels : sequence of (str, float, Raster or TiledRaster)
         As for :func:`~bananagrid.geo.dataset.raster_dataset`.
     frame : GeoFrame, optional
@@ -85,6 +151,9 @@ def write_zarr(path: str | os.PathLike, panels: Sequence, frame=None, *, title: 
         Global attributes.
     progress : bool
         A progress bar on stderr while the blocks are computed and written.
+    stage : callable, optional
+        A run's :meth:`bananagrid.atomic.OutputSet.stage` (the run planned ``path`` and commits
+        it with its other files); default: the store is put in place when complete.
 
     Returns
     -------
@@ -94,11 +163,13 @@ def write_zarr(path: str | os.PathLike, panels: Sequence, frame=None, *, title: 
     Raises
     ------
     BananagridError
-        A missing directory, ``path`` an existing file, a missing library of the ``cluster``
-        extra, or any failure while computing or writing (one line; nothing is left behind).
+        A missing directory, ``path`` a file, a link or a directory that is not a store of ours
+        (:func:`check_store_target`), a missing library of the ``cluster`` extra, or
+        (:class:`~bananagrid.atomic.OutputWriteError`) any failure while computing or writing
+        (one line naming ``path``; nothing is left behind).
     """
     xr = require("xarray", CLUSTER_PURPOSE, CLUSTER_EXTRA)
-    final = _check_target(path)
+    final = check_store_target(path)
     dataset = raster_dataset(panels, frame, title=title, source=source)
     if not isinstance(dataset, xr.Dataset):  # pragma: no cover - raster_dataset always returns one
         raise BananagridError("write_zarr: expected the maps as an xarray.Dataset")
@@ -110,7 +181,7 @@ def write_zarr(path: str | os.PathLike, panels: Sequence, frame=None, *, title: 
             keep.update(fill_value=np.zeros((), dtype=var.dtype)[()], chunks=tuple(c[0] for c in var.chunks),
                         compressors=_compressors())
         encoding[name] = keep
-    _write_dataset(dataset, final, encoding, progress, _computed_pieces(dataset, check_panels(panels)))
+    _write_dataset(dataset, final, encoding, progress, _computed_pieces(dataset, check_panels(panels)), stage=stage)
     return final
 
 
@@ -141,7 +212,7 @@ def write_batch_zarr(path: str | os.PathLike, values, bounds: np.ndarray, mass, 
     ``bounds`` (hypothesis, edge), its grid's outer edges x0, x1, y0, y1 (m); ``mass``
     (hypothesis), its captured mass. Errors as for :func:`write_zarr`."""
     xr = require("xarray", CLUSTER_PURPOSE, CLUSTER_EXTRA)
-    final = _check_target(path)
+    final = check_store_target(path)
     h, ny, nx = values.shape
     dataset = xr.Dataset(
         {
@@ -167,55 +238,54 @@ def _compressors() -> tuple:
     return (codecs.BloscCodec(cname="lz4", clevel=5, shuffle="shuffle"),)
 
 
-def _check_target(path) -> Path:
-    require("zarr", CLUSTER_PURPOSE, CLUSTER_EXTRA)
-    final = Path(path)
-    if not final.parent.is_dir():
-        raise BananagridError(f"{final}: cannot write the Zarr store: directory {final.parent} does not exist")
-    if final.exists() and not final.is_dir():
-        raise BananagridError(f"{final}: cannot write the Zarr store: it is a file")
-    return final
-
-
-def _write_dataset(dataset, final: Path, encoding: dict, progress: bool, pieces: dict | None = None) -> None:
+def _write_dataset(dataset, final: Path, encoding: dict, progress: bool, pieces: dict | None = None,
+                   stage=None) -> None:
     """Write ``dataset`` to a temporary store beside ``final``, computing its Dask variables in
-    one pass, and rename it to ``final`` when complete; on any failure remove it. ``pieces``:
-    variables written only in the given blocks and regions (the rest is Zarr's fill value)."""
-    pieces = pieces or {}
-    partial = partial_path(final)
-    try:
-        with warnings.catch_warnings():
-            # consolidated metadata (one read opens the store) is zarr-python's extension of v3: it warns
-            warnings.filterwarnings("ignore", message=".*[Cc]onsolidated metadata.*")
-            # the structure, the attributes and the variables in memory; the lazy ones (a map's blocks,
-            # masses, latitudes) are stored below, so that a skipped block is never handed to Zarr
-            dataset.to_zarr(partial, mode="w-", zarr_format=ZARR_FORMAT, consolidated=True, compute=False,
-                            encoding=encoding)
-        zarr = require("zarr", CLUSTER_PURPOSE, CLUSTER_EXTRA)
-        da = require("dask.array", CLUSTER_PURPOSE, CLUSTER_EXTRA)
-        group = zarr.open_group(partial, mode="r+", zarr_format=ZARR_FORMAT)
-        sources, targets, regions = [], [], []
-        for name, var in dataset.variables.items():
-            if name in pieces:  # only the blocks computed, each into its region
-                target = _SkipZeros(group[name])
-                for block, region in pieces[name]:
-                    sources.append(block)
-                    targets.append(target)
-                    regions.append(region)
-            elif var.chunks is not None:
-                sources.append(var.data)
-                targets.append(_SkipZeros(group[name]))
-                regions.append(None)
-        if sources:
-            stored = da.store(sources, targets, regions=regions, lock=False, compute=False)
-            compute_with_progress(stored, progress=progress)
-        _replace(partial, final)
-    except BaseException as exc:
-        shutil.rmtree(partial, ignore_errors=True)
-        if isinstance(exc, (BananagridError, KeyboardInterrupt, SystemExit)) or not isinstance(exc, Exception):
-            raise
-        reason = (str(exc) or type(exc).__name__).splitlines()[0]
-        raise BananagridError(f"{final}: cannot write the Zarr store ({type(exc).__name__}: {reason})") from None
+    one pass, and put it in place when complete (``stage``: a run's, which commits it with its
+    other files); on any failure remove it. ``pieces``: variables written only in the given
+    blocks and regions (the rest is Zarr's fill value)."""
+    with OutputSet() as own:
+        if stage is None:
+            own.add(final, STORE, ours=is_bananagrid_store)
+            stage = own.stage
+        try:
+            with stage(final) as partial:
+                _write_store(dataset, partial, encoding, progress, pieces or {})
+            own.commit()
+        except Exception as exc:
+            if isinstance(exc, BananagridError):
+                raise
+            reason = (str(exc) or type(exc).__name__).splitlines()[0]
+            raise OutputWriteError(f"{final}: cannot write the {STORE} ({type(exc).__name__}: {reason})") from None
+
+
+def _write_store(dataset, partial: Path, encoding: dict, progress: bool, pieces: dict) -> None:
+    """The store at ``partial``: its structure first, then the lazy variables in one pass."""
+    with warnings.catch_warnings():
+        # consolidated metadata (one read opens the store) is zarr-python's extension of v3: it warns
+        warnings.filterwarnings("ignore", message=".*[Cc]onsolidated metadata.*")
+        # the structure, the attributes and the variables in memory; the lazy ones (a map's blocks,
+        # masses, latitudes) are stored below, so that a skipped block is never handed to Zarr
+        dataset.to_zarr(partial, mode="w-", zarr_format=ZARR_FORMAT, consolidated=True, compute=False,
+                        encoding=encoding)
+    zarr = require("zarr", CLUSTER_PURPOSE, CLUSTER_EXTRA)
+    da = require("dask.array", CLUSTER_PURPOSE, CLUSTER_EXTRA)
+    group = zarr.open_group(partial, mode="r+", zarr_format=ZARR_FORMAT)
+    sources, targets, regions = [], [], []
+    for name, var in dataset.variables.items():
+        if name in pieces:  # only the blocks computed, each into its region
+            target = _SkipZeros(group[name])
+            for block, region in pieces[name]:
+                sources.append(block)
+                targets.append(target)
+                regions.append(region)
+        elif var.chunks is not None:
+            sources.append(var.data)
+            targets.append(_SkipZeros(group[name]))
+            regions.append(None)
+    if sources:
+        stored = da.store(sources, targets, regions=regions, lock=False, compute=False)
+        compute_with_progress(stored, progress=progress)
 
 
 class _SkipZeros:
@@ -232,14 +302,3 @@ class _SkipZeros:
             return
         self.array[key] = value
 
-
-def _replace(partial: Path, final: Path) -> None:
-    """Make the complete store ``partial`` the store ``final``: a directory cannot be renamed
-    over a non-empty one, so an old store is first moved aside, then removed."""
-    old = None
-    if final.exists():
-        old = partial_path(final).with_suffix(".old")
-        os.replace(final, old)
-    os.replace(partial, final)
-    if old is not None:
-        shutil.rmtree(old, ignore_errors=True)

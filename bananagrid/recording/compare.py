@@ -61,8 +61,9 @@ def write_compare_recording(
     write_recording(path, build, recording_id=recording_id, blueprint=blueprint)
 
 
-def write_sweep_recording(path: Path, result, *, recording_id: str, levels) -> None:
-    """Write a :class:`sweep.SweepResult` as the Figure 7 map with its contours."""
+def write_sweep_recording(path: Path, result, *, recording_id: str, levels, stage=None) -> None:
+    """Write a :class:`sweep.SweepResult` as the Figure 7 map with its contours (``stage``: as
+    for :func:`~bananagrid.recording.core.write_recording`)."""
     n_beta, n_alpha = result.goodness.shape
     claim = result.claim()
 
@@ -94,7 +95,7 @@ def write_sweep_recording(path: Path, result, *, recording_id: str, levels) -> N
         ),
         collapse_panels=False,
     )
-    write_recording(path, build, recording_id=recording_id, blueprint=blueprint)
+    write_recording(path, build, recording_id=recording_id, blueprint=blueprint, stage=stage)
 
 
 def _claim_text(result, claim) -> str:

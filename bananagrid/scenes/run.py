@@ -1,12 +1,15 @@
 """Run a scene: rasterise every layer at every time, record it, and optionally export arrays.
 
-One scene gives one recording ``OUT/NAME.rrd`` (and ``OUT/NAME.npz`` with ``npz=True``). Both
-are written under temporary names and renamed only when everything succeeded, so a failure
-leaves no file at the final paths.
+One scene gives one recording ``OUT/NAME.rrd`` (and ``OUT/NAME.npz`` with ``npz=True``, and the
+map files asked for). They are one :class:`~bananagrid.atomic.OutputSet`: every target is checked
+before any computing (:func:`plan_outputs`), each is written under a temporary name, and they
+are renamed into place together only when all are complete, so a failure leaves the previous
+run's files as they were and no temporary behind.
 """
 
 from __future__ import annotations
 
+import contextlib
 import json
 import math
 import os
@@ -22,7 +25,7 @@ import numpy as np
 
 from ..analysis.bearing_validation import format_table, summary, validation_table
 from ..analysis.coverage import coverage_warnings, level_warnings, peak_location
-from ..atomic import partial_path
+from ..atomic import OutputSet, OutputWriteError
 from ..engine.grid_cells import probability_work
 from ..engine.memory import check_memory
 from ..engine.grid_kernel import GridExtent
@@ -60,7 +63,7 @@ from .presence import PresenceScene
 from .run_presence import run_presence_scene
 
 __all__ = ["run_scene", "compute", "array_key", "check_exports", "check_run_memory", "check_run_work", "export_paths", "write_exports",
-           "RUN_ONLY_PROVENANCE"]
+           "plan_outputs", "RUN_ONLY_PROVENANCE"]
 
 #: Provenance keys that describe the run rather than the result. They stay out of the
 #: recording, so that running a scene twice gives equal recordings; the summary rows and the
@@ -130,6 +133,14 @@ def run_scene(
         :class:`~bananagrid.contours.MassRegion`) and ``seconds`` (rasterise, cell probabilities
         and normalise, wall clock).
 
+    Raises
+    ------
+    BananagridError
+        Before any computing: a bad option, too much memory or work, or a target that must not
+        be replaced (:func:`plan_outputs`). After: a failure while computing or writing
+        (:class:`~bananagrid.atomic.OutputWriteError` names the file), with the previous run's
+        files kept as they were.
+
     Warns
     -----
     BananagridWarning
@@ -141,11 +152,10 @@ def run_scene(
     check_exports(scene, netcdf=netcdf, geotiff=geotiff, geojson=geojson)
     check_run_memory(scene, exports=netcdf or geotiff or geojson, limit=max_memory)
     check_run_work(scene, threads=threads, limit=max_seconds)
+    outputs = plan_outputs(scene, out_dir, npz=npz, netcdf=netcdf, geotiff=geotiff, geojson=geojson)
     if isinstance(scene, PresenceScene):  # an [array] scene: its own runner
-        return run_presence_scene(scene, out_dir, npz=npz, threads=threads, progress=progress)
+        return run_presence_scene(scene, out_dir, npz=npz, threads=threads, progress=progress, outputs=outputs)
     out_dir = Path(out_dir)
-    if not out_dir.is_dir():
-        raise BananagridError(f"{out_dir}: output directory does not exist")
     panels: list | None = [] if netcdf or geotiff or geojson else None
     rrd_path = out_dir / f"{scene.name}.rrd"
     npz_path = out_dir / f"{scene.name}.npz"
@@ -216,24 +226,43 @@ def run_scene(
         if archive is not None:
             archive.close()
 
-    try:
-        archive = _Archive(npz_path, scene) if npz else None
-        write_recording(rrd_path, build, recording_id=_recording_id(scene))
-        written = [rrd_path]
-        try:
-            if panels is not None:
-                written += write_exports(scene, out_dir, panels, netcdf=netcdf, geotiff=geotiff, geojson=geojson,
-                                         areas=areas)
-            if archive is not None:
-                archive.publish()
-        except BaseException:
-            for path in written:  # all or nothing: no recording without the files asked for
-                path.unlink(missing_ok=True)
-            raise
-    finally:
-        if archive is not None:
-            archive.discard()
+    with outputs:  # all or nothing: the old files stay until every new one is complete
+        with outputs.stage(npz_path) if npz else contextlib.nullcontext() as npz_partial:
+            archive = _Archive(npz_path, npz_partial, scene) if npz else None
+            try:
+                write_recording(rrd_path, build, recording_id=_recording_id(scene), stage=outputs.stage)
+            finally:
+                if archive is not None:
+                    archive.abandon()
+        if panels is not None:
+            write_exports(scene, out_dir, panels, netcdf=netcdf, geotiff=geotiff, geojson=geojson, areas=areas,
+                          stage=outputs.stage)
+        outputs.commit()
     return rows
+
+
+def plan_outputs(scene: Scene | PresenceScene, out_dir: str | os.PathLike, *, npz: bool = False,
+                 netcdf: bool = False, geotiff: bool = False, geojson: bool = False) -> OutputSet:
+    """The files a run of ``scene`` writes in ``out_dir`` (``NAME.rrd``, and ``NAME.npz`` and the
+    map files asked for), each checked now, before any computing: the directory must exist and
+    take new files, and each target must be absent or a regular file (a directory, a link or
+    anything else there is refused, naming it). Nothing is created.
+
+    Raises
+    ------
+    BananagridError
+        One line naming the directory or the target and what is there.
+    """
+    out_dir = Path(out_dir)
+    if not out_dir.is_dir():
+        raise BananagridError(f"{out_dir}: output directory does not exist")
+    outputs = OutputSet()
+    outputs.add(out_dir / f"{scene.name}.rrd", "recording")
+    if npz:
+        outputs.add(out_dir / f"{scene.name}.npz", NPZ)
+    for option, path in export_paths(scene.name, out_dir, netcdf=netcdf, geotiff=geotiff, geojson=geojson).items():
+        outputs.add(path, EXPORT_NAMES[option])
+    return outputs
 
 
 #: Peak bytes per grid cell of a scene run (rasters, the recording's float32 images, contours
@@ -304,6 +333,10 @@ def check_exports(scene: Scene | PresenceScene, *, netcdf: bool = False, geotiff
 
 #: The map files' names after the scene's name, by option.
 EXPORT_SUFFIXES = {"netcdf": ".nc", "geotiff": ".tif", "geojson": "-areas.geojson"}
+#: What each map file is called in messages (as its writer calls it).
+EXPORT_NAMES = {"netcdf": "NetCDF file", "geotiff": "GeoTIFF", "geojson": "GeoJSON file"}
+#: What the .npz is called in messages.
+NPZ = ".npz arrays"
 
 
 def export_paths(name: str, out_dir: Path, *, netcdf: bool = False, geotiff: bool = False,
@@ -314,26 +347,27 @@ def export_paths(name: str, out_dir: Path, *, netcdf: bool = False, geotiff: boo
 
 
 def write_exports(scene: Scene, out_dir: Path, panels: list, *, netcdf: bool = False, geotiff: bool = False,
-                  geojson: bool = False, areas: dict | None = None) -> list[Path]:
-    """The map files of a scene's ``panels`` (``(layer, t, raster)``), each written whole or
-    not at all; if one fails, those already written are removed. Returns their paths.
-    ``areas``: the panels' search areas by ``(layer, t)`` where already found."""
+                  geojson: bool = False, areas: dict | None = None, stage=None) -> list[Path]:
+    """The map files of a scene's ``panels`` (``(layer, t, raster)``), written together or not at
+    all (``stage``: a run's :meth:`~bananagrid.atomic.OutputSet.stage`, whose commit puts them in
+    place with its other files; default: put in place here when all are complete). Returns their
+    paths. ``areas``: the panels' search areas by ``(layer, t)`` where already found."""
     paths = export_paths(scene.name, out_dir, netcdf=netcdf, geotiff=geotiff, geojson=geojson)
-    written: list[Path] = []
-    try:
+    with OutputSet() as own:
+        if stage is None:
+            for option, path in paths.items():
+                own.add(path, EXPORT_NAMES[option])
+            stage = own.stage
         if netcdf:
             dataset = raster_dataset(panels, scene.geo, title=scene.title, source=scene.source)
-            written.append(write_netcdf(paths["netcdf"], dataset))
+            write_netcdf(paths["netcdf"], dataset, stage=stage)
         if geotiff:
-            written.append(write_geotiff(paths["geotiff"], panels, scene.geo, title=scene.title))
+            write_geotiff(paths["geotiff"], panels, scene.geo, title=scene.title, stage=stage)
         if geojson:
-            written.append(write_geojson(paths["geojson"], panels, scene.geo, scene.mass_levels,
-                                         title=scene.title, areas=areas))
-    except BaseException:
-        for path in written:
-            path.unlink(missing_ok=True)
-        raise
-    return written
+            write_geojson(paths["geojson"], panels, scene.geo, scene.mass_levels, title=scene.title, areas=areas,
+                          stage=stage)
+        own.commit()
+    return list(paths.values())
 
 
 def compute(scene: Scene, layer: Layer, t: float, *, threads: int | None = None,
@@ -425,23 +459,27 @@ def _row(scene: Scene, layer: Layer, t: float, raster: Raster, seconds: float, r
 
 
 class _Archive:
-    """The .npz export, streamed into a hidden temporary file and renamed at the end.
+    """The .npz export, streamed into its temporary file ``partial`` (the run's output set
+    renames it with the other files).
 
     Arrays are added one at a time (no need to hold every raster), in numpy's .npz layout: a
-    zip of ``KEY.npy`` members, deflated, readable with :func:`numpy.load` without pickle.
+    zip of ``KEY.npy`` members, deflated, readable with :func:`numpy.load` without pickle. A
+    failure of the file system is one line naming ``path``
+    (:class:`~bananagrid.atomic.OutputWriteError`).
     """
 
-    def __init__(self, path: Path, scene: Scene):
+    def __init__(self, path: Path, partial: Path, scene: Scene):
         self.path = path
-        self.partial = partial_path(path)
+        self.partial = partial
         self.scene = scene
         self.entries: dict[str, dict] = {}
-        self.zip = zipfile.ZipFile(self.partial, "w", compression=zipfile.ZIP_DEFLATED, compresslevel=1)
+        with self._failing():
+            self.zip = zipfile.ZipFile(self.partial, "w", compression=zipfile.ZIP_DEFLATED, compresslevel=1)
         try:
             self._write("x", scene.grid.x)
             self._write("y", scene.grid.y)
         except BaseException:
-            self.discard()
+            self.abandon()
             raise
 
     def add(self, layer: str, t: float, raster: Raster, cells: Raster | None = None) -> None:
@@ -460,20 +498,30 @@ class _Archive:
     def close(self) -> None:
         """Write the provenance and finish the zip (still under the temporary name)."""
         self._write("provenance", np.array(json.dumps(self._provenance(), default=str)))
-        self.zip.close()
+        with self._failing():
+            self.zip.close()
 
-    def publish(self) -> None:
-        """Rename the finished file to its final path."""
-        os.replace(self.partial, self.path)
-
-    def discard(self) -> None:
-        """Remove the temporary file if it is still there (after a failure)."""
-        self.zip.close()
-        self.partial.unlink(missing_ok=True)
+    def abandon(self) -> None:
+        """Let go of the file after a failure (or after :meth:`close`: then nothing to do);
+        the output set removes it. Never raises: the failure already on its way is the one
+        to report."""
+        try:
+            self.zip.close()
+        except (OSError, ValueError):  # the write that failed failed again; or a member left open
+            if self.zip.fp is not None:
+                self.zip.fp.close()
 
     def _write(self, key: str, array: np.ndarray) -> None:
-        with self.zip.open(f"{key}.npy", "w", force_zip64=True) as member:
+        with self._failing(), self.zip.open(f"{key}.npy", "w", force_zip64=True) as member:
             np.lib.format.write_array(member, np.asanyarray(array), allow_pickle=False)
+
+    @contextlib.contextmanager
+    def _failing(self):
+        """An error of the file system (a full disk, a file-size limit) as one line naming the file."""
+        try:
+            yield
+        except OSError as exc:
+            raise OutputWriteError(f"{self.path}: cannot write the {NPZ} ({exc.strerror or exc})") from None
 
     def _provenance(self) -> dict:
         scene = self.scene

@@ -1,5 +1,6 @@
-"""Run a presence scene: its cell map, recorded to ``OUT/NAME.rrd`` (and ``OUT/NAME.npz``)
-atomically, with the summary row, as :func:`bananagrid.scenes.run.run_scene` does for grids."""
+"""Run a presence scene: its cell map, recorded to ``OUT/NAME.rrd`` (and ``OUT/NAME.npz``),
+the two replaced together or not at all (:class:`~bananagrid.atomic.OutputSet`), with the
+summary row, as :func:`bananagrid.scenes.run.run_scene` does for grids."""
 
 from __future__ import annotations
 
@@ -11,7 +12,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..atomic import partial_path
+from ..atomic import OutputSet, OutputWriteError
 from ..recording.core import log_scene_text, recording_id_for, write_recording
 from ..recording.presence import log_cell_map, plane_eye, presence_blueprint
 from ..results import CellMap
@@ -23,7 +24,7 @@ __all__ = ["run_presence_scene"]
 
 
 def run_presence_scene(scene: PresenceScene, out_dir: str | os.PathLike, *, npz: bool = False,
-                       threads: int | None = None, progress=None) -> list[dict]:
+                       threads: int | None = None, progress=None, outputs: OutputSet | None = None) -> list[dict]:
     """Compute the scene's cell map, record it to ``OUT/NAME.rrd`` and optionally export it.
 
     Parameters
@@ -44,6 +45,9 @@ def run_presence_scene(scene: PresenceScene, out_dir: str | os.PathLike, *, npz:
         CPU threads (default: every core).
     progress : callable, optional
         ``progress(done, total, label)`` before (0, 1) and after (1, 1) the computation.
+    outputs : OutputSet, optional
+        The run's planned files (:func:`bananagrid.scenes.run.plan_outputs`); default: planned
+        here, before computing.
 
     Returns
     -------
@@ -57,7 +61,11 @@ def run_presence_scene(scene: PresenceScene, out_dir: str | os.PathLike, *, npz:
         raise BananagridError(f"{out_dir}: output directory does not exist")
     rrd_path = out_dir / f"{scene.name}.rrd"
     npz_path = out_dir / f"{scene.name}.npz"
-    npz_partial = partial_path(npz_path)
+    if outputs is None:
+        outputs = OutputSet()
+        outputs.add(rrd_path, "recording")
+        if npz:
+            outputs.add(npz_path, ".npz arrays")
     lattice = scene.lattice
     label = f"{lattice.geometry}/{scene.kind} {' x '.join(map(str, lattice.shape))} cells"
     rows: list[dict] = []
@@ -76,24 +84,22 @@ def run_presence_scene(scene: PresenceScene, out_dir: str | os.PathLike, *, npz:
         for message in _unreached(regions, where):
             warnings.warn(message, BananagridWarning, stacklevel=2)
         if npz:
-            _write_npz(npz_partial, scene, cm)
+            with outputs.stage(npz_path) as partial:
+                try:
+                    _write_npz(partial, scene, cm)
+                except OSError as exc:  # a full disk, a file-size limit: one line naming the file
+                    raise OutputWriteError(f"{npz_path}: cannot write the .npz arrays ({exc.strerror or exc})") from None
         rows.append({"scene": scene.name, "layer": f"{lattice.geometry}/{scene.kind}", "t": 0.0,
                      "cells": int(cm.prob.size), "mass": float(np.sum(cm.prob)), "peak": float(np.max(cm.prob)),
                      "peak_unit": "per cell", "regions": regions, "seconds": seconds})
         if progress is not None:
             progress(1, 1, label)
 
-    try:
+    with outputs:  # all or nothing: no recording without its arrays, the old pair kept on failure
         blueprint = presence_blueprint(eye=plane_eye(lattice, scene.region, scene.far))
-        write_recording(rrd_path, build, recording_id=recording_id_for(scene.text), blueprint=blueprint)
-        if npz:
-            try:
-                os.replace(npz_partial, npz_path)
-            except BaseException:
-                rrd_path.unlink(missing_ok=True)  # all or nothing: no recording without its arrays
-                raise
-    finally:
-        npz_partial.unlink(missing_ok=True)
+        write_recording(rrd_path, build, recording_id=recording_id_for(scene.text), blueprint=blueprint,
+                        stage=outputs.stage)
+        outputs.commit()
     return rows
 
 

@@ -20,7 +20,7 @@ import numpy as np
 
 from ..engine.tiles import rasterise_tiles
 from ..geo.libraries import CLUSTER_EXTRA, CLUSTER_PURPOSE, require
-from ..geo.zarr_store import write_zarr
+from ..geo.zarr_store import check_store_target, write_zarr
 from ..results import TiledRaster
 from ..validate import BananagridError
 from .load import Scene
@@ -55,9 +55,12 @@ def tiled_maps(scene: Scene, chunks, *, max_seconds: float | None = None) -> lis
 def run_scene_tiled(scene: Scene, path: Path, chunks, *, progress: bool = False,
                     max_seconds: float | None = None) -> list[dict]:
     """Compute ``scene`` in tiles into the Zarr store ``path``; returns one summary row per map
-    (:func:`format_tiled_summary`), read back from the store."""
+    (:func:`format_tiled_summary`), read back from the store. A ``path`` that is not absent, an
+    empty directory or a store of ours is refused before any computing
+    (:func:`~bananagrid.geo.zarr_store.check_store_target`)."""
     xr = require("xarray", CLUSTER_PURPOSE, CLUSTER_EXTRA)
     check_tiled(scene)
+    check_store_target(path)
     start = time.perf_counter()
     panels = tiled_maps(scene, chunks, max_seconds=max_seconds)
     write_zarr(path, panels, scene.geo, title=scene.title, source=scene.source, progress=progress)
