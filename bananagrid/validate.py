@@ -174,7 +174,13 @@ def checked_in_child(path: Path, check: Callable[[Path], None]) -> None:
         return
     seconds = CHILD_SECONDS + os.stat(path).st_size / CHILD_BYTES_PER_SECOND
     read_end, write_end = os.pipe()
-    pid = os.fork()
+    with warnings.catch_warnings():
+        # JAX (imported by a process that also timed peers, say) warns at every fork that its
+        # threads may deadlock the child, and Python 3.12 does so for any threaded process: this
+        # child only reads a file and leaves by os._exit, taking none of their locks.
+        warnings.filterwarnings("ignore", message=r"os\.fork\(\) was called", category=RuntimeWarning)
+        warnings.filterwarnings("ignore", message=r"This process .* is multi-threaded", category=DeprecationWarning)
+        pid = os.fork()
     if pid == 0:  # the child: check, say what is wrong on the pipe, exit without any cleanup
         code, message = 0, ""
         try:

@@ -57,6 +57,7 @@ NOT_RUN = {
     "rerun rrd compare": "named in prose; tests/test_cli.py runs it on two runs of a scene",
     "pip install 'bananagrid[plot]'": "installs from the package index; the test extra installs matplotlib",
     "pip install 'bananagrid[cluster]'": "installs from the package index; the test extra holds the cluster extra",
+    "bananagrid bench --device cuda": "needs a CUDA device: tests/test_cuda.py runs it on one, tests/test_bench.py its refusal here",
     "bananagrid bench --device cuda --no-peers --no-memory --repeat 3 --baseline-stride 20":
         "needs a CUDA device: tests/test_cuda.py runs bench --device on one, tests/test_bench.py its refusal here",
     "bananagrid bench --cluster --json cluster.json": "minutes on a local cluster (see tests/test_bench.py for the cluster rows at a small size)",

@@ -5,9 +5,11 @@ back without error (measured: a zeroed 60-byte block in a 100 x 100 layer change
 region by 2 %, exit 0). So every row that bananagrid logs carries a digest of its own:
 
 - :class:`DigestingRecording` (the stream :func:`bananagrid.recording.core.new_recording`
-  makes) logs, after each row, a row on :data:`DIGESTS` at the same time (static with a static
-  row) holding the row's entity and the BLAKE2b digest of its components (name, archetype and
-  every value, as arrow arrays; :func:`row_digest`);
+  makes) logs, after each row, a row under :data:`DIGESTS` at the same time (static with a
+  static row) holding the row's entity and the BLAKE2b digest of its components (name,
+  archetype and every value, as arrow arrays; :func:`row_digest`). Each entity's digests go to
+  an entity of their own, ``DIGESTS`` + the entity's path: layers logged from several threads
+  then never interleave their digests, so two runs of a scene cut the same chunks;
 - at the end it logs one static :data:`MANIFEST`: how many rows it logged, a digest of all
   their digests, the recording and application ids and whether a blueprint store was sent, so
   that rows lost whole (a chunk dropped, a file cut short) and damaged store headers are caught
@@ -43,11 +45,11 @@ __all__ = [
     "row_digest", "warn_undigested",
 ]
 
-#: Entity of the per-row digests; :data:`MANIFEST` holds the summary. Neither is in any view of
-#: the default blueprint (its views name their contents), and readers skip both.
+#: Root of the per-row digests (one entity below it per entity logged); :data:`MANIFEST` holds
+#: the summary. Neither is in any view of the default blueprint (its views name their
+#: contents), and readers skip both.
 DIGESTS = "bananagrid/digests"
 MANIFEST = "bananagrid/manifest"
-_INTERNAL = ("/" + DIGESTS, "/" + MANIFEST)
 #: Files already warned about as holding no digests: ``inspect`` reads a file three times, and
 #: one warning says it all.
 _WARNED: set[str] = set()
@@ -103,7 +105,7 @@ def row_digest(entity: str, components: Iterable[tuple[str, str, pa.Array]]) -> 
 
 def is_internal(entity: str) -> bool:
     """Whether a row read at ``entity`` is a digest or the manifest, not data."""
-    return entity in _INTERNAL
+    return entity == "/" + MANIFEST or entity == "/" + DIGESTS or entity.startswith("/" + DIGESTS + "/")
 
 
 def _entity(path) -> str:
@@ -154,7 +156,7 @@ class DigestingRecording(rr.RecordingStream):
         digest = row_digest(name, components)
         with self._lock:
             self._pairs.append((name, digest))
-        super().log(DIGESTS, rr.AnyValues(entity=name, digest=digest), static=static, strict=True)
+        super().log(DIGESTS + name, rr.AnyValues(entity=name, digest=digest), static=static, strict=True)
 
     def send_blueprint(self, blueprint, *args, **kwargs) -> None:
         """As :meth:`rerun.RecordingStream.send_blueprint`; the manifest says a blueprint was sent."""
@@ -270,12 +272,12 @@ class DigestCheck:
     def add(self, entity: str, times: dict, cells: dict) -> bool:
         """Account for one row; True if it is a digest or the manifest (not data)."""
         key = tuple(sorted((name, kind, value) for name, (kind, value) in times.items()))
-        if entity in _INTERNAL:
+        if is_internal(entity):
             values = {}
             for name, (_, cell) in cells.items():
                 items = cell.as_py() if isinstance(cell, pa.ListScalar) else None
                 values[name] = items[0] if items and len(items) == 1 else items
-            if entity == _INTERNAL[1]:
+            if entity == "/" + MANIFEST:
                 self._manifests.append(values)
             elif isinstance(values.get("entity"), str) and isinstance(values.get("digest"), str):
                 self._digests[(values["entity"], key, values["digest"])] += 1
