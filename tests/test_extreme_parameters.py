@@ -221,29 +221,6 @@ def test_bearing_fixes_at_the_extremes(baseline, offset, sigma_1, sigma_2):
     exercise(build, ["sensors", "bearings", "sigmas"])
 
 
-@MODEL_SWEEP
-@given(st.floats(1e-3, 1e6), st.floats(1e-3, 1e6), SIGNED)
-def test_presence_laws_at_the_extremes(sd, size, offset):
-    """Uniform rooms and mixtures at any offset (ordinary sizes and spreads)."""
-    def mixture():
-        return bg.GaussianMixture(weights=[0.5, 0.5], means=[[0.0, 0.0], [offset, offset]],
-                                  covs=[[[sd, 0.0], [0.0, sd]]] * 2)
-
-    def uniform():
-        return bg.UniformPresence(bg.Region(x=(offset, offset + size), y=(-size, size)))
-
-    for build in (mixture, uniform):
-        law = refused_or(build, ["weights", "means", "covs", "region", "x", "y"])
-        if law is None:
-            continue
-        density = refused_or(lambda: law.pdf(np.array([[0.0, 0.0], [1e300, -1e300]])), ["points"])
-        if density is not None:
-            finite(density)
-        samples = refused_or(lambda: law.sample(10, np.random.default_rng(0)), ["n"])
-        if samples is not None:
-            finite(samples)
-
-
 # -- sample sizes ----------------------------------------------------------------------------
 
 POSE = bg.Pose(origin=(150.0, -80.0), heading=0.4)
