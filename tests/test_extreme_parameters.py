@@ -1,7 +1,7 @@
-"""Every public constructor and verb at the extremes of float64 and of memory.
+"""Public constructors and verbs at the extremes of float64 and of memory.
 
 Parameters anywhere from the smallest subnormal (5e-324) through 1e-308 and 1 to 1e308 and the
-largest float, of either sign; sample and batch sizes up to 10**15. Each call either succeeds
+largest float, of either sign; sample sizes up to 10**15. Each call either succeeds
 with finite results or raises :class:`bananagrid.BananagridError` with one line that names the
 argument: never OverflowError, MemoryError, ZeroDivisionError, a NumPy or thread-pool
 ValueError, FloatingPointError or a RuntimeWarning (the sweeps turn RuntimeWarnings into
@@ -310,27 +310,3 @@ def test_radial_scales_of_extreme_models(scale):
     result = refused_or(moments, MOTION + ["angles", "angle", "r_max"])
     if result is not None:
         finite(result.mean, result.sd, result.mass)
-
-
-BATCH = [SAMPLERS["polar"], bg.PolarBanana(v0=250.0, t=10.0, sigma_a=2.0, sigma_omega=0.05, pose=POSE)]
-BATCH_SIZES = st.one_of(st.sampled_from([1, 2, 3, 10**6, 10**9, 10**15]), st.integers(1, 10**15))
-
-
-@SWEEP
-@given(BATCH_SIZES, BATCH_SIZES)
-def test_batch_shapes_that_do_not_fit_are_refused(rows, cols, monkeypatch):
-    """Batch grids of up to 10**15 cells a side (memory held at 64 MB): a one-line refusal naming
-    the shape, never a MemoryError; the few that fit run."""
-    monkeypatch.setattr(memory, "available_bytes", lambda: 64 * 10**6)
-    batch = refused_or(lambda: bg.rasterise_batch(BATCH, shape=(rows, cols)), ["shape"])
-    if batch is not None:
-        assert rows * cols * len(BATCH) * 8 <= 64 * 10**6
-        finite(batch.values)
-
-
-@pytest.mark.parametrize("n", [10**9, 10**12, 10**15])
-def test_batch_points_that_do_not_fit_are_refused(n, monkeypatch):
-    """pdf_batch over n points (a broadcast view: no memory of its own) for two hypotheses."""
-    monkeypatch.setattr(memory, "available_bytes", lambda: 64 * 10**6)
-    with pytest.raises(bg.BananagridError, match=r"^x, y: .*"):
-        bg.pdf_batch(BATCH, np.broadcast_to(0.0, (n,)), 0.0)
