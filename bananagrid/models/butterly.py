@@ -184,9 +184,6 @@ class NormalSpeed:
     def __post_init__(self):
         object.__setattr__(self, "mean", finite("speeds.mean", self.mean))
         object.__setattr__(self, "sd", positive("speeds.sd", self.sd))
-        if not self.sd >= MIN_SPEED_WIDTH:  # its density 1 / sd stays finite
-            raise BananagridError(f"speeds.sd = {self.sd!r}: must be at least {MIN_SPEED_WIDTH:g} m/s; "
-                                  "give one speed as speeds = [mean]")
         if self.mean + NORMAL_SPAN * self.sd <= 0.0:
             raise BananagridError(
                 f"speeds.mean = {self.mean!r}: with sd = {self.sd!r} the law has no mass above 0 m/s"
@@ -199,6 +196,9 @@ class NormalSpeed:
                 f"speeds.sd = {self.sd!r}: below {MIN_RELATIVE_SD:g} of the mean {self.mean!r} the law is one "
                 "speed; give it as speeds = [mean]"
             )
+        if not self.sd >= MIN_SPEED_WIDTH:  # its density 1 / sd stays finite
+            raise BananagridError(f"speeds.sd = {self.sd!r}: must be at least {MIN_SPEED_WIDTH:g} m/s; "
+                                  "give one speed as speeds = [mean]")
         if not abs(self.mean) + NORMAL_SPAN * self.sd < MAX_SPEED:
             raise BananagridError(
                 f"speeds.sd = {self.sd!r}: with mean = {self.mean!r} the law reaches "
