@@ -27,7 +27,7 @@ from .atomic import (OutputSet, OutputWriteError, Terminated, check_target, chec
                      signals_as_exceptions)
 from .bench import runner as bench
 from .contours import DEFAULT_LEVELS, format_area, mass_levels
-from .engine.cluster import dask_client
+from .engine.cluster import CONNECT_SECONDS, check_memory_limit, check_scheduler, check_workers, dask_client, worker_need
 from .engine.memory import memory_limit
 from .engine.tiles import DEFAULT_CHUNK
 from .engine.work import work_limit
@@ -156,9 +156,12 @@ def build_parser() -> tuple[argparse.ArgumentParser, dict[str, argparse.Argument
     tiles.add_argument("--workers", type=int, metavar="N",
                        help="worker processes of the local cluster (default: one per core)")
     tiles.add_argument("--memory-limit", metavar="SIZE",
-                       help="memory per local worker, e.g. 4GiB (default: the machine's, shared)")
+                       help="memory per local worker, e.g. 4GiB (default: the machine's, shared); at least what a "
+                       "worker needs for one block (about 0.5 GB and 32 bytes per block cell, over Dask's pause fraction)")
     tiles.add_argument("--scheduler", metavar="ADDRESS",
                        help="run on the existing Dask cluster at ADDRESS (tcp://host:8786) instead of a local one")
+    tiles.add_argument("--connect-timeout", type=float, metavar="S",
+                       help=f"seconds to wait for the scheduler at --scheduler to answer (default {CONNECT_SECONDS:g})")
     run.set_defaults(handler=_run)
 
     examples = sub.add_parser(
@@ -275,7 +278,8 @@ def _run(args: argparse.Namespace) -> int:
         raise BananagridError("run: give at least one SCENE.toml or --example NAME (`bananagrid examples` lists them)")
     if args.zarr is not None:
         return _run_tiled(args, paths)
-    tiled_only = [f"--{k.replace('_', '-')}" for k in ("workers", "memory_limit", "scheduler") if getattr(args, k) is not None]
+    tiled_only = [f"--{k.replace('_', '-')}" for k in ("workers", "memory_limit", "scheduler", "connect_timeout")
+                  if getattr(args, k) is not None]
     if tiled_only:
         raise BananagridError(f"{', '.join(tiled_only)}: only with --zarr (tiles on a Dask cluster)")
     scenes = [load_scene(path) for path in paths]
@@ -336,8 +340,10 @@ def _run_tiled(args: argparse.Namespace, paths: list[Path]) -> int:
         scene = scene.with_step(args.step, tiled=True)
     check_tiled(scene)
     max_seconds = None if args.max_seconds is None else work_limit(args.max_seconds)
-    tiled_maps(scene, args.chunks, max_seconds=max_seconds)  # every check (chunks, work) before a cluster starts
-    with dask_client(workers=args.workers, memory_limit=args.memory_limit, scheduler=args.scheduler) as client:
+    panels = tiled_maps(scene, args.chunks, max_seconds=max_seconds)  # every check before a cluster starts
+    timeout = _check_cluster(args, panels)
+    with dask_client(workers=args.workers, memory_limit=args.memory_limit, scheduler=args.scheduler,
+                     timeout=timeout) as client:
         if not args.quiet:
             where = args.scheduler or f"a local cluster of {len(client.scheduler_info()['workers'])} workers"
             link = client.dashboard_link if args.scheduler else None
@@ -348,6 +354,25 @@ def _run_tiled(args: argparse.Namespace, paths: list[Path]) -> int:
     print()
     print(f"wrote {args.zarr}")
     return OK
+
+
+def _check_cluster(args: argparse.Namespace, panels) -> float:
+    """The cluster options of ``run --zarr``, checked before any worker starts or any connection is
+    kept: the scheduler answers as one, or the workers' memory holds a block. Returns the timeout."""
+    if args.connect_timeout is not None and args.scheduler is None:
+        raise BananagridError("--connect-timeout: only with --scheduler")
+    timeout = CONNECT_SECONDS if args.connect_timeout is None else positive("--connect-timeout", args.connect_timeout)
+    if args.scheduler is not None:
+        if args.workers is not None or args.memory_limit is not None:
+            raise BananagridError("--scheduler: an existing cluster has its own workers and memory limits; "
+                                  "give --workers and --memory-limit only for a local cluster")
+        check_scheduler(args.scheduler, timeout=timeout, name="--scheduler")
+        return timeout
+    check_workers(args.workers, name="--workers")
+    needs = [(worker_need(t.chunks, t.values.dtype, t.provenance["computed_in"]), t.chunks) for _, _, t in panels]
+    need, (rows, cols) = max(needs, key=lambda pair: pair[0])
+    check_memory_limit(args.memory_limit, need=need, name="--memory-limit", what=f"a block of {rows} x {cols} cells")
+    return timeout
 
 
 def _examples(args: argparse.Namespace) -> int:

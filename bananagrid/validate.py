@@ -20,7 +20,8 @@ from pathlib import Path
 
 import numpy as np
 
-__all__ = ["finite", "positive", "non_negative", "positive_int", "pair", "point", "real_array", "show", "BananagridError", "BananagridWarning", "regular_file", "checked_in_child"]
+__all__ = ["finite", "positive", "non_negative", "positive_int", "pair", "point", "real_array", "show", "step_ratio",
+           "BananagridError", "BananagridWarning", "regular_file", "checked_in_child"]
 
 
 class BananagridError(ValueError):
@@ -107,6 +108,20 @@ def pair(name: str, value, expected: str = "a pair (low, high)") -> tuple[float,
 def point(name: str, value) -> tuple[float, float]:
     """Return ``value`` as a pair of finite floats (x, y), or raise naming the bad one."""
     return pair(name, value, "a pair (x, y)")
+
+
+def step_ratio(name: str, step: float, span: float, limit: int, unit: str = "") -> float:
+    """``span / step``: the number of cells a step cuts a span into, or raise when it overflows
+    (a subnormal step: 1 / 5e-324 is inf) or exceeds ``limit`` (before any count is rounded or
+    any array allocated)."""
+    ratio = span / step
+    if not ratio <= limit:
+        count = f"{ratio:.3g}" if math.isfinite(ratio) else "more than 1.8e308"
+        raise BananagridError(
+            f"{name} = {step!r}: cuts the span {span!r}{unit} into {count} cells, more than the {limit:,} a "
+            "domain may have; use a larger step"
+        )
+    return ratio
 
 
 def show(value) -> str:

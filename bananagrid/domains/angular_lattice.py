@@ -29,7 +29,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..validate import BananagridError, finite, pair, positive
+from ..validate import BananagridError, finite, pair, positive, step_ratio
+from .grid import MAX_CELLS
 from .region import Region
 
 __all__ = [
@@ -42,6 +43,8 @@ GEOMETRIES = ("line", "plane", "frustum")
 ANGLE_TOL = 1e-9
 _TWO_PI = 2.0 * math.pi
 _HALF_PI = 0.5 * math.pi
+#: Depths h a lattice may have, m: h^3 (a frustum's volumes) and 1/h^3 stay far inside float64.
+MIN_DEPTH, MAX_DEPTH = 1e-100, 1e100
 
 
 def _pair(name: str, value) -> tuple[float, float]:
@@ -49,7 +52,7 @@ def _pair(name: str, value) -> tuple[float, float]:
 
 
 def _steps(name: str, step: float, span: float) -> int:
-    ratio = span / step
+    ratio = step_ratio(name, step, span, MAX_CELLS, " rad")
     n = round(ratio)
     if abs(ratio - n) > ANGLE_TOL * max(1.0, ratio):
         best = max(1, n)
@@ -110,11 +113,21 @@ class AngularLattice:
         h = finite("h", self.h)
         if h <= 0.0:
             raise BananagridError(f"h = {h!r}: must be > 0 (the target lies at z = -h, below the array)")
+        if not MIN_DEPTH <= h <= MAX_DEPTH:
+            raise BananagridError(
+                f"h = {h!r}: must be within [{MIN_DEPTH:g}, {MAX_DEPTH:g}] m (cell areas and volumes, h^2 and h^3 "
+                "times the directions' tangents, must stay normal float64 numbers)"
+            )
         dh = finite("dh", self.dh)
         if self.geometry == "frustum":
             if not 0.0 < dh < h:
                 raise BananagridError(
                     f"dh = {dh!r}: a frustum needs 0 < dh < h = {h!r} (depths h - dh to h + dh, all below the array)"
+                )
+            if not h - dh < h + dh:  # dh below half a unit in the last place of h
+                raise BananagridError(
+                    f"dh = {dh!r}: the slab h - dh to h + dh has no thickness at h = {h!r} in float64; "
+                    f"use dh of at least {h * 2.0**-52:.3g} m or the plane geometry"
                 )
         elif dh != 0.0:
             raise BananagridError(f"dh = {dh!r}: only the frustum geometry has a slab thickness; use dh = 0")
@@ -162,6 +175,12 @@ class AngularLattice:
         object.__setattr__(self, "h", h)
         object.__setattr__(self, "dh", dh)
         object.__setattr__(self, "azimuth_step", da)
+        cells = math.prod(self.shape)
+        if cells > MAX_CELLS:
+            raise BananagridError(
+                f"angular lattice of {' x '.join(map(str, self.shape))} = {cells:,} cells: more than the {MAX_CELLS:,} a "
+                "lattice may have; use a larger azimuth_step or elevation_step"
+            )
 
     @classmethod
     def integer_degrees(cls, geometry: str = "plane", h: float = 1.0, dh: float = 0.0) -> "AngularLattice":

@@ -24,7 +24,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..validate import BananagridError, pair, positive
+from ..validate import BananagridError, pair, positive, step_ratio
 from .grid import MAX_CELLS
 from .pose import Pose
 
@@ -38,7 +38,7 @@ _TWO_PI = 2.0 * math.pi
 
 def _count(name: str, step: float, span: float, span_text: str, unit: str) -> int:
     """Number of steps in ``span``; raise unless ``step`` divides it (within DIVIDES_RTOL)."""
-    ratio = span / step
+    ratio = step_ratio(name, step, span, MAX_CELLS, f" {unit}")
     n = round(ratio)
     if n < 1 or abs(ratio - n) > DIVIDES_RTOL * max(1.0, ratio):
         best = max(1, n)
@@ -106,8 +106,20 @@ class PolarLattice:
             )
         if not isinstance(self.pose, Pose):
             raise BananagridError(f"pose = {self.pose!r}: expected a bananagrid.Pose")
+        total = 0.5 * (r_max - r_min) * (r_max + r_min) * b_span
+        if not math.isfinite(total):  # ranges near 1e154 and beyond: r^2 overflows
+            raise BananagridError(
+                f"ranges = ({r_min!r}, {r_max!r}): the lattice's area {total!r} m^2 is not a finite number; "
+                "use ranges below 1e150 m"
+            )
         n_range = _count("range_step", dr, r_max - r_min, "range span", "m")
         n_bearing = _count("bearing_step", db, b_span, "bearing span", "rad")
+        smallest = 0.5 * dr * (2.0 * r_min + dr) * db  # the innermost ring's cells
+        if not smallest > 0.0:  # subnormal steps: the area underflows to 0
+            raise BananagridError(
+                f"range_step, bearing_step = {dr!r}, {db!r}: the innermost cells' area {smallest!r} m^2 "
+                "underflows; use larger steps"
+            )
         cells = n_range * n_bearing
         if cells > MAX_CELLS:
             raise BananagridError(

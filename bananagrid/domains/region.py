@@ -57,8 +57,9 @@ class Region:
         """|S| divides every uniform density and conditions every probability: it must be a
         normal float64 number, in [1e-300, 1e300]."""
         ranges = [r for r in (self.x, self.y, self.z) if r is not None]
-        # log10 of each width, halved first so that hi - lo cannot overflow
-        exponent = sum(math.log10(0.5 * hi - 0.5 * lo) + math.log10(2.0) for lo, hi in ranges)
+        # log10 of each width (> 0, subnormal widths too); halved first where hi - lo overflows
+        exponent = sum(math.log10(hi - lo) if hi - lo < math.inf else math.log10(0.5 * hi - 0.5 * lo) + math.log10(2.0)
+                       for lo, hi in ranges)
         if not (-300.0 <= exponent <= 300.0 and all(hi - lo < math.inf for lo, hi in ranges)):
             unit = ("m", "m^2", "m^3")[len(ranges) - 1]
             measure = ("length", "area", "volume")[len(ranges) - 1]

@@ -24,7 +24,8 @@ class PointsExtent:
         self.x, self.y = x, y
 
     def radii(self, origin) -> tuple[float, float]:
-        r = np.hypot(self.x - origin[0], self.y - origin[1])
+        with np.errstate(over="ignore"):  # points near 1.8e308 away: inf, farther than any support
+            r = np.hypot(self.x - origin[0], self.y - origin[1])
         return float(r.min()), float(r.max())
 
 

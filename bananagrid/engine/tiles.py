@@ -20,6 +20,7 @@ Dask, distributed and Zarr are the ``cluster`` extra, loaded when first used.
 from __future__ import annotations
 
 import math
+import sys
 import threading
 import uuid
 from collections import OrderedDict
@@ -32,12 +33,15 @@ from ..geo.libraries import CLUSTER_EXTRA, CLUSTER_PURPOSE, require
 from ..protocol import DensityModel
 from ..results import TiledRaster
 from ..validate import BananagridError, show
+from .cluster import minimum_memory_limit, worker_need
 from .grid_kernel import grid_block, grid_context
+from .memory import format_bytes
 from .points import check_finite, check_model
 from .warp_runtime import WarpContext, default_threads
 from .work import check_work
 
-__all__ = ["rasterise_tiles", "TilePlan", "block_values", "check_chunks", "tile_bounds", "DEFAULT_CHUNK"]
+__all__ = ["rasterise_tiles", "TilePlan", "block_values", "check_chunks", "check_cluster_memory", "tile_bounds",
+           "DEFAULT_CHUNK"]
 
 #: Default side of a block, cells: 1024 x 1024 float32 is 4 MiB a block (8 MiB float64), a few
 #: milliseconds of Dask's overhead against tenths of a second of a kernel.
@@ -66,6 +70,33 @@ def check_chunks(chunks, grid: Grid, align: int = 1) -> tuple[int, int]:
             )
         out.append(min(c, n))
     return out[0], out[1]
+
+
+def check_cluster_memory(chunks: tuple[int, int], dtype, computed_in) -> None:
+    """Refuse blocks of ``chunks`` cells that the workers of the current ``distributed`` client
+    (if one is open) cannot compute within their memory limits (:func:`~bananagrid.engine.cluster.worker_need`):
+    Dask would pause such a worker, or kill and restart it, block after block."""
+    distributed = sys.modules.get("distributed")
+    if distributed is None:  # no client can be open
+        return
+    try:
+        client = distributed.default_client()
+    except ValueError:
+        return
+    if client.asynchronous:  # its cached information has no workers; the caller awaits its own checks
+        return
+    limits = [w.get("memory_limit") or 0 for w in client.scheduler_info()["workers"].values()]
+    limits = [limit for limit in limits if limit > 0]  # 0: no limit
+    if not limits:
+        return
+    need = worker_need(chunks, dtype, computed_in)
+    minimum = minimum_memory_limit(need)
+    if min(limits) < minimum:
+        raise BananagridError(
+            f"chunks = {show(tuple(chunks))}: a worker needs about {format_bytes(need)} for a block of "
+            f"{chunks[0]} x {chunks[1]} cells, so a memory limit of at least {format_bytes(minimum)}; this cluster's "
+            f"workers have {format_bytes(min(limits))}: give them more memory or use smaller chunks"
+        )
 
 
 def tile_bounds(grid: Grid, rows: tuple[int, int], cols: tuple[int, int]) -> tuple[float, float, float, float]:
@@ -192,6 +223,7 @@ def rasterise_tiles(model: DensityModel, grid: Grid, chunks=DEFAULT_CHUNK, *, dt
     if ctx.cpu:
         check_work(model.work_estimate(computed, extent), default_threads(),
                    f"{type(model).__name__}: {computed:,} cells in tiles", limit=max_seconds, option="max_seconds=S")
+    check_cluster_memory((cy, cx), asked, ctx.dtype)
     plan = TilePlan(model, grid, asked.name, ctx.dtype.name, ctx.device, (cy, cx), skipped, uuid.uuid4().hex)
     values = da.map_blocks(
         _block_task, dask.delayed(plan, pure=True), chunks=(tuple(sizes_y), tuple(sizes_x)), dtype=asked,

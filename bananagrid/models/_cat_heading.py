@@ -252,7 +252,8 @@ def _rows(r_lo: float, r_hi: float, dr: float) -> int:
     """Lattice rows for ranges [r_lo, r_hi] at spacing dr, two rows of margin each side."""
     start = r_lo - 2.0 * dr
     r0 = 0.0 if start < 2.0 * dr else start
-    return max(4, int(math.ceil((r_hi + 2.0 * dr - r0) / dr)) + 1)
+    rows = (r_hi + 2.0 * dr - r0) / dr  # inf for points near 1e300 and a tiny banana: capped, then refused
+    return max(4, int(math.ceil(min(rows, 2.0**62))) + 1)
 
 
 def _build(model: MotionModel, r_lo, r_hi, dr, n_theta, refinement, threads) -> HeadingTable:

@@ -14,11 +14,12 @@ from dataclasses import fields
 import numpy as np
 
 from ..domains.pose import Pose
+from ..engine import memory
 from ..engine.points import evaluate_points
 from ..protocol import CellPlan
 from ..validate import BananagridError
 
-__all__ = ["Model", "check_n", "check_rng", "RANGE_SDS", "ZERO_BELOW", "PEAK_PROBES"]
+__all__ = ["Model", "check_n", "check_rng", "RANGE_SDS", "ZERO_BELOW", "PEAK_PROBES", "SAMPLE_BYTES"]
 
 #: Rays scan a model out to this many of its widest SDs beyond where its mass lies (the density
 #: there is below e^-72 of its peak along the ray).
@@ -44,11 +45,32 @@ def check_rng(rng) -> np.random.Generator:
     return rng
 
 
-def check_n(n) -> int:
-    """``n`` as a non-negative int."""
+#: Peak bytes per sample of a model's ``sample`` when its class does not say (``sample_bytes``):
+#: the largest measured, BearingFix's 448 (three bearings; tracemalloc's peak over
+#: ``sample(10**6)``, which counts NumPy's arrays), rounded up.
+SAMPLE_BYTES = 512
+
+
+def check_n(n, sample_bytes: float = SAMPLE_BYTES) -> int:
+    """``n`` as a non-negative int whose ``n * sample_bytes`` fit in the memory available.
+
+    Raises
+    ------
+    BananagridError
+        Not a count, or samples that would not fit: one line with the bytes they would take
+        (an allocation that cannot be had is a MemoryError deep inside NumPy, or swapping).
+    """
     if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < 0:
         raise BananagridError(f"n = {n!r}: expected a non-negative integer")
-    return int(n)
+    n = int(n)
+    need = float(n) * sample_bytes
+    available = memory.available_bytes()
+    if available is not None and need > available:
+        raise BananagridError(
+            f"n = {n:,}: sample(n) would take about {memory.format_bytes(need)} ({sample_bytes:g} bytes a sample), "
+            f"more than the {memory.format_bytes(available)} available: draw fewer samples at a time"
+        )
+    return n
 
 
 class Model:
@@ -59,6 +81,9 @@ class Model:
 
     #: A probability density (see :attr:`bananagrid.protocol.DensityModel.integrates_to_one`).
     integrates_to_one: bool = True
+
+    #: Peak bytes per sample of :meth:`sample` (measured; :func:`check_n` refuses what would not fit).
+    sample_bytes: float = SAMPLE_BYTES
 
     #: Seconds of one CPU core per cell assumed by the default :meth:`work_estimate`: above the
     #: cost of the models without a scan or a table (the polar and bearing kernels take

@@ -145,6 +145,11 @@ class UniformSpeed:
         hi = non_negative("speeds.v_max", self.v_max)
         if hi <= lo:
             raise BananagridError(f"speeds.v_max = {hi!r}: must be > v_min = {lo!r}")
+        if not hi < MAX_SPEED:  # the quadrature's panels and the ranges v t stay finite
+            raise BananagridError(f"speeds.v_max = {hi!r}: must be below {MAX_SPEED:g} m/s")
+        if not hi - lo >= MIN_SPEED_WIDTH:  # its density 1 / (v_max - v_min) stays finite
+            raise BananagridError(f"speeds.v_max = {hi!r}: the law's width {hi - lo!r} m/s is below "
+                                  f"{MIN_SPEED_WIDTH:g} m/s; give one speed as speeds = [v]")
         object.__setattr__(self, "v_min", lo)
         object.__setattr__(self, "v_max", hi)
 
@@ -164,6 +169,9 @@ class UniformSpeed:
 #: Fastest speed a continuous speed law may reach, m/s: its quadrature panels and the ranges
 #: v t stay normal float64 numbers.
 MAX_SPEED = 1e100
+#: Narrowest continuous speed law, m/s (width of a uniform law or table, SD of a normal one):
+#: its density and quadrature weights stay finite.
+MIN_SPEED_WIDTH = 1e-100
 #: Smallest SD of a normal speed law relative to its mean: the law's quadrature spans 20 SDs,
 #: which must hold many float64 steps of the mean (2.2e-16 of it).
 MIN_RELATIVE_SD = 1e-9
@@ -191,6 +199,9 @@ class NormalSpeed:
                 f"speeds.sd = {self.sd!r}: below {MIN_RELATIVE_SD:g} of the mean {self.mean!r} the law is one "
                 "speed; give it as speeds = [mean]"
             )
+        if not self.sd >= MIN_SPEED_WIDTH:  # its density 1 / sd stays finite
+            raise BananagridError(f"speeds.sd = {self.sd!r}: must be at least {MIN_SPEED_WIDTH:g} m/s; "
+                                  "give one speed as speeds = [mean]")
         if not abs(self.mean) + NORMAL_SPAN * self.sd < MAX_SPEED:
             raise BananagridError(
                 f"speeds.sd = {self.sd!r}: with mean = {self.mean!r} the law reaches "
@@ -240,6 +251,11 @@ class TabulatedSpeed:
             )
         if v[0] < 0 or np.any(np.diff(v) <= 0):
             raise BananagridError(f"speeds.speeds = {v.tolist()!r}: must be >= 0 and strictly increasing")
+        if not v[-1] < MAX_SPEED:  # the quadrature's panels and the ranges v t stay finite
+            raise BananagridError(f"speeds.speeds = {v.tolist()!r}: must be below {MAX_SPEED:g} m/s")
+        if not v[-1] - v[0] >= MIN_SPEED_WIDTH:  # the normalised density stays finite
+            raise BananagridError(f"speeds.speeds = {v.tolist()!r}: the table spans less than {MIN_SPEED_WIDTH:g} m/s; "
+                                  "give one speed as speeds = [v]")
         if np.any(f < 0) or not np.any(f > 0):
             raise BananagridError(f"speeds.density = {f.tolist()!r}: must be >= 0 and not all zero")
         mass = float(np.sum(0.5 * (f[1:] + f[:-1]) * np.diff(v)))

@@ -507,6 +507,8 @@ class CAT(MotionModel):
     pose: Pose = field(default_factory=Pose)
 
     kind = "cat"
+    #: Peak bytes per sample of :meth:`sample`: 105 measured (tracemalloc, ``sample(10**6)``), rounded up.
+    sample_bytes = 160
     #: float32 agreement with float64 where the density exceeds 1e-6 of its peak, beyond the
     #: density's change over the point's float32 rounding (``DensityModel.float32_rtol``).
     float32_rtol = 2e-4
@@ -709,7 +711,7 @@ class CAT(MotionModel):
 
         The turn rate is not truncated here (the truncated mass is below 1e-15 by default).
         """
-        n, rng = check_n(n), check_rng(rng)
+        n, rng = check_n(n, self.sample_bytes), check_rng(rng)
         a = rng.normal(0.0, self.sigma_a, n)
         omega = rng.normal(0.0, self.sigma_omega, n)
         local = cat_position(self.v0, self.t, a, omega)

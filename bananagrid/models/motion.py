@@ -83,16 +83,28 @@ class MotionModel(Model):
     def _check_scales(self) -> None:
         """The derived scales the models compute with (the reach v0 t, the range SD sigma_a t^2,
         the turn sigma_omega t, (v0 / sigma_a)^2 of P_sigma (11), and their products) must be
-        normal float64 numbers: values near 1e308 or 1e-308 would overflow or vanish in them."""
-        v0, t, sa, sw = self.v0, self.t, self.sigma_a, self.sigma_omega
-        derived = {
-            "v0 t": v0 * t, "sigma_a t^2": sa * t * t, "sigma_omega t": sw * t, "t^2": t * t,
-            "(v0 / sigma_a)^2": (v0 / sa) ** 2 if math.isfinite(v0 / sa) and v0 / sa < 1e150 else math.inf,
-            "(v0 t)^2": (v0 * t) ** 2 if v0 * t < 1e150 else math.inf,
+        normal float64 numbers: values near 1e308 or 1e-308 would overflow or vanish in them.
+        The squares the kernels' coefficients take (sigma_omega^2, (sigma_omega t)^2,
+        sigma_a^2 t^3 / v0, and with heading noise (sigma_heading sigma_omega t)^2) must stay
+        within [1e-300, 1e300]. Checked in log10, where nothing overflows."""
+        v0, t, sa, sw, sh = self.v0, self.t, self.sigma_a, self.sigma_omega, self.sigma_heading
+        lv, lt, la, lw = (math.log10(x) for x in (v0, t, sa, sw))
+        derived = {  # log10 of each, and whether it must keep its square normal (1e-150..1e300)
+            "v0 t": lv + lt, "sigma_a t^2": la + 2 * lt, "sigma_omega t": lw + lt, "t^2": 2 * lt,
+            "(v0 / sigma_a)^2": 2 * (lv - la), "(v0 t)^2": 2 * (lv + lt),
         }
-        bad = [name for name, value in derived.items() if not 1e-150 <= value <= 1e300]  # squares stay normal
+        squares = {
+            "sigma_omega^2": 2 * lw, "(sigma_omega t)^2": 2 * (lw + lt), "sigma_a^2 t^3 / v0": 2 * la + 3 * lt - lv,
+        }
+        if sh > 0.0:
+            squares["(sigma_heading sigma_omega t)^2"] = 2 * (math.log10(sh) + lw + lt)
+        bad = [name for name, e in derived.items() if not -150.0 <= e <= 300.0]
+        bad += [name for name, e in squares.items() if not -300.0 <= e <= 300.0 and not (
+            name.startswith("(sigma_heading") and e < -300.0)]  # a vanishing heading term is no heading noise
         if bad:
             given = {"v0": v0, "t": t, "sigma_a": sa, "sigma_omega": sw}
+            if any(name.startswith("(sigma_heading") for name in bad):
+                given["sigma_heading"] = sh
             worst = max(given, key=lambda name: abs(math.log10(given[name])))  # the extreme one
             others = ", ".join(f"{name} = {value!r}" for name, value in given.items() if name != worst)
             raise BananagridError(

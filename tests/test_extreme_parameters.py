@@ -1,0 +1,312 @@
+"""Public constructors and verbs at the extremes of float64 and of memory.
+
+Parameters anywhere from the smallest subnormal (5e-324) through 1e-308 and 1 to 1e308 and the
+largest float, of either sign; sample sizes up to 10**15. Each call either succeeds
+with finite results or raises :class:`bananagrid.BananagridError` with one line that names the
+argument: never OverflowError, MemoryError, ZeroDivisionError, a NumPy or thread-pool
+ValueError, FloatingPointError or a RuntimeWarning (the sweeps turn RuntimeWarnings into
+errors). Derandomised property-based sweeps; each example is bounded in work (small lattices,
+a few points, ten samples).
+"""
+
+from __future__ import annotations
+
+import math
+import warnings
+
+import numpy as np
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+import bananagrid as bg
+from bananagrid.engine import memory
+from bananagrid.models.base import SAMPLE_BYTES
+
+TINY = float(np.finfo(float).smallest_subnormal)  # 5e-324
+HUGE = float(np.finfo(float).max)  # 1.8e308
+#: Magnitudes at the edges of float64: subnormals, the smallest normal, and the largest values.
+SPECIAL = [TINY, 1e-323, 1e-320, 1e-310, 2.2250738585072014e-308, 1e-308, 1e-300, 1e-30, 1e-6, 0.5, 1.0,
+           3.0, 1e6, 1e30, 1e300, 1e307, 1e308, HUGE]
+MAGNITUDES = st.one_of(st.sampled_from(SPECIAL),
+                       st.floats(min_value=TINY, max_value=HUGE, allow_subnormal=True),
+                       st.floats(min_value=1e-3, max_value=1e4))  # ordinary values, so that some calls succeed
+SIGNED = st.one_of(MAGNITUDES, MAGNITUDES.map(lambda v: -v), st.just(0.0))
+#: Sizes from 0 to 10**15 (memory checks) and small ones (that run).
+SIZES = st.one_of(st.sampled_from([0, 1, 10, 10**9, 10**12, 10**13, 10**15]), st.integers(0, 10**15))
+
+SWEEP = settings(max_examples=120, deadline=None, derandomize=True, database=None,
+                 suppress_health_check=list(HealthCheck))
+#: For the sweeps that run kernels on each model (its pdf, samples): fewer, costlier examples.
+MODEL_SWEEP = settings(SWEEP, max_examples=40)
+
+
+def refused_or(call, names):
+    """``call()``, or None when it raises a one-line BananagridError naming one of ``names``;
+    RuntimeWarnings (NumPy's overflow, invalid values, division by zero) raise and fail the test;
+    BananagridWarnings are allowed."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", RuntimeWarning)
+        warnings.simplefilter("ignore", bg.BananagridWarning)
+        try:
+            return call()
+        except bg.BananagridError as exc:
+            message = str(exc)
+            assert "\n" not in message, message
+            assert any(name in message for name in names), (names, message)
+            return None
+
+
+def finite(*arrays):
+    for a in arrays:
+        assert np.all(np.isfinite(np.asarray(a, dtype=float))), a
+
+
+# -- domains ---------------------------------------------------------------------------------
+
+
+@SWEEP
+@given(SIGNED, SIGNED, MAGNITUDES, MAGNITUDES, st.integers(1, 4), st.integers(1, 4))
+def test_grids_at_the_extremes(x0, y0, dx, dy, nx, ny):
+    grid = refused_or(lambda: bg.Grid(origin=(x0, y0), dx=dx, dy=dy, nx=nx, ny=ny), ["origin", "dx", "dy", "grid"])
+    if grid is not None:
+        finite(grid.x, grid.y, grid.extent, grid.cell_area)
+        assert grid.cell_area > 0.0
+
+
+@SWEEP
+@given(SIGNED, MAGNITUDES, SIGNED, MAGNITUDES, MAGNITUDES)
+def test_grids_from_bounds_at_the_extremes(x0, width, y0, height, step):
+    grid = refused_or(lambda: bg.Grid.from_bounds(x=(x0, x0 + width), y=(y0, y0 + height), step=step),
+                      ["x", "y", "step", "grid", "dx", "dy"])
+    if grid is not None and grid.nx * grid.ny <= 10**6:
+        finite(grid.x, grid.y, grid.extent)
+
+
+@SWEEP
+@given(MAGNITUDES, MAGNITUDES, MAGNITUDES, st.floats(1e-3, 2 * math.pi), MAGNITUDES)
+def test_polar_lattices_at_the_extremes(r_min, span, range_step, bearing_span, bearing_step):
+    lattice = refused_or(
+        lambda: bg.PolarLattice(ranges=(r_min, r_min + span), range_step=range_step, bearings=(0.0, bearing_span),
+                                bearing_step=bearing_step),
+        ["ranges", "range_step", "bearings", "bearing_step", "polar lattice"])
+    if lattice is not None:
+        assert 1 <= lattice.n_range * lattice.n_bearing <= 2**31
+        if lattice.n_range * lattice.n_bearing <= 10**5:
+            finite(lattice.range_edges, lattice.bearing_edges, lattice.cell_areas)
+
+
+@SWEEP
+@given(st.sampled_from(["line", "plane", "frustum"]), MAGNITUDES, st.floats(0.0, 1.0), MAGNITUDES, MAGNITUDES)
+def test_angular_lattices_at_the_extremes(geometry, h, thickness, azimuth_step, elevation_step):
+    """Steps down to 5e-324 (a count that overflows, or too many cells) and depths to 1e308."""
+    def build():
+        kwargs = {"dh": thickness * h} if geometry == "frustum" else {}
+        if geometry != "line":
+            kwargs["elevation_step"] = elevation_step
+        return bg.AngularLattice(geometry, h=h, azimuth_step=azimuth_step, **kwargs)
+
+    lattice = refused_or(build, ["azimuth_step", "elevation_step", "h", "dh", "lattice"])
+    if lattice is not None:
+        assert math.prod(lattice.shape) <= 2**31
+        if math.prod(lattice.shape) <= 10**5:
+            finite(lattice.azimuths)
+
+
+@MODEL_SWEEP
+@given(st.sampled_from(["line", "plane", "frustum"]), MAGNITUDES, MAGNITUDES, SIGNED, MAGNITUDES, MAGNITUDES)
+def test_cell_probabilities_at_the_extremes(geometry, h, dh, shift, size, depth):
+    """A uniform room and a mixture under lattices with depths and slab thicknesses at the extremes
+    (a frustum of dh = 1e-308 once ended in a thread pool's "max_workers must be greater than 0")."""
+    dim = {"line": 1, "plane": 2, "frustum": 3}[geometry]
+    axes = {"x": (shift - size, shift + size), "y": (-size, size), "z": (-depth - size, -depth)}
+
+    def build():
+        room = bg.UniformPresence(bg.Region(**{k: axes[k] for k in "xyz"[:dim]}))
+        kwargs = {"dh": dh} if geometry == "frustum" else {}
+        lattice = bg.AngularLattice(geometry, h=h, azimuth_step=math.pi / 4,
+                                    elevation_step=None if geometry == "line" else math.pi / 8, **kwargs)
+        return bg.cell_probabilities(room, lattice)
+
+    cells = refused_or(build, ["h", "dh", "region", "x", "y", "z", "cell", "lattice", "room"])
+    if cells is not None:
+        finite(cells.prob)
+        assert np.all(cells.prob >= 0.0) and float(np.sum(cells.prob)) <= 1.0 + 1e-12
+
+
+@SWEEP
+@given(SIGNED, MAGNITUDES, SIGNED, MAGNITUDES, SIGNED, MAGNITUDES)
+def test_regions_and_poses_at_the_extremes(x0, wx, y0, wy, origin, heading):
+    region = refused_or(lambda: bg.Region(x=(x0, x0 + wx), y=(y0, y0 + wy)), ["x", "y", "region"])
+    if region is not None:
+        finite(region.bounds, region.size)
+        assert region.size > 0.0
+    pose = refused_or(lambda: bg.Pose(origin=(origin, -origin), heading=heading), ["origin", "heading"])
+    if pose is not None:
+        finite(pose.to_world(np.array([[1.0, 2.0]])))
+
+
+# -- models ----------------------------------------------------------------------------------
+
+#: Points to 1e300 m (a point farther than float64 can measure from a model's origin, near
+#: 1.8e308 on both axes, is not swept: see the README).
+POINTS_X = [0.0, 1.0, -5.0, 1e4, 1e300, -1e300]
+POINTS_Y = [0.0, 2.0, 3.0, -1e4, -1e300, 1e300]
+
+
+def exercise(build, names):
+    """Build a model; if it builds, its densities at ordinary and extreme points and ten samples
+    are finite (densities >= 0)."""
+    model = refused_or(build, names)
+    if model is None:
+        return
+    density = refused_or(lambda: model.pdf(POINTS_X, POINTS_Y), ["x", "y", "points"])
+    if density is not None:
+        finite(density)
+        assert np.all(density >= 0.0)
+    samples = refused_or(lambda: model.sample(10, np.random.default_rng(0)), ["n", "sample"])
+    if samples is not None:
+        assert samples.shape == (10, 2)
+        finite(samples)
+
+
+MOTION = ["v0", "t", "sigma_a", "sigma_omega", "sigma_heading", "sigma"]
+
+
+@MODEL_SWEEP
+@given(MAGNITUDES, MAGNITUDES, MAGNITUDES, MAGNITUDES, st.one_of(st.just(0.0), MAGNITUDES),
+       st.sampled_from(["cat", "rough", "improved"]))
+def test_motion_models_at_the_extremes(v0, t, sigma_a, sigma_omega, sigma_heading, kind):
+    def build():
+        if kind == "cat":
+            return bg.CAT(v0=v0, t=t, sigma_a=sigma_a, sigma_omega=sigma_omega, sigma_heading=sigma_heading)
+        return bg.PolarBanana(v0=v0, t=t, sigma_a=sigma_a, sigma_omega=sigma_omega, variant=kind,
+                              sigma_heading=sigma_heading)
+
+    exercise(build, MOTION)
+
+
+SPEEDS = ["speeds", "v_min", "v_max", "mean", "sd", "density", "t"]
+
+
+@MODEL_SWEEP
+@given(st.sampled_from(["uniform", "normal", "table", "list"]), MAGNITUDES, MAGNITUDES, st.floats(1.0, 1e4),
+       st.floats(1.0, 1e6))
+def test_butterly_speed_laws_at_the_extremes(law, low, width, t, sd):
+    """Speed laws reaching from 5e-324 up to 1.8e308 m/s (a uniform law to 1e308 once ended in
+    OverflowError in its quadrature): continuous laws, tables and lists of speeds (ordinary
+    times and spreads: Butterly's own numerics at the extremes are swept in test_api_fuzz)."""
+    def speeds():
+        if law == "uniform":
+            return bg.UniformSpeed(low, low + width)
+        if law == "normal":
+            return bg.NormalSpeed(mean=low, sd=width)
+        if law == "table":
+            return bg.TabulatedSpeed([low, low + width], [1.0, 0.5])
+        return [low, low + width]
+
+    exercise(lambda: bg.Butterly(mean=(0.0, 0.0), cov=[[sd * 1.0, 0.0], [0.0, sd]], speeds=speeds(), t=t),
+             SPEEDS + ["cov", "mean", "weights"])
+
+
+@MODEL_SWEEP
+@given(MAGNITUDES, SIGNED, MAGNITUDES, MAGNITUDES)
+def test_bearing_fixes_at_the_extremes(baseline, offset, sigma_1, sigma_2):
+    def build():
+        sensors = [[0.0, 0.0], [baseline, 0.0]]
+        target = np.array([0.5 * baseline + offset, baseline])
+        bearings = [math.atan2(target[0] - s[0], target[1] - s[1]) for s in sensors]
+        return bg.BearingFix(sensors=sensors, bearings=bearings, sigmas=[sigma_1, sigma_2])
+
+    exercise(build, ["sensors", "bearings", "sigmas"])
+
+
+# -- sample sizes ----------------------------------------------------------------------------
+
+POSE = bg.Pose(origin=(150.0, -80.0), heading=0.4)
+#: One model of every class that samples.
+SAMPLERS = {
+    "cat": bg.CAT(v0=280.0, t=10.0, sigma_a=5 / 3, sigma_omega=math.pi / 54, pose=POSE),
+    "polar": bg.PolarBanana(v0=280.0, t=10.0, sigma_a=5 / 3, sigma_omega=math.pi / 54, pose=POSE),
+    "butterly": bg.Butterly(mean=(300.0, 900.0), cov=[[900.0, 200.0], [200.0, 400.0]],
+                            speeds=bg.NormalSpeed(mean=4.0, sd=0.5), t=120.0),
+    "bearing": bg.BearingFix(sensors=[(-2000.0, 0.0), (2500.0, 300.0)], bearings=[0.6, -0.5], sigmas=[0.02, 0.03]),
+    "mixture": bg.GaussianMixture(weights=[0.5, 0.5], means=[[0.0, 0.0], [1.0, 1.0]], covs=[np.eye(2)] * 2),
+    "uniform": bg.UniformPresence(bg.Region(x=(0.0, 1.0), y=(0.0, 2.0), z=(-3.0, -1.0))),
+}
+
+
+@pytest.mark.parametrize("name", list(SAMPLERS))
+@SWEEP
+@given(n=SIZES)
+def test_sample_sizes_that_do_not_fit_are_refused_with_the_bytes(name, n, monkeypatch):
+    """Up to 10**15 samples: refused, naming n and the bytes, when they would not fit in the
+    memory available (held at 64 MB here, so that no example allocates more), else drawn."""
+    available = 64 * 10**6
+    monkeypatch.setattr(memory, "available_bytes", lambda: available)
+    model = SAMPLERS[name]
+    bytes_per_sample = getattr(model, "sample_bytes", SAMPLE_BYTES)
+    if n * bytes_per_sample > available:
+        with pytest.raises(bg.BananagridError) as raised:
+            model.sample(n, np.random.default_rng(0))
+        message = str(raised.value)
+        assert message.startswith(f"n = {n:,}: sample(n) would take about "
+                                  f"{memory.format_bytes(n * bytes_per_sample)}") and "64 MB available" in message
+    elif n <= 1000:  # a size that fits and is quick: drawn
+        assert len(model.sample(n, np.random.default_rng(0))) == n
+
+
+@pytest.mark.parametrize("name", list(SAMPLERS))
+@pytest.mark.parametrize("n", [-1, 1.5, "10", True, None])
+def test_sample_sizes_that_are_not_counts_are_refused(name, n):
+    with pytest.raises(bg.BananagridError, match=r"^n = .*: expected a non-negative integer"):
+        SAMPLERS[name].sample(n, np.random.default_rng(0))
+
+
+def test_sample_memory_figures_cover_the_measured_peaks():
+    """The bytes per sample each class declares are at least its measured peak (tracemalloc over
+    sample(200,000), which NumPy's allocations report to), so the refusal is never too late."""
+    import tracemalloc
+
+    for name, model in SAMPLERS.items():
+        model.sample(10, np.random.default_rng(0))
+        tracemalloc.start()
+        try:
+            model.sample(200_000, np.random.default_rng(1))
+            peak = tracemalloc.get_traced_memory()[1]
+        finally:
+            tracemalloc.stop()
+        assert peak / 200_000 <= getattr(model, "sample_bytes", SAMPLE_BYTES), (name, peak / 200_000)
+
+
+# -- radial laws and batches -----------------------------------------------------------------
+
+CAT = SAMPLERS["cat"]
+
+
+@MODEL_SWEEP
+@given(SIGNED, st.one_of(MAGNITUDES, MAGNITUDES.map(lambda v: -v)), st.integers(1, 4),
+       st.one_of(st.none(), MAGNITUDES))
+def test_radial_laws_at_the_extremes(start, step, count, r_max):
+    """Angles a subnormal step apart (5e-324), anywhere up to 1.8e308 rad, ranges to 1.8e308 m."""
+    angles = start + step * np.arange(count) if math.isfinite(start + step * count) else [start]
+    moments = refused_or(lambda: bg.radial_moments(CAT, angles, r_max=r_max), ["angles", "angle", "r_max"])
+    if moments is not None:
+        finite(moments.mean, moments.sd, moments.mass)
+        assert np.all(moments.sd >= 0.0) and np.all(moments.mass >= 0.0)
+    law = refused_or(lambda: bg.radial_density(CAT, float(start), r_max=r_max), ["angle", "r_max"])
+    if law is not None:
+        finite(law.density, law.normal, law.mean, law.sd)
+
+
+@MODEL_SWEEP
+@given(st.one_of(st.sampled_from([0.0, TINY, 1e-308, 1e308, HUGE, 1.0]), MAGNITUDES))
+def test_radial_scales_of_extreme_models(scale):
+    """Motion models whose length scales are subnormal or huge: the rays' nodes stay countable."""
+    def moments():
+        model = bg.PolarBanana(v0=scale, t=1.0, sigma_a=scale, sigma_omega=0.1)
+        return bg.radial_moments(model, [0.0, 0.1])
+
+    result = refused_or(moments, MOTION + ["angles", "angle", "r_max"])
+    if result is not None:
+        finite(result.mean, result.sd, result.mass)
