@@ -204,3 +204,21 @@ def pdf_polar_cell(model, point, cell, seams=(), eps=1e-10):
         warnings.simplefilter("ignore", integrate.IntegrationWarning)
         value, _ = integrate.quad(inner, t0, t1, points=breaks or None, epsabs=0.0, epsrel=eps, limit=200)
     return value
+
+
+# --- cells of a grid ----------------------------------------------------------------------------
+
+
+def grid_cells(grid):
+    """``(i, j, (x0, x1, y0, y1))`` of every cell of ``grid``, rows south to north."""
+    x0, _, y0, _ = grid.extent
+    for i in range(grid.ny):
+        for j in range(grid.nx):
+            yield i, j, (x0 + grid.dx * j, x0 + grid.dx * (j + 1), y0 + grid.dy * i, y0 + grid.dy * (i + 1))
+
+
+def cells_around(point, cell, n=3):
+    """A grid of n x n cells of side ``cell`` centred on ``point`` (the middle one holds it)."""
+    import bananagrid as bg
+
+    return bg.Grid(origin=(point[0] - 0.5 * n * cell, point[1] - 0.5 * n * cell), dx=cell, dy=cell, nx=n, ny=n)

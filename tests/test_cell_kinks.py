@@ -37,22 +37,10 @@ RTOL = 1e-8
 ATOL = 1e-14
 
 
-def _cells(grid):
-    x0, _, y0, _ = grid.extent
-    for i in range(grid.ny):
-        for j in range(grid.nx):
-            yield i, j, (x0 + grid.dx * j, x0 + grid.dx * (j + 1), y0 + grid.dy * i, y0 + grid.dy * (i + 1))
-
-
-def _around(point, cell, n=3):
-    """n x n cells of side ``cell`` centred on ``point`` (the middle one holds it)."""
-    return bg.Grid(origin=(point[0] - 0.5 * n * cell, point[1] - 0.5 * n * cell), dx=cell, dy=cell, nx=n, ny=n)
-
-
 def _check(model, grid, oracle, min_checked=1):
     got = bg.rasterise(model, grid, quantity="probability").values
     checked = 0
-    for i, j, cell in _cells(grid):
+    for i, j, cell in cell_oracle.grid_cells(grid):
         want = oracle(cell)
         assert abs(got[i, j] - want) <= RTOL * want + ATOL, (cell, got[i, j], want, got[i, j] / want - 1)
         checked += want > 1e-6
@@ -94,7 +82,7 @@ def test_polar_cells_on_the_seam_behind_the_start(name):
     checked = 0
     for distance in (0.0, 0.05 * v0t, 0.3 * v0t):
         for side in (0.02 * v0t, 0.1 * v0t):
-            checked += _check(model, _around(_behind(model, distance), side), _polar_oracle(model, seams),
+            checked += _check(model, cell_oracle.cells_around(_behind(model, distance), side), _polar_oracle(model, seams),
                               min_checked=0)
     assert checked >= 6  # cells that hold mass, not only tails
 
@@ -123,7 +111,7 @@ def test_improved_cells_at_the_p_sigma_edge(params):
     assert len(seams) == 3
     scale = math.dist(point, model.pose.origin)
     for side in (0.05 * scale, 0.15 * scale, 0.5 * scale):
-        _check(model, _around(point, side), _polar_oracle(model, seams), min_checked=3)
+        _check(model, cell_oracle.cells_around(point, side), _polar_oracle(model, seams), min_checked=3)
 
 
 def test_polar_cells_at_the_origin_with_the_seam():
@@ -159,7 +147,7 @@ def test_polar_kinks_over_the_domain(variant, sigma_phi, range_sd, heading, wher
     else:
         point = _behind(model, 0.2 * v0t)
     cell = side * v0t
-    grid = _around((point[0] + offset * cell, point[1] - 0.37 * offset * cell), cell)
+    grid = cell_oracle.cells_around((point[0] + offset * cell, point[1] - 0.37 * offset * cell), cell)
     _check(model, grid, _polar_oracle(model, model.seams()[:, 2]), min_checked=0)
 
 
@@ -175,11 +163,11 @@ def test_polar_heading_cells_at_the_seam_and_the_edge():
     oracle = lambda cell: cell_oracle.pdf_polar_cell(model, (0.0, 0.0), cell, seams)  # noqa: E731
     mean, _ = model.conditional_moments([edge - 1e-3])
     point = (float(mean[0]) * math.sin(edge), float(mean[0]) * math.cos(edge))
-    _check(model, _around(point, 4.0, n=2), oracle)
+    _check(model, cell_oracle.cells_around(point, 4.0, n=2), oracle)
     # beyond the edge the improved density is 0, behind the start too: the seam there on a rough one
     rough = bg.PolarBanana(v0=1.0, t=10.0, sigma_a=0.5, sigma_omega=0.3, variant="rough", sigma_heading=0.4)
     seams = rough.seams()[:, 2]
-    _check(rough, _around(_behind(rough, 8.0), 4.0, n=2),
+    _check(rough, cell_oracle.cells_around(_behind(rough, 8.0), 4.0, n=2),
            lambda cell: cell_oracle.pdf_polar_cell(rough, (0.0, 0.0), cell, seams))
 
 
@@ -218,7 +206,7 @@ def test_bearing_cells_at_a_station_and_behind_it():
                          variant="linear").seams().shape == (0, 3)
     model = bg.BearingFix(sensors=[(0.0, 0.0), (1000.0, 0.0)], bearings=[0.5, -0.4], sigmas=[0.5, 0.6])
     oracle = lambda cell: cell_oracle.pdf_polar_cell(model, (0.0, 0.0), cell, [0.5 - math.pi])  # noqa: E731
-    _check(model, _around((0.0, 0.0), 60.0, n=2), oracle)
+    _check(model, cell_oracle.cells_around((0.0, 0.0), 60.0, n=2), oracle)
 
 
 # --- Butterly: smooth everywhere --------------------------------------------------------------
@@ -229,4 +217,4 @@ def test_butterly_cells_about_its_ring_and_start():
     model = bg.Butterly(mean=(50.0, -20.0), cov=[[100.0**2, 3000.0], [3000.0, 80.0**2]], speeds=[0.0, 2.0],
                         weights=[0.3, 0.7], t=100.0)
     for point in [(50.0, -20.0), (250.0, -20.0)]:
-        _check(model, _around(point, 60.0, n=2), lambda cell: cell_oracle.pdf_cell(model, cell, eps=1e-15))
+        _check(model, cell_oracle.cells_around(point, 60.0, n=2), lambda cell: cell_oracle.pdf_cell(model, cell, eps=1e-15))

@@ -39,17 +39,6 @@ CAT_ATOL = 1e-12
 QUADRATURE_RTOL = 1e-8
 
 
-def _cells(grid):
-    x0, _, y0, _ = grid.extent
-    for i in range(grid.ny):
-        for j in range(grid.nx):
-            yield i, j, (x0 + grid.dx * j, x0 + grid.dx * (j + 1), y0 + grid.dy * i, y0 + grid.dy * (i + 1))
-
-
-def _around(point, cell, n=3):
-    return bg.Grid(origin=(point[0] - 0.5 * n * cell, point[1] - 0.5 * n * cell), dx=cell, dy=cell, nx=n, ny=n)
-
-
 # --- CAT: exact in the acceleration ----------------------------------------------------------
 
 
@@ -63,9 +52,9 @@ def test_cat_caustic_cells_against_the_oracle(name):
     checked = 0
     for fraction in (1e-3, 1e-2):
         for point in caustics.fold_points(params, n_folds=2, distances=(1e-3,))[::2]:
-            grid = _around(point, fraction * v0t)
+            grid = cell_oracle.cells_around(point, fraction * v0t)
             got = bg.rasterise(model, grid, quantity="probability").values
-            for i, j, cell in _cells(grid):
+            for i, j, cell in cell_oracle.grid_cells(grid):
                 want = cell_oracle.cat_cell(model, cell)
                 assert abs(got[i, j] - want) <= CAT_RTOL * want + CAT_ATOL, (fraction, cell, got[i, j], want)
                 checked += want > 1e-6
@@ -167,9 +156,9 @@ def test_cat_cells_over_the_domain(case):
     if len(folds):
         centres.append(pose.to_world(folds[:1])[0])
     for centre in centres:
-        grid = _around(centre, fraction * v0t)
+        grid = cell_oracle.cells_around(centre, fraction * v0t)
         got = bg.rasterise(model, grid, quantity="probability").values
-        for i, j, cell in _cells(grid):
+        for i, j, cell in cell_oracle.grid_cells(grid):
             want = cell_oracle.cat_cell(model, cell)
             assert abs(got[i, j] - want) <= CAT_RTOL * want + CAT_ATOL, (params, pose, cell, got[i, j], want)
 
@@ -190,7 +179,7 @@ def test_butterly_on_a_coarse_grid_never_exceeds_one():
     r = bg.rasterise(model, grid, quantity="probability")
     assert abs(r.mass - 1.0) < 1e-12  # every sub-cell to 1e-10 of the mass; the whole support inside
     assert abs(bg.rasterise(model, grid).mass - 1.0) > 1e-3
-    for i, j, cell in list(_cells(grid))[::7]:
+    for i, j, cell in list(cell_oracle.grid_cells(grid))[::7]:
         want = cell_oracle.pdf_cell(model, cell, eps=1e-15)
         assert abs(r.values[i, j] - want) <= QUADRATURE_RTOL * want + 1e-14, (cell, r.values[i, j], want)
 
@@ -204,16 +193,7 @@ def _polar_dblquad(model, cell, origin):
     corners = [(x0, y0), (x1, y0), (x1, y1), (x0, y1)]
 
     def inside(theta):
-        u, v = math.sin(theta), math.cos(theta)  # bearing clockwise from north
-        lo, hi = 0.0, 1e12
-        for start, step, a, b in ((ox, u, x0, x1), (oy, v, y0, y1)):
-            if abs(step) < 1e-300:
-                if not a <= start <= b:
-                    return 0.0, 0.0
-                continue
-            ra, rb = sorted(((a - start) / step, (b - start) / step))
-            lo, hi = max(lo, ra), min(hi, rb)
-        return lo, max(lo, hi)
+        return cell_oracle.ray_segment((ox, oy), cell, theta)
 
     thetas = [math.atan2(cx - ox, cy - oy) for cx, cy in corners]
     contains = x0 <= ox <= x1 and y0 <= oy <= y1
