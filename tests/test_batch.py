@@ -64,3 +64,19 @@ def test_batch_bad_input(hypotheses):
         rasterise_batch(hypotheses[:2], [grids[0], odd])
     with pytest.raises(bg.BananagridError, match="x, y: points must be finite"):
         pdf_batch(hypotheses[:2], [0.0, math.nan], [0.0, 0.0])
+
+
+@pytest.mark.parametrize("dtype, itemsize", [(np.float64, 8), (np.float32, 4)])
+def test_a_batch_larger_than_memory_is_refused_before_anything_is_made(hypotheses, dtype, itemsize, monkeypatch):
+    """Values that cannot fit are refused with the bytes, before the points or the values are
+    made (a broadcast of 10^12 points allocates nothing until then); the limit is the memory
+    available, here set to 1 GB."""
+    monkeypatch.setattr("bananagrid.engine.memory.available_bytes", lambda: 10**9)
+    with pytest.raises(bg.BananagridError) as info:
+        pdf_batch(hypotheses, np.broadcast_to(0.0, (10**12,)), 0.0, dtype=dtype)
+    assert f"a batch of {len(hypotheses)} hypotheses x 1,000,000,000,000 cells needs about" in str(info.value)
+    assert f"({itemsize} bytes per cell), more than the 1 GB available" in str(info.value)
+    with pytest.raises(bg.BananagridError, match=f"hypotheses x 400,000,000 cells needs .* more than the 1 GB"):
+        rasterise_batch(hypotheses, shape=(20000, 20000), dtype=dtype)
+    # a batch that fits runs
+    assert pdf_batch(hypotheses, [0.0, 10.0], [100.0, 120.0], dtype=dtype).shape == (len(hypotheses), 2)

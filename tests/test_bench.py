@@ -176,3 +176,13 @@ def test_bench_cluster_rows(tmp_path, capsys):
     assert result["records"] == []  # --cluster alone: no kernel rows
     assert bench.main(["--cluster", "--memory-limit", "lots"]) == 2
     assert "--memory-limit: memory_limit = \"lots\"" in capsys.readouterr().err
+
+
+def test_bench_refuses_a_json_target_that_is_not_a_file_before_timing(tmp_path, capsys):
+    """A directory or a link at --json is refused before any timing, one line naming it."""
+    (tmp_path / "dir.json").mkdir()
+    (tmp_path / "link.json").symlink_to(tmp_path / "elsewhere.json")
+    for name, what in (("dir.json", "it is a directory"), ("link.json", "it is a symbolic link")):
+        assert bench.main(["--kernels", "polar-rough", "--json", str(tmp_path / name)]) == 2
+        err = capsys.readouterr().err
+        assert err.count("\n") == 1 and what in err and name in err, err

@@ -28,7 +28,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..atomic import atomic_write, check_writable
+from ..atomic import atomic_write, check_target, check_writable
 from ..domains.angular_lattice import AngularLattice
 from ..domains.grid import Grid
 from ..engine.batch import frame, rasterise_batch
@@ -590,6 +590,7 @@ def main(argv: list[str] | None = None) -> int:
     if args.json and not problems:  # before minutes of timing, not after
         try:
             check_writable(Path(args.json).resolve().parent)
+            check_target(args.json, "JSON records")  # a directory, a link or a pipe there is refused
         except BananagridError as exc:
             problems.append(f"--json {args.json}: {exc}")
     if problems:

@@ -19,6 +19,7 @@ from ..domains.grid import Grid
 from ..protocol import BatchModel
 from ..results import BatchRaster
 from ..validate import BananagridError, positive, positive_int
+from .memory import check_memory
 from .warp_runtime import WarpContext, row_sums
 
 __all__ = ["frame", "frame_bounds", "grids_in", "batch_models", "rasterise_batch", "pdf_batch", "FRAME_SDS"]
@@ -86,8 +87,9 @@ def rasterise_batch(models: Sequence[BatchModel], grids: Sequence[Grid] | None =
             raise BananagridError(f"grids[{k}] = {g!r}: expected a bananagrid.Grid")
         if g.shape != grids[0].shape:
             raise BananagridError(f"grids[{k}]: shape {g.shape}, but grids[0] has {grids[0].shape}; one shape for all")
-    # every grid's cell centres at once, with Grid.x's and Grid.y's arithmetic (the same values)
     ny, nx = grids[0].shape
+    _check_memory(len(models), ny * nx, 0, dtype)
+    # every grid's cell centres at once, with Grid.x's and Grid.y's arithmetic (the same values)
     origins = np.array([g.origin for g in grids])
     steps = np.array([(g.dx, g.dy) for g in grids])
     xs = origins[:, :1] + (np.arange(nx) + 0.5) * steps[:, :1]
@@ -104,10 +106,24 @@ def pdf_batch(models: Sequence[BatchModel], x, y, *, dtype=np.float64, device: s
         bx, by = np.broadcast_arrays(np.asarray(x, dtype=float), np.asarray(y, dtype=float))
     except ValueError:
         raise BananagridError(f"x and y: shapes {np.shape(x)} and {np.shape(y)} do not broadcast") from None
+    _check_memory(len(models), bx.size, bx.size, dtype)  # before anything the size of the points is made
     if not (np.isfinite(bx).all() and np.isfinite(by).all()):
         raise BananagridError("x, y: points must be finite (NaN or inf given)")
     return _launch("points", models, bx.ravel(), by.ravel(), (len(models), bx.size), None,
                    dtype=dtype, device=device, threads=threads)[0]
+
+
+def _check_memory(hypotheses: int, cells: int, points: int, dtype) -> None:
+    """Refuse a batch whose values alone (hypotheses x cells of ``dtype``) and, for points, their
+    float64 coordinates (the points as given and as the kernel's arrays: 32 bytes a point) would
+    not fit in the memory available: a lower bound of what the batch holds, so a refusal is
+    certain, with the bytes (:func:`bananagrid.engine.memory.check_memory`)."""
+    try:
+        itemsize = np.dtype(dtype).itemsize
+    except TypeError:
+        return  # not a dtype: WarpContext says so, naming it
+    check_memory(hypotheses * cells, itemsize, f"a batch of {hypotheses:,} hypotheses x {cells:,} cells",
+                 base=32.0 * points)
 
 
 def _launch(which: str, models: list[BatchModel], x, y, out_shape, rows, *, dtype, device,
