@@ -310,3 +310,55 @@ def test_radial_scales_of_extreme_models(scale):
     result = refused_or(moments, MOTION + ["angles", "angle", "r_max"])
     if result is not None:
         finite(result.mean, result.sd, result.mass)
+
+
+# -- mixtures: means and points anywhere in float64 ------------------------------------------
+
+
+@SWEEP
+@given(SIGNED, SIGNED, SIGNED, SIGNED, MAGNITUDES, st.floats(-0.99, 0.99))
+def test_mixture_densities_with_means_and_points_anywhere(mx, my, px, py, scale, rho):
+    """A mixture's ``pdf`` with means and points anywhere in float64 (as far as +-1.8e308 apart,
+    where their difference overflows): finite and non-negative, 0 where a point lies farther
+    than float64 reaches, and the normal's peak at the mean; or the covariance refused by name."""
+    def call():
+        cov = [[scale * scale, rho * scale * scale], [rho * scale * scale, scale * scale]]
+        mixture = bg.GaussianMixture(weights=[0.5, 0.5], means=[[mx, my], [0.0, 0.0]], covs=[cov, [[1.0, 0.0], [0.0, 1.0]]])
+        points = np.array([[px, py], [mx, my], [-mx, -my]])
+        values = mixture.pdf(points)
+        finite(values)
+        assert np.all(values >= 0.0)
+        if math.isfinite(mx - px) and math.isfinite(my - py) and max(abs(mx - px), abs(my - py)) > 1e200:
+            assert values[0] <= 0.5 / (2.0 * math.pi)  # only the unit component can hold it
+        return values
+
+    refused_or(call, ["covs", "means", "weights"])
+
+
+@pytest.mark.parametrize("name", ["cat", "cat-heading", "rough", "improved", "butterly", "bearing"])
+def test_densities_at_points_as_far_as_float64_reaches(name):
+    """Every model's ``pdf`` at points up to +-1.8e308 from its origin (where distances
+    overflow): finite, no RuntimeWarning, 0 that far out (the exact bearing map excepted: its
+    flat prior keeps a little density along the bearings however far); or (the
+    heading-convolved CAT) one line naming the parameter whose table cannot reach that far."""
+    fig1 = dict(v0=280.0, t=10.0, sigma_a=5.0 / 3.0, sigma_omega=math.pi / 54.0)
+    model = {
+        "cat": lambda: bg.CAT(**fig1),
+        "cat-heading": lambda: bg.CAT(**fig1, sigma_heading=0.1),
+        "rough": lambda: bg.PolarBanana(**fig1, variant="rough"),
+        "improved": lambda: bg.PolarBanana(**fig1, variant="improved"),
+        "butterly": lambda: bg.Butterly(mean=(0.0, 0.0), cov=[[1e4, 0.0], [0.0, 1e4]], speeds=[1.0], t=600.0),
+        "bearing": lambda: bg.BearingFix(sensors=[(0.0, 0.0), (20000.0, 0.0)], bearings=[0.2641, -0.3909],
+                                         sigmas=[0.01, 0.02]),
+    }[name]()
+    far = [HUGE, -HUGE, 1e300, -1e300, 1e308]
+    x = np.array([a for a in far for _ in far])
+    y = np.array([b for _ in far for b in far])
+    # the heading-convolved CAT tabulates its law over the points' ranges: that far, a table
+    # it cannot hold, refused by name
+    values = refused_or(lambda: model.pdf(x, y), ["sigma_heading"] if name == "cat-heading" else [])
+    if values is not None:
+        finite(values)
+        assert np.all(values >= 0.0), values
+        if name != "bearing":
+            assert np.all(values == 0.0), values

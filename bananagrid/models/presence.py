@@ -155,9 +155,16 @@ class GaussianMixture:
         out = np.zeros(p.shape[0])
         for w, mu, cov in zip(self.weights, self.means, self.covs):
             chol = np.linalg.cholesky(cov)
-            u = np.linalg.solve(chol, (p - mu).T)
+            with np.errstate(over="ignore", invalid="ignore"):
+                d = p - mu  # inf where a point and a mean near +-1.8e308 lie apart: no density there
+                far = ~np.all(np.isfinite(d), axis=1)
+                u = np.linalg.solve(chol, np.where(far[:, None], 0.0, d).T)
+                q = np.sum(u * u, axis=0)
+                # beyond ~1e154 SDs u * u overflows, and an overflowing forward substitution can
+                # give inf - inf: either way the point is that far out, where exp gives 0
+                q = np.where(np.isfinite(q), q, np.inf)
             norm = w / ((2.0 * math.pi) ** (self.dim / 2) * np.prod(np.diag(chol)))
-            out += norm * np.exp(-0.5 * np.sum(u * u, axis=0))
+            out += np.where(far, 0.0, norm * np.exp(-0.5 * q))
         return out
 
     def sample(self, n: int, rng=None) -> np.ndarray:
