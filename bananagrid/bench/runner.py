@@ -347,12 +347,6 @@ def _cold_rasterise(model: DensityModel, grid: Grid, dtype, threads: int, device
     return rasterise(model, grid, dtype=dtype, threads=threads, device=device)
 
 
-def _timed(fn) -> float:
-    start = time.perf_counter()
-    fn()
-    return time.perf_counter() - start
-
-
 def run(kernels, step: float, threads: int, repeat: int, stride: int, log=print, device: str = "cpu") -> list[dict]:
     """Time every kernel in both dtypes on 1 and ``threads`` threads (on a GPU: one row per
     dtype, results copied back to the host included, and the first call, which builds or loads
@@ -369,7 +363,7 @@ def run(kernels, step: float, threads: int, repeat: int, stride: int, log=print,
         estimate = model.work_estimate(grid.nx * grid.ny, GridExtent(grid))  # one core's seconds
         for dtype in (np.float64, np.float32):
             # warm-up: compile or load the module
-            first = _timed(lambda: rasterise(model, grid, dtype=dtype, threads=1, device=device))
+            first = _best_of(1, lambda: rasterise(model, grid, dtype=dtype, threads=1, device=device))
             for n_threads in ([1] if gpu else sorted({1, threads})):
                 seconds = _best_of(repeat, lambda: _cold_rasterise(model, grid, dtype, n_threads, device))
                 record = {
@@ -416,7 +410,7 @@ def _run_job(name: str, threads: int, repeat: int, stride: int, log, device: str
     records = []
     gpu = device != "cpu"
     for dtype in job.dtypes:
-        first = _timed(lambda: job.work(dtype, 1, device))  # warm-up: compile or load the module
+        first = _best_of(1, lambda: job.work(dtype, 1, device))  # warm-up: compile or load the module
         for n_threads in ([1] if gpu else sorted({1, threads})):
             seconds = _best_of(repeat, lambda: job.work(dtype, n_threads, device))
             record = {
