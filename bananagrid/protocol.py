@@ -31,7 +31,7 @@ import numpy as np
 from .domains.pose import Pose
 
 __all__ = [
-    "DensityModel", "BatchModel", "KernelBinding", "CellPlan", "KernelContext", "Extent", "SceneKey", "SceneSchema",
+    "DensityModel", "PresenceModel", "BatchModel", "KernelBinding", "CellPlan", "KernelContext", "Extent", "SceneKey", "SceneSchema",
     "KEY_TYPES",
     "LATLON",
 ]
@@ -417,3 +417,40 @@ class BatchModel(Protocol):
         """The batch kernels: ``grid_kernel`` over (hypothesis, row) taking ``(xs[H, nx],
         ys[H, ny], h0, *params, out[H, ny, nx])`` and ``points_kernel`` over hypotheses taking
         ``(x[N], y[N], h0, *params, out[H, N])``."""
+
+
+@runtime_checkable
+class PresenceModel(Protocol):
+    """A presence law in the array frame (x, y horizontal, z up; Pessentheiner): a density in
+    1, 2 or 3 dimensions whose cells are those of an angular lattice, conditioned on a region.
+
+    It shares :class:`DensityModel`'s face where the two meet (``kind``, ``scene``,
+    ``float32_rtol``, ``parameters``, ``pdf``, ``sample``); its cells come from the law itself
+    (:meth:`cell_map`), which :func:`bananagrid.rasterise` calls for an
+    :class:`~bananagrid.AngularLattice`.
+    """
+
+    kind: ClassVar[str]
+    scene: ClassVar[SceneSchema]
+    float32_rtol: ClassVar[float]
+
+    @property
+    def dim(self) -> int:
+        """Its dimension D: 1 (a line), 2 (a plane) or 3 (a room)."""
+
+    def parameters(self) -> dict:
+        """Plain-data parameters for provenance and recordings (``{"model": NAME, ...}``)."""
+
+    def pdf(self, x, y=None, z=None, *, dtype=np.float64, device: str = "cpu") -> np.ndarray:
+        """Density per m^D at points (``x``, ``y``, ``z`` broadcast, as many as D; ``pdf(x, y)``
+        of a 3-D law is its (x, y) marginal per m^2)."""
+
+    def sample(self, n: int, rng) -> np.ndarray:
+        """``n`` positions from the law, shape ``(n, D)``."""
+
+    def region_probability(self, region) -> float:
+        """p(S): the law's probability of the box ``region`` (a :class:`~bananagrid.Region`)."""
+
+    def cell_map(self, lattice, region=None, *, dtype=np.float64, device: str = "cpu", threads=None):
+        """p(C | S) of every cell of ``lattice`` (an :class:`~bananagrid.AngularLattice`),
+        conditioned on ``region`` (None: the whole space): a :class:`~bananagrid.CellMap`."""

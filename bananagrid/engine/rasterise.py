@@ -7,10 +7,11 @@ import time
 
 import numpy as np
 
+from ..domains.angular_lattice import AngularLattice
 from ..domains.grid import Grid
 from ..domains.polar_lattice import PolarLattice
-from ..protocol import DensityModel
-from ..results import PolarRaster, Raster, TiledRaster
+from ..protocol import DensityModel, PresenceModel
+from ..results import CellMap, PolarRaster, Raster, TiledRaster
 from ..validate import BananagridError
 from .memory import RASTERISE_BYTES_PER_CELL, check_memory
 from .points import check_finite, check_model
@@ -42,15 +43,22 @@ def narrow(values: np.ndarray, dtype: np.dtype, total: float, model: DensityMode
     return cast
 
 
-def rasterise(model: DensityModel, grid: Grid | PolarLattice, *, quantity: str = "density", dtype=np.float64,
-              device: str = "cpu", threads=None, max_seconds: float | None = None,
-              chunks=None) -> Raster | PolarRaster | TiledRaster:
+def rasterise(model: DensityModel | PresenceModel, grid: Grid | PolarLattice | AngularLattice, *,
+              quantity: str = "density", dtype=np.float64, device: str = "cpu", threads=None,
+              max_seconds: float | None = None, chunks=None,
+              region=None) -> Raster | PolarRaster | TiledRaster | CellMap:
     """Density of ``model`` at the cell centres of ``grid`` or the probability of each cell, or
-    both on a polar lattice.
+    both on a polar lattice, or the probability of each angular cell.
 
     With a :class:`~bananagrid.PolarLattice` the result is a :class:`~bananagrid.PolarRaster`:
     densities per (m, rad) at the cell centres and the probability integrated over each
     (range, bearing) cell (see :func:`bananagrid.engine.polar_cells.rasterise_lattice`).
+
+    With an :class:`~bananagrid.AngularLattice` the result is a :class:`~bananagrid.CellMap`:
+    the probability p(C | S) of each cell of an array's directions, conditioned on ``region``
+    (S; None for the whole space), computed by the model's own cell plan
+    (``model.cell_map``, :class:`~bananagrid.protocol.PresenceModel`;
+    :func:`bananagrid.cell_probabilities` for the presence laws).
 
     Parameters
     ----------
@@ -90,14 +98,21 @@ def rasterise(model: DensityModel, grid: Grid | PolarLattice, *, quantity: str =
         (:func:`bananagrid.engine.tiles.rasterise_tiles`; ``threads`` does not apply: Dask runs
         the blocks in parallel).
 
+    region : Region, optional
+        An angular lattice's conditioning box S (the other domains take none).
+
     Returns
     -------
     Raster
         Raw (not normalised) densities per m^2, with the captured mass and provenance
-        (a PolarRaster for a PolarLattice).
+        (a PolarRaster for a PolarLattice, a CellMap for an AngularLattice).
     """
     if quantity not in QUANTITIES:
         raise BananagridError(f"quantity = {quantity!r}: expected one of {', '.join(map(repr, QUANTITIES))}")
+    if isinstance(grid, AngularLattice):
+        return _angular_cells(model, grid, region, dtype=dtype, device=device, threads=threads, chunks=chunks)
+    if region is not None:
+        raise BananagridError(f"region = {region!r}: only an AngularLattice's cells are conditioned on a region")
     if isinstance(grid, PolarLattice):
         return rasterise_lattice(model, grid, dtype=dtype, device=device, threads=threads, max_seconds=max_seconds)
     if not isinstance(grid, Grid):
@@ -136,3 +151,17 @@ def rasterise(model: DensityModel, grid: Grid | PolarLattice, *, quantity: str =
         **binding.notes,
     }
     return Raster(values=values, grid=grid, mass=mass, normalised=False, provenance=provenance)
+
+
+def _angular_cells(model, lattice: AngularLattice, region, *, dtype, device, threads, chunks) -> CellMap:
+    """The model's own cells of an angular lattice (its ``cell_map``: probabilities, whatever the
+    ``quantity``, as a polar lattice gives both), or one line saying why not."""
+    if chunks is not None:
+        raise BananagridError("chunks: an AngularLattice's cells are not tiled; leave chunks out")
+    cell_map = getattr(model, "cell_map", None)
+    if cell_map is None:
+        raise BananagridError(
+            f"{type(model).__name__}: a density in the world plane has no cells of an array's directions; "
+            "an AngularLattice takes a presence law (GaussianMixture, UniformPresence)"
+        )
+    return cell_map(lattice, region, dtype=dtype, device=device, threads=threads)

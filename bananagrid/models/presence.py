@@ -30,8 +30,9 @@ from ..domains.region import Region, as_region
 from ..engine.warp_runtime import WarpContext, check_threads
 from ..kernels import presence as kp
 from ..results import CellMap, GridPresence
+from ..protocol import SceneSchema
 from ..validate import BananagridError, positive, real_array
-from .base import check_n
+from .base import check_n, check_rng
 
 __all__ = [
     "GaussianMixture", "UniformPresence", "cell_probabilities", "grid_probabilities", "rectangle_probabilities",
@@ -78,6 +79,19 @@ class GaussianMixture:
     weights: np.ndarray
     means: np.ndarray
     covs: np.ndarray
+
+    #: Its registry name: ``presence.kind = "mixture"`` of an ``[array]`` scene.
+    kind: ClassVar[str] = "mixture"
+    #: Its scene keys: the components of the ``[presence]`` table (:mod:`bananagrid.scenes.presence`
+    #: turns their ``mean``, ``cov`` or SDs into these parameters).
+    scene: ClassVar[SceneSchema] = SceneSchema(
+        keys=(), required=("weights", "means", "covs"), timed=False,
+        build=lambda params: GaussianMixture(**params),
+        summary="a Gaussian mixture of heads in the room, one [presence.components.NAME] table a component",
+    )
+    #: Stated agreement of float32 cells with float64 (relative, cells holding 1e-9 of the mass):
+    #: a float32 run uses the tolerance FLOAT32_RTOL and agrees to 4e-5 (tests/test_presence.py).
+    float32_rtol: ClassVar[float] = 2e-4
 
     #: Peak bytes per sample of :meth:`sample`: 56 (2-D) and 80 (3-D) measured (tracemalloc,
     #: ``sample(10**6)``), rounded up.
@@ -149,32 +163,50 @@ class GaussianMixture:
 
     # -- law -------------------------------------------------------------------------------
 
-    def pdf(self, points) -> np.ndarray:
-        """Density at points, ``(n, D)`` (or ``(n,)`` for D = 1), per m^D (float64 NumPy)."""
-        p = _points(points, self.dim)
+    def pdf(self, x, y=None, z=None, *, dtype=np.float64, device: str = "cpu") -> np.ndarray:
+        """Density at points, per m^D, computed in float64 NumPy and returned in ``dtype``
+        (``device`` is accepted for the protocol; the law needs no kernel).
+
+        The protocol form gives coordinates, broadcast: ``pdf(x)`` (1-D), ``pdf(x, y)`` (2-D; for
+        a 3-D mixture its (x, y) marginal, per m^2, the density the grid functions use) and
+        ``pdf(x, y, z)`` (3-D), each returning the broadcast shape. As a convenience ``pdf(points)``
+        takes one ``(n, D)`` array (``(n,)`` for D = 1) and returns ``(n,)``.
+        """
+        return _law_values(self, _coordinates(x, y, z, self.dim), self._density, dtype)
+
+    def _density(self, p: np.ndarray) -> np.ndarray:
+        """Density at points ``(n, d)`` of the law's first d axes (d = D, or 2 for the marginal)."""
+        d = p.shape[1]
         out = np.zeros(p.shape[0])
-        for w, mu, cov in zip(self.weights, self.means, self.covs):
+        for w, mu, cov in zip(self.weights, self.means[:, :d], self.covs[:, :d, :d]):
             chol = np.linalg.cholesky(cov)
             with np.errstate(over="ignore", invalid="ignore"):
-                d = p - mu  # inf where a point and a mean near +-1.8e308 lie apart: no density there
-                far = ~np.all(np.isfinite(d), axis=1)
-                u = np.linalg.solve(chol, np.where(far[:, None], 0.0, d).T)
+                diff = p - mu  # inf where a point and a mean near +-1.8e308 lie apart: no density there
+                far = ~np.all(np.isfinite(diff), axis=1)
+                u = np.linalg.solve(chol, np.where(far[:, None], 0.0, diff).T)
                 q = np.sum(u * u, axis=0)
                 # beyond ~1e154 SDs u * u overflows, and an overflowing forward substitution can
                 # give inf - inf: either way the point is that far out, where exp gives 0
                 q = np.where(np.isfinite(q), q, np.inf)
-            norm = w / ((2.0 * math.pi) ** (self.dim / 2) * np.prod(np.diag(chol)))
+            norm = w / ((2.0 * math.pi) ** (d / 2) * np.prod(np.diag(chol)))
             out += np.where(far, 0.0, norm * np.exp(-0.5 * q))
         return out
 
-    def sample(self, n: int, rng=None) -> np.ndarray:
-        """``(n, D)`` positions: a component by weight, then its normal."""
+    def sample(self, n: int, rng) -> np.ndarray:
+        """``(n, D)`` positions: a component by weight, then its normal (``rng``: a NumPy
+        Generator or an integer seed)."""
         n = check_n(n, self.sample_bytes)
-        rng = np.random.default_rng(rng)
+        rng = check_rng(rng)
         counts = rng.multinomial(n, self.weights)
         parts = [rng.multivariate_normal(mu, cov, size=k) for mu, cov, k in zip(self.means, self.covs, counts) if k]
         out = np.concatenate(parts) if parts else np.zeros((0, self.dim))
         return out[rng.permutation(out.shape[0])]
+
+    def cell_map(self, lattice, region=None, *, dtype=np.float64, device: str = "cpu", threads=None) -> CellMap:
+        """The law's own cells of a domain: p(C | S) of every cell of an
+        :class:`~bananagrid.AngularLattice` (:func:`cell_probabilities`); what
+        :func:`bananagrid.rasterise` calls for such a lattice."""
+        return cell_probabilities(self, lattice, region, dtype=dtype, device=device, threads=threads)
 
     def region_probability(self, region, *, dtype=np.float64, device: str = "cpu") -> float:
         r"""p(S): the mixture's probability of the box S (ERRATA, end of Section 9).
@@ -247,6 +279,41 @@ def _points(points, dim: int) -> np.ndarray:
     return p
 
 
+def _coordinates(x, y, z, dim: int):
+    """``(points (n, d), shape of the result)`` from a pdf call: the coordinates ``x``, ``y``,
+    ``z`` broadcast (d of them), or the convenience form ``pdf(points)``."""
+    if y is None and z is None:
+        if dim == 1:  # pdf(x): the protocol form and the points form agree
+            x = np.asarray(x, dtype=float)
+            if x.ndim == 2 and x.shape[1] == 1:
+                x = x[:, 0]
+            return x.reshape(-1, 1), x.shape
+        p = _points(x, dim)
+        return p, (p.shape[0],)
+    if y is None:
+        raise BananagridError("pdf: z given without y; call pdf(x, y, z)")
+    if dim == 1:
+        raise BananagridError(f"pdf: a 1-D (line) law takes x only; got y{' and z' if z is not None else ''}")
+    if z is not None and dim == 2:
+        raise BananagridError("pdf: a 2-D (plane) law takes x and y; got z")
+    axes = [x, y] if z is None else [x, y, z]
+    try:
+        arrays = np.broadcast_arrays(*(np.asarray(a, dtype=float) for a in axes))
+    except ValueError:
+        raise BananagridError(f"pdf: x, y{', z' if z is not None else ''} do not broadcast "
+                              f"(shapes {', '.join(str(np.shape(a)) for a in axes)})") from None
+    return np.stack([a.ravel() for a in arrays], axis=1), arrays[0].shape
+
+
+def _law_values(law, located, density, dtype) -> np.ndarray:
+    """``density(points)`` reshaped to the call's shape and cast to ``dtype``."""
+    points, shape = located
+    dtype = np.dtype(dtype)
+    if dtype not in (np.float32, np.float64):
+        raise BananagridError(f"dtype = {dtype}: expected float32 or float64")
+    return density(points).reshape(shape).astype(dtype, copy=False)
+
+
 def _interval_probability(lo, hi) -> np.ndarray:
     """Phi(hi) - Phi(lo), from the tail away from zero (no cancellation near one)."""
     lo, hi = np.asarray(lo, dtype=float), np.asarray(hi, dtype=float)
@@ -276,6 +343,16 @@ class UniformPresence:
 
     region: Region
 
+    #: Its registry name: ``presence.kind = "uniform"`` of an ``[array]`` scene.
+    kind: ClassVar[str] = "uniform"
+    #: Its scene keys: none of its own; the region is the scene's ``[room]``.
+    scene: ClassVar[SceneSchema] = SceneSchema(
+        keys=(), required=("region",), timed=False, build=lambda params: UniformPresence(**params),
+        summary="presence uniform on the scene's [room]",
+    )
+    #: Stated agreement of float32 with float64: exact geometry, computed in float64 either way.
+    float32_rtol: ClassVar[float] = 0.0
+
     #: Peak bytes per sample of :meth:`sample`: 48 measured (3-D; tracemalloc, ``sample(10**6)``), rounded up.
     sample_bytes: ClassVar[float] = 64
 
@@ -289,15 +366,29 @@ class UniformPresence:
     def parameters(self) -> dict:
         return {"model": "UniformPresence", "region": self.region.describe()}
 
-    def pdf(self, points) -> np.ndarray:
-        p = _points(points, self.dim)
-        return np.where(self.region.contains(p), 1.0 / self.region.size, 0.0)
+    def pdf(self, x, y=None, z=None, *, dtype=np.float64, device: str = "cpu") -> np.ndarray:
+        """``1 / |S|`` inside the box, 0 outside, per m^D; called as :meth:`GaussianMixture.pdf`
+        (``pdf(x, y)`` of a 3-D law: its (x, y) marginal, ``z_extent / |S|`` over the floor plan)."""
+        return _law_values(self, _coordinates(x, y, z, self.dim), self._density, dtype)
 
-    def sample(self, n: int, rng=None) -> np.ndarray:
+    def _density(self, p: np.ndarray) -> np.ndarray:
+        d = p.shape[1]
+        b = self.region.bounds[:d]
+        inside = np.all((p >= b[:, 0]) & (p <= b[:, 1]), axis=1)
+        size = self.region.size if d == self.dim else float(np.prod(b[:, 1] - b[:, 0]))
+        return np.where(inside, 1.0 / size, 0.0)
+
+    def sample(self, n: int, rng) -> np.ndarray:
+        """``(n, D)`` positions uniform in the box (``rng``: a NumPy Generator or an integer seed)."""
         n = check_n(n, self.sample_bytes)
-        rng = np.random.default_rng(rng)
+        rng = check_rng(rng)
         b = self.region.bounds
         return b[:, 0] + (b[:, 1] - b[:, 0]) * rng.random((n, self.dim))
+
+    def cell_map(self, lattice, region=None, *, dtype=np.float64, device: str = "cpu", threads=None) -> CellMap:
+        """Its cells of an :class:`~bananagrid.AngularLattice` (:func:`cell_probabilities`), as
+        :meth:`GaussianMixture.cell_map`."""
+        return cell_probabilities(self, lattice, region, dtype=dtype, device=device, threads=threads)
 
     def region_probability(self, region, **_) -> float:
         """p(S') = |S' and S| / |S|."""

@@ -12,8 +12,15 @@ from .bearing import BearingFix
 from .butterly import Butterly
 from .cat import CAT
 from .polar import PolarBanana
+from .presence import GaussianMixture, UniformPresence
 
-__all__ = ["ModelKind", "Registry", "MODEL_KINDS"]
+__all__ = ["ModelKind", "Registry", "MODEL_KINDS", "DOMAINS"]
+
+#: Where a kind's model is computed in a scene: ``"grid"``, a planar density of a ``[layers]``
+#: table on the scene's ``[grid]`` (also on polar lattices); ``"array"``, a presence law of the
+#: ``[presence]`` table on the angular cells of the scene's ``[array]`` (conditioned on its
+#: ``[room]``).
+DOMAINS = ("grid", "array")
 
 
 @dataclass(frozen=True)
@@ -32,13 +39,20 @@ class ModelKind:
         comparisons); ``None`` for none. It provides ``log_layer_extras(rec, entity, model,
         raster, *, compute)`` and ``layer_views(entity, model) -> (extra image names, extra
         views)`` (see :mod:`bananagrid.recording.layers`).
+    domain : str
+        One of :data:`DOMAINS`: where scenes compute the kind (a ``"grid"`` kind's class is a
+        :class:`~bananagrid.protocol.DensityModel`, an ``"array"`` kind's a
+        :class:`~bananagrid.protocol.PresenceModel`).
     """
 
     name: str
     cls: type
     recording: str | None = None
+    domain: str = "grid"
 
     def __post_init__(self):
+        if self.domain not in DOMAINS:
+            raise ValueError(f"model kind {self.name!r}: domain {self.domain!r} not in {DOMAINS}")
         if getattr(self.cls, "kind", None) != self.name:
             raise ValueError(f"model kind {self.name!r}: {self.cls.__name__}.kind is {getattr(self.cls, 'kind', None)!r}")
         if not isinstance(getattr(self.cls, "scene", None), SceneSchema):
@@ -86,6 +100,10 @@ class Registry(Mapping):
         """This registry with ``kinds`` added after its own."""
         return Registry([*self._kinds.values(), *kinds])
 
+    def on(self, domain: str) -> "Registry":
+        """The kinds computed on ``domain`` (one of :data:`DOMAINS`), in registration order."""
+        return Registry([kind for kind in self._kinds.values() if kind.domain == domain])
+
 
 #: The model kinds of scene files.
 MODEL_KINDS = Registry([
@@ -93,4 +111,6 @@ MODEL_KINDS = Registry([
     ModelKind("polar", PolarBanana),
     ModelKind("bearing_fix", BearingFix, recording="bananagrid.recording.bearing"),
     ModelKind("butterly", Butterly, recording="bananagrid.recording.butterly"),
+    ModelKind("mixture", GaussianMixture, domain="array"),
+    ModelKind("uniform", UniformPresence, domain="array"),
 ])

@@ -1,7 +1,7 @@
-"""Scene files: keys and their checks, loading (grid and presence scenes), and running them."""
+"""Scene files: keys and their checks, loading (a grid or an array's angular lattice as the
+domain), and running them (one runner for both)."""
 
 from .load import Layer, Scene, load_scene, parse_scene
-from .presence import PresenceScene
 from .run import run_scene
 
-__all__ = ["Scene", "Layer", "PresenceScene", "load_scene", "parse_scene", "run_scene"]
+__all__ = ["Scene", "Layer", "load_scene", "parse_scene", "run_scene"]

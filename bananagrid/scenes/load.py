@@ -22,7 +22,9 @@ from types import MappingProxyType
 
 from ..analysis.coverage import DEFAULT_MIN_MASS, min_mass
 from ..contours import DEFAULT_MASS_LEVELS, mass_levels
+from ..domains.angular_lattice import AngularLattice
 from ..domains.grid import Grid
+from ..domains.region import Region
 from ..geo.frame import DEFAULT_MAX_SCALE_ERROR, GeoFrame
 from ..models.registry import MODEL_KINDS, ModelKind, Registry
 from ..protocol import DensityModel
@@ -30,15 +32,15 @@ from ..recording.core import MAX_ELAPSED_S, colormaps
 from ..validate import BananagridError, BananagridWarning, positive
 from . import keys
 from .keys import DTYPES, NAME_PATTERN, SceneKeyError, check_keys, show
-from .presence import PresenceScene, build_presence_scene
+from .presence import LAYER_NAME, array_scene_fields
 
 __all__ = [
     "Layer", "Scene", "RadialOutput", "load_scene", "parse_scene", "MODEL_KINDS", "PARAMETER_KEYS",
     "TOP_KEYS", "RADIAL_KEYS", "SCENE_KEYS", "GRID_KEYS", "OUTPUT_KEYS", "GEO_KEYS",
 ]
 
-#: Scene keys of every registered model kind.
-PARAMETER_KEYS = MappingProxyType({kind: spec.scene.key_names for kind, spec in MODEL_KINDS.items()})
+#: Scene keys of every registered model kind of grid layers.
+PARAMETER_KEYS = MappingProxyType({kind: spec.scene.key_names for kind, spec in MODEL_KINDS.on("grid").items()})
 
 TOP_KEYS = ("scene", "grid", "geo", "output", "defaults", "layers", "radial")
 GEO_KEYS = ("origin_latlon", "time", "crs", "max_scale_error")
@@ -121,7 +123,13 @@ class RadialOutput:
 
 @dataclass(frozen=True)
 class Scene:
-    """A validated scene: a grid, model layers and recording options.
+    """A validated scene: a domain (a grid, or an array's angular lattice), model layers and
+    recording options.
+
+    A ``[grid]`` scene has model layers (``[layers]``) computed on its grid; an ``[array]``
+    scene has one layer, its ``[presence]`` law, computed on the lattice's cells conditioned on
+    its ``[room]`` (:mod:`bananagrid.scenes.presence`). Both run through
+    :func:`bananagrid.scenes.run.run_scene`.
 
     Attributes
     ----------
@@ -133,10 +141,11 @@ class Scene:
         The scene file as written (logged into the recording).
     source : str
         Where the text came from (file path or ``"<string>"``), used in messages.
-    grid : Grid
-        The grid every layer is rasterised on.
-    bounds : ((float, float), (float, float))
-        The ``x`` and ``y`` bounds as written, m; :meth:`with_step` rebuilds the grid from them.
+    domain : Grid or AngularLattice
+        Where every layer is computed (:attr:`grid` for a grid scene).
+    bounds : ((float, float), (float, float)) or None
+        The ``x`` and ``y`` bounds as written, m; :meth:`with_step` rebuilds the grid from them
+        (None for an array scene).
     layers : tuple of Layer
         In file order.
     times : tuple of float or None
@@ -170,6 +179,17 @@ class Scene:
     cell_probabilities : bool
         Whether every layer's cell probabilities are computed too (``output.cell_probabilities``:
         recorded, exported to the .npz, and the source of the captured mass).
+    region : Region or None
+        An array scene's S: the room's ranges on the law's axes, on which its cells are
+        conditioned; None without ``[room]`` (and for a grid scene).
+    room_z : (float, float) or None
+        An array scene's room z range as written (drawn; part of S for the frustum only).
+    component_names : tuple of str
+        An array scene's mixture component names in file order (empty otherwise).
+    far : float or None
+        m: where an array scene's cells are cut in the drawing when there is no room (default 10 h).
+    log10_floor : float
+        Bottom of an array scene's recorded colour scale, log10 of a probability.
     """
 
     name: str
@@ -177,8 +197,8 @@ class Scene:
     description: str
     text: str
     source: str
-    grid: Grid
-    bounds: tuple
+    domain: Grid | AngularLattice
+    bounds: tuple | None
     layers: tuple
     times: tuple | None
     levels: tuple
@@ -193,10 +213,42 @@ class Scene:
     geo: GeoFrame | None = None
     scale_error: float = 0.0
     cell_probabilities: bool = False
+    region: Region | None = None
+    room_z: tuple | None = None
+    component_names: tuple = ()
+    far: float | None = None
+    log10_floor: float = -12.0
+
+    @property
+    def gridded(self) -> bool:
+        """Whether the scene's domain is a grid (an ``[array]`` scene's is an angular lattice)."""
+        return isinstance(self.domain, Grid)
+
+    @property
+    def grid(self) -> Grid:
+        """The grid of a ``[grid]`` scene.
+
+        Raises
+        ------
+        BananagridError
+            For an ``[array]`` scene: commands that need a grid say so in one line.
+        """
+        if not self.gridded:
+            raise BananagridError(
+                f"{self.source}: a presence scene ([array]) has no grid layers; only `bananagrid run` takes it"
+            )
+        return self.domain
 
     def with_step(self, step: float, *, tiled: bool = False) -> "Scene":
         """A copy whose grid covers the same bounds with square cells of ``step`` metres (larger
-        than memory takes only when ``tiled``)."""
+        than memory takes only when ``tiled``). ``--step`` sets grid cells in metres: an array
+        scene (an angular lattice, no grid) is returned unchanged, with a warning."""
+        if not self.gridded:
+            warnings.warn(
+                f"{self.source}: --step {step:g} does not apply to a presence scene (angular lattice, "
+                "no grid); it runs at its own array steps", UserWarning, stacklevel=2,
+            )
+            return self
         step = positive("step", step)
         x, y = self.bounds
         try:
@@ -205,7 +257,7 @@ class Scene:
                 grid.check_in_memory()
         except BananagridError as exc:
             raise BananagridError(f"{self.source}: grid at step {step:g} m: {exc}") from None
-        return replace(self, grid=grid)
+        return replace(self, domain=grid)
 
     def jobs(self) -> list[tuple[Layer, float]]:
         """Every (layer, elapsed time) to compute, time-major when the scene has times. A
@@ -218,7 +270,7 @@ class Scene:
 # --- entry points -----------------------------------------------------------------------------
 
 
-def load_scene(path: str | os.PathLike, *, kinds: Registry = MODEL_KINDS, tiled: bool = False) -> Scene | PresenceScene:
+def load_scene(path: str | os.PathLike, *, kinds: Registry = MODEL_KINDS, tiled: bool = False) -> Scene:
     """Read and validate the scene file at ``path`` (``kinds`` and ``tiled`` as for :func:`parse_scene`).
 
     Raises
@@ -243,7 +295,7 @@ def load_scene(path: str | os.PathLike, *, kinds: Registry = MODEL_KINDS, tiled:
 
 
 def parse_scene(text: str, source: str = "<string>", *, kinds: Registry = MODEL_KINDS,
-                tiled: bool = False) -> Scene | PresenceScene:
+                tiled: bool = False) -> Scene:
     """Parse and validate scene TOML ``text``; ``source`` names it in error messages.
 
     ``tiled``: the scene will be computed in tiles (``bananagrid run --zarr``), so its grid may
@@ -259,14 +311,23 @@ def parse_scene(text: str, source: str = "<string>", *, kinds: Registry = MODEL_
     except RecursionError:  # tomllib parses nested arrays recursively
         raise BananagridError(f"{source}: invalid TOML: arrays or tables nested too deeply") from None
     try:
-        if "array" in doc:  # a presence scene: bananagrid.scenes.presence
-            return build_presence_scene(doc, text, source)
+        if "array" in doc:  # the [array] domain instead of [grid]: bananagrid.scenes.presence
+            return _build_array(doc, text, source, kinds)
         return _build(doc, text, source, kinds, tiled)
     except SceneKeyError as exc:
         raise BananagridError(f"{source}: {exc}") from None
 
 
 # --- building the scene -----------------------------------------------------------------------
+
+
+def _build_array(doc: dict, text: str, source: str, kinds: Registry) -> Scene:
+    """An ``[array]`` scene: the lattice as the domain and the ``[presence]`` law as the one layer."""
+    fields = array_scene_fields(doc, kinds)
+    kind, params = fields.pop("layer")
+    layer = Layer(name=LAYER_NAME, kind=kind, params=params, model_kind=kinds[kind])
+    return Scene(text=text, source=source, bounds=None, layers=(layer,), times=None, levels=(), normalise=False,
+                 colormap="viridis", **fields)
 
 
 def _build(doc: dict, text: str, source: str, kinds: Registry, tiled: bool = False) -> Scene:
@@ -289,6 +350,7 @@ def _build(doc: dict, text: str, source: str, kinds: Registry, tiled: bool = Fal
             raise SceneKeyError(_geo_message(str(exc), "")) from None
     output = _output(keys.table(doc, "output"))
     defaults = keys.table(doc, "defaults")
+    kinds = kinds.on("grid")  # the kinds of [layers]; an [array] scene's law is in [presence]
     every_key = tuple(dict.fromkeys(k for kind in kinds.values() for k in kind.scene.key_names))
     check_keys(defaults, every_key, "defaults")
     if times is not None and "t" in defaults:
@@ -309,7 +371,7 @@ def _build(doc: dict, text: str, source: str, kinds: Registry, tiled: bool = Fal
         warnings.warn(f"{source}: {message}", BananagridWarning, stacklevel=3)
     return Scene(
         name=name, title=title, description=description, text=text, source=source,
-        grid=grid, bounds=bounds, layers=layers, times=times, radial=radial, warnings=tuple(found), **output,
+        domain=grid, bounds=bounds, layers=layers, times=times, radial=radial, warnings=tuple(found), **output,
         geo=geo, scale_error=scale_error,
     )
 

@@ -33,8 +33,7 @@ from ..recording.readback import read_rasters
 from ..results import Raster
 from ..validate import BananagridError, positive, regular_file, show
 from .load import load_scene
-from .presence import PresenceScene
-from .run import compute
+from .run_grid import compute
 
 __all__ = ["INPUTS", "Panel", "Picture", "check_picture_options", "read_picture", "write_picture"]
 
@@ -197,7 +196,7 @@ def _listed(times: Sequence[float]) -> str:
 def _from_scene(path: Path, t: float | None, threads: int | None,
                 step: float | None) -> tuple[str, tuple, list[Panel]]:
     scene = load_scene(path)
-    if isinstance(scene, PresenceScene):
+    if not scene.gridded:
         raise BananagridError(
             f"{path}: an [array] scene maps angular cells, not a grid, so it has no map to plot; run it "
             "and read its cell table in the recording (bananagrid inspect)"

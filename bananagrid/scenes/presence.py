@@ -1,8 +1,12 @@
-r"""Presence scenes: a ceiling array, a room and a presence law (Pessentheiner).
+r"""The ``[array]`` domain of a scene: a ceiling array, a room and a presence law (Pessentheiner).
 
-A scene document whose top level has an ``[array]`` table is a presence scene;
-:func:`bananagrid.scenes.load.parse_scene` hands it to :func:`build_presence_scene`. The schema (see
-``docs/scenes.md``, "Presence scenes"):
+A scene document whose top level has an ``[array]`` table (instead of ``[grid]``) computes a
+presence law on the angular cells of an array;
+:func:`bananagrid.scenes.load.parse_scene` hands its tables to :func:`array_scene_fields` and
+builds the one :class:`~bananagrid.scenes.load.Scene` from them: the lattice is its domain and
+the ``[presence]`` table its one layer, whose kind (``"mixture"``, ``"uniform"``) is a kind of the
+registry computed on the ``"array"`` domain. The schema (see ``docs/scenes.md``, "Presence
+scenes"):
 
 - ``[scene]``: ``name`` (required), ``title``, ``description``;
 - ``[array]``: ``geometry`` ("line", "plane" or "frustum"), ``h`` (m), ``dh`` (m, frustum),
@@ -17,33 +21,29 @@ A scene document whose top level has an ``[array]`` table is a presence scene;
 
 Every key is checked once here; errors name the file, the key path, the value and what is
 allowed, as for grid scenes (the helpers of :mod:`bananagrid.scenes.keys` are shared).
-:func:`bananagrid.scenes.run_presence.run_presence_scene` runs it.
 """
 
 from __future__ import annotations
 
 import math
-import warnings
-from dataclasses import dataclass
 
 import numpy as np
 
 from ..contours import DEFAULT_MASS_LEVELS, mass_levels
 from ..domains.angular_lattice import AngularLattice
 from ..domains.region import Region
-from ..models.presence import WEIGHT_SUM_TOL, GaussianMixture, UniformPresence, cell_probabilities
-from ..results import CellMap
+from ..models.presence import WEIGHT_SUM_TOL
+from ..models.registry import MODEL_KINDS, Registry
 from ..validate import BananagridError
 from . import keys
 from .keys import DTYPES, SceneKeyError, check_keys, show
 
 __all__ = [
-    "PresenceScene", "build_presence_scene", "GEOMETRIES", "PRESENCE_KINDS",
+    "array_scene_fields", "GEOMETRIES", "LAYER_NAME",
     "TOP_KEYS", "ARRAY_KEYS", "ROOM_KEYS", "PRESENCE_KEYS", "COMPONENT_KEYS", "OUTPUT_KEYS",
 ]
 
 GEOMETRIES = ("line", "plane", "frustum")
-PRESENCE_KINDS = ("mixture", "uniform")
 TOP_KEYS = ("scene", "array", "room", "presence", "output")
 SCENE_KEYS = ("name", "title", "description")
 ARRAY_KEYS = ("geometry", "h", "dh", "azimuth_step_deg", "elevation_step_deg", "azimuth_range_deg",
@@ -52,6 +52,8 @@ ROOM_KEYS = ("x", "y", "z")
 PRESENCE_KEYS = ("kind", "components")
 COMPONENT_KEYS = ("weight", "mean", "cov", "sd_x", "sd_y", "rho", "sd_z")
 OUTPUT_KEYS = ("dtype", "far", "log10_floor", "mass_levels")
+#: The name of an array scene's one layer (its entity in the recording).
+LAYER_NAME = "presence"
 #: Axes of the presence law per geometry.
 AXES = {"line": ("x",), "plane": ("x", "y"), "frustum": ("x", "y", "z")}
 #: Default direction ranges, degrees: line azimuths inclusive, plane/frustum azimuths a full
@@ -60,79 +62,16 @@ DEFAULT_AZIMUTH_RANGE = {"line": (180, 360), "plane": (0, 360), "frustum": (0, 3
 DEFAULT_ELEVATION_RANGE = (90, 180)
 
 
-@dataclass(frozen=True)
-class PresenceScene:
-    """A validated presence scene.
-
-    Attributes
-    ----------
-    name, title, description, text, source
-        As for grid scenes (:class:`bananagrid.scenes.load.Scene`).
-    lattice : AngularLattice
-    presence : GaussianMixture or UniformPresence
-        Of the lattice's dimension (1 line, 2 plane, 3 frustum).
-    region : Region or None
-        S: the room's ranges on the law's axes (x; x, y; x, y, z); None without ``[room]``.
-    room_z : (float, float) or None
-        The room's z range as written (drawn; it is part of S for the frustum only).
-    component_names : tuple of str
-        Mixture component names in file order (empty for a uniform law).
-    kind : str
-        ``"mixture"`` or ``"uniform"``.
-    dtype : str
-        Kernel precision.
-    far : float or None
-        m: where cells are cut in the drawing when there is no room (default 10 h).
-    log10_floor : float
-        Bottom of the recorded colour scale, log10 of a probability.
-    mass_levels : tuple of float
-        Probability-mass levels in (0, 1) whose highest-probability sets of cells are outlined.
-    """
-
-    name: str
-    title: str
-    description: str
-    text: str
-    source: str
-    lattice: AngularLattice
-    presence: GaussianMixture | UniformPresence
-    region: Region | None
-    room_z: tuple | None
-    component_names: tuple
-    kind: str
-    dtype: str = "float64"
-    far: float | None = None
-    log10_floor: float = -12.0
-    mass_levels: tuple = DEFAULT_MASS_LEVELS
-
-    @property
-    def layers(self):
-        """Presence scenes have no grid layers: commands that need them say so in one line."""
-        raise BananagridError(
-            f"{self.source}: a presence scene ([array]) has no grid layers; only `bananagrid run` takes it"
-        )
-
-    def with_step(self, step: float) -> "PresenceScene":
-        """``--step`` sets grid cells in metres; a presence scene has an angular lattice and no
-        grid, so the step does not apply: the scene is returned unchanged, with a warning."""
-        warnings.warn(
-            f"{self.source}: --step {step:g} does not apply to a presence scene (angular lattice, "
-            "no grid); it runs at its own array steps", UserWarning, stacklevel=2,
-        )
-        return self
-
-    def cell_map(self, *, threads: int | None = None) -> CellMap:
-        """The scene's cell probabilities (:func:`bananagrid.cell_probabilities`)."""
-        return cell_probabilities(self.presence, self.lattice, self.region, dtype=np.dtype(self.dtype),
-                                  threads=threads)
-
-
 # --- parsing ----------------------------------------------------------------------------------
 
 
-def build_presence_scene(doc: dict, text: str, source: str) -> PresenceScene:
-    """Validate a parsed presence-scene document table by table (raises ``SceneKeyError``, which
-    :func:`bananagrid.scenes.load.parse_scene` prefixes with the source)."""
+def array_scene_fields(doc: dict, kinds: Registry = MODEL_KINDS) -> dict:
+    """Validate a parsed ``[array]`` scene document table by table (raises ``SceneKeyError``,
+    which :func:`bananagrid.scenes.load.parse_scene` prefixes with the source) and return the
+    :class:`~bananagrid.scenes.load.Scene` fields it gives: ``name``, ``title``,
+    ``description``, ``domain`` (the lattice), ``layer`` (``(kind, params)`` of the presence
+    law, a kind of ``kinds`` on the ``"array"`` domain), ``region``, ``room_z``,
+    ``component_names``, ``dtype``, ``far``, ``log10_floor`` and ``mass_levels``."""
     check_keys(doc, TOP_KEYS, "", note=" (a presence scene, since it has [array])")
     head = keys.table(doc, "scene", required=True)
     check_keys(head, SCENE_KEYS, "scene")
@@ -141,7 +80,8 @@ def build_presence_scene(doc: dict, text: str, source: str) -> PresenceScene:
     description = keys.text(head, "description", "scene", default="")
     lattice = _array(keys.table(doc, "array", required=True))
     room, room_z = _room(keys.table(doc, "room"), lattice) if "room" in doc else (None, None)
-    presence, names, kind = _presence(keys.table(doc, "presence", required=True), lattice, room)
+    kind, params, names, presence = _presence(keys.table(doc, "presence", required=True), lattice, room,
+                                              kinds.on("array"))
     dtype, far, floor, levels = _output(keys.table(doc, "output"))
     if kind == "mixture" and room is not None:
         try:
@@ -150,10 +90,9 @@ def build_presence_scene(doc: dict, text: str, source: str) -> PresenceScene:
             raise SceneKeyError(f"room: {exc}") from None
         if not p_s > 0.0:
             raise SceneKeyError(f"room = {show(doc['room'])}: the mixture gives the room no mass (p(S) = {p_s!r})")
-    return PresenceScene(
-        name=name, title=title, description=description, text=text, source=source, lattice=lattice,
-        presence=presence, region=room, room_z=room_z, component_names=names, kind=kind, dtype=dtype,
-        far=far, log10_floor=floor, mass_levels=levels,
+    return dict(
+        name=name, title=title, description=description, domain=lattice, layer=(kind, params), region=room,
+        room_z=room_z, component_names=names, dtype=dtype, far=far, log10_floor=floor, mass_levels=levels,
     )
 
 
@@ -281,19 +220,20 @@ def _range(value, path: str) -> tuple[float, float]:
     return lo, hi
 
 
-def _presence(table: dict, lattice: AngularLattice, room: Region | None):
-    """``[presence]``: (law, component names, kind)."""
+def _presence(table: dict, lattice: AngularLattice, room: Region | None, kinds: Registry):
+    """``[presence]``: (kind, model parameters, component names, the law)."""
     check_keys(table, PRESENCE_KEYS, "presence")
     kind = table.get("kind")
-    if kind not in PRESENCE_KINDS:
+    if kind not in kinds:
         shown = "missing" if kind is None else f"= {show(kind)}"
-        raise SceneKeyError(f"presence.kind {shown}: must be one of {', '.join(map(show, PRESENCE_KINDS))}")
+        raise SceneKeyError(f"presence.kind {shown}: must be one of {', '.join(map(show, kinds))}")
     if kind == "uniform":
         if "components" in table:
             raise SceneKeyError("presence.components: a uniform law has no components (kind = \"uniform\")")
         if room is None:
             raise SceneKeyError("[room]: missing table; a uniform law (presence.kind = \"uniform\") is uniform on the room")
-        return UniformPresence(room), (), kind
+        params = {"region": room}
+        return kind, params, (), kinds[kind].build(params)
     components = table.get("components")
     if not isinstance(components, dict) or not components:
         raise SceneKeyError("presence.components: a mixture needs at least one [presence.components.NAME] table")
@@ -316,8 +256,9 @@ def _presence(table: dict, lattice: AngularLattice, room: Region | None):
             f"presence.components: the weights ({listed}) sum to {total!r}, not 1 "
             f"(allowed error {WEIGHT_SUM_TOL:g}); divide them by their sum"
         )
+    params = {"weights": weights, "means": means, "covs": covs}
     try:
-        mixture = GaussianMixture(weights=weights, means=means, covs=covs)
+        mixture = kinds[kind].build(params)
     except BananagridError as exc:
         message = str(exc)
         if message.startswith("covs["):
@@ -326,7 +267,7 @@ def _presence(table: dict, lattice: AngularLattice, room: Region | None):
             key = "cov" if "cov" in components[names[k]] else "sd_x, sd_y, rho" + (", sd_z" if len(axes) == 3 else "")
             raise SceneKeyError(f"{path}.{key}: {message.split(': ', 1)[1]}") from None
         raise SceneKeyError(f"presence.components: {message}") from None
-    return mixture, tuple(names), kind
+    return kind, params, tuple(names), mixture
 
 
 def _component(body: dict, path: str, axes, geometry: str):

@@ -24,15 +24,14 @@ from ..geo.zarr_store import check_store_target, write_zarr
 from ..results import TiledRaster
 from ..validate import BananagridError
 from .load import Scene
-from .presence import PresenceScene
 
 __all__ = ["run_scene_tiled", "tiled_maps", "check_tiled", "format_tiled_summary"]
 
 
-def check_tiled(scene: Scene | PresenceScene) -> Scene:
+def check_tiled(scene: Scene) -> Scene:
     """Refuse what cannot be tiled: an [array] scene (angular cells, not a grid), a scene that
     asks for cell probabilities (tiles compute densities)."""
-    if isinstance(scene, PresenceScene):
+    if not scene.gridded:
         raise BananagridError(f"{scene.source}: --zarr: an [array] scene's angular cells are not a grid; "
                               "run it without --zarr")
     if scene.cell_probabilities:

@@ -1,0 +1,86 @@
+"""The files of a scene's run, planned before any computing: ``NAME.rrd``, ``NAME.npz`` and the
+map files (NetCDF, GeoTIFF, GeoJSON), all one :class:`~bananagrid.atomic.OutputSet`."""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+from ..atomic import OutputSet
+from ..geo.dataset import raster_dataset, write_netcdf
+from ..geo.geojson import write_geojson
+from ..geo.geotiff import write_geotiff
+from ..validate import BananagridError
+
+__all__ = ["plan_outputs", "export_paths", "write_exports", "EXPORT_SUFFIXES", "EXPORT_NAMES", "NPZ",
+           "RUN_ONLY_PROVENANCE"]
+
+#: Provenance keys that describe the run rather than the result. They stay out of the
+#: recording, so that running a scene twice gives equal recordings; the summary rows and the
+#: .npz provenance keep them.
+RUN_ONLY_PROVENANCE = ("seconds", "threads")
+
+
+def plan_outputs(scene, out_dir: str | os.PathLike, *, npz: bool = False,
+                 netcdf: bool = False, geotiff: bool = False, geojson: bool = False) -> OutputSet:
+    """The files a run of ``scene`` writes in ``out_dir`` (``NAME.rrd``, and ``NAME.npz`` and the
+    map files asked for), each checked now, before any computing: the directory must exist and
+    take new files, and each target must be absent or a regular file (a directory, a link or
+    anything else there is refused, naming it). Nothing is created.
+
+    Raises
+    ------
+    BananagridError
+        One line naming the directory or the target and what is there.
+    """
+    out_dir = Path(out_dir)
+    if not out_dir.is_dir():
+        raise BananagridError(f"{out_dir}: output directory does not exist")
+    outputs = OutputSet()
+    outputs.add(out_dir / f"{scene.name}.rrd", "recording")
+    if npz:
+        outputs.add(out_dir / f"{scene.name}.npz", NPZ)
+    for option, path in export_paths(scene.name, out_dir, netcdf=netcdf, geotiff=geotiff, geojson=geojson).items():
+        outputs.add(path, EXPORT_NAMES[option])
+    return outputs
+
+
+#: The map files' names after the scene's name, by option.
+EXPORT_SUFFIXES = {"netcdf": ".nc", "geotiff": ".tif", "geojson": "-areas.geojson"}
+#: What each map file is called in messages (as its writer calls it).
+EXPORT_NAMES = {"netcdf": "NetCDF file", "geotiff": "GeoTIFF", "geojson": "GeoJSON file"}
+#: What the .npz is called in messages.
+NPZ = ".npz arrays"
+
+
+def export_paths(name: str, out_dir: Path, *, netcdf: bool = False, geotiff: bool = False,
+                 geojson: bool = False) -> dict[str, Path]:
+    """``{option: path}`` of the map files asked for, for scene ``name`` in ``out_dir``."""
+    wanted = {"netcdf": netcdf, "geotiff": geotiff, "geojson": geojson}
+    return {option: Path(out_dir) / f"{name}{suffix}" for option, suffix in EXPORT_SUFFIXES.items() if wanted[option]}
+
+
+def write_exports(scene, out_dir: Path, panels: list, *, netcdf: bool = False, geotiff: bool = False,
+                  geojson: bool = False, areas: dict | None = None, stage=None) -> list[Path]:
+    """The map files of a scene's ``panels`` (``(layer, t, raster)``), written together or not at
+    all (``stage``: a run's :meth:`~bananagrid.atomic.OutputSet.stage`, whose commit puts them in
+    place with its other files; default: put in place here when all are complete). Returns their
+    paths. ``areas``: the panels' search areas by ``(layer, t)`` where already found."""
+    paths = export_paths(scene.name, out_dir, netcdf=netcdf, geotiff=geotiff, geojson=geojson)
+    with OutputSet() as own:
+        if stage is None:
+            for option, path in paths.items():
+                own.add(path, EXPORT_NAMES[option])
+            stage = own.stage
+        if netcdf:
+            dataset = raster_dataset(panels, scene.geo, title=scene.title, source=scene.source)
+            write_netcdf(paths["netcdf"], dataset, stage=stage)
+        if geotiff:
+            write_geotiff(paths["geotiff"], panels, scene.geo, title=scene.title, stage=stage)
+        if geojson:
+            write_geojson(paths["geojson"], panels, scene.geo, scene.mass_levels, title=scene.title, areas=areas,
+                          stage=stage)
+        own.commit()
+    return list(paths.values())
+
+
