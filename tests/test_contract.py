@@ -2,11 +2,17 @@
 SciPy's ``test_continuous_basic.py``), and a model defined only in the tests through all of them
 plus scenes and recordings.
 
-Each case is a model kind of the registry with scene parameters, a grid holding its mass, a
-polar lattice over its support and bad values with the messages they must give. The checks:
-``pdf`` equals ``rasterise``; the thread count changes nothing; float32 within the model's
-stated ``float32_rtol``; Monte Carlo from the model's own ``sample``; polar-lattice cells that
-sum to the grid's mass; radial moments along rays; every bad value refused with its name.
+One table of cases, one per model kind and setting, whose checks follow the kind's domain in
+the registry. A grid kind's case has scene parameters, a grid holding its mass, a polar lattice
+over its support and bad values with the messages they must give; its checks: ``pdf`` equals
+``rasterise``; the thread count changes nothing; float32 within the model's stated
+``float32_rtol``; Monte Carlo from the model's own ``sample``; polar-lattice cells that sum to
+the grid's mass; radial moments along rays; every bad value refused with its name. An array
+kind's case (a presence law) has its parameters, an angular lattice and a room; the same checks
+in its domain: ``pdf`` in the protocol's form against its closed form; the lattice's cells from
+``rasterise`` equal the law's own; the thread count changes nothing; float32 within the stated
+bound; Monte Carlo of the law's own samples binned by direction; the cells sum to the law's own
+probability of the room's part that the lattice sees; every bad value refused with its name.
 """
 
 import math
@@ -22,8 +28,10 @@ from bananagrid.recording.inspect import inspect_recording
 from bananagrid.scenes.load import parse_scene
 from bananagrid.scenes.run import run_scene
 
+from bananagrid.protocol import PresenceModel
 from cases import FIG1, FIG1_BOUNDS
 from isotropic_model import ISOTROPIC, IsotropicNormal
+from presence_oracle import bin_samples
 
 COASTAL = dict(sensors=[(0.0, 0.0), (20000.0, 0.0)], bearings=[0.2641, -0.3909], sigmas=[0.01, 0.02])
 BUTTERLY = dict(mean=(0.0, 0.0), cov=[[4e4, 5e3], [5e3, 2.5e4]], speeds=[1.0, 2.0], weights=[0.4, 0.6], t=600.0)
@@ -53,7 +61,50 @@ class Case:
     def grid(self):
         return bg.Grid.from_bounds(**self.bounds, step=self.step)
 
+    @property
+    def domain(self) -> str:
+        return self.kinds[self.kind].domain
 
+
+@dataclass(frozen=True)
+class ArrayCase:
+    """A presence law of an ``"array"`` kind: its parameters (a uniform law's region as Region
+    arguments), its angular lattice and the room S its cells are conditioned on."""
+
+    kind: str
+    params: dict
+    lattice: dict  # AngularLattice arguments
+    room: dict  # Region arguments of S
+    bad: tuple = ()  # (parameter, bad value, message regex)
+    kinds: bg.models.registry.Registry = field(default=bg.MODEL_KINDS)
+
+    def model(self, **changes):
+        return self.kinds[self.kind].build({**self.params, **changes})
+
+    @property
+    def angular(self):
+        return bg.AngularLattice(**self.lattice)
+
+    @property
+    def region(self):
+        return bg.Region(**self.room)
+
+    @property
+    def domain(self) -> str:
+        return self.kinds[self.kind].domain
+
+
+DEG = math.pi / 180.0
+#: The room of the bundled room scenes (array frame, m) and room_mixture.toml's law.
+ROOM = dict(x=(-3.0, 3.0), y=(-2.5, 2.5))
+ROOM_MIXTURE = dict(weights=[0.5, 0.35, 0.15], means=[[-1.8, 1.5], [1.2, -1.8], [2.6, 1.9]],
+                    covs=[np.diag([0.0625, 0.0625]), np.diag([0.49, 0.04]), [[0.0225, 0.0135], [0.0135, 0.09]]])
+PLANE = dict(geometry="plane", h=1.8, azimuth_step=5 * DEG, elevation_step=5 * DEG)
+MIXTURE_BAD = (
+    ("weights", [0.5, 0.35, 0.25], r"weights = \[0.5, 0.35, 0.25\]: they sum to 1.1\d*, not 1"),
+    ("covs", [[[1.0, 2.0], [2.0, 1.0]]] * 3, r"covs\[0\] = .*: not positive definite"),
+    ("means", [[0.0, 0.0, 0.0]] * 3, r"covs: expected shape \(3, 3, 3\) to match the means"),
+)
 MOTION_BAD = (
     ("v0", -1.0, r"v0 = -1.0: must be > 0"),
     ("sigma_a", math.nan, r"sigma_a = nan: must be finite"),
@@ -105,16 +156,40 @@ CASES = {
                       20.0, dict(ranges=(0.0, 1200.0), range_step=40.0, pose=Pose(origin=(300.0, -200.0)), **FULL_TURN),
                       bad=(("sigma", 0.0, r"sigma = 0.0: must be > 0"),), pose=dict(origin=(300.0, -200.0)),
                       kinds=bg.MODEL_KINDS.with_kinds(ISOTROPIC)),
+    # presence laws on an array's angular cells (Pessentheiner), conditioned on a room
+    "mixture-line": ArrayCase("mixture", dict(weights=[0.6, 0.4], means=[[-1.8], [2.6]], covs=[0.09, 0.04]),
+                              dict(geometry="line", h=1.8, azimuth_step=2 * DEG), dict(x=(-3.0, 3.0)),
+                              bad=(("weights", [0.6, 0.5], r"they sum to 1.1\d*, not 1"),
+                                   ("covs", [-0.09, 0.04], r"covs\[0\] = \[\[-0.09\]\]: not positive definite"),
+                                   ("means", [[-1.8, 0.0]], r"means: expected shape \(M, D\) with M = 2 components"))),
+    "mixture-plane": ArrayCase("mixture", ROOM_MIXTURE, PLANE, ROOM, bad=MIXTURE_BAD),
+    "mixture-frustum": ArrayCase("mixture", dict(weights=[0.5, 0.35, 0.15],
+                                                 means=[[-1.8, 1.5, -1.75], [1.2, -1.8, -1.75], [2.6, 1.9, -1.35]],
+                                                 covs=[np.diag([0.0625, 0.0625, 0.0025]), np.diag([0.49, 0.04, 0.0064]),
+                                                       [[0.0225, 0.0135, 0.001], [0.0135, 0.09, 0.0], [0.001, 0.0, 0.0064]]]),
+                                 dict(geometry="frustum", h=1.55, dh=0.25, azimuth_step=5 * DEG,
+                                      elevation_step=5 * DEG), {**ROOM, "z": (-3.0, 0.0)}),
+    "uniform-plane": ArrayCase("uniform", dict(region=ROOM), PLANE, dict(x=(-1.0, 3.0), y=(-2.5, 1.0)),
+                               bad=(("region", "room", r"region = 'room': expected a bananagrid Region"),
+                                    ("region", dict(x=(1.0, 0.0), y=(0.0, 1.0)), r"region x = \(1.0, 0.0\): the region is empty"))),
+    "uniform-frustum": ArrayCase("uniform", dict(region={**ROOM, "z": (-3.0, 0.0)}),
+                                 dict(geometry="frustum", h=1.55, dh=0.25, azimuth_step=5 * DEG, elevation_step=5 * DEG),
+                                 {**ROOM, "z": (-3.0, 0.0)}),
 }
+GRID_CASES = [name for name, case in CASES.items() if case.domain == "grid"]
+ARRAY_CASES = [name for name, case in CASES.items() if case.domain == "array"]
 
 
 def test_every_registered_kind_has_a_case():
-    """A kind added to the registry must join this table (and so pass every check here)."""
+    """A kind added to the registry must join this table (and so pass every check here of its
+    domain); a grid kind's model follows the density protocol, an array kind's the presence one."""
     assert set(bg.MODEL_KINDS) <= {case.kind for case in CASES.values()}
-    assert all(isinstance(case.model(), bg.DensityModel) for case in CASES.values())
+    assert set(GRID_CASES) | set(ARRAY_CASES) == set(CASES)
+    assert all(isinstance(CASES[name].model(), bg.DensityModel) for name in GRID_CASES)
+    assert all(isinstance(CASES[name].model(), PresenceModel) for name in ARRAY_CASES)
 
 
-@pytest.mark.parametrize("name", CASES)
+@pytest.mark.parametrize("name", GRID_CASES)
 def test_pdf_equals_rasterise(name):
     case = CASES[name]
     model, grid = case.model(), case.grid
@@ -128,7 +203,7 @@ def test_pdf_equals_rasterise(name):
         np.testing.assert_allclose(raster.values[live], points[live], rtol=case.pdf_rtol, atol=0.0)
 
 
-@pytest.mark.parametrize("name", CASES)
+@pytest.mark.parametrize("name", GRID_CASES)
 def test_threads_do_not_change_results(name):
     case = CASES[name]
     model, grid = case.model(), case.grid
@@ -139,7 +214,7 @@ def test_threads_do_not_change_results(name):
         assert many.mass == one.mass
 
 
-@pytest.mark.parametrize("name", CASES)
+@pytest.mark.parametrize("name", GRID_CASES)
 def test_float32_within_the_stated_bound(name):
     """float32 against float64 where the density exceeds 1e-6 of its peak, within the bound the
     model class states (``float32_rtol``)."""
@@ -162,7 +237,7 @@ N_SAMPLES = 200_000
 SUB = 10
 
 
-@pytest.mark.parametrize("name", CASES)
+@pytest.mark.parametrize("name", GRID_CASES)
 def test_density_matches_its_own_samples(name):
     """Pearson's chi-square of the model's samples binned on its grid against the kernel's bin
     probabilities (normalised over the grid, which holds the mass), bins expecting >= 5."""
@@ -189,7 +264,7 @@ def test_density_matches_its_own_samples(name):
     assert p_value > ALPHA, f"chi2 = {chi2:.1f} on {len(obs) - 1} dof, p = {p_value:.2e}"
 
 
-@pytest.mark.parametrize("name", CASES)
+@pytest.mark.parametrize("name", GRID_CASES)
 def test_polar_lattice_cells_sum_to_the_grid_mass(name):
     """The lattice's Gauss-Legendre cells and the grid's midpoint rule integrate the same density
     over regions that both hold its mass (the coarse grid's midpoint rule errs by up to ~1e-4
@@ -202,7 +277,7 @@ def test_polar_lattice_cells_sum_to_the_grid_mass(name):
     assert abs(polar.mass - fine.mass) < 1e-4 * fine.mass, (polar.mass, fine.mass)
 
 
-@pytest.mark.parametrize("name", CASES)
+@pytest.mark.parametrize("name", GRID_CASES)
 def test_radial_moments_along_rays(name):
     """E[r | theta] lies inside the lattice's ranges, SD > 0 and the ray mass > 0 at the
     bearing of the lattice's centre (through the protocol's radial_extent and ray_values)."""
@@ -214,6 +289,151 @@ def test_radial_moments_along_rays(name):
     moments = bg.radial_moments(model, [bearing], pose=pose)
     assert lattice.ranges[0] < moments.mean[0] < lattice.ranges[1]
     assert moments.sd[0] > 0.0 and moments.mass[0] > 0.0
+
+
+# --- the array kinds: presence laws on an array's angular cells --------------------------------
+
+#: SciPy's multivariate normal (an eigendecomposition) against the law's Cholesky whitening of
+#: the same well-conditioned covariances: both within a few ulp of the density; 1e-12 leaves room
+#: for exp's amplification of the quadratic form's rounding (|q| < 60 at these points).
+ORACLE_RTOL = 1e-12
+#: A cell's relative error in float64 is below 1e-6 wherever it holds 1e-9 of the mass (the
+#: quadrature's stated bound, README), so sums of cells agree with an independent p(S) to 1e-6.
+CELL_SUM_RTOL = 1e-6
+
+
+def _closed_form(case: ArrayCase, points: np.ndarray, axes: int) -> np.ndarray:
+    """The law's density on its first ``axes`` coordinates: SciPy's normals summed by weight, or
+    1 / |S| inside the box."""
+    params = case.params
+    if case.kind == "uniform":
+        box = bg.Region(**params["region"]).bounds[:axes]
+        inside = np.all((points >= box[:, 0]) & (points <= box[:, 1]), axis=1)
+        return np.where(inside, 1.0 / np.prod(box[:, 1] - box[:, 0]), 0.0)
+    means = np.asarray(params["means"], dtype=float)
+    covs = np.asarray(params["covs"], dtype=float).reshape(len(params["weights"]), means.shape[1], means.shape[1])
+    return sum(w * stats.multivariate_normal(m[:axes], c[:axes, :axes]).pdf(points).reshape(-1)
+               for w, m, c in zip(params["weights"], means, covs))
+
+
+@pytest.mark.parametrize("name", ARRAY_CASES)
+def test_array_pdf_matches_its_closed_form(name):
+    """``pdf`` in the protocol's form (coordinates, broadcast) against the closed form, the
+    convenience form ``pdf(points)`` bit for bit the same, and a 3-D law's ``pdf(x, y)`` its
+    (x, y) marginal."""
+    case = CASES[name]
+    model = case.model()
+    d = model.dim
+    rng = np.random.default_rng(20261127)
+    box = case.region.bounds
+    shapes = [(6, 1), (1, 5), (6, 5)][:d] if d > 1 else [(6, 5)]
+    coords = [rng.uniform(box[k, 0] - 1.0, box[k, 1] + 1.0, size=shape) for k, shape in enumerate(shapes)]
+    values = model.pdf(*coords)
+    assert values.shape == (6, 5)
+    points = np.stack(np.broadcast_arrays(*coords), axis=-1).reshape(-1, d)
+    np.testing.assert_array_equal(model.pdf(points), values.ravel())
+    np.testing.assert_allclose(values.ravel(), _closed_form(case, points, d), rtol=ORACLE_RTOL, atol=0.0)
+    if d == 3:
+        np.testing.assert_allclose(model.pdf(*coords[:2]).ravel(), _closed_form(case, points[:, :2], 2),
+                                   rtol=ORACLE_RTOL, atol=0.0)
+
+
+@pytest.mark.parametrize("name", ARRAY_CASES)
+def test_array_cells_equal_rasterise(name):
+    """``rasterise`` on an AngularLattice is the law's own cell plan, bit for bit."""
+    case = CASES[name]
+    model, lattice, region = case.model(), case.angular, case.region
+    cells = bg.rasterise(model, lattice, region=region)
+    assert isinstance(cells, bg.CellMap) and cells.prob.shape == lattice.shape
+    np.testing.assert_array_equal(cells.prob, model.cell_map(lattice, region).prob)
+    np.testing.assert_array_equal(cells.prob, bg.cell_probabilities(model, lattice, region).prob)
+    assert cells.prob.min() >= 0.0
+
+
+@pytest.mark.parametrize("name", ARRAY_CASES)
+def test_array_threads_do_not_change_results(name):
+    case = CASES[name]
+    model, lattice, region = case.model(), case.angular, case.region
+    one = bg.rasterise(model, lattice, region=region, threads=1)
+    for threads in (2, 3):
+        np.testing.assert_array_equal(bg.rasterise(model, lattice, region=region, threads=threads).prob, one.prob)
+
+
+@pytest.mark.parametrize("name", ARRAY_CASES)
+def test_array_float32_within_the_stated_bound(name):
+    """float32 cells against float64 where a cell holds 1e-9 of the mass, within ``float32_rtol``."""
+    case = CASES[name]
+    model, lattice, region = case.model(), case.angular, case.region
+    r64 = bg.rasterise(model, lattice, region=region).prob
+    r32 = bg.rasterise(model, lattice, region=region, dtype=np.float32).prob
+    live = r64 >= 1e-9
+    worst = float(np.max(np.abs(r32[live] / r64[live] - 1.0)))
+    assert worst <= type(model).float32_rtol, worst
+
+
+def _line_counts(points: np.ndarray, lattice) -> np.ndarray:
+    """Samples per line cell: cell k lies between x = -h cot(phi) of its azimuth edges."""
+    x = np.clip(lattice.line_edges(), -1e9, 1e9)  # the end cells reach to infinity
+    order = np.argsort(x)
+    counts = np.histogram(points[:, 0], bins=x[order])[0]
+    out = np.zeros(lattice.shape[0])
+    np.add.at(out, np.minimum(order[:-1], order[1:]), counts)
+    return out
+
+
+@pytest.mark.parametrize("name", ARRAY_CASES)
+def test_array_cells_match_their_own_samples(name):
+    """Pearson's chi-square of the law's samples in the room, binned by the direction the array
+    sees them in, against p(C | S) times their number (bins expecting >= 5, pooled below)."""
+    case = CASES[name]
+    model, lattice, region = case.model(), case.angular, case.region
+    cells = bg.rasterise(model, lattice, region=region).prob
+    pts = model.sample(N_SAMPLES, np.random.default_rng(20261128))
+    pts = pts[region.contains(pts)]
+    if lattice.geometry == "line":
+        counts = _line_counts(pts, lattice)
+    else:
+        depths = lattice.depths if lattice.geometry == "frustum" else (lattice.h, lattice.h)
+        counts = bin_samples(pts, lattice.azimuth_edges, lattice.elevation_edges, depths)
+    expected = (cells * len(pts)).ravel()
+    counts = counts.ravel()
+    big = expected >= 5
+    obs = np.append(counts[big], counts[~big].sum())
+    exp = np.append(expected[big], expected[~big].sum())
+    if exp[-1] < 5:  # too little pooled mass for Pearson's approximation
+        obs, exp = obs[:-1], exp[:-1] * (obs[:-1].sum() / exp[:-1].sum())
+    chi2 = float(np.sum((obs - exp) ** 2 / exp))
+    p_value = stats.chi2.sf(chi2, df=len(obs) - 1)
+    assert p_value > ALPHA, f"chi2 = {chi2:.1f} on {len(obs) - 1} dof, p = {p_value:.2e}"
+
+
+@pytest.mark.parametrize("name", ARRAY_CASES)
+def test_array_cells_sum_to_the_seen_part_of_the_room(name):
+    """The cells cover the room's part the lattice sees (the whole line or plane; the slab
+    between the frustum's depths), so they sum to its probability over the room's, each by the
+    law's own ``region_probability`` (rectangle probabilities, not the cells' quadrature)."""
+    case = CASES[name]
+    model, lattice, region = case.model(), case.angular, case.region
+    total = float(bg.rasterise(model, lattice, region=region).prob.sum())
+    want = 1.0
+    if lattice.geometry == "frustum":
+        d0, d1 = lattice.depths
+        (x, y, z) = region.bounds
+        seen = bg.Region(x=tuple(x), y=tuple(y), z=(max(z[0], -d1), min(z[1], -d0)))
+        want = model.region_probability(seen) / model.region_probability(region)
+    assert total == pytest.approx(want, rel=CELL_SUM_RTOL, abs=0.0)
+
+
+def test_each_domain_refuses_the_other_kind_in_one_line():
+    """A planar density has no cells of an array's directions; a presence law is no planar kernel
+    model; a region conditions only an angular lattice's cells."""
+    cat, mixture = CASES["cat"].model(), CASES["mixture-plane"].model()
+    with pytest.raises(bg.BananagridError, match=r"^CAT: a density in the world plane has no cells of an array's "):
+        bg.rasterise(cat, CASES["mixture-plane"].angular)
+    with pytest.raises(bg.BananagridError, match=r"^model = GaussianMixture"):
+        bg.rasterise(mixture, CASES["cat"].grid)
+    with pytest.raises(bg.BananagridError, match=r"^region = Region.*: only an AngularLattice's cells"):
+        bg.rasterise(cat, CASES["cat"].grid, region=bg.Region(**ROOM))
 
 
 BAD = [(name, param, value, message) for name, case in CASES.items() for param, value, message in case.bad]

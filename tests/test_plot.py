@@ -27,7 +27,6 @@ from bananagrid.plotting import FLOOR_DECADES, figure_layout, map_frame, map_geo
 from bananagrid.scenes.examples import example_path  # noqa: E402
 from bananagrid.scenes.load import load_scene  # noqa: E402
 from bananagrid.scenes.pictures import read_picture  # noqa: E402
-from bananagrid.scenes.presence import PresenceScene  # noqa: E402
 
 from cases import small_scene  # noqa: E402
 
@@ -338,7 +337,7 @@ def test_readme_pictures_are_made_from_every_grid_scene(tmp_path):
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")  # the poor crossing's warning at load
         grid_scenes = {path.stem for path in (ROOT / "scenes").glob("*.toml")
-                       if not isinstance(load_scene(path), PresenceScene)}
+                       if load_scene(path).gridded}
     assert set(make_pictures.PICTURED) == grid_scenes
     readme = (ROOT / "README.md").read_text()
     shown = re.findall(r"!\[[^\]]+\]\((docs/pictures/[\w-]+\.png)\)", readme)

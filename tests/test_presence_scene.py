@@ -24,8 +24,7 @@ from bananagrid.recording.inspect import inspect_recording, read_depth_image
 from bananagrid.recording.presence import cell_colours
 from bananagrid.scenes.run import run_scene
 from bananagrid.scenes.load import load_scene, parse_scene
-from bananagrid.scenes.presence import PresenceScene
-from bananagrid.scenes.run_presence import run_presence_scene
+import bananagrid.scenes.run_cells as run_cells
 
 ROOT = Path(__file__).resolve().parent.parent
 SCENES = {name: ROOT / "scenes" / f"{name}.toml" for name in ("room_mixture", "room_uniform", "room_frustum", "line_section4")}
@@ -42,34 +41,41 @@ MIXTURE = bg.GaussianMixture(
 )
 
 
+def law(scene):
+    """The scene's presence law: its one layer's model."""
+    (layer,) = scene.layers
+    return layer.model()
+
+
 # --- the bundled scenes parse to what they say ----------------------------------------------------
 
 
 def test_room_mixture_parses_to_its_law_lattice_and_room():
     scene = load_scene(SCENES["room_mixture"])
-    assert isinstance(scene, PresenceScene) and scene.name == "room_mixture" and scene.kind == "mixture"
-    assert scene.lattice == bg.AngularLattice.integer_degrees("plane", h=1.8)
+    assert not scene.gridded and scene.name == "room_mixture" and scene.layers[0].kind == "mixture"
+    assert scene.layers[0].model_kind is bg.MODEL_KINDS["mixture"] and scene.layers[0].model_kind.domain == "array"
+    assert scene.domain == bg.AngularLattice.integer_degrees("plane", h=1.8)
     assert scene.region == ROOM and scene.room_z == (-3.0, 0.0)
     assert scene.component_names == ("desk_chair", "sofa", "door")
-    np.testing.assert_array_equal(scene.presence.weights, MIXTURE.weights)
-    np.testing.assert_array_equal(scene.presence.means, MIXTURE.means)
+    np.testing.assert_array_equal(law(scene).weights, MIXTURE.weights)
+    np.testing.assert_array_equal(law(scene).means, MIXTURE.means)
     # sd^2 and rho sd_x sd_y in floating point: equal to the hand-written products to 1 ulp
-    np.testing.assert_allclose(scene.presence.covs, MIXTURE.covs, rtol=1e-15, atol=0)
+    np.testing.assert_allclose(law(scene).covs, MIXTURE.covs, rtol=1e-15, atol=0)
 
 
 def test_other_scenes_parse():
     uniform = load_scene(SCENES["room_uniform"])
-    assert isinstance(uniform.presence, bg.UniformPresence) and uniform.presence.region == ROOM
+    assert isinstance(law(uniform), bg.UniformPresence) and law(uniform).region == ROOM
     assert uniform.component_names == ()
     frustum = load_scene(SCENES["room_frustum"])
-    assert frustum.lattice == bg.AngularLattice.integer_degrees("frustum", h=1.55, dh=0.25)
+    assert frustum.domain == bg.AngularLattice.integer_degrees("frustum", h=1.55, dh=0.25)
     assert frustum.region == bg.Region(x=(-3.0, 3.0), y=(-2.5, 2.5), z=(-3.0, 0.0))
-    assert frustum.presence.dim == 3 and frustum.presence.block_diagonal
-    assert frustum.presence.covs[2, 2, 2] == pytest.approx(0.08**2, rel=1e-15)
+    assert law(frustum).dim == 3 and law(frustum).block_diagonal
+    assert law(frustum).covs[2, 2, 2] == pytest.approx(0.08**2, rel=1e-15)
     line = load_scene(SCENES["line_section4"])
-    assert line.lattice == bg.AngularLattice("line", h=1.8, azimuth_step=DEG, azimuth_range=(math.pi, 2 * math.pi))
-    assert line.lattice.shape == (181,) and line.region == bg.Region(x=(-3.0, 3.0))
-    np.testing.assert_array_equal(line.presence.means[:, 0], [-1.8, 2.6])  # a number and [x] alike
+    assert line.domain == bg.AngularLattice("line", h=1.8, azimuth_step=DEG, azimuth_range=(math.pi, 2 * math.pi))
+    assert line.domain.shape == (181,) and line.region == bg.Region(x=(-3.0, 3.0))
+    np.testing.assert_array_equal(law(line).means[:, 0], [-1.8, 2.6])  # a number and [x] alike
 
 
 # --- bad keys, one per kind, the whole message ----------------------------------------------------
@@ -161,7 +167,7 @@ BAD = [
 
 def test_base_scene_is_valid():
     scene = parse_scene(BASE, source="base.toml")
-    assert scene.lattice.shape == (36, 10) and scene.component_names == ("a", "b")
+    assert scene.domain.shape == (36, 10) and scene.component_names == ("a", "b")
 
 
 @pytest.mark.parametrize("case, edit, message", BAD, ids=[case for case, _, _ in BAD])
@@ -322,8 +328,8 @@ def test_npz_round_trips(mixture_run):
 
 def test_line_scene_records_segments_and_exports_by_degree(tmp_path):
     scene = load_scene(SCENES["line_section4"])
-    run_presence_scene(scene, tmp_path, npz=True)
-    direct = bg.cell_probabilities(scene.presence, scene.lattice, bg.Region(x=(-3.0, 3.0)))
+    run_scene(scene, tmp_path, npz=True)
+    direct = bg.cell_probabilities(law(scene), scene.domain, bg.Region(x=(-3.0, 3.0)))
     table = np.flipud(read_depth_image(tmp_path / "line_section4.rrd", "presence/table"))
     np.testing.assert_array_equal(table, direct.prob[None, :].astype(np.float32))
     strips = _cell(tmp_path / "line_section4.rrd", "/presence/plane/cells", "LineStrips3D:strips")
@@ -332,7 +338,7 @@ def test_line_scene_records_segments_and_exports_by_degree(tmp_path):
     with np.load(tmp_path / "line_section4.npz", allow_pickle=False) as arrays:
         assert arrays["prob"].shape == (361,)
         np.testing.assert_array_equal(arrays["prob"][180:], direct.prob)
-        np.testing.assert_array_equal(arrays["x_edges"], scene.lattice.line_edges())
+        np.testing.assert_array_equal(arrays["x_edges"], scene.domain.line_edges())
         assert "elevation_deg" not in arrays.files
 
 
@@ -367,21 +373,23 @@ def test_bad_presence_scene_is_one_line_exit_2(tmp_path, capsys):
     assert not (tmp_path / "out").exists()
 
 
-def test_compare_refuses_a_presence_scene_in_one_line(tmp_path, capsys):
-    argv = ["compare", str(SCENES["line_section4"]), "--reference", "a", "--model", "b", "--out", str(tmp_path)]
+@pytest.mark.parametrize("layers, message", [
+    (("presence", "presence"), "{scene}: a presence scene ([array]) has no grid layers; only `bananagrid run` takes it"),
+    (("a", "b"), "--reference a: no such layer in {scene} (layers: presence)"),
+])
+def test_compare_refuses_a_presence_scene_in_one_line(tmp_path, capsys, layers, message):
+    argv = ["compare", str(SCENES["line_section4"]), "--reference", layers[0], "--model", layers[1],
+            "--out", str(tmp_path)]
     assert main(argv) == 2
     err = capsys.readouterr().err.strip().splitlines()
-    assert err == [f"bananagrid: error: {SCENES['line_section4']}: a presence scene ([array]) has no grid layers; "
-                   "only `bananagrid run` takes it"]
+    assert err == ["bananagrid: error: " + message.format(scene=SCENES["line_section4"])]
 
 
 def test_failure_leaves_no_file(tmp_path, capsys, monkeypatch):
-    import bananagrid.scenes.run_presence as rp
-
     def fail(*args, **kwargs):
         raise bg.BananagridError("drawing failed")
 
-    monkeypatch.setattr(rp, "log_cell_map", fail)
+    monkeypatch.setattr(run_cells, "log_cell_map", fail)
     out = tmp_path / "out"
     assert main(["run", str(SCENES["line_section4"]), "--out", str(out), "--npz"]) == 2
     assert capsys.readouterr().err.strip().splitlines()[-1] == "bananagrid: error: drawing failed"
@@ -389,13 +397,11 @@ def test_failure_leaves_no_file(tmp_path, capsys, monkeypatch):
 
 
 def test_failure_while_exporting_leaves_no_file(tmp_path, capsys, monkeypatch):
-    import bananagrid.scenes.run_presence as sp
-
     def half_written(path, scene, cm):
         path.write_bytes(b"PK half an archive")
         raise OSError(28, "No space left on device", str(path))
 
-    monkeypatch.setattr(sp, "_write_npz", half_written)
+    monkeypatch.setattr(run_cells, "_write_npz", half_written)
     out = tmp_path / "out"
     assert main(["run", str(SCENES["line_section4"]), "--out", str(out), "--npz", "--quiet"]) == 2
     assert capsys.readouterr().err.strip().splitlines()[-1] == (

@@ -18,7 +18,6 @@ from bananagrid.engine.work import DEFAULT_MAX_SECONDS, check_work, format_durat
 from bananagrid.models.cat import MAX_NODES, NODE_SPACING, scan_node_count, scan_nodes
 from bananagrid.scenes.examples import example_names, example_path
 from bananagrid.scenes.load import load_scene
-from bananagrid.scenes.presence import PresenceScene
 from bananagrid.scenes.run import check_run_work
 
 #: A CAT whose turn-rate SD is 5,000 rad over the minute: 800,001 scan nodes, about 32 ms a cell.
@@ -90,7 +89,7 @@ def test_a_refused_scene_leaves_nothing_and_computes_nothing(tmp_path, capsys, m
 def test_no_bundled_scene_is_refused_and_every_estimate_is_positive():
     for name in example_names():
         scene = load_scene(example_path(name))
-        if isinstance(scene, PresenceScene):
+        if not scene.gridded:
             assert check_run_work(scene) is None
             continue
         seconds = check_run_work(scene, threads=1)

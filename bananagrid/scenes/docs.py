@@ -46,9 +46,10 @@ def _rows(key: SceneKey) -> list[str]:
 
 
 def model_keys_markdown(kinds: Registry = MODEL_KINDS) -> str:
-    """One section per model kind: its summary and the table of its keys."""
+    """One section per model kind of grid layers: its summary and the table of its keys (the
+    array's presence kinds are written in their ``[presence]`` table, documented by hand)."""
     parts = []
-    for name, kind in kinds.items():
+    for name, kind in kinds.on("grid").items():
         schema = kind.scene
         timed = ("it depends on the elapsed time: it takes `t`, or is computed at every `scene.times`"
                  if schema.timed else "it does not depend on time: it is logged at `t = 0` (or at every `scene.times`)")
