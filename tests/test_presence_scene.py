@@ -141,6 +141,10 @@ BAD = [
      "room.z = [-1.5, 0.0]: the target plane z = -h = -1.8 m lies outside the room"),
     ("presence kind", ('kind = "mixture"', 'kind = "gaussian"'),
      'presence.kind = "gaussian": must be one of "mixture", "uniform"'),
+    ("presence kind of a grid layer", ('kind = "mixture"', 'kind = "cat"'),
+     'presence.kind = "cat": must be one of "mixture", "uniform"'),
+    ("presence kind not a string", ('kind = "mixture"', 'kind = []'),
+     'presence.kind = []: must be one of "mixture", "uniform"'),
     ("uniform with components", ('kind = "mixture"', 'kind = "uniform"'),
      'presence.components: a uniform law has no components (kind = "uniform")'),
     ("component key of another geometry", ("sd_y = 0.2", "sd_y = 0.2\nsd_z = 0.1"),
@@ -407,3 +411,38 @@ def test_failure_while_exporting_leaves_no_file(tmp_path, capsys, monkeypatch):
     assert capsys.readouterr().err.strip().splitlines()[-1] == (
         f"bananagrid: error: {out / 'line_section4.npz'}: cannot write the .npz arrays (No space left on device)")
     assert sorted(p.name for p in out.iterdir()) == []
+
+
+# --- one registry, a domain per kind ----------------------------------------------------------------
+
+GRID_SCENE = """\
+[scene]
+name = "g"
+
+[grid]
+x = [0.0, 10.0]
+y = [0.0, 10.0]
+step = 1.0
+
+[layers.a]
+model = "mixture"
+"""
+
+
+def test_a_presence_kind_is_no_grid_layer():
+    """The registry holds the presence laws as kinds of the array domain: [presence] takes them,
+    a grid scene's layers do not (and name the grid kinds)."""
+    assert [name for name, kind in bg.MODEL_KINDS.items() if kind.domain == "array"] == ["mixture", "uniform"]
+    with pytest.raises(bg.BananagridError) as info:
+        parse_scene(GRID_SCENE, source="g.toml")
+    assert str(info.value) == 'g.toml: layers.a.model = "mixture": must be one of "cat", "polar", "bearing_fix", "butterly"'
+
+
+@pytest.mark.parametrize("name", sorted(SCENES))
+def test_an_array_scene_runs_its_layer_through_rasterise(name):
+    """The one runner's array job is ``rasterise`` of the scene's layer on its lattice, conditioned
+    on its room: the same cells as the law's own ``cell_probabilities``, bit for bit."""
+    scene = load_scene(SCENES[name])
+    ((layer, t),) = scene.jobs()
+    cells = bg.rasterise(layer.model(t), scene.domain, region=scene.region)
+    np.testing.assert_array_equal(cells.prob, bg.cell_probabilities(law(scene), scene.domain, scene.region).prob)

@@ -224,7 +224,7 @@ def _presence(table: dict, lattice: AngularLattice, room: Region | None, kinds: 
     """``[presence]``: (kind, model parameters, component names, the law)."""
     check_keys(table, PRESENCE_KEYS, "presence")
     kind = table.get("kind")
-    if kind not in kinds:
+    if not isinstance(kind, str) or kind not in kinds:  # a list or a table is no kind (nor hashable)
         shown = "missing" if kind is None else f"= {show(kind)}"
         raise SceneKeyError(f"presence.kind {shown}: must be one of {', '.join(map(show, kinds))}")
     if kind == "uniform":
