@@ -430,7 +430,7 @@ def test_each_domain_refuses_the_other_kind_in_one_line():
     cat, mixture = CASES["cat"].model(), CASES["mixture-plane"].model()
     with pytest.raises(bg.BananagridError, match=r"^CAT: a density in the world plane has no cells of an array's "):
         bg.rasterise(cat, CASES["mixture-plane"].angular)
-    with pytest.raises(bg.BananagridError, match=r"^model = GaussianMixture"):
+    with pytest.raises(bg.BananagridError, match=r"^GaussianMixture: a presence law's cells are those of an Angular"):
         bg.rasterise(mixture, CASES["cat"].grid)
     with pytest.raises(bg.BananagridError, match=r"^region = Region.*: only an AngularLattice's cells"):
         bg.rasterise(cat, CASES["cat"].grid, region=bg.Region(**ROOM))

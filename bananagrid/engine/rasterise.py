@@ -113,6 +113,11 @@ def rasterise(model: DensityModel | PresenceModel, grid: Grid | PolarLattice | A
         return _angular_cells(model, grid, region, dtype=dtype, device=device, threads=threads, chunks=chunks)
     if region is not None:
         raise BananagridError(f"region = {region!r}: only an AngularLattice's cells are conditioned on a region")
+    if isinstance(model, PresenceModel) and not isinstance(model, DensityModel):
+        raise BananagridError(
+            f"{type(model).__name__}: a presence law's cells are those of an AngularLattice (rasterise(law, "
+            "lattice, region=room)); a 2-D mixture's grid cells: bananagrid.grid_probabilities(law, grid)"
+        )
     if isinstance(grid, PolarLattice):
         return rasterise_lattice(model, grid, dtype=dtype, device=device, threads=threads, max_seconds=max_seconds)
     if not isinstance(grid, Grid):

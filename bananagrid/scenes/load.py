@@ -1,9 +1,13 @@
 """Scene files: parse a TOML scene, validate every key once, and build grids and models.
 
-A scene names a grid, one or more model layers and how to record them; see ``docs/scenes.md``
-for the schema. :func:`load_scene` and :func:`parse_scene` raise :class:`BananagridError` with
-one line that names the file, the key path (``layers.exact.sigma_a``), the value given and what
-is allowed; nothing downstream has to check a scene again. The model kinds and their keys come
+A scene names its domain, its model layers and how to record them; see ``docs/scenes.md``
+for the schema. The domain is a ``[grid]`` (one or more ``[layers]`` of planar densities) or an
+``[array]`` (the angular cells of a ceiling array, whose one layer is the ``[presence]`` law
+conditioned on the ``[room]``, :mod:`bananagrid.scenes.presence`); both give one
+:class:`Scene`, run by :func:`bananagrid.scenes.run.run_scene`.
+
+:func:`load_scene` and :func:`parse_scene` raise :class:`BananagridError` with one line that
+names the file, the key path (``layers.exact.sigma_a``), the value given and what is allowed; nothing downstream has to check a scene again. The model kinds and their keys come
 from the registry (:data:`bananagrid.models.registry.MODEL_KINDS`): pass ``kinds=`` to parse
 scenes with models of your own.
 """
