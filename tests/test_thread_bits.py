@@ -5,7 +5,8 @@ band by band (the captured mass, a batch's per-hypothesis sums) would then depen
 bands begin. Each row (each hypothesis) is summed on its own and the rows' sums added exactly,
 so values, masses and normalised values must be equal byte for byte between 1 and any number of
 threads, for every registered model kind (the contract table of ``tests/test_contract.py``),
-both dtypes and grids of 1 row, of prime row counts, and of more Butterly tiles than bands.
+both dtypes and grids of 1 row, of prime row counts, and of more Butterly tiles than bands; the
+presence laws (kinds of the array domain) on their angular lattices, whose cells are bands too.
 """
 
 import math
@@ -19,7 +20,11 @@ import bananagrid as bg
 from bananagrid.engine.batch import rasterise_batch
 from bananagrid.engine.warp_runtime import row_sums
 
-from test_contract import CASES
+from test_contract import ARRAY_CASES, GRID_CASES
+from test_contract import CASES as EVERY_CASE
+
+#: The grid kinds' cases (the array kinds' are swept on their lattices below).
+CASES = {name: EVERY_CASE[name] for name in GRID_CASES}
 
 THREADS = (2, 3, 5, 8)
 #: Row counts: one row, primes (bands of unequal sizes for every thread count), and 257 rows
@@ -142,3 +147,16 @@ def test_row_sums_of_a_band_are_those_of_the_whole(ny, nx, dtype, cut, seed):
     assert whole.dtype == np.float64 and whole.shape == (ny,)
     # the mass is their exact sum: the order of the rows cannot matter
     assert math.fsum(whole[::-1]) == math.fsum(whole)
+
+
+@pytest.mark.parametrize("name", ARRAY_CASES)
+def test_angular_cells(name):
+    """A presence law's cells on its angular lattice, conditioned on its room: the kernels' cell
+    bands (and the uniform law's exact geometry) give the same bits for any thread count."""
+    case = EVERY_CASE[name]
+    model, lattice, region = case.model(), case.angular, case.region
+    for dtype in DTYPES:
+        one = bg.rasterise(model, lattice, region=region, dtype=dtype, threads=1)
+        for threads in (2, 5):
+            many = bg.rasterise(model, lattice, region=region, dtype=dtype, threads=threads)
+            assert _same(many.prob, one.prob) and _same(many.error, one.error), (name, dtype, threads)
