@@ -18,8 +18,9 @@ from ..domains.pose import Pose
 from ..protocol import SceneKey
 from ..validate import BananagridError, non_negative, positive
 from .base import RANGE_SDS, Model
+from .params import param
 
-__all__ = ["MotionModel", "natural_scales", "MOTION_KEYS", "pose_arguments"]
+__all__ = ["MotionModel", "natural_scales", "MOTION_PARAMS", "motion_param", "pose_arguments", "pose_entries"]
 
 
 #: Largest heading SD (rad): its square must stay a normal float64 number.
@@ -149,17 +150,37 @@ def pose_arguments(params: Mapping) -> dict:
     return {**kwargs, "pose": pose}
 
 
-#: Scene keys of both motion models, by name (each model lists them in its own order).
-MOTION_KEYS = {
-    "v0": SceneKey("v0", unit="m/s", allowed="finite, > 0"),
-    "t": SceneKey("t", unit="s", default="required, unless `scene.times`",
-                  allowed="finite, > 0; refused with `scene.times`"),
-    "sigma_a": SceneKey("sigma_a", unit="m/s^2", allowed="finite, > 0"),
-    "sigma_omega": SceneKey("sigma_omega", unit="rad/s", allowed="finite, > 0", alias="deg"),
-    "sigma_heading": SceneKey("sigma_heading", unit="rad", default="`0`", alias="deg",
-                              allowed="in [0, 1e150]: SD of a normal error on the initial heading (Section 7)"),
-    "origin": SceneKey("origin", type="pair", unit="m", default="`[0, 0]`", allowed="finite: the last fix"),
-    "heading": SceneKey("heading", unit="rad", default="`0` (north)", alias="deg", bearing_at="origin",
-                        allowed="finite; the initial heading, a bearing clockwise from north (true north in a "
-                                "geographic scene)"),
+def pose_entries(model, pose: Pose) -> dict:
+    """A pose's entries in ``parameters()``: ``origin_x``, ``origin_y`` and ``heading``."""
+    return {"origin_x": pose.origin[0], "origin_y": pose.origin[1], "heading": pose.heading}
+
+
+#: The parameters both motion models share, declared once (:func:`motion_param`).
+MOTION_PARAMS = {
+    "v0": dict(doc="Initial speed.", unit="m/s", domain="finite, > 0"),
+    "t": dict(doc="Elapsed time.", unit="s", default_doc="required, unless `scene.times`",
+              domain="finite, > 0; refused with `scene.times`"),
+    "sigma_a": dict(doc="Standard deviation of the acceleration.", unit="m/s^2", domain="finite, > 0"),
+    "sigma_omega": dict(doc="Standard deviation of the turn rate.", unit="rad/s", domain="finite, > 0", alias="deg"),
+    "sigma_heading": dict(default=0.0, unit="rad", alias="deg",
+                          doc="Standard deviation sigma_0 of a normal error on the initial heading (Section 7 of "
+                              "the polar-banana paper); 0 for none.",
+                          domain="in [0, 1e150]: SD of a normal error on the initial heading (Section 7)"),
+    "pose": dict(
+        default_factory=Pose, py="Pose", default_doc="origin (0, 0), heading north", plain=pose_entries,
+        doc="Places the local frame (origin at the last fix, +y along the initial heading) in the world.",
+        domain="a bananagrid.Pose",
+        scene=(
+            SceneKey("origin", type="pair", unit="m", default="`[0, 0]`", allowed="finite: the last fix"),
+            SceneKey("heading", unit="rad", default="`0` (north)", alias="deg", bearing_at="origin",
+                     allowed="finite; the initial heading, a bearing clockwise from north (true north in a "
+                             "geographic scene)"),
+        ),
+    ),
 }
+
+
+def motion_param(name: str, **changes):
+    """The declared field (:func:`~bananagrid.models.params.param`) of motion parameter ``name``
+    (a key of :data:`MOTION_PARAMS`), with ``changes`` (a model's own ``doc``)."""
+    return param(**{**MOTION_PARAMS[name], **changes})
