@@ -5,15 +5,15 @@ A model class is a :func:`modelclass` (a frozen dataclass) whose fields are decl
 :func:`param`::
 
     @modelclass
-    class ConstantVelocity(Model):
-        \"\"\"A target moving at a known velocity from a normal start.\"\"\"
+    class Drift(Model):
+        \"\"\"A target drifting from a normal start.\"\"\"
 
         mean: tuple = param(type="pair", unit="m", py="(float, float)", doc="Mean of the start.")
         t: float = param(unit="s", domain="finite, >= 0", doc="Elapsed time.")
         q: float = param(0.0, unit="m^2/s", domain="finite, >= 0", doc="Diffusion of the velocity error.")
 
         kind = "cv"
-        scene = SceneSchema(timed=True, summary="a constant-velocity target")
+        scene = SceneSchema(timed=True, summary="a drifting target")
 
 From the declarations come
 

@@ -6,7 +6,7 @@ Models from other packages register through the entry point group ``bananagrid.m
 xarray's backends do through ``xarray.backends``), in their distribution's metadata::
 
     [project.entry-points."bananagrid.models"]
-    cv = "mypackage.model:ConstantVelocity"
+    cv = "mypackage.model:Drift"
 
 The entry point's name is the scene kind; its object is the model class (its ``kind`` equal to
 that name) or a :class:`ModelKind`. :func:`installed_kinds` loads them on first use, never at
@@ -146,6 +146,8 @@ def _kind_of(entry: metadata.EntryPoint) -> ModelKind:
     if isinstance(target, ModelKind):
         kind = target
     elif isinstance(target, type):
+        if not isinstance(getattr(target, "kind", None), str):
+            raise BananagridError(f"{_origin(entry)}: not a model class: {target.__name__} has no kind (its scene name)")
         try:
             kind = ModelKind(getattr(target, "kind", None), target)
         except ValueError as exc:
