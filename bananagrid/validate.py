@@ -203,16 +203,18 @@ def polygon(name: str, value) -> np.ndarray:
     if same.size:
         k = int(same[0])
         raise BananagridError(f"{name}[{(k + 1) % len(vertices)}] = {vertices[k].tolist()!r}: repeats the vertex before it")
-    x, y = vertices[:, 0], vertices[:, 1]
-    area = 0.5 * abs(math.fsum(x * np.roll(y, -1) - np.roll(x, -1) * y))
-    extent = float(np.max(np.abs(vertices)))
-    if not area > 1e-12 * extent * extent:
-        raise BananagridError(f"{name} = {vertices.tolist()!r}: encloses no area (its vertices lie on a line)")
     crossing = _crossing_edges(vertices)
     if crossing is not None:
         i, j = crossing
         raise BananagridError(f"{name}: edges {i}-{i + 1} and {j}-{(j + 1) % len(vertices)} cross; "
                               "the polygon must not cross itself")
+    local = vertices - vertices[0]  # the shoelace about a vertex: no cancellation of a far offset
+    x, y = local[:, 0], local[:, 1]
+    area = 0.5 * abs(math.fsum(x * np.roll(y, -1) - np.roll(x, -1) * y))
+    span = float(np.max(np.ptp(vertices, axis=0)))
+    # below the area a rounding of the coordinates (16 ulps of the largest) moves along the span
+    if not area > span * 16.0 * np.finfo(float).eps * float(np.max(np.abs(vertices))):
+        raise BananagridError(f"{name} = {vertices.tolist()!r}: encloses no area (its vertices lie on a line)")
     return vertices
 
 
