@@ -120,3 +120,13 @@ def test_the_docs_keep_their_derived_defaults():
     assert keys["k_sigma"].default == "`8`" and keys["sigma_heading"].default == "`0`"
     assert {key.name: key for key in bg.PolarBanana.scene.keys}["variant"].default == '`"improved"`'
     assert np.isfinite(bg.CAT.scene.build(PARAMS["cat"]).k_sigma)
+
+
+def test_bench_times_every_registered_kind():
+    """The bench's grid rows are parameter sets of registered kinds, built through the registry:
+    a kind added to the registry must get one (and nothing else names the kinds)."""
+    from bananagrid.bench.runner import GRID_ROWS, grid_model
+
+    assert {kind for kind, _ in GRID_ROWS.values()} == set(bg.MODEL_KINDS)
+    for name, (kind, _) in GRID_ROWS.items():
+        assert isinstance(grid_model(name), bg.MODEL_KINDS[kind].cls)
