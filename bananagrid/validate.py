@@ -283,6 +283,15 @@ def timed_track(name: str, times, positions) -> tuple[np.ndarray, np.ndarray]:
     return t, p
 
 
+#: What each check allows, as the documentation states it (a declared parameter's default domain,
+#: :func:`bananagrid.models.params.param`).
+finite.domain = "finite"
+positive.domain = "finite, > 0"
+non_negative.domain = "finite, >= 0"
+point.domain = "finite"
+covariance.domain = "finite, symmetric, positive definite"
+
+
 def step_ratio(name: str, step: float, span: float, limit: int, unit: str = "") -> float:
     """``span / step``: the number of cells a step cuts a span into, or raise when it overflows
     (a subnormal step: 1 / 5e-324 is inf) or exceeds ``limit`` (before any count is rounded or

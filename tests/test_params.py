@@ -11,6 +11,7 @@ import pytest
 import bananagrid as bg
 from bananagrid.models.params import METADATA, declared, modelclass, param, parameters_section, scene_keys
 from bananagrid.protocol import SceneSchema
+from bananagrid.validate import non_negative, positive
 
 from cases import FIG1
 
@@ -78,13 +79,26 @@ def test_a_model_class_of_a_few_lines():
     class Drift(bg.Model):
         """A drifting point."""
 
-        speed: float = param(unit="m/s", domain="finite, > 0", doc="How fast it drifts.")
-        t: float = param(unit="s", domain="finite, >= 0", doc="Elapsed time.")
+        speed: float = param(unit="m/s", check=positive, doc="How fast it drifts.")
+        t: float = param(unit="s", check=non_negative, doc="Elapsed time.")
         variant: str = param("slow", type="choice", choices=("slow", "fast"), py="str", domain="slow or fast",
                              doc="Which drift.")
 
         kind = "drift"
         scene = SceneSchema(timed=True, summary="a drifting point")
+
+        def __post_init__(self):  # a rule between parameters, after the declared checks
+            if self.variant == "fast" and self.speed < 1.0:
+                raise bg.BananagridError(f"speed = {self.speed!r}: a fast drift is at least 1 m/s")
+
+    @modelclass
+    class Drifts(Drift):
+        """Two drifting points."""
+
+        gap: float = param(1.0, unit="m", check=positive, doc="Their distance.")
+
+        kind = "drifts"
+        scene = SceneSchema(timed=True, summary="two drifting points")
 
     keys = {key.name: key for key in Drift.scene.keys}
     assert list(keys) == ["speed", "t", "variant"]
@@ -98,6 +112,19 @@ def test_a_model_class_of_a_few_lines():
     with pytest.raises(AttributeError):  # frozen
         Drift(speed=2.0, t=1.0).speed = 3.0
     assert METADATA in fields(Drift)[0].metadata
+    # the declared checks run on construction, in field order, then the class's own rule
+    assert keys["speed"].allowed == "finite, > 0" and keys["t"].allowed == "finite, >= 0"
+    assert Drift(speed=2, t=1).speed == 2.0 and type(Drift(speed=2, t=1).speed) is float
+    with pytest.raises(bg.BananagridError, match=r"^speed = -1.0: must be > 0$"):
+        Drift(speed=-1.0, t=-1.0)
+    with pytest.raises(bg.BananagridError, match=r"^speed = 0.5: a fast drift is at least 1 m/s$"):
+        Drift(speed=0.5, t=1.0, variant="fast")
+    # a subclass keeps its parent's checks and rule, and adds its own
+    assert [key.name for key in Drifts.scene.keys] == ["speed", "t", "variant", "gap"]
+    with pytest.raises(bg.BananagridError, match=r"^gap = 0.0: must be > 0$"):
+        Drifts(speed=2.0, t=1.0, gap=0.0)
+    with pytest.raises(bg.BananagridError, match=r"a fast drift"):
+        Drifts(speed=0.5, t=1.0, variant="fast")
 
 
 def test_a_hand_written_parameters_section_is_refused():

@@ -465,7 +465,7 @@ class BearingFix(Model):
         if angle < POOR_CROSSING_DEG:
             warnings.warn(
                 f"bearings cross at {angle:.3g} deg (< {POOR_CROSSING_DEG} deg): the linearised "
-                "covariance and containment are optimistic", stacklevel=4,
+                "covariance and containment are optimistic", stacklevel=5,
             )
 
     def _solve(self) -> tuple[np.ndarray, np.ndarray | None, int | None]:
@@ -555,7 +555,7 @@ class BearingFix(Model):
             if len(self.sensors) == 2:
                 raise BananagridError(text + " (the lines cross on the far side of the station)")
             warnings.warn(text + " (its bearing is off by more than 90 deg at the likelihood's maximum): "
-                          "check it", stacklevel=4)
+                          "check it", stacklevel=5)
 
     def _bearing_gradients(self, point) -> np.ndarray:
         """d bearing_i / d(x, y) at ``point``: (dy, -dx) / r^2, shape (n, 2)."""

@@ -445,12 +445,12 @@ class Butterly(Model):
     """
 
     mean: tuple[float, float] = param(
-        type="pair", unit="m", py="(float, float)", domain="finite: the start's mean (x east, y north)",
+        type="pair", unit="m", py="(float, float)", check=point, domain="finite: the start's mean (x east, y north)",
         plain=lambda model, mean: {"mean_x": mean[0], "mean_y": mean[1]},
         doc="Mean of the start position (x east, y north).")
     cov: np.ndarray = param(
-        type="matrix", unit="m^2", py="array_like, 2x2", also=SIGMA_KEYS,
-        default_doc="required unless `sigma_x`, `sigma_y`", domain="finite, symmetric, positive definite",
+        type="matrix", unit="m^2", py="array_like, 2x2", also=SIGMA_KEYS, check=covariance,
+        default_doc="required unless `sigma_x`, `sigma_y`",
         plain=lambda model, cov: {"cov_xx": float(cov[0, 0]), "cov_xy": float(cov[0, 1]), "cov_yy": float(cov[1, 1])},
         doc="Covariance of the start: symmetric positive definite (any correlation |rho| < 1, any elongation); "
             "a scene may give ``sigma_x``, ``sigma_y`` and ``rho`` instead.")
@@ -491,10 +491,7 @@ class Butterly(Model):
     )
 
     def __post_init__(self):
-        object.__setattr__(self, "mean", point("mean", self.mean))
-        cov = covariance("cov", self.cov)
-        cov.setflags(write=False)
-        object.__setattr__(self, "cov", cov)
+        self.cov.setflags(write=False)  # mean and cov: their declared checks have run
         t = finite("t", self.t)
         if t < 0:
             raise BananagridError(f"t = {t!r}: must be >= 0 (elapsed time, s)")
@@ -539,7 +536,7 @@ class Butterly(Model):
                 object.__setattr__(self, "weights", frozen)
         if v.size > MANY_SPEED_NODES:
             warnings.warn(
-                f"Butterly: {v.size} speed nodes; each costs a course integral per cell", stacklevel=3
+                f"Butterly: {v.size} speed nodes; each costs a course integral per cell", stacklevel=4
             )
         v = np.ascontiguousarray(v, dtype=float)
         w = np.ascontiguousarray(w, dtype=float)

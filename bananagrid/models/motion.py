@@ -67,11 +67,9 @@ class MotionModel(Model):
     pose: Pose
 
     def _validate_motion(self) -> None:
-        """The parameters every motion model shares: v0, t, sigma_a, sigma_omega > 0,
-        sigma_heading >= 0 and a Pose."""
-        for name in ("v0", "t", "sigma_a", "sigma_omega"):
-            object.__setattr__(self, name, positive(name, getattr(self, name)))
-        object.__setattr__(self, "sigma_heading", non_negative("sigma_heading", self.sigma_heading))
+        """What the declared checks (v0, t, sigma_a, sigma_omega > 0, sigma_heading >= 0,
+        :data:`MOTION_PARAMS`) leave to every motion model: sigma_heading's upper bound, a Pose,
+        and scales that stay normal float64 numbers."""
         if not self.sigma_heading <= MAX_SIGMA_HEADING:  # its square enters the heading law (12)
             raise BananagridError(
                 f"sigma_heading = {self.sigma_heading!r}: must be at most {MAX_SIGMA_HEADING:g} rad "
@@ -157,12 +155,12 @@ def pose_entries(model, pose: Pose) -> dict:
 
 #: The parameters both motion models share, declared once (:func:`motion_param`).
 MOTION_PARAMS = {
-    "v0": dict(doc="Initial speed.", unit="m/s", domain="finite, > 0"),
-    "t": dict(doc="Elapsed time.", unit="s", default_doc="required, unless `scene.times`",
+    "v0": dict(doc="Initial speed.", unit="m/s", check=positive),
+    "t": dict(doc="Elapsed time.", unit="s", default_doc="required, unless `scene.times`", check=positive,
               domain="finite, > 0; refused with `scene.times`"),
-    "sigma_a": dict(doc="Standard deviation of the acceleration.", unit="m/s^2", domain="finite, > 0"),
-    "sigma_omega": dict(doc="Standard deviation of the turn rate.", unit="rad/s", domain="finite, > 0", alias="deg"),
-    "sigma_heading": dict(default=0.0, unit="rad", alias="deg",
+    "sigma_a": dict(doc="Standard deviation of the acceleration.", unit="m/s^2", check=positive),
+    "sigma_omega": dict(doc="Standard deviation of the turn rate.", unit="rad/s", check=positive, alias="deg"),
+    "sigma_heading": dict(default=0.0, unit="rad", alias="deg", check=non_negative,
                           doc="Standard deviation sigma_0 of a normal error on the initial heading (Section 7 of "
                               "the polar-banana paper); 0 for none.",
                           domain="in [0, 1e150]: SD of a normal error on the initial heading (Section 7)"),

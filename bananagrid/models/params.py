@@ -8,9 +8,9 @@ A model class is a :func:`modelclass` (a frozen dataclass) whose fields are decl
     class Drift(Model):
         \"\"\"A target drifting from a normal start.\"\"\"
 
-        mean: tuple = param(type="pair", unit="m", py="(float, float)", doc="Mean of the start.")
-        t: float = param(unit="s", domain="finite, >= 0", doc="Elapsed time.")
-        q: float = param(0.0, unit="m^2/s", domain="finite, >= 0", doc="Diffusion of the velocity error.")
+        mean: tuple = param(type="pair", unit="m", py="(float, float)", check=point, doc="Mean of the start.")
+        t: float = param(unit="s", check=non_negative, doc="Elapsed time.")
+        q: float = param(0.0, unit="m^2/s", check=non_negative, doc="Diffusion of the velocity error.")
 
         kind = "cv"
         scene = SceneSchema(timed=True, summary="a drifting target")
@@ -23,10 +23,10 @@ From the declarations come
   another way too, which the schema's ``missing`` rules), and ``build`` (the class itself);
 * ``parameters()``, the plain data of provenance and recordings
   (:meth:`bananagrid.models.base.Model.parameters`);
-* the "Parameters" section of the class docstring, and ``docs/scenes.md``.
-
-Values are checked by the model itself, once, in ``__post_init__`` (with the shared checks of
-:mod:`bananagrid.validate`): a domain here is the documentation of that check.
+* the "Parameters" section of the class docstring, and ``docs/scenes.md``;
+* the checks of the values: a parameter's ``check`` (one of :mod:`bananagrid.validate`'s,
+  ``check(name, value) -> value``) runs on construction, in field order, before the class's own
+  ``__post_init__`` (for the rules between parameters), and states its domain (``check.domain``).
 """
 
 from __future__ import annotations
@@ -53,6 +53,7 @@ class Param:
     doc: str
     unit: str = ""
     domain: str = "finite"
+    check: Callable | None = None
     type: str = "number"
     py: str = "float"
     alias: str | None = None
@@ -64,7 +65,8 @@ class Param:
     plain: Callable | None = None
 
 
-def param(default=MISSING, *, doc: str, unit: str = "", domain: str = "finite", type: str = "number",
+def param(default=MISSING, *, doc: str, unit: str = "", domain: str | None = None, check: Callable | None = None,
+          type: str = "number",
           py: str = "float", alias: str | None = None, choices: tuple = (), bearing_at: str | None = None,
           default_doc: str | None = None, scene: tuple | None = None, also: tuple = (),
           plain: Callable | None = None, default_factory=MISSING, **kwargs) -> Any:
@@ -78,8 +80,14 @@ def param(default=MISSING, *, doc: str, unit: str = "", domain: str = "finite", 
         What it is, for the docstring (a sentence or two).
     unit : str
         SI unit ("" for none).
-    domain : str
-        What is allowed, as the scene documentation states it (the model checks it).
+    domain : str, optional
+        What is allowed, as the scene documentation states it (default: ``check.domain``, else
+        "finite").
+    check : callable, optional
+        ``check(name, value) -> value``: refuses a value out of the domain with a
+        :class:`~bananagrid.BananagridError` naming it, and gives the value as the model keeps it
+        (a float, an array); run on construction (see :func:`modelclass`). None: the class's own
+        ``__post_init__`` checks it.
     type : str
         The scene key's type, one of :data:`bananagrid.protocol.KEY_TYPES`.
     py : str
@@ -99,7 +107,9 @@ def param(default=MISSING, *, doc: str, unit: str = "", domain: str = "finite", 
     kwargs
         More :func:`dataclasses.field` arguments (``repr``, ``compare``, ...).
     """
-    spec = Param(doc=doc, unit=unit, domain=domain, type=type, py=py, alias=alias, choices=tuple(choices),
+    if domain is None:
+        domain = getattr(check, "domain", "finite")
+    spec = Param(doc=doc, unit=unit, domain=domain, check=check, type=type, py=py, alias=alias, choices=tuple(choices),
                  bearing_at=bearing_at, default_doc=default_doc, scene=scene, also=tuple(also), plain=plain)
     return field(default=default, default_factory=default_factory, metadata={METADATA: spec}, **kwargs)
 
@@ -224,9 +234,25 @@ def modelclass(cls=None, /, **options):
     """A frozen dataclass of declared parameters (:func:`param`), with what derives from them:
     ``scene``'s keys, required keys and ``build`` where its :class:`SceneSchema` leaves them
     out, and the docstring's Parameters section. ``options`` go to :func:`dataclasses.dataclass`
-    (``eq``, ``kw_only``)."""
+    (``eq``, ``kw_only``). The declared checks run on construction, before the class's own
+    ``__post_init__``."""
 
     def wrap(klass):
+        own = klass.__dict__.get("__post_init__")
+        if own is None:  # inherited: a declared parent's own rules, not its checks again
+            inherited = getattr(klass, "__post_init__", None)
+            own = getattr(inherited, "own", inherited)
+
+        def __post_init__(self):
+            for f, spec in declared(type(self)):
+                if spec.check is not None:
+                    object.__setattr__(self, f.name, spec.check(f.name, getattr(self, f.name)))
+            if own is not None:
+                own(self)
+
+        __post_init__.__doc__ = "Run the declared parameters' checks, then the class's own rules."
+        __post_init__.own = own
+        klass.__post_init__ = __post_init__
         klass = dataclass(frozen=True, **options)(klass)
         schema = klass.__dict__.get("scene")
         if isinstance(schema, SceneSchema):

@@ -224,7 +224,7 @@ class PolarBanana(MotionModel):
             warnings.warn(
                 f"P_sigma (11) is not positive for |phi| > {self.sigma_positive_limit:.4g} rad; "
                 "the improved density is 0 there",
-                stacklevel=3,
+                stacklevel=4,
             )
 
     @property

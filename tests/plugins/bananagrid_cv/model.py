@@ -10,7 +10,7 @@ import numpy as np
 from bananagrid.models.base import Model, check_n, check_rng
 from bananagrid.models.params import modelclass, param
 from bananagrid.protocol import KernelBinding, SceneSchema
-from bananagrid.validate import covariance, non_negative, pair, point
+from bananagrid.validate import covariance, non_negative, point
 
 from . import kernels
 
@@ -19,28 +19,21 @@ from . import kernels
 class ConstantVelocity(Model):
     """A target moving at a known velocity from a normal start: N(mean + velocity t, cov + q t I)."""
 
-    mean: tuple = param(type="pair", unit="m", py="(float, float)", domain="finite",
+    mean: tuple = param(type="pair", unit="m", py="(float, float)", check=point,
                         plain=lambda model, m: {"mean_x": m[0], "mean_y": m[1]}, doc="Mean of the start.")
-    cov: np.ndarray = param(type="matrix", unit="m^2", py="array_like, 2x2",
-                            domain="finite, symmetric, positive definite", doc="Covariance of the start.",
+    cov: np.ndarray = param(type="matrix", unit="m^2", py="array_like, 2x2", check=covariance,
+                            doc="Covariance of the start.",
                             plain=lambda model, c: {"cov_xx": c[0, 0], "cov_xy": c[0, 1], "cov_yy": c[1, 1]})
-    velocity: tuple = param(type="pair", unit="m/s", py="(float, float)", domain="finite",
+    velocity: tuple = param(type="pair", unit="m/s", py="(float, float)", check=point,
                             plain=lambda model, v: {"velocity_x": v[0], "velocity_y": v[1]}, doc="The velocity.")
-    t: float = param(unit="s", domain="finite, >= 0", doc="Elapsed time.")
-    q: float = param(0.0, unit="m^2/s", domain="finite, >= 0", doc="Growth of each position variance per second.")
+    t: float = param(unit="s", check=non_negative, doc="Elapsed time.")
+    q: float = param(0.0, unit="m^2/s", check=non_negative, doc="Growth of each position variance per second.")
 
     kind = "cv"
     # the exponent's rounding: q/2 <= 14 where the density exceeds 1e-6 of its peak, a few
     # float32 ulps (6e-8) of it, and of exp: 1e-5 with room
     float32_rtol = 1e-5
     scene = SceneSchema(timed=True, summary="a constant-velocity target from a normal start")
-
-    def __post_init__(self):
-        object.__setattr__(self, "mean", point("mean", self.mean))
-        object.__setattr__(self, "cov", covariance("cov", self.cov))
-        object.__setattr__(self, "velocity", pair("velocity", self.velocity, "a pair (vx, vy)"))
-        object.__setattr__(self, "t", non_negative("t", self.t))
-        object.__setattr__(self, "q", non_negative("q", self.q))
 
     @property
     def law(self) -> tuple[np.ndarray, np.ndarray]:
