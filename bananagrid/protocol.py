@@ -243,14 +243,17 @@ class SceneSchema:
     Attributes
     ----------
     keys : tuple of SceneKey
-        Every parameter a layer may give, in documentation order.
-    required : tuple of str
+        Every parameter a layer may give, in documentation order (derived from the declared
+        fields of a :func:`~bananagrid.models.params.modelclass` when left empty).
+    required : tuple of str, optional
         Parameters every layer needs (from its table or ``[defaults]``); a timed kind also
-        needs ``t`` unless the scene gives ``scene.times``.
+        needs ``t`` unless the scene gives ``scene.times``. None: derived from the declared
+        fields (those without a default), or none.
     timed : bool
         Whether the density depends on the elapsed time ``t`` (then ``scene.times`` applies).
-    build : callable
-        ``build(params) -> model`` from the parameters in SI units (no aliases).
+    build : callable, optional
+        ``build(params) -> model`` from the parameters in SI units (no aliases); a
+        ``modelclass`` calls itself with them when left out.
     missing : callable, optional
         ``missing(given) -> list of str``: further keys a layer lacks, for rules the key list
         cannot say (one of two ways to give a value; keys that depend on another's value).
@@ -263,16 +266,21 @@ class SceneSchema:
         Whether layers of this kind can record the conditional radial curves (``[radial]``).
     summary : str
         One line for the scene documentation.
+    options : Mapping
+        Scene-wide ``[output]`` switches (true or false, default false) this kind adds, by name,
+        with what each adds; the kind's recording module acts on them
+        (:func:`bananagrid.recording.layers.log_scene_extras`).
     """
 
-    keys: tuple
-    required: tuple
-    timed: bool
-    build: Callable
+    keys: tuple = ()
+    required: tuple | None = None
+    timed: bool = False
+    build: Callable | None = None
     missing: Callable | None = None
     message_keys: Mapping = field(default_factory=dict)
     radial_curves: bool = False
     summary: str = ""
+    options: Mapping = field(default_factory=dict)
 
     @property
     def key_names(self) -> tuple[str, ...]:

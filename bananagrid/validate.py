@@ -15,12 +15,14 @@ import stat
 import time
 import warnings
 from collections.abc import Callable
+from fractions import Fraction
 from numbers import Real
 from pathlib import Path
 
 import numpy as np
 
 __all__ = ["finite", "positive", "non_negative", "positive_int", "pair", "point", "real_array", "show", "step_ratio",
+           "covariance", "polygon", "timed_track", "MAX_CONDITION",
            "BananagridError", "BananagridWarning", "regular_file", "checked_in_child"]
 
 
@@ -108,6 +110,186 @@ def pair(name: str, value, expected: str = "a pair (low, high)") -> tuple[float,
 def point(name: str, value) -> tuple[float, float]:
     """Return ``value`` as a pair of finite floats (x, y), or raise naming the bad one."""
     return pair(name, value, "a pair (x, y)")
+
+
+#: Largest condition number (ratio of the largest to the smallest eigenvalue) of a covariance:
+#: beyond it the smallest axis is lost to the rounding of the largest in float64 (eps 2.2e-16
+#: times 1e13 is 2e-3 of the smallest eigenvalue).
+MAX_CONDITION = 1e13
+#: Relative asymmetry of a covariance's off-diagonal pair that is taken as rounding (and made
+#: exactly symmetric): a few ulps of the largest entry.
+SYMMETRY_RTOL = 1e-12
+
+
+def _eigenvalues_2x2(sxx: float, sxy: float, syy: float) -> tuple[float, float]:
+    """Eigenvalues s1 <= s2 of [[sxx, sxy], [sxy, syy]]: s1 = det / s2, with det exact (in
+    rationals, rounded once) and the entries scaled by a power of two, so that neither the
+    cancellation of an elongated matrix nor the range of the units loses s1."""
+    exponent = math.frexp(max(abs(sxx), abs(syy), abs(sxy)))[1]
+    sxx, sxy, syy = (math.ldexp(v, -exponent) for v in (sxx, sxy, syy))
+    s2 = 0.5 * (sxx + syy) + math.hypot(0.5 * (sxx - syy), sxy)
+    s1 = float(Fraction(sxx) * Fraction(syy) - Fraction(sxy) ** 2) / s2
+    return math.ldexp(s1, exponent), math.ldexp(s2, exponent)
+
+
+def covariance(name: str, value, dim: int = 2) -> np.ndarray:
+    """``value`` as a new float64 ``(dim, dim)`` covariance matrix: finite, symmetric (to
+    :data:`SYMMETRY_RTOL` of its largest entry; then made exactly so), positive variances and a
+    condition number below :data:`MAX_CONDITION`.
+
+    Raises
+    ------
+    BananagridError
+        ``NAME = value: rule`` naming the first rule broken (for a 2 x 2 matrix, its eigenvalues
+        and correlation when it is not positive definite).
+    """
+    cov = real_array(name, value, f"a {dim}x{dim} array of numbers")
+    if cov.shape != (dim, dim):
+        layout = " [[sxx, sxy], [sxy, syy]]" if dim == 2 else ""
+        raise BananagridError(f"{name} = {value!r}: expected a {dim}x{dim} array{layout}, got shape {cov.shape}")
+    if not np.isfinite(cov).all():
+        raise BananagridError(f"{name} = {cov.tolist()!r}: every entry must be finite (NaN or inf given)")
+    scale = float(np.max(np.abs(cov)))
+    bad = np.argwhere(np.abs(cov - cov.T) > SYMMETRY_RTOL * scale)
+    if bad.size:
+        i, j = (int(k) for k in bad[0])
+        raise BananagridError(f"{name} = {cov.tolist()!r}: must be symmetric ({name}[{i}][{j}] == {name}[{j}][{i}])")
+    cov = np.triu(cov) + np.triu(cov, 1).T  # exactly symmetric: the upper triangle mirrored
+    if not np.all(np.diag(cov) > 0.0):
+        raise BananagridError(f"{name} = {cov.tolist()!r}: must be positive definite (variances > 0)")
+    if dim == 2:
+        s1, s2 = _eigenvalues_2x2(cov[0, 0], cov[0, 1], cov[1, 1])
+        if not s1 > MAX_CONDITION**-1 * s2:
+            rho = cov[0, 1] / (math.sqrt(cov[0, 0]) * math.sqrt(cov[1, 1]))
+            raise BananagridError(
+                f"{name} = {cov.tolist()!r}: must be positive definite (eigenvalues {s1:.6g}, {s2:.6g}; "
+                f"correlation {rho:.15g}, |rho| must be < 1)"
+            )
+        return cov
+    # scaled by the diagonal, so that units of very different size on the axes do not count
+    d = np.sqrt(np.diag(cov))
+    eig = np.linalg.eigvalsh(cov / np.outer(d, d))
+    if not eig[0] > eig[-1] / MAX_CONDITION:
+        raise BananagridError(
+            f"{name} = {cov.tolist()!r}: must be positive definite (correlation eigenvalues {eig.tolist()!r}; "
+            f"condition number below {MAX_CONDITION:g})"
+        )
+    return cov
+
+
+def polygon(name: str, value) -> np.ndarray:
+    """``value`` as a new float64 ``(n, 2)`` array of the vertices (x, y) of a simple polygon:
+    at least 3, finite, a closing vertex equal to the first dropped, no two consecutive alike,
+    an area above 0 and no edge crossing another.
+
+    Raises
+    ------
+    BananagridError
+        ``NAME = value: rule`` naming the first rule broken (``NAME[k]`` for one vertex).
+    """
+    vertices = real_array(name, value, "a list of [x, y] vertices")
+    if vertices.ndim != 2 or vertices.shape[1] != 2:
+        raise BananagridError(f"{name} = {value!r}: expected a list of [x, y] vertices, got shape {vertices.shape}")
+    bad = np.argwhere(~np.isfinite(vertices))
+    if bad.size:
+        k = int(bad[0][0])
+        raise BananagridError(f"{name}[{k}] = {vertices[k].tolist()!r}: must be finite")
+    if len(vertices) > 1 and np.array_equal(vertices[0], vertices[-1]):
+        vertices = vertices[:-1]  # a closed ring
+    if len(vertices) < 3:
+        raise BananagridError(f"{name}: {len(vertices)} distinct vertices given, a polygon needs at least 3")
+    following = np.roll(vertices, -1, axis=0)
+    same = np.flatnonzero(np.all(vertices == following, axis=1))
+    if same.size:
+        k = int(same[0])
+        raise BananagridError(f"{name}[{(k + 1) % len(vertices)}] = {vertices[k].tolist()!r}: repeats the vertex before it")
+    crossing = _crossing_edges(vertices)
+    if crossing is not None:
+        i, j = crossing
+        raise BananagridError(f"{name}: edges {i}-{i + 1} and {j}-{(j + 1) % len(vertices)} cross; "
+                              "the polygon must not cross itself")
+    local = vertices - vertices[0]  # the shoelace about a vertex: no cancellation of a far offset
+    x, y = local[:, 0], local[:, 1]
+    area = 0.5 * abs(math.fsum(x * np.roll(y, -1) - np.roll(x, -1) * y))
+    span = float(np.max(np.ptp(vertices, axis=0)))
+    # below the area a rounding of the coordinates (16 ulps of the largest) moves along the span
+    if not area > span * 16.0 * np.finfo(float).eps * float(np.max(np.abs(vertices))):
+        raise BananagridError(f"{name} = {vertices.tolist()!r}: encloses no area (its vertices lie on a line)")
+    return vertices
+
+
+def _orientation(a, b, c) -> np.ndarray:
+    """Sign of the turn a -> b -> c (broadcast over rows): +1 left, -1 right, 0 collinear."""
+    return np.sign((b[..., 0] - a[..., 0]) * (c[..., 1] - a[..., 1]) - (b[..., 1] - a[..., 1]) * (c[..., 0] - a[..., 0]))
+
+
+def _crossing_edges(vertices: np.ndarray) -> tuple[int, int] | None:
+    """The first pair (i, j), i < j, of non-adjacent edges that touch or cross, or None."""
+    n = len(vertices)
+    a, b = vertices, np.roll(vertices, -1, axis=0)
+    for i in range(n):
+        j = np.arange(i + 2, n if i else n - 1)  # edges that share no vertex with edge i
+        if not j.size:
+            continue
+        p, q = a[i], b[i]
+        r, s = a[j], b[j]
+        d1, d2 = _orientation(p, q, r), _orientation(p, q, s)
+        d3, d4 = _orientation(r, s, p[None]), _orientation(r, s, q[None])
+        proper = (d1 * d2 < 0) & (d3 * d4 < 0)
+        # collinear touching: an end of one edge within the other's box on their common line
+        def on(seg_a, seg_b, point):
+            return ((np.minimum(seg_a[..., 0], seg_b[..., 0]) <= point[..., 0])
+                    & (point[..., 0] <= np.maximum(seg_a[..., 0], seg_b[..., 0]))
+                    & (np.minimum(seg_a[..., 1], seg_b[..., 1]) <= point[..., 1])
+                    & (point[..., 1] <= np.maximum(seg_a[..., 1], seg_b[..., 1])))
+        touch = (((d1 == 0) & on(p[None], q[None], r)) | ((d2 == 0) & on(p[None], q[None], s))
+                 | ((d3 == 0) & on(r, s, p[None])) | ((d4 == 0) & on(r, s, q[None])))
+        hit = np.flatnonzero(proper | touch)
+        if hit.size:
+            return i, int(j[hit[0]])
+    return None
+
+
+def timed_track(name: str, times, positions) -> tuple[np.ndarray, np.ndarray]:
+    """``times`` (s) and ``positions`` (m) of a track as new float64 arrays ``(n,)`` and
+    ``(n, 2)``: at least 2 points, finite, one position per time, times strictly increasing.
+
+    Raises
+    ------
+    BananagridError
+        ``NAME.times[k] = value: rule`` or ``NAME.positions[k] = ...`` naming the first bad one.
+    """
+    t = real_array(f"{name}.times", times, "a list of times (s)")
+    p = real_array(f"{name}.positions", positions, "a list of [x, y] positions (m)")
+    if t.ndim != 1:
+        raise BananagridError(f"{name}.times = {times!r}: expected a list of times (s)")
+    if p.ndim != 2 or p.shape[1] != 2:
+        raise BananagridError(f"{name}.positions = {positions!r}: expected a list of [x, y] positions (m)")
+    if len(t) != len(p):
+        raise BananagridError(f"{name}: {len(t)} times and {len(p)} positions; give one position per time")
+    if len(t) < 2:
+        raise BananagridError(f"{name}: {len(t)} point given, a track needs at least 2")
+    for label, array in (("times", t), ("positions", p)):
+        bad = np.argwhere(~np.isfinite(array))
+        if bad.size:
+            k = int(bad[0][0])
+            raise BananagridError(f"{name}.{label}[{k}] = {array[k].tolist()!r}: must be finite")
+    back = np.flatnonzero(np.diff(t) <= 0.0)
+    if back.size:
+        k = int(back[0]) + 1
+        raise BananagridError(
+            f"{name}.times[{k}] = {t[k]!r}: must be later than the time before it ({t[k - 1]!r}); times strictly increase"
+        )
+    return t, p
+
+
+#: What each check allows, as the documentation states it (a declared parameter's default domain,
+#: :func:`bananagrid.models.params.param`).
+finite.domain = "finite"
+positive.domain = "finite, > 0"
+non_negative.domain = "finite, >= 0"
+point.domain = "finite"
+covariance.domain = "finite, symmetric, positive definite"
 
 
 def step_ratio(name: str, step: float, span: float, limit: int, unit: str = "") -> float:

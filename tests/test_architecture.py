@@ -11,6 +11,8 @@ from pathlib import Path
 
 import pytest
 
+import bananagrid
+
 ROOT = Path(__file__).resolve().parents[1]
 PACKAGE = ROOT / "bananagrid"
 SOURCES = sorted(p for p in PACKAGE.rglob("*.py") if "kernels" not in p.relative_to(PACKAGE).parts)
@@ -95,15 +97,22 @@ class _NestedImports(ast.NodeVisitor):
 
 
 def test_no_import_inside_functions():
-    """Every import is at module level, so the layers contract sees all of them (the registry's
-    recording modules are named by dotted path and loaded with importlib, by design, and so is
-    matplotlib, an optional extra, in bananagrid.plotting)."""
+    """Every import is at module level, so the layers contract sees all of them (optional extras
+    alone, matplotlib in bananagrid.plotting and the geo and peer libraries, are loaded with
+    importlib on first use), and no module of the package is imported by its dotted name."""
     nested = []
     for path in SOURCES:
         visitor = _NestedImports()
         visitor.visit(parse(path))
         nested += [f"{path.relative_to(ROOT)}:{line}" for line in visitor.found]
     assert nested == []
+    by_name = []
+    for path in SOURCES:
+        for node in ast.walk(parse(path)):
+            if (isinstance(node, ast.Call) and isinstance(node.func, ast.Attribute) and node.func.attr == "import_module"
+                    and node.args and isinstance(node.args[0], ast.Constant) and str(node.args[0].value).startswith(("bananagrid", "."))):
+                by_name.append(f"{path.relative_to(ROOT)}:{node.lineno}")
+    assert by_name == []
 
 
 def _private(name: str) -> bool:
@@ -138,6 +147,10 @@ def _files_naming(name: str) -> set[str]:
     return files
 
 
+#: Every registered model class by name, with the stem of its module.
+MODEL_CLASSES = {kind.cls.__name__: kind.cls.__module__.rsplit(".", 1)[-1] for kind in bananagrid.MODEL_KINDS.values()}
+
+
 def test_a_model_is_named_only_where_it_lives():
     """Adding a model is its model module, its kernel module and one registry line: nothing else
     in the package names the class (its recording extras module aside)."""
@@ -146,15 +159,14 @@ def test_a_model_is_named_only_where_it_lives():
         "bananagrid/models/registry.py", "bananagrid/__init__.py",
     }
     # the engine, lattices, radial laws, batch and compare talk to models through the protocol
-    for name in ("CAT", "PolarBanana", "BearingFix", "Butterly", "MotionModel"):
+    for name in (*MODEL_CLASSES, "MotionModel"):
         for path in _files_naming(name):
             assert not path.startswith(("bananagrid/engine/", "bananagrid/domains/")), (name, path)
             assert path not in ("bananagrid/analysis/radial.py", "bananagrid/analysis/compare.py"), (name, path)
 
 
 def test_no_isinstance_on_a_model_outside_its_module():
-    models = {"CAT": "cat", "PolarBanana": "polar", "BearingFix": "bearing", "Butterly": "butterly",
-              "MotionModel": "motion", "GaussianMixture": "presence", "UniformPresence": "presence"}
+    models = {**MODEL_CLASSES, "MotionModel": "motion", "GaussianMixture": "presence", "UniformPresence": "presence"}
     found = []
     for path in SOURCES:
         for node in ast.walk(parse(path)):

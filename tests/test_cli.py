@@ -15,6 +15,7 @@ import bananagrid
 from bananagrid import rasterise
 from bananagrid import cli
 from bananagrid.cli import main
+from bananagrid.models.registry import installed_kinds
 from bananagrid.recording.inspect import inspect_recording, read_depth_image
 from bananagrid.scenes.run import array_key, run_scene
 from bananagrid.scenes.load import load_scene
@@ -134,7 +135,8 @@ def test_error_as_subprocess(tmp_path):
     )
     assert result.returncode == 2
     assert result.stderr.strip().splitlines() == [
-        f'bananagrid: error: {scene}: layers.near.model = "banana": must be one of "cat", "polar", "bearing_fix", "butterly"'
+        f'bananagrid: error: {scene}: layers.near.model = "banana": must be one of '
+        + ", ".join(f'"{kind}"' for kind in installed_kinds())
     ]
     assert result.stdout == ""
 

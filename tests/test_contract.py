@@ -16,7 +16,10 @@ probability of the room's part that the lattice sees; every bad value refused wi
 """
 
 import math
+import sys
 from dataclasses import dataclass, field
+from importlib import metadata
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -32,6 +35,24 @@ from bananagrid.protocol import PresenceModel
 from cases import FIG1, FIG1_BOUNDS
 from isotropic_model import ISOTROPIC, IsotropicNormal
 from presence_oracle import bin_samples
+
+from bananagrid.models.registry import ENTRY_POINT_GROUP, kinds_from_entry_points
+
+#: The tests' own installed package (tests/plugins: a model registered by entry point).
+PLUGINS = Path(__file__).resolve().parent / "plugins"
+
+
+def plugin_kinds() -> bg.models.registry.Registry:
+    """The registry with the kinds of the distributions in ``tests/plugins``, loaded through
+    their entry points as an installed package's are; the directory is on ``sys.path`` only
+    while they import, so that no other test finds the distribution."""
+    entries = [e for dist in metadata.distributions(path=[str(PLUGINS)])
+               for e in dist.entry_points.select(group=ENTRY_POINT_GROUP)]
+    sys.path.insert(0, str(PLUGINS))
+    try:
+        return kinds_from_entry_points(bg.MODEL_KINDS, entries)
+    finally:
+        sys.path.remove(str(PLUGINS))
 
 COASTAL = dict(sensors=[(0.0, 0.0), (20000.0, 0.0)], bearings=[0.2641, -0.3909], sigmas=[0.01, 0.02])
 BUTTERLY = dict(mean=(0.0, 0.0), cov=[[4e4, 5e3], [5e3, 2.5e4]], speeds=[1.0, 2.0], weights=[0.4, 0.6], t=600.0)
@@ -156,6 +177,13 @@ CASES = {
                       20.0, dict(ranges=(0.0, 1200.0), range_step=40.0, pose=Pose(origin=(300.0, -200.0)), **FULL_TURN),
                       bad=(("sigma", 0.0, r"sigma = 0.0: must be > 0"),), pose=dict(origin=(300.0, -200.0)),
                       kinds=bg.MODEL_KINDS.with_kinds(ISOTROPIC)),
+    # the constant-velocity model of the tests' installed package, by its entry point
+    "cv": Case("cv", dict(mean=(0.0, 0.0), cov=[[4e4, 1e4], [1e4, 2.25e4]], velocity=(8.0, 4.0), q=50.0, t=120.0),
+               dict(x=(-640.0, 2560.0), y=(-920.0, 1880.0)), 40.0,
+               dict(ranges=(0.0, 1800.0), range_step=40.0, pose=Pose(origin=(960.0, 480.0)), **FULL_TURN),
+               bad=(("q", -1.0, r"q = -1.0: must be >= 0"),
+                    ("cov", [[1.0, 2.0], [2.0, 1.0]], r"cov = .*: must be positive definite")),
+               pose=dict(origin=(960.0, 480.0)), kinds=plugin_kinds()),
     # presence laws on an array's angular cells (Pessentheiner), conditioned on a room
     "mixture-line": ArrayCase("mixture", dict(weights=[0.6, 0.4], means=[[-1.8], [2.6]], covs=[0.09, 0.04]),
                               dict(geometry="line", h=1.8, azimuth_step=2 * DEG), dict(x=(-3.0, 3.0)),

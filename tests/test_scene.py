@@ -8,11 +8,16 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+import bananagrid as bg
 from bananagrid import CAT, BananagridError, PolarBanana
 from bananagrid.contours import DEFAULT_MASS_LEVELS
+from bananagrid.models.registry import installed_kinds
 from bananagrid.scenes.load import Layer, load_scene, parse_scene
 
 from cases import small_scene
+
+#: The model kinds a scene may name, as its messages list them (from the registry).
+KINDS_LISTED = ", ".join(f'"{kind}"' for kind in installed_kinds())
 
 SCENES = Path(__file__).resolve().parent.parent / "scenes"
 
@@ -205,9 +210,9 @@ BAD = {
     ),
     "unknown model kind": (
         edited('model = "cat"\n', 'model = "ctrv"\n'),
-        ['layers.exact.model = "ctrv": must be one of "cat", "polar", "bearing_fix"'],
+        [f'layers.exact.model = "ctrv": must be one of {KINDS_LISTED}'],
     ),
-    "missing model": (edited('model = "cat"\n', ""), ['layers.exact.model missing: must be one of "cat", "polar", "bearing_fix"']),
+    "missing model": (edited('model = "cat"\n', ""), [f'layers.exact.model missing: must be one of {KINDS_LISTED}']),
     "missing parameter": (
         edited("sigma_a = 1.0\n", ""),
         ["layers.exact: missing sigma_a: give each in [layers.exact] or [defaults]"],
@@ -303,6 +308,7 @@ def test_docs_name_every_key_and_the_example_parses():
     doc = DOC.read_text()
     assert not [table for table in TOP_KEYS if f"`[{table}" not in doc]
     keys = {*SCENE_KEYS, *GRID_KEYS, *OUTPUT_KEYS, *RADIAL_KEYS, "model"}
+    keys.update(option for kind in bg.MODEL_KINDS.values() for option in kind.scene.options)
     keys.update(k for kind in PARAMETER_KEYS.values() for k in kind)
     assert not [key for key in sorted(keys) if f"`{key}`" not in doc]
     example = doc.split("## Example")[1].split("```toml\n")[1].split("```")[0]

@@ -217,3 +217,132 @@ def test_a_heading_sd_whose_square_overflows_is_refused(model):
     """sigma_heading_deg = 1e308 was accepted and overflowed in the polar coefficients (12)."""
     with pytest.raises(bg.BananagridError, match=r"sigma_heading = 1\.7\d*e\+306: must be at most 1e\+150 rad"):
         model(v0=8.0, t=60.0, sigma_a=0.02, sigma_omega=0.01, sigma_heading=math.radians(1e308))
+
+
+# --- the shared checks of bananagrid.validate: covariances, polygons, timed tracks ------------
+
+from hypothesis import given, settings  # noqa: E402
+from hypothesis import strategies as st  # noqa: E402
+
+from bananagrid.validate import MAX_CONDITION, covariance, polygon, timed_track  # noqa: E402
+
+FUZZ = settings(max_examples=200, deadline=None, derandomize=True, database=None)
+
+
+@FUZZ
+@given(small=st.floats(-100.0, 100.0), ratio=st.floats(0.0, 16.0), angle=st.floats(0.0, math.pi))
+def test_every_well_conditioned_covariance_is_taken_as_given(small, ratio, angle):
+    """R diag(s1, s2) R^T with s1 = 10^small and s2 = s1 10^ratio: taken as given where the
+    condition number 10^ratio is below MAX_CONDITION (1e13) by a factor 10, refused with its
+    eigenvalues where it is above by 10 (between, the construction's own rounding decides)."""
+    s1, s2 = 10.0**small, 10.0 ** (small + ratio)
+    c, s = math.cos(angle), math.sin(angle)
+    rotation = np.array([[c, -s], [s, c]])
+    cov = rotation @ np.diag([s1, s2]) @ rotation.T
+    cov[1, 0] = cov[0, 1]  # symmetric as written in a scene
+    if 10.0**ratio < MAX_CONDITION / 10:
+        out = covariance("cov", cov.tolist())
+        assert out.dtype == np.float64 and np.array_equal(out, cov)
+    elif 10.0**ratio > MAX_CONDITION * 10:
+        with pytest.raises(bg.BananagridError, match=r"^cov = .*: must be positive definite \((variances|eigenvalues)"):
+            covariance("cov", cov)
+
+
+BAD_COVARIANCES = {
+    "shape": ([[1.0, 0.0, 0.0]], r"^cov = \[\[1.0, 0.0, 0.0\]\]: expected a 2x2 array \[\[sxx, sxy\], \[sxy, syy\]\], got shape \(1, 3\)$"),
+    "text": ([[1.0, "0"], [0.0, 1.0]], r"^cov = .*: expected a 2x2 array of numbers$"),
+    "nan": ([[1.0, math.nan], [math.nan, 1.0]], r"^cov = .*: every entry must be finite \(NaN or inf given\)$"),
+    "asymmetric": ([[1.0, 0.5], [0.4, 1.0]], r"^cov = .*: must be symmetric \(cov\[0\]\[1\] == cov\[1\]\[0\]\)$"),
+    "negative variance": ([[-1.0, 0.0], [0.0, 1.0]], r"^cov = .*: must be positive definite \(variances > 0\)$"),
+    "correlation 1": ([[4.0, 6.0], [6.0, 9.0]], r"^cov = .*: must be positive definite \(eigenvalues 0, 13; "
+                                                  r"correlation 1, \|rho\| must be < 1\)$"),
+}
+
+
+@pytest.mark.parametrize("case", BAD_COVARIANCES)
+def test_a_bad_covariance_is_named(case):
+    value, message = BAD_COVARIANCES[case]
+    with pytest.raises(bg.BananagridError, match=message):
+        covariance("cov", value)
+
+
+def test_a_covariance_of_three_axes():
+    good = np.array([[4.0, 1.0, 0.0], [1.0, 9.0, 0.0], [0.0, 0.0, 1e6]])  # units of different size on z
+    assert np.array_equal(covariance("covs[0]", good, dim=3), good)
+    with pytest.raises(bg.BananagridError, match=r"^covs\[0\] = .*: must be symmetric \(covs\[0\]\[0\]\[2\]|"
+                                                 r"^covs\[0\] = .*: must be symmetric \(covs\[0\]\[0\]\[2\] == "):
+        covariance("covs[0]", good + np.diag([0.0, 0.0, 0.0]) + np.array([[0, 0, 1.0], [0, 0, 0], [0, 0, 0]]), dim=3)
+    singular = np.array([[1.0, 1.0, 0.0], [1.0, 1.0, 0.0], [0.0, 0.0, 1.0]])
+    with pytest.raises(bg.BananagridError, match=r"condition number below 1e\+13"):
+        covariance("covs[0]", singular, dim=3)
+
+
+@FUZZ
+@given(n=st.integers(3, 24), radius=st.floats(1e-3, 1e9), turn=st.floats(0.0, 2 * math.pi),
+       centre=st.tuples(st.floats(-1e9, 1e9), st.floats(-1e9, 1e9)), closed=st.booleans(), jitter=st.randoms())
+def test_every_convex_polygon_is_taken_and_a_swap_of_two_vertices_is_not(n, radius, turn, centre, closed, jitter):
+    """Vertices on a circle at increasing angles (spread at random) make a convex polygon; swapping
+    two neighbours of a polygon of 4 or more makes two of its edges cross."""
+    angles = turn + np.sort(np.array([jitter.uniform(0.1, 1.0) for _ in range(n)]).cumsum())
+    angles = turn + (angles - turn) * (2 * math.pi * 0.95 / (angles[-1] - turn))  # within one turn
+    ring = np.column_stack((centre[0] + radius * np.cos(angles), centre[1] + radius * np.sin(angles)))
+    if radius < 1e-6 * max(map(abs, centre)):  # a polygon lost in the rounding of its offset
+        return
+    given_ring = np.vstack((ring, ring[:1])) if closed else ring
+    assert np.array_equal(polygon("area", given_ring.tolist()), ring)
+    if n >= 4:
+        k = jitter.randrange(n)
+        swapped = ring.copy()
+        swapped[[k, (k + 1) % n]] = swapped[[(k + 1) % n, k]]
+        with pytest.raises(bg.BananagridError, match=r"^area: edges \d+-\d+ and \d+-\d+ cross; the polygon must not cross itself$"):
+            polygon("area", swapped)
+
+
+BAD_POLYGONS = {
+    "two vertices": ([[0.0, 0.0], [1.0, 0.0]], r"^area: 2 distinct vertices given, a polygon needs at least 3$"),
+    "not pairs": ([[0.0, 0.0, 0.0]], r"^area = \[\[0.0, 0.0, 0.0\]\]: expected a list of \[x, y\] vertices, got shape \(1, 3\)$"),
+    "infinite": ([[0.0, 0.0], [1.0, math.inf], [1.0, 1.0]], r"^area\[1\] = \[1.0, inf\]: must be finite$"),
+    "repeated": ([[0.0, 0.0], [1.0, 0.0], [1.0, 0.0], [0.0, 1.0]], r"^area\[2\] = \[1.0, 0.0\]: repeats the vertex before it$"),
+    "on a line": ([[0.0, 0.0], [1.0, 1.0], [2.0, 2.0]], r"^area = .*: encloses no area \(its vertices lie on a line\)$"),
+    "bow tie": ([[0.0, 0.0], [1.0, 1.0], [1.0, 0.0], [0.0, 1.0]], r"^area: edges 0-1 and 2-3 cross"),
+    "touching": ([[0.0, 0.0], [2.0, 0.0], [1.0, 0.0], [1.0, 1.0]], r"^area: edges 0-1 and 2-3 cross"),
+}
+
+
+@pytest.mark.parametrize("case", BAD_POLYGONS)
+def test_a_bad_polygon_is_named(case):
+    value, message = BAD_POLYGONS[case]
+    with pytest.raises(bg.BananagridError, match=message):
+        polygon("area", value)
+
+
+@FUZZ
+@given(steps=st.lists(st.floats(1e-6, 1e6), min_size=1, max_size=30), start=st.floats(-1e9, 1e9), seed=st.integers(0, 99))
+def test_every_increasing_track_is_taken_and_a_step_back_is_named(steps, start, seed):
+    times = start + np.cumsum([0.0, *steps])
+    if not np.all(np.diff(times) > 0):  # steps lost to the rounding of a large start
+        return
+    positions = np.random.default_rng(seed).normal(0.0, 1e4, (len(times), 2))
+    t, p = timed_track("track", times.tolist(), positions.tolist())
+    assert np.array_equal(t, times) and np.array_equal(p, positions)
+    k = 1 + seed % len(steps)
+    back = times.copy()
+    back[k] = back[k - 1]
+    with pytest.raises(bg.BananagridError, match=rf"^track.times\[{k}\] = .*: must be later than the time before it"):
+        timed_track("track", back, positions)
+
+
+BAD_TRACKS = {
+    "one point": ([0.0], [[0.0, 0.0]], r"^track: 1 point given, a track needs at least 2$"),
+    "lengths": ([0.0, 1.0], [[0.0, 0.0]], r"^track: 2 times and 1 positions; give one position per time$"),
+    "nan time": ([0.0, math.nan], [[0.0, 0.0], [1.0, 1.0]], r"^track.times\[1\] = nan: must be finite$"),
+    "positions shape": ([0.0, 1.0], [0.0, 1.0], r"^track.positions = \[0.0, 1.0\]: expected a list of \[x, y\] positions \(m\)$"),
+    "text": (["0", 1.0], [[0.0, 0.0], [1.0, 1.0]], r"^track.times = \['0', 1.0\]: expected a list of times \(s\)$"),
+}
+
+
+@pytest.mark.parametrize("case", BAD_TRACKS)
+def test_a_bad_track_is_named(case):
+    times, positions, message = BAD_TRACKS[case]
+    with pytest.raises(bg.BananagridError, match=message):
+        timed_track("track", times, positions)

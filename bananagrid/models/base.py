@@ -9,7 +9,6 @@ A model class derives from :class:`Model` and implements the rest of
 from __future__ import annotations
 
 import math
-from dataclasses import fields
 
 import numpy as np
 
@@ -18,6 +17,7 @@ from ..engine import memory
 from ..engine.points import evaluate_points
 from ..protocol import CellPlan
 from ..validate import BananagridError
+from .params import plain_parameters
 
 __all__ = ["Model", "check_n", "check_rng", "RANGE_SDS", "ZERO_BELOW", "PEAK_PROBES", "SAMPLE_BYTES"]
 
@@ -146,16 +146,9 @@ class Model:
 
     def parameters(self) -> dict:
         """Plain-data parameters for provenance and recordings: the class name, then every
-        dataclass field (a pose as ``origin_x``, ``origin_y`` and ``heading``)."""
-        out = {"model": type(self).__name__}
-        for f in fields(self):
-            value = getattr(self, f.name)
-            if isinstance(value, Pose):
-                out["origin_x"], out["origin_y"] = value.origin
-                out["heading"] = value.heading
-            else:
-                out[f.name] = value
-        return out
+        field's entries (a declared parameter's own, :func:`bananagrid.models.params.param`'s
+        ``plain``; else its name and value)."""
+        return plain_parameters(self)
 
     def pdf(self, x, y, *, dtype=np.float64, device="cpu"):
         """Density per m^2 at world points (broadcast x, y), through the same kernels as rasterise."""

@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import math
 import warnings
-from dataclasses import dataclass, replace
+from dataclasses import replace
 
 import numpy as np
 from scipy import special
@@ -21,10 +21,11 @@ from scipy import special
 from ..domains.pose import Pose
 from ..kernels import bearing as kernels
 from ..kernels import bearing_lanes
-from ..protocol import Extent, KernelBinding, KernelContext, SceneKey, SceneSchema
+from ..protocol import Extent, KernelBinding, KernelContext, SceneSchema
 from ..validate import BananagridError, real_array
 from .base import RANGE_SDS, Model, check_n, check_rng
 from .containment import containment, containment_radius
+from .params import modelclass, param
 
 __all__ = ["BearingFix", "bearing_to", "crossings", "two_bearing_variances", "MIN_CROSSING_DEG", "MAP_VARIANTS"]
 
@@ -346,23 +347,13 @@ MAX_POSITION = 1e150
 MIN_CROSS_SD, MAX_CROSS_SD = 1e-75, 1e75
 
 
-@dataclass(frozen=True, eq=False)
+def _sensor_entries(model, sensors) -> dict:
+    return {k: float(v) for i, s in enumerate(sensors) for k, v in ((f"sensor{i}_x", s[0]), (f"sensor{i}_y", s[1]))}
+
+
+@modelclass(eq=False)
 class BearingFix(Model):
     """A position fix from two or more bearings with independent normal errors.
-
-    Parameters
-    ----------
-    sensors : array_like, shape (n, 2)
-        Sensor positions (x east, y north), metres; n >= 2, no two coincident.
-    bearings : array_like, shape (n,)
-        Observed bearings to the contact, radians clockwise from north.
-    sigmas : array_like, shape (n,)
-        Standard deviations of the bearing errors, radians, > 0.
-    variant : {"exact", "linear"}, default "exact"
-        The presence map that ``rasterise`` and ``pdf`` compute: the bearings' likelihood under
-        a flat prior (the true, non-elliptical shape; divided by the linearised normaliser, so
-        it integrates to about one and normalising over a grid gives the posterior), or the
-        normal law of the linearised fix, N(fix, covariance).
 
     Raises
     ------
@@ -372,27 +363,34 @@ class BearingFix(Model):
         warns: the linearised covariance is then optimistic (see the validation table).
     """
 
-    sensors: np.ndarray
-    bearings: np.ndarray
-    sigmas: np.ndarray
-    variant: str = "exact"
+    sensors: np.ndarray = param(
+        type="pairs", unit="m", py="array_like, shape (n, 2)", plain=_sensor_entries,
+        domain="at least 2, within +-1e150, no two coincident",
+        doc="Sensor positions (x east, y north).")
+    bearings: np.ndarray = param(
+        type="numbers", unit="rad", alias="deg", bearing_at="sensors", py="array_like, shape (n,)",
+        plain=lambda model, bearings: {f"bearing{i}": float(b) for i, b in enumerate(bearings)},
+        domain="one per sensor, finite, clockwise from north (true north in a geographic scene)",
+        doc="Observed bearings to the contact, clockwise from north.")
+    sigmas: np.ndarray = param(
+        type="numbers", unit="rad", alias="deg", py="array_like, shape (n,)",
+        plain=lambda model, sigmas: {f"sigma{i}": float(sd) for i, sd in enumerate(sigmas)},
+        domain="one per sensor, in [1e-10, 1e150]",
+        doc="Standard deviations of the bearing errors.")
+    variant: str = param(
+        "exact", type="choice", choices=MAP_VARIANTS, py='{"exact", "linear"}',
+        domain='`"exact"` (the likelihood under a flat prior), `"linear"` (the linearised normal)',
+        doc="The presence map that ``rasterise`` and ``pdf`` compute: the bearings' likelihood under a flat "
+            "prior (the true, non-elliptical shape; divided by the linearised normaliser, so it integrates to "
+            "about one and normalising over a grid gives the posterior), or the normal law of the linearised "
+            "fix, N(fix, covariance).")
 
     kind = "bearing_fix"
     #: float32 agreement with float64 where the density exceeds 1e-6 of its peak.
     float32_rtol = 1e-4
     scene = SceneSchema(
-        keys=(
-            SceneKey("sensors", type="pairs", unit="m", allowed="at least 2, within +-1e150, no two coincident"),
-            SceneKey("bearings", type="numbers", unit="rad", alias="deg", bearing_at="sensors",
-                     allowed="one per sensor, finite, clockwise from north (true north in a geographic scene)"),
-            SceneKey("sigmas", type="numbers", unit="rad", alias="deg", allowed="one per sensor, in [1e-10, 1e150]"),
-            SceneKey("variant", type="choice", default='`"exact"`', choices=MAP_VARIANTS,
-                     allowed='`"exact"` (the likelihood under a flat prior), `"linear"` (the linearised normal)'),
-        ),
-        required=("sensors", "bearings", "sigmas"),
-        timed=False,
-        build=lambda params: BearingFix(**params),
         summary="the presence map of a fix from two or more bearings (Walsh)",
+        options={"bearing_validation": "the entity `validation`, a table of where Walsh's linearisation holds"},
     )
 
     def __post_init__(self):
@@ -467,7 +465,7 @@ class BearingFix(Model):
         if angle < POOR_CROSSING_DEG:
             warnings.warn(
                 f"bearings cross at {angle:.3g} deg (< {POOR_CROSSING_DEG} deg): the linearised "
-                "covariance and containment are optimistic", stacklevel=4,
+                "covariance and containment are optimistic", stacklevel=5,
             )
 
     def _solve(self) -> tuple[np.ndarray, np.ndarray | None, int | None]:
@@ -557,7 +555,7 @@ class BearingFix(Model):
             if len(self.sensors) == 2:
                 raise BananagridError(text + " (the lines cross on the far side of the station)")
             warnings.warn(text + " (its bearing is off by more than 90 deg at the likelihood's maximum): "
-                          "check it", stacklevel=4)
+                          "check it", stacklevel=5)
 
     def _bearing_gradients(self, point) -> np.ndarray:
         """d bearing_i / d(x, y) at ``point``: (dy, -dx) / r^2, shape (n, 2)."""
@@ -710,13 +708,9 @@ class BearingFix(Model):
         return np.concatenate((head, sensors))
 
     def parameters(self) -> dict:
-        """Plain-data parameters for provenance and recordings."""
-        out = {"model": "BearingFix", "variant": self.variant}
-        for i, (s, b, sd) in enumerate(zip(self.sensors, self.bearings, self.sigmas)):
-            out[f"sensor{i}_x"], out[f"sensor{i}_y"] = float(s[0]), float(s[1])
-            out[f"bearing{i}"], out[f"sigma{i}"] = float(b), float(sd)
-        out["fix_x"], out["fix_y"] = (float(v) for v in self._fix)
-        return out
+        """Plain-data parameters for provenance and recordings: the declared ones and the fix."""
+        fix_x, fix_y = (float(v) for v in self._fix)
+        return {**super().parameters(), "fix_x": fix_x, "fix_y": fix_y}
 
     def bind(self, ctx: KernelContext, extent: Extent, *, grid: bool = False) -> KernelBinding:
         """The bearing kernels (``kernels/bearing.py``) of ``variant``; on the CPU their lane twins."""

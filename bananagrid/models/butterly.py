@@ -30,9 +30,10 @@ from scipy import special, stats
 from ..domains.pose import Pose
 from ..kernels import butterly as kernels
 from ..protocol import Extent, KernelBinding, KernelContext, SceneKey, SceneSchema
-from ..validate import BananagridError, finite, non_negative, point, positive, real_array, show
+from ..validate import BananagridError, covariance, finite, non_negative, point, positive, real_array, show
 from ._butterly_series import series_density
 from .base import RANGE_SDS, Model, check_n, check_rng
+from .params import modelclass, param
 
 __all__ = [
     "Butterly",
@@ -300,28 +301,6 @@ def _vector(name: str, value) -> np.ndarray:
     return array
 
 
-def _covariance(value) -> np.ndarray:
-    cov = real_array("cov", value, "a 2x2 array of numbers")
-    if cov.shape != (2, 2):
-        raise BananagridError(f"cov = {value!r}: expected a 2x2 array [[sxx, sxy], [sxy, syy]], got shape {cov.shape}")
-    if not np.isfinite(cov).all():
-        raise BananagridError(f"cov = {cov.tolist()!r}: every entry must be finite (NaN or inf given)")
-    scale = max(abs(cov[0, 0]), abs(cov[1, 1]), abs(cov[0, 1]), abs(cov[1, 0]))
-    if abs(cov[0, 1] - cov[1, 0]) > 1e-12 * scale:
-        raise BananagridError(f"cov = {cov.tolist()!r}: must be symmetric (cov[0][1] == cov[1][0])")
-    cov[1, 0] = cov[0, 1]
-    if cov[0, 0] <= 0 or cov[1, 1] <= 0:
-        raise BananagridError(f"cov = {cov.tolist()!r}: must be positive definite (variances > 0)")
-    s1, s2, _ = covariance_axes(cov)
-    if not s1 > 1e-13 * s2:
-        rho = cov[0, 1] / (math.sqrt(cov[0, 0]) * math.sqrt(cov[1, 1]))
-        raise BananagridError(
-            f"cov = {cov.tolist()!r}: must be positive definite (eigenvalues {s1:.6g}, {s2:.6g}; "
-            f"correlation {rho:.15g}, |rho| must be < 1)"
-        )
-    return cov
-
-
 # ---------------------------------------------------------------------------------------------
 # Scene layers (model = "butterly")
 # ---------------------------------------------------------------------------------------------
@@ -413,28 +392,46 @@ def _scene_missing(given: Mapping, path: str) -> list[str]:
 # ---------------------------------------------------------------------------------------------
 
 
-@dataclass(frozen=True, eq=False, kw_only=True)
+def _speed_entries(model: "Butterly", speeds) -> dict:
+    """The speeds' entries in ``parameters()``: the discrete speeds and their weights, or the
+    continuous law and its number of quadrature nodes."""
+    v, w = model.speed_nodes
+    if isinstance(speeds, np.ndarray):
+        return {"speeds": v.tolist(), "weights": w.tolist()}
+    return {"speed_law": repr(speeds), "speed_nodes": int(v.size)}
+
+
+#: Scene keys that set the start's covariance from standard deviations instead of ``cov``.
+SIGMA_KEYS = (
+    SceneKey("sigma_x", unit="m", default="instead of `cov`", allowed="finite, > 0: the start's 1-sigma error east"),
+    SceneKey("sigma_y", unit="m", default="instead of `cov`", allowed="finite, > 0: the start's 1-sigma error north"),
+    SceneKey("rho", default="`0`", allowed="in (-1, 1): their correlation (with `sigma_x`, `sigma_y` only)"),
+)
+#: Scene keys that set the speeds: the law, and the keys of each law (:data:`SPEED_LAWS`).
+SPEED_KEYS = (
+    SceneKey("speed_law", type="choice", default='`"discrete"`', choices=tuple(SPEED_LAWS),
+             allowed='`"discrete"` (`speeds`, `weights`), `"uniform"` (`speed_min`, `speed_max`), `"normal"` '
+                     '(`speed_mean`, `speed_sd`, truncated at 0 and renormalised), `"table"` (`speeds`, '
+                     '`speed_density`, joined linearly)'),
+    SceneKey("speeds", type="numbers", unit="m/s", alias="kn",
+             default='required for `"discrete"` and `"table"` (or `speeds_kn`)',
+             allowed='finite, >= 0 (`"table"`: at least 2, strictly increasing)'),
+    SceneKey("speed_min", unit="m/s", alias="kn", default='required for `"uniform"` (or `speed_min_kn`)',
+             allowed="finite, 0 <= `speed_min` < `speed_max`"),
+    SceneKey("speed_max", unit="m/s", alias="kn", default='required for `"uniform"` (or `speed_max_kn`)',
+             allowed="finite, > `speed_min`"),
+    SceneKey("speed_mean", unit="m/s", alias="kn", default='required for `"normal"` (or `speed_mean_kn`)',
+             allowed="|mean| < 1e100; some of the law's mass above 0"),
+    SceneKey("speed_sd", unit="m/s", alias="kn", default='required for `"normal"` (or `speed_sd_kn`)',
+             allowed=">= 1e-9 |mean|, with |mean| + 10 sd < 1e100"),
+    SceneKey("speed_density", type="numbers", unit="(relative)", default='required for `"table"`',
+             allowed="one per speed, >= 0, not all 0; normalised over the table"),
+)
+
+
+@modelclass(eq=False, kw_only=True)
 class Butterly(Model):
     """Normal start, random course, speed law (Butterly (2.5), (3.1); (2.3) for von Mises).
-
-    Parameters
-    ----------
-    mean : (float, float)
-        Mean of the start position (x east, y north), m.
-    cov : array_like, 2x2
-        Covariance of the start, m^2: symmetric positive definite (any correlation |rho| < 1,
-        any elongation).
-    speeds : list of float, or UniformSpeed, NormalSpeed, TabulatedSpeed
-        Discrete speeds V_i >= 0 (m/s) of (2.5), or a continuous speed law.
-    t : float
-        Elapsed time, s, >= 0.
-    weights : list of float, optional
-        Probabilities p_i of the discrete speeds, >= 0, summing to 1 (within 1e-9). Required
-        for more than one discrete speed; must be left out for a continuous law.
-    course_kappa : float, default 0
-        Concentration of the von Mises course law, >= 0; 0 is Butterly's uniform course.
-    course_mean : float, default 0
-        Mean course c0, radians clockwise from north (used when course_kappa > 0).
 
     Notes
     -----
@@ -447,13 +444,35 @@ class Butterly(Model):
     (V_i, w_i) the kernel integrates: the speeds given, or a continuous law's quadrature nodes.
     """
 
-    mean: tuple[float, float]
-    cov: np.ndarray
-    speeds: object
-    t: float
-    weights: object = None
-    course_kappa: float = 0.0
-    course_mean: float = 0.0
+    mean: tuple[float, float] = param(
+        type="pair", unit="m", py="(float, float)", check=point, domain="finite: the start's mean (x east, y north)",
+        plain=lambda model, mean: {"mean_x": mean[0], "mean_y": mean[1]},
+        doc="Mean of the start position (x east, y north).")
+    cov: np.ndarray = param(
+        type="matrix", unit="m^2", py="array_like, 2x2", also=SIGMA_KEYS, check=covariance,
+        default_doc="required unless `sigma_x`, `sigma_y`",
+        plain=lambda model, cov: {"cov_xx": float(cov[0, 0]), "cov_xy": float(cov[0, 1]), "cov_yy": float(cov[1, 1])},
+        doc="Covariance of the start: symmetric positive definite (any correlation |rho| < 1, any elongation); "
+            "a scene may give ``sigma_x``, ``sigma_y`` and ``rho`` instead.")
+    t: float = param(
+        unit="s", default_doc="required, unless `scene.times`", domain="finite, >= 0; refused with `scene.times`",
+        doc="Elapsed time.")
+    speeds: object = param(
+        py="list of float, or UniformSpeed, NormalSpeed, TabulatedSpeed", scene=SPEED_KEYS, plain=_speed_entries,
+        domain="discrete speeds finite, >= 0", doc="Discrete speeds V_i >= 0 (m/s) of (2.5), or a continuous speed law.")
+    weights: object = param(
+        None, type="numbers", py="list of float, optional", plain=lambda model, weights: {},
+        default_doc="required for more than one discrete speed", domain="one per speed, >= 0, summing to 1 (within 1e-9)",
+        doc="Probabilities p_i of the discrete speeds. Required for more than one discrete speed; must be left "
+            "out for a continuous law.")
+    course_kappa: float = param(
+        0.0, domain="finite, >= 0: concentration of a von Mises course law; 0 is Butterly's uniform course",
+        doc="Concentration of the von Mises course law.")
+    course_mean: float = param(
+        0.0, unit="rad", alias="deg", default_doc="`0` (north)", bearing_at="mean",
+        domain="finite; the von Mises law's mean course, clockwise from north (true north in a geographic scene; "
+               "used when `course_kappa` > 0)",
+        doc="Mean course c0, clockwise from north (used when course_kappa > 0).")
     _nodes: tuple = field(init=False, repr=False)
 
     kind = "butterly"
@@ -461,40 +480,6 @@ class Butterly(Model):
     #: density's change over the point's float32 rounding (``DensityModel.float32_rtol``).
     float32_rtol = 1e-4
     scene = SceneSchema(
-        keys=(
-            SceneKey("mean", type="pair", unit="m", allowed="finite: the start's mean (x east, y north)"),
-            SceneKey("cov", type="matrix", unit="m^2", default="required unless `sigma_x`, `sigma_y`",
-                     allowed="finite, symmetric, positive definite"),
-            SceneKey("sigma_x", unit="m", default="instead of `cov`", allowed="finite, > 0: the start's 1-sigma error east"),
-            SceneKey("sigma_y", unit="m", default="instead of `cov`", allowed="finite, > 0: the start's 1-sigma error north"),
-            SceneKey("rho", default="`0`", allowed="in (-1, 1): their correlation (with `sigma_x`, `sigma_y` only)"),
-            SceneKey("t", unit="s", default="required, unless `scene.times`", allowed="finite, >= 0; refused with `scene.times`"),
-            SceneKey("speed_law", type="choice", default='`"discrete"`', choices=tuple(SPEED_LAWS),
-                     allowed='`"discrete"` (`speeds`, `weights`), `"uniform"` (`speed_min`, `speed_max`), `"normal"` '
-                             '(`speed_mean`, `speed_sd`, truncated at 0 and renormalised), `"table"` (`speeds`, '
-                             '`speed_density`, joined linearly)'),
-            SceneKey("speeds", type="numbers", unit="m/s", alias="kn",
-                     default='required for `"discrete"` and `"table"` (or `speeds_kn`)',
-                     allowed='finite, >= 0 (`"table"`: at least 2, strictly increasing)'),
-            SceneKey("weights", type="numbers", default="required for more than one discrete speed",
-                     allowed="one per speed, >= 0, summing to 1 (within 1e-9)"),
-            SceneKey("speed_min", unit="m/s", alias="kn", default='required for `"uniform"` (or `speed_min_kn`)',
-                     allowed="finite, 0 <= `speed_min` < `speed_max`"),
-            SceneKey("speed_max", unit="m/s", alias="kn", default='required for `"uniform"` (or `speed_max_kn`)',
-                     allowed="finite, > `speed_min`"),
-            SceneKey("speed_mean", unit="m/s", alias="kn", default='required for `"normal"` (or `speed_mean_kn`)',
-                     allowed="|mean| < 1e100; some of the law's mass above 0"),
-            SceneKey("speed_sd", unit="m/s", alias="kn", default='required for `"normal"` (or `speed_sd_kn`)',
-                     allowed=">= 1e-9 |mean|, with |mean| + 10 sd < 1e100"),
-            SceneKey("speed_density", type="numbers", unit="(relative)", default='required for `"table"`',
-                     allowed="one per speed, >= 0, not all 0; normalised over the table"),
-            SceneKey("course_kappa", default="`0`",
-                     allowed="finite, >= 0: concentration of a von Mises course law; 0 is Butterly's uniform course"),
-            SceneKey("course_mean", unit="rad", alias="deg", default="`0` (north)", bearing_at="mean",
-                     allowed="finite; the von Mises law's mean course, clockwise from north (true north in a "
-                             "geographic scene; used when `course_kappa` > 0)"),
-        ),
-        required=("mean",),
         timed=True,
         build=lambda params: Butterly(**scene_arguments(params)),
         missing=_scene_missing,
@@ -506,10 +491,7 @@ class Butterly(Model):
     )
 
     def __post_init__(self):
-        object.__setattr__(self, "mean", point("mean", self.mean))
-        cov = _covariance(self.cov)
-        cov.setflags(write=False)
-        object.__setattr__(self, "cov", cov)
+        self.cov.setflags(write=False)  # mean and cov: their declared checks have run
         t = finite("t", self.t)
         if t < 0:
             raise BananagridError(f"t = {t!r}: must be >= 0 (elapsed time, s)")
@@ -554,7 +536,7 @@ class Butterly(Model):
                 object.__setattr__(self, "weights", frozen)
         if v.size > MANY_SPEED_NODES:
             warnings.warn(
-                f"Butterly: {v.size} speed nodes; each costs a course integral per cell", stacklevel=3
+                f"Butterly: {v.size} speed nodes; each costs a course integral per cell", stacklevel=4
             )
         v = np.ascontiguousarray(v, dtype=float)
         w = np.ascontiguousarray(w, dtype=float)
@@ -668,28 +650,6 @@ class Butterly(Model):
             peak = float(np.finfo(float).smallest_subnormal)
         self.__dict__["_peak_lower_bound"] = peak
         return peak
-
-    def parameters(self) -> dict:
-        """Plain-data parameters for provenance and recordings."""
-        v, w = self._nodes
-        out = {
-            "model": "Butterly",
-            "mean_x": self.mean[0],
-            "mean_y": self.mean[1],
-            "cov_xx": float(self.cov[0, 0]),
-            "cov_xy": float(self.cov[0, 1]),
-            "cov_yy": float(self.cov[1, 1]),
-            "t": self.t,
-            "course_kappa": self.course_kappa,
-            "course_mean": self.course_mean,
-        }
-        if isinstance(self.speeds, np.ndarray):
-            out["speeds"] = v.tolist()
-            out["weights"] = w.tolist()
-        else:
-            out["speed_law"] = repr(self.speeds)
-            out["speed_nodes"] = int(v.size)
-        return out
 
     # -- densities ---------------------------------------------------------------------------------
 

@@ -4,7 +4,7 @@ the polar-banana paper), with an optional normal error on the initial heading (S
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 from scipy.special import erfc
@@ -15,14 +15,15 @@ from ..kernels import cat as kernels
 from ..kernels import cat_lanes
 from ..kernels.common import LANES32, LANES64
 from ..kernels import cat_cells
-from ..protocol import CellPlan, Extent, KernelBinding, KernelContext, SceneKey, SceneSchema
+from ..protocol import CellPlan, Extent, KernelBinding, KernelContext, SceneSchema
 from ..validate import BananagridError, positive
 from ._cat_heading import (
     clear_heading_tables, first_table_nodes, heading_table, interpolation_bound, ray_densities, table_binding,
     table_spacing_limits,
 )
 from .base import check_n, check_rng
-from .motion import MOTION_KEYS, MotionModel, pose_arguments
+from .motion import MotionModel, motion_param, pose_arguments
+from .params import modelclass, param
 
 __all__ = ["CAT", "cat_position", "scan_nodes", "scan_table", "scan_bounds", "clear_heading_tables", "NODE_SPACING"]
 
@@ -457,36 +458,13 @@ def _rotate(local: np.ndarray, theta0: np.ndarray) -> np.ndarray:
     return np.column_stack((x * c + y * s, -x * s + y * c))
 
 
-@dataclass(frozen=True)
+@modelclass
 class CAT(MotionModel):
     """Constant, unknown acceleration and turn rate (Gade et al.; eq. (1) of the polar-banana paper).
 
     From the origin, heading +y at speed ``v0``, the target moves for ``t`` seconds with constant
     acceleration a ~ N(0, sigma_a) and turn rate omega ~ N(0, sigma_omega). Its density at (x, y)
     is the sum over every (a, omega) reaching (x, y) of g(a) g(omega) / |det d(x,y)/d(a,omega)|.
-
-    Parameters
-    ----------
-    v0 : float
-        Initial speed, m/s, > 0.
-    t : float
-        Elapsed time, s, > 0.
-    sigma_a : float
-        Standard deviation of the acceleration, m/s^2, > 0.
-    sigma_omega : float
-        Standard deviation of the turn rate, rad/s, > 0.
-    k_sigma : float, default 8
-        Turn rates are searched within +-k_sigma * sigma_omega; the mass beyond,
-        erfc(k_sigma / sqrt 2) (1.2e-15 at 8), is reported as ``truncated_mass`` and excluded.
-    sigma_heading : float, default 0
-        Standard deviation sigma_0 (radians, >= 0) of a normal error theta_0 on the initial
-        heading (Section 7 of the polar-banana paper). The density is then the exact CAT density
-        convolved over the rotation by theta_0 about the origin:
-        p(r, theta) = integral of p_0(r, theta - theta_0) g(theta_0; 0, sigma_0) d theta_0, computed
-        on a polar lattice (exact wrapped-normal convolution by FFT along the bearing, then
-        interpolation; see :mod:`bananagrid.models._cat_heading`). 0 gives the plain kernel exactly.
-    pose : Pose, default origin (0, 0), heading north
-        Places the local frame in the world.
 
     Notes
     -----
@@ -498,13 +476,22 @@ class CAT(MotionModel):
     ``kernels/cat.py`` (``cat_interval``).
     """
 
-    v0: float
-    t: float
-    sigma_a: float
-    sigma_omega: float
-    k_sigma: float = 8.0
-    sigma_heading: float = 0.0
-    pose: Pose = field(default_factory=Pose)
+    v0: float = motion_param("v0")
+    t: float = motion_param("t")
+    sigma_a: float = motion_param("sigma_a")
+    sigma_omega: float = motion_param("sigma_omega")
+    k_sigma: float = param(
+        8.0, domain="in [1, 38]: turn rates beyond +-k_sigma sigma_omega are left out",
+        doc="Turn rates are searched within +-k_sigma * sigma_omega; the mass beyond, erfc(k_sigma / sqrt 2) "
+            "(1.2e-15 at 8), is reported as ``truncated_mass`` and excluded.")
+    sigma_heading: float = motion_param(
+        "sigma_heading",
+        doc="Standard deviation sigma_0 of a normal error theta_0 on the initial heading (Section 7 of the "
+            "polar-banana paper). The density is then the exact CAT density convolved over the rotation by "
+            "theta_0 about the origin: p(r, theta) = integral of p_0(r, theta - theta_0) g(theta_0; 0, sigma_0) "
+            "d theta_0, computed on a polar lattice (exact wrapped-normal convolution by FFT along the bearing, "
+            "then interpolation; see :mod:`bananagrid.models._cat_heading`). 0 gives the plain kernel exactly.")
+    pose: Pose = motion_param("pose")
 
     kind = "cat"
     #: Peak bytes per sample of :meth:`sample`: 105 measured (tracemalloc, ``sample(10**6)``), rounded up.
@@ -513,12 +500,6 @@ class CAT(MotionModel):
     #: density's change over the point's float32 rounding (``DensityModel.float32_rtol``).
     float32_rtol = 2e-4
     scene = SceneSchema(
-        keys=(
-            MOTION_KEYS["v0"], MOTION_KEYS["t"], MOTION_KEYS["sigma_a"], MOTION_KEYS["sigma_omega"],
-            SceneKey("k_sigma", default="`8`", allowed="in [1, 38]: turn rates beyond +-k_sigma sigma_omega are left out"),
-            MOTION_KEYS["sigma_heading"], MOTION_KEYS["origin"], MOTION_KEYS["heading"],
-        ),
-        required=("v0", "sigma_a", "sigma_omega"),
         timed=True,
         build=lambda params: CAT(**pose_arguments(params)),
         radial_curves=True,

@@ -18,8 +18,9 @@ from ..domains.pose import Pose
 from ..protocol import SceneKey
 from ..validate import BananagridError, non_negative, positive
 from .base import RANGE_SDS, Model
+from .params import param
 
-__all__ = ["MotionModel", "natural_scales", "MOTION_KEYS", "pose_arguments"]
+__all__ = ["MotionModel", "natural_scales", "MOTION_PARAMS", "motion_param", "pose_arguments", "pose_entries"]
 
 
 #: Largest heading SD (rad): its square must stay a normal float64 number.
@@ -66,11 +67,9 @@ class MotionModel(Model):
     pose: Pose
 
     def _validate_motion(self) -> None:
-        """The parameters every motion model shares: v0, t, sigma_a, sigma_omega > 0,
-        sigma_heading >= 0 and a Pose."""
-        for name in ("v0", "t", "sigma_a", "sigma_omega"):
-            object.__setattr__(self, name, positive(name, getattr(self, name)))
-        object.__setattr__(self, "sigma_heading", non_negative("sigma_heading", self.sigma_heading))
+        """What the declared checks (v0, t, sigma_a, sigma_omega > 0, sigma_heading >= 0,
+        :data:`MOTION_PARAMS`) leave to every motion model: sigma_heading's upper bound, a Pose,
+        and scales that stay normal float64 numbers."""
         if not self.sigma_heading <= MAX_SIGMA_HEADING:  # its square enters the heading law (12)
             raise BananagridError(
                 f"sigma_heading = {self.sigma_heading!r}: must be at most {MAX_SIGMA_HEADING:g} rad "
@@ -149,17 +148,37 @@ def pose_arguments(params: Mapping) -> dict:
     return {**kwargs, "pose": pose}
 
 
-#: Scene keys of both motion models, by name (each model lists them in its own order).
-MOTION_KEYS = {
-    "v0": SceneKey("v0", unit="m/s", allowed="finite, > 0"),
-    "t": SceneKey("t", unit="s", default="required, unless `scene.times`",
-                  allowed="finite, > 0; refused with `scene.times`"),
-    "sigma_a": SceneKey("sigma_a", unit="m/s^2", allowed="finite, > 0"),
-    "sigma_omega": SceneKey("sigma_omega", unit="rad/s", allowed="finite, > 0", alias="deg"),
-    "sigma_heading": SceneKey("sigma_heading", unit="rad", default="`0`", alias="deg",
-                              allowed="in [0, 1e150]: SD of a normal error on the initial heading (Section 7)"),
-    "origin": SceneKey("origin", type="pair", unit="m", default="`[0, 0]`", allowed="finite: the last fix"),
-    "heading": SceneKey("heading", unit="rad", default="`0` (north)", alias="deg", bearing_at="origin",
-                        allowed="finite; the initial heading, a bearing clockwise from north (true north in a "
-                                "geographic scene)"),
+def pose_entries(model, pose: Pose) -> dict:
+    """A pose's entries in ``parameters()``: ``origin_x``, ``origin_y`` and ``heading``."""
+    return {"origin_x": pose.origin[0], "origin_y": pose.origin[1], "heading": pose.heading}
+
+
+#: The parameters both motion models share, declared once (:func:`motion_param`).
+MOTION_PARAMS = {
+    "v0": dict(doc="Initial speed.", unit="m/s", check=positive),
+    "t": dict(doc="Elapsed time.", unit="s", default_doc="required, unless `scene.times`", check=positive,
+              domain="finite, > 0; refused with `scene.times`"),
+    "sigma_a": dict(doc="Standard deviation of the acceleration.", unit="m/s^2", check=positive),
+    "sigma_omega": dict(doc="Standard deviation of the turn rate.", unit="rad/s", check=positive, alias="deg"),
+    "sigma_heading": dict(default=0.0, unit="rad", alias="deg", check=non_negative,
+                          doc="Standard deviation sigma_0 of a normal error on the initial heading (Section 7 of "
+                              "the polar-banana paper); 0 for none.",
+                          domain="in [0, 1e150]: SD of a normal error on the initial heading (Section 7)"),
+    "pose": dict(
+        default_factory=Pose, py="Pose", default_doc="origin (0, 0), heading north", plain=pose_entries,
+        doc="Places the local frame (origin at the last fix, +y along the initial heading) in the world.",
+        domain="a bananagrid.Pose",
+        scene=(
+            SceneKey("origin", type="pair", unit="m", default="`[0, 0]`", allowed="finite: the last fix"),
+            SceneKey("heading", unit="rad", default="`0` (north)", alias="deg", bearing_at="origin",
+                     allowed="finite; the initial heading, a bearing clockwise from north (true north in a "
+                             "geographic scene)"),
+        ),
+    ),
 }
+
+
+def motion_param(name: str, **changes):
+    """The declared field (:func:`~bananagrid.models.params.param`) of motion parameter ``name``
+    (a key of :data:`MOTION_PARAMS`), with ``changes`` (a model's own ``doc``)."""
+    return param(**{**MOTION_PARAMS[name], **changes})

@@ -5,7 +5,6 @@ from __future__ import annotations
 import math
 import warnings
 from collections.abc import Sequence
-from dataclasses import dataclass, field
 
 import numpy as np
 from scipy import stats
@@ -15,10 +14,11 @@ from ..domains.pose import Pose
 from ..engine.warp_runtime import WarpContext
 from ..kernels import polar as kernels
 from ..kernels import polar_lanes
-from ..protocol import Extent, KernelBinding, KernelContext, SceneKey, SceneSchema
+from ..protocol import Extent, KernelBinding, KernelContext, SceneSchema
 from ..validate import BananagridError
 from .base import check_n, check_rng
-from .motion import MOTION_KEYS, MotionModel, pose_arguments
+from .motion import MotionModel, motion_param, pose_arguments
+from .params import modelclass, param
 
 __all__ = ["PolarBanana", "VARIANTS", "HEADING_ORDERS"]
 
@@ -155,7 +155,7 @@ def _wrap(angle: float) -> float:
     return (angle + math.pi) % (2.0 * math.pi) - math.pi
 
 
-@dataclass(frozen=True)
+@modelclass
 class PolarBanana(MotionModel):
     """Polar approximation of the CAT density (Sections 2 and 5 of the polar-banana paper).
 
@@ -163,21 +163,6 @@ class PolarBanana(MotionModel):
     mean and SD ``v0 t sinc(phi)`` and ``sigma_a t^2 / 2`` (``variant="rough"``) or P_mu (8) and
     P_sigma (11) (``variant="improved"``); the density in the plane is
     g(phi) g(r; mean, sd) / r.
-
-    Parameters
-    ----------
-    v0, t, sigma_a, sigma_omega : float
-        As for :class:`CAT`, all > 0.
-    variant : {"rough", "improved"}, default "improved"
-    sigma_heading : float, default 0
-        Standard deviation sigma_0 (radians, >= 0) of a normal error on the initial heading
-        (Section 7). The bearing is then theta ~ N(0, sigma_theta), sigma_theta^2 = sigma_0^2 +
-        sigma_phi^2, and r | theta is normal with the mean (15) and SD (16) built from the
-        variant's P_mu and P_sigma at theta_bar = theta sigma_phi^2 / sigma_theta^2.
-    heading_order : {2, 4}, default 2
-        2: (15) and (16) as printed; 4: with (1/8) P_mu^(4) sigma_bar^4 in the mean and the
-        fourth-order variance terms given after Figure 8. Only used when sigma_heading > 0.
-    pose : Pose
 
     Notes
     -----
@@ -189,14 +174,27 @@ class PolarBanana(MotionModel):
     origin grow as the grid is refined.
     """
 
-    v0: float
-    t: float
-    sigma_a: float
-    sigma_omega: float
-    variant: str = "improved"
-    sigma_heading: float = 0.0
-    heading_order: int = 2
-    pose: Pose = field(default_factory=Pose)
+    v0: float = motion_param("v0")
+    t: float = motion_param("t")
+    sigma_a: float = motion_param("sigma_a")
+    sigma_omega: float = motion_param("sigma_omega")
+    variant: str = param(
+        "improved", type="choice", choices=VARIANTS, py='{"rough", "improved"}',
+        domain='`"rough"` (Section 2), `"improved"` (P_mu (8), P_sigma (11))',
+        doc="Which approximation: the rough normal range law of Section 2, or P_mu (8) and P_sigma (11).")
+    sigma_heading: float = motion_param(
+        "sigma_heading",
+        doc="Standard deviation sigma_0 of a normal error on the initial heading (Section 7). The bearing is "
+            "then theta ~ N(0, sigma_theta), sigma_theta^2 = sigma_0^2 + sigma_phi^2, and r | theta is normal "
+            "with the mean (15) and SD (16) built from the variant's P_mu and P_sigma at theta_bar = theta "
+            "sigma_phi^2 / sigma_theta^2.")
+    heading_order: int = param(
+        2, py="{2, 4}",
+        domain="`2`: (15), (16); `4`: with the fourth-order terms after Figure 8 (only used when "
+               "`sigma_heading` > 0)",
+        doc="2: (15) and (16) as printed; 4: with (1/8) P_mu^(4) sigma_bar^4 in the mean and the fourth-order "
+            "variance terms given after Figure 8. Only used when sigma_heading > 0.")
+    pose: Pose = motion_param("pose")
 
     kind = "polar"
     #: Peak bytes per sample of :meth:`sample` (its rejection loop): 132 measured (tracemalloc,
@@ -206,17 +204,6 @@ class PolarBanana(MotionModel):
     #: density's change over the point's float32 rounding (``DensityModel.float32_rtol``).
     float32_rtol = 6e-5
     scene = SceneSchema(
-        keys=(
-            MOTION_KEYS["v0"], MOTION_KEYS["t"], MOTION_KEYS["sigma_a"], MOTION_KEYS["sigma_omega"],
-            SceneKey("variant", type="choice", default='`"improved"`', choices=VARIANTS,
-                     allowed='`"rough"` (Section 2), `"improved"` (P_mu (8), P_sigma (11))'),
-            MOTION_KEYS["sigma_heading"],
-            SceneKey("heading_order", default="`2`",
-                     allowed="`2`: (15), (16); `4`: with the fourth-order terms after Figure 8 "
-                             "(only used when `sigma_heading` > 0)"),
-            MOTION_KEYS["origin"], MOTION_KEYS["heading"],
-        ),
-        required=("v0", "sigma_a", "sigma_omega"),
         timed=True,
         build=lambda params: PolarBanana(**pose_arguments(params)),
         radial_curves=True,
@@ -237,7 +224,7 @@ class PolarBanana(MotionModel):
             warnings.warn(
                 f"P_sigma (11) is not positive for |phi| > {self.sigma_positive_limit:.4g} rad; "
                 "the improved density is 0 there",
-                stacklevel=3,
+                stacklevel=4,
             )
 
     @property

@@ -12,14 +12,18 @@ import math
 import numpy as np
 import rerun as rr
 
+from ..analysis.bearing_validation import format_table, summary, validation_table
 from ..models.bearing import BearingFix
 from ..results import Raster
 from .core import entity_path, log_signed_image, strict
 
 __all__ = [
-    "log_layer_extras", "layer_views", "log_bearing_geometry", "log_difference", "log_validation_table",
+    "log_layer_extras", "layer_views", "log_scene_extras", "scene_texts", "log_bearing_geometry", "log_difference", "log_validation_table",
     "WEDGE_SIGMAS",
 ]
+
+#: The model class whose layers this module records (:data:`bananagrid.recording.layers.EXTRAS`).
+MODEL = BearingFix
 
 #: Half-width of the drawn bearing wedges, in sigmas.
 WEDGE_SIGMAS = 2.0
@@ -122,3 +126,21 @@ def log_layer_extras(rec: rr.RecordingStream, entity: str, fix: BearingFix, rast
 def layer_views(entity: str, fix: BearingFix) -> tuple[list[str], list]:
     """The exact map's difference image as one more tab of the layer; no further views."""
     return (["difference_to_linear"] if fix.variant == "exact" else []), []
+
+
+#: The entity of the validation table (``output.bearing_validation``).
+VALIDATION_ENTITY = "validation"
+
+
+def log_scene_extras(rec: rr.RecordingStream, options) -> None:
+    """With the scene's ``output.bearing_validation``: the linearisation validation table (Monte
+    Carlo of the true two-bearing geometry over crossing angles and bearing errors; a few
+    seconds) as the text entity ``validation``."""
+    if options.get("bearing_validation"):
+        records = validation_table()
+        log_validation_table(rec, VALIDATION_ENTITY, format_table(records), summary(records))
+
+
+def scene_texts(options) -> list[str]:
+    """The text entities :func:`log_scene_extras` logs for ``options``."""
+    return [VALIDATION_ENTITY] if options.get("bearing_validation") else []

@@ -15,7 +15,7 @@ For an isotropic start (cov = s^2 I) the distance from the mean has Rice's law p
 ``range/raster`` and ``range/rice`` (BarCharts: the probability per metre in range bins about
 the mean, from the raster's cells and from scipy.stats.rice) and ``range/summary``.
 
-The registry names this module as the ``butterly`` kind's recording extras
+:mod:`bananagrid.recording.layers` finds this module by its ``MODEL`` as the Butterly layers' extras
 (:func:`log_layer_extras`, :func:`layer_views`).
 """
 
@@ -36,6 +36,9 @@ __all__ = [
     "log_layer_extras", "layer_views", "log_butterly_geometry", "range_comparison", "log_range_comparison",
     "is_isotropic", "start_ellipse", "MAX_RINGS",
 ]
+
+#: The model class whose layers this module records (:data:`bananagrid.recording.layers.EXTRAS`).
+MODEL = Butterly
 
 #: Points per cell side over which a cell's mass is spread when binned by range.
 SUB = 4

@@ -7,9 +7,11 @@ conditioned on the ``[room]``, :mod:`bananagrid.scenes.presence`); both give one
 :class:`Scene`, run by :func:`bananagrid.scenes.run.run_scene`.
 
 :func:`load_scene` and :func:`parse_scene` raise :class:`BananagridError` with one line that
-names the file, the key path (``layers.exact.sigma_a``), the value given and what is allowed; nothing downstream has to check a scene again. The model kinds and their keys come
-from the registry (:data:`bananagrid.models.registry.MODEL_KINDS`): pass ``kinds=`` to parse
-scenes with models of your own.
+names the file, the key path (``layers.exact.sigma_a``), the value given and what is allowed;
+nothing downstream has to check a scene again. The model kinds and their keys come from the
+installed model kinds (:func:`bananagrid.models.registry.installed_kinds`: this package's and
+those other packages register by entry point); pass ``kinds=`` to parse scenes with models of
+your own.
 """
 
 from __future__ import annotations
@@ -30,7 +32,7 @@ from ..domains.angular_lattice import AngularLattice
 from ..domains.grid import Grid
 from ..domains.region import Region
 from ..geo.frame import DEFAULT_MAX_SCALE_ERROR, GeoFrame
-from ..models.registry import MODEL_KINDS, ModelKind, Registry
+from ..models.registry import MODEL_KINDS, ModelKind, Registry, installed_kinds
 from ..protocol import DensityModel
 from ..recording.core import MAX_ELAPSED_S, colormaps
 from ..validate import BananagridError, BananagridWarning, positive
@@ -51,8 +53,9 @@ GEO_KEYS = ("origin_latlon", "time", "crs", "max_scale_error")
 RADIAL_KEYS = ("layers", "density_bearings_deg", "moments_max_deg", "moments_step_deg")
 SCENE_KEYS = ("name", "title", "description", "times")
 GRID_KEYS = ("x", "y", "step", "dx", "dy")
-OUTPUT_KEYS = ("mass_levels", "contour_levels", "min_mass", "normalise", "dtype", "colormap", "bearing_validation",
-               "cell_probabilities")
+#: Keys of ``[output]`` that every scene takes; a model kind may add switches of its own
+#: (:attr:`~bananagrid.protocol.SceneSchema.options`, e.g. the bearing fix's ``bearing_validation``).
+OUTPUT_KEYS = ("mass_levels", "contour_levels", "min_mass", "normalise", "dtype", "colormap", "cell_probabilities")
 
 
 @dataclass(frozen=True)
@@ -71,7 +74,8 @@ class Layer:
         their scene names without ``_deg`` / ``_kn`` (``t`` absent when the scene has
         ``times``).
     model_kind : ModelKind, optional
-        The registry entry of ``kind`` (default: looked up in ``MODEL_KINDS``).
+        The registry entry of ``kind`` (default: looked up in the installed kinds,
+        :func:`~bananagrid.models.registry.installed_kinds`).
     """
 
     name: str
@@ -82,7 +86,7 @@ class Layer:
     def __post_init__(self):
         object.__setattr__(self, "params", MappingProxyType(dict(self.params)))
         if self.model_kind is None:
-            object.__setattr__(self, "model_kind", MODEL_KINDS[self.kind])
+            object.__setattr__(self, "model_kind", installed_kinds()[self.kind])
 
     def model(self, t: float | None = None) -> DensityModel:
         """The layer's model at elapsed time ``t`` (s); by default the layer's own ``t``.
@@ -163,9 +167,11 @@ class Scene:
         Kernel precision, ``"float64"`` or ``"float32"``.
     colormap : str
         rerun colormap of the density images (lower case).
-    bearing_validation : bool
-        Whether the recording gets the Walsh linearisation validation table (Monte Carlo of
-        the true geometry over crossing angles and bearing errors; a few seconds).
+    options : Mapping
+        The ``[output]`` switches that model kinds add (:attr:`SceneSchema.options`), by name,
+        as given (e.g. ``bearing_validation``: the Walsh linearisation validation table).
+    kinds : Registry
+        The model kinds the scene was parsed with (their recording hooks act on ``options``).
     radial : RadialOutput or None
         The conditional radial curves to record, if the scene asks for them (``[radial]``).
     mass_levels : tuple of float
@@ -209,7 +215,8 @@ class Scene:
     normalise: bool
     dtype: str
     colormap: str
-    bearing_validation: bool = False
+    options: Mapping = field(default_factory=dict)
+    kinds: Registry = MODEL_KINDS
     radial: RadialOutput | None = None
     mass_levels: tuple = DEFAULT_MASS_LEVELS
     min_mass: float = DEFAULT_MIN_MASS
@@ -274,7 +281,7 @@ class Scene:
 # --- entry points -----------------------------------------------------------------------------
 
 
-def load_scene(path: str | os.PathLike, *, kinds: Registry = MODEL_KINDS, tiled: bool = False) -> Scene:
+def load_scene(path: str | os.PathLike, *, kinds: Registry | None = None, tiled: bool = False) -> Scene:
     """Read and validate the scene file at ``path`` (``kinds`` and ``tiled`` as for :func:`parse_scene`).
 
     Raises
@@ -298,16 +305,18 @@ def load_scene(path: str | os.PathLike, *, kinds: Registry = MODEL_KINDS, tiled:
     return parse_scene(text, source=str(path), kinds=kinds, tiled=tiled)
 
 
-def parse_scene(text: str, source: str = "<string>", *, kinds: Registry = MODEL_KINDS,
+def parse_scene(text: str, source: str = "<string>", *, kinds: Registry | None = None,
                 tiled: bool = False) -> Scene:
     """Parse and validate scene TOML ``text``; ``source`` names it in error messages.
 
     ``tiled``: the scene will be computed in tiles (``bananagrid run --zarr``), so its grid may
     exceed :data:`~bananagrid.domains.grid.MAX_CELLS` (up to ``MAX_TILED_CELLS``).
 
-    ``kinds``: the model kinds layers may use (default: the registry's; e.g.
+    ``kinds``: the model kinds layers may use (default: the installed ones, this package's and
+    those other packages register by entry point, :func:`~bananagrid.models.registry.installed_kinds`;
     ``MODEL_KINDS.with_kinds(ModelKind("mine", Mine))`` adds a model of your own).
     """
+    kinds = installed_kinds() if kinds is None else kinds
     try:
         doc = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
@@ -352,8 +361,9 @@ def _build(doc: dict, text: str, source: str, kinds: Registry, tiled: bool = Fal
             scale_error = geo.check_extent((x0, x1), (y0, y1), max_scale_error)
         except BananagridError as exc:
             raise SceneKeyError(_geo_message(str(exc), "")) from None
-    output = _output(keys.table(doc, "output"))
+    output = _output(keys.table(doc, "output"), kinds)
     defaults = keys.table(doc, "defaults")
+    scene_kinds = kinds
     kinds = kinds.on("grid")  # the kinds of [layers]; an [array] scene's law is in [presence]
     every_key = tuple(dict.fromkeys(k for kind in kinds.values() for k in kind.scene.key_names))
     check_keys(defaults, every_key, "defaults")
@@ -376,7 +386,7 @@ def _build(doc: dict, text: str, source: str, kinds: Registry, tiled: bool = Fal
     return Scene(
         name=name, title=title, description=description, text=text, source=source,
         domain=grid, bounds=bounds, layers=layers, times=times, radial=radial, warnings=tuple(found), **output,
-        geo=geo, scale_error=scale_error,
+        geo=geo, scale_error=scale_error, kinds=scene_kinds,
     )
 
 
@@ -460,11 +470,13 @@ def _grid(table: dict, tiled: bool = False) -> tuple[tuple, Grid]:
         raise SceneKeyError(keys.prefixed(str(exc), "grid", GRID_KEYS)) from None
 
 
-def _output(table: dict) -> dict:
+def _output(table: dict, kinds: Registry) -> dict:
     """``[output]``: contour levels (probability mass and fixed densities), the captured-mass
-    threshold, normalisation, dtype, colormap, whether to add the bearing-fix validation
-    table and whether to compute cell probabilities, with defaults; as keyword arguments of :class:`Scene`."""
-    check_keys(table, OUTPUT_KEYS, "output")
+    threshold, normalisation, dtype, colormap, whether to compute cell probabilities, and the
+    switches of ``kinds`` (:attr:`SceneSchema.options`), with defaults; as keyword arguments of
+    :class:`Scene`."""
+    switches = tuple(dict.fromkeys(name for kind in kinds.values() for name in kind.scene.options))
+    check_keys(table, (*OUTPUT_KEYS, *switches), "output")
     levels: tuple = ()
     if "contour_levels" in table:
         value = table["contour_levels"]
@@ -503,15 +515,18 @@ def _output(table: dict) -> dict:
     allowed = _colormaps()
     if not isinstance(colormap, str) or colormap.lower() not in allowed:
         raise SceneKeyError(f"output.colormap = {show(colormap)}: must be one of {', '.join(allowed)}")
-    validation = table.get("bearing_validation", False)
-    if not isinstance(validation, bool):
-        raise SceneKeyError(f"output.bearing_validation = {show(validation)}: expected true or false")
+    options = {}
+    for name in switches:
+        value = table.get(name, False)
+        if not isinstance(value, bool):
+            raise SceneKeyError(f"output.{name} = {show(value)}: expected true or false")
+        options[name] = value
     cells = table.get("cell_probabilities", False)
     if not isinstance(cells, bool):
         raise SceneKeyError(f"output.cell_probabilities = {show(cells)}: expected true or false")
     return {
         "levels": tuple(float(v) for v in levels), "mass_levels": probabilities, "min_mass": threshold,
-        "normalise": normalise, "dtype": dtype, "colormap": colormap.lower(), "bearing_validation": validation,
+        "normalise": normalise, "dtype": dtype, "colormap": colormap.lower(), "options": MappingProxyType(options),
         "cell_probabilities": cells,
     }
 
@@ -546,6 +561,8 @@ def _layer(layer_name: str, body: dict, shared: dict, times, kinds: Registry, fo
     bearings are true bearings, turned into grid bearings where they are measured."""
     path = f"layers.{layer_name}"
     kind_name = body.get("model")
+    if isinstance(kind_name, str) and kind_name in kinds.broken:  # an entry point that failed to load
+        raise SceneKeyError(f"{path}.model = {show(kind_name)}: {kinds.broken[kind_name]}")
     if not isinstance(kind_name, str) or kind_name not in kinds:
         shown = "missing" if kind_name is None else f"= {show(kind_name)}"
         raise SceneKeyError(f"{path}.model {shown}: must be one of {', '.join(map(show, kinds))}")
@@ -563,7 +580,8 @@ def _layer(layer_name: str, body: dict, shared: dict, times, kinds: Registry, fo
     own = {key.name: key for key in schema.keys}
     given = {p: v for p, v in shared.items() if p in own}
     given.update(keys.parameters({k: v for k, v in body.items() if k != "model"}, path, own, geo))
-    needed = schema.required if times is not None or not schema.timed else (*schema.required, "t")
+    required = schema.required or ()
+    needed = required if times is not None or not schema.timed else (*required, "t")
     missing = [p for p in needed if p not in given]
     if schema.missing is not None:
         try:

@@ -18,7 +18,6 @@ from pathlib import Path
 
 import numpy as np
 
-from ..analysis.bearing_validation import format_table, summary, validation_table
 from ..analysis.coverage import coverage_warnings, level_warnings, peak_location
 from ..atomic import OutputSet, OutputWriteError
 from ..engine.grid_cells import probability_work
@@ -30,7 +29,6 @@ from ..engine.work import check_work
 from ..geo.areas import search_areas
 from ..geo.libraries import require
 from ..protocol import DensityModel
-from ..recording.bearing import log_validation_table
 from ..recording.core import (
     default_blueprint,
     focus_extent,
@@ -42,7 +40,7 @@ from ..recording.core import (
     union_extent,
 )
 from ..recording.geomap import log_map_areas, log_map_marks, map_view
-from ..recording.layers import layer_views, log_layer_extras
+from ..recording.layers import layer_views, log_layer_extras, log_scene_extras, scene_texts
 from ..recording.radial import log_radial_curves, radial_groups, radial_views
 from ..recording.summary import CELL_TAB, log_summary
 from ..results import Raster
@@ -177,11 +175,9 @@ class GridRun:
         log_map_areas(rec, layer.name, self.areas[layer.name, t], scene.geo)
 
     def finish(self, rec, rows: list[dict]) -> None:
-        """The validation table, the summary and (last) the blueprint; the .npz completed."""
+        """The kinds' scene extras (e.g. the validation table), the summary and (last) the blueprint; the .npz completed."""
         scene = self.scene
-        if scene.bearing_validation:
-            records = validation_table()
-            log_validation_table(rec, "validation", format_table(records), summary(records))
+        log_scene_extras(rec, scene.kinds.values(), scene.options)
         log_summary(rec, scene.title, rows, self.found)
         # The maps open framed on what was found, so the blueprint comes last.
         send_blueprint(rec, _blueprint(scene, {e: union_extent(extents) for e, extents in self.frames.items()}))
@@ -287,7 +283,7 @@ def _blueprint(scene: Scene, frames: dict):
         [f"layers/{layer.name}" for layer in scene.layers],
         summary_entity="summary",
         extra_images=images,
-        text_entities=["validation"] if scene.bearing_validation else [],
+        text_entities=scene_texts(scene.kinds.values(), scene.options),
         extra_views=views,
         several_times=scene.times is not None and len(scene.times) > 1,
         frames=frames,
