@@ -136,7 +136,7 @@ def test_error_as_subprocess(tmp_path):
     assert result.returncode == 2
     assert result.stderr.strip().splitlines() == [
         f'bananagrid: error: {scene}: layers.near.model = "banana": must be one of '
-        + ", ".join(f'"{kind}"' for kind in installed_kinds())
+        + ", ".join(f'"{kind}"' for kind in installed_kinds().on("grid"))
     ]
     assert result.stdout == ""
 

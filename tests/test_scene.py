@@ -17,7 +17,7 @@ from bananagrid.scenes.load import Layer, load_scene, parse_scene
 from cases import small_scene
 
 #: The model kinds a scene may name, as its messages list them (from the registry).
-KINDS_LISTED = ", ".join(f'"{kind}"' for kind in installed_kinds())
+KINDS_LISTED = ", ".join(f'"{kind}"' for kind in installed_kinds().on("grid"))  # the kinds a [layers] table takes
 
 SCENES = Path(__file__).resolve().parent.parent / "scenes"
 
