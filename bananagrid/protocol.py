@@ -462,3 +462,10 @@ class PresenceModel(Protocol):
     def cell_map(self, lattice, region=None, *, dtype=np.float64, device: str = "cpu", threads=None):
         """p(C | S) of every cell of ``lattice`` (an :class:`~bananagrid.AngularLattice`),
         conditioned on ``region`` (None: the whole space): a :class:`~bananagrid.CellMap`."""
+
+    @classmethod
+    def scene_table(cls, table, *, path: str, lattice, room) -> tuple[dict, tuple]:
+        """``(parameters, part names)`` from a scene's presence table ``table`` (whose ``kind``
+        names this law; ``path``: its key path) on ``lattice``, the scene's room ``room`` (a
+        :class:`~bananagrid.Region` or None): how the law's scene is written, so that the
+        parser names no kind. Raises :class:`~bananagrid.BananagridError` naming the key."""

@@ -163,7 +163,7 @@ def covariance(name: str, value, dim: int = 2) -> np.ndarray:
             rho = cov[0, 1] / (math.sqrt(cov[0, 0]) * math.sqrt(cov[1, 1]))
             raise BananagridError(
                 f"{name} = {cov.tolist()!r}: must be positive definite (eigenvalues {s1:.6g}, {s2:.6g}; "
-                f"correlation {rho:.15g}, |rho| must be < 1)"
+                f"correlation {rho:.15g}; allowed: |rho| < 1 and a condition number below {MAX_CONDITION:g})"
             )
         return cov
     # scaled by the diagonal, so that units of very different size on the axes do not count

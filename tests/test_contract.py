@@ -123,7 +123,8 @@ ROOM_MIXTURE = dict(weights=[0.5, 0.35, 0.15], means=[[-1.8, 1.5], [1.2, -1.8], 
 PLANE = dict(geometry="plane", h=1.8, azimuth_step=5 * DEG, elevation_step=5 * DEG)
 MIXTURE_BAD = (
     ("weights", [0.5, 0.35, 0.25], r"weights = \[0.5, 0.35, 0.25\]: they sum to 1.1\d*, not 1"),
-    ("covs", [[[1.0, 2.0], [2.0, 1.0]]] * 3, r"covs\[0\] = .*: not positive definite"),
+    ("covs", [[[1.0, 2.0], [2.0, 1.0]]] * 3, r"covs\[0\] = \[\[1.0, 2.0\], \[2.0, 1.0\]\]: must be positive definite "
+                                             r"\(eigenvalues -1, 3; correlation 2; allowed: \|rho\| < 1"),
     ("means", [[0.0, 0.0, 0.0]] * 3, r"covs: expected shape \(3, 3, 3\) to match the means"),
 )
 MOTION_BAD = (
@@ -188,7 +189,7 @@ CASES = {
     "mixture-line": ArrayCase("mixture", dict(weights=[0.6, 0.4], means=[[-1.8], [2.6]], covs=[0.09, 0.04]),
                               dict(geometry="line", h=1.8, azimuth_step=2 * DEG), dict(x=(-3.0, 3.0)),
                               bad=(("weights", [0.6, 0.5], r"they sum to 1.1\d*, not 1"),
-                                   ("covs", [-0.09, 0.04], r"covs\[0\] = \[\[-0.09\]\]: not positive definite"),
+                                   ("covs", [-0.09, 0.04], r"covs\[0\] = \[\[-0.09\]\]: must be positive definite \(variances > 0\)"),
                                    ("means", [[-1.8, 0.0]], r"means: expected shape \(M, D\) with M = 2 components"))),
     "mixture-plane": ArrayCase("mixture", ROOM_MIXTURE, PLANE, ROOM, bad=MIXTURE_BAD),
     "mixture-frustum": ArrayCase("mixture", dict(weights=[0.5, 0.35, 0.15],

@@ -21,6 +21,9 @@ PARAMS = {
     "polar": {**FIG1, "variant": "rough"},
     "bearing_fix": dict(sensors=[(0.0, 0.0), (20000.0, 0.0)], bearings=[0.2641, -0.3909], sigmas=[0.01, 0.02]),
     "butterly": dict(mean=(1.0, 2.0), cov=[[4e4, 5e3], [5e3, 2.5e4]], speeds=[1.0, 2.0], weights=[0.4, 0.6], t=600.0),
+    "mixture": dict(weights=[0.7, 0.3], means=[[-1.8, 1.5], [1.2, -1.8]], covs=[np.diag([0.0625, 0.0625]),
+                                                                           [[0.0225, 0.0135], [0.0135, 0.09]]]),
+    "uniform": dict(region=bg.Region(x=(-3.0, 3.0), y=(-2.5, 2.5))),
 }
 KINDS = list(bg.MODEL_KINDS)
 
@@ -37,8 +40,9 @@ def test_every_field_is_declared_once_and_its_scene_keys_derive_from_it(kind):
     assert cls.scene.keys == scene_keys(cls)  # the scene's keys are the declarations'
     names = [key.name for key in cls.scene.keys]
     assert len(names) == len(set(names))
-    for f, spec in declared(cls):  # each field is set by a key of its own name, or by the keys it names
-        assert f.name in names or spec.scene, f.name
+    for f, spec in declared(cls):  # each field is set by a key of its own name, or by the keys it names,
+        # or is declared as set by none (scene=(): a uniform law's region is the scene's [room])
+        assert f.name in names or spec.scene or (spec.scene == () and not spec.also), f.name
 
 
 @pytest.mark.parametrize("kind", KINDS)
@@ -63,9 +67,14 @@ def test_parameters_cover_every_declared_field(kind):
     for f, spec in declared(type(model)):
         own = spec.plain(model, getattr(model, f.name)) if spec.plain is not None else {f.name: getattr(model, f.name)}
         assert own.items() <= plain.items()
-    # plain data: numbers, strings and lists of numbers, as recordings and JSON take them
+    # plain data: numbers, strings, and lists and mappings of them, as recordings and JSON take them
+    def plain_data(value):
+        if isinstance(value, (list, dict)):
+            return all(plain_data(v) for v in (value.values() if isinstance(value, dict) else value))
+        return isinstance(value, (int, float, str)) and not isinstance(value, np.generic)
+
     for key, value in plain.items():
-        assert isinstance(value, (int, float, str, list)), (key, value)
+        assert plain_data(value), (key, value)
 
 
 def test_required_keys_are_the_fields_without_a_default():

@@ -8,6 +8,7 @@ sd_y, or dropped rho, would fail), and the drawn geometry against the room and t
 
 from __future__ import annotations
 
+import ast
 import json
 import math
 import subprocess
@@ -16,10 +17,15 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 from rerun.chunk import RrdReader
 
 import bananagrid as bg
 from bananagrid.cli import main
+from bananagrid.models.params import modelclass
+from bananagrid.models.registry import ModelKind
+from bananagrid.protocol import SceneSchema
 from bananagrid.recording.inspect import inspect_recording, read_depth_image
 from bananagrid.recording.presence import cell_colours
 from bananagrid.scenes.run import run_scene
@@ -160,8 +166,16 @@ BAD = [
     ("rho", ("sd_y = 0.2", "sd_y = 0.2\nrho = 1.0"),
      "presence.components.a.rho = 1.0: must be in (-1, 1) (the x-y correlation)"),
     ("covariance not positive definite", ("[[0.1, 0.02], [0.02, 0.2]]", "[[0.1, 0.5], [0.5, 0.2]]"),
-     "presence.components.b.cov: not positive definite (eigenvalues [-0.3524937810560445, 0.6524937810560445]); "
-     "every covariance needs positive eigenvalues (condition number below 1e14)"),
+     "presence.components.b.cov = [[0.1, 0.5], [0.5, 0.2]]: must be positive definite (eigenvalues -0.352494, "
+     "0.652494; correlation 3.53553390593274; allowed: |rho| < 1 and a condition number below 1e+13)"),
+    ("covariance not symmetric", ("[[0.1, 0.02], [0.02, 0.2]]", "[[0.1, 0.02], [0.03, 0.2]]"),
+     "presence.components.b.cov = [[0.1, 0.02], [0.03, 0.2]]: must be symmetric "
+     "(presence.components.b.cov[0][1] == presence.components.b.cov[1][0])"),
+    ("SDs too elongated", ("sd_y = 0.2", "sd_y = 1e-8"),  # variances 0.09 and 1e-16: condition 9e14 > 1e13
+     "presence.components.a.sd_x, sd_y, rho = [[0.09, 0.0], [0.0, 1.0000000000000001e-16]]: must be positive "
+     "definite (eigenvalues 1e-16, 0.09; correlation 0; allowed: |rho| < 1 and a condition number below 1e+13)"),
+    ("presence key", ('kind = "mixture"', 'kind = "mixture"\nlabel = "heads"'),
+     "presence.label: unknown key; allowed: kind, components"),
     ("output key", ("[presence]", '[output]\ncolormap = "turbo"\n\n[presence]'),
      "output.colormap: unknown key; allowed: dtype, far, log10_floor, mass_levels"),
     ("log10 floor", ("[presence]", "[output]\nlog10_floor = 2\n\n[presence]"),
@@ -188,6 +202,94 @@ def test_uniform_needs_a_room():
     text = BASE.split("[room]")[0] + '[presence]\nkind = "uniform"\n'
     with pytest.raises(bg.BananagridError, match=r'^bad.toml: \[room\]: missing table; a uniform law'):
         parse_scene(text, source="bad.toml")
+
+
+@settings(max_examples=200, deadline=None, derandomize=True, database=None)
+@given(a=st.floats(-4.0, 4.0), b=st.floats(-4.0, 4.0), c=st.floats(-20.0, 20.0), rho=st.floats(-1.0, 1.0),
+       sds=st.booleans())
+def test_a_component_covariance_is_the_laws_own(a, b, c, rho, sds):
+    """The component table and the law check a covariance the same way: a table the scene
+    accepts builds the law with that covariance, and one the law would refuse is refused naming
+    the component's key (never by the fallback that names only ``presence``). Covariances of
+    every elongation (variances 10^a, 10^b) and correlation, near-singular ones included (rho
+    and c close to the ends), given as ``cov`` or as SDs."""
+    sx, sy = 10.0 ** (a / 2), 10.0 ** (b / 2)
+    if sds:
+        body = f"sd_x = {sx!r}\nsd_y = {sy!r}\nrho = {rho!r}"
+        key = "presence.components.b.sd_x, sd_y, rho"
+    else:
+        sxy = rho * sx * sy * (1.0 + 10.0 ** -abs(c))  # |correlation| a hair above |rho|: at and past 1
+        body = f"cov = [[{sx * sx!r}, {sxy!r}], [{sxy!r}, {sy * sy!r}]]"
+        key = "presence.components.b.cov"
+    text = BASE.replace("cov = [[0.1, 0.02], [0.02, 0.2]]", body)
+    try:
+        scene = parse_scene(text, source="fuzz.toml")
+    except bg.BananagridError as exc:
+        message = str(exc)
+        # a correlation of 1 or more is the only refusal this table can meet but the room's mass
+        assert message.startswith((f"fuzz.toml: {key} = ", "fuzz.toml: presence.components.b.rho = ")), message
+        return
+    cov = law(scene).covs[1]
+    assert cov[0, 1] == cov[1, 0]  # the law's own check made it exactly symmetric (it was written so)
+
+
+def test_uniform_takes_no_keys_of_its_own():
+    text = BASE.split("[presence]")[0] + '[presence]\nkind = "uniform"\nlabel = "heads"\n'
+    with pytest.raises(bg.BananagridError) as info:
+        parse_scene(text, source="bad.toml")
+    assert str(info.value) == "bad.toml: presence.label: unknown key; allowed: kind"
+
+
+def test_a_room_the_law_gives_no_mass_is_refused():
+    """Every law's cells are conditioned on the room, so each must give it mass (a uniform law
+    is the room's own and always does)."""
+    text = BASE.replace("mean = [1.0, 0.5]", "mean = [100.0, 0.5]").replace("mean = [-1.0, -0.5]", "mean = [-100.0, 0.5]")
+    with pytest.raises(bg.BananagridError) as info:
+        parse_scene(text, source="bad.toml")
+    assert str(info.value) == ("bad.toml: room = {x = [-3.0, 3.0], y = [-2.5, 2.5]}: the mixture law gives the room "
+                               "no mass (p(S) = 0.0)")
+
+
+@modelclass
+class WholeRoom(bg.UniformPresence):
+    """A presence law of the tests' own: uniform on the room, under a kind name the package never
+    spells; its scene table is read by the hook it inherits."""
+
+    kind = "whole_room"
+    scene = SceneSchema(summary="presence uniform on the scene's [room], a kind of the tests")
+
+
+def test_a_presence_kind_of_ones_own_is_parsed_and_run_through_its_hooks(tmp_path):
+    """The parser and the runner name no kind: a law registered beside the package's runs from
+    its scene, reading its table through its class's ``scene_table``, to the same cells as the
+    uniform law it extends."""
+    kinds = bg.MODEL_KINDS.with_kinds(ModelKind("whole_room", WholeRoom, domain="array"))
+    text = BASE.split("[presence]")[0] + '[presence]\nkind = "whole_room"\n'
+    scene = parse_scene(text, source="own.toml", kinds=kinds)
+    assert type(law(scene)) is WholeRoom and law(scene).region == scene.region == ROOM
+    with pytest.raises(bg.BananagridError, match=r'^own.toml: presence.components: a uniform law has no components '
+                                                 r'\(kind = "whole_room"\)$'):
+        parse_scene(BASE.replace('kind = "mixture"', 'kind = "whole_room"'), source="own.toml", kinds=kinds)
+    (row,) = run_scene(scene, tmp_path, npz=True)
+    assert row["layer"] == "plane/whole_room"
+    with np.load(tmp_path / "t.npz") as z:
+        own = z["cells"]
+    uniform = bg.cell_probabilities(bg.UniformPresence(ROOM), scene.domain)
+    np.testing.assert_array_equal(own, uniform.prob)
+
+
+def test_the_scene_layer_names_no_kind():
+    """Scenes branch on a kind's hooks, never on its name: no string of the scenes package (its
+    docstrings aside) is a registered kind's name."""
+    found = []
+    for path in sorted((ROOT / "bananagrid" / "scenes").rglob("*.py")):
+        tree = ast.parse(path.read_text())
+        docstrings = {id(node.body[0].value) for node in ast.walk(tree)
+                      if isinstance(node, (ast.Module, ast.ClassDef, ast.FunctionDef, ast.AsyncFunctionDef))
+                      and node.body and isinstance(node.body[0], ast.Expr) and isinstance(node.body[0].value, ast.Constant)}
+        found += [f"{path.name}:{node.lineno} {node.value!r}" for node in ast.walk(tree)
+                  if isinstance(node, ast.Constant) and node.value in set(bg.MODEL_KINDS) and id(node) not in docstrings]
+    assert found == []
 
 
 def test_frustum_room_must_meet_the_slab():

@@ -255,7 +255,7 @@ BAD_COVARIANCES = {
     "asymmetric": ([[1.0, 0.5], [0.4, 1.0]], r"^cov = .*: must be symmetric \(cov\[0\]\[1\] == cov\[1\]\[0\]\)$"),
     "negative variance": ([[-1.0, 0.0], [0.0, 1.0]], r"^cov = .*: must be positive definite \(variances > 0\)$"),
     "correlation 1": ([[4.0, 6.0], [6.0, 9.0]], r"^cov = .*: must be positive definite \(eigenvalues 0, 13; "
-                                                  r"correlation 1, \|rho\| must be < 1\)$"),
+                                                  r"correlation 1; allowed: \|rho\| < 1 and a condition number below 1e\+13\)$"),
 }
 
 

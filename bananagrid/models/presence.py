@@ -15,8 +15,9 @@ r"""Presence laws of Pessentheiner's report: where people are in a room (Section
 from __future__ import annotations
 
 import math
+import re
 import time
-from dataclasses import dataclass
+from collections.abc import Mapping
 from typing import ClassVar
 
 import numpy as np
@@ -30,19 +31,19 @@ from ..domains.region import Region, as_region
 from ..engine.warp_runtime import WarpContext, check_threads
 from ..kernels import presence as kp
 from ..results import CellMap, GridPresence
-from ..protocol import SceneSchema
-from ..validate import BananagridError, positive, real_array
+from ..protocol import SceneKey, SceneSchema
+from ..validate import MAX_CONDITION, BananagridError, covariance, positive, real_array, show
 from .base import check_n, check_rng
+from .params import modelclass, param, plain_parameters
 
 __all__ = [
     "GaussianMixture", "UniformPresence", "cell_probabilities", "grid_probabilities", "rectangle_probabilities",
-    "WEIGHT_SUM_TOL", "SYMMETRY_TOL", "RTOL", "ATOL", "FLOAT32_RTOL", "MAX_PANELS", "RECTANGLE_ABS_ERROR", "clip_rounding",
+    "WEIGHT_SUM_TOL", "RTOL", "ATOL", "FLOAT32_RTOL", "MAX_PANELS", "RECTANGLE_ABS_ERROR", "clip_rounding",
+    "AXES", "COMPONENT_KEYS", "COVARIANCE_KEYS", "SD_KEYS", "MAX_LENGTH", "MIN_LENGTH",
 ]
 
 #: |sum(weights) - 1| allowed (rounding of weights typed with a few digits is the user's job).
 WEIGHT_SUM_TOL = 1e-9
-#: |Sigma - Sigma^T| allowed, relative to the largest entry.
-SYMMETRY_TOL = 1e-12
 #: Default relative tolerance of each component's cell integral (|K15 - G7| <= RTOL |K15| + ATOL).
 RTOL = 1e-7
 #: The tolerance a float32 run uses at least: its cells agree with float64 to about 4e-5 relative
@@ -54,21 +55,67 @@ ATOL = 1e-17
 #: Most Gauss-Kronrod panels per piece and axis.
 MAX_PANELS = 4096
 
-@dataclass(frozen=True, eq=False)
+def _finite_array(name: str, value) -> np.ndarray:
+    a = real_array(name, value)
+    if not np.all(np.isfinite(a)):
+        raise BananagridError(f"{name}: every entry must be finite (NaN or inf given)")
+    return a
+
+
+_finite_array.domain = "finite"
+
+
+def _mixture_weights(name: str, value) -> np.ndarray:
+    """The weights of a mixture: a non-empty 1-D array, each >= 0, summing to 1."""
+    w = _finite_array(name, value)
+    if w.ndim != 1 or w.size == 0:
+        raise BananagridError(f"{name}: expected a non-empty 1-D array, got shape {w.shape}")
+    if np.any(w < 0.0):
+        i = int(np.argmin(w))
+        raise BananagridError(f"{name}[{i}] = {w[i]!r}: weights must be >= 0")
+    total = float(w.sum())
+    if abs(total - 1.0) > WEIGHT_SUM_TOL:
+        raise BananagridError(
+            f"{name} = {w.tolist()!r}: they sum to {total!r}, not 1 (allowed error {WEIGHT_SUM_TOL:g}); "
+            "divide them by their sum"
+        )
+    return w
+
+
+_mixture_weights.domain = f"each >= 0, summing to 1 (within {WEIGHT_SUM_TOL:g})"
+
+
+def _listed(name: str):
+    """``plain`` of an array parameter: ``{name: nested lists}``."""
+    return lambda model, value: {name: value.tolist()}
+
+
+#: Axes of a presence law by its dimension (the array frame: x, y horizontal, z up).
+AXES = ("x", "y", "z")
+
+#: The keys of a mixture component's table, ``[presence.components.NAME]`` of an ``[array]``
+#: scene (``axes``: the law's, by its lattice's geometry; ``sd_x`` .. ``rho`` set the covariance).
+COMPONENT_KEYS = (
+    SceneKey("weight", default="required", allowed=f"in [0, 1]; the weights sum to 1 within {WEIGHT_SUM_TOL:g}"),
+    SceneKey("mean", type="numbers", unit="m",
+             allowed="one number per axis (the line: a number or `[x]`), each within +-1e150"),
+)
+COVARIANCE_KEYS = (
+    SceneKey("cov", type="matrix", unit="m^2", default="instead of the SDs",
+             allowed="D x D, symmetric positive definite, variances in [1e-300, 1e300]"),
+)
+SD_KEYS = (
+    SceneKey("sd_x", unit="m", default="required unless `cov`", allowed="in [1e-150, 1e150]"),
+    SceneKey("sd_y", unit="m", default="required unless `cov` (plane, frustum)", allowed="in [1e-150, 1e150]"),
+    SceneKey("sd_z", unit="m", default="required unless `cov` (frustum)", allowed="in [1e-150, 1e150]"),
+    SceneKey("rho", default="`0`", allowed="plane and frustum, with the SDs: the x-y correlation, in (-1, 1)"),
+)
+
+
+@modelclass(eq=False)
 class GaussianMixture:
     r"""Gaussian mixture presence law, ``f(x) = sum_i w_i N(x; mu_i, Sigma_i)`` ((7.2), (8.2),
     (9.3)), in 1, 2 or 3 dimensions.
-
-    Parameters
-    ----------
-    weights : array_like, shape (M,)
-        w_i >= 0, summing to 1 (within ``WEIGHT_SUM_TOL``), at least one positive.
-    means : array_like, shape (M, D) (or (M,) for D = 1)
-        Component means, m; D is 1 (a line: x), 2 (a plane: x, y) or 3 (x, y, z; z up, the
-        floor at negative z).
-    covs : array_like, shape (M, D, D) (or (M,) variances for D = 1)
-        Symmetric positive-definite covariances, m^2 (full matrices; the frustum lattice takes
-        any, the paper's block-diagonal (x, y) | z included).
 
     Notes
     -----
@@ -76,17 +123,27 @@ class GaussianMixture:
     Cholesky factor L instead (any A with A A^T = Sigma whitens the same way).
     """
 
-    weights: np.ndarray
-    means: np.ndarray
-    covs: np.ndarray
+    weights: np.ndarray = param(
+        py="array_like, shape (M,)", scene=COMPONENT_KEYS[:1], check=_mixture_weights, plain=_listed("weights"),
+        doc="Component weights w_i; a scene gives one ``weight`` per ``[presence.components.NAME]`` table.")
+    means: np.ndarray = param(
+        py="array_like, shape (M, D) (or (M,) for D = 1)", unit="m", scene=COMPONENT_KEYS[1:], check=_finite_array,
+        domain="finite, shape (M, D) with D in 1, 2, 3", plain=_listed("means"),
+        doc="Component means; D is 1 (a line: x), 2 (a plane: x, y) or 3 (x, y, z; z up, the floor at "
+            "negative z).")
+    covs: np.ndarray = param(
+        py="array_like, shape (M, D, D) (or (M,) variances for D = 1)", unit="m^2", scene=COVARIANCE_KEYS,
+        also=SD_KEYS, check=_finite_array, plain=_listed("covs"),
+        domain=f"each {covariance.domain}, condition number below {MAX_CONDITION:g} (in 3-D of its correlation "
+               "matrix)",
+        doc="Component covariances (full matrices; the frustum lattice takes any, the paper's block-diagonal "
+            "(x, y) | z included).")
 
     #: Its registry name: ``presence.kind = "mixture"`` of an ``[array]`` scene.
     kind: ClassVar[str] = "mixture"
-    #: Its scene keys: the components of the ``[presence]`` table (:mod:`bananagrid.scenes.presence`
+    #: Its scene keys: those of each ``[presence.components.NAME]`` table (:meth:`scene_table`
     #: turns their ``mean``, ``cov`` or SDs into these parameters).
     scene: ClassVar[SceneSchema] = SceneSchema(
-        keys=(), required=("weights", "means", "covs"), timed=False,
-        build=lambda params: GaussianMixture(**params),
         summary="a Gaussian mixture of heads in the room, one [presence.components.NAME] table a component",
     )
     #: Stated agreement of float32 cells with float64 (relative, cells holding 1e-9 of the mass):
@@ -98,10 +155,9 @@ class GaussianMixture:
     sample_bytes: ClassVar[float] = 128
 
     def __post_init__(self):
-        w = _finite_array("weights", self.weights)
-        if w.ndim != 1 or w.size == 0:
-            raise BananagridError(f"weights: expected a non-empty 1-D array, got shape {w.shape}")
-        m = _finite_array("means", self.means)
+        """The rules between the parameters: the means' and covariances' shapes match the
+        weights, and each covariance is one (:func:`bananagrid.validate.covariance`)."""
+        w, m, c = self.weights, self.means, self.covs
         if m.ndim == 1 and w.size == m.size:
             m = m[:, None]
         if m.ndim != 2 or m.shape[0] != w.size or m.shape[1] not in (1, 2, 3):
@@ -109,34 +165,59 @@ class GaussianMixture:
                 f"means: expected shape (M, D) with M = {w.size} components and D in 1, 2, 3; got {m.shape}"
             )
         d = m.shape[1]
-        c = _finite_array("covs", self.covs)
         if d == 1 and c.shape == (w.size,):
             c = c[:, None, None]
         if c.shape != (w.size, d, d):
             raise BananagridError(f"covs: expected shape ({w.size}, {d}, {d}) to match the means; got {c.shape}")
-        if np.any(w < 0.0):
-            i = int(np.argmin(w))
-            raise BananagridError(f"weights[{i}] = {w[i]!r}: weights must be >= 0")
-        total = float(w.sum())
-        if abs(total - 1.0) > WEIGHT_SUM_TOL:
-            raise BananagridError(
-                f"weights = {w.tolist()!r}: they sum to {total!r}, not 1 (allowed error {WEIGHT_SUM_TOL:g}); "
-                "divide them by their sum"
-            )
-        for i in range(w.size):
-            ci = c[i]
-            scale = float(np.max(np.abs(ci)))
-            if np.max(np.abs(ci - ci.T)) > SYMMETRY_TOL * max(scale, 1e-300):
-                raise BananagridError(f"covs[{i}] = {ci.tolist()!r}: a covariance must be symmetric")
-            eig = np.linalg.eigvalsh(ci)
-            if not eig[0] > 0.0 or eig[0] <= 1e-14 * eig[-1]:
-                raise BananagridError(
-                    f"covs[{i}] = {ci.tolist()!r}: not positive definite (eigenvalues {eig.tolist()!r}); "
-                    "every covariance needs positive eigenvalues (condition number below 1e14)"
-                )
+        c = np.stack([covariance(f"covs[{i}]", c[i], dim=d) for i in range(w.size)])
         for name, value in (("weights", w), ("means", m), ("covs", c)):
             value.setflags(write=False)
             object.__setattr__(self, name, value)
+
+    @classmethod
+    def scene_table(cls, table: Mapping, *, path: str, lattice: AngularLattice, room: Region | None):
+        """The parameters of a scene's presence table (``table``, whose ``kind`` names this law;
+        ``path``: its key path) on ``lattice``: one ``[PATH.components.NAME]`` table a component, with
+        ``weight``, ``mean`` and ``cov`` or the SDs (``sd_x``, ``sd_y``, ``rho``, ``sd_z``) on the
+        law's axes.
+
+        Returns
+        -------
+        params : dict
+            ``weights``, ``means``, ``covs`` (lists, m and m^2).
+        names : tuple of str
+            The components' names, in the table's order.
+
+        Raises
+        ------
+        BananagridError
+            ``KEY.PATH = value: what is allowed`` for the first key that breaks a rule.
+        """
+        _check_keys(table, ("kind", "components"), path)
+        components = table.get("components")
+        if not isinstance(components, dict) or not components:
+            raise BananagridError(f"{path}.components: a mixture needs at least one [{path}.components.NAME] table")
+        axes = AXES[:_GEOMETRY_DIM[lattice.geometry]]
+        names, weights, means, covs = [], [], [], []
+        for name, body in components.items():
+            where = f"{path}.components.{name}"
+            if not isinstance(name, str) or not _NAME.fullmatch(name):
+                raise BananagridError(f"{where} = {show(name)}: expected a component name of letters, digits, _ and -")
+            if not isinstance(body, dict):
+                raise BananagridError(f"{where} = {show(body)}: expected a table [{where}]")
+            w, mu, cov = _component(body, where, axes, lattice.geometry)
+            names.append(name)
+            weights.append(w)
+            means.append(mu)
+            covs.append(cov)
+        total = math.fsum(weights)
+        if abs(total - 1.0) > WEIGHT_SUM_TOL:
+            listed = ", ".join(f"{n} = {show(float(w))}" for n, w in zip(names, weights))
+            raise BananagridError(
+                f"{path}.components: the weights ({listed}) sum to {total!r}, not 1 "
+                f"(allowed error {WEIGHT_SUM_TOL:g}); divide them by their sum"
+            )
+        return {"weights": weights, "means": means, "covs": covs}, tuple(names)
 
     # -- description ---------------------------------------------------------------------
 
@@ -154,12 +235,8 @@ class GaussianMixture:
         return self.dim == 3 and bool(np.all(self.covs[:, :2, 2] == 0.0))
 
     def parameters(self) -> dict:
-        return {
-            "model": "GaussianMixture",
-            "weights": self.weights.tolist(),
-            "means": self.means.tolist(),
-            "covs": self.covs.tolist(),
-        }
+        """Plain-data parameters for provenance and recordings (the declared ``plain`` entries)."""
+        return plain_parameters(self)
 
     # -- law -------------------------------------------------------------------------------
 
@@ -261,13 +338,6 @@ class GaussianMixture:
         return float(total)
 
 
-def _finite_array(name: str, value) -> np.ndarray:
-    a = real_array(name, value)
-    if not np.all(np.isfinite(a)):
-        raise BananagridError(f"{name}: every entry must be finite (NaN or inf given)")
-    return a
-
-
 def _points(points, dim: int) -> np.ndarray:
     p = np.asarray(points, dtype=float)
     if dim == 1 and p.ndim <= 1:
@@ -330,41 +400,48 @@ def _standard_rectangles(means, covs, xb, yb) -> np.ndarray:
                      (yb[0] - means[:, 1]) / sy, (yb[1] - means[:, 1]) / sy, r], axis=1)
 
 
-@dataclass(frozen=True)
+@modelclass
 class UniformPresence:
     """Uniform presence on a region S: density ``1 / |S|`` inside the box, 0 outside (Sections
-    7.1, 8.1, 9.1 with C_Sigma = |S|).
+    7.1, 8.1, 9.1 with C_Sigma = |S|)."""
 
-    Parameters
-    ----------
-    region : Region
-        The box; its dimension is the law's.
-    """
-
-    region: Region
+    region: Region = param(
+        py="Region", unit="m", scene=(), check=lambda name, value: as_region(value),
+        domain="a bananagrid Region (or a mapping of its axes' ranges), not empty",
+        plain=lambda model, region: {"region": region.describe()},
+        doc="The box; its dimension is the law's. A scene gives no key for it: the law is uniform on the "
+            "scene's ``[room]``.")
 
     #: Its registry name: ``presence.kind = "uniform"`` of an ``[array]`` scene.
     kind: ClassVar[str] = "uniform"
-    #: Its scene keys: none of its own; the region is the scene's ``[room]``.
-    scene: ClassVar[SceneSchema] = SceneSchema(
-        keys=(), required=("region",), timed=False, build=lambda params: UniformPresence(**params),
-        summary="presence uniform on the scene's [room]",
-    )
+    #: Its scene keys: none of its own; the region is the scene's ``[room]`` (:meth:`scene_table`).
+    scene: ClassVar[SceneSchema] = SceneSchema(summary="presence uniform on the scene's [room]")
     #: Stated agreement of float32 with float64: exact geometry, computed in float64 either way.
     float32_rtol: ClassVar[float] = 0.0
 
     #: Peak bytes per sample of :meth:`sample`: 48 measured (3-D; tracemalloc, ``sample(10**6)``), rounded up.
     sample_bytes: ClassVar[float] = 64
 
-    def __post_init__(self):
-        object.__setattr__(self, "region", as_region(self.region))
+    @classmethod
+    def scene_table(cls, table: Mapping, *, path: str, lattice: AngularLattice, room: Region | None):
+        """The parameters of a scene's presence table (``table``, whose ``kind`` names this law), as
+        :meth:`GaussianMixture.scene_table`: the law has no keys of its own and is uniform on
+        the scene's room (``room``, required), with no components."""
+        if "components" in table:
+            raise BananagridError(f"{path}.components: a uniform law has no components (kind = \"{cls.kind}\")")
+        _check_keys(table, ("kind",), path)
+        if room is None:
+            raise BananagridError(f"[room]: missing table; a uniform law ({path}.kind = \"{cls.kind}\") is uniform "
+                                  "on the room")
+        return {"region": room}, ()
 
     @property
     def dim(self) -> int:
         return self.region.dim
 
     def parameters(self) -> dict:
-        return {"model": "UniformPresence", "region": self.region.describe()}
+        """Plain-data parameters for provenance and recordings (the declared ``plain`` entries)."""
+        return plain_parameters(self)
 
     def pdf(self, x, y=None, z=None, *, dtype=np.float64, device: str = "cpu") -> np.ndarray:
         """``1 / |S|`` inside the box, 0 outside, per m^D; called as :meth:`GaussianMixture.pdf`
@@ -398,6 +475,106 @@ class UniformPresence:
         a, b = self.region.bounds, other.bounds
         overlap = np.clip(np.minimum(a[:, 1], b[:, 1]) - np.maximum(a[:, 0], b[:, 0]), 0.0, None)
         return float(np.prod(overlap) / self.region.size)
+
+
+# --------------------------------------------------------------------------------------------
+# Scene tables (the keys of a presence law in an [array] scene)
+# --------------------------------------------------------------------------------------------
+
+#: The law's dimension on each lattice geometry.
+_GEOMETRY_DIM = {"line": 1, "plane": 2, "frustum": 3}
+#: Names of components: they become entity names of the recording.
+_NAME = re.compile(r"[A-Za-z0-9_-]+")
+#: Positions and spreads of a room, in metres, stay within these magnitudes, so that their
+#: squares and ratios (standardised room bounds) are normal float64 numbers.
+MAX_LENGTH = 1e150
+MIN_LENGTH = 1e-150
+
+
+def _check_keys(table: Mapping, allowed, path: str, note: str = "") -> None:
+    """Refuse keys outside ``allowed``, naming the key path."""
+    for key in table:
+        if key not in allowed:
+            raise BananagridError(f"{path}.{key}: unknown key{note}; allowed: {', '.join(allowed)}")
+
+
+def _number(value, path: str) -> float:
+    """A TOML integer or float as float (booleans and strings are refused)."""
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        raise BananagridError(f"{path} = {show(value)}: expected a number")
+    return float(value)
+
+
+def _finite(value, path: str) -> float:
+    number = _number(value, path)
+    if not math.isfinite(number):
+        raise BananagridError(f"{path} = {show(value)}: must be finite")
+    return number
+
+
+def _length(value, path: str) -> float:
+    """A position in metres: finite, |value| <= MAX_LENGTH."""
+    number = _finite(value, path)
+    if not abs(number) <= MAX_LENGTH:
+        raise BananagridError(f"{path} = {show(value)}: must be within +-{MAX_LENGTH:g} m")
+    return number
+
+
+def _component(body: Mapping, path: str, axes, geometry: str):
+    """One component table: (weight, mean (D,), cov (D, D)), checked key by key."""
+    d = len(axes)
+    allowed = [key.name for key in (*COMPONENT_KEYS, *COVARIANCE_KEYS)]
+    allowed += [key.name for key in SD_KEYS if key.name[3:] in axes or (key.name == "rho" and d > 1)]
+    _check_keys(body, allowed, path, note=f" (geometry {show(geometry)}: axes {', '.join(axes)})")
+    if "weight" not in body:
+        raise BananagridError(f"{path}.weight: missing; a number in [0, 1]")
+    w = _number(body["weight"], f"{path}.weight")
+    if not (math.isfinite(w) and 0.0 <= w <= 1.0):
+        raise BananagridError(f"{path}.weight = {show(body['weight'])}: must be in [0, 1]")
+    if "mean" not in body:
+        raise BananagridError(f"{path}.mean: missing; [{', '.join(axes)}] in m")
+    value = body["mean"]
+    if d == 1 and not isinstance(value, list):
+        value = [value]
+    if not isinstance(value, list) or len(value) != d:
+        raise BananagridError(f"{path}.mean = {show(body['mean'])}: expected [{', '.join(axes)}] in m ({d} number(s))")
+    mean = [_length(v, f"{path}.mean[{k}]") for k, v in enumerate(value)]
+    sd_keys = [k for k in body if k.startswith("sd_") or k == "rho"]
+    if "cov" in body:
+        if sd_keys:
+            raise BananagridError(f"{path}: give cov or {', '.join(f'sd_{a}' for a in axes)}{', rho' if d > 1 else ''}, "
+                                  f"not both ({', '.join(sd_keys)} given with cov)")
+        value = body["cov"]
+        rows = value if isinstance(value, list) else None
+        if rows is None or len(rows) != d or any(not isinstance(r, list) or len(r) != d for r in rows):
+            raise BananagridError(f"{path}.cov = {show(value)}: expected a {d} x {d} list of lists in m^2")
+        cov = [[_finite(v, f"{path}.cov[{i}][{j}]") for j, v in enumerate(r)] for i, r in enumerate(rows)]
+        for i in range(d):
+            if not MIN_LENGTH**2 <= cov[i][i] <= MAX_LENGTH**2:
+                raise BananagridError(f"{path}.cov[{i}][{i}] = {show(rows[i][i])}: a variance must be in "
+                                      f"[{MIN_LENGTH**2:g}, {MAX_LENGTH**2:g}] m^2")
+        covariance(f"{path}.cov", cov, dim=d)  # the model's own check, named by the key
+        return w, mean, cov
+    missing = [f"sd_{a}" for a in axes if f"sd_{a}" not in body]
+    if missing:
+        raise BananagridError(f"{path}: missing {', '.join(missing)}; give cov ({d} x {d}, m^2) or the SDs "
+                              f"{', '.join(f'sd_{a}' for a in axes)} (m){' and rho' if d > 1 else ''}")
+    sds = []
+    for a in axes:
+        sd = _finite(body[f"sd_{a}"], f"{path}.sd_{a}")
+        if not sd > 0.0:
+            raise BananagridError(f"{path}.sd_{a} = {show(body[f'sd_{a}'])}: must be > 0 (m)")
+        if not MIN_LENGTH <= sd <= MAX_LENGTH:
+            raise BananagridError(f"{path}.sd_{a} = {show(body[f'sd_{a}'])}: must be in [{MIN_LENGTH:g}, {MAX_LENGTH:g}] m")
+        sds.append(sd)
+    cov = np.diag(np.square(sds))
+    if d > 1:
+        rho = _finite(body.get("rho", 0.0), f"{path}.rho")
+        if not -1.0 < rho < 1.0:
+            raise BananagridError(f"{path}.rho = {show(body['rho'])}: must be in (-1, 1) (the x-y correlation)")
+        cov[0, 1] = cov[1, 0] = rho * sds[0] * sds[1]
+    covariance(f"{path}.{', '.join(f'sd_{a}' for a in axes)}{', rho' if d > 1 else ''}", cov, dim=d)
+    return w, mean, cov.tolist()
 
 
 # --------------------------------------------------------------------------------------------

@@ -14,9 +14,10 @@ scenes"):
   (whole degrees: the paper's 16-bit integer angles, Section 2);
 - ``[room]``: ``x``, ``y``, ``z`` ranges in the array frame (m, z up, the floor at negative z):
   the region S the probabilities are conditioned on;
-- ``[presence]``: ``kind`` ("mixture" or "uniform") and, for a mixture,
+- ``[presence]``: ``kind`` (a kind of the registry on the ``"array"`` domain) and the rest of
+  the table, which the kind's class reads (its ``scene_table``: a mixture's
   ``[presence.components.NAME]`` tables with ``weight``, ``mean`` and ``cov`` or ``sd_x``,
-  ``sd_y``, ``rho``, ``sd_z``;
+  ``sd_y``, ``rho``, ``sd_z``; a uniform law takes the ``[room]``);
 - ``[output]``: ``dtype``, ``far``, ``log10_floor``, ``mass_levels``.
 
 Every key is checked once here; errors name the file, the key path, the value and what is
@@ -27,12 +28,11 @@ from __future__ import annotations
 
 import math
 
-import numpy as np
-
 from ..contours import DEFAULT_MASS_LEVELS, mass_levels
 from ..domains.angular_lattice import AngularLattice
 from ..domains.region import Region
-from ..models.presence import WEIGHT_SUM_TOL
+from ..models.presence import AXES as LAW_AXES
+from ..models.presence import MAX_LENGTH
 from ..models.registry import MODEL_KINDS, Registry
 from ..validate import BananagridError
 from . import keys
@@ -40,7 +40,7 @@ from .keys import DTYPES, SceneKeyError, check_keys, show
 
 __all__ = [
     "array_scene_fields", "GEOMETRIES", "LAYER_NAME",
-    "TOP_KEYS", "ARRAY_KEYS", "ROOM_KEYS", "PRESENCE_KEYS", "COMPONENT_KEYS", "OUTPUT_KEYS",
+    "TOP_KEYS", "ARRAY_KEYS", "ROOM_KEYS", "OUTPUT_KEYS",
 ]
 
 GEOMETRIES = ("line", "plane", "frustum")
@@ -49,13 +49,11 @@ SCENE_KEYS = ("name", "title", "description")
 ARRAY_KEYS = ("geometry", "h", "dh", "azimuth_step_deg", "elevation_step_deg", "azimuth_range_deg",
               "elevation_range_deg")
 ROOM_KEYS = ("x", "y", "z")
-PRESENCE_KEYS = ("kind", "components")
-COMPONENT_KEYS = ("weight", "mean", "cov", "sd_x", "sd_y", "rho", "sd_z")
 OUTPUT_KEYS = ("dtype", "far", "log10_floor", "mass_levels")
 #: The name of an array scene's one layer (its entity in the recording).
 LAYER_NAME = "presence"
 #: Axes of the presence law per geometry.
-AXES = {"line": ("x",), "plane": ("x", "y"), "frustum": ("x", "y", "z")}
+AXES = {"line": LAW_AXES[:1], "plane": LAW_AXES[:2], "frustum": LAW_AXES}
 #: Default direction ranges, degrees: line azimuths inclusive, plane/frustum azimuths a full
 #: turn (end excluded), elevations inclusive from the horizon to the nadir.
 DEFAULT_AZIMUTH_RANGE = {"line": (180, 360), "plane": (0, 360), "frustum": (0, 360)}
@@ -83,13 +81,13 @@ def array_scene_fields(doc: dict, kinds: Registry = MODEL_KINDS) -> dict:
     kind, params, names, presence = _presence(keys.table(doc, "presence", required=True), lattice, room,
                                               kinds.on("array"))
     dtype, far, floor, levels = _output(keys.table(doc, "output"))
-    if kind == "mixture" and room is not None:
+    if room is not None:  # every law's cells are conditioned on the room: it must hold some mass
         try:
             p_s = presence.region_probability(room)
         except BananagridError as exc:
             raise SceneKeyError(f"room: {exc}") from None
         if not p_s > 0.0:
-            raise SceneKeyError(f"room = {show(doc['room'])}: the mixture gives the room no mass (p(S) = {p_s!r})")
+            raise SceneKeyError(f"room = {show(doc['room'])}: the {kind} law gives the room no mass (p(S) = {p_s!r})")
     return dict(
         name=name, title=title, description=description, domain=lattice, layer=(kind, params), region=room,
         room_z=room_z, component_names=names, dtype=dtype, far=far, log10_floor=floor, mass_levels=levels,
@@ -221,113 +219,25 @@ def _range(value, path: str) -> tuple[float, float]:
 
 
 def _presence(table: dict, lattice: AngularLattice, room: Region | None, kinds: Registry):
-    """``[presence]``: (kind, model parameters, component names, the law)."""
-    check_keys(table, PRESENCE_KEYS, "presence")
+    """``[presence]``: (kind, model parameters, part names, the law). The kind's class reads its
+    table (``scene_table``: a mixture's components, a uniform law's room)."""
     kind = table.get("kind")
     if not isinstance(kind, str) or kind not in kinds:  # a list or a table is no kind (nor hashable)
         shown = "missing" if kind is None else f"= {show(kind)}"
         raise SceneKeyError(f"presence.kind {shown}: must be one of {', '.join(map(show, kinds))}")
-    if kind == "uniform":
-        if "components" in table:
-            raise SceneKeyError("presence.components: a uniform law has no components (kind = \"uniform\")")
-        if room is None:
-            raise SceneKeyError("[room]: missing table; a uniform law (presence.kind = \"uniform\") is uniform on the room")
-        params = {"region": room}
-        return kind, params, (), kinds[kind].build(params)
-    components = table.get("components")
-    if not isinstance(components, dict) or not components:
-        raise SceneKeyError("presence.components: a mixture needs at least one [presence.components.NAME] table")
-    axes = AXES[lattice.geometry]
-    names, weights, means, covs = [], [], [], []
-    for name, body in components.items():
-        path = f"presence.components.{name}"
-        keys.name(name, path, what="component name")
-        if not isinstance(body, dict):
-            raise SceneKeyError(f"{path} = {show(body)}: expected a table [{path}]")
-        w, mu, cov = _component(body, path, axes, lattice.geometry)
-        names.append(name)
-        weights.append(w)
-        means.append(mu)
-        covs.append(cov)
-    total = math.fsum(weights)
-    if abs(total - 1.0) > WEIGHT_SUM_TOL:
-        listed = ", ".join(f"{n} = {show(float(w))}" for n, w in zip(names, weights))
-        raise SceneKeyError(
-            f"presence.components: the weights ({listed}) sum to {total!r}, not 1 "
-            f"(allowed error {WEIGHT_SUM_TOL:g}); divide them by their sum"
-        )
-    params = {"weights": weights, "means": means, "covs": covs}
+    read = getattr(kinds[kind].cls, "scene_table", None)
+    if read is None:  # a law of another package without the hook
+        raise SceneKeyError(f"presence.kind = {show(kind)}: {kinds[kind].cls.__name__} has no scene_table(table, *, "
+                            "path, lattice, room) to read its [presence] table")
     try:
-        mixture = kinds[kind].build(params)
-    except BananagridError as exc:
-        message = str(exc)
-        if message.startswith("covs["):
-            k = int(message[5:message.index("]")])
-            path = f"presence.components.{names[k]}"
-            key = "cov" if "cov" in components[names[k]] else "sd_x, sd_y, rho" + (", sd_z" if len(axes) == 3 else "")
-            raise SceneKeyError(f"{path}.{key}: {message.split(': ', 1)[1]}") from None
-        raise SceneKeyError(f"presence.components: {message}") from None
-    return kind, params, tuple(names), mixture
-
-
-def _component(body: dict, path: str, axes, geometry: str):
-    """One component: (weight, mean (D,), cov (D, D))."""
-    allowed = ("weight", "mean", "cov", *(f"sd_{a}" for a in axes), *(("rho",) if len(axes) > 1 else ()))
-    check_keys(body, allowed, path, note=f" (geometry {show(geometry)}: axes {', '.join(axes)})")
-    if "weight" not in body:
-        raise SceneKeyError(f"{path}.weight: missing; a number in [0, 1]")
-    w = keys.number(body["weight"], f"{path}.weight")
-    if not (math.isfinite(w) and 0.0 <= w <= 1.0):
-        raise SceneKeyError(f"{path}.weight = {show(body['weight'])}: must be in [0, 1]")
-    d = len(axes)
-    if "mean" not in body:
-        raise SceneKeyError(f"{path}.mean: missing; [{', '.join(axes)}] in m")
-    value = body["mean"]
-    if d == 1 and not isinstance(value, list):
-        value = [value]
-    if not isinstance(value, list) or len(value) != d:
-        raise SceneKeyError(f"{path}.mean = {show(body['mean'])}: expected [{', '.join(axes)}] in m ({d} number(s))")
-    mean = [_length(v, f"{path}.mean[{k}]") for k, v in enumerate(value)]
-    sd_keys = [k for k in body if k.startswith("sd_") or k == "rho"]
-    if "cov" in body:
-        if sd_keys:
-            raise SceneKeyError(f"{path}: give cov or {', '.join(f'sd_{a}' for a in axes)}{', rho' if d > 1 else ''}, "
-                            f"not both ({', '.join(sd_keys)} given with cov)")
-        value = body["cov"]
-        rows = value if isinstance(value, list) else None
-        if rows is None or len(rows) != d or any(not isinstance(r, list) or len(r) != d for r in rows):
-            raise SceneKeyError(f"{path}.cov = {show(value)}: expected a {d} x {d} list of lists in m^2")
-        cov = [[_finite(v, f"{path}.cov[{i}][{j}]") for j, v in enumerate(r)] for i, r in enumerate(rows)]
-        for i in range(d):
-            if not MIN_LENGTH**2 <= cov[i][i] <= MAX_LENGTH**2:
-                raise SceneKeyError(f"{path}.cov[{i}][{i}] = {show(rows[i][i])}: a variance must be in "
-                                    f"[{MIN_LENGTH**2:g}, {MAX_LENGTH**2:g}] m^2")
-        return w, mean, cov
-    missing = [f"sd_{a}" for a in axes if f"sd_{a}" not in body]
-    if missing:
-        raise SceneKeyError(f"{path}: missing {', '.join(missing)}; give cov ({d} x {d}, m^2) or the SDs "
-                        f"{', '.join(f'sd_{a}' for a in axes)} (m){' and rho' if d > 1 else ''}")
-    sds = []
-    for a in axes:
-        sd = _finite(body[f"sd_{a}"], f"{path}.sd_{a}")
-        if not sd > 0.0:
-            raise SceneKeyError(f"{path}.sd_{a} = {show(body[f'sd_{a}'])}: must be > 0 (m)")
-        if not MIN_LENGTH <= sd <= MAX_LENGTH:
-            raise SceneKeyError(f"{path}.sd_{a} = {show(body[f'sd_{a}'])}: must be in [{MIN_LENGTH:g}, {MAX_LENGTH:g}] m")
-        sds.append(sd)
-    cov = np.diag(np.square(sds))
-    if d > 1:
-        rho = _finite(body.get("rho", 0.0), f"{path}.rho")
-        if not -1.0 < rho < 1.0:
-            raise SceneKeyError(f"{path}.rho = {show(body['rho'])}: must be in (-1, 1) (the x-y correlation)")
-        cov[0, 1] = cov[1, 0] = rho * sds[0] * sds[1]
-    return w, mean, cov.tolist()
-
-
-#: Positions and spreads of a room, in metres, stay within these magnitudes, so that their
-#: squares and ratios (standardised room bounds) are normal float64 numbers.
-MAX_LENGTH = 1e150
-MIN_LENGTH = 1e-150
+        params, names = read(table, path="presence", lattice=lattice, room=room)
+    except BananagridError as exc:  # its messages name the key path
+        raise SceneKeyError(str(exc)) from None
+    try:
+        law = kinds[kind].build(params)
+    except BananagridError as exc:  # the table's checks should leave nothing; say where if not
+        raise SceneKeyError(f"presence: {exc}") from None
+    return kind, params, names, law
 
 
 def _length(value, path: str) -> float:
