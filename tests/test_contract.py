@@ -197,7 +197,14 @@ CASES = {
                                                  covs=[np.diag([0.0625, 0.0625, 0.0025]), np.diag([0.49, 0.04, 0.0064]),
                                                        [[0.0225, 0.0135, 0.001], [0.0135, 0.09, 0.0], [0.001, 0.0, 0.0064]]]),
                                  dict(geometry="frustum", h=1.55, dh=0.25, azimuth_step=5 * DEG,
-                                      elevation_step=5 * DEG), {**ROOM, "z": (-3.0, 0.0)}),
+                                      elevation_step=5 * DEG), {**ROOM, "z": (-3.0, 0.0)},
+                                 # x and y fully correlated: the correlation matrix's eigenvalues 0, 1, 2
+                                 bad=(("covs", [[[1.0, 1.0, 0.0], [1.0, 1.0, 0.0], [0.0, 0.0, 1.0]]] * 3,
+                                       r"covs\[0\] = .*: must be positive definite \(correlation eigenvalues .*; "
+                                       r"condition number below 1e\+13\)"),
+                                      ("covs", [[[1.0, 0.0, 0.0], [0.0, 1.0, 0.5], [0.0, 0.4, 1.0]]] * 3,
+                                       r"covs\[0\] = .*: must be symmetric "
+                                       r"\(covs\[0\]\[1\]\[2\] == covs\[0\]\[2\]\[1\]\)"))),
     "uniform-plane": ArrayCase("uniform", dict(region=ROOM), PLANE, dict(x=(-1.0, 3.0), y=(-2.5, 1.0)),
                                bad=(("region", "room", r"region = 'room': expected a bananagrid Region"),
                                     ("region", dict(x=(1.0, 0.0), y=(0.0, 1.0)), r"region x = \(1.0, 0.0\): the region is empty"))),
