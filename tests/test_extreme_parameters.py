@@ -221,6 +221,44 @@ def test_bearing_fixes_at_the_extremes(baseline, offset, sigma_1, sigma_2):
     exercise(build, ["sensors", "bearings", "sigmas"])
 
 
+#: Points as far as float64 reaches, each way, and a few ordinary ones.
+FAR_POINTS = [0.0, 1.0, -1e4, 1e154, -1e160, 1e300, -1e300, 1e308, HUGE, -HUGE]
+
+
+#: Bearing SDs and baselines: extreme ones, and ordinary ones so that most fixes build.
+BEARING_SIGMAS = st.one_of(st.floats(1e-6, 0.3), MAGNITUDES)
+BASELINES = st.one_of(st.floats(1.0, 1e6), MAGNITUDES)
+
+
+@settings(MODEL_SWEEP, max_examples=80)
+@given(SIGNED, SIGNED, BASELINES, st.floats(0.05, 1.5), BEARING_SIGMAS, BEARING_SIGMAS,
+       st.sampled_from(["exact", "linear"]))
+def test_bearing_maps_anywhere_at_points_anywhere(ox, oy, baseline, angle, sigma_1, sigma_2, variant):
+    """Both bearing maps of a fix placed anywhere in float64 (stations up to 1.8e308 from the
+    world origin, baselines from 5e-324 up), at points anywhere (offsets from the fix beyond
+    1.8e308, where they overflow): finite, non-negative and at most the map's peak
+    exp(log_norm) (the likelihood is at most 1); the linear map's quadratic form once made
+    inf - inf = NaN beyond 1e154 m from its fix. Or the fix refused by name."""
+    def build():
+        sensors = [[ox, oy], [ox + baseline, oy]]
+        target = [ox + 0.5 * baseline, oy + 0.5 * baseline / math.tan(0.5 * angle)]
+        bearings = [math.atan2(target[0] - sx, target[1] - sy) for sx, sy in sensors]
+        return bg.BearingFix(sensors=sensors, bearings=bearings, sigmas=[sigma_1, sigma_2], variant=variant)
+
+    model = refused_or(build, ["sensors", "bearings", "sigmas"])
+    if model is None:
+        return
+    fx, fy = model.fix
+    x = np.array([fx] + [a for a in FAR_POINTS for _ in FAR_POINTS])
+    y = np.array([fy] + [b for _ in FAR_POINTS for b in FAR_POINTS])
+    peak = math.exp(model.kernel_parameters()[0])
+    for dtype in (np.float64, np.float32):
+        values = refused_or(lambda: model.pdf(x, y, dtype=dtype), ["x", "y", "points"])
+        finite(values)
+        # the lane exp is within 3 ulp (tests/test_lanes.py): 1e-6 covers float32's too
+        assert np.all(values >= 0.0) and np.all(values <= peak * (1.0 + 1e-6)), (values.max(), peak)
+
+
 # -- sample sizes ----------------------------------------------------------------------------
 
 POSE = bg.Pose(origin=(150.0, -80.0), heading=0.4)
@@ -335,7 +373,7 @@ def test_mixture_densities_with_means_and_points_anywhere(mx, my, px, py, scale,
     refused_or(call, ["covs", "means", "weights"])
 
 
-@pytest.mark.parametrize("name", ["cat", "cat-heading", "rough", "improved", "butterly", "bearing"])
+@pytest.mark.parametrize("name", ["cat", "cat-heading", "rough", "improved", "butterly", "bearing", "bearing-linear"])
 def test_densities_at_points_as_far_as_float64_reaches(name):
     """Every model's ``pdf`` at points up to +-1.8e308 from its origin (where distances
     overflow): finite, no RuntimeWarning, 0 that far out (the exact bearing map excepted: its
@@ -350,6 +388,8 @@ def test_densities_at_points_as_far_as_float64_reaches(name):
         "butterly": lambda: bg.Butterly(mean=(0.0, 0.0), cov=[[1e4, 0.0], [0.0, 1e4]], speeds=[1.0], t=600.0),
         "bearing": lambda: bg.BearingFix(sensors=[(0.0, 0.0), (20000.0, 0.0)], bearings=[0.2641, -0.3909],
                                          sigmas=[0.01, 0.02]),
+        "bearing-linear": lambda: bg.BearingFix(sensors=[(0.0, 0.0), (20000.0, 0.0)], bearings=[0.2641, -0.3909],
+                                                sigmas=[0.01, 0.02], variant="linear"),
     }[name]()
     far = [HUGE, -HUGE, 1e300, -1e300, 1e308]
     x = np.array([a for a in far for _ in far])
