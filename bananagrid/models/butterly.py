@@ -300,6 +300,14 @@ def _vector(name: str, value) -> np.ndarray:
     return array
 
 
+#: Travelled ranges below this many of the start's smallest SD are taken as 0 (see
+#: :meth:`Butterly.kernel_parameters`).
+NEGLIGIBLE_RHO = 1e-100
+#: Largest log of the start's peak density: float64 reaches exp(709.78); a factor of two below
+#: leaves room for the kernels' roundings of the normaliser.
+MAX_LOG_PEAK = 709.0
+
+
 def _covariance(value) -> np.ndarray:
     cov = real_array("cov", value, "a 2x2 array of numbers")
     if cov.shape != (2, 2):
@@ -318,6 +326,13 @@ def _covariance(value) -> np.ndarray:
         raise BananagridError(
             f"cov = {cov.tolist()!r}: must be positive definite (eigenvalues {s1:.6g}, {s2:.6g}; "
             f"correlation {rho:.15g}, |rho| must be < 1)"
+        )
+    # the start's peak density 1 / (2 pi sqrt(det)) must be a float64 number
+    log_peak = -math.log(2.0 * math.pi) - 0.5 * (math.log(s1) + math.log(s2))
+    if not log_peak < MAX_LOG_PEAK:
+        raise BananagridError(
+            f"cov = {cov.tolist()!r}: so small that the start's peak density 1 / (2 pi sqrt(det)) = "
+            f"exp({log_peak:.6g}) is beyond float64 (up to exp({MAX_LOG_PEAK:g})); use smaller units"
         )
     return cov
 
@@ -640,6 +655,10 @@ class Butterly(Model):
             )
         r = self.ranges
         rho1, rho2 = r / math.sqrt(s1), r / math.sqrt(s2)
+        # a ring under 1e-100 SDs moves no density a float64 can hold (by exp(38.6 rho) - 1 at
+        # most: beyond 38.6 SDs the density underflows), and its squares would underflow in
+        # the kernel's secular equation (densities 0 off the mean at rho ~ 1e-154): the start
+        rho1, rho2 = np.where(rho1 < NEGLIGIBLE_RHO, 0.0, rho1), np.where(rho1 < NEGLIGIBLE_RHO, 0.0, rho2)
         with np.errstate(divide="ignore"):
             log_w = np.log(self._nodes[1])
         per = np.zeros((r.size, k.PER_SPEED))

@@ -42,6 +42,9 @@ __all__ = [
 WEIGHT_SUM_TOL = 1e-9
 #: |Sigma - Sigma^T| allowed, relative to the largest entry.
 SYMMETRY_TOL = 1e-12
+#: Largest log of a component's peak density: float64 reaches exp(709.78); a factor of two below
+#: leaves room for the rounding of the normaliser and of the weights' sum.
+MAX_LOG_PEAK = 709.0
 #: Default relative tolerance of each component's cell integral (|K15 - G7| <= RTOL |K15| + ATOL).
 RTOL = 1e-7
 #: The tolerance a float32 run uses at least: its cells agree with float64 to about 4e-5 relative
@@ -119,6 +122,13 @@ class GaussianMixture:
                 raise BananagridError(
                     f"covs[{i}] = {ci.tolist()!r}: not positive definite (eigenvalues {eig.tolist()!r}); "
                     "every covariance needs positive eigenvalues (condition number below 1e14)"
+                )
+            # the normal's peak density 1 / ((2 pi)^(D/2) sqrt(det)) must be a float64 number
+            log_peak = -0.5 * d * math.log(2.0 * math.pi) - 0.5 * float(np.sum(np.log(eig)))
+            if not log_peak < MAX_LOG_PEAK:
+                raise BananagridError(
+                    f"covs[{i}] = {ci.tolist()!r}: so small that its peak density (2 pi)^(-D/2) det^(-1/2) "
+                    f"= exp({log_peak:.6g}) is beyond float64 (up to exp({MAX_LOG_PEAK:g})); use smaller units"
                 )
         for name, value in (("weights", w), ("means", m), ("covs", c)):
             value.setflags(write=False)
