@@ -222,3 +222,78 @@ def cells_around(point, cell, n=3):
     import bananagrid as bg
 
     return bg.Grid(origin=(point[0] - 0.5 * n * cell, point[1] - 0.5 * n * cell), dx=cell, dy=cell, nx=n, ny=n)
+
+
+# --- cells crossed by several seams: Cartesian, every crossing a breakpoint ---------------------
+
+
+def bearing_density(model):
+    """The exact bearing map's density at a point, written with ``math`` (kernels/bearing.py's
+    module docstring): exp(log_norm - sum_i wrap(beta_i - b_i)^2 / (2 sigma_i^2)), log_norm the
+    model's normaliser (this oracle checks the cell rule, not the normaliser)."""
+    log_norm = float(model.kernel_parameters()[0])
+    stations = [(float(x), float(y), float(b), float(s)) for (x, y), b, s in
+                zip(model.sensors, model.bearings, model.sigmas)]
+
+    def density(x, y):
+        total = log_norm
+        for sx, sy, b, s in stations:
+            z = (math.atan2(x - sx, y - sy) - b + math.pi) % (2.0 * math.pi) - math.pi
+            total -= 0.5 * (z / s) ** 2
+        return math.exp(total)
+
+    return density
+
+
+def _ray_hits_line(seam, axis, value):
+    """The parameter s >= 0 at which the half-line ``seam`` = (x, y, bearing) reaches the line
+    x = value (axis 0) or y = value (axis 1), or None."""
+    qx, qy, b = seam
+    start, step = ((qx, math.sin(b)), (qy, math.cos(b)))[axis]
+    if step == 0.0:
+        return None
+    s = (value - start) / step
+    return s if s >= 0.0 else None
+
+
+def seams_cell(density, cell, seams, eps=1e-11):
+    """The probability of a world cell by nested adaptive ``quad`` in Cartesian coordinates (x
+    outside, y inside) of ``density(x, y)``, every kink a breakpoint: of the inner integral,
+    the y at which each seam crosses the vertical line and each seam's start's y; of the
+    outer, each start's x and the x at which a seam crosses the cell's bottom or top or
+    another seam (between those the inner breakpoints move smoothly and keep their order)."""
+    x0, x1, y0, y1 = cell
+    seams = [tuple(float(v) for v in s) for s in np.asarray(seams, dtype=float).reshape(-1, 3)]
+    starts_y = sorted({qy for _, qy, _ in seams if y0 < qy < y1})
+
+    def inner(x):
+        points = set(starts_y)
+        for seam in seams:
+            s = _ray_hits_line(seam, 0, x)
+            if s is not None:
+                y = seam[1] + s * math.cos(seam[2])
+                if y0 < y < y1:
+                    points.add(y)
+        return integrate.quad(lambda y: density(x, y), y0, y1, points=sorted(points) or None, epsabs=0.0,
+                              epsrel=eps, limit=400)[0]
+
+    outer = {qx for qx, _, _ in seams}
+    for seam in seams:
+        for value in (y0, y1):
+            s = _ray_hits_line(seam, 1, value)
+            if s is not None:
+                outer.add(seam[0] + s * math.sin(seam[2]))
+    for i, (ax, ay, a) in enumerate(seams):  # pairwise crossings of the half-lines
+        for bx, by, b in seams[i + 1:]:
+            ux, uy, vx, vy = math.sin(a), math.cos(a), math.sin(b), math.cos(b)
+            den = ux * vy - uy * vx
+            if den == 0.0:
+                continue
+            qx, qy = bx - ax, by - ay
+            s, t = (qx * vy - qy * vx) / den, (qx * uy - qy * ux) / den
+            if s >= 0.0 and t >= 0.0:
+                outer.add(ax + s * ux)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", integrate.IntegrationWarning)
+        return integrate.quad(inner, x0, x1, points=sorted(v for v in outer if x0 < v < x1) or None, epsabs=0.0,
+                              epsrel=eps, limit=400)[0]

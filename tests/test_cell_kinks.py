@@ -21,7 +21,7 @@ import math
 
 import numpy as np
 import pytest
-from hypothesis import HealthCheck, given, settings
+from hypothesis import HealthCheck, Phase, assume, given, settings
 from hypothesis import strategies as st
 
 import bananagrid as bg
@@ -218,3 +218,66 @@ def test_butterly_cells_about_its_ring_and_start():
                         weights=[0.3, 0.7], t=100.0)
     for point in [(50.0, -20.0), (250.0, -20.0)]:
         _check(model, cell_oracle.cells_around(point, 60.0, n=2), lambda cell: cell_oracle.pdf_cell(model, cell, eps=1e-15))
+
+
+# --- seams of several points in one cell: crossing back rays, two stations in a cell ----------
+
+
+def _station_geometry(rng, n, close):
+    """A contact at the origin seen by ``n`` stations 1-3 km away (bearing SDs 0.8 to 2 rad, so
+    the map reaches behind every station), one of them ``close`` (a fraction of a km) beside
+    another when given."""
+    angles = rng.uniform(0.0, 2.0 * math.pi, n)
+    sensors = rng.uniform(1000.0, 3000.0, n)[:, None] * np.column_stack((np.sin(angles), np.cos(angles)))
+    if close is not None:
+        turn = rng.uniform(0.0, 2.0 * math.pi)
+        sensors[1] = sensors[0] + close * 1000.0 * np.array([math.sin(turn), math.cos(turn)])
+    sigmas = rng.uniform(0.8, 2.0, n)
+    bearings = bg.bearing_to(sensors, np.zeros(2)) + sigmas * rng.normal(size=n) * 0.3
+    return sensors, bearings, sigmas
+
+
+def _back_ray_crossings(model):
+    """Where two stations' seams (the rays behind them) cross."""
+    seams = model.seams()
+    out = []
+    for i in range(len(seams)):
+        for j in range(i + 1, len(seams)):
+            (ax, ay, a), (bx, by, b) = seams[i], seams[j]
+            ux, uy, vx, vy = math.sin(a), math.cos(a), math.sin(b), math.cos(b)
+            den = ux * vy - uy * vx
+            qx, qy = bx - ax, by - ay
+            s, t = (qx * vy - qy * vx) / den, (qx * uy - qy * ux) / den
+            if s > 0.0 and t > 0.0:
+                out.append((ax + s * ux, ay + s * uy))
+    return out
+
+
+@pytest.mark.filterwarnings("ignore:bearings cross at", "ignore:the fix lies behind")
+@settings(max_examples=8, deadline=None, derandomize=True, database=None,
+          suppress_health_check=[HealthCheck.too_slow, HealthCheck.filter_too_much],
+          phases=[Phase.explicit, Phase.generate])  # each example is seconds of quad: no shrinking
+@given(seed=st.integers(0, 2**32 - 1), n=st.integers(3, 4), where=st.sampled_from(["crossing", "stations"]),
+       side=st.floats(40.0, 400.0), offset=st.tuples(st.floats(-0.5, 0.5), st.floats(-0.5, 0.5)),
+       close=st.floats(0.1, 0.45))
+def test_bearing_cells_where_seams_of_several_stations_meet(seed, n, where, side, offset, close):
+    """Random three- and four-station fixes: 3 x 3 cells of 40 to 400 m over the point where two
+    stations' back rays cross (the seams of two points in one cell), or over two stations a
+    tenth to a half of a cell apart (two seams' start points in one cell), against nested
+    Cartesian ``quad`` with every seam's crossing and start as a breakpoint (only one point's
+    seams were breaks of the rule before)."""
+    rng = np.random.default_rng(seed)
+    sensors, bearings, sigmas = _station_geometry(rng, n, close * side / 1000.0 if where == "stations" else None)
+    try:
+        model = bg.BearingFix(sensors=sensors, bearings=bearings, sigmas=sigmas)
+    except bg.BananagridError:
+        assume(False)
+    if where == "crossing":
+        crossings = [c for c in _back_ray_crossings(model) if math.hypot(*c) < 4000.0]  # where the map has mass
+        assume(crossings)
+        centre = crossings[0]
+    else:
+        centre = tuple(0.5 * (sensors[0] + sensors[1]))
+    grid = cell_oracle.cells_around((centre[0] + offset[0] * side, centre[1] + offset[1] * side), side)
+    density = cell_oracle.bearing_density(model)
+    _check(model, grid, lambda cell: cell_oracle.seams_cell(density, cell, model.seams()))
