@@ -297,3 +297,69 @@ def seams_cell(density, cell, seams, eps=1e-11):
         warnings.simplefilter("ignore", integrate.IntegrationWarning)
         return integrate.quad(inner, x0, x1, points=sorted(v for v in outer if x0 < v < x1) or None, epsabs=0.0,
                               epsrel=eps, limit=400)[0]
+
+
+def _ray_meets(origin, theta, seam):
+    """The range at which the ray from ``origin`` at bearing ``theta`` meets the half-line
+    ``seam`` = (x, y, bearing), or None."""
+    ux, uy = math.sin(theta), math.cos(theta)
+    vx, vy = math.sin(seam[2]), math.cos(seam[2])
+    den = ux * vy - uy * vx
+    if den == 0.0:
+        return None
+    qx, qy = seam[0] - origin[0], seam[1] - origin[1]
+    r, s = (qx * vy - qy * vx) / den, (qx * uy - qy * ux) / den
+    return r if r > 0.0 and s >= 0.0 else None
+
+
+def lattice_cell(density, origin, heading, ranges, bearings, seams, eps=1e-11):
+    """The probability of a polar lattice cell (``ranges`` = (r0, r1), ``bearings`` = (b0, b1)
+    clockwise from ``heading`` about ``origin``) by nested adaptive ``quad`` of
+    ``density(x, y) r`` in (b, r): the inner integral's breakpoints are the ranges at which each
+    seam crosses the ray, the outer's the bearings at which a seam crosses the arcs r0 and r1
+    (a quadratic in the seam's own parameter), its start's bearing, and a seam's own bearing
+    and its opposite (a seam along a ray of the lattice)."""
+    (r0, r1), (b0, b1) = ranges, bearings
+    ox, oy = origin
+    seams = [tuple(float(v) for v in s) for s in np.asarray(seams, dtype=float).reshape(-1, 3)]
+    outer = set()
+    for qx, qy, beta in seams:
+        dx, dy = qx - ox, qy - oy
+        vx, vy = math.sin(beta), math.cos(beta)
+        outer |= {math.atan2(dx, dy), beta, beta + math.pi}
+        b = dx * vx + dy * vy
+        for radius in (r0, r1):
+            disc = b * b - (dx * dx + dy * dy - radius * radius)
+            if disc >= 0.0:
+                for s in (-b - math.sqrt(disc), -b + math.sqrt(disc)):
+                    if s >= 0.0:
+                        outer.add(math.atan2(dx + s * vx, dy + s * vy))
+    outer = sorted({b0 + (t - heading - b0) % (2.0 * math.pi) for t in outer} - {b0, b1})
+    outer = [t for t in outer if b0 < t < b1]
+
+    def inner(b):
+        theta = heading + b
+        s, c = math.sin(theta), math.cos(theta)
+        points = sorted(r for r in (_ray_meets(origin, theta, seam) for seam in seams) if r is not None and r0 < r < r1)
+        return integrate.quad(lambda r: density(ox + r * s, oy + r * c) * r, r0, r1, points=points or None,
+                              epsabs=0.0, epsrel=eps, limit=400)[0]
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", integrate.IntegrationWarning)
+        return integrate.quad(inner, b0, b1, points=outer or None, epsabs=0.0, epsrel=eps, limit=400)[0]
+
+
+def polar_banana_density(model):
+    """A rough or improved PolarBanana's density at a world point from :func:`polar_banana_law`:
+    g(theta) N(rho; mu, sd) / rho in polar coordinates (rho, theta) about its start."""
+    law = polar_banana_law(model)
+    ox, oy = model.pose.origin
+
+    def density(x, y):
+        rho = math.hypot(x - ox, y - oy)
+        g, mu, sd = law(math.atan2(x - ox, y - oy))
+        if not sd > 0.0 or rho == 0.0:
+            return 0.0
+        return g * math.exp(-0.5 * ((rho - mu) / sd) ** 2) / (math.sqrt(2.0 * math.pi) * sd * rho)
+
+    return density
