@@ -318,7 +318,8 @@ def lattice_cell(density, origin, heading, ranges, bearings, seams, eps=1e-11):
     ``density(x, y) r`` in (b, r): the inner integral's breakpoints are the ranges at which each
     seam crosses the ray, the outer's the bearings at which a seam crosses the arcs r0 and r1
     (a quadratic in the seam's own parameter), its start's bearing, and a seam's own bearing
-    and its opposite (a seam along a ray of the lattice)."""
+    and its opposite (a seam along a ray of the lattice); the inner ones also the ray's nearest
+    approach to each start."""
     (r0, r1), (b0, b1) = ranges, bearings
     ox, oy = origin
     seams = [tuple(float(v) for v in s) for s in np.asarray(seams, dtype=float).reshape(-1, 3)]
@@ -340,7 +341,11 @@ def lattice_cell(density, origin, heading, ranges, bearings, seams, eps=1e-11):
     def inner(b):
         theta = heading + b
         s, c = math.sin(theta), math.cos(theta)
-        points = sorted(r for r in (_ray_meets(origin, theta, seam) for seam in seams) if r is not None and r0 < r < r1)
+        # and the ray's nearest approach to each start (the peak of a 1 / r there, or where the
+        # direction from a station turns fastest)
+        near = [(qx - ox) * s + (qy - oy) * c for qx, qy, _ in seams]
+        points = sorted({r for r in (*(_ray_meets(origin, theta, seam) for seam in seams), *near)
+                         if r is not None and r0 < r < r1})
         return integrate.quad(lambda r: density(ox + r * s, oy + r * c) * r, r0, r1, points=points or None,
                               epsabs=0.0, epsrel=eps, limit=400)[0]
 

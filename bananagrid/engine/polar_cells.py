@@ -9,8 +9,12 @@ side of it. A seam whose line misses the origin crosses the cells along a curve 
 b): the cells it crosses are integrated again with each bearing node's range interval split
 at r*(b) and the bearings where it crosses the cells' arcs as breaks (:func:`_foreign_cells`),
 as are the cells near a seam's start (a station, about which the density changes with the
-direction) with sub-intervals of a quarter of their distance to it. Every node is evaluated
-by the model's own kernels through :func:`bananagrid.engine.points.evaluate_points`.
+direction) with sub-intervals of a quarter of their distance to it. A cell that holds a seam's
+start or a 1 / r point off the origin, and a cell crossed by the seams of a point about which
+the model has a closed radial law (a polar banana posed elsewhere: its ridge narrows to a
+point on the improved variant's P_sigma = 0 edge), is swept in polar coordinates about that
+point over the annular sector (:func:`_point_cells`). Every node is evaluated by the model's
+own kernels through :func:`bananagrid.engine.points.evaluate_points`.
 """
 
 from __future__ import annotations
@@ -247,6 +251,7 @@ def _integrate(model: DensityModel, lattice: PolarLattice, plan: _Plan, *, dtype
     else:
         probability = _tensor_cells(model, lattice, plan, dtype=dtype, device=device, threads=threads)
     _foreign_cells(model, lattice, plan, probability, dtype=dtype, device=device, threads=threads)
+    _point_cells(model, lattice, plan, probability, dtype=dtype, device=device, threads=threads)
     return probability
 
 
@@ -456,6 +461,152 @@ def _foreign_cells(model: DensityModel, lattice: PolarLattice, plan: _Plan, prob
     flush()
     rows, columns = np.array(cells).T
     probability[rows, columns] = totals
+
+
+#: Widest bearing sub-interval of a lattice cell swept about a point (radians).
+SWEEP_ANGLE = 0.25
+
+
+def _sector_segments(point, phi, ranges, bearings, origin, heading, foreign) -> tuple[np.ndarray, np.ndarray]:
+    """The pieces ``(lo, hi)`` (shape (T, K), empty ones lo = hi) of the rays from ``point`` at
+    bearings ``phi`` that lie in the annular sector ``ranges`` x ``bearings`` about ``origin``
+    (bearings from ``heading``), split where a seam of ``foreign`` crosses them: a ray enters
+    or leaves the sector where it crosses a range circle (a quadratic in its range) or a
+    bounding ray, and a piece between two such events is in or out as its midpoint is."""
+    (r0, r1), (b0, b1) = ranges, bearings
+    wx, wy = np.sin(phi), np.cos(phi)
+    dx, dy = point[0] - origin[0], point[1] - origin[1]
+    along = dx * wx + dy * wy
+    distance = math.hypot(dx, dy)
+    far = distance + r1
+    events = [np.zeros_like(phi), np.full_like(phi, far)]
+    for radius in (r0, r1):
+        if radius > 0.0:
+            disc = along * along + (radius - distance) * (radius + distance)
+            root = np.sqrt(np.maximum(disc, 0.0))
+            for s in (-along - root, -along + root):
+                events.append(np.where((disc >= 0.0) & (s > 0.0), s, np.nan))
+    sides = np.array([(origin[0], origin[1], heading + b0), (origin[0], origin[1], heading + b1)])
+    cuts = seam_ranges(point, phi, np.concatenate([sides, np.asarray(foreign, dtype=float).reshape(-1, 3)]))
+    stacked = np.column_stack(events + [cuts])
+    stacked = np.sort(np.where(np.isnan(stacked), far, np.minimum(stacked, far)), axis=1)
+    lo, hi = stacked[:, :-1], stacked[:, 1:]
+    mid = 0.5 * (lo + hi)
+    mx, my = dx + mid * wx[:, None], dy + mid * wy[:, None]
+    r = np.hypot(mx, my)
+    rel = b0 + (np.arctan2(mx, my) - heading - b0) % (2.0 * math.pi)
+    inside = (r0 <= r) & (r <= r1) & (rel <= b1) & (hi > lo)
+    return lo, np.where(inside, hi, lo)
+
+
+def _swept_lattice_cell(model, point, own_bearings, law, cell, lattice, plan, foreign, feature):
+    """Nodes of a lattice cell swept in polar coordinates about ``point`` (a seam's start or a
+    1 / r point off the lattice's origin, which the cell holds, or whose polar law the seams
+    crossing the cell come from): ``("law", theta, w, lo, hi)`` (the cell's probability is
+    sum(w g [Phi] over the pieces)) or ``("pdf", x, y, w)``. The bearing about the point is cut
+    at the cell's corners, the tangents from the point to its arcs (graded toward them: a
+    piece's ends move like the square root of the turn there), the bearing of the lattice's
+    origin, and the point's seams (graded toward them where the law's SD narrows)."""
+    (r0, r1), (b0, b1) = cell
+    origin, heading = lattice.pose.origin, lattice.pose.heading
+    px, py = point
+    dx, dy = px - origin[0], py - origin[1]
+    distance = math.hypot(dx, dy)
+    centre = math.atan2(origin[0] - px, origin[1] - py) if distance > 0.0 else 0.0
+    breaks, graded = set(), set()
+    for radius in (r0, r1):
+        for bearing in (b0, b1):
+            cx = origin[0] + radius * math.sin(heading + bearing)
+            cy = origin[1] + radius * math.cos(heading + bearing)
+            breaks.add(math.atan2(cx - px, cy - py))
+        if 0.0 < radius < distance:
+            half = math.asin(radius / distance)
+            graded |= {centre - half, centre + half}
+    breaks |= graded | {centre} | set(own_bearings)
+    start = centre - math.pi
+    unwrap = lambda b: start + (b - start) % (2.0 * math.pi)  # noqa: E731
+    edges = sorted({start, start + 2.0 * math.pi} | {unwrap(b) for b in breaks})
+    seams = {unwrap(b) for b in own_bearings}
+    graded = {unwrap(b) for b in graded}
+    radial, angular = model.polar_scales(point)
+    far = distance + r1
+    # no wider than a quarter radian: the pieces span the whole turn about the point
+    angular = min(angular, SWEEP_ANGLE, feature / max(far, 1e-300))
+    out = []
+    for a, b in zip(edges[:-1], edges[1:]):
+        if not b > a:
+            continue
+        grade = [a in graded, b in graded]
+        scale = angular
+        if law is not None:
+            _, _, sd = law(np.linspace(a, b, LAW_PROBES))
+            live = sd[sd > 0.0]
+            scale = min(angular, 0.5 * float(live.min()) / far) if live.size else angular
+            narrow = narrowing(sd)
+            grade = [grade[0] or (a in seams and narrow[0]), grade[1] or (b in seams and narrow[1])]
+        theta, w_t = graded_rule(a, b, scale, tuple(grade))
+        lo, hi = _sector_segments(point, theta, (r0, r1), (b0, b1), origin, heading, foreign)
+        out.append((theta, w_t, lo, hi))
+    theta, w_t, lo, hi = (np.concatenate(parts) for parts in zip(*out))
+    if law is not None:
+        return "law", theta, w_t, lo, hi
+    m_r, _, _ = axis_plan(math.hypot(r1 - r0, r1 * (b1 - b0)), min(radial, feature), MAX_SUBINTERVALS)
+    u_r, w_r = unit_rule(m_r, MAX_ORDER)
+    r = lo[:, :, None] + (hi - lo)[:, :, None] * u_r
+    w = (w_t[:, None] * (hi - lo))[:, :, None] * w_r * r
+    keep = np.broadcast_to((hi > lo)[:, :, None], r.shape)
+    return "pdf", (px + r * np.sin(theta)[:, None, None])[keep], (py + r * np.cos(theta)[:, None, None])[keep], w[keep]
+
+
+def _point_cells(model: DensityModel, lattice: PolarLattice, plan: _Plan, probability: np.ndarray, *, dtype,
+                 device, threads) -> None:
+    """Integrate again, swept about the point (:func:`_swept_lattice_cell`), the cells that hold
+    a seam's start or a 1 / r point off the lattice's origin, and the cells that the seams of a
+    point with a polar law cross (exact in range about it, graded toward its seams where the
+    range SD narrows: the improved polar banana's P_sigma = 0 edge); set them in
+    ``probability``."""
+    origin = lattice.pose.origin
+    seams = np.asarray(model.seams(), dtype=float).reshape(-1, 3)
+    points = [tuple(map(float, p)) for p in np.asarray(model.singular_points(), dtype=float).reshape(-1, 2)]
+    points += [tuple(map(float, p)) for p in seams[:, :2] if tuple(map(float, p)) not in points]
+    points = [p for p in points if p != tuple(map(float, origin))]
+    if not points:
+        return
+    r_edges, b_edges = lattice.range_edges, lattice.bearing_edges
+    feature = float(model.feature_scale())
+    extent = LatticeExtent(lattice)
+    chosen = {}
+    for k, point in enumerate(points):
+        own = seams[(seams[:, 0] == point[0]) & (seams[:, 1] == point[1])]
+        if model.polar_law(point) is not None:
+            for cell in _crossed_cells(lattice, own):
+                chosen.setdefault(cell, k)
+        dx, dy = point[0] - origin[0], point[1] - origin[1]
+        r = math.hypot(dx, dy)
+        rel = b_edges[0] + (math.atan2(dx, dy) - lattice.pose.heading - b_edges[0]) % (2.0 * math.pi)
+        i = int(np.searchsorted(r_edges, r, side="right")) - 1
+        j = int(np.searchsorted(b_edges, rel, side="right")) - 1
+        if 0 <= i < lattice.n_range and 0 <= j < lattice.n_bearing:
+            chosen[(i, j)] = k
+    for (i, j), k in sorted(chosen.items()):
+        point = points[k]
+        own = seams[(seams[:, 0] == point[0]) & (seams[:, 1] == point[1])]
+        foreign = seams[~((seams[:, 0] == point[0]) & (seams[:, 1] == point[1]))]
+        law = model.polar_law(point)
+        cell = ((float(r_edges[i]), float(r_edges[i + 1])), (float(b_edges[j]), float(b_edges[j + 1])))
+        kind, *nodes = _swept_lattice_cell(model, point, own[:, 2], law, cell, lattice, plan, foreign, feature)
+        if kind == "law":
+            theta, w, lo, hi = nodes
+            g, mu, sd = law(theta)
+            probability[i, j] = float(np.sum(w[:, None] * normal_shares(g[:, None], mu[:, None], sd[:, None], lo, hi)))
+        else:
+            xs, ys, w = nodes
+            total = 0.0
+            for c0 in range(0, xs.size, NODE_CHUNK):
+                values = evaluate_points(model, xs[c0:c0 + NODE_CHUNK], ys[c0:c0 + NODE_CHUNK], dtype=dtype,
+                                         device=device, threads=threads, extent=extent)
+                total += float(np.dot(w[c0:c0 + NODE_CHUNK], values.astype(float)))
+            probability[i, j] = total
 
 
 def rasterise_lattice(
