@@ -362,14 +362,20 @@ def _crossed_cells(lattice: PolarLattice, foreign: np.ndarray) -> set:
 
 
 def _near_cells(lattice: PolarLattice, plan: _Plan, starts: np.ndarray) -> set:
-    """The cells whose distance to one of ``starts`` (seams' starts off the origin) is less than
-    1 / NEAR_FRACTION of the length scales the tensor rule was sized for (radial, or as an arc
-    at the row's outer edge): there the density's change with the direction about the start is
-    narrower than the rule resolves (its sub-intervals and orders are chosen for those scales)."""
+    """The cells too near one of ``starts`` (seams' starts off the origin) for the tensor rule:
+    about a start the density changes with the direction on the scale of the distance d, and an
+    n-point Gauss rule on a sub-interval of width h at a distance d from such a point errs by
+    about (h / 4d)^(2n) (the singularity bounds the Bernstein ellipse): the cells where that
+    exceeds GAUSS_TOL, radially or along the arc at the row's outer edge."""
     out = set()
     r_edges, b_edges = lattice.range_edges, lattice.bearing_edges
     r0, r1 = r_edges[:-1], r_edges[1:]
-    sub = np.maximum(plan.scales[0], r1 * plan.scales[1])
+    rm, rn = plan.radial
+    m_b = np.array([m for m, _ in plan.angular], dtype=float)
+    n_b = np.array([n for _, n in plan.angular], dtype=float)
+    h_r, h_b = lattice.range_step / rm, r1 * lattice.bearing_step / m_b
+    # the distance below which (h / 4d)^(2n) > GAUSS_TOL, per row: the larger of the two axes'
+    sub = np.maximum(h_r / (4.0 * GAUSS_TOL ** (1.0 / (2.0 * rn))), h_b / (4.0 * GAUSS_TOL ** (1.0 / (2.0 * n_b))))
     ox, oy = lattice.pose.origin
     for px, py in starts:
         dx, dy = px - ox, py - oy
@@ -381,7 +387,7 @@ def _near_cells(lattice: PolarLattice, plan: _Plan, starts: np.ndarray) -> set:
                        np.minimum(circular(rel - b_edges[:-1]), circular(rel - b_edges[1:])))
         across = r * np.sin(np.minimum(gap, 0.5 * math.pi))
         distance = np.maximum(radial[:, None], across[None, :])
-        out |= set(map(tuple, np.argwhere(NEAR_FRACTION * distance < sub[:, None]).tolist()))
+        out |= set(map(tuple, np.argwhere(distance < sub[:, None]).tolist()))
     return out
 
 
@@ -447,15 +453,12 @@ def _foreign_cells(model: DensityModel, lattice: PolarLattice, plan: _Plan, prob
         w_t = np.concatenate([w for _, w in rules])
         world = heading + theta
         lo, hi = split_segments(np.full(theta.size, r0), np.full(theta.size, r1), seam_ranges(origin, world, foreign))
-        r = lo[:, :, None] + (hi - lo)[:, :, None] * u_r  # (T, F + 1, R)
-        w = (w_t[:, None] * (hi - lo))[:, :, None] * w_r * r  # db, dr and the area element r
-        keep = np.broadcast_to((hi > lo)[:, :, None], r.shape)
-        xs = (ox + r * np.sin(world)[:, None, None])[keep]
+        xs, ys, ws = _radial_nodes(origin, world, w_t, lo, hi, (u_r, w_r))
         if batch["size"] and batch["size"] + xs.size > NODE_CHUNK:
             flush()
         batch["x"].append(xs)
-        batch["y"].append((oy + r * np.cos(world)[:, None, None])[keep])
-        batch["w"].append(w[keep])
+        batch["y"].append(ys)
+        batch["w"].append(ws)
         batch["owner"].append(np.full(xs.size, n))
         batch["size"] += xs.size
     flush()
@@ -551,11 +554,20 @@ def _swept_lattice_cell(model, point, own_bearings, law, cell, lattice, plan, fo
     if law is not None:
         return "law", theta, w_t, lo, hi
     m_r, _, _ = axis_plan(math.hypot(r1 - r0, r1 * (b1 - b0)), min(radial, feature), MAX_SUBINTERVALS)
-    u_r, w_r = unit_rule(m_r, MAX_ORDER)
-    r = lo[:, :, None] + (hi - lo)[:, :, None] * u_r
-    w = (w_t[:, None] * (hi - lo))[:, :, None] * w_r * r
-    keep = np.broadcast_to((hi > lo)[:, :, None], r.shape)
-    return "pdf", (px + r * np.sin(theta)[:, None, None])[keep], (py + r * np.cos(theta)[:, None, None])[keep], w[keep]
+    x, y, w = _radial_nodes(point, theta, w_t, lo, hi, unit_rule(m_r, MAX_ORDER))
+    return "pdf", x, y, w
+
+
+def _radial_nodes(point, theta, w_t, lo, hi, rule):
+    """Nodes ``(x, y, w)`` of the rays from ``point`` at bearings ``theta`` (weights ``w_t``) over
+    their non-empty pieces [lo, hi] (shape (T, K)), each by the unit ``rule`` scaled, the
+    area element r included: only the pieces that hold something are expanded."""
+    u_r, w_r = rule
+    t, _ = np.nonzero(hi > lo)
+    a, b = lo[hi > lo], hi[hi > lo]
+    r = a[:, None] + (b - a)[:, None] * u_r  # (P, R)
+    w = ((w_t[t] * (b - a))[:, None] * w_r * r).ravel()  # the bearing's and range's weights, r dr
+    return (point[0] + r * np.sin(theta[t])[:, None]).ravel(), (point[1] + r * np.cos(theta[t])[:, None]).ravel(), w
 
 
 def _point_cells(model: DensityModel, lattice: PolarLattice, plan: _Plan, probability: np.ndarray, *, dtype,
