@@ -119,6 +119,9 @@ MAX_CONDITION = 1e13
 #: Relative asymmetry of a covariance's off-diagonal pair that is taken as rounding (and made
 #: exactly symmetric): a few ulps of the largest entry.
 SYMMETRY_RTOL = 1e-12
+#: Largest log of a normal's peak density (2 pi)^(-D/2) det^(-1/2): float64 reaches
+#: exp(709.78); a factor of two below leaves room for the roundings of the normaliser.
+MAX_LOG_PEAK = 709.0
 
 
 def _eigenvalues_2x2(sxx: float, sxy: float, syy: float) -> tuple[float, float]:
@@ -135,7 +138,8 @@ def _eigenvalues_2x2(sxx: float, sxy: float, syy: float) -> tuple[float, float]:
 def covariance(name: str, value, dim: int = 2) -> np.ndarray:
     """``value`` as a new float64 ``(dim, dim)`` covariance matrix: finite, symmetric (to
     :data:`SYMMETRY_RTOL` of its largest entry; then made exactly so), positive variances and a
-    condition number below :data:`MAX_CONDITION`.
+    condition number below :data:`MAX_CONDITION`, and a peak density within float64
+    (:data:`MAX_LOG_PEAK`).
 
     Raises
     ------
@@ -165,7 +169,7 @@ def covariance(name: str, value, dim: int = 2) -> np.ndarray:
                 f"{name} = {cov.tolist()!r}: must be positive definite (eigenvalues {s1:.6g}, {s2:.6g}; "
                 f"correlation {rho:.15g}; allowed: |rho| < 1 and a condition number below {MAX_CONDITION:g})"
             )
-        return cov
+        return _finite_peak(name, cov, (s1, s2))
     # scaled by the diagonal, so that units of very different size on the axes do not count
     d = np.sqrt(np.diag(cov))
     eig = np.linalg.eigvalsh(cov / np.outer(d, d))
@@ -173,6 +177,19 @@ def covariance(name: str, value, dim: int = 2) -> np.ndarray:
         raise BananagridError(
             f"{name} = {cov.tolist()!r}: must be positive definite (correlation eigenvalues {eig.tolist()!r}; "
             f"condition number below {MAX_CONDITION:g})"
+        )
+    return _finite_peak(name, cov, np.linalg.eigvalsh(cov))
+
+
+def _finite_peak(name: str, cov: np.ndarray, eigenvalues) -> np.ndarray:
+    """``cov``, or an error where the normal's peak density (2 pi)^(-D/2) det^(-1/2) is beyond
+    float64 (variances near 1e-308 and below: the densities would be inf)."""
+    dim = cov.shape[0]
+    log_peak = -0.5 * dim * math.log(2.0 * math.pi) - 0.5 * float(np.sum(np.log(np.asarray(eigenvalues, float))))
+    if not log_peak < MAX_LOG_PEAK:
+        raise BananagridError(
+            f"{name} = {cov.tolist()!r}: so small that the normal's peak density (2 pi)^(-D/2) det^(-1/2) = "
+            f"exp({log_peak:.6g}) is beyond float64 (up to exp({MAX_LOG_PEAK:g})); use smaller units"
         )
     return cov
 

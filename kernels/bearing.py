@@ -8,7 +8,12 @@ exact:  p(P) proportional to prod_i exp(-wrap(beta_i(P) - b_i)^2 / (2 sigma_i^2)
         likelihood at stations the other bearings point at (``BearingFix.station_lumps``), so
         the grid's captured mass shows how far the true shape departs from the ellipse, and
         normalising over the grid gives the posterior.
-linear: p(P) = N(P; fix, C), C the linearised covariance of the fix.
+linear: p(P) = N(P; fix, C), C the linearised covariance of the fix. Its quadratic form
+        (P - F)^T C^-1 (P - F) is taken as the sum of two squares,
+        p_xx (dx + (p_xy / p_xx) dy)^2 + (det C^-1 / p_xx) dy^2, on the halved offsets
+        dx = x / 2 - F_x / 2, dy = y / 2 - F_y / 2 (then times 4, exactly): no term is negative
+        and no offset overflows, so q is +inf, never inf - inf, at points as far from the fix as
+        float64 reaches, and the density 0 there.
 """
 
 from typing import Any
@@ -25,8 +30,8 @@ wp.set_module_options({"enable_backward": False})
 EXACT = 0
 LINEAR = 1
 
-#: Layout of the parameter array: [log_norm, fix_x, fix_y, p_xx, p_xy, p_yy] (p = C^-1), then
-#: per sensor (x, y, bearing, 1/sigma).
+#: Layout of the parameter array: [log_norm, fix_x, fix_y, p_xx, p_xy / p_xx, det(p) / p_xx]
+#: (p = C^-1: the linear map's form as a sum of squares), then per sensor (x, y, bearing, 1/sigma).
 HEAD = 6
 PER_SENSOR = 4
 
@@ -42,10 +47,12 @@ def wrap_angle(d: Any):
 def bearing_log_density(x: Any, y: Any, params: wp.array(dtype=Any), n_sensors: int, variant: int):
     """log p at the world point (x, y) (see the module docstring)."""
     if variant == LINEAR:
-        dx = x - params[1]
-        dy = y - params[2]
-        q = params[3] * dx * dx + type(x)(2.0) * params[4] * dx * dy + params[5] * dy * dy
-        return params[0] - type(x)(0.5) * q
+        half = type(x)(0.5)
+        dx = x * half - params[1] * half
+        dy = y * half - params[2] * half
+        u = dx + params[4] * dy
+        q = params[3] * u * u + params[5] * dy * dy  # a quarter of the form
+        return params[0] - type(x)(2.0) * q
     total = params[0]
     for i in range(n_sensors):
         base = HEAD + PER_SENSOR * i

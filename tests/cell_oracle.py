@@ -222,3 +222,149 @@ def cells_around(point, cell, n=3):
     import bananagrid as bg
 
     return bg.Grid(origin=(point[0] - 0.5 * n * cell, point[1] - 0.5 * n * cell), dx=cell, dy=cell, nx=n, ny=n)
+
+
+# --- cells crossed by several seams: Cartesian, every crossing a breakpoint ---------------------
+
+
+def bearing_density(model):
+    """The exact bearing map's density at a point, written with ``math`` (kernels/bearing.py's
+    module docstring): exp(log_norm - sum_i wrap(beta_i - b_i)^2 / (2 sigma_i^2)), log_norm the
+    model's normaliser (this oracle checks the cell rule, not the normaliser)."""
+    log_norm = float(model.kernel_parameters()[0])
+    stations = [(float(x), float(y), float(b), float(s)) for (x, y), b, s in
+                zip(model.sensors, model.bearings, model.sigmas)]
+
+    def density(x, y):
+        total = log_norm
+        for sx, sy, b, s in stations:
+            z = (math.atan2(x - sx, y - sy) - b + math.pi) % (2.0 * math.pi) - math.pi
+            total -= 0.5 * (z / s) ** 2
+        return math.exp(total)
+
+    return density
+
+
+def _ray_hits_line(seam, axis, value):
+    """The parameter s >= 0 at which the half-line ``seam`` = (x, y, bearing) reaches the line
+    x = value (axis 0) or y = value (axis 1), or None."""
+    qx, qy, b = seam
+    start, step = ((qx, math.sin(b)), (qy, math.cos(b)))[axis]
+    if step == 0.0:
+        return None
+    s = (value - start) / step
+    return s if s >= 0.0 else None
+
+
+def seams_cell(density, cell, seams, eps=1e-11):
+    """The probability of a world cell by nested adaptive ``quad`` in Cartesian coordinates (x
+    outside, y inside) of ``density(x, y)``, every kink a breakpoint: of the inner integral,
+    the y at which each seam crosses the vertical line and each seam's start's y; of the
+    outer, each start's x and the x at which a seam crosses the cell's bottom or top or
+    another seam (between those the inner breakpoints move smoothly and keep their order)."""
+    x0, x1, y0, y1 = cell
+    seams = [tuple(float(v) for v in s) for s in np.asarray(seams, dtype=float).reshape(-1, 3)]
+    starts_y = sorted({qy for _, qy, _ in seams if y0 < qy < y1})
+
+    def inner(x):
+        points = set(starts_y)
+        for seam in seams:
+            s = _ray_hits_line(seam, 0, x)
+            if s is not None:
+                y = seam[1] + s * math.cos(seam[2])
+                if y0 < y < y1:
+                    points.add(y)
+        return integrate.quad(lambda y: density(x, y), y0, y1, points=sorted(points) or None, epsabs=0.0,
+                              epsrel=eps, limit=400)[0]
+
+    outer = {qx for qx, _, _ in seams}
+    for seam in seams:
+        for value in (y0, y1):
+            s = _ray_hits_line(seam, 1, value)
+            if s is not None:
+                outer.add(seam[0] + s * math.sin(seam[2]))
+    for i, (ax, ay, a) in enumerate(seams):  # pairwise crossings of the half-lines
+        for bx, by, b in seams[i + 1:]:
+            ux, uy, vx, vy = math.sin(a), math.cos(a), math.sin(b), math.cos(b)
+            den = ux * vy - uy * vx
+            if den == 0.0:
+                continue
+            qx, qy = bx - ax, by - ay
+            s, t = (qx * vy - qy * vx) / den, (qx * uy - qy * ux) / den
+            if s >= 0.0 and t >= 0.0:
+                outer.add(ax + s * ux)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", integrate.IntegrationWarning)
+        return integrate.quad(inner, x0, x1, points=sorted(v for v in outer if x0 < v < x1) or None, epsabs=0.0,
+                              epsrel=eps, limit=400)[0]
+
+
+def _ray_meets(origin, theta, seam):
+    """The range at which the ray from ``origin`` at bearing ``theta`` meets the half-line
+    ``seam`` = (x, y, bearing), or None."""
+    ux, uy = math.sin(theta), math.cos(theta)
+    vx, vy = math.sin(seam[2]), math.cos(seam[2])
+    den = ux * vy - uy * vx
+    if den == 0.0:
+        return None
+    qx, qy = seam[0] - origin[0], seam[1] - origin[1]
+    r, s = (qx * vy - qy * vx) / den, (qx * uy - qy * ux) / den
+    return r if r > 0.0 and s >= 0.0 else None
+
+
+def lattice_cell(density, origin, heading, ranges, bearings, seams, eps=1e-11):
+    """The probability of a polar lattice cell (``ranges`` = (r0, r1), ``bearings`` = (b0, b1)
+    clockwise from ``heading`` about ``origin``) by nested adaptive ``quad`` of
+    ``density(x, y) r`` in (b, r): the inner integral's breakpoints are the ranges at which each
+    seam crosses the ray, the outer's the bearings at which a seam crosses the arcs r0 and r1
+    (a quadratic in the seam's own parameter), its start's bearing, and a seam's own bearing
+    and its opposite (a seam along a ray of the lattice); the inner ones also the ray's nearest
+    approach to each start."""
+    (r0, r1), (b0, b1) = ranges, bearings
+    ox, oy = origin
+    seams = [tuple(float(v) for v in s) for s in np.asarray(seams, dtype=float).reshape(-1, 3)]
+    outer = set()
+    for qx, qy, beta in seams:
+        dx, dy = qx - ox, qy - oy
+        vx, vy = math.sin(beta), math.cos(beta)
+        outer |= {math.atan2(dx, dy), beta, beta + math.pi}
+        b = dx * vx + dy * vy
+        for radius in (r0, r1):
+            disc = b * b - (dx * dx + dy * dy - radius * radius)
+            if disc >= 0.0:
+                for s in (-b - math.sqrt(disc), -b + math.sqrt(disc)):
+                    if s >= 0.0:
+                        outer.add(math.atan2(dx + s * vx, dy + s * vy))
+    outer = sorted({b0 + (t - heading - b0) % (2.0 * math.pi) for t in outer} - {b0, b1})
+    outer = [t for t in outer if b0 < t < b1]
+
+    def inner(b):
+        theta = heading + b
+        s, c = math.sin(theta), math.cos(theta)
+        # and the ray's nearest approach to each start (the peak of a 1 / r there, or where the
+        # direction from a station turns fastest)
+        near = [(qx - ox) * s + (qy - oy) * c for qx, qy, _ in seams]
+        points = sorted({r for r in (*(_ray_meets(origin, theta, seam) for seam in seams), *near)
+                         if r is not None and r0 < r < r1})
+        return integrate.quad(lambda r: density(ox + r * s, oy + r * c) * r, r0, r1, points=points or None,
+                              epsabs=0.0, epsrel=eps, limit=400)[0]
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", integrate.IntegrationWarning)
+        return integrate.quad(inner, b0, b1, points=outer or None, epsabs=0.0, epsrel=eps, limit=400)[0]
+
+
+def polar_banana_density(model):
+    """A rough or improved PolarBanana's density at a world point from :func:`polar_banana_law`:
+    g(theta) N(rho; mu, sd) / rho in polar coordinates (rho, theta) about its start."""
+    law = polar_banana_law(model)
+    ox, oy = model.pose.origin
+
+    def density(x, y):
+        rho = math.hypot(x - ox, y - oy)
+        g, mu, sd = law(math.atan2(x - ox, y - oy))
+        if not sd > 0.0 or rho == 0.0:
+            return 0.0
+        return g * math.exp(-0.5 * ((rho - mu) / sd) ** 2) / (math.sqrt(2.0 * math.pi) * sd * rho)
+
+    return density

@@ -221,6 +221,44 @@ def test_bearing_fixes_at_the_extremes(baseline, offset, sigma_1, sigma_2):
     exercise(build, ["sensors", "bearings", "sigmas"])
 
 
+#: Points as far as float64 reaches, each way, and a few ordinary ones.
+FAR_POINTS = [0.0, 1.0, -1e4, 1e154, -1e160, 1e300, -1e300, 1e308, HUGE, -HUGE]
+
+
+#: Bearing SDs and baselines: extreme ones, and ordinary ones so that most fixes build.
+BEARING_SIGMAS = st.one_of(st.floats(1e-6, 0.3), MAGNITUDES)
+BASELINES = st.one_of(st.floats(1.0, 1e6), MAGNITUDES)
+
+
+@settings(MODEL_SWEEP, max_examples=80)
+@given(SIGNED, SIGNED, BASELINES, st.floats(0.05, 1.5), BEARING_SIGMAS, BEARING_SIGMAS,
+       st.sampled_from(["exact", "linear"]))
+def test_bearing_maps_anywhere_at_points_anywhere(ox, oy, baseline, angle, sigma_1, sigma_2, variant):
+    """Both bearing maps of a fix placed anywhere in float64 (stations up to 1.8e308 from the
+    world origin, baselines from 5e-324 up), at points anywhere (offsets from the fix beyond
+    1.8e308, where they overflow): finite, non-negative and at most the map's peak
+    exp(log_norm) (the likelihood is at most 1); the linear map's quadratic form once made
+    inf - inf = NaN beyond 1e154 m from its fix. Or the fix refused by name."""
+    def build():
+        sensors = [[ox, oy], [ox + baseline, oy]]
+        target = [ox + 0.5 * baseline, oy + 0.5 * baseline / math.tan(0.5 * angle)]
+        bearings = [math.atan2(target[0] - sx, target[1] - sy) for sx, sy in sensors]
+        return bg.BearingFix(sensors=sensors, bearings=bearings, sigmas=[sigma_1, sigma_2], variant=variant)
+
+    model = refused_or(build, ["sensors", "bearings", "sigmas"])
+    if model is None:
+        return
+    fx, fy = model.fix
+    x = np.array([fx] + [a for a in FAR_POINTS for _ in FAR_POINTS])
+    y = np.array([fy] + [b for _ in FAR_POINTS for b in FAR_POINTS])
+    peak = math.exp(model.kernel_parameters()[0])
+    for dtype in (np.float64, np.float32):
+        values = refused_or(lambda: model.pdf(x, y, dtype=dtype), ["x", "y", "points"])
+        finite(values)
+        # the lane exp is within 3 ulp (tests/test_lanes.py): 1e-6 covers float32's too
+        assert np.all(values >= 0.0) and np.all(values <= peak * (1.0 + 1e-6)), (values.max(), peak)
+
+
 # -- sample sizes ----------------------------------------------------------------------------
 
 POSE = bg.Pose(origin=(150.0, -80.0), heading=0.4)
@@ -335,7 +373,94 @@ def test_mixture_densities_with_means_and_points_anywhere(mx, my, px, py, scale,
     refused_or(call, ["covs", "means", "weights"])
 
 
-@pytest.mark.parametrize("name", ["cat", "cat-heading", "rough", "improved", "butterly", "bearing"])
+#: Variances at the bottom of float64: subnormal, the smallest normals, and just above, where a
+#: normal's peak density 1 / (2 pi sqrt(det)) crosses float64's largest value (near 1e-308).
+TINY_VARIANCES = st.one_of(
+    st.sampled_from([TINY, 1e-323, 1e-320, 1e-315, 1e-310, 2.2250738585072014e-308, 1e-308, 1.7e-308,
+                     1e-307, 1e-300, 1e-290]),
+    st.floats(TINY, 1e-290, allow_subnormal=True))
+
+
+@MODEL_SWEEP
+@given(TINY_VARIANCES, st.one_of(st.just(1.0), st.floats(1e-13, 1.0)), st.floats(-0.999, 0.999),
+       st.one_of(st.just(0.0), SIGNED))
+def test_mixture_covariances_near_the_smallest_floats(variance, ratio, rho, shift):
+    """A mixture component whose covariance is tiny but positive definite (variances from 5e-324
+    to 1e-290, aspect ratios to 1e13, correlations to 0.999), its mean anywhere: refused in one
+    line naming ``covs``, or densities that are finite (at the mean, a few SDs off and far away)
+    and cell probabilities on a grid of its own scale that are the unit-variance mixture's (a
+    rectangle's probability is invariant under scaling both), to 1e-9 relative plus 1e-14
+    (README's presence cells: Genz's BVNU is accurate to about 1e-15 absolute)."""
+    vx, vy = variance, variance * ratio
+
+    def mixture(scale_x, scale_y, mean):
+        c = rho * math.sqrt(scale_x) * math.sqrt(scale_y)
+        return bg.GaussianMixture(weights=[1.0], means=[mean], covs=[[[scale_x, c], [c, scale_y]]])
+
+    tiny = refused_or(lambda: mixture(vx, vy, (shift, -shift)), ["covs"])
+    if tiny is None:
+        return
+    sx, sy = math.sqrt(vx), math.sqrt(vy)
+    density = tiny.pdf(np.array([[shift, -shift], [shift + 2.0 * sx, -shift - sy], [0.0, 1.0]]))
+    finite(density)
+    assert np.all(density >= 0.0) and density[0] > 0.0
+    # the same law in units of its SDs: the grid's cells are the unit grid's scaled
+    unit = mixture(1.0, 1.0, (0.0, 0.0))
+    n = 6
+    small = refused_or(lambda: bg.Grid(origin=(shift - 3.0 * sx, -shift - 3.0 * sy), dx=sx, dy=sy, nx=n, ny=n),
+                       ["origin", "dx", "dy", "grid"])
+    k = np.arange(n + 1)
+    # the unit grid's edges, to 1e-12 (moving the cells' probabilities by far less than the
+    # tolerance), unless a mean far from 0 rounds the tiny steps away: nothing to compare then
+    if small is None or not (np.allclose((small.origin[0] + sx * k - shift) / sx, k - 3.0, rtol=0.0, atol=1e-12)
+                             and np.allclose((small.origin[1] + sy * k + shift) / sy, k - 3.0, rtol=0.0, atol=1e-12)):
+        return
+    cells = refused_or(lambda: bg.grid_probabilities(tiny, small), ["grid", "mixture", "covs"])
+    if cells is None:
+        return
+    finite(cells.probability, cells.density)
+    want = bg.grid_probabilities(unit, bg.Grid(origin=(-3.0, -3.0), dx=1.0, dy=1.0, nx=n, ny=n)).probability
+    np.testing.assert_allclose(cells.probability, want, rtol=1e-9, atol=1e-14)
+
+
+#: Elapsed times at the bottom of float64, and ordinary ones.
+TINY_TIMES = st.one_of(st.sampled_from([TINY, 1e-320, 1e-310, 2.2250738585072014e-308, 1e-300, 1e-200, 1e-30]),
+                       st.floats(TINY, 1e-290, allow_subnormal=True), st.floats(1e-3, 1e4))
+
+
+@MODEL_SWEEP
+@given(st.one_of(TINY_VARIANCES, st.floats(1e-6, 1e6)), st.one_of(st.just(1.0), st.floats(1e-6, 1.0)),
+       st.floats(-0.999, 0.999), TINY_TIMES, st.floats(0.1, 10.0))
+def test_butterly_at_tiny_times_and_covariances(variance, ratio, rho, t, speed):
+    """Butterly with start covariances from 5e-324 up and elapsed times from 5e-324 up: refused
+    in one line naming ``cov`` or ``t``, or densities that are finite and are the same law's in
+    units of its SD (the density scales as 1 / variance: the model with covariance cov / v and
+    time t / sqrt(v) at the points divided by sqrt(v), where that one is ordinary), to the
+    README's 1e-9 relative (plus 1e-9 of the peak, for points in the tails)."""
+    c = rho * math.sqrt(variance) * math.sqrt(variance * ratio)
+
+    def build(v, cc, time):
+        return bg.Butterly(mean=(0.0, 0.0), cov=[[v, cc], [cc, v * ratio]], speeds=[speed], t=time)
+
+    model = refused_or(lambda: build(variance, c, t), ["cov", "t", "speeds"])
+    if model is None:
+        return
+    s = math.sqrt(variance)
+    ring = speed * (t / s)  # the ring's radius in SDs
+    unit_points = np.array([[0.0, 0.0], [1.0, 0.5], [ring, 0.0], [0.0, -ring], [-2.0, 1.0]])
+    values = refused_or(lambda: model.pdf(unit_points[:, 0] * s, unit_points[:, 1] * s), ["x", "y", "points"])
+    finite(values)
+    assert np.all(values >= 0.0)
+    if ring <= 1.0:  # the mean is within an SD of the ring: near the peak, not 0
+        assert values[0] > 0.0
+    if not (1e-3 <= t / s <= 1e6 or t / s <= 1e-12):
+        return  # no ordinary twin to compare with
+    unit = build(1.0, c / variance, max(t / s, 1e-12))  # below 1e-12 SDs the ring is a point either way
+    want = unit.pdf(unit_points[:, 0], unit_points[:, 1])
+    np.testing.assert_allclose(values * variance, want, rtol=1e-9, atol=1e-9 * want.max())
+
+
+@pytest.mark.parametrize("name", ["cat", "cat-heading", "rough", "improved", "butterly", "bearing", "bearing-linear"])
 def test_densities_at_points_as_far_as_float64_reaches(name):
     """Every model's ``pdf`` at points up to +-1.8e308 from its origin (where distances
     overflow): finite, no RuntimeWarning, 0 that far out (the exact bearing map excepted: its
@@ -350,6 +475,8 @@ def test_densities_at_points_as_far_as_float64_reaches(name):
         "butterly": lambda: bg.Butterly(mean=(0.0, 0.0), cov=[[1e4, 0.0], [0.0, 1e4]], speeds=[1.0], t=600.0),
         "bearing": lambda: bg.BearingFix(sensors=[(0.0, 0.0), (20000.0, 0.0)], bearings=[0.2641, -0.3909],
                                          sigmas=[0.01, 0.02]),
+        "bearing-linear": lambda: bg.BearingFix(sensors=[(0.0, 0.0), (20000.0, 0.0)], bearings=[0.2641, -0.3909],
+                                                sigmas=[0.01, 0.02], variant="linear"),
     }[name]()
     far = [HUGE, -HUGE, 1e300, -1e300, 1e308]
     x = np.array([a for a in far for _ in far])

@@ -8,12 +8,20 @@ larger than the model's length scale (``model.feature_scale``), the rule the pol
 integrates, so two kinds of cells are swept in polar coordinates about a point P instead:
 
 * about a point where the density is infinite like 1 / r (``model.singular_points``: the origin
-  of a polar density), the cells within FAN_CELLS diagonals of it: the area element r dr
-  cancels the 1 / r;
+  of a polar density) or where a seam starts (the density changes with the direction there:
+  a bearing station), the cells within FAN_CELLS diagonals of it: the area element r dr
+  cancels the 1 / r, and the direction is a coordinate;
 * cells that a seam crosses (``model.seams``: a ray from P along which the density has a kink
   or a jump, such as a polar density's angle wrapping at +-pi behind the start), or that hold
   its P: in polar coordinates about P the seam is a line of constant bearing, a break of the
   rule like the bearings of the cell's corners.
+
+A cell is swept about the point it holds, else about the point whose seam or fan reached it
+first. Every other seam that crosses it (another station's, crossing the first's) is a curve
+about that point: each ray's segment is split where it crosses one, and the bearings at which
+one enters, leaves or ends in the cell are breaks. A cell holding two or more points, or much
+larger than its distance to a point it does not hold, is first cut into leaves
+(:func:`_leaves`), each swept about the point it holds.
 
 A swept cell is, for each bearing theta between its smallest and largest as seen from P (the
 whole circle where the cell holds P), the segment [r_in(theta), r_out(theta)] of the ray that
@@ -37,7 +45,8 @@ from ..results import Raster
 from ..validate import BananagridError
 from .memory import check_memory
 from .points import check_finite, evaluate_points
-from .quadrature import GAUSS_TOL, MAX_ORDER, MAX_SUBINTERVALS, axis_plan, graded_rule, narrowing, normal_shares, unit_rule
+from .quadrature import (GAUSS_TOL, MAX_ORDER, MAX_SUBINTERVALS, axis_plan, graded_rule, narrowing, normal_shares,
+                         ray_box_points, seam_ranges, split_segments, unit_rule)
 from .warp_runtime import WarpContext
 from .work import check_work
 
@@ -115,22 +124,28 @@ def _cell_scales(model: DensityModel, grid: Grid) -> tuple[np.ndarray, np.ndarra
     x0, _, y0, _ = grid.extent
     xl = x0 + grid.dx * np.arange(grid.nx)
     yl = y0 + grid.dy * np.arange(grid.ny)
-    for k, ((sx, sy), bearings, singular) in enumerate(_seams_by_point(model)):
-        if singular:
-            gap_x = np.maximum(0.0, np.maximum(xl - sx, sx - (xl + grid.dx)))
-            gap_y = np.maximum(0.0, np.maximum(yl - sy, sy - (yl + grid.dy)))
-            distance = np.hypot(gap_y[:, None], gap_x[None, :])
-            # the angular features narrowed in proportion to the distance, and the 1 / r itself,
-            # whose Taylor series about a node converges within the distance: sub-cells of at
-            # most a quarter of it (Gauss's error then falls like 8^-2n)
-            angular = min(model.polar_scales((sx, sy))[1], SINGULAR_FRACTION)
-            sweep[(sweep < 0) & (distance <= FAN_CELLS * diagonal)] = k
-            scale = np.minimum(scale, np.maximum(distance, diagonal) * angular)
+    for k, ((sx, sy), bearings, _) in enumerate(_seams_by_point(model)):
+        gap_x = np.maximum(0.0, np.maximum(xl - sx, sx - (xl + grid.dx)))
+        gap_y = np.maximum(0.0, np.maximum(yl - sy, sy - (yl + grid.dy)))
+        distance = np.hypot(gap_y[:, None], gap_x[None, :])
+        # about a 1 / r point or a seam's start (where the density changes with the direction:
+        # a bearing station) the angular features narrow in proportion to the distance, and the
+        # 1 / r's Taylor series about a node converges within it: cells within FAN_CELLS
+        # diagonals are swept about the point, and sub-cells beyond are at most a quarter of
+        # the distance (Gauss's error then falls like 8^-2n)
+        angular = min(model.polar_scales((sx, sy))[1], SINGULAR_FRACTION)
+        sweep[(sweep < 0) & (distance <= FAN_CELLS * diagonal)] = k
+        scale = np.minimum(scale, np.maximum(distance, diagonal) * angular)
         for bearing in bearings:
             sweep[(sweep < 0) & _crossed(grid, (sx, sy), bearing)] = k
         law = model.polar_law((sx, sy))
         if law is not None:
             sweep[(sweep < 0) & _narrow(grid, (sx, sy), law, float(model.feature_scale()))] = k
+    # a cell that holds a point is swept about it (the singular points first), whichever other
+    # point's seam crosses it: the other seams are then split along each ray (_sweep_nodes)
+    for k, ((sx, sy), _, _) in reversed(list(enumerate(_seams_by_point(model)))):
+        holds = ((xl <= sx) & (sx <= xl + grid.dx))[None, :] & ((yl <= sy) & (sy <= yl + grid.dy))[:, None]
+        sweep[holds] = k
     return scale, sweep
 
 
@@ -224,10 +239,18 @@ class _QuadraturePlan:
             distance = np.hypot(cx, cy)
             span = np.where(distance <= diagonal, 2.0 * math.pi, np.minimum(2.0 * math.pi, 2.0 * diagonal / np.maximum(distance, 1e-300)))
             far = distance + diagonal
-            pieces = 4 + len(bearings)
+            # the seams of other points that cross each cell: two breaks each, a split of each ray
+            others = [(x, y, b) for q, ((x, y), seam_bearings, _) in enumerate(points) if q != k
+                      for b in seam_bearings]
+            crossing = np.zeros(len(cells))
+            for seam in others:
+                for n, (i, j) in enumerate(cells[:, :2]):
+                    box = (x0 + grid.dx * j, x0 + grid.dx * (j + 1), y0 + grid.dy * i, y0 + grid.dy * (i + 1))
+                    crossing[n] += bool(ray_box_points(seam, box))
+            pieces = 4 + len(bearings) + 2 * crossing
             per_angle = np.minimum(MAX_SUBINTERVALS, np.ceil(span / np.minimum(angular, feature / far)) + pieces)
             per_range = min(MAX_SUBINTERVALS, math.ceil(diagonal / radial))
-            total += int(np.sum(per_angle)) * per_range * MAX_ORDER**2
+            total += int(np.sum(per_angle * (1 + crossing))) * per_range * MAX_ORDER**2
         return total
 
 
@@ -366,10 +389,11 @@ def _segment(point, corners_lo, corners_hi, theta):
     return lo, np.maximum(lo, hi)
 
 
-def _bearing_pieces(point, seam_bearings, box):
+def _bearing_pieces(point, seam_bearings, box, breaks_at=()):
     """The bearings a cell subtends about ``point``, cut at the corners' and the seams'
-    bearings: ``(pieces, far)``, pieces ``(a, b, seam_at_a, seam_at_b)`` (unwrapped bearings),
-    far the greatest distance from the point to the cell."""
+    bearings and at ``breaks_at`` (bearings of other breaks: where another point's seam enters,
+    leaves or ends in the cell): ``(pieces, far)``, pieces ``(a, b, seam_at_a, seam_at_b)``
+    (unwrapped bearings), far the greatest distance from the point to the cell."""
     x0, x1, y0, y1 = box
     px, py = point
     cx, cy = np.array([x0, x1, x1, x0]), np.array([y0, y0, y1, y1])
@@ -388,7 +412,8 @@ def _bearing_pieces(point, seam_bearings, box):
     seams = {unwrap(float(b)) for b in seam_bearings}
     if x0 <= px <= x1 and y0 <= py <= y1:
         seams |= {s + two_pi for s in seams if abs(s - span[0]) < 1e-15}
-    breaks = {span[0], span[1]} | {u for u in (*map(unwrap, map(float, corner_bearings)), *seams)
+    breaks = {span[0], span[1]} | {u for u in (*map(unwrap, map(float, corner_bearings)), *seams,
+                                               *map(unwrap, map(float, breaks_at)))
                                     if span[0] < u < span[1]}
     breaks = sorted(breaks)
     pieces = [(a, b, a in seams, b in seams) for a, b in zip(breaks[:-1], breaks[1:]) if b > a]
@@ -420,26 +445,39 @@ def _along_sides(a: float, b: float, sides) -> set:
     return {p for p in points if a < p < b}
 
 
-def _sweep_nodes(point, seam_bearings, box, radial: float, angular: float, feature: float):
+def _sweep_nodes(point, seam_bearings, box, radial: float, angular: float, feature: float,
+                 foreign=np.zeros((0, 3)), limit: float = math.inf):
     """Nodes ``(x, y, w)`` of the swept rule over the cell ``box`` = (x0, x1, y0, y1) about
-    ``point``: sum(w p(x, y)) is the cell's probability."""
+    ``point``: sum(w p(x, y)) is the cell's probability.
+
+    ``foreign`` are the seams of other points that cross the cell (rows (x, y, bearing)): in
+    polar coordinates about ``point`` each is a curve, so every ray's segment is split where it
+    crosses one (:func:`~bananagrid.engine.quadrature.seam_ranges`), and the bearings at which
+    one enters, leaves or ends in the cell are breaks: between them each piece of a ray is
+    smooth and its integral smooth in the bearing. ``limit`` bounds the sub-intervals' lengths
+    (radial, and as arcs): a quarter of the distance to another point about which the density
+    changes with the direction."""
     x0, x1, y0, y1 = box
     px, py = point
-    pieces, far, sides = _bearing_pieces(point, seam_bearings, box)
-    angular = min(angular, feature / max(far, 1e-300))
+    foreign = np.asarray(foreign, dtype=float).reshape(-1, 3)
+    crossings = [_bearing(qx - px, qy - py) for seam in foreign for qx, qy in ray_box_points(seam, box)]
+    pieces, far, sides = _bearing_pieces(point, seam_bearings, box, crossings)
+    angular = min(angular, min(feature, limit) / max(far, 1e-300))
     # MAX_ORDER nodes whatever the plan's error bound asks: the swept cells are few, and the
     # bound is one of a whole normal feature, where a cell in its tail wants relative accuracy
-    m_r, _, _ = axis_plan(math.hypot(x1 - x0, y1 - y0), radial, MAX_SUBINTERVALS)
+    m_r, _, _ = axis_plan(math.hypot(x1 - x0, y1 - y0), min(radial, limit), MAX_SUBINTERVALS)
     u_r, w_r = unit_rule(m_r, MAX_ORDER)
     xs, ys, ws = [], [], []
     for a, b, seam_a, seam_b in pieces:
         theta, w_t = graded_rule(a, b, angular, (seam_a, seam_b), _along_sides(a, b, sides))
         r_in, r_out = _segment(point, (x0, y0), (x1, y1), theta)
-        r = r_in[:, None] + (r_out - r_in)[:, None] * u_r[None, :]  # (T, R)
-        w = (w_t * (r_out - r_in))[:, None] * w_r[None, :] * r  # dtheta, dr and the area element r
-        xs.append((px + r * np.sin(theta)[:, None]).ravel())
-        ys.append((py + r * np.cos(theta)[:, None]).ravel())
-        ws.append(w.ravel())
+        lo, hi = split_segments(r_in, r_out, seam_ranges(point, theta, foreign))  # (T, F + 1)
+        r = lo[:, :, None] + (hi - lo)[:, :, None] * u_r  # (T, F + 1, R)
+        w = (w_t[:, None] * (hi - lo))[:, :, None] * w_r * r  # dtheta, dr and the area element r
+        keep = np.broadcast_to((hi > lo)[:, :, None], r.shape)  # empty pieces hold no nodes
+        xs.append((px + r * np.sin(theta)[:, None, None])[keep])
+        ys.append((py + r * np.cos(theta)[:, None, None])[keep])
+        ws.append(w[keep])
     return np.concatenate(xs), np.concatenate(ys), np.concatenate(ws)
 
 
@@ -507,8 +545,17 @@ def _swept_cells(model, grid, ctx, cells, probability, extent) -> None:
             i, j = int(cells[n, 0]), int(cells[n, 1])
             box = (x0 + grid.dx * j, x0 + grid.dx * (j + 1), y0 + grid.dy * i, y0 + grid.dy * (i + 1))
             if law is None:
-                part = _sweep_nodes(point, bearings, box, radial if singular else min(radial, feature), angular,
-                                    feature)
+                parts = []
+                for leaf, held, limit in _leaves(box, [p for p, _, _ in points]):
+                    m = k if held is None else held
+                    (mx, my), own, m_singular = points[m]
+                    m_radial, m_angular = scales.get(m) or scales.setdefault(m, model.polar_scales((mx, my)))
+                    foreign = [(x, y, b) for q, (p, seam_bearings, _) in enumerate(points) if q != m
+                               for x, y, b in [(*p, b) for b in seam_bearings]
+                               if ray_box_points((x, y, b), leaf)]
+                    parts.append(_sweep_nodes((mx, my), own, leaf, m_radial if m_singular else min(m_radial, feature),
+                                              m_angular, feature, foreign, limit))
+                part = tuple(np.concatenate(v) for v in zip(*parts))
             else:
                 part = _law_nodes(point, bearings, box, angular, law)
             if batch["size"] and batch["size"] + part[0].size > NODE_CHUNK:
@@ -517,3 +564,43 @@ def _swept_cells(model, grid, ctx, cells, probability, extent) -> None:
             batch["size"] += part[0].size
         flush()
     probability[cells[:, 0], cells[:, 1]] = totals
+
+
+#: Most halvings of a swept cell toward the points it holds or is near (its leaves, each
+#: holding at most one point and no larger than twice its distance to any other).
+MAX_SPLIT_DEPTH = 40
+#: A leaf's sub-intervals are at most this fraction of its distance to another point, about
+#: which the density changes with the direction on that scale.
+NEAR_FRACTION = 0.25
+
+
+def _holds(box, point) -> bool:
+    x0, x1, y0, y1 = box
+    return x0 <= point[0] <= x1 and y0 <= point[1] <= y1
+
+
+def _leaves(box, points, depth: int = 0) -> list:
+    """The cell ``box`` as leaves ``(box, held, limit)``: each holds at most one of ``points``
+    (``held``, its index, or None) and is no larger than twice its distance to the others, or
+    ``limit`` (NEAR_FRACTION of that distance) bounds its rule's sub-intervals. A box holding
+    two points is cut between them (across the coordinate in which they are farther apart); a
+    box larger than twice its distance to a point it does not hold is quartered."""
+    x0, x1, y0, y1 = box
+    held = [k for k, p in enumerate(points) if _holds(box, p)]
+    if len(held) >= 2 and depth < MAX_SPLIT_DEPTH:
+        p, q = points[held[0]], points[held[1]]
+        if abs(p[0] - q[0]) >= abs(p[1] - q[1]):
+            cut = 0.5 * (p[0] + q[0])
+            halves = [(x0, cut, y0, y1), (cut, x1, y0, y1)]
+        else:
+            cut = 0.5 * (p[1] + q[1])
+            halves = [(x0, x1, y0, cut), (x0, x1, cut, y1)]
+        return [leaf for half in halves for leaf in _leaves(half, points, depth + 1)]
+    others = [math.hypot(max(0.0, x0 - px, px - x1), max(0.0, y0 - py, py - y1))
+              for k, (px, py) in enumerate(points) if k not in held]
+    near = min(others, default=math.inf)
+    if math.hypot(x1 - x0, y1 - y0) > 2.0 * near and depth < MAX_SPLIT_DEPTH:
+        xm, ym = 0.5 * (x0 + x1), 0.5 * (y0 + y1)
+        quarters = [(x0, xm, y0, ym), (xm, x1, y0, ym), (x0, xm, ym, y1), (xm, x1, ym, y1)]
+        return [leaf for quarter in quarters for leaf in _leaves(quarter, points, depth + 1)]
+    return [(box, held[0] if held else None, NEAR_FRACTION * near if near > 0.0 else math.inf)]

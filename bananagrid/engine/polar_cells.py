@@ -3,9 +3,18 @@ model's own length scales.
 
 The sub-cells are no larger than the model's length scales (``model.polar_scales``, through
 the model protocol), and a cell that a seam of the model's density crosses along a bearing of
-the lattice (``model.seams``: a polar density's angle wrapping at +-pi behind its start) is
-integrated on each side of it; every node is evaluated by the model's own kernels through
-:func:`bananagrid.engine.points.evaluate_points`.
+the lattice (``model.seams``: a polar density's angle wrapping at +-pi behind its start, when
+the seam starts at the lattice's origin or its line passes through it) is integrated on each
+side of it. A seam whose line misses the origin crosses the cells along a curve r*(b) in (r,
+b): the cells it crosses are integrated again with each bearing node's range interval split
+at r*(b) and the bearings where it crosses the cells' arcs as breaks (:func:`_foreign_cells`),
+as are the cells near a seam's start (a station, about which the density changes with the
+direction) with sub-intervals of a quarter of their distance to it. A cell that holds a seam's
+start or a 1 / r point off the origin, and a cell crossed by the seams of a point about which
+the model has a closed radial law (a polar banana posed elsewhere: its ridge narrows to a
+point on the improved variant's P_sigma = 0 edge), is swept in polar coordinates about that
+point over the annular sector (:func:`_point_cells`). Every node is evaluated by the model's
+own kernels through :func:`bananagrid.engine.points.evaluate_points`.
 """
 
 from __future__ import annotations
@@ -22,7 +31,8 @@ from ..protocol import DensityModel
 from ..results import PolarRaster
 from ..validate import BananagridError
 from .points import check_finite, check_model, evaluate_points
-from .quadrature import GAUSS_TOL, MAX_SUBINTERVALS, axis_plan, graded_rule, narrowing, normal_shares, unit_rule
+from .quadrature import (GAUSS_TOL, MAX_ORDER, MAX_SUBINTERVALS, axis_plan, graded_rule, narrowing, normal_shares,
+                         ray_circle_points, seam_ranges, split_segments, unit_rule)
 from .warp_runtime import check_threads
 from .work import check_work
 
@@ -136,18 +146,39 @@ def _tasks(n_pieces: int, plan: _Plan):
                     yield row, j, j + 1, a0, min(n_r_nodes, a0 + per_a)
 
 
+#: A seam whose line passes within this fraction of its start's distance of the lattice's
+#: origin is taken as a ray of the lattice (a bearing cut) rather than a curve across it.
+THROUGH_ORIGIN = 1e-13
+
+
+def _split_seams(model: DensityModel, lattice: PolarLattice) -> tuple[list, np.ndarray]:
+    """The model's seams (:meth:`~bananagrid.protocol.DensityModel.seams`) as the lattice sees
+    them: ``(cuts, foreign)``. A seam on a line through the origin is along the lattice's
+    bearings: ``cuts`` holds them (relative to the heading): its own bearing, and the opposite
+    one where the origin lies ahead of its start. Every other seam crosses the cells along a
+    curve: ``foreign``, rows (x, y, bearing), which :func:`_foreign_cells` integrates."""
+    ox, oy = lattice.pose.origin
+    cuts, foreign = [], []
+    for x, y, bearing in np.asarray(model.seams(), dtype=float).reshape(-1, 3):
+        qx, qy = x - ox, y - oy
+        vx, vy = math.sin(bearing), math.cos(bearing)
+        distance = math.hypot(qx, qy)
+        if abs(qx * vy - qy * vx) <= THROUGH_ORIGIN * distance:
+            cuts.append(bearing - lattice.pose.heading)
+            if -(qx * vx + qy * vy) > 0.0:  # the origin is ahead of the start: the seam passes it
+                cuts.append(bearing + math.pi - lattice.pose.heading)
+        else:
+            foreign.append((x, y, bearing))
+    return cuts, np.array(foreign, dtype=np.float64).reshape(-1, 3)
+
+
 def _bearing_pieces(model: DensityModel, lattice: PolarLattice) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """``(lo, hi, column)``: the bearing intervals the rule integrates, each cell's interval cut
-    at the bearings of the model's seams (:meth:`~bananagrid.protocol.DensityModel.seams`) that
-    start at the lattice's origin and pass through it (a kink of the density there becomes a
-    break of the rule, like a cell edge). Seams from other points cross the lattice's cells
-    along curves and are not cut."""
+    at the bearings of the model's seams that lie along the lattice's rays (from its origin or
+    through it: a kink of the density there becomes a break of the rule, like a cell edge).
+    Seams that cross the cells along curves are the business of :func:`_foreign_cells`."""
     edges = lattice.bearing_edges
-    origin = np.asarray(lattice.pose.origin, dtype=float)
-    cuts = []
-    for x, y, bearing in np.asarray(model.seams(), dtype=float).reshape(-1, 3):
-        if np.array_equal(np.array([x, y]), origin):
-            cuts.append(bearing - lattice.pose.heading)
+    cuts, _ = _split_seams(model, lattice)
     lo, hi, column, seam = [], [], [], []
     two_pi = 2.0 * math.pi
     for j in range(lattice.n_bearing):
@@ -216,7 +247,17 @@ def _integrate(model: DensityModel, lattice: PolarLattice, plan: _Plan, *, dtype
     r_edges = lattice.range_edges
     law = model.polar_law(lattice.pose.origin)
     if law is not None:
-        return _law_cells(model, lattice, law)
+        probability = _law_cells(model, lattice, law)
+    else:
+        probability = _tensor_cells(model, lattice, plan, dtype=dtype, device=device, threads=threads)
+    _foreign_cells(model, lattice, plan, probability, dtype=dtype, device=device, threads=threads)
+    _point_cells(model, lattice, plan, probability, dtype=dtype, device=device, threads=threads)
+    return probability
+
+
+def _tensor_cells(model: DensityModel, lattice: PolarLattice, plan: _Plan, *, dtype, device, threads) -> np.ndarray:
+    """The tensor rule over every cell's bearing pieces (:func:`_integrate`)."""
+    r_edges = lattice.range_edges
     p_lo, p_hi, p_column, _ = _bearing_pieces(model, lattice)
     r_nodes, r_weights = unit_rule(*plan.radial)
     b_rules = {mn: unit_rule(*mn) for mn in set(plan.angular)}
@@ -254,6 +295,330 @@ def _integrate(model: DensityModel, lattice: PolarLattice, plan: _Plan, *, dtype
             pieces = np.einsum("a,ajk,jk->j", w_r, block, w_b, dtype=np.float64)
             np.add.at(probability[row], p_column[j0:j1], pieces)  # in piece order: no thread dependence
     return probability
+
+
+#: A crossed cell's sub-intervals are at most this fraction of its distance to a seam's start.
+NEAR_FRACTION = 0.25
+
+
+def _distance_to_cell(points, origin, heading, ranges, bearings) -> float:
+    """A lower bound of the distance from the nearest of ``points`` to the annular sector
+    ``ranges`` x ``bearings`` (0 for a point inside): the distance to the annulus, or to the
+    nearer bounding ray where the point's bearing lies outside the sector's."""
+    (r0, r1), (b0, b1) = ranges, bearings
+    best = math.inf
+    for px, py in points:
+        dx, dy = px - origin[0], py - origin[1]
+        r = math.hypot(dx, dy)
+        radial = max(0.0, r0 - r, r - r1)
+        rel = b0 + (math.atan2(dx, dy) - heading - b0) % (2.0 * math.pi)
+        if rel <= b1:
+            best = min(best, radial)
+            continue
+        # outside the sector's bearings: at least the distance to the nearer bounding ray
+        gap = min(rel - b1, b0 + 2.0 * math.pi - rel)  # rel in (b1, b0 + 2 pi): both positive
+        best = min(best, max(radial, r * math.sin(min(gap, 0.5 * math.pi))))
+    return best
+
+
+def _crossed_cells(lattice: PolarLattice, foreign: np.ndarray) -> set:
+    """The cells ``(i, j)`` that a seam of ``foreign`` crosses or ends in: its curve in (r, b)
+    enters and leaves a cell through its arcs (a crossing of a range edge's circle) or its
+    radial sides (a crossing of a bearing edge's ray), or ends at its start inside."""
+    r_edges, b_edges = lattice.range_edges, lattice.bearing_edges
+    origin = lattice.pose.origin
+    heading = lattice.pose.heading
+    n_r, n_b = lattice.n_range, lattice.n_bearing
+    out = set()
+
+    def column(bearing):  # the lattice column of a world bearing, or None outside the lattice
+        rel = b_edges[0] + (bearing - heading - b_edges[0]) % (2.0 * math.pi)
+        j = int(np.searchsorted(b_edges, rel, side="right")) - 1
+        return j if 0 <= j < n_b else (n_b - 1 if rel == b_edges[-1] else None)
+
+    def row(r):
+        i = int(np.searchsorted(r_edges, r, side="right")) - 1
+        return i if 0 <= i < n_r else (n_r - 1 if r == r_edges[-1] else None)
+
+    for seam in foreign:
+        for e, radius in enumerate(r_edges):
+            if radius <= 0.0:
+                continue
+            for px, py in ray_circle_points(seam, origin, float(radius)):
+                j = column(math.atan2(px - origin[0], py - origin[1]))
+                if j is not None:
+                    out |= {(i, j) for i in (e - 1, e) if 0 <= i < n_r}
+        ranges = seam_ranges(origin, heading + b_edges, seam[None, :])[:, 0]
+        for e, r in enumerate(ranges):
+            if np.isfinite(r):
+                i = row(float(r))
+                if i is not None:
+                    out |= {(i, j) for j in (e - 1, e) if 0 <= j < n_b}
+        qx, qy = seam[0] - origin[0], seam[1] - origin[1]
+        i, j = row(math.hypot(qx, qy)), column(math.atan2(qx, qy))
+        if i is not None and j is not None:
+            out.add((i, j))
+    return out
+
+
+def _near_cells(lattice: PolarLattice, plan: _Plan, starts: np.ndarray) -> set:
+    """The cells too near one of ``starts`` (seams' starts off the origin) for the tensor rule:
+    about a start the density changes with the direction on the scale of the distance d, and an
+    n-point Gauss rule on a sub-interval of width h at a distance d from such a point errs by
+    about (h / 4d)^(2n) (the singularity bounds the Bernstein ellipse): the cells where that
+    exceeds GAUSS_TOL, radially or along the arc at the row's outer edge."""
+    out = set()
+    r_edges, b_edges = lattice.range_edges, lattice.bearing_edges
+    r0, r1 = r_edges[:-1], r_edges[1:]
+    rm, rn = plan.radial
+    m_b = np.array([m for m, _ in plan.angular], dtype=float)
+    n_b = np.array([n for _, n in plan.angular], dtype=float)
+    h_r, h_b = lattice.range_step / rm, r1 * lattice.bearing_step / m_b
+    # the distance below which (h / 4d)^(2n) > GAUSS_TOL, per row: the larger of the two axes'
+    sub = np.maximum(h_r / (4.0 * GAUSS_TOL ** (1.0 / (2.0 * rn))), h_b / (4.0 * GAUSS_TOL ** (1.0 / (2.0 * n_b))))
+    ox, oy = lattice.pose.origin
+    for px, py in starts:
+        dx, dy = px - ox, py - oy
+        r = math.hypot(dx, dy)
+        radial = np.maximum(0.0, np.maximum(r0 - r, r - r1))
+        rel = b_edges[0] + (math.atan2(dx, dy) - lattice.pose.heading - b_edges[0]) % (2.0 * math.pi)
+        circular = lambda d: np.abs((d + math.pi) % (2.0 * math.pi) - math.pi)  # noqa: E731
+        gap = np.where((b_edges[:-1] <= rel) & (rel <= b_edges[1:]), 0.0,
+                       np.minimum(circular(rel - b_edges[:-1]), circular(rel - b_edges[1:])))
+        across = r * np.sin(np.minimum(gap, 0.5 * math.pi))
+        distance = np.maximum(radial[:, None], across[None, :])
+        out |= set(map(tuple, np.argwhere(distance < sub[:, None]).tolist()))
+    return out
+
+
+def _foreign_cells(model: DensityModel, lattice: PolarLattice, plan: _Plan, probability: np.ndarray, *, dtype,
+                   device, threads) -> None:
+    """Integrate again the cells that seams off the lattice's rays cross (``foreign`` of
+    :func:`_split_seams`), and those near a seam's start off the origin, and set them in
+    ``probability``.
+
+    A seam that is a half-line from Q not through the origin O meets the ray from O at bearing
+    b at one range r*(b) at most (:func:`~bananagrid.engine.quadrature.seam_ranges`): each
+    bearing node's range interval is split there, so every radial piece is smooth. Between the
+    bearings at which a seam crosses the cell's arcs (and Q's bearing), r*(b) stays inside or
+    outside the cell, and each node's integral is smooth in b: those bearings are breaks. About
+    Q the density changes with the direction on the scale of the distance: sub-intervals are at
+    most NEAR_FRACTION of the cell's distance to the nearest start, and no wider than the
+    tensor rule's, MAX_ORDER nodes each. (A cell that holds a start is integrated the same way:
+    no accuracy is claimed for it.)"""
+    cuts, foreign = _split_seams(model, lattice)
+    origin, heading = lattice.pose.origin, lattice.pose.heading
+    ox, oy = origin
+    seams = np.asarray(model.seams(), dtype=float).reshape(-1, 3)
+    starts = np.unique(seams[:, :2], axis=0) if len(seams) else np.zeros((0, 2))
+    starts = starts[np.hypot(starts[:, 0] - ox, starts[:, 1] - oy) > 0.0]
+    if not len(starts) and not len(foreign):
+        return
+    cells = sorted(_crossed_cells(lattice, foreign) | _near_cells(lattice, plan, starts))
+    if not cells:
+        return
+    r_edges, b_edges = lattice.range_edges, lattice.bearing_edges
+    db, dr = lattice.bearing_step, lattice.range_step
+    extent = LatticeExtent(lattice)
+    two_pi = 2.0 * math.pi
+    totals = np.zeros(len(cells))
+    batch = {"x": [], "y": [], "w": [], "owner": [], "size": 0}
+
+    def flush():
+        if not batch["size"]:
+            return
+        values = evaluate_points(model, np.concatenate(batch["x"]), np.concatenate(batch["y"]), dtype=dtype,
+                                 device=device, threads=threads, extent=extent).astype(float)
+        totals[:] += np.bincount(np.concatenate(batch["owner"]), weights=np.concatenate(batch["w"]) * values,
+                                 minlength=len(cells))  # in node order: no thread dependence
+        batch.update(x=[], y=[], w=[], owner=[], size=0)
+
+    for n, (i, j) in enumerate(cells):
+        r0, r1 = float(r_edges[i]), float(r_edges[i + 1])
+        a, b = float(b_edges[j]), float(b_edges[j + 1])
+        near = _distance_to_cell(starts, origin, heading, (r0, r1), (a, b)) if len(starts) else math.inf
+        limit = NEAR_FRACTION * near if near > 0.0 else math.inf
+        m_r, _, _ = axis_plan(dr, min(dr / plan.radial[0], limit), MAX_SUBINTERVALS)
+        u_r, w_r = unit_rule(m_r, MAX_ORDER)
+        at = list(cuts)
+        for seam in foreign:
+            at += [math.atan2(px - ox, py - oy) - heading
+                   for radius in (r0, r1) if radius > 0.0 for px, py in ray_circle_points(seam, origin, radius)]
+            at.append(math.atan2(seam[0] - ox, seam[1] - oy) - heading)
+        edges = sorted({a, b} | {a + (c - a) % two_pi for c in at if a < a + (c - a) % two_pi < b})
+        m, _ = plan.angular[i]
+        rules = [graded_rule(lo, hi, min(db / m, limit / max(r1, 1e-300)), (False, False))
+                 for lo, hi in zip(edges[:-1], edges[1:])]
+        theta = np.concatenate([t for t, _ in rules])
+        w_t = np.concatenate([w for _, w in rules])
+        world = heading + theta
+        lo, hi = split_segments(np.full(theta.size, r0), np.full(theta.size, r1), seam_ranges(origin, world, foreign))
+        xs, ys, ws = _radial_nodes(origin, world, w_t, lo, hi, (u_r, w_r))
+        if batch["size"] and batch["size"] + xs.size > NODE_CHUNK:
+            flush()
+        batch["x"].append(xs)
+        batch["y"].append(ys)
+        batch["w"].append(ws)
+        batch["owner"].append(np.full(xs.size, n))
+        batch["size"] += xs.size
+    flush()
+    rows, columns = np.array(cells).T
+    probability[rows, columns] = totals
+
+
+#: Widest bearing sub-interval of a lattice cell swept about a point (radians).
+SWEEP_ANGLE = 0.25
+
+
+def _sector_segments(point, phi, ranges, bearings, origin, heading, foreign) -> tuple[np.ndarray, np.ndarray]:
+    """The pieces ``(lo, hi)`` (shape (T, K), empty ones lo = hi) of the rays from ``point`` at
+    bearings ``phi`` that lie in the annular sector ``ranges`` x ``bearings`` about ``origin``
+    (bearings from ``heading``), split where a seam of ``foreign`` crosses them: a ray enters
+    or leaves the sector where it crosses a range circle (a quadratic in its range) or a
+    bounding ray, and a piece between two such events is in or out as its midpoint is."""
+    (r0, r1), (b0, b1) = ranges, bearings
+    wx, wy = np.sin(phi), np.cos(phi)
+    dx, dy = point[0] - origin[0], point[1] - origin[1]
+    along = dx * wx + dy * wy
+    distance = math.hypot(dx, dy)
+    far = distance + r1
+    events = [np.zeros_like(phi), np.full_like(phi, far)]
+    for radius in (r0, r1):
+        if radius > 0.0:
+            disc = along * along + (radius - distance) * (radius + distance)
+            root = np.sqrt(np.maximum(disc, 0.0))
+            for s in (-along - root, -along + root):
+                events.append(np.where((disc >= 0.0) & (s > 0.0), s, np.nan))
+    sides = np.array([(origin[0], origin[1], heading + b0), (origin[0], origin[1], heading + b1)])
+    cuts = seam_ranges(point, phi, np.concatenate([sides, np.asarray(foreign, dtype=float).reshape(-1, 3)]))
+    stacked = np.column_stack(events + [cuts])
+    stacked = np.sort(np.where(np.isnan(stacked), far, np.minimum(stacked, far)), axis=1)
+    lo, hi = stacked[:, :-1], stacked[:, 1:]
+    mid = 0.5 * (lo + hi)
+    mx, my = dx + mid * wx[:, None], dy + mid * wy[:, None]
+    r = np.hypot(mx, my)
+    rel = b0 + (np.arctan2(mx, my) - heading - b0) % (2.0 * math.pi)
+    inside = (r0 <= r) & (r <= r1) & (rel <= b1) & (hi > lo)
+    return lo, np.where(inside, hi, lo)
+
+
+def _swept_lattice_cell(model, point, own_bearings, law, cell, lattice, plan, foreign, feature):
+    """Nodes of a lattice cell swept in polar coordinates about ``point`` (a seam's start or a
+    1 / r point off the lattice's origin, which the cell holds, or whose polar law the seams
+    crossing the cell come from): ``("law", theta, w, lo, hi)`` (the cell's probability is
+    sum(w g [Phi] over the pieces)) or ``("pdf", x, y, w)``. The bearing about the point is cut
+    at the cell's corners, the tangents from the point to its arcs (graded toward them: a
+    piece's ends move like the square root of the turn there), the bearing of the lattice's
+    origin, and the point's seams (graded toward them where the law's SD narrows)."""
+    (r0, r1), (b0, b1) = cell
+    origin, heading = lattice.pose.origin, lattice.pose.heading
+    px, py = point
+    dx, dy = px - origin[0], py - origin[1]
+    distance = math.hypot(dx, dy)
+    centre = math.atan2(origin[0] - px, origin[1] - py) if distance > 0.0 else 0.0
+    breaks, graded = set(), set()
+    for radius in (r0, r1):
+        for bearing in (b0, b1):
+            cx = origin[0] + radius * math.sin(heading + bearing)
+            cy = origin[1] + radius * math.cos(heading + bearing)
+            breaks.add(math.atan2(cx - px, cy - py))
+        if 0.0 < radius < distance:
+            half = math.asin(radius / distance)
+            graded |= {centre - half, centre + half}
+    breaks |= graded | {centre} | set(own_bearings)
+    start = centre - math.pi
+    unwrap = lambda b: start + (b - start) % (2.0 * math.pi)  # noqa: E731
+    edges = sorted({start, start + 2.0 * math.pi} | {unwrap(b) for b in breaks})
+    seams = {unwrap(b) for b in own_bearings}
+    graded = {unwrap(b) for b in graded}
+    radial, angular = model.polar_scales(point)
+    far = distance + r1
+    # no wider than a quarter radian: the pieces span the whole turn about the point
+    angular = min(angular, SWEEP_ANGLE, feature / max(far, 1e-300))
+    out = []
+    for a, b in zip(edges[:-1], edges[1:]):
+        if not b > a:
+            continue
+        grade = [a in graded, b in graded]
+        scale = angular
+        if law is not None:
+            _, _, sd = law(np.linspace(a, b, LAW_PROBES))
+            live = sd[sd > 0.0]
+            scale = min(angular, 0.5 * float(live.min()) / far) if live.size else angular
+            narrow = narrowing(sd)
+            grade = [grade[0] or (a in seams and narrow[0]), grade[1] or (b in seams and narrow[1])]
+        theta, w_t = graded_rule(a, b, scale, tuple(grade))
+        lo, hi = _sector_segments(point, theta, (r0, r1), (b0, b1), origin, heading, foreign)
+        out.append((theta, w_t, lo, hi))
+    theta, w_t, lo, hi = (np.concatenate(parts) for parts in zip(*out))
+    if law is not None:
+        return "law", theta, w_t, lo, hi
+    m_r, _, _ = axis_plan(math.hypot(r1 - r0, r1 * (b1 - b0)), min(radial, feature), MAX_SUBINTERVALS)
+    x, y, w = _radial_nodes(point, theta, w_t, lo, hi, unit_rule(m_r, MAX_ORDER))
+    return "pdf", x, y, w
+
+
+def _radial_nodes(point, theta, w_t, lo, hi, rule):
+    """Nodes ``(x, y, w)`` of the rays from ``point`` at bearings ``theta`` (weights ``w_t``) over
+    their non-empty pieces [lo, hi] (shape (T, K)), each by the unit ``rule`` scaled, the
+    area element r included: only the pieces that hold something are expanded."""
+    u_r, w_r = rule
+    t, _ = np.nonzero(hi > lo)
+    a, b = lo[hi > lo], hi[hi > lo]
+    r = a[:, None] + (b - a)[:, None] * u_r  # (P, R)
+    w = ((w_t[t] * (b - a))[:, None] * w_r * r).ravel()  # the bearing's and range's weights, r dr
+    return (point[0] + r * np.sin(theta[t])[:, None]).ravel(), (point[1] + r * np.cos(theta[t])[:, None]).ravel(), w
+
+
+def _point_cells(model: DensityModel, lattice: PolarLattice, plan: _Plan, probability: np.ndarray, *, dtype,
+                 device, threads) -> None:
+    """Integrate again, swept about the point (:func:`_swept_lattice_cell`), the cells that hold
+    a seam's start or a 1 / r point off the lattice's origin, and the cells that the seams of a
+    point with a polar law cross (exact in range about it, graded toward its seams where the
+    range SD narrows: the improved polar banana's P_sigma = 0 edge); set them in
+    ``probability``."""
+    origin = lattice.pose.origin
+    seams = np.asarray(model.seams(), dtype=float).reshape(-1, 3)
+    points = [tuple(map(float, p)) for p in np.asarray(model.singular_points(), dtype=float).reshape(-1, 2)]
+    points += [tuple(map(float, p)) for p in seams[:, :2] if tuple(map(float, p)) not in points]
+    points = [p for p in points if p != tuple(map(float, origin))]
+    if not points:
+        return
+    r_edges, b_edges = lattice.range_edges, lattice.bearing_edges
+    feature = float(model.feature_scale())
+    extent = LatticeExtent(lattice)
+    chosen = {}
+    for k, point in enumerate(points):
+        own = seams[(seams[:, 0] == point[0]) & (seams[:, 1] == point[1])]
+        if model.polar_law(point) is not None:
+            for cell in _crossed_cells(lattice, own):
+                chosen.setdefault(cell, k)
+        dx, dy = point[0] - origin[0], point[1] - origin[1]
+        r = math.hypot(dx, dy)
+        rel = b_edges[0] + (math.atan2(dx, dy) - lattice.pose.heading - b_edges[0]) % (2.0 * math.pi)
+        i = int(np.searchsorted(r_edges, r, side="right")) - 1
+        j = int(np.searchsorted(b_edges, rel, side="right")) - 1
+        if 0 <= i < lattice.n_range and 0 <= j < lattice.n_bearing:
+            chosen[(i, j)] = k
+    for (i, j), k in sorted(chosen.items()):
+        point = points[k]
+        own = seams[(seams[:, 0] == point[0]) & (seams[:, 1] == point[1])]
+        foreign = seams[~((seams[:, 0] == point[0]) & (seams[:, 1] == point[1]))]
+        law = model.polar_law(point)
+        cell = ((float(r_edges[i]), float(r_edges[i + 1])), (float(b_edges[j]), float(b_edges[j + 1])))
+        kind, *nodes = _swept_lattice_cell(model, point, own[:, 2], law, cell, lattice, plan, foreign, feature)
+        if kind == "law":
+            theta, w, lo, hi = nodes
+            g, mu, sd = law(theta)
+            probability[i, j] = float(np.sum(w[:, None] * normal_shares(g[:, None], mu[:, None], sd[:, None], lo, hi)))
+        else:
+            xs, ys, w = nodes
+            total = 0.0
+            for c0 in range(0, xs.size, NODE_CHUNK):
+                values = evaluate_points(model, xs[c0:c0 + NODE_CHUNK], ys[c0:c0 + NODE_CHUNK], dtype=dtype,
+                                         device=device, threads=threads, extent=extent)
+                total += float(np.dot(w[c0:c0 + NODE_CHUNK], values.astype(float)))
+            probability[i, j] = total
 
 
 def rasterise_lattice(

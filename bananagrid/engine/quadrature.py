@@ -10,6 +10,7 @@ import numpy as np
 from scipy.special import ndtr
 
 __all__ = ["GAUSS_TOL", "MAX_ORDER", "MAX_SUBINTERVALS", "gauss_error", "axis_plan", "unit_rule", "graded_rule",
+           "seam_ranges", "split_segments", "ray_box_points", "ray_circle_points",
            "normal_shares"]
 
 _TWO_PI = 2.0 * math.pi
@@ -113,3 +114,75 @@ def normal_shares(g, mu, sd, r_in, r_out) -> np.ndarray:
     z_in, z_out = (r_in - mu) / sd, (r_out - mu) / sd
     share = np.where(z_in > 0.0, ndtr(-z_in) - ndtr(-z_out), ndtr(z_out) - ndtr(z_in))
     return np.where(live & (r_out > r_in), g * share, 0.0)
+
+
+def seam_ranges(origin, theta, seams) -> np.ndarray:
+    """Ranges along the rays from ``origin`` at bearings ``theta`` (shape (T,), clockwise from
+    north) at which each of ``seams`` (rows (x, y, bearing), shape (F, 3): half-lines) crosses
+    them: shape (T, F), NaN where a ray and a seam do not meet (parallel, or the crossing
+    behind the ray's origin or the seam's start).
+
+    O + r u(theta) = Q + s v(beta) gives r = (q x v) / (u x v) and s = (q x u) / (u x v), with
+    q = Q - O and a x b = a_x b_y - a_y b_x: a seam that does not pass through the origin is a
+    curve in polar coordinates about it, and a rule that splits each ray's range at r makes the
+    kink along it a break.
+    """
+    theta = np.asarray(theta, dtype=float)
+    seams = np.asarray(seams, dtype=float).reshape(-1, 3)
+    ux, uy = np.sin(theta)[:, None], np.cos(theta)[:, None]
+    qx, qy = (seams[:, 0] - origin[0])[None, :], (seams[:, 1] - origin[1])[None, :]
+    vx, vy = np.sin(seams[:, 2])[None, :], np.cos(seams[:, 2])[None, :]
+    den = ux * vy - uy * vx
+    with np.errstate(divide="ignore", invalid="ignore"):
+        r = (qx * vy - qy * vx) / den
+        s = (qx * uy - qy * ux) / den
+    return np.where((den != 0.0) & (r > 0.0) & (s >= 0.0) & np.isfinite(r), r, np.nan)
+
+
+def split_segments(r_in, r_out, cuts) -> tuple[np.ndarray, np.ndarray]:
+    """The segments [r_in, r_out] (shape (T,)) cut at ``cuts`` (shape (T, F), NaN for none):
+    ``(lo, hi)`` of shape (T, F + 1), the pieces in order (empty ones have lo = hi)."""
+    r_in = np.asarray(r_in, dtype=float)
+    r_out = np.asarray(r_out, dtype=float)
+    cuts = np.clip(np.where(np.isnan(cuts), r_in[:, None], cuts), r_in[:, None], r_out[:, None])
+    edges = np.sort(np.concatenate([r_in[:, None], cuts, r_out[:, None]], axis=1), axis=1)
+    return edges[:, :-1], edges[:, 1:]
+
+
+def ray_box_points(seam, box) -> list[tuple[float, float]]:
+    """Where the half-line ``seam`` = (x, y, bearing) meets the sides of ``box`` = (x0, x1, y0,
+    y1), and its start if the box holds it: the points at which it enters, leaves or ends in
+    the box."""
+    qx, qy, beta = (float(v) for v in seam)
+    vx, vy = math.sin(beta), math.cos(beta)
+    x0, x1, y0, y1 = box
+    out = []
+    if x0 <= qx <= x1 and y0 <= qy <= y1:
+        out.append((qx, qy))
+    for start, step, other_start, other_step, lines, lo, hi, axis in (
+            (qx, vx, qy, vy, (x0, x1), y0, y1, 0), (qy, vy, qx, vx, (y0, y1), x0, x1, 1)):
+        if step == 0.0:
+            continue
+        for line in lines:
+            s = (line - start) / step
+            if s < 0.0:
+                continue
+            other = other_start + s * other_step
+            if lo <= other <= hi:
+                out.append((line, other) if axis == 0 else (other, line))
+    return out
+
+
+def ray_circle_points(seam, centre, radius: float) -> list[tuple[float, float]]:
+    """Where the half-line ``seam`` = (x, y, bearing) crosses the circle of ``radius`` about
+    ``centre``: 0, 1 or 2 points."""
+    qx, qy = float(seam[0]) - centre[0], float(seam[1]) - centre[1]
+    vx, vy = math.sin(float(seam[2])), math.cos(float(seam[2]))
+    along = qx * vx + qy * vy
+    # s^2 + 2 s along + |q|^2 - R^2 = 0; the discriminant as (R - d)(R + d) + along^2 loses less
+    d = math.hypot(qx, qy)
+    disc = along * along + (radius - d) * (radius + d)
+    if disc < 0.0:
+        return []
+    root = math.sqrt(disc)
+    return [(centre[0] + qx + s * vx, centre[1] + qy + s * vy) for s in {-along - root, -along + root} if s >= 0.0]

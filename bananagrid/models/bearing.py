@@ -655,24 +655,38 @@ class BearingFix(Model):
         info, det = self._information()
         return np.array([[info[1, 1], -info[0, 1]], [-info[0, 1], info[0, 0]]]) / det
 
+    def _information_eigen(self) -> tuple[float, float, float]:
+        """The information matrix's eigenvalues (largest, smallest) and the angle from +x of the
+        largest's eigenvector, in closed form: the largest is half the trace plus a root of
+        squares (no cancellation), the smallest the Cauchy-Binet determinant over it. An
+        eigensolver on the covariance loses its smaller eigenvalue (it even came out negative)
+        where the stations' cross-range SDs differ by 1e30."""
+        info, det = self._information()
+        a, b, c = float(info[0, 0]), float(info[0, 1]), float(info[1, 1])
+        big = 0.5 * (a + c) + math.hypot(0.5 * (a - c), b)
+        return big, det / big, 0.5 * math.atan2(2.0 * b, a - c)
+
     @property
     def principal_variances(self) -> tuple[float, float]:
-        """(v1, v2): the covariance's eigenvalues, largest first (Walsh's v_g), m^2."""
-        values = np.linalg.eigvalsh(self.covariance)
-        return float(values[1]), float(values[0])
+        """(v1, v2): the covariance's eigenvalues, largest first (Walsh's v_g), m^2: the
+        inverses of the information matrix's."""
+        big, small, _ = self._information_eigen()
+        return 1.0 / small, 1.0 / big
 
     def ellipse(self, k: float = 1.0) -> dict:
         """The k-sigma error ellipse: semi-axes (m) and the major axis' bearing (radians from
         north). It holds probability 1 - exp(-k^2 / 2) of the linearised law."""
         if not (isinstance(k, (int, float)) and math.isfinite(k) and k > 0):
             raise BananagridError(f"k = {k!r}: must be a finite number > 0")
-        values, vectors = np.linalg.eigh(self.covariance)
-        major = vectors[:, 1]
+        v1, v2 = self.principal_variances
+        # the major axis is perpendicular to the information's largest eigenvector (angle
+        # phi from +x): at phi + pi / 2 from +x, a bearing of -phi from north
+        phi = self._information_eigen()[2]
         return {
             "centre": self.fix,
-            "semi_major": k * math.sqrt(values[1]),
-            "semi_minor": k * math.sqrt(values[0]),
-            "bearing": math.atan2(major[0], major[1]) % math.pi,
+            "semi_major": k * math.sqrt(v1),
+            "semi_minor": k * math.sqrt(v2),
+            "bearing": (-phi) % math.pi,
             "probability": 1.0 - math.exp(-0.5 * k * k),
         }
 
@@ -703,7 +717,10 @@ class BearingFix(Model):
             # bearings they do not all pass through the fix, L(fix) = exp(-chi2_min / 2) < 1),
             # plus the lumps at stations the other bearings point at
             log_norm = -self._log_mass()
-        head = [log_norm, *self._fix, precision[0, 0], precision[0, 1], precision[1, 1]]
+        # the linear form as p_xx (dx + k dy)^2 + m dy^2 (k = p_xy / p_xx, m = det p / p_xx, the
+        # Cauchy-Binet determinant): two non-negative squares, finite or +inf however far the point
+        p_xx = float(precision[0, 0])
+        head = [log_norm, *self._fix, p_xx, float(precision[0, 1]) / p_xx, det / p_xx]
         sensors = np.column_stack((self.sensors, self.bearings, 1.0 / self.sigmas)).ravel()
         return np.concatenate((head, sensors))
 
@@ -730,6 +747,7 @@ class BearingFix(Model):
         if cached is not None:
             return cached
         params = self.kernel_parameters()
+        precision, _ = self._information()
         rounded = params.astype(np.float32).astype(np.float64)
         per_sensor = slice(kernels.HEAD + 3, None, kernels.PER_SENSOR)
         bearings = self.bearings
@@ -745,7 +763,8 @@ class BearingFix(Model):
                             + np.abs(bearings.astype(np.float32).astype(np.float64) - bearings)),
             # sensors and the fix, whose float32 rounding moves the point the kernel sees
             "scale": float(max(np.abs(self.sensors).max(), np.abs(self._fix).max())),
-            "precision": tuple(float(v) for v in params[3:6]),
+            # the linear map's C^-1 (the kernel holds it as p_xx, p_xy / p_xx, det / p_xx)
+            "precision": (float(precision[0, 0]), float(precision[0, 1]), float(precision[1, 1])),
         }
         self.__dict__["_density_bound_terms"] = terms  # a frozen dataclass: its __dict__ caches
         return terms
@@ -772,9 +791,13 @@ class BearingFix(Model):
         rounding; the sum of these minima bounds the minimum of the sum. A sensor inside the
         rectangle contributes nothing, and the bound stays finite (at most the peak, exp(log_norm)).
 
-        linear: the rounding of q is at most 2 gamma (p_xx dx^2 + p_yy dy^2) (as
-        2 |p_xy dx dy| <= p_xx dx^2 + p_yy dy^2), so q is at least the form with p_xx, p_yy
-        scaled by (1 - 2 gamma), minimised exactly over the widened box about the fix.
+        linear: the kernel computes q = 4 [p_xx u^2 + m (dy/2)^2], u = dx/2 + k dy/2, from k =
+        p_xy / p_xx and m = det / p_xx rounded to the kernel's dtype. With p_xx k^2 <= p_yy and
+        2 |u k dy/2| <= u^2 + (k dy/2)^2, the parameters' rounding and the seven of q take at most
+        18.5 u (p_xx dx^2 + p_yy dy^2) off it (as 2 |p_xy dx dy| <= p_xx dx^2 + p_yy dy^2, q
+        itself is at most twice that), within 2 gamma (p_xx dx^2 + p_yy dy^2), gamma = 16 u; so q
+        is at least the form with p_xx, p_yy scaled by (1 - 2 gamma), minimised exactly over the
+        widened box about the fix.
 
         The result, times 1 + ``BOUND_MARGIN`` plus ``UNDERFLOW_SLACK``, is never 0 (the kernel
         computes no exact zeros but by underflow); ``math.inf`` only if the bound would overflow.
@@ -805,7 +828,7 @@ class BearingFix(Model):
                 q = 0.0
         else:
             p_xx, p_xy, p_yy = terms["precision"]
-            shrink = 1.0 - 2.0 * 16.0 * UNIT_ROUNDOFF  # gamma = 16 u: 5 roundings of q, 1 of p
+            shrink = 1.0 - 2.0 * 16.0 * UNIT_ROUNDOFF  # gamma = 16 u >= 18.5 u / 2 (see above)
             if finite:
                 fx, fy = self._fix
                 q = _box_quadratic_min(p_xx * shrink, p_xy, p_yy * shrink, x0 - fx, x1 - fx, y0 - fy, y1 - fy)

@@ -301,6 +301,11 @@ def _vector(name: str, value) -> np.ndarray:
     return array
 
 
+#: Travelled ranges below this many of the start's smallest SD are taken as 0 (see
+#: :meth:`Butterly.kernel_parameters`).
+NEGLIGIBLE_RHO = 1e-100
+
+
 # ---------------------------------------------------------------------------------------------
 # Scene layers (model = "butterly")
 # ---------------------------------------------------------------------------------------------
@@ -622,6 +627,10 @@ class Butterly(Model):
             )
         r = self.ranges
         rho1, rho2 = r / math.sqrt(s1), r / math.sqrt(s2)
+        # a ring under 1e-100 SDs moves no density a float64 can hold (by exp(38.6 rho) - 1 at
+        # most: beyond 38.6 SDs the density underflows), and its squares would underflow in
+        # the kernel's secular equation (densities 0 off the mean at rho ~ 1e-154): the start
+        rho1, rho2 = np.where(rho1 < NEGLIGIBLE_RHO, 0.0, rho1), np.where(rho1 < NEGLIGIBLE_RHO, 0.0, rho2)
         with np.errstate(divide="ignore"):
             log_w = np.log(self._nodes[1])
         per = np.zeros((r.size, k.PER_SPEED))
