@@ -1,12 +1,14 @@
 """The package's architecture as tests: the import layers (import-linter's contracts in
 pyproject.toml), no import cycle, no import inside a function, no private name imported across
-modules, models named only where they live, the generated scene schema up to date, and the
-package usable from a plain checkout."""
+modules, models named only where they live, the generated scene schema up to date, the
+package usable from a plain checkout, and the tests laid out as the package is."""
 
 import ast
 import os
+import re
 import subprocess
 import sys
+import tomllib
 from pathlib import Path
 
 import pytest
@@ -202,3 +204,69 @@ def test_the_checkout_runs_a_scene_from_the_root(tmp_path):
     )
     assert run.returncode == 0, run.stderr
     assert (tmp_path / "figure1.rrd").stat().st_size > 0
+
+
+# The tests' own layout: tests/<package>/test_<module...>.py beside the package they test.
+TESTS = ROOT / "tests"
+SUPPORT = TESTS / "support"
+
+
+def _test_files() -> list[Path]:
+    return sorted(TESTS.rglob("test_*.py"))
+
+
+def _test_directories() -> list[Path]:
+    return sorted({path.parent for path in _test_files()})
+
+
+def test_the_tests_mirror_the_package():
+    """A test lives in tests/ (cross-cutting: README, packaging, architecture, CLI, top-level
+    modules) or in tests/<name>/ for the package bananagrid/<name>/ (kernels/ for the kernels)."""
+    packages = {path.parent.name for path in PACKAGE.glob("*/__init__.py")} | {"kernels"}
+    for directory in _test_directories():
+        if directory != TESTS:
+            assert directory.parent == TESTS and directory.name in packages, directory.relative_to(ROOT)
+    assert not list(SUPPORT.glob("test_*.py")), "tests/support/ holds what tests share, not tests"
+
+
+def test_test_file_names_are_unique():
+    """Tests import each other's tables by module name (every test directory is on pytest's
+    path), so two test files of one name would shadow each other."""
+    names = [path.name for path in _test_files()]
+    assert sorted(names) == sorted(set(names)), sorted({name for name in names if names.count(name) > 1})
+
+
+def test_pytest_path_is_support_and_every_test_directory():
+    pythonpath = tomllib.loads((ROOT / "pyproject.toml").read_text())["tool"]["pytest"]["ini_options"]["pythonpath"]
+    expected = ["tests/support"] + [directory.relative_to(ROOT).as_posix() for directory in _test_directories()]
+    assert pythonpath == expected
+
+
+def test_shared_helpers_live_in_support():
+    """A module that tests import (an oracle, a case table, the tests' own model) is in
+    tests/support/; beside the tests only conftest.py and scripts run by hand (``__main__``)."""
+    misplaced = []
+    for path in sorted(TESTS.rglob("*.py")):
+        if path.is_relative_to(SUPPORT) or path.name.startswith("test_") or path.name == "conftest.py":
+            continue
+        if "__main__" not in path.read_text():
+            misplaced.append(path.relative_to(ROOT).as_posix())
+    assert misplaced == []
+
+
+#: Where a test file is named by its path (tests/...py): each such path must exist. (The
+#: README's commands are quoted verbatim in test_readme.py's table, which follows the README.)
+NAMING_TEST_PATHS = ["pyproject.toml", "bananagrid", "kernels", "docs", "tests"]
+QUOTING_THE_README = TESTS / "test_readme.py"
+
+
+def test_every_test_path_named_exists():
+    missing = []
+    for entry in NAMING_TEST_PATHS:
+        paths = [ROOT / entry] if (ROOT / entry).is_file() else sorted((ROOT / entry).rglob("*.py"))
+        paths += sorted((ROOT / entry).rglob("*.md")) if (ROOT / entry).is_dir() else []
+        for path in (path for path in paths if path != QUOTING_THE_README):
+            for named in re.findall(r"\btests/[\w/]+\.py\b", path.read_text()):
+                if not (ROOT / named).is_file():
+                    missing.append(f"{path.relative_to(ROOT)}: {named}")
+    assert missing == []

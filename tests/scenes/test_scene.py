@@ -14,7 +14,7 @@ from bananagrid.scenes.load import Layer, load_scene, parse_scene
 
 from cases import small_scene
 
-SCENES = Path(__file__).resolve().parent.parent / "scenes"
+SCENES = Path(__file__).resolve().parents[2] / "scenes"
 
 # A small valid scene; the error cases below edit one line of it each.
 BASE = small_scene("demo", """\

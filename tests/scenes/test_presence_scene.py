@@ -27,7 +27,7 @@ from bananagrid.scenes.load import load_scene, parse_scene
 from bananagrid.scenes.presence import PresenceScene
 from bananagrid.scenes.run_presence import run_presence_scene
 
-ROOT = Path(__file__).resolve().parent.parent
+ROOT = Path(__file__).resolve().parents[2]
 SCENES = {name: ROOT / "scenes" / f"{name}.toml" for name in ("room_mixture", "room_uniform", "room_frustum", "line_section4")}
 RERUN = Path(sys.executable).parent / "rerun"
 DEG = math.pi / 180.0
