@@ -45,7 +45,7 @@ SYMMETRY_TOL = 1e-12
 #: Default relative tolerance of each component's cell integral (|K15 - G7| <= RTOL |K15| + ATOL).
 RTOL = 1e-7
 #: The tolerance a float32 run uses at least: its cells agree with float64 to about 4e-5 relative
-#: (tests/test_presence.py), the precision float32 gives; the 1e-6 guarantee is float64's.
+#: (tests/models/test_presence.py), the precision float32 gives; the 1e-6 guarantee is float64's.
 FLOAT32_RTOL = 1e-5
 #: Absolute tolerance of a component's cell integral, as a fraction of p(S) (the conditioning
 #: mass): far below the 1e-9 cell mass that the 1e-6 relative guarantee covers.
