@@ -1,9 +1,11 @@
 """The package's architecture as tests: the import layers (import-linter's contracts in
 pyproject.toml), no import cycle, no import inside a function, no private name imported across
 modules, models named only where they live, the generated scene schema up to date, the
-package usable from a plain checkout, and the tests laid out as the package is."""
+package usable from a plain checkout, the tests laid out as the package is, and
+docs/architecture.md naming every module and the layers as they are."""
 
 import ast
+import importlib
 import os
 import re
 import subprocess
@@ -270,3 +272,58 @@ def test_every_test_path_named_exists():
                 if not (ROOT / named).is_file():
                     missing.append(f"{path.relative_to(ROOT)}: {named}")
     assert missing == []
+
+
+# docs/architecture.md: the package as it is, kept true here.
+ARCHITECTURE = ROOT / "docs" / "architecture.md"
+
+
+def _package_modules() -> set[str]:
+    """Every package and module of bananagrid, the kernels (installed as bananagrid.kernels) included."""
+    kernels = {f"bananagrid.kernels.{path.stem}" for path in (ROOT / "kernels").glob("*.py") if path.stem != "__init__"}
+    return {module_name(path) for path in SOURCES} | kernels | {"bananagrid.kernels"}
+
+
+def _named_in_architecture() -> set[str]:
+    return set(re.findall(r"`(bananagrid(?:\.\w+)*)`", ARCHITECTURE.read_text()))
+
+
+def test_every_module_is_named_in_the_architecture_docs():
+    assert sorted(_package_modules() - _named_in_architecture()) == []
+
+
+def test_every_name_in_the_architecture_docs_exists():
+    """A dotted name there is a module of the package, or a name defined in one."""
+    modules = _package_modules()
+    missing = []
+    for name in sorted(_named_in_architecture() - modules):
+        parts = name.split(".")
+        owner = max((k for k in range(1, len(parts)) if ".".join(parts[:k]) in modules), default=None)
+        if owner is None or not _has_attribute(".".join(parts[:owner]), parts[owner:]):
+            missing.append(name)
+    assert missing == []
+
+
+def _has_attribute(module: str, path: list[str]) -> bool:
+    value = importlib.import_module(module)
+    for part in path:
+        if not hasattr(value, part):
+            return False
+        value = getattr(value, part)
+    return True
+
+
+def test_the_layers_in_the_architecture_docs_are_the_contract():
+    """The layers block of docs/architecture.md, top to bottom, is import-linter's layers contract."""
+    contracts = tomllib.loads((ROOT / "pyproject.toml").read_text())["tool"]["importlinter"]["contracts"]
+    (layers,) = [c["layers"] for c in contracts if c["type"] == "layers"]
+    section = ARCHITECTURE.read_text().split("\n## Layers\n", 1)[1].split("\n## ", 1)[0]
+    (block,) = re.findall(r"^```text\n(.*?)^```", section, flags=re.S | re.M)
+    assert block.splitlines() == layers
+
+
+def test_every_test_directory_is_described_in_the_architecture_docs():
+    section = ARCHITECTURE.read_text().split("\n## Tests\n", 1)[1].split("\n## ", 1)[0]
+    described = set(re.findall(r"^\| `(tests/(?:\w+/)?)` \|", section, flags=re.M))
+    directories = {directory.relative_to(ROOT).as_posix() + "/" for directory in [*_test_directories(), SUPPORT]}
+    assert described == directories
