@@ -309,7 +309,7 @@ class DensityModel(Protocol):
         Stated agreement of float32 with float64 kernels, relative, where the density exceeds
         1e-6 of its peak (tested over every registered model), beyond the float64 density's
         own change over the float32 rounding of the point's coordinates, which no float32
-        kernel can resolve (tests/test_float32_sweep.py).
+        kernel can resolve (tests/models/test_float32_sweep.py).
     """
 
     kind: ClassVar[str]

@@ -8,7 +8,7 @@ intervals at once (``lanes.cat_scan_group``: F at the group's nodes and at their
 from the table's columns regrouped into vectors by :func:`node_groups`, with the scalar scan's
 arithmetic), and each flagged interval is examined by the scalar kernel's own
 ``cat.cat_node_interval``, in node order. The density is therefore the scalar kernel's, bit for
-bit (``tests/test_lanes.py`` checks it).
+bit (``tests/kernels/test_lanes.py`` checks it).
 
 CPU only (see ``kernels/lanes.py``); the GPU path uses ``cat.cat_grid``.
 """

@@ -187,7 +187,7 @@ def scc_of(sinc_x: Any, cos_x: Any):
 
 
 #: Cephes' atan rational approximation P(z^2) / Q(z^2) on |z| <= 0.66 (Q monic), accurate to
-#: 2.3e-16 relative for atan2 over 2e6 random points (tests/test_consistency.py checks it).
+#: 2.3e-16 relative for atan2 over 2e6 random points (tests/models/test_consistency.py checks it).
 ATAN_MOREBITS = 6.123233995736765886130e-17
 HALF_PI = 1.5707963267948966
 QUARTER_PI = 0.7853981633974483

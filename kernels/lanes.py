@@ -19,7 +19,7 @@ rounding fewer each. The atan2 snippet does not: its rounding is then the scalar
 ``common.atan2_fast``'s, step for step, and phi feeds P_sigma, which is ill conditioned near its
 zero (an FMA there moved the density 3e-13 from the scalar kernel's).
 
-Accuracy (``tests/test_lanes.py`` measures each over its reduced range and the whole domain
+Accuracy (``tests/kernels/test_lanes.py`` measures each over its reduced range and the whole domain
 against long double references): :func:`lane_exp` within 3 ulp (float64) and 2 ulp
 (float32), :func:`lane_atan2` within 2 ulp (Cephes' rational function, as the scalar
 ``common.atan2_fast``), :func:`lane_sin` and :func:`lane_cos` within 2 ulp away from their zeros

@@ -9,7 +9,7 @@ functions the scalar kernel runs too (``polar.polar_law_of``, ``polar.polar_head
 with the lane sine and both branches of the sinc derivatives selected per lane. The scalar
 kernel's branches are selects: 0 at r = 0 and where P_sigma (or the variance) is not positive.
 Values agree with the scalar kernel to about 1e-14 relative in float64 where the density is well
-conditioned (``tests/test_lanes.py`` sweeps the parameter domain).
+conditioned (``tests/kernels/test_lanes.py`` sweeps the parameter domain).
 
 CPU only (see ``kernels/lanes.py``); the GPU path uses ``polar.polar_grid``. The grid, points
 and batch kernels share :func:`polar_world_lanes`, so that ``rasterise``, ``pdf`` and the batches

@@ -36,7 +36,7 @@ changes; TVPACK): P(X > h, Y > k) for standard normals of correlation r, by 6/12
 Gauss-Legendre in the correlation (nodes passed in ``bvn_rule``).
 
 A grid cell is a difference of four such orthant probabilities, which cancels. In float32
-arithmetic the small cells are lost (tests/test_presence.py's room against float64, cells above
+arithmetic the small cells are lost (tests/models/test_presence.py's room against float64, cells above
 1e-6 of the largest: 40% off at 64 x 64, 560% at 256 x 256), and float32 cell edges alone would
 cost ulp(x) / dx of a cell's width (4e-5 for a 1024-cell row of that 6 m room). So
 :func:`grid_cells` always reads float64 edges, components and Gauss-Legendre nodes and does the

@@ -1,5 +1,5 @@
 """Reproduce Tables 1 and 2 and the Section 6.1 goodness figure of Langholm & Totland with the
-independent float64 oracle in tests/oracles.py, check grid convergence, and sanity-check the
+independent float64 oracle in tests/support/oracles.py, check grid convergence, and sanity-check the
 oracle by Monte Carlo.
 
     python tests/reproduce_tables.py            # everything (several minutes on 2 cores)
@@ -20,7 +20,7 @@ import time
 import numpy as np
 from scipy.stats import chi2 as chi2_dist
 
-sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "support"))
 import oracles  # noqa: E402
 
 V0, T, SA, SW = 280.0, 10.0, 5.0 / 3.0, math.pi / 54.0

@@ -1,12 +1,16 @@
 """The package's architecture as tests: the import layers (import-linter's contracts in
 pyproject.toml), no import cycle, no import inside a function, no private name imported across
-modules, models named only where they live, the generated scene schema up to date, and the
-package usable from a plain checkout."""
+modules, models named only where they live, the generated scene schema up to date, the
+package usable from a plain checkout, the tests laid out as the package is, and
+docs/architecture.md naming every module and the layers as they are."""
 
 import ast
+import importlib
 import os
+import re
 import subprocess
 import sys
+import tomllib
 from pathlib import Path
 
 import pytest
@@ -214,3 +218,126 @@ def test_the_checkout_runs_a_scene_from_the_root(tmp_path):
     )
     assert run.returncode == 0, run.stderr
     assert (tmp_path / "figure1.rrd").stat().st_size > 0
+
+
+# The tests' own layout: tests/<package>/test_<module...>.py beside the package they test.
+TESTS = ROOT / "tests"
+SUPPORT = TESTS / "support"
+
+
+def _test_files() -> list[Path]:
+    return sorted(TESTS.rglob("test_*.py"))
+
+
+def _test_directories() -> list[Path]:
+    return sorted({path.parent for path in _test_files()})
+
+
+def test_the_tests_mirror_the_package():
+    """A test lives in tests/ (cross-cutting: README, packaging, architecture, CLI, top-level
+    modules) or in tests/<name>/ for the package bananagrid/<name>/ (kernels/ for the kernels)."""
+    packages = {path.parent.name for path in PACKAGE.glob("*/__init__.py")} | {"kernels"}
+    for directory in _test_directories():
+        if directory != TESTS:
+            assert directory.parent == TESTS and directory.name in packages, directory.relative_to(ROOT)
+    assert not list(SUPPORT.glob("test_*.py")), "tests/support/ holds what tests share, not tests"
+
+
+def test_test_file_names_are_unique():
+    """Tests import each other's tables by module name (every test directory is on pytest's
+    path), so two test files of one name would shadow each other."""
+    names = [path.name for path in _test_files()]
+    assert sorted(names) == sorted(set(names)), sorted({name for name in names if names.count(name) > 1})
+
+
+def test_pytest_path_is_support_and_every_test_directory():
+    pythonpath = tomllib.loads((ROOT / "pyproject.toml").read_text())["tool"]["pytest"]["ini_options"]["pythonpath"]
+    expected = ["tests/support"] + [directory.relative_to(ROOT).as_posix() for directory in _test_directories()]
+    assert pythonpath == expected
+
+
+def test_shared_helpers_live_in_support():
+    """A module that tests import (an oracle, a case table, the tests' own model) is in
+    tests/support/; beside the tests only conftest.py and scripts run by hand (``__main__``).
+    (A package the tests install, in a folder of its own without tests, is not looked at.)"""
+    misplaced = []
+    for path in sorted(path for directory in _test_directories() for path in directory.glob("*.py")):
+        if path.name.startswith("test_") or path.name == "conftest.py":
+            continue
+        if "__main__" not in path.read_text():
+            misplaced.append(path.relative_to(ROOT).as_posix())
+    assert misplaced == []
+
+
+#: Where a test file is named by its path (tests/...py): each such path must exist. (The
+#: README's commands are quoted verbatim in test_readme.py's table, which follows the README.)
+NAMING_TEST_PATHS = ["pyproject.toml", "bananagrid", "kernels", "docs", "tests", "README.md"]
+QUOTING_THE_README = TESTS / "test_readme.py"
+
+
+def test_every_test_path_named_exists():
+    missing = []
+    for entry in NAMING_TEST_PATHS:
+        paths = [ROOT / entry] if (ROOT / entry).is_file() else sorted((ROOT / entry).rglob("*.py"))
+        paths += sorted((ROOT / entry).rglob("*.md")) if (ROOT / entry).is_dir() else []
+        for path in (path for path in paths if path != QUOTING_THE_README):
+            for named in re.findall(r"\btests/[\w/]+\.py\b", path.read_text()):
+                if not (ROOT / named).is_file():
+                    missing.append(f"{path.relative_to(ROOT)}: {named}")
+    assert missing == []
+
+
+# docs/architecture.md: the package as it is, kept true here.
+ARCHITECTURE = ROOT / "docs" / "architecture.md"
+
+
+def _package_modules() -> set[str]:
+    """Every package and module of bananagrid, the kernels (installed as bananagrid.kernels) included."""
+    kernels = {f"bananagrid.kernels.{path.stem}" for path in (ROOT / "kernels").glob("*.py") if path.stem != "__init__"}
+    return {module_name(path) for path in SOURCES} | kernels | {"bananagrid.kernels"}
+
+
+def _named_in_architecture() -> set[str]:
+    return set(re.findall(r"`(bananagrid(?:\.\w+)*)`", ARCHITECTURE.read_text()))
+
+
+def test_every_module_is_named_in_the_architecture_docs():
+    assert sorted(_package_modules() - _named_in_architecture()) == []
+
+
+def test_every_name_in_the_architecture_docs_exists():
+    """A dotted name there is a module of the package, or a name defined in one."""
+    modules = _package_modules()
+    missing = []
+    for name in sorted(_named_in_architecture() - modules):
+        parts = name.split(".")
+        owner = max((k for k in range(1, len(parts)) if ".".join(parts[:k]) in modules), default=None)
+        if owner is None or not _has_attribute(".".join(parts[:owner]), parts[owner:]):
+            missing.append(name)
+    assert missing == []
+
+
+def _has_attribute(module: str, path: list[str]) -> bool:
+    value = importlib.import_module(module)
+    for part in path:
+        if not hasattr(value, part):
+            return False
+        value = getattr(value, part)
+    return True
+
+
+def test_the_layers_in_the_architecture_docs_are_the_contract():
+    """The layers block of docs/architecture.md, top to bottom, is import-linter's layers contract."""
+    contracts = tomllib.loads((ROOT / "pyproject.toml").read_text())["tool"]["importlinter"]["contracts"]
+    (layers,) = [c["layers"] for c in contracts if c["type"] == "layers"]
+    section = ARCHITECTURE.read_text().split("\n## Layers\n", 1)[1].split("\n## ", 1)[0]
+    (block,) = re.findall(r"^```text\n(.*?)^```", section, flags=re.S | re.M)
+    assert block.splitlines() == layers
+
+
+def test_every_test_directory_is_described_in_the_architecture_docs():
+    section = ARCHITECTURE.read_text().split("\n## Tests\n", 1)[1].split("\n## ", 1)[0]
+    described = set(re.findall(r"^\| `(tests/(?:\w+/)?)` \|", section, flags=re.M))
+    directories = {directory.relative_to(ROOT).as_posix() + "/" for directory in [*_test_directories(), SUPPORT]}
+    assert sorted(directories - described) == []
+    assert sorted(name for name in described if not (ROOT / name).is_dir()) == []

@@ -255,7 +255,7 @@ def test_bearing_maps_anywhere_at_points_anywhere(ox, oy, baseline, angle, sigma
     for dtype in (np.float64, np.float32):
         values = refused_or(lambda: model.pdf(x, y, dtype=dtype), ["x", "y", "points"])
         finite(values)
-        # the lane exp is within 3 ulp (tests/test_lanes.py): 1e-6 covers float32's too
+        # the lane exp is within 3 ulp (tests/kernels/test_lanes.py): 1e-6 covers float32's too
         assert np.all(values >= 0.0) and np.all(values <= peak * (1.0 + 1e-6)), (values.max(), peak)
 
 

@@ -14,7 +14,7 @@ each bearing ranges over P_mu(phi) +- 6.5 s(phi) (together they leave out about 
 mass, far below Figure 7's finest contour, 0.99999), s(phi) = sigma_a t^2 / 2 scc(phi) (the range
 SD of Section 4.3; scc >= 1/3 on [0, pi]), both by the midpoint rule, each node standing for
 its polar area r dr dphi. :func:`sweep_point` on Figure 1's setting gives the single-scene
-``compare`` figure 0.99992 (tests/test_compare.py checks the two agree, and that doubling the
+``compare`` figure 0.99992 (tests/analysis/test_compare.py checks the two agree, and that doubling the
 lattice changes the goodness by less than 1e-5).
 """
 

@@ -101,7 +101,7 @@ def row_sums(block: np.ndarray) -> np.ndarray:
     A row's sum is NumPy's pairwise sum of that row alone, whatever rows surround it (the
     reduction runs along each contiguous row, casting in buffers that restart at every row), so
     sums taken band by band equal, bit for bit, those of the whole array at once
-    (``tests/test_thread_bits.py`` checks it over shapes, slices and both dtypes): results summed
+    (``tests/engine/test_thread_bits.py`` checks it over shapes, slices and both dtypes): results summed
     from them in a fixed order do not depend on how rows were split between threads."""
     return np.ascontiguousarray(block).sum(axis=1, dtype=np.float64)
 

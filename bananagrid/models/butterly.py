@@ -53,7 +53,7 @@ __all__ = [
 #: of the start's smallest SD sqrt(S1). P_r(u) varies with r on that scale (the ring's
 #: profile), so the error of GAUSS_POINTS nodes per panel is fixed by this ratio: below 1e-11
 #: relative against a rule 4x finer (measured 5e-12, the kernel's own rounding level) wherever
-#: the density exceeds 1e-12 of its peak (tests/test_butterly.py, test_continuous_speed_*).
+#: the density exceeds 1e-12 of its peak (tests/models/test_butterly.py, test_continuous_speed_*).
 SPEED_PANEL_SIGMAS = 1.0
 #: Gauss-Legendre nodes per panel.
 GAUSS_POINTS = 8

@@ -583,7 +583,7 @@ class CAT(MotionModel):
         interpolation, is second order in the interval, which is kept short enough for it
         (``CELL_CURVE_TOL``): stated as 5e-5 of a cell's probability plus 1e-12, tested over
         the whole parameter domain and at the folds (measured at most 4.3e-6,
-        tests/test_cell_probabilities.py).
+        tests/engine/test_cell_probabilities.py).
         """
         if self.sigma_heading > 0.0:
             return None

@@ -634,7 +634,7 @@ def exact_nodes(x, V):
     fitted so that, on a dense grid of V in [1, 1e14] and x in [2e-8, 80 V], the bound
     minimised over y is below ``EXACT_RTOL`` times a lower bound of P
     (:math:`\max((1 - e^{-x/2})/\sqrt V,\ 1 - e^{-x/(2V)})`), with N at least 2.6 % above
-    the count that the bound requires (14 % for V <= 1e6); ``tests/test_containment.py``
+    the count that the bound requires (14 % for V <= 1e6); ``tests/models/test_containment.py``
     re-checks the bound on such a grid and compares N with 2N nodes in extended precision
     (observed truncation below 1e-18 relative).
     """

@@ -47,7 +47,7 @@ WEIGHT_SUM_TOL = 1e-9
 #: Default relative tolerance of each component's cell integral (|K15 - G7| <= RTOL |K15| + ATOL).
 RTOL = 1e-7
 #: The tolerance a float32 run uses at least: its cells agree with float64 to about 4e-5 relative
-#: (tests/test_presence.py), the precision float32 gives; the 1e-6 guarantee is float64's.
+#: (tests/models/test_presence.py), the precision float32 gives; the 1e-6 guarantee is float64's.
 FLOAT32_RTOL = 1e-5
 #: Absolute tolerance of a component's cell integral, as a fraction of p(S) (the conditioning
 #: mass): far below the 1e-9 cell mass that the 1e-6 relative guarantee covers.
@@ -147,7 +147,7 @@ class GaussianMixture:
         summary="a Gaussian mixture of heads in the room, one [presence.components.NAME] table a component",
     )
     #: Stated agreement of float32 cells with float64 (relative, cells holding 1e-9 of the mass):
-    #: a float32 run uses the tolerance FLOAT32_RTOL and agrees to 4e-5 (tests/test_presence.py).
+    #: a float32 run uses the tolerance FLOAT32_RTOL and agrees to 4e-5 (tests/models/test_presence.py).
     float32_rtol: ClassVar[float] = 2e-4
 
     #: Peak bytes per sample of :meth:`sample`: 56 (2-D) and 80 (3-D) measured (tracemalloc,

@@ -109,7 +109,7 @@ def range_comparison(raster: Raster, model: Butterly) -> dict:
     of 2 cells and s / 5 wide. Each cell's mass is spread evenly over SUB x SUB points in it
     before binning (the density is known at the centre only), which leaves an error of about
     the density's change across a cell (the midpoint rule's) and of the binning of those
-    points near the bin edges: a few 1e-3 of the peak at cells of s / 20 (tests/test_scene.py).
+    points near the bin edges: a few 1e-3 of the peak at cells of s / 20 (tests/scenes/test_scene.py).
 
     Returns
     -------

@@ -187,7 +187,7 @@ class GridRun:
 
 #: Peak bytes per grid cell of a scene run (rasters, the recording's float32 images, contours
 #: and regions): the growth of a process's peak resident set from a 10,000-cell run to a
-#: 2-million-cell one (tests/test_memory.py) measured 76.4 (rice_isotropic, Butterly), 75.2
+#: 2-million-cell one (tests/engine/test_memory.py) measured 76.4 (rice_isotropic, Butterly), 75.2
 #: (ship_heading), 74.4 (figure1), 68.4 (submarine), 64.3 (bearing_coastal); rounded up to a bound.
 RUN_BYTES_PER_CELL = 96
 #: Further bytes per cell for each map kept for --netcdf, --geotiff or --geojson (the float64

@@ -25,7 +25,7 @@ from bananagrid.recording.readback import open_recording, read_rasters, recordin
 from bananagrid.scenes.load import load_scene
 from bananagrid.scenes.pictures import read_picture
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 SHIP = ROOT / "scenes" / "geo_ship.toml"
 STEP = 200.0  # m: 60 x 45 cells, a quick run; the files do not depend on the step
 

@@ -1,6 +1,6 @@
 """Cell probabilities on grids: ``bg.rasterise(model, grid, quantity="probability")``.
 
-References (``tests/cell_oracle.py``): the CAT cells exact in the acceleration by NumPy line
+References (``tests/support/cell_oracle.py``): the CAT cells exact in the acceleration by NumPy line
 clipping and SciPy's adaptive ``quad`` over the turn rate (not the kernel's walk or its rule);
 the other models by SciPy ``dblquad`` of their density, in polar coordinates about a polar
 density's origin; Monte Carlo from each model's own ``sample``; and the mass of a grid that holds

@@ -22,7 +22,7 @@ from bananagrid.geo import libraries
 from bananagrid.geo.frame import GeoFrame, parse_utc
 from bananagrid.scenes.load import load_scene, parse_scene
 
-SCENES = Path(__file__).resolve().parent.parent / "scenes"
+SCENES = Path(__file__).resolve().parents[2] / "scenes"
 GEOD = pyproj.Geod(ellps="WGS84")
 
 # Origins: the Norwegian coast, the equator, the southern ocean, next to the antimeridian.

@@ -16,7 +16,7 @@ from rerun.chunk import RrdReader
 from bananagrid import BananagridError, Grid, Raster
 from bananagrid.contours import contour_lines, mass_inside, mass_regions
 from bananagrid.recording.inspect import format_inspection, inspect_recording, read_depth_image
-from bananagrid.recording import core as core_module
+from bananagrid.recording import stream as stream_module
 from bananagrid.recording.core import (
     default_blueprint,
     log_raster,
@@ -275,14 +275,14 @@ def test_inspect_counts_non_finite_pixels_instead_of_a_nan_range(tmp_path):
 def test_a_recording_cut_short_is_refused_before_it_is_named(tmp_path, raster, monkeypatch):
     """The file is read back before the rename: cut to half after rerun closes it (a full disk
     or a dying writer), it raises one line and leaves neither the file nor its temporary."""
-    real_close = core_module._close
+    real_close = stream_module._close
 
     def close_then_cut(rec, shown, partial, **kwargs):
         real_close(rec, shown, partial, **kwargs)
         with open(partial, "r+b") as f:
             f.truncate(partial.stat().st_size // 2)
 
-    monkeypatch.setattr(core_module, "_close", close_then_cut)
+    monkeypatch.setattr(stream_module, "_close", close_then_cut)
     with pytest.raises(BananagridError, match=r"a\.rrd: the recording written does not read back") as info:
         write(tmp_path / "a.rrd", {1.0: raster})
     assert "\n" not in str(info.value)

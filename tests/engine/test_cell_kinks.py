@@ -8,9 +8,9 @@ ridge narrows to a point), and with heading noise the same edge as a jump; a bea
 bearings wrap behind each station, and the station itself is a point about which the density
 changes with the direction; a Butterly is smooth (a normal start convolved with a course and a
 speed law); the CAT's folds are caustics, which its own rule takes exactly in the acceleration
-(``tests/test_cell_probabilities.py`` holds it to its stated 5e-5 at the folds).
+(``tests/engine/test_cell_probabilities.py`` holds it to its stated 5e-5 at the folds).
 
-Cells are placed across each: the oracles (``tests/cell_oracle.py``) are SciPy's adaptive
+Cells are placed across each: the oracles (``tests/support/cell_oracle.py``) are SciPy's adaptive
 ``quad`` in polar coordinates about the kink's point with the kinks and the corners' bearings
 as breakpoints, exact in r for a polar banana's radial law written with ``math``, nested over
 ``model.pdf`` otherwise. Stated accuracy (README, cell probabilities): 1e-8 relative for the
@@ -32,7 +32,7 @@ import cell_oracle
 #: The stated accuracy of every cell rule but the CAT's (README): relative to the cell, plus an
 #: absolute floor of 1e-14 for cells in a density's far tail (the rule's error there is an
 #: absolute one, far below any cell a planner looks at; the same floor as
-#: tests/test_cell_probabilities.py).
+#: tests/engine/test_cell_probabilities.py).
 RTOL = 1e-8
 ATOL = 1e-14
 

@@ -16,7 +16,7 @@ from bananagrid.engine.memory import RASTERISE_BYTES_PER_CELL, available_bytes, 
 from bananagrid.scenes.load import load_scene
 from bananagrid.scenes.run import RUN_BYTES_PER_CELL
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 
 #: A child process that runs one scene at about ``cells`` cells and prints its peak RSS growth
 #: over the same run at a small grid (both in the child, so imports and compiled kernels count

@@ -1,6 +1,6 @@
 """Presence probabilities on angular cells and grids (Pessentheiner with ERRATA).
 
-Oracles (tests/presence_oracle.py) are independent of the kernels: scipy dblquad / tplquad of
+Oracles (tests/support/presence_oracle.py) are independent of the kernels: scipy dblquad / tplquad of
 scipy.stats densities over each cell written from the geometry alone, scipy quad on the line,
 scipy.stats.multivariate_normal.cdf for rectangles, and Monte Carlo from ``sample``.
 """

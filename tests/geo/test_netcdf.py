@@ -30,7 +30,7 @@ from bananagrid.geo.dataset import raster_dataset, write_netcdf
 from bananagrid.geo.frame import GeoFrame
 from bananagrid.results import CellMap, PolarRaster
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 LAT, LON, FIX_TIME = 60.39, 5.32, "2026-11-24T06:00:00Z"
 GRID = Grid.from_bounds(x=(-3000.0, 3000.0), y=(-200.0, 3400.0), step=400.0)  # 15 x 9 cells
 # The two CRSs of a frame: the default (false origin (0, 0)) and a UTM zone (a false origin of

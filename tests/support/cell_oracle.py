@@ -1,4 +1,4 @@
-"""Independent references for cell probabilities (tests/test_cell_probabilities.py).
+"""Independent references for cell probabilities (tests/engine/test_cell_probabilities.py).
 
 CAT: for each turn rate the line P(a) = pos(a, omega) is clipped to the cell in NumPy (the
 cell's two slabs, not the kernel's walk), and Phi(z_out) - Phi(z_in) is integrated over omega by

@@ -4,7 +4,7 @@ Where the banana folds over itself, points on the folded side of the caustic (de
 reached by two nearby turn rates; the pair merges at the caustic and its density grows like
 1 / sqrt(distance). The kernel must find both roots however close they are (the bounds and the
 proof are in ``kernels/cat.py``, ``cat_interval``). The reference is the independent float64
-oracle of ``tests/oracles.py`` (another parametrisation, a 0.002-rad scan of every node
+oracle of ``tests/support/oracles.py`` (another parametrisation, a 0.002-rad scan of every node
 interval for an interior minimum of |f|, no pruning), at points placed on both sides of the
 caustic, computed here from det J = 0 in the oracle's own terms, and at points drawn by a
 derandomised property-based sweep over the whole domain.
@@ -23,7 +23,7 @@ from bananagrid.domains.pose import Pose
 
 import oracles
 
-#: Required agreement with the oracle (the CAT accuracy requirement of tests/test_cat_accuracy.py).
+#: Required agreement with the oracle (the CAT accuracy requirement of tests/models/test_cat_accuracy.py).
 RTOL = 1e-6
 #: Oracle scan step in s = omega t: a fifth of the oracle's default, so that every node interval
 #: of the oracle holds at most one extremum of f even at the widest settings swept (f varies on

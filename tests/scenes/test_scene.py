@@ -19,7 +19,7 @@ from cases import small_scene
 #: The model kinds a scene may name, as its messages list them (from the registry).
 KINDS_LISTED = ", ".join(f'"{kind}"' for kind in installed_kinds().on("grid"))  # the kinds a [layers] table takes
 
-SCENES = Path(__file__).resolve().parent.parent / "scenes"
+SCENES = Path(__file__).resolve().parents[2] / "scenes"
 
 # A small valid scene; the error cases below edit one line of it each.
 BASE = small_scene("demo", """\

@@ -26,7 +26,7 @@ from bananagrid.scenes.load import parse_scene
 
 from cases import small_scene
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 BIN = Path(sys.executable).parent
 #: A slow target at 2 and 5 s on a 20 x 20 grid of 10 m cells (milliseconds to compute).
 TEXT = small_scene("where", '[layers.a]\nmodel = "cat"\n').replace("t = 5.0\n", "").replace(

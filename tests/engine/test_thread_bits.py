@@ -4,7 +4,7 @@ The engine splits rows into bands, one launch each, as many as the threads allow
 band by band (the captured mass, a batch's per-hypothesis sums) would then depend on where the
 bands begin. Each row (each hypothesis) is summed on its own and the rows' sums added exactly,
 so values, masses and normalised values must be equal byte for byte between 1 and any number of
-threads, for every registered model kind (the contract table of ``tests/test_contract.py``),
+threads, for every registered model kind (the contract table of ``tests/models/test_contract.py``),
 both dtypes and grids of 1 row, of prime row counts, and of more Butterly tiles than bands; the
 presence laws (kinds of the array domain) on their angular lattices, whose cells are bands too.
 """
@@ -94,7 +94,7 @@ def test_butterly_tiles_do_not_follow_the_bands():
 @pytest.mark.parametrize("name", ["polar-rough", "polar-heading", "bearing_fix", "butterly", "isotropic"])
 def test_cell_probabilities(name):
     """Cell probabilities on a grid by the engine's quadrature, whose nodes are evaluated in
-    chunks sized by the thread count (the CAT's own rule: tests/test_cell_probabilities.py)."""
+    chunks sized by the thread count (the CAT's own rule: tests/engine/test_cell_probabilities.py)."""
     case = CASES[name]
     model, grid = case.model(), _grid(case, 7, 5)
     for dtype in DTYPES:

@@ -32,7 +32,7 @@ from bananagrid.scenes.run import run_scene
 from bananagrid.scenes.load import load_scene, parse_scene
 import bananagrid.scenes.run_cells as run_cells
 
-ROOT = Path(__file__).resolve().parent.parent
+ROOT = Path(__file__).resolve().parents[2]
 SCENES = {name: ROOT / "scenes" / f"{name}.toml" for name in ("room_mixture", "room_uniform", "room_frustum", "line_section4")}
 RERUN = Path(sys.executable).parent / "rerun"
 DEG = math.pi / 180.0

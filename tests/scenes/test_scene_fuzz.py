@@ -19,7 +19,7 @@ from bananagrid.scenes.load import parse_scene
 from bananagrid.scenes.run import run_scene
 from geo_cases import check_geojson, check_geotiff, check_netcdf, moved_doc
 
-SCENES = sorted((Path(__file__).resolve().parents[1] / "scenes").glob("*.toml"))
+SCENES = sorted((Path(__file__).resolve().parents[2] / "scenes").glob("*.toml"))
 DOCS = {path.name: tomllib.loads(path.read_text()) for path in SCENES}
 
 #: Values of every TOML type and the numeric extremes.

@@ -47,7 +47,7 @@ from geo_cases import (GEOD, check_area, check_geojson, check_geojson_geometry, 
                        one_line_naming)
 from test_scene_fuzz import toml_text
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 SCENES = {name: (ROOT / "scenes" / f"{name}.toml").read_text() for name in ("geo_ship", "geo_bearing")}
 #: A step of about 40 cells along each scene's wider side: a quick run; the files' geometry does
 #: not depend on it.
