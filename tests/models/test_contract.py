@@ -39,7 +39,7 @@ from presence_oracle import bin_samples
 from bananagrid.models.registry import ENTRY_POINT_GROUP, kinds_from_entry_points
 
 #: The tests' own installed package (tests/plugins: a model registered by entry point).
-PLUGINS = Path(__file__).resolve().parent / "plugins"
+PLUGINS = Path(__file__).resolve().parents[1] / "plugins"
 
 
 def plugin_kinds() -> bg.models.registry.Registry:
