@@ -144,16 +144,21 @@ class KernelBinding:
 
 @dataclass(frozen=True)
 class CellPlan:
-    """A model's own way to the probabilities of a grid's cells (instead of the engine's
-    quadrature of its density), sized before anything runs.
+    """A model's own way to the probabilities of a domain's cells (instead of the engine's
+    rule for that domain), sized before anything runs: the one form of cell plans for every
+    domain and model family (:meth:`DensityModel.cell_plan`, :meth:`PresenceModel.cell_plan`).
 
     Attributes
     ----------
-    seconds : float
-        Estimated seconds of one CPU core, checked like :meth:`DensityModel.work_estimate`.
+    seconds : float or None
+        Estimated seconds of one CPU core, checked like :meth:`DensityModel.work_estimate`;
+        None where the domain's size bounds the work (an angular lattice's cells).
     run : callable
-        ``run(ctx) -> (probability, notes)``: the probability of every cell, float64 of shape
-        ``(ny, nx)``, and provenance entries (method, nodes, the error claim).
+        ``run(ctx) -> (cells, notes)``, ``ctx`` a :class:`KernelContext`: on a
+        :class:`~bananagrid.Grid`, the probability of every cell, float64 of shape ``(ny, nx)``,
+        which the engine sums and narrows into a :class:`~bananagrid.Raster`; on an
+        :class:`~bananagrid.AngularLattice`, the complete :class:`~bananagrid.CellMap`. ``notes``:
+        provenance entries (method, nodes, the error claim).
     method : str
         One line naming the method, for provenance and messages.
     """
@@ -352,10 +357,14 @@ class DensityModel(Protocol):
         on cells where the density is not negligible and rounded up; checked before any launch
         (:mod:`bananagrid.engine.work`)."""
 
-    def grid_cells(self, grid) -> CellPlan | None:
-        """The model's own method for the probabilities of the cells of ``grid`` (a
-        :class:`~bananagrid.Grid`), or None for the engine's quadrature of the density
-        (:func:`bananagrid.engine.grid_cells.probability_raster`)."""
+    def cell_plan(self, domain, region=None) -> CellPlan | None:
+        """The model's own method for the probabilities of the cells of ``domain``, or None for
+        the engine's rule there: the quadrature of the density over a
+        :class:`~bananagrid.Grid`'s cells (:func:`bananagrid.engine.grid_cells.probability_raster`)
+        or a :class:`~bananagrid.PolarLattice`'s (:mod:`bananagrid.engine.polar_cells`). A domain
+        the model has no cells of (an :class:`~bananagrid.AngularLattice`'s directions, for a
+        density in the world plane) raises :class:`~bananagrid.BananagridError` in one line;
+        ``region`` conditions an angular lattice's cells only."""
 
     def density_bound(self, x0: float, x1: float, y0: float, y1: float) -> float:
         """A proved (not sampled) upper bound of the density the model's grid kernel computes, in
@@ -433,8 +442,8 @@ class PresenceModel(Protocol):
     1, 2 or 3 dimensions whose cells are those of an angular lattice, conditioned on a region.
 
     It shares :class:`DensityModel`'s face where the two meet (``kind``, ``scene``,
-    ``float32_rtol``, ``parameters``, ``pdf``, ``sample``); its cells come from the law itself
-    (:meth:`cell_map`), which :func:`bananagrid.rasterise` calls for an
+    ``float32_rtol``, ``parameters``, ``pdf``, ``sample``, ``cell_plan``); its cells come from
+    the law's own plan (:meth:`cell_plan`), which :func:`bananagrid.rasterise` runs for an
     :class:`~bananagrid.AngularLattice`.
     """
 
@@ -459,9 +468,11 @@ class PresenceModel(Protocol):
     def region_probability(self, region) -> float:
         """p(S): the law's probability of the box ``region`` (a :class:`~bananagrid.Region`)."""
 
-    def cell_map(self, lattice, region=None, *, dtype=np.float64, device: str = "cpu", threads=None):
-        """p(C | S) of every cell of ``lattice`` (an :class:`~bananagrid.AngularLattice`),
-        conditioned on ``region`` (None: the whole space): a :class:`~bananagrid.CellMap`."""
+    def cell_plan(self, domain, region=None) -> CellPlan:
+        """The law's plan for p(C | S) of every cell of ``domain`` (an
+        :class:`~bananagrid.AngularLattice`), conditioned on ``region`` (None: the whole space),
+        whose ``run(ctx)`` gives the :class:`~bananagrid.CellMap`; any other domain raises
+        :class:`~bananagrid.BananagridError` in one line saying where the law's cells are."""
 
     @classmethod
     def scene_table(cls, table, *, path: str, lattice, room) -> tuple[dict, tuple]:

@@ -337,7 +337,7 @@ def butterly_density(model: DensityModel, x, y, *, floors: bool = False, chunk: 
 
 def cat_cells(model: DensityModel, cells, edges: np.ndarray) -> np.ndarray:
     """CAT cell probabilities exact in the acceleration, by the midpoint rule over the turn-rate
-    intervals ``edges`` (``CAT.grid_cells`` integrates each interval between corner passes),
+    intervals ``edges`` (``CAT.cell_plan`` integrates each interval between corner passes),
     vectorised over the lines per cell: each line's clip to the cell (two slabs) and its normal
     mass Phi(z_out) - Phi(z_in), weighted by its interval's normal mass. ``cells`` are world
     boxes ``(x0, x1, y0, y1)``. NumPy clips every line against every cell; the kernel walks

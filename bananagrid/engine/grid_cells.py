@@ -1,6 +1,6 @@
 """Cell probabilities on a grid: the probability that the target is in each cell.
 
-A model may compute them its own way (``model.grid_cells``, a
+A model may compute them its own way (``model.cell_plan``, a
 :class:`~bananagrid.protocol.CellPlan`: the CAT's lines, exact in the acceleration). Otherwise
 the density is integrated over each cell by a tensor Gauss-Legendre rule whose sub-cells are no
 larger than the model's length scale (``model.feature_scale``), the rule the polar lattices use
@@ -78,7 +78,7 @@ def probability_raster(model: DensityModel, grid: Grid, *, dtype=np.float64, dev
     n_cells = grid.nx * grid.ny
     what = f"{type(model).__name__}: cell probabilities on a grid of {grid.nx} x {grid.ny} = {n_cells:,} cells"
     start = time.perf_counter()
-    plan = model.grid_cells(grid)
+    plan = model.cell_plan(grid)
     if ctx.cpu:
         check_memory(n_cells, PROBABILITY_BYTES_PER_CELL, what)
     if plan is not None:
@@ -257,7 +257,7 @@ class _QuadraturePlan:
 def probability_work(model: DensityModel, grid: Grid) -> tuple[float, str]:
     """Estimated seconds of one CPU core for the cell probabilities of ``grid``, and the
     method: the model's own plan, or the engine's quadrature (its nodes at the model's cost)."""
-    plan = model.grid_cells(grid)
+    plan = model.cell_plan(grid)
     if plan is not None:
         return plan.seconds, plan.method
     q = _QuadraturePlan(model, grid)

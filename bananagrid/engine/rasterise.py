@@ -19,6 +19,7 @@ from .work import check_work
 from .grid_cells import probability_raster
 from .polar_cells import rasterise_lattice
 from .grid_kernel import grid_block, grid_context
+from .warp_runtime import WarpContext
 from .tiles import rasterise_tiles
 
 __all__ = ["rasterise", "QUANTITIES"]
@@ -57,7 +58,7 @@ def rasterise(model: DensityModel | PresenceModel, grid: Grid | PolarLattice | A
     With an :class:`~bananagrid.AngularLattice` the result is a :class:`~bananagrid.CellMap`:
     the probability p(C | S) of each cell of an array's directions, conditioned on ``region``
     (S; None for the whole space), computed by the model's own cell plan
-    (``model.cell_map``, :class:`~bananagrid.protocol.PresenceModel`;
+    (``model.cell_plan``, :class:`~bananagrid.protocol.PresenceModel`;
     :func:`bananagrid.cell_probabilities` for the presence laws).
 
     Parameters
@@ -71,7 +72,7 @@ def rasterise(model: DensityModel | PresenceModel, grid: Grid | PolarLattice | A
         the probability that the target is in each cell (a :class:`Raster` of ``quantity ==
         "probability"`` whose values sum to its ``mass``, the probability inside the grid, never
         above 1 but by rounding). CAT (without heading noise) computes them exactly in the
-        acceleration (``CAT.grid_cells``), caustic cells included; every other model by a
+        acceleration (``CAT.cell_plan``), caustic cells included; every other model by a
         Gauss-Legendre rule over sub-cells no larger than its length scale, in polar coordinates
         about a polar density's origin (:mod:`bananagrid.engine.grid_cells`). A polar lattice
         always gives both.
@@ -113,11 +114,8 @@ def rasterise(model: DensityModel | PresenceModel, grid: Grid | PolarLattice | A
         return _angular_cells(model, grid, region, dtype=dtype, device=device, threads=threads, chunks=chunks)
     if region is not None:
         raise BananagridError(f"region = {region!r}: only an AngularLattice's cells are conditioned on a region")
-    if isinstance(model, PresenceModel) and not isinstance(model, DensityModel):
-        raise BananagridError(
-            f"{type(model).__name__}: a presence law's cells are those of an AngularLattice (rasterise(law, "
-            "lattice, region=room)); a 2-D mixture's grid cells: bananagrid.grid_probabilities(law, grid)"
-        )
+    if not callable(getattr(model, "bind", None)) and callable(getattr(model, "cell_plan", None)):
+        model.cell_plan(grid)  # a law with cells but no planar kernels (a presence law) says where they are
     if isinstance(grid, PolarLattice):
         return rasterise_lattice(model, grid, dtype=dtype, device=device, threads=threads, max_seconds=max_seconds)
     if not isinstance(grid, Grid):
@@ -159,14 +157,12 @@ def rasterise(model: DensityModel | PresenceModel, grid: Grid | PolarLattice | A
 
 
 def _angular_cells(model, lattice: AngularLattice, region, *, dtype, device, threads, chunks) -> CellMap:
-    """The model's own cells of an angular lattice (its ``cell_map``: probabilities, whatever the
-    ``quantity``, as a polar lattice gives both), or one line saying why not."""
+    """The model's own cells of an angular lattice (its :meth:`cell_plan`: probabilities,
+    whatever the ``quantity``, as a polar lattice gives both), or one line saying why not."""
     if chunks is not None:
         raise BananagridError("chunks: an AngularLattice's cells are not tiled; leave chunks out")
-    cell_map = getattr(model, "cell_map", None)
-    if cell_map is None:
-        raise BananagridError(
-            f"{type(model).__name__}: a density in the world plane has no cells of an array's directions; "
-            "an AngularLattice takes a presence law (GaussianMixture, UniformPresence)"
-        )
-    return cell_map(lattice, region, dtype=dtype, device=device, threads=threads)
+    if not callable(getattr(model, "cell_plan", None)):
+        check_model(model)  # not a model at all
+    plan = model.cell_plan(lattice, region)  # a density in the world plane refuses in one line
+    cells, _ = plan.run(WarpContext(dtype, device, threads))
+    return cells

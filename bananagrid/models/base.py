@@ -12,6 +12,7 @@ import math
 
 import numpy as np
 
+from ..domains.angular_lattice import AngularLattice
 from ..domains.pose import Pose
 from ..engine import memory
 from ..engine.points import evaluate_points
@@ -94,9 +95,15 @@ class Model:
         """``cells * seconds_per_cell`` (:meth:`bananagrid.protocol.DensityModel.work_estimate`)."""
         return float(cells) * self.seconds_per_cell
 
-    def grid_cells(self, grid) -> CellPlan | None:
-        """None: the engine integrates the density over each cell
-        (:meth:`bananagrid.protocol.DensityModel.grid_cells`)."""
+    def cell_plan(self, domain, region=None) -> CellPlan | None:
+        """None: the engine integrates the density over each cell of a grid or polar lattice
+        (:meth:`bananagrid.protocol.DensityModel.cell_plan`); an angular lattice's directions
+        hold no cells of a density in the world plane."""
+        if isinstance(domain, AngularLattice):
+            raise BananagridError(
+                f"{type(self).__name__}: a density in the world plane has no cells of an array's directions; "
+                "an AngularLattice takes a presence law (GaussianMixture, UniformPresence)"
+            )
         return None
 
     def density_bound(self, x0: float, x1: float, y0: float, y1: float) -> float:

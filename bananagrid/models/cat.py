@@ -9,6 +9,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.special import erfc
 
+from ..domains.grid import Grid
 from ..domains.pose import Pose
 from ..engine.warp_runtime import WarpContext
 from ..kernels import cat as kernels
@@ -75,7 +76,7 @@ FARTHEST_BOUNDED = 1e100
 COORDINATE_ULPS = 8.0
 
 
-#: Exact-in-acceleration cell probabilities (:meth:`CAT.grid_cells`): turn-rate intervals
+#: Exact-in-acceleration cell probabilities (:meth:`CAT.cell_plan`): turn-rate intervals
 #: per crossing of the smallest cell side by the fastest-moving point of a line (so that an
 #: interval's ribbon of lines is narrower than a cell), and at least per sigma_omega; the work
 #: estimate per cell an interval's edge lines walk (a few normal intervals and corner tests;
@@ -563,9 +564,9 @@ class CAT(MotionModel):
             return nodes * per_point + float(cells) * SECONDS_PER_TABLE_CELL
         return float(cells) * per_point
 
-    def grid_cells(self, grid) -> CellPlan | None:
-        r"""Cell probabilities exact in the acceleration (without heading noise; with it, None:
-        the engine integrates the convolved density).
+    def cell_plan(self, domain, region=None) -> CellPlan | None:
+        r"""A grid's cell probabilities exact in the acceleration (without heading noise; with
+        it, and on other domains, :meth:`Model.cell_plan`: the engine integrates the density).
 
         For each turn rate the reachable points form a line along which z = a / sigma_a is
         standard normal (``kernels/cat_cells.py``), so a cell crossed between z_in and z_out
@@ -585,8 +586,9 @@ class CAT(MotionModel):
         the whole parameter domain and at the folds (measured at most 4.3e-6,
         tests/engine/test_cell_probabilities.py).
         """
-        if self.sigma_heading > 0.0:
-            return None
+        if self.sigma_heading > 0.0 or not isinstance(domain, Grid):
+            return super().cell_plan(domain, region)
+        grid = domain
         edges = cell_turn_edges(self, min(grid.dx, grid.dy))
         intervals = len(edges) - 1
         if intervals > MAX_CELL_NODES:

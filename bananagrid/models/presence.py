@@ -31,7 +31,7 @@ from ..domains.region import Region, as_region
 from ..engine.warp_runtime import WarpContext, check_threads
 from ..kernels import presence as kp
 from ..results import CellMap, GridPresence
-from ..protocol import SceneKey, SceneSchema
+from ..protocol import CellPlan, SceneKey, SceneSchema
 from ..validate import MAX_CONDITION, BananagridError, covariance, positive, real_array, show
 from .base import check_n, check_rng
 from .params import modelclass, param, plain_parameters
@@ -279,11 +279,11 @@ class GaussianMixture:
         out = np.concatenate(parts) if parts else np.zeros((0, self.dim))
         return out[rng.permutation(out.shape[0])]
 
-    def cell_map(self, lattice, region=None, *, dtype=np.float64, device: str = "cpu", threads=None) -> CellMap:
+    def cell_plan(self, domain, region=None) -> CellPlan:
         """The law's own cells of a domain: p(C | S) of every cell of an
-        :class:`~bananagrid.AngularLattice` (:func:`cell_probabilities`); what
-        :func:`bananagrid.rasterise` calls for such a lattice."""
-        return cell_probabilities(self, lattice, region, dtype=dtype, device=device, threads=threads)
+        :class:`~bananagrid.AngularLattice` (:func:`cell_probabilities`), the plan
+        :func:`bananagrid.rasterise` runs for such a lattice (:func:`lattice_cell_plan`)."""
+        return lattice_cell_plan(self, domain, region)
 
     def region_probability(self, region, *, dtype=np.float64, device: str = "cpu") -> float:
         r"""p(S): the mixture's probability of the box S (ERRATA, end of Section 9).
@@ -462,10 +462,10 @@ class UniformPresence:
         b = self.region.bounds
         return b[:, 0] + (b[:, 1] - b[:, 0]) * rng.random((n, self.dim))
 
-    def cell_map(self, lattice, region=None, *, dtype=np.float64, device: str = "cpu", threads=None) -> CellMap:
+    def cell_plan(self, domain, region=None) -> CellPlan:
         """Its cells of an :class:`~bananagrid.AngularLattice` (:func:`cell_probabilities`), as
-        :meth:`GaussianMixture.cell_map`."""
-        return cell_probabilities(self, lattice, region, dtype=dtype, device=device, threads=threads)
+        :meth:`GaussianMixture.cell_plan`."""
+        return lattice_cell_plan(self, domain, region)
 
     def region_probability(self, region, **_) -> float:
         """p(S') = |S' and S| / |S|."""
@@ -777,6 +777,23 @@ def _check_presence(presence, lattice: AngularLattice):
             f"presence has {presence.dim} dimension(s) but a {lattice.geometry} lattice needs {need} "
             f"({'x' if need == 1 else 'x, y' if need == 2 else 'x, y, z'})"
         )
+
+
+def lattice_cell_plan(law, domain, region=None) -> CellPlan:
+    """A presence law's :class:`~bananagrid.protocol.CellPlan` on ``domain``: the cells of an
+    :class:`~bananagrid.AngularLattice` conditioned on ``region`` (:func:`cell_probabilities` in
+    the run's dtype, device and threads; no time estimate, the lattice's size bounds it), or one
+    line saying where the law's cells are."""
+    if not isinstance(domain, AngularLattice):
+        raise BananagridError(
+            f"{type(law).__name__}: a presence law's cells are those of an AngularLattice (rasterise(law, "
+            "lattice, region=room)); a 2-D mixture's grid cells: bananagrid.grid_probabilities(law, grid)"
+        )
+
+    def run(ctx):
+        return cell_probabilities(law, domain, region, dtype=ctx.dtype, device=ctx.device, threads=ctx.threads), {}
+
+    return CellPlan(seconds=None, run=run, method="the law's cells of an angular lattice (cell_probabilities)")
 
 
 def cell_probabilities(presence, lattice: AngularLattice, region=None, *, dtype=np.float64, device: str = "cpu",

@@ -26,12 +26,13 @@ import pytest
 from scipy import stats
 
 import bananagrid as bg
+from bananagrid.engine.warp_runtime import WarpContext
 from bananagrid.domains.pose import Pose
 from bananagrid.recording.inspect import inspect_recording
 from bananagrid.scenes.load import parse_scene
 from bananagrid.scenes.run import run_scene
 
-from bananagrid.protocol import PresenceModel
+from bananagrid.protocol import CellPlan, PresenceModel
 from cases import FIG1, FIG1_BOUNDS
 from isotropic_model import ISOTROPIC, IsotropicNormal
 from presence_oracle import bin_samples
@@ -381,7 +382,7 @@ def test_array_cells_equal_rasterise(name):
     model, lattice, region = case.model(), case.angular, case.region
     cells = bg.rasterise(model, lattice, region=region)
     assert isinstance(cells, bg.CellMap) and cells.prob.shape == lattice.shape
-    np.testing.assert_array_equal(cells.prob, model.cell_map(lattice, region).prob)
+    np.testing.assert_array_equal(cells.prob, model.cell_plan(lattice, region).run(WarpContext())[0].prob)
     np.testing.assert_array_equal(cells.prob, bg.cell_probabilities(model, lattice, region).prob)
     assert cells.prob.min() >= 0.0
 
@@ -458,6 +459,29 @@ def test_array_cells_sum_to_the_seen_part_of_the_room(name):
         seen = bg.Region(x=tuple(x), y=tuple(y), z=(max(z[0], -d1), min(z[1], -d0)))
         want = model.region_probability(seen) / model.region_probability(region)
     assert total == pytest.approx(want, rel=CELL_SUM_RTOL, abs=0.0)
+
+
+@pytest.mark.parametrize("name", list(CASES))
+def test_every_kind_has_one_cell_plan_for_every_domain(name):
+    """One protocol method gives a model's cells on any domain (``cell_plan``): a plan or None
+    (the engine's rule) where the kind has cells, one line naming the model where it has none."""
+    case = CASES[name]
+    model = case.model()
+    grid = CASES["cat"].grid
+    angular = CASES["mixture-plane"].angular
+    if case.domain == "grid":
+        for domain in (grid, bg.PolarLattice(**case.lattice)):
+            plan = model.cell_plan(domain)
+            assert plan is None or isinstance(plan, CellPlan)
+        with pytest.raises(bg.BananagridError, match=rf"^{type(model).__name__}: .*no cells of an array's directions"):
+            model.cell_plan(angular)
+    else:
+        plan = model.cell_plan(case.angular, case.region)
+        assert isinstance(plan, CellPlan) and plan.seconds is None
+        cells, _ = plan.run(WarpContext())
+        np.testing.assert_array_equal(cells.prob, bg.cell_probabilities(model, case.angular, case.region).prob)
+        with pytest.raises(bg.BananagridError, match=rf"^{type(model).__name__}: a presence law's cells are those"):
+            model.cell_plan(grid)
 
 
 def test_each_domain_refuses_the_other_kind_in_one_line():
