@@ -180,7 +180,7 @@ def test_float32_exp_atan2_sqrt_and_sinc():
 
 
 def _scalar_kernel(model, x, y, dtype=np.float64, inputs=None):
-    """The density by the scalar kernel (``polar.polar_points``, which the GPU and heading-noise
+    """The density by the scalar kernel (``polar.KERNELS.points``, which the GPU and heading-noise
     paths run) in ``dtype``, launched here directly (``model.pdf`` itself takes the lane kernel);
     with ``inputs=np.float32`` the coordinates, pose and coefficients are first rounded to
     float32 (what a float32 kernel is given), then computed in ``dtype``."""
@@ -191,12 +191,19 @@ def _scalar_kernel(model, x, y, dtype=np.float64, inputs=None):
         rounded = np.ascontiguousarray(values, dtype=inputs).ravel().astype(dtype)
         return wp.array(rounded, dtype=scalar, device="cpu")
 
+    def rounded(values):
+        return np.asarray(values, dtype=inputs).astype(dtype)
+
     coef = polar.coefficients(model.v0, model.t, model.sigma_a, model.sigma_omega, model.sigma_heading)
-    law = polar.ROUGH if model.variant == "rough" else polar.IMPROVED
+    params = polar.POLAR.of(scalar)()
+    for name, value in zip(polar.COEFFICIENTS, rounded(coef)):
+        setattr(params, name, value)
+    params.pose = wp.types.vector(4, scalar)(*rounded(model.pose.as_array()))
+    params.variant = polar.ROUGH if model.variant == "rough" else polar.IMPROVED
+    params.order = model.kernel_order
     xs, ys = device_array(x), device_array(y)
     out = wp.zeros(xs.shape[0], dtype=scalar, device="cpu")
-    wp.launch(polar.polar_points, dim=xs.shape[0], device="cpu", inputs=[
-        xs, ys, 0, device_array(coef), law, model.kernel_order, device_array(model.pose.as_array()), out])
+    wp.launch(polar.KERNELS.points, dim=xs.shape[0], device="cpu", inputs=[xs, ys, 0, params, out])
     return out.numpy().reshape(np.shape(x))
 
 
