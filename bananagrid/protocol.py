@@ -70,11 +70,11 @@ class KernelContext(Protocol):
     def vector(self, length: int) -> Any:
         """The Warp vector type of ``length`` lanes of the scalar type (e.g. SIMD scratch)."""
 
-    def struct(self, params, **values) -> Any:
+    def struct(self, params, /, **values) -> Any:
         """An instance of a family's parameter struct (``params``:
         :class:`bananagrid.kernels.generate.Params`) in the scalar type, fields from ``values``."""
 
-    def structs(self, params, count: int, **columns) -> Any:
+    def structs(self, params, count: int, /, **columns) -> Any:
         """A device array of ``count`` parameter structs, field ``name`` of the ``h``-th from
         ``columns[name][h]``."""
 

@@ -108,13 +108,13 @@ class DensityKernels:
 
 
 def density_kernels(density, params: Params, name: str, *, lanes: bool = False, batch: bool = False,
-                    bands_per_thread: int = 16, grid=None, tile_rows: int = 0, scratch_width: int = 0,
-                    quad_width: int = 0) -> DensityKernels:
+                    bands_per_thread: int = 16, suffix: str | None = None, grid=None, tile_rows: int = 0,
+                    scratch_width: int = 0, quad_width: int = 0) -> DensityKernels:
     """The grid and points kernels (and with ``batch`` the batch kernels) of ``density``, named
-    ``NAME_grid``, ``NAME_points``, ... (``_lanes`` appended with ``lanes``), in its module and
+    ``NAME_grid``, ``NAME_points``, ... (``suffix`` appended: by default ``_lanes`` with ``lanes``), in its module and
     overloaded for both scalar types; ``grid``: the family's own grid kernel instead."""
     module = density.module
-    suffix = "_lanes" if lanes else ""
+    suffix = ("_lanes" if lanes else "") if suffix is None else suffix
 
     def make(f, kind):
         return wp.kernel(f, name=f"{name}_{kind}{suffix}", module=module)

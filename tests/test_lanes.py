@@ -354,16 +354,17 @@ def test_lane_grid_at_the_origin_and_past_the_improved_domain(variant, dtype):
 
 
 def _scalar_bearing(model, x, y, dtype):
-    """The bearing density by the scalar kernel (``bearing.bearing_points``, the GPU path's),
+    """The bearing density by the scalar kernel (``bearing.KERNELS.points``, the GPU path's),
     launched here directly in ``dtype`` (``model.pdf`` takes the lane kernel on the CPU)."""
     scalar = wp.float64 if dtype == np.float64 else wp.float32
     xs = wp.array(np.ravel(x).astype(dtype), dtype=scalar, device="cpu")
     ys = wp.array(np.ravel(y).astype(dtype), dtype=scalar, device="cpu")
     out = wp.zeros(xs.shape[0], dtype=scalar, device="cpu")
-    params = wp.array(model.kernel_parameters().astype(dtype), dtype=scalar, device="cpu")
-    law = bearing.EXACT if model.variant == "exact" else bearing.LINEAR
-    wp.launch(bearing.bearing_points, dim=xs.shape[0], device="cpu",
-              inputs=[xs, ys, 0, params, len(model.sensors), law, out])
+    params = bearing.BEARING.of(scalar)()
+    params.params = wp.array(model.kernel_parameters().astype(dtype), dtype=scalar, device="cpu")
+    params.n_sensors = len(model.sensors)
+    params.variant = bearing.EXACT if model.variant == "exact" else bearing.LINEAR
+    wp.launch(bearing.KERNELS.points, dim=xs.shape[0], device="cpu", inputs=[xs, ys, 0, params, out])
     return out.numpy().reshape(np.shape(x))
 
 
@@ -553,8 +554,11 @@ def test_cat_lane_scan_equals_the_scalar_scan_bit_for_bit(case):
         binding = model.bind(ctx, None, grid=True)
         assert binding.kernel_name == "cat_lanes.cat_grid_lanes"
         out = ctx.zeros(x.size)
-        wp.launch(cat.cat_points, dim=x.size, device="cpu", inputs=[
-            ctx.array(x.ravel()), ctx.array(y.ravel()), 0, binding.params[0], *binding.params[2:], out])
+        params = cat.CAT.of(ctx.scalar_type)()  # the lane binding's parameters but the node groups
+        for name in cat.CAT.fields:
+            setattr(params, name, getattr(binding.params, name))
+        wp.launch(cat.KERNELS.points, dim=x.size, device="cpu", inputs=[
+            ctx.array(x.ravel()), ctx.array(y.ravel()), 0, params, out])
         scalar = out.numpy().reshape(x.shape)
         assert np.array_equal(lanes.values, scalar.astype(dtype))
         if computed == dtype:

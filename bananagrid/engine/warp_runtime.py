@@ -201,7 +201,7 @@ class WarpContext:
             values = np.ascontiguousarray(values, dtype=self.dtype)
         return self.wp.array(values, dtype=kind, device=self.device)
 
-    def struct(self, params, **values):
+    def struct(self, params, /, **values):
         """An instance of ``params``'s struct (a :class:`bananagrid.kernels.generate.Params`) in the
         scalar type, its fields set from ``values`` (numbers, sequences for vectors, device arrays)."""
         struct = params.of(self.scalar_type)
@@ -211,7 +211,7 @@ class WarpContext:
             setattr(instance, name, kind(*value) if self.wp.types.type_is_vector(kind) else value)
         return instance
 
-    def structs(self, params, count: int, **columns):
+    def structs(self, params, count: int, /, **columns):
         """A device array of ``count`` instances of ``params``'s struct, field ``name`` of
         instance ``h`` from ``columns[name][h]`` (arrays of shape ``(count, ...)``)."""
         struct = params.of(self.scalar_type)
