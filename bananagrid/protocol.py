@@ -131,14 +131,6 @@ class KernelBinding:
         """``module.kernel`` of the grid kernel, for provenance."""
         return self.kernels.name
 
-    @property
-    def grid_kernel(self):
-        return self.kernels.grid
-
-    @property
-    def points_kernel(self):
-        return self.kernels.points
-
 
 @dataclass(frozen=True)
 class CellPlan:

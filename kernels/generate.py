@@ -20,8 +20,9 @@ Kernel arguments (``P`` the struct):
   ``(hypotheses, rows)``, and batch points ``(xs, ys, h0, ps, out[H, n])`` over hypotheses.
 
 A family whose grid kernel works on blocks of rows (Butterly's tiles) passes its own ``grid``
-with ``tile_rows``, ``scratch_width`` and ``quad_width`` (see
-:class:`bananagrid.engine.grid_kernel.grid_block`); the generator then writes the others.
+with ``tile_rows``, ``scratch_width`` and ``quad_width`` (the engine's ``grid_block`` gives it
+``(xs, ys, row0, row_end, rows, columns, step_x, step_y, p, scratch, quads, band, out)``); the
+generator then writes the others.
 """
 
 import inspect
@@ -84,7 +85,7 @@ class DensityKernels:
     Attributes
     ----------
     name : str
-        ``module.grid_kernel`` for provenance.
+        ``module.kernel`` of the grid kernel, for provenance.
     params : Params
     grid, points, batch_grid, batch_points : Warp kernels (the batch ones None without ``batch``)
     bands_per_thread : int
@@ -145,20 +146,22 @@ def density_kernels(density, params: Params, name: str, *, lanes: bool = False, 
                               out: wp.array3d(dtype=Any)):
             hh, i = wp.tid()
             h = h0 + hh
+            p = ps[h]  # loaded once: the output's stores could alias it
             xs_h = xs[h]
             y = ys[h, i]
             j = int(0)
             while j < xs.shape[1]:
                 x = load_lanes(xs_h, j)
-                store_lanes(out[h, i], j, density(x, type(x)(y), ps[h]), xs.shape[1] - j)
+                store_lanes(out[h, i], j, density(x, type(x)(y), p), xs.shape[1] - j)
                 j += lane_count(xs_h)
 
         def batch_points_kernel(xs: wp.array(dtype=Any), ys: wp.array(dtype=Any), h0: int, ps: wp.array(dtype=Any),
                                 out: wp.array2d(dtype=Any)):
             h = h0 + wp.tid()
+            p = ps[h]
             k = int(0)
             while k < xs.shape[0]:
-                store_lanes(out[h], k, density(load_lanes(xs, k), load_lanes(ys, k), ps[h]), xs.shape[0] - k)
+                store_lanes(out[h], k, density(load_lanes(xs, k), load_lanes(ys, k), p), xs.shape[0] - k)
                 k += lane_count(xs)
     else:
         def grid_kernel(xs: wp.array(dtype=Any), ys: wp.array(dtype=Any), row0: int, columns: int, p: Any,
@@ -178,15 +181,17 @@ def density_kernels(density, params: Params, name: str, *, lanes: bool = False, 
                               out: wp.array3d(dtype=Any)):
             hh, i = wp.tid()
             h = h0 + hh
+            p = ps[h]  # loaded once: the output's stores could alias it
             y = ys[h, i]
             for j in range(xs.shape[1]):
-                out[h, i, j] = density(xs[h, j], y, ps[h])
+                out[h, i, j] = density(xs[h, j], y, p)
 
         def batch_points_kernel(xs: wp.array(dtype=Any), ys: wp.array(dtype=Any), h0: int, ps: wp.array(dtype=Any),
                                 out: wp.array2d(dtype=Any)):
             h = h0 + wp.tid()
+            p = ps[h]
             for k in range(xs.shape[0]):
-                out[h, k] = density(xs[k], ys[k], ps[h])
+                out[h, k] = density(xs[k], ys[k], p)
 
     own_grid = grid is not None
     grid = grid if own_grid else make(grid_kernel, "grid")

@@ -55,9 +55,9 @@ def grid_block(ctx: WarpContext, binding, grid: Grid, rows: tuple[int, int] | No
     bands' boundaries nor their order can change a bit of it.
 
     Each cell's value depends on its coordinates only, except for kernels that work in tiles of
-    ``binding.kernels.tile_rows`` cells (Butterly): their bands start on multiples of the tile side and
-    they take the grid's steps, so that a block whose corner lies on such a multiple computes
-    the same tiles as the whole grid.
+    ``binding.kernels.tile_rows`` cells (Butterly): their bands start on multiples of the tile
+    side and they take the grid's steps, so that a block whose corner lies on such a multiple
+    computes the same tiles as the whole grid.
     """
     rows = (0, grid.ny) if rows is None else rows
     cols = (0, grid.nx) if cols is None else cols
