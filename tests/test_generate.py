@@ -6,6 +6,7 @@ the engine's own layouts (row bands, point chunks, batch bands) for every shape,
 dtype the sweep draws: every cell and point written once, grids equal to points bit for bit, and
 values against a NumPy oracle."""
 
+import importlib
 from typing import Any
 
 import numpy as np
@@ -19,6 +20,7 @@ from bananagrid.engine import batch as engine_batch
 from bananagrid.engine.grid_kernel import grid_block
 from bananagrid.engine.points import launch_points
 from bananagrid.engine.warp_runtime import WarpContext
+from bananagrid.kernels import cat
 from bananagrid.kernels.generate import SCALAR, SCALARS, VEC4, Params, density_kernels
 from bananagrid.kernels.lanes import lane_exp
 from bananagrid.protocol import KernelBinding
@@ -152,3 +154,18 @@ def test_generated_batches_equal_one_hypothesis_at_a_time(family, dtype):
         assert np.array_equal(values[k], grid_block(ctx, binding, grid))
         ctx.load(binding.kernels.points)
         assert np.array_equal(points[k], launch_points(ctx, binding, px, py))
+
+
+@pytest.mark.parametrize("family", ["polar", "polar_lanes", "bearing", "bearing_lanes", "cat", "cat_lanes", "tabulated",
+                                    "butterly"])
+def test_every_family_builds_one_module_without_adjoints(family):
+    """The package's families: every kernel of a family (generated or its own) lives in the family's
+    module, one build, under the module's options (no adjoint kernels; the CAT scan's loops not
+    unrolled)."""
+    module = importlib.import_module(f"bananagrid.kernels.{family}")
+    kernels = module.KERNELS
+    built = [k for k in (kernels.grid, kernels.points, kernels.batch_grid, kernels.batch_points) if k is not None]
+    assert {k.module.name for k in built} == {module.__name__}
+    assert built[0].module.options["enable_backward"] is False
+    if family.startswith("cat"):
+        assert built[0].module.options["max_unroll"] == cat.SPLIT - 1
