@@ -70,6 +70,14 @@ class KernelContext(Protocol):
     def vector(self, length: int) -> Any:
         """The Warp vector type of ``length`` lanes of the scalar type (e.g. SIMD scratch)."""
 
+    def struct(self, params, /, **values) -> Any:
+        """An instance of a family's parameter struct (``params``:
+        :class:`bananagrid.kernels.generate.Params`) in the scalar type, fields from ``values``."""
+
+    def structs(self, params, count: int, /, **columns) -> Any:
+        """A device array of ``count`` parameter structs, field ``name`` of the ``h``-th from
+        ``columns[name][h]``."""
+
     def launch(self, kernel, *, dim, inputs) -> None:
         """Launch ``kernel`` over ``dim`` with ``inputs`` on this context's device."""
 
@@ -99,47 +107,29 @@ class Extent(Protocol):
 class KernelBinding:
     """A model bound to its kernels, ready for the engine to launch.
 
-    The grid kernel takes ``(xs, ys, row0, *params, out)`` and computes one cell per thread
-    over ``dim = (rows, nx)``; with ``row_loop`` it takes ``(xs, ys, row0, columns, *params,
-    out)`` and loops over ``columns`` cells of a row per thread; with ``tile_rows`` as well,
-    ``(xs, ys, row0, row_end, rows, columns, step_x, step_y, *params, ...)`` for blocks of rows
-    (``step_x``, ``step_y``: the grid's cell sizes). The points
-    kernel takes ``(xs, ys, offset, *params, out)``.
+    The kernels are generated from the family's density and parameter struct
+    (:func:`bananagrid.kernels.generate.density_kernels`, which states their arguments and
+    layout); a model hands over the family and the parameters and writes no launch code.
 
     Attributes
     ----------
-    grid_kernel, points_kernel : Warp kernels
-    params : tuple
-        The kernels' arguments after the coordinates (device arrays and scalars).
-    kernel_name : str
-        ``module.kernel`` for provenance.
+    kernels : DensityKernels
+        The family's kernels (grid, points, batch) and their layout.
+    params : struct
+        The parameter struct (:meth:`KernelContext.struct`); for a batch, a device array of them
+        (:meth:`KernelContext.structs`).
     notes : dict
         Provenance entries of this binding (scan nodes, truncated mass, ...).
-    row_loop : bool
-        Whether the grid kernel loops over columns of a row (see above).
-    bands_per_thread : int
-        Row bands per CPU thread: one where every row costs the same (fewest launches), many
-        where the cost follows the density.
-    scratch_width : int
-        Scratch values per band that the grid kernel takes after ``params``:
-        ``(scratch[n_bands, width], band)``; 0 for none.
-    quad_width : int
-        Vector (4-lane) scratch per band, taken between the scratch and the band's index.
-    tile_rows : int
-        Rows per thread of a row-looping kernel that takes blocks of rows on the CPU (one cell
-        per thread on a GPU); 0 for one row.
     """
 
-    grid_kernel: Any
-    points_kernel: Any
-    params: tuple
-    kernel_name: str
+    kernels: Any
+    params: Any
     notes: dict = field(default_factory=dict)
-    row_loop: bool = False
-    bands_per_thread: int = 16
-    scratch_width: int = 0
-    quad_width: int = 0
-    tile_rows: int = 0
+
+    @property
+    def kernel_name(self) -> str:
+        """``module.kernel`` of the grid kernel, for provenance."""
+        return self.kernels.name
 
 
 @dataclass(frozen=True)
@@ -431,9 +421,8 @@ class BatchModel(Protocol):
 
     @classmethod
     def batch_binding(cls, ctx: KernelContext, models: Sequence[DensityModel]) -> KernelBinding:
-        """The batch kernels: ``grid_kernel`` over (hypothesis, row) taking ``(xs[H, nx],
-        ys[H, ny], h0, *params, out[H, ny, nx])`` and ``points_kernel`` over hypotheses taking
-        ``(x[N], y[N], h0, *params, out[H, N])``."""
+        """The family's kernels with a device array of the hypotheses' parameter structs
+        (:meth:`KernelContext.structs`): the engine launches their batch kernels."""
 
 
 @runtime_checkable

@@ -1,7 +1,11 @@
 """Warp device code for bananagrid, installed as ``bananagrid.kernels``.
 
-Only ``@wp.func`` math and ``@wp.kernel`` rasterisers live here; nothing imports from
-``bananagrid``. One module per model family, so each compiles as one unit.
+Only Warp device code lives here; nothing imports from ``bananagrid``. One module per model
+family, so each compiles as one unit. A family module holds maths: a ``@wp.func`` density over a
+typed parameter struct (:class:`generate.Params`), from which :func:`generate.density_kernels`
+writes the grid, points and batch kernels (scalar, and in CPU lanes where the family writes a
+lane density) into the family's own module; only kernels of another shape (Butterly's tiles,
+the CAT's scan table, cell rules) are written by hand.
 
 Module options, and why. Every module sets ``enable_backward = False``: nothing differentiates
 these kernels, and Warp otherwise generates an adjoint kernel beside every launch kernel, most

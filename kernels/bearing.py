@@ -21,6 +21,7 @@ from typing import Any
 import warp as wp
 
 from .common import PI, atan2_fast
+from .generate import ARRAY, Params, density_kernels
 
 # No adjoints: nothing differentiates these kernels, and the backward kernels Warp would
 # generate for every launch kernel are most of a module's code (the CAT module's CUDA build:
@@ -62,45 +63,12 @@ def bearing_log_density(x: Any, y: Any, params: wp.array(dtype=Any), n_sensors: 
     return total
 
 
-@wp.kernel
-def bearing_grid(
-    xs: wp.array(dtype=Any),
-    ys: wp.array(dtype=Any),
-    row0: int,
-    params: wp.array(dtype=Any),
-    n_sensors: int,
-    variant: int,
-    out: wp.array2d(dtype=Any),
-):
-    """Density at the cell centres (xs[j], ys[row0 + i]) of a band of rows."""
-    i, j = wp.tid()
-    row = row0 + i
-    out[row, j] = wp.exp(bearing_log_density(xs[j], ys[row], params, n_sensors, variant))
+@wp.func
+def bearing_density(x: Any, y: Any, p: Any):
+    """Density per m^2 at the world point (x, y): the launch kernels' maths."""
+    return wp.exp(bearing_log_density(x, y, p.params, p.n_sensors, p.variant))
 
 
-@wp.kernel
-def bearing_points(
-    xs: wp.array(dtype=Any),
-    ys: wp.array(dtype=Any),
-    start: int,
-    params: wp.array(dtype=Any),
-    n_sensors: int,
-    variant: int,
-    out: wp.array(dtype=Any),
-):
-    """Density at arbitrary world points (xs[k], ys[k]) for k in a chunk starting at ``start``."""
-    k = start + wp.tid()
-    out[k] = wp.exp(bearing_log_density(xs[k], ys[k], params, n_sensors, variant))
-
-
-def overload_bearing_kernels(grid, points) -> None:
-    """Register float32 and float64 overloads of a grid and a points kernel with the arguments of
-    ``bearing_grid`` and ``bearing_points`` (these and their lane twins in ``bearing_lanes``)."""
-    for scalar in (wp.float32, wp.float64):
-        vec = wp.array(dtype=scalar)
-        common = {"xs": vec, "ys": vec, "params": vec}
-        wp.overload(grid, {**common, "out": wp.array2d(dtype=scalar)})
-        wp.overload(points, {**common, "out": vec})
-
-
-overload_bearing_kernels(bearing_grid, bearing_points)
+#: The parameters: the array laid out as HEAD and PER_SENSOR say, the sensors' count, the variant.
+BEARING = Params("BearingParams", __name__, params=ARRAY, n_sensors=int, variant=int)
+KERNELS = density_kernels(bearing_density, BEARING, "bearing")

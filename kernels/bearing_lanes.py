@@ -6,17 +6,18 @@ quadratic form, two squares of halved offsets), in the scalar kernel's order of 
 kernel, one cell at a time, ran at 0.7x NumPy's speed on one core (NumPy's arctan2 and exp are
 SIMD loops); here every step is one vector of cells.
 
-CPU only (see ``kernels/lanes.py``); the GPU path uses ``bearing.bearing_grid``. The grid and
-points kernels share :func:`bearing_density_lanes`, so that ``rasterise`` and ``pdf`` agree
-bit for bit.
+CPU only (see ``kernels/lanes.py``); the GPU path uses ``bearing.KERNELS``. The grid and
+points kernels are generated from :func:`bearing_world_lanes`, so that ``rasterise`` and ``pdf``
+agree bit for bit.
 """
 
 from typing import Any
 
 import warp as wp
 
-from .bearing import HEAD, LINEAR, PER_SENSOR, overload_bearing_kernels
-from .lanes import lane_atan2, lane_count, lane_exp, lane_wrap_angle, load_lanes, store_lanes
+from .bearing import BEARING, HEAD, LINEAR, PER_SENSOR
+from .generate import density_kernels
+from .lanes import lane_atan2, lane_exp, lane_wrap_angle
 
 # No adjoints: nothing differentiates these kernels (see ``polar_lanes``).
 wp.set_module_options({"enable_backward": False})
@@ -42,48 +43,10 @@ def bearing_density_lanes(x: Any, y: Any, params: wp.array(dtype=Any), n_sensors
     return lane_exp(total)
 
 
-@wp.kernel
-def bearing_grid_lanes(
-    xs: wp.array(dtype=Any),
-    ys: wp.array(dtype=Any),
-    row0: int,
-    columns: int,
-    params: wp.array(dtype=Any),
-    n_sensors: int,
-    variant: int,
-    out: wp.array2d(dtype=Any),
-):
-    """Density at the cell centres of a band of rows, ``columns`` cells per thread, a vector at a
-    time."""
-    i, block = wp.tid()
-    row = row0 + i
-    j0 = block * columns
-    j1 = wp.min(j0 + columns, xs.shape[0])
-    y = ys[row]
-    width = lane_count(xs)
-    j = j0
-    while j < j1:
-        x = load_lanes(xs, j)
-        store_lanes(out[row], j, bearing_density_lanes(x, type(x)(y), params, n_sensors, variant), j1 - j)
-        j += width
+@wp.func(inline=True)
+def bearing_world_lanes(x: Any, y: Any, p: Any):
+    """The density at a vector of world points: the launch kernels' maths."""
+    return bearing_density_lanes(x, y, p.params, p.n_sensors, p.variant)
 
 
-@wp.kernel
-def bearing_points_lanes(
-    xs: wp.array(dtype=Any),
-    ys: wp.array(dtype=Any),
-    start: int,
-    params: wp.array(dtype=Any),
-    n_sensors: int,
-    variant: int,
-    out: wp.array(dtype=Any),
-):
-    """``bearing.bearing_points`` in lanes: the thread of every lane-count-th point (counted from
-    the first of all) fills it and the next ones; the others return."""
-    k = start + wp.tid()
-    if k % lane_count(xs) == 0:
-        values = bearing_density_lanes(load_lanes(xs, k), load_lanes(ys, k), params, n_sensors, variant)
-        store_lanes(out, k, values, xs.shape[0] - k)
-
-
-overload_bearing_kernels(bearing_grid_lanes, bearing_points_lanes)
+KERNELS = density_kernels(bearing_world_lanes, BEARING, "bearing", lanes=True, bands_per_thread=4)

@@ -69,6 +69,8 @@ from typing import Any
 
 import warp as wp
 
+from .generate import ARRAY, SCALARS, Params, density_kernels
+
 # No adjoints: nothing differentiates these kernels, and the backward kernels Warp would
 # generate for every launch kernel are most of a module's code (the CAT module's CUDA build:
 # see the note in kernels/__init__.py).
@@ -668,8 +670,7 @@ def butterly_grid(
     columns: int,
     step_x: Any,
     step_y: Any,
-    params: wp.array(dtype=Any),
-    n_speeds: int,
+    p: Any,
     scratch: wp.array2d(dtype=Any),
     quads: wp.array2d(dtype=Any),
     band: int,
@@ -690,6 +691,8 @@ def butterly_grid(
     peak. Blocks too small for a tile (a GPU's cells) are marked and walked cell by cell.
     ``out`` holds -1 for skipped cells until the end.
     """
+    params = p.params
+    n_speeds = p.n_speeds
     i, block = wp.tid()
     r_begin = row0 + i * rows
     r_end = wp.min(r_begin + rows, row_end)
@@ -762,28 +765,19 @@ def butterly_grid(
             fill_cells(r_begin, r_end, c_begin, c_end, zero, 1, out)
 
 
-@wp.kernel
-def butterly_points(
-    xs: wp.array(dtype=Any),
-    ys: wp.array(dtype=Any),
-    start: int,
-    params: wp.array(dtype=Any),
-    n_speeds: int,
-    out: wp.array(dtype=Any),
-):
-    """Density at arbitrary world points (xs[k], ys[k]) for k in a chunk starting at ``start``."""
-    k = start + wp.tid()
-    out[k] = butterly_density(xs[k], ys[k], params, n_speeds)
+@wp.func
+def butterly_world(x: Any, y: Any, p: Any):
+    """Density per m^2 at the world point (x, y) (:func:`butterly_density`): the points kernels'
+    maths."""
+    return butterly_density(x, y, p.params, p.n_speeds)
 
 
-def _register_overloads():
-    for scalar in (wp.float32, wp.float64):
-        vec = wp.array(dtype=scalar)
-        common = {"xs": vec, "ys": vec, "params": vec}
-        quads = wp.array2d(dtype=wp.types.vector(4, scalar))
-        wp.overload(butterly_grid, {**common, "step_x": scalar, "step_y": scalar, "scratch": wp.array2d(dtype=scalar),
-                                     "quads": quads, "out": wp.array2d(dtype=scalar)})
-        wp.overload(butterly_points, {**common, "out": vec})
-
-
-_register_overloads()
+#: The parameters: the array laid out as HEAD and PER_SPEED say, and the speeds' count.
+BUTTERLY = Params("ButterlyParams", __name__, params=ARRAY, n_speeds=int)
+for _scalar in SCALARS:
+    wp.overload(butterly_grid, {"xs": wp.array(dtype=_scalar), "ys": wp.array(dtype=_scalar), "step_x": _scalar,
+                                "step_y": _scalar, "p": BUTTERLY.of(_scalar), "scratch": wp.array2d(dtype=_scalar),
+                                "quads": wp.array2d(dtype=wp.types.vector(4, _scalar)),
+                                "out": wp.array2d(dtype=_scalar)})
+KERNELS = density_kernels(butterly_world, BUTTERLY, "butterly", grid=butterly_grid, tile_rows=TILE,
+                          scratch_width=SCRATCH, quad_width=QUAD_SCRATCH)

@@ -21,6 +21,7 @@ from typing import Any
 import warp as wp
 
 from .common import cat_basis, normal_pdf, world_to_local
+from .generate import ARRAY2D, SCALAR, SCALARS, VEC4, Params, density_kernels
 
 #: Table columns: omega; the coefficients of F = hx*y - hy*x - c and of
 #: dF/domega = dhx*y - dhy*x - dc; and of the acceleration of the line through P,
@@ -434,71 +435,18 @@ def cat_table(
     table[k, 6] = dc
 
 
-@wp.kernel
-def cat_grid(
-    xs: wp.array(dtype=Any),
-    ys: wp.array(dtype=Any),
-    row0: int,
-    table: wp.array2d(dtype=Any),
-    v0: Any,
-    t: Any,
-    sigma_a: Any,
-    sigma_omega: Any,
-    pose: wp.array(dtype=Any),
-    tol: Any,
-    eps: Any,
-    out: wp.array2d(dtype=Any),
-):
-    """Density at the cell centres (xs[j], ys[row0 + i]) of a band of rows (``eps``: the dtype's
-    machine epsilon, for the rounding allowance)."""
-    i, j = wp.tid()
-    row = row0 + i
-    x, y = world_to_local(xs[j], ys[row], pose)
-    out[row, j] = cat_density_local(x, y, table, v0, t, sigma_a, sigma_omega, tol, eps)
+@wp.func
+def cat_density(x: Any, y: Any, p: Any):
+    """Density per m^2 at the world point (x, y): the launch kernels' maths (``p.eps``: the
+    dtype's machine epsilon, for the rounding allowance)."""
+    lx, ly = world_to_local(x, y, p.pose)
+    return cat_density_local(lx, ly, p.table, p.v0, p.t, p.sigma_a, p.sigma_omega, p.tol, p.eps)
 
 
-@wp.kernel
-def cat_points(
-    xs: wp.array(dtype=Any),
-    ys: wp.array(dtype=Any),
-    start: int,
-    table: wp.array2d(dtype=Any),
-    v0: Any,
-    t: Any,
-    sigma_a: Any,
-    sigma_omega: Any,
-    pose: wp.array(dtype=Any),
-    tol: Any,
-    eps: Any,
-    out: wp.array(dtype=Any),
-):
-    """Density at arbitrary world points (xs[k], ys[k]) for k in a chunk starting at ``start``."""
-    k = start + wp.tid()
-    x, y = world_to_local(xs[k], ys[k], pose)
-    out[k] = cat_density_local(x, y, table, v0, t, sigma_a, sigma_omega, tol, eps)
-
-
-def overload_scan_kernels(grid, points, extra=None) -> None:
-    """Register float32 and float64 overloads of a grid and a points kernel with the arguments of
-    ``cat_grid`` and ``cat_points`` (these and their lane twins in ``cat_lanes``); ``extra`` maps
-    each scalar type to the annotations of further arguments (the lane kernels' node groups)."""
-    for scalar in (wp.float32, wp.float64):
-        vec = wp.array(dtype=scalar)
-        mat = wp.array2d(dtype=scalar)
-        common = {
-            "xs": vec, "ys": vec, "table": mat, "v0": scalar, "t": scalar,
-            "sigma_a": scalar, "sigma_omega": scalar, "pose": vec, "tol": scalar, "eps": scalar,
-            **(extra[scalar] if extra else {}),
-        }
-        wp.overload(grid, {**common, "out": mat})
-        wp.overload(points, {**common, "out": vec})
-
-
-def _register_overloads():
-    for scalar in (wp.float32, wp.float64):
-        wp.overload(cat_table, {"omegas": wp.array(dtype=scalar), "v0": scalar, "t": scalar,
-                                "table": wp.array2d(dtype=scalar)})
-    overload_scan_kernels(cat_grid, cat_points)
-
-
-_register_overloads()
+#: The parameters: the scan table (``cat_table``), the model's, its pose, Newton's tolerance.
+CAT = Params("CatParams", __name__, table=ARRAY2D, v0=SCALAR, t=SCALAR, sigma_a=SCALAR, sigma_omega=SCALAR, pose=VEC4,
+             tol=SCALAR, eps=SCALAR)
+KERNELS = density_kernels(cat_density, CAT, "cat")
+for _scalar in SCALARS:
+    wp.overload(cat_table, {"omegas": wp.array(dtype=_scalar), "v0": _scalar, "t": _scalar,
+                            "table": wp.array2d(dtype=_scalar)})

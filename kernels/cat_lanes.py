@@ -10,7 +10,7 @@ arithmetic), and each flagged interval is examined by the scalar kernel's own
 ``cat.cat_node_interval``, in node order. The density is therefore the scalar kernel's, bit for
 bit (``tests/kernels/test_lanes.py`` checks it).
 
-CPU only (see ``kernels/lanes.py``); the GPU path uses ``cat.cat_grid``.
+CPU only (see ``kernels/lanes.py``); the GPU path uses ``cat.KERNELS``.
 """
 
 from typing import Any
@@ -18,7 +18,8 @@ from typing import Any
 import numpy as np
 import warp as wp
 
-from .cat import SPLIT, cat_node_interval, cat_scan_noise, overload_scan_kernels
+from .cat import CAT, SPLIT, cat_node_interval, cat_scan_noise
+from .generate import Params, density_kernels
 from .common import LANES32, LANES64, lanes32, lanes64, world_to_local
 from .lanes import cat_scan_group
 
@@ -85,51 +86,15 @@ def cat_density_lanes(
     return density
 
 
-@wp.kernel
-def cat_grid_lanes(
-    xs: wp.array(dtype=Any),
-    ys: wp.array(dtype=Any),
-    row0: int,
-    table: wp.array2d(dtype=Any),
-    groups: wp.array2d(dtype=Any),
-    v0: Any,
-    t: Any,
-    sigma_a: Any,
-    sigma_omega: Any,
-    pose: wp.array(dtype=Any),
-    tol: Any,
-    eps: Any,
-    out: wp.array2d(dtype=Any),
-):
-    """``cat.cat_grid`` with the lane scan (``groups``: :func:`node_groups`)."""
-    i, j = wp.tid()
-    row = row0 + i
-    x, y = world_to_local(xs[j], ys[row], pose)
-    out[row, j] = cat_density_lanes(x, y, table, groups, v0, t, sigma_a, sigma_omega, tol, eps)
+@wp.func
+def cat_density_world_lanes(x: Any, y: Any, p: Any):
+    """Density per m^2 at the world point (x, y), the scan in lanes: the launch kernels' maths."""
+    lx, ly = world_to_local(x, y, p.pose)
+    return cat_density_lanes(lx, ly, p.table, p.groups, p.v0, p.t, p.sigma_a, p.sigma_omega, p.tol, p.eps)
 
 
-@wp.kernel
-def cat_points_lanes(
-    xs: wp.array(dtype=Any),
-    ys: wp.array(dtype=Any),
-    start: int,
-    table: wp.array2d(dtype=Any),
-    groups: wp.array2d(dtype=Any),
-    v0: Any,
-    t: Any,
-    sigma_a: Any,
-    sigma_omega: Any,
-    pose: wp.array(dtype=Any),
-    tol: Any,
-    eps: Any,
-    out: wp.array(dtype=Any),
-):
-    """``cat.cat_points`` with the lane scan."""
-    k = start + wp.tid()
-    x, y = world_to_local(xs[k], ys[k], pose)
-    out[k] = cat_density_lanes(x, y, table, groups, v0, t, sigma_a, sigma_omega, tol, eps)
-
-
-overload_scan_kernels(cat_grid_lanes, cat_points_lanes, extra={
-    wp.float32: {"groups": wp.array2d(dtype=lanes32)}, wp.float64: {"groups": wp.array2d(dtype=lanes64)},
-})
+#: The scalar kernels' parameters and the node groups (:func:`node_groups`).
+CAT_LANES = Params("CatLaneParams", __name__, **CAT.fields,
+                   groups=lambda scalar: wp.array2d(dtype=lanes64 if scalar == wp.float64 else lanes32))
+# one cell per thread, the nodes in lanes: the generated scalar kernels
+KERNELS = density_kernels(cat_density_world_lanes, CAT_LANES, "cat", suffix="_lanes")

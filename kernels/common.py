@@ -307,9 +307,9 @@ def cat_basis(u: Any):
 
 
 @wp.func
-def world_to_local(x: Any, y: Any, pose: wp.array(dtype=Any)):
+def world_to_local(x: Any, y: Any, pose: Any):
     """World (east, north) to a model's local frame (+y along the heading, a bearing from
-    north); ``pose`` = (origin x, origin y, cos heading, sin heading)."""
+    north); ``pose`` = (origin x, origin y, cos heading, sin heading), an array or a vector."""
     dx = x - pose[0]
     dy = y - pose[1]
     return dx * pose[2] - dy * pose[3], dx * pose[3] + dy * pose[2]

@@ -37,6 +37,7 @@ from typing import Any
 import warp as wp
 
 from .common import atan2_fast, each_mul, lane0, scc_of, sinc_derivatives, sinc_of, world_to_local
+from .generate import SCALAR, SCALARS, VEC4, Params, density_kernels
 
 # No adjoints: nothing differentiates these kernels, and the backward kernels Warp would
 # generate for every launch kernel are most of a module's code (the CAT module's CUDA build:
@@ -50,11 +51,16 @@ IMPROVED = 1
 #: fourth-order terms given after Figure 8.
 HEADING_ORDERS = (0, 2, 4)
 
-#: Layout of the coefficient array (see :func:`coefficients`).
+#: The coefficients (:func:`coefficients`), fields of the parameter struct; their indices in
+#: the list for host code.
+COEFFICIENTS = (
+    "mean_sinc", "mean_scc", "inv_sigma_phi", "sd_scale", "sd_curvature", "sd_t_term", "inv_sigma_omega_sq", "norm",
+    "inv_sigma_theta", "theta_norm", "shrink", "sigma_bar_sq",
+)
 (
     MEAN_SINC, MEAN_SCC, INV_SIGMA_PHI, SD_SCALE, SD_CURVATURE, SD_T_TERM, INV_SIGMA_OMEGA_SQ, NORM,
     INV_SIGMA_THETA, THETA_NORM, SHRINK, SIGMA_BAR_SQ,
-) = range(12)
+) = range(len(COEFFICIENTS))
 
 
 def coefficients(
@@ -81,22 +87,21 @@ def coefficients(
 
 
 @wp.func
-def polar_mean_sd(phi: Any, sinc_phi: Any, cos_phi: Any, coef: wp.array(dtype=Any), variant: int):
+def polar_mean_sd(phi: Any, sinc_phi: Any, cos_phi: Any, p: Any):
     """Mean and SD of r given phi: the rough law, or P_mu (8) and P_sigma (11)."""
     one = type(phi)(1.0)
-    if variant == ROUGH:
-        return coef[MEAN_SINC] * sinc_phi, coef[SD_SCALE]
+    if p.variant == ROUGH:
+        return p.mean_sinc * sinc_phi, p.sd_scale
     scc_phi = scc_of(sinc_phi, cos_phi)
-    z = phi * coef[INV_SIGMA_PHI]
-    mu = coef[MEAN_SINC] * sinc_phi + coef[MEAN_SCC] * (z * z - one) * scc_phi
-    sd = coef[SD_SCALE] * (one + coef[SD_CURVATURE] * (coef[SD_T_TERM] - phi * phi * coef[INV_SIGMA_OMEGA_SQ])) * scc_phi
+    z = phi * p.inv_sigma_phi
+    mu = p.mean_sinc * sinc_phi + p.mean_scc * (z * z - one) * scc_phi
+    sd = p.sd_scale * (one + p.sd_curvature * (p.sd_t_term - phi * phi * p.inv_sigma_omega_sq)) * scc_phi
     return mu, sd
 
 
 @wp.func
 def polar_law_of(
-    phi: Any, d0: Any, d1: Any, d2: Any, d3: Any, d4: Any, sin_phi: Any, cos_phi: Any, coef: wp.array(dtype=Any),
-    variant: int,
+    phi: Any, d0: Any, d1: Any, d2: Any, d3: Any, d4: Any, sin_phi: Any, cos_phi: Any, p: Any,
 ):
     """P_mu and its first four derivatives, P_sigma and its first two, at phi, from sinc's
     derivatives d0..d4 and sin, cos at phi. Generic over a value and a vector of lanes.
@@ -110,30 +115,30 @@ def polar_law_of(
     two = type(lane0(phi))(2.0)
     three = type(lane0(phi))(3.0)
     four = type(lane0(phi))(4.0)
-    a = coef[MEAN_SINC]
-    if variant == ROUGH:
-        return a * d0, a * d1, a * d2, a * d3, a * d4, type(phi)(coef[SD_SCALE]), zero, zero
+    a = p.mean_sinc
+    if p.variant == ROUGH:
+        return a * d0, a * d1, a * d2, a * d3, a * d4, type(phi)(p.sd_scale), zero, zero
     c0 = (four * d0 - cos_phi) / three
     c1 = (four * d1 + sin_phi) / three
     c2 = (four * d2 + cos_phi) / three
     c3 = (four * d3 - sin_phi) / three
     c4 = (four * d4 - cos_phi) / three
-    inv_sp2 = coef[INV_SIGMA_PHI] * coef[INV_SIGMA_PHI]
+    inv_sp2 = p.inv_sigma_phi * p.inv_sigma_phi
     q = each_mul(phi, phi) * inv_sp2 - type(phi)(1.0)
     q1 = two * phi * inv_sp2
     q2 = two * inv_sp2
-    k = coef[MEAN_SCC]
+    k = p.mean_scc
     m0 = a * d0 + each_mul(k * q, c0)
     m1 = a * d1 + k * (each_mul(q, c1) + each_mul(q1, c0))
     m2 = a * d2 + k * (each_mul(q, c2) + each_mul(two * q1, c1) + q2 * c0)
     m3 = a * d3 + k * (each_mul(q, c3) + each_mul(three * q1, c2) + three * q2 * c1)
     m4 = a * d4 + k * (each_mul(q, c4) + each_mul(four * q1, c3) + type(lane0(phi))(6.0) * q2 * c2)
-    curv = coef[SD_CURVATURE]
-    u = coef[INV_SIGMA_OMEGA_SQ]
-    w = type(phi)(1.0) + curv * (type(phi)(coef[SD_T_TERM]) - each_mul(phi, phi) * u)
+    curv = p.sd_curvature
+    u = p.inv_sigma_omega_sq
+    w = type(phi)(1.0) + curv * (type(phi)(p.sd_t_term) - each_mul(phi, phi) * u)
     w1 = -two * curv * u * phi
     w2 = -two * curv * u
-    scale = coef[SD_SCALE]
+    scale = p.sd_scale
     s0 = each_mul(scale * w, c0)
     s1 = scale * (each_mul(w, c1) + each_mul(w1, c0))
     s2 = scale * (each_mul(w, c2) + each_mul(two * w1, c1) + w2 * c0)
@@ -141,50 +146,50 @@ def polar_law_of(
 
 
 @wp.func
-def polar_law_derivatives(phi: Any, coef: wp.array(dtype=Any), variant: int):
+def polar_law_derivatives(phi: Any, p: Any):
     """P_mu and its first four derivatives, P_sigma and its first two, at phi
     (:func:`polar_law_of`)."""
     d0, d1, d2, d3, d4 = sinc_derivatives(phi)
     sin_phi = type(phi)(0.0)
     cos_phi = type(phi)(0.0)
-    if variant != ROUGH:
+    if p.variant != ROUGH:
         cos_phi = wp.cos(phi)
         sin_phi = wp.sin(phi)
-    return polar_law_of(phi, d0, d1, d2, d3, d4, sin_phi, cos_phi, coef, variant)
+    return polar_law_of(phi, d0, d1, d2, d3, d4, sin_phi, cos_phi, p)
 
 
 @wp.func
 def polar_heading_moments(
-    m0: Any, m1: Any, m2: Any, m3: Any, m4: Any, s0: Any, s1: Any, s2: Any, coef: wp.array(dtype=Any), order: int
+    m0: Any, m1: Any, m2: Any, m3: Any, m4: Any, s0: Any, s1: Any, s2: Any, p: Any
 ):
     """E[r | theta] and Var[r | theta] from the law's derivatives at theta_bar: (15) and (16)
     at order 2, with the fourth-order terms at order 4. Generic over a value and a vector of
     lanes."""
-    sb2 = coef[SIGMA_BAR_SQ]
+    sb2 = p.sigma_bar_sq
     half = type(lane0(m0))(0.5)
     mean = m0 + half * m2 * sb2
     var = each_mul(s0, s0) + each_mul(m1, m1) * sb2
-    if order == 4:
+    if p.order == 4:
         mean = mean + type(lane0(m0))(0.125) * m4 * sb2 * sb2
         var = var + (each_mul(s1, s1) + each_mul(s0, s2)) * sb2 + (half * each_mul(m2, m2) + each_mul(m1, m3)) * sb2 * sb2
     return mean, var
 
 
 @wp.func
-def polar_heading_mean_sd(theta: Any, coef: wp.array(dtype=Any), variant: int, order: int):
+def polar_heading_mean_sd(theta: Any, p: Any):
     """E[r | theta] and SD[r | theta] with initial-heading noise (:func:`polar_heading_moments`).
     SD is 0 where P_sigma(theta_bar) <= 0 (outside the approximation's domain, as without
     heading noise) or the variance is not positive."""
     zero = type(theta)(0.0)
-    m0, m1, m2, m3, m4, s0, s1, s2 = polar_law_derivatives(theta * coef[SHRINK], coef, variant)
-    mean, var = polar_heading_moments(m0, m1, m2, m3, m4, s0, s1, s2, coef, order)
+    m0, m1, m2, m3, m4, s0, s1, s2 = polar_law_derivatives(theta * p.shrink, p)
+    mean, var = polar_heading_moments(m0, m1, m2, m3, m4, s0, s1, s2, p)
     if s0 <= zero or var <= zero:
         return mean, zero
     return mean, wp.sqrt(var)
 
 
 @wp.func
-def polar_density_local(x: Any, y: Any, coef: wp.array(dtype=Any), variant: int, order: int):
+def polar_density_local(x: Any, y: Any, p: Any):
     """Density per m^2 at a local point: g(phi; 0, sigma_phi) g(r; mu, sd) / r.
 
     sin(phi) = x / r and cos(phi) = y / r, and the two normal factors share one exp. Zero where
@@ -198,132 +203,51 @@ def polar_density_local(x: Any, y: Any, coef: wp.array(dtype=Any), variant: int,
         return zero  # the 1/r Jacobian is singular at the origin
     inv_r = type(x)(1.0) / r
     phi = atan2_fast(x, y)
-    if order != 0:
-        mean_t, sd_t = polar_heading_mean_sd(phi, coef, variant, order)
+    if p.order != 0:
+        mean_t, sd_t = polar_heading_mean_sd(phi, p)
         if sd_t <= zero:
             return zero
         inv_sd_t = type(x)(1.0) / sd_t
-        z_theta = phi * coef[INV_SIGMA_THETA]
+        z_theta = phi * p.inv_sigma_theta
         z_rt = (r - mean_t) * inv_sd_t
-        return coef[THETA_NORM] * inv_sd_t * inv_r * wp.exp(type(x)(-0.5) * (z_theta * z_theta + z_rt * z_rt))
-    mu, sd = polar_mean_sd(phi, sinc_of(phi, x * inv_r), y * inv_r, coef, variant)
+        return p.theta_norm * inv_sd_t * inv_r * wp.exp(type(x)(-0.5) * (z_theta * z_theta + z_rt * z_rt))
+    mu, sd = polar_mean_sd(phi, sinc_of(phi, x * inv_r), y * inv_r, p)
     if sd <= zero:
         return zero
     inv_sd = type(x)(1.0) / sd
-    z_phi = phi * coef[INV_SIGMA_PHI]
+    z_phi = phi * p.inv_sigma_phi
     z_r = (r - mu) * inv_sd
-    return coef[NORM] * inv_sd * inv_r * wp.exp(type(x)(-0.5) * (z_phi * z_phi + z_r * z_r))
+    return p.norm * inv_sd * inv_r * wp.exp(type(x)(-0.5) * (z_phi * z_phi + z_r * z_r))
 
 
 @wp.func
-def polar_row(
-    xs: wp.array(dtype=Any),
-    y_world: Any,
-    j0: int,
-    j1: int,
-    coef: wp.array(dtype=Any),
-    variant: int,
-    order: int,
-    pose: wp.array(dtype=Any),
-    out: wp.array(dtype=Any),
-):
-    """out[j] for j0 <= j < j1: the density at (xs[j], y_world)."""
-    for j in range(j0, j1):
-        x, y = world_to_local(xs[j], y_world, pose)
-        out[j] = polar_density_local(x, y, coef, variant, order)
-
-
-@wp.func
-def polar_point_range(
-    xs: wp.array(dtype=Any),
-    ys: wp.array(dtype=Any),
-    k0: int,
-    k1: int,
-    coef: wp.array(dtype=Any),
-    variant: int,
-    order: int,
-    pose: wp.array(dtype=Any),
-    out: wp.array(dtype=Any),
-):
-    """out[k] for k0 <= k < k1: the density at (xs[k], ys[k])."""
-    for k in range(k0, k1):
-        x, y = world_to_local(xs[k], ys[k], pose)
-        out[k] = polar_density_local(x, y, coef, variant, order)
+def polar_density(x: Any, y: Any, p: Any):
+    """Density per m^2 at the world point (x, y): the launch kernels' maths."""
+    lx, ly = world_to_local(x, y, p.pose)
+    return polar_density_local(lx, ly, p)
 
 
 @wp.kernel
-def polar_grid(
-    xs: wp.array(dtype=Any),
-    ys: wp.array(dtype=Any),
-    row0: int,
-    columns: int,
-    coef: wp.array(dtype=Any),
-    variant: int,
-    order: int,
-    pose: wp.array(dtype=Any),
-    out: wp.array2d(dtype=Any),
-):
-    """Density at the cell centres of a band of rows, ``columns`` cells per thread.
-
-    On the CPU a thread takes a whole row (Warp's 2-D thread index costs an integer division
-    per thread, as much as a third of a cell); on a GPU one cell (``columns = 1``).
-    """
-    i, block = wp.tid()
-    row = row0 + i
-    polar_row(xs, ys[row], block * columns, wp.min((block + 1) * columns, xs.shape[0]), coef, variant, order, pose,
-              out[row])
-
-
-@wp.kernel
-def polar_points(
-    xs: wp.array(dtype=Any),
-    ys: wp.array(dtype=Any),
-    start: int,
-    coef: wp.array(dtype=Any),
-    variant: int,
-    order: int,
-    pose: wp.array(dtype=Any),
-    out: wp.array(dtype=Any),
-):
-    """Density at arbitrary world points (xs[k], ys[k]) for k in a chunk starting at ``start``."""
-    k = start + wp.tid()
-    x, y = world_to_local(xs[k], ys[k], pose)
-    out[k] = polar_density_local(x, y, coef, variant, order)
-
-
-@wp.kernel
-def polar_moments(
-    phis: wp.array(dtype=Any),
-    coef: wp.array(dtype=Any),
-    variant: int,
-    order: int,
-    mean: wp.array(dtype=Any),
-    sd: wp.array(dtype=Any),
-):
+def polar_moments(phis: wp.array(dtype=Any), p: Any, mean: wp.array(dtype=Any), sd: wp.array(dtype=Any)):
     """Mean and SD of r given the angle: at order 0 given phi (P_mu (8) and P_sigma (11) for
     the improved variant), at order 2 or 4 given theta with heading noise ((15), (16))."""
     k = wp.tid()
     phi = phis[k]
-    if order == 0:
-        m, s = polar_mean_sd(phi, sinc_of(phi, wp.sin(phi)), wp.cos(phi), coef, variant)
+    if p.order == 0:
+        m, s = polar_mean_sd(phi, sinc_of(phi, wp.sin(phi)), wp.cos(phi), p)
         mean[k] = m
         sd[k] = s
     else:
-        m, s = polar_heading_mean_sd(phi, coef, variant, order)
+        m, s = polar_heading_mean_sd(phi, p)
         mean[k] = m
         sd[k] = s
 
 
 @wp.kernel
-def polar_derivatives(
-    phis: wp.array(dtype=Any),
-    coef: wp.array(dtype=Any),
-    variant: int,
-    out: wp.array2d(dtype=Any),
-):
+def polar_derivatives(phis: wp.array(dtype=Any), p: Any, out: wp.array2d(dtype=Any)):
     """P_mu and its derivatives 1-4, P_sigma and its derivatives 1-2, at each phi (8 columns)."""
     k = wp.tid()
-    m0, m1, m2, m3, m4, s0, s1, s2 = polar_law_derivatives(phis[k], coef, variant)
+    m0, m1, m2, m3, m4, s0, s1, s2 = polar_law_derivatives(phis[k], p)
     out[k, 0] = m0
     out[k, 1] = m1
     out[k, 2] = m2
@@ -334,62 +258,11 @@ def polar_derivatives(
     out[k, 7] = s2
 
 
-@wp.kernel
-def polar_batch_grid(
-    xs: wp.array2d(dtype=Any),
-    ys: wp.array2d(dtype=Any),
-    h0: int,
-    coefs: wp.array2d(dtype=Any),
-    variants: wp.array(dtype=wp.int32),
-    orders: wp.array(dtype=wp.int32),
-    poses: wp.array2d(dtype=Any),
-    out: wp.array3d(dtype=Any),
-):
-    """Many hypotheses, each on its own grid: thread (h, i) fills row i of hypothesis h0 + h,
-    whose cell centres are xs[h], ys[h] and whose parameters are row h of coefs and poses."""
-    hh, i = wp.tid()
-    h = h0 + hh
-    polar_row(xs[h], ys[h, i], 0, xs.shape[1], coefs[h], int(variants[h]), int(orders[h]), poses[h], out[h, i])
-
-
-@wp.kernel
-def polar_batch_points(
-    xs: wp.array(dtype=Any),
-    ys: wp.array(dtype=Any),
-    h0: int,
-    coefs: wp.array2d(dtype=Any),
-    variants: wp.array(dtype=wp.int32),
-    orders: wp.array(dtype=wp.int32),
-    poses: wp.array2d(dtype=Any),
-    out: wp.array2d(dtype=Any),
-):
-    """Every point under every hypothesis: thread h fills out[h0 + h, :] (the tracker's score of
-    every plot against every track)."""
-    h = h0 + wp.tid()
-    polar_point_range(xs, ys, 0, xs.shape[0], coefs[h], int(variants[h]), int(orders[h]), poses[h], out[h])
-
-
-def overload_density_kernels(grid, points, batch_grid, batch_points) -> None:
-    """Register float32 and float64 overloads of a family of kernels with the arguments of
-    ``polar_grid``, ``polar_points``, ``polar_batch_grid`` and ``polar_batch_points`` (these and
-    their lane twins in ``polar_lanes``)."""
-    for scalar in (wp.float32, wp.float64):
-        vec = wp.array(dtype=scalar)
-        mat = wp.array2d(dtype=scalar)
-        common = {"xs": vec, "ys": vec, "coef": vec, "pose": vec}
-        wp.overload(grid, {**common, "out": mat})
-        wp.overload(points, {**common, "out": vec})
-        batch = {"coefs": mat, "poses": mat}
-        wp.overload(batch_grid, {"xs": mat, "ys": mat, **batch, "out": wp.array3d(dtype=scalar)})
-        wp.overload(batch_points, {"xs": vec, "ys": vec, **batch, "out": mat})
-
-
-def _register_overloads():
-    overload_density_kernels(polar_grid, polar_points, polar_batch_grid, polar_batch_points)
-    for scalar in (wp.float32, wp.float64):
-        vec = wp.array(dtype=scalar)
-        wp.overload(polar_moments, {"phis": vec, "coef": vec, "mean": vec, "sd": vec})
-        wp.overload(polar_derivatives, {"phis": vec, "coef": vec, "out": wp.array2d(dtype=scalar)})
-
-
-_register_overloads()
+#: The parameters: the coefficients (:func:`coefficients`, in their order), the pose, the
+#: variant and the heading order.
+POLAR = Params("PolarParams", __name__, **dict.fromkeys(COEFFICIENTS, SCALAR), pose=VEC4, variant=int, order=int)
+KERNELS = density_kernels(polar_density, POLAR, "polar", batch=True, bands_per_thread=1)
+for _scalar in SCALARS:
+    _vec = wp.array(dtype=_scalar)
+    wp.overload(polar_moments, {"phis": _vec, "p": POLAR.of(_scalar), "mean": _vec, "sd": _vec})
+    wp.overload(polar_derivatives, {"phis": _vec, "p": POLAR.of(_scalar), "out": wp.array2d(dtype=_scalar)})

@@ -11,9 +11,9 @@ kernel's branches are selects: 0 at r = 0 and where P_sigma (or the variance) is
 Values agree with the scalar kernel to about 1e-14 relative in float64 where the density is well
 conditioned (``tests/kernels/test_lanes.py`` sweeps the parameter domain).
 
-CPU only (see ``kernels/lanes.py``); the GPU path uses ``polar.polar_grid``. The grid, points
-and batch kernels share :func:`polar_world_lanes`, so that ``rasterise``, ``pdf`` and the batches
-agree bit for bit.
+CPU only (see ``kernels/lanes.py``); the GPU path uses ``polar.KERNELS``. The grid, points
+and batch kernels are generated from :func:`polar_density_lanes`, so that ``rasterise``, ``pdf``
+and the batches agree bit for bit.
 """
 
 from typing import Any
@@ -21,14 +21,12 @@ from typing import Any
 import warp as wp
 
 from .common import SINC_SERIES_SWITCH, sinc_derivatives_recurrence, sinc_derivatives_series
+from .generate import density_kernels
 from .lanes import (
-    lane_abs, lane_atan2, lane_cos, lane_count, lane_exp, lane_sin, lane_sinc_of, lane_sqrt, lane_where_not_negative,
-    lane_where_positive, load_lanes, store_lanes,
+    lane_abs, lane_atan2, lane_cos, lane_exp, lane_sin, lane_sinc_of, lane_sqrt, lane_where_not_negative,
+    lane_where_positive,
 )
-from .polar import (
-    INV_SIGMA_OMEGA_SQ, INV_SIGMA_PHI, INV_SIGMA_THETA, MEAN_SCC, MEAN_SINC, NORM, ROUGH, SD_CURVATURE, SD_SCALE,
-    SD_T_TERM, SHRINK, THETA_NORM, overload_density_kernels, polar_heading_moments, polar_law_of,
-)
+from .polar import POLAR, ROUGH, polar_heading_moments, polar_law_of
 
 ONE_THIRD = 1.0 / 3.0
 
@@ -40,7 +38,7 @@ wp.set_module_options({"enable_backward": False})
 
 
 @wp.func(inline=True)
-def polar_plain_lanes(x: Any, y: Any, coef: wp.array(dtype=Any), variant: int):
+def polar_plain_lanes(x: Any, y: Any, p: Any):
     """Density per m^2 at a vector of local points without heading noise:
     g(phi; 0, sigma_phi) g(r; mu, sd) / r."""
     one = type(x)(1.0)
@@ -48,20 +46,20 @@ def polar_plain_lanes(x: Any, y: Any, coef: wp.array(dtype=Any), variant: int):
     inv_r = wp.cw_div(one, r)
     phi = lane_atan2(x, y)
     sinc_phi = lane_sinc_of(phi, wp.cw_mul(x, inv_r))
-    mu = sinc_phi * coef[MEAN_SINC]
-    sd = type(x)(coef[SD_SCALE])
-    if variant != ROUGH:
+    mu = sinc_phi * p.mean_sinc
+    sd = type(x)(p.sd_scale)
+    if p.variant != ROUGH:
         phi2 = wp.cw_mul(phi, phi)
         scc = wp.cw_mul(wp.cw_mul(sinc_phi, type(x)(4.0)) - wp.cw_mul(y, inv_r), type(x)(ONE_THIRD))
-        z2 = phi2 * (coef[INV_SIGMA_PHI] * coef[INV_SIGMA_PHI])
-        mu = mu + wp.cw_mul((z2 - one) * coef[MEAN_SCC], scc)
-        sd = wp.cw_mul((one + (type(x)(coef[SD_T_TERM]) - phi2 * coef[INV_SIGMA_OMEGA_SQ]) * coef[SD_CURVATURE])
-                       * coef[SD_SCALE], scc)
+        z2 = phi2 * (p.inv_sigma_phi * p.inv_sigma_phi)
+        mu = mu + wp.cw_mul((z2 - one) * p.mean_scc, scc)
+        sd = wp.cw_mul((one + (type(x)(p.sd_t_term) - phi2 * p.inv_sigma_omega_sq) * p.sd_curvature)
+                       * p.sd_scale, scc)
     inv_sd = wp.cw_div(one, sd)
-    z_phi = phi * coef[INV_SIGMA_PHI]
+    z_phi = phi * p.inv_sigma_phi
     z_r = wp.cw_mul(r - mu, inv_sd)
     e = lane_exp(wp.cw_mul(wp.cw_mul(z_phi, z_phi) + wp.cw_mul(z_r, z_r), type(x)(-0.5)))
-    density = wp.cw_mul(wp.cw_mul(inv_sd, inv_r), e) * coef[NORM]
+    density = wp.cw_mul(wp.cw_mul(inv_sd, inv_r), e) * p.norm
     return lane_where_positive(sd, lane_where_positive(r, density))
 
 
@@ -77,7 +75,7 @@ def sinc_derivatives_lanes(x: Any, sin_x: Any, cos_x: Any):
 
 
 @wp.func(inline=True)
-def polar_heading_lanes(x: Any, y: Any, coef: wp.array(dtype=Any), variant: int, order: int):
+def polar_heading_lanes(x: Any, y: Any, p: Any):
     """Density per m^2 at a vector of local points with initial-heading noise (``order`` 2 or 4):
     g(theta; 0, sigma_theta) g(r; E[r | theta], SD[r | theta]) / r, the law's derivatives at
     theta_bar by the scalar kernel's own generic functions (``polar.polar_law_of``,
@@ -87,150 +85,32 @@ def polar_heading_lanes(x: Any, y: Any, coef: wp.array(dtype=Any), variant: int,
     r = lane_sqrt(wp.cw_mul(x, x) + wp.cw_mul(y, y))
     inv_r = wp.cw_div(one, r)
     theta = lane_atan2(x, y)
-    bar = theta * coef[SHRINK]
+    bar = theta * p.shrink
     sin_bar = lane_sin(bar)
     cos_bar = lane_cos(bar)
     d0, d1, d2, d3, d4 = sinc_derivatives_lanes(bar, sin_bar, cos_bar)
-    m0, m1, m2, m3, m4, s0, s1, s2 = polar_law_of(bar, d0, d1, d2, d3, d4, sin_bar, cos_bar, coef, variant)
-    mean, var = polar_heading_moments(m0, m1, m2, m3, m4, s0, s1, s2, coef, order)
+    m0, m1, m2, m3, m4, s0, s1, s2 = polar_law_of(bar, d0, d1, d2, d3, d4, sin_bar, cos_bar, p)
+    mean, var = polar_heading_moments(m0, m1, m2, m3, m4, s0, s1, s2, p)
     sd = lane_where_positive(s0, lane_where_positive(var, lane_sqrt(var)))
     inv_sd = wp.cw_div(one, sd)
-    z_theta = theta * coef[INV_SIGMA_THETA]
+    z_theta = theta * p.inv_sigma_theta
     z_r = wp.cw_mul(r - mean, inv_sd)
     e = lane_exp(wp.cw_mul(wp.cw_mul(z_theta, z_theta) + wp.cw_mul(z_r, z_r), type(x)(-0.5)))
-    density = wp.cw_mul(wp.cw_mul(inv_sd, inv_r), e) * coef[THETA_NORM]
+    density = wp.cw_mul(wp.cw_mul(inv_sd, inv_r), e) * p.theta_norm
     return lane_where_positive(sd, lane_where_positive(r, density))
 
 
 @wp.func(inline=True)
-def polar_world_lanes(dx: Any, dy: Any, coef: wp.array(dtype=Any), variant: int, order: int,
-                      pose: wp.array(dtype=Any)):
-    """The density at a vector of world offsets from the pose origin (``common.world_to_local``'s
-    rotation), one expression for the grid and the points kernels so that they agree bit for bit."""
-    x = dx * pose[2] - dy * pose[3]
-    y = dx * pose[3] + dy * pose[2]
-    if order == 0:
-        return polar_plain_lanes(x, y, coef, variant)
-    return polar_heading_lanes(x, y, coef, variant, order)
+def polar_density_lanes(x: Any, y: Any, p: Any):
+    """The density at a vector of world points (``common.world_to_local``'s arithmetic, lane by
+    lane): the launch kernels' maths."""
+    dx = x - type(x)(p.pose[0])
+    dy = y - type(x)(p.pose[1])
+    lx = dx * p.pose[2] - dy * p.pose[3]
+    ly = dx * p.pose[3] + dy * p.pose[2]
+    if p.order == 0:
+        return polar_plain_lanes(lx, ly, p)
+    return polar_heading_lanes(lx, ly, p)
 
 
-@wp.func(inline=True)
-def polar_row_lanes(
-    xs: wp.array(dtype=Any),
-    y_world: Any,
-    j0: int,
-    j1: int,
-    coef: wp.array(dtype=Any),
-    variant: int,
-    order: int,
-    pose: wp.array(dtype=Any),
-    out: wp.array(dtype=Any),
-):
-    """out[j] for j0 <= j < j1: the density at (xs[j], y_world), a vector of cells at a time."""
-    dy = y_world - pose[1]
-    width = lane_count(xs)
-    j = j0
-    while j < j1:
-        dx = load_lanes(xs, j)
-        values = polar_world_lanes(dx - type(dx)(pose[0]), type(dx)(dy), coef, variant, order, pose)
-        store_lanes(out, j, values, j1 - j)
-        j += width
-
-
-@wp.func(inline=True)
-def polar_point_lanes(
-    xs: wp.array(dtype=Any),
-    ys: wp.array(dtype=Any),
-    k: int,
-    coef: wp.array(dtype=Any),
-    variant: int,
-    order: int,
-    pose: wp.array(dtype=Any),
-    out: wp.array(dtype=Any),
-):
-    """out[k ..]: the density at the vector of points from (xs[k], ys[k]) (as many as remain)."""
-    dx = load_lanes(xs, k)
-    values = polar_world_lanes(dx - type(dx)(pose[0]), load_lanes(ys, k) - type(dx)(pose[1]), coef, variant, order,
-                               pose)
-    store_lanes(out, k, values, xs.shape[0] - k)
-
-
-@wp.kernel
-def polar_grid_lanes(
-    xs: wp.array(dtype=Any),
-    ys: wp.array(dtype=Any),
-    row0: int,
-    columns: int,
-    coef: wp.array(dtype=Any),
-    variant: int,
-    order: int,
-    pose: wp.array(dtype=Any),
-    out: wp.array2d(dtype=Any),
-):
-    """Density at the cell centres of a band of rows, ``columns`` cells per thread, a vector at a
-    time (the arguments of ``polar.polar_grid``)."""
-    i, block = wp.tid()
-    row = row0 + i
-    polar_row_lanes(xs, ys[row], block * columns, wp.min((block + 1) * columns, xs.shape[0]), coef, variant, order,
-                    pose, out[row])
-
-
-@wp.kernel
-def polar_points_lanes(
-    xs: wp.array(dtype=Any),
-    ys: wp.array(dtype=Any),
-    start: int,
-    coef: wp.array(dtype=Any),
-    variant: int,
-    order: int,
-    pose: wp.array(dtype=Any),
-    out: wp.array(dtype=Any),
-):
-    """``polar.polar_points`` in lanes: the thread of every lane-count-th point (counted from the
-    first of all, so that a group is computed once even where it straddles two launches'
-    chunks) fills it and the next ones; the others return."""
-    k = start + wp.tid()
-    if k % lane_count(xs) == 0:
-        polar_point_lanes(xs, ys, k, coef, variant, order, pose, out)
-
-
-@wp.kernel
-def polar_batch_grid_lanes(
-    xs: wp.array2d(dtype=Any),
-    ys: wp.array2d(dtype=Any),
-    h0: int,
-    coefs: wp.array2d(dtype=Any),
-    variants: wp.array(dtype=wp.int32),
-    orders: wp.array(dtype=wp.int32),
-    poses: wp.array2d(dtype=Any),
-    out: wp.array3d(dtype=Any),
-):
-    """``polar.polar_batch_grid`` in lanes: thread (h, i) fills row i of hypothesis h0 + h."""
-    hh, i = wp.tid()
-    h = h0 + hh
-    polar_row_lanes(xs[h], ys[h, i], 0, xs.shape[1], coefs[h], int(variants[h]), int(orders[h]), poses[h], out[h, i])
-
-
-@wp.kernel
-def polar_batch_points_lanes(
-    xs: wp.array(dtype=Any),
-    ys: wp.array(dtype=Any),
-    h0: int,
-    coefs: wp.array2d(dtype=Any),
-    variants: wp.array(dtype=wp.int32),
-    orders: wp.array(dtype=wp.int32),
-    poses: wp.array2d(dtype=Any),
-    out: wp.array2d(dtype=Any),
-):
-    """``polar.polar_batch_points`` in lanes: thread h fills out[h0 + h, :], a vector of points
-    at a time."""
-    h = h0 + wp.tid()
-    order = int(orders[h])
-    variant = int(variants[h])
-    k = int(0)
-    while k < xs.shape[0]:
-        polar_point_lanes(xs, ys, k, coefs[h], variant, order, poses[h], out[h])
-        k += lane_count(xs)
-
-
-overload_density_kernels(polar_grid_lanes, polar_points_lanes, polar_batch_grid_lanes, polar_batch_points_lanes)
+KERNELS = density_kernels(polar_density_lanes, POLAR, "polar", lanes=True, batch=True, bands_per_thread=1)

@@ -16,6 +16,7 @@ from typing import Any
 import warp as wp
 
 from .common import atan2_fast, world_to_local
+from .generate import ARRAY2D, SCALAR, VEC4, Params, density_kernels
 
 # No adjoints: nothing differentiates these kernels, and the backward kernels Warp would
 # generate for every launch kernel are most of a module's code (the CAT module's CUDA build:
@@ -50,27 +51,20 @@ def row_weight(k: int, w0: Any, w1: Any, w2: Any, w3: Any):
 
 
 @wp.func
-def table_density_local(
-    x: Any,
-    y: Any,
-    log_table: wp.array2d(dtype=Any),
-    table: wp.array2d(dtype=Any),
-    geometry: wp.array(dtype=Any),
-    mirror: int,
-):
-    """Interpolated density at a local point; ``geometry`` = (r0, dr, theta0, dtheta, floor)."""
+def table_density_local(x: Any, y: Any, p: Any):
+    """Interpolated density at a local point."""
     zero = type(x)(0.0)
-    n_r = table.shape[0]
-    n_theta = table.shape[1]
-    r0 = geometry[0]
-    dr = geometry[1]
-    theta0 = geometry[2]
-    dtheta = geometry[3]
-    floor_value = geometry[4]
+    n_r = p.table.shape[0]
+    n_theta = p.table.shape[1]
+    r0 = p.r0
+    dr = p.dr
+    theta0 = p.theta0
+    dtheta = p.dtheta
+    floor_value = p.floor_value
     r = wp.sqrt(x * x + y * y)
     u = (r - r0) / dr
     base = int(wp.floor(u))
-    if mirror == 0:
+    if p.mirror == 0:
         base = wp.clamp(base, 1, n_r - 3)  # one-sided stencils at the lattice's ends
     else:
         base = wp.min(base, n_r - 3)
@@ -96,66 +90,26 @@ def table_density_local(
             if j < 0:
                 j = j + n_theta
             w = wr * row_weight(b, wt0, wt1, wt2, wt3)
-            p = table[i, j]
-            lin_sum += w * p
-            log_sum += w * log_table[i, j]
+            value = p.table[i, j]
+            lin_sum += w * value
+            log_sum += w * p.log_table[i, j]
             if b == 0 and a == 0:
-                lowest = p
+                lowest = value
             else:
-                lowest = wp.min(lowest, p)
+                lowest = wp.min(lowest, value)
     if lowest > floor_value:
         return wp.exp(log_sum)
     return wp.max(lin_sum, zero)
 
 
-@wp.kernel
-def table_grid(
-    xs: wp.array(dtype=Any),
-    ys: wp.array(dtype=Any),
-    row0: int,
-    columns: int,
-    log_table: wp.array2d(dtype=Any),
-    table: wp.array2d(dtype=Any),
-    geometry: wp.array(dtype=Any),
-    mirror: int,
-    pose: wp.array(dtype=Any),
-    out: wp.array2d(dtype=Any),
-):
-    """Interpolated density at the cell centres of a band of rows, ``columns`` cells a thread."""
-    i, block = wp.tid()
-    row = row0 + i
-    y_world = ys[row]
-    j_end = wp.min((block + 1) * columns, xs.shape[0])
-    for j in range(block * columns, j_end):
-        x, y = world_to_local(xs[j], y_world, pose)
-        out[row, j] = table_density_local(x, y, log_table, table, geometry, mirror)
+@wp.func
+def table_density(x: Any, y: Any, p: Any):
+    """Interpolated density per m^2 at the world point (x, y): the launch kernels' maths."""
+    lx, ly = world_to_local(x, y, p.pose)
+    return table_density_local(lx, ly, p)
 
 
-@wp.kernel
-def table_points(
-    xs: wp.array(dtype=Any),
-    ys: wp.array(dtype=Any),
-    start: int,
-    log_table: wp.array2d(dtype=Any),
-    table: wp.array2d(dtype=Any),
-    geometry: wp.array(dtype=Any),
-    mirror: int,
-    pose: wp.array(dtype=Any),
-    out: wp.array(dtype=Any),
-):
-    """Interpolated density at world points (xs[k], ys[k]) for k in a chunk from ``start``."""
-    k = start + wp.tid()
-    x, y = world_to_local(xs[k], ys[k], pose)
-    out[k] = table_density_local(x, y, log_table, table, geometry, mirror)
-
-
-def _register_overloads():
-    for scalar in (wp.float32, wp.float64):
-        vec = wp.array(dtype=scalar)
-        mat = wp.array2d(dtype=scalar)
-        common = {"xs": vec, "ys": vec, "log_table": mat, "table": mat, "geometry": vec, "pose": vec}
-        wp.overload(table_grid, {**common, "out": mat})
-        wp.overload(table_points, {**common, "out": vec})
-
-
-_register_overloads()
+#: The parameters: log p and p on the lattice, its geometry, ``mirror``, the pose.
+TABLE = Params("TableParams", __name__, log_table=ARRAY2D, table=ARRAY2D, r0=SCALAR, dr=SCALAR, theta0=SCALAR,
+               dtheta=SCALAR, floor_value=SCALAR, mirror=int, pose=VEC4)
+KERNELS = density_kernels(table_density, TABLE, "table", bands_per_thread=1)

@@ -138,7 +138,7 @@ def _launch(which: str, models: list[BatchModel], x, y, out_shape, rows, *, dtyp
     (:func:`~bananagrid.engine.warp_runtime.row_sums`), the same bits for any banding."""
     ctx = WarpContext(dtype, device, threads)
     binding = type(models[0]).batch_binding(ctx, models)
-    kernel = binding.grid_kernel if which == "grid" else binding.points_kernel
+    kernel = binding.kernels.batch_grid if which == "grid" else binding.kernels.batch_points
     ctx.load(kernel)
     x_arr = ctx.array(x)
     y_arr = ctx.array(y)
@@ -151,7 +151,7 @@ def _launch(which: str, models: list[BatchModel], x, y, out_shape, rows, *, dtyp
 
     def launch_band(a, b):
         dim = b - a if rows is None else (b - a, rows)
-        ctx.launch(kernel, dim=dim, inputs=[x_arr, y_arr, a, *binding.params, out])
+        ctx.launch(kernel, dim=dim, inputs=[x_arr, y_arr, a, binding.params, out])
         if ctx.cpu:  # a CPU launch has finished when it returns
             sums[a:b] = row_sums(values[a:b].reshape(b - a, -1))
 

@@ -55,15 +55,16 @@ def grid_block(ctx: WarpContext, binding, grid: Grid, rows: tuple[int, int] | No
     bands' boundaries nor their order can change a bit of it.
 
     Each cell's value depends on its coordinates only, except for kernels that work in tiles of
-    ``binding.tile_rows`` cells (Butterly): their bands start on multiples of the tile side and
-    they take the grid's steps, so that a block whose corner lies on such a multiple computes
-    the same tiles as the whole grid.
+    ``binding.kernels.tile_rows`` cells (Butterly): their bands start on multiples of the tile
+    side and they take the grid's steps, so that a block whose corner lies on such a multiple
+    computes the same tiles as the whole grid.
     """
     rows = (0, grid.ny) if rows is None else rows
     cols = (0, grid.nx) if cols is None else cols
     xs_host, ys_host = grid.x[cols[0]:cols[1]], grid.y[rows[0]:rows[1]]
     ny, nx = len(ys_host), len(xs_host)
-    ctx.load(binding.grid_kernel)
+    family = binding.kernels
+    ctx.load(family.grid)
     xs = ctx.array(xs_host)
     ys = ctx.array(ys_host)
     if ctx.cpu:
@@ -72,28 +73,24 @@ def grid_block(ctx: WarpContext, binding, grid: Grid, rows: tuple[int, int] | No
     else:
         out = ctx.zeros((ny, nx))
 
-    # row-looping kernels take whole rows per thread on the CPU, one cell per thread on a GPU
-    columns = (nx if ctx.cpu else 1) if binding.row_loop else None
-    bands = ctx.bands(ny, binding.bands_per_thread, align=max(1, binding.tile_rows))
-    scratch, quads = None, None
-    if binding.scratch_width:  # one work row per band: a band's rows run one after another
-        scratch = ctx.empty((len(bands), binding.scratch_width))
+    # whole rows per thread on the CPU, one cell per thread on a GPU
+    columns = nx if ctx.cpu else 1
+    bands = ctx.bands(ny, family.bands_per_thread, align=max(1, family.tile_rows))
+    if family.scratch_width:  # one work row per band: a band's rows run one after another
+        scratch = ctx.empty((len(bands), family.scratch_width))
+        quads = ctx.empty((len(bands), family.quad_width), dtype=ctx.vector(4))
         band_of = {r0: k for k, (r0, _) in enumerate(bands)}
-    if binding.quad_width:
-        quads = ctx.empty((len(bands), binding.quad_width), dtype=ctx.vector(4))
-    tile = (binding.tile_rows if ctx.cpu else 1) if binding.tile_rows else None
+    tile = (family.tile_rows if ctx.cpu else 1) if family.tile_rows else None
     sums = np.empty(ny) if with_sum else None
 
     def launch_band(r0, r1):
-        if columns is None:
-            dim, head = (r1 - r0, nx), [xs, ys, r0]
-        elif tile is None:
+        if tile is None:
             dim, head = (r1 - r0, -(-nx // columns)), [xs, ys, r0, columns]
         else:
             dim = (-(-(r1 - r0) // tile), -(-nx // columns))
             head = [xs, ys, r0, r1, tile, columns, ctx.scalar(grid.dx), ctx.scalar(grid.dy)]
-        extra = [] if scratch is None else [scratch] + ([] if quads is None else [quads]) + [band_of[r0]]
-        ctx.launch(binding.grid_kernel, dim=dim, inputs=[*head, *binding.params, *extra, out])
+        extra = [scratch, quads, band_of[r0]] if family.scratch_width else []
+        ctx.launch(family.grid, dim=dim, inputs=[*head, binding.params, *extra, out])
         if with_sum and ctx.cpu:  # a CPU launch has finished when it returns
             sums[r0:r1] = row_sums(values[r0:r1])
 

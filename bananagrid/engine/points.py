@@ -73,7 +73,7 @@ def evaluate_points(model: DensityModel, x, y, *, dtype=np.float64, device: str 
     extent = extent if extent is not None else PointsExtent(bx, by)
     ctx = WarpContext(working_dtype(model, asked, extent.radii((0.0, 0.0))[1]), device, threads)
     binding = model.bind(ctx, extent, grid=False)
-    ctx.load(binding.grid_kernel)
+    ctx.load(binding.kernels.points)
     return launch_points(ctx, binding, bx, by).astype(asked, copy=False)
 
 
@@ -86,7 +86,7 @@ def launch_points(ctx: WarpContext, binding: KernelBinding, bx: np.ndarray, by: 
     out = ctx.zeros(n)
 
     def launch_chunk(a, b):
-        ctx.launch(binding.points_kernel, dim=b - a, inputs=[xs, ys, a, *binding.params, out])
+        ctx.launch(binding.kernels.points, dim=b - a, inputs=[xs, ys, a, binding.params, out])
 
     # at least one chunk per thread once there is enough work to share
     size = max(MIN_POINT_CHUNK, min(POINT_CHUNK, -(-n // ctx.threads)))

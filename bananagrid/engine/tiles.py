@@ -209,7 +209,7 @@ def rasterise_tiles(model: DensityModel, grid: Grid, chunks=DEFAULT_CHUNK, *, dt
     check_model(model)
     asked, ctx, extent = grid_context(model, grid, dtype, device, 1)
     binding = model.bind(ctx, extent, grid=True)  # the provenance, and the kernel's tile side
-    cy, cx = check_chunks(chunks, grid, max(1, binding.tile_rows))
+    cy, cx = check_chunks(chunks, grid, max(1, binding.kernels.tile_rows))
     row_edges, col_edges = _edges(grid.ny, cy), _edges(grid.nx, cx)
     floor = model.density_floor() if skip else -math.inf
     skipped = np.zeros((len(row_edges), len(col_edges)), dtype=bool)

@@ -201,6 +201,25 @@ class WarpContext:
             values = np.ascontiguousarray(values, dtype=self.dtype)
         return self.wp.array(values, dtype=kind, device=self.device)
 
+    def struct(self, params, /, **values):
+        """An instance of ``params``'s struct (a :class:`bananagrid.kernels.generate.Params`) in the
+        scalar type, its fields set from ``values`` (numbers, sequences for vectors, device arrays)."""
+        struct = params.of(self.scalar_type)
+        instance = struct()
+        for name, value in values.items():
+            kind = struct.vars[name].type
+            setattr(instance, name, kind(*value) if self.wp.types.type_is_vector(kind) else value)
+        return instance
+
+    def structs(self, params, count: int, /, **columns):
+        """A device array of ``count`` instances of ``params``'s struct, field ``name`` of
+        instance ``h`` from ``columns[name][h]`` (arrays of shape ``(count, ...)``)."""
+        struct = params.of(self.scalar_type)
+        records = np.zeros(count, dtype=struct.numpy_dtype())
+        for name, column in columns.items():
+            records[name] = column
+        return self.wp.array(records, dtype=struct, device=self.device)
+
     def shared(self, values: np.ndarray):
         """A device array that shares the memory of ``values`` on the CPU (same dtype)."""
         return self.wp.array(values, dtype=self.scalar_type, copy=False, device=self.device)

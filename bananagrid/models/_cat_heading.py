@@ -334,24 +334,21 @@ def ray_densities(model: MotionModel, radii, angles, *, threads=None) -> np.ndar
 
 def table_binding(ctx: KernelContext, table: HeadingTable, pose, notes: dict) -> KernelBinding:
     """The interpolating kernels (``kernels/tabulated.py``) over ``table``, placed by ``pose``
-    (the kernels' pose array): log-cubic stencils where the table is above its floor."""
+    (origin x, origin y, cos heading, sin heading): log-cubic stencils where the table is above
+    its floor."""
     values = table.values.astype(ctx.dtype)
     floor = FLOOR[np.dtype(ctx.dtype)]
     with np.errstate(divide="ignore"):
         logs = np.log(np.maximum(values, floor))  # entries at the floor are never used in log
-    geometry = np.array([table.r0, table.dr, table.theta0, table.dtheta, floor], dtype=ctx.dtype)
-    params = (ctx.array(logs), ctx.array(values), ctx.array(geometry), int(table.mirror), pose)
-    return KernelBinding(
-        tabulated.table_grid, tabulated.table_points, params, "tabulated.table_grid", notes,
-        row_loop=True, bands_per_thread=1,
-    )
+    params = ctx.struct(tabulated.TABLE, log_table=ctx.array(logs), table=ctx.array(values), r0=table.r0, dr=table.dr,
+                        theta0=table.theta0, dtheta=table.dtheta, floor_value=floor, mirror=int(table.mirror), pose=pose)
+    return KernelBinding(tabulated.KERNELS, params, notes)
 
 
 def interpolate_table(table: HeadingTable, x, y, *, dtype=np.float64, device: str = "cpu", threads=None) -> np.ndarray:
     """Interpolate ``table`` at points (x, y) of its own local frame."""
     ctx = WarpContext(dtype, device, threads)
     bx, by = np.broadcast_arrays(np.asarray(x, dtype=float), np.asarray(y, dtype=float))
-    identity = ctx.array(np.array([0.0, 0.0, 1.0, 0.0]))
-    binding = table_binding(ctx, table, identity, {})
-    ctx.load(binding.points_kernel)
+    binding = table_binding(ctx, table, (0.0, 0.0, 1.0, 0.0), {})
+    ctx.load(binding.kernels.points)
     return launch_points(ctx, binding, bx, by)

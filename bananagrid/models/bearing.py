@@ -731,13 +731,10 @@ class BearingFix(Model):
 
     def bind(self, ctx: KernelContext, extent: Extent, *, grid: bool = False) -> KernelBinding:
         """The bearing kernels (``kernels/bearing.py``) of ``variant``; on the CPU their lane twins."""
-        params = (ctx.array(self.kernel_parameters()), len(self.sensors),
-                  kernels.EXACT if self.variant == "exact" else kernels.LINEAR)
-        if ctx.device == "cpu":  # a vector of cells or points at a time (kernels/bearing_lanes.py)
-            return KernelBinding(bearing_lanes.bearing_grid_lanes, bearing_lanes.bearing_points_lanes, params,
-                                 "bearing_lanes.bearing_grid_lanes", {"variant": self.variant}, row_loop=True,
-                                 bands_per_thread=4)
-        return KernelBinding(kernels.bearing_grid, kernels.bearing_points, params, "bearing.bearing_grid",
+        params = ctx.struct(kernels.BEARING, params=ctx.array(self.kernel_parameters()), n_sensors=len(self.sensors),
+                            variant=kernels.EXACT if self.variant == "exact" else kernels.LINEAR)
+        # on the CPU a vector of cells or points at a time (kernels/bearing_lanes.py)
+        return KernelBinding(bearing_lanes.KERNELS if ctx.device == "cpu" else kernels.KERNELS, params,
                              {"variant": self.variant})
 
     def _bound_terms(self) -> dict:

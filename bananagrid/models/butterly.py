@@ -665,14 +665,12 @@ class Butterly(Model):
     def bind(self, ctx: KernelContext, extent: Extent, *, grid: bool = False) -> KernelBinding:
         """The course-integral kernels (``kernels/butterly.py``); on a grid, with the cell and
         speed floors (:meth:`kernel_parameters`), 32 x 32 tiles and per-band scratch."""
-        params = (ctx.array(self.kernel_parameters(ctx.dtype, floors=grid)), self.n_speed_nodes)
+        params = ctx.struct(kernels.BUTTERLY, params=ctx.array(self.kernel_parameters(ctx.dtype, floors=grid)),
+                            n_speeds=self.n_speed_nodes)
         notes = {"speed_nodes": self.n_speed_nodes}
         if grid:
             notes["zero_below"] = CELL_FLOOR * self.peak_lower_bound()
-        return KernelBinding(
-            kernels.butterly_grid, kernels.butterly_points, params, "butterly.butterly_grid", notes,
-            row_loop=True, scratch_width=kernels.SCRATCH, quad_width=kernels.QUAD_SCRATCH, tile_rows=kernels.TILE,
-        )
+        return KernelBinding(kernels.KERNELS, params, notes)
 
     def density_bound(self, x0: float, x1: float, y0: float, y1: float) -> float:
         """A proved upper bound of the density on the rectangle [x0, x1] x [y0, y1].

@@ -532,7 +532,7 @@ class CAT(MotionModel):
     def bind(self, ctx: KernelContext, extent: Extent, *, grid: bool = False) -> KernelBinding:
         """The scan kernels (``kernels/cat.py``) with their turn-rate table; with heading noise,
         the interpolating kernels over a heading table covering ``extent``."""
-        pose = ctx.array(self.pose.as_array())
+        pose = self.pose.as_array()
         if self.sigma_heading > 0.0:
             table = heading_table(self, *extent.radii(self.pose.origin), threads=ctx.threads)
             return table_binding(ctx, table, pose, {
@@ -541,17 +541,14 @@ class CAT(MotionModel):
         table = scan_table(self, ctx)
         # Newton stops when its step is below a few ulps of the searched range.
         tol = 8.0 * np.finfo(ctx.dtype).eps * self.k_sigma * self.sigma_omega
-        params = (
-            table, ctx.scalar(self.v0), ctx.scalar(self.t), ctx.scalar(self.sigma_a),
-            ctx.scalar(self.sigma_omega), pose, ctx.scalar(tol), ctx.scalar(np.finfo(ctx.dtype).eps),
-        )
+        params = dict(table=table, v0=self.v0, t=self.t, sigma_a=self.sigma_a, sigma_omega=self.sigma_omega, pose=pose,
+                      tol=tol, eps=np.finfo(ctx.dtype).eps)
         notes = {"scan_nodes": table.shape[0], "k_sigma": self.k_sigma, "truncated_mass": self.truncated_mass}
         if ctx.device == "cpu":  # the scan over nodes in lanes (kernels/cat_lanes.py)
             lanes = LANES64 if ctx.dtype == np.float64 else LANES32
             groups = ctx.array(cat_lanes.node_groups(table.numpy(), lanes), dtype=ctx.vector(lanes))
-            return KernelBinding(cat_lanes.cat_grid_lanes, cat_lanes.cat_points_lanes, (table, groups, *params[1:]),
-                                 "cat_lanes.cat_grid_lanes", notes)
-        return KernelBinding(kernels.cat_grid, kernels.cat_points, params, "cat.cat_grid", notes)
+            return KernelBinding(cat_lanes.KERNELS, ctx.struct(cat_lanes.CAT_LANES, **params, groups=groups), notes)
+        return KernelBinding(kernels.KERNELS, ctx.struct(kernels.CAT, **params), notes)
 
     def work_estimate(self, cells: int, extent: Extent) -> float:
         """Seconds of one core: ``cells (SECONDS_PER_CELL + nodes SECONDS_PER_NODE)`` for the

@@ -322,8 +322,7 @@ class PolarBanana(MotionModel):
         ctx = WarpContext(dtype, device)
         out = ctx.zeros((phi.size, 8))
         if phi.size:
-            ctx.launch(kernels.polar_derivatives, dim=phi.size,
-                       inputs=[ctx.array(phi.ravel()), self._coefficients(ctx), self._law(), out])
+            ctx.launch(kernels.polar_derivatives, dim=phi.size, inputs=[ctx.array(phi.ravel()), self._params(ctx), out])
         return ctx.numpy(out).reshape(phi.shape + (8,))
 
     def conditional_moments(self, theta, *, order=None, dtype=np.float64, device="cpu"):
@@ -575,9 +574,12 @@ class PolarBanana(MotionModel):
 
     # --- kernels ------------------------------------------------------------------------------
 
-    def _coefficients(self, ctx: KernelContext):
-        """The kernels' coefficient array: P_mu (8), P_sigma (11) and heading-law factors."""
-        return ctx.array(kernels.coefficients(self.v0, self.t, self.sigma_a, self.sigma_omega, self.sigma_heading))
+    def _params(self, ctx: KernelContext, variant: str | None = None, order: int | None = None):
+        """The kernels' parameter struct: the coefficients of P_mu (8), P_sigma (11) and the
+        heading law, the pose, ``variant`` and the heading ``order`` (default: the model's)."""
+        coef = kernels.coefficients(self.v0, self.t, self.sigma_a, self.sigma_omega, self.sigma_heading)
+        return ctx.struct(kernels.POLAR, **dict(zip(kernels.COEFFICIENTS, coef)), pose=self.pose.as_array(),
+                          variant=self._law(variant), order=self.kernel_order if order is None else int(order))
 
     def _law(self, variant: str | None = None) -> int:
         """The kernels' code of ``variant`` (default: the model's)."""
@@ -591,23 +593,18 @@ class PolarBanana(MotionModel):
         mean = ctx.zeros(phi.size)
         sd = ctx.zeros(phi.size)
         if phi.size:
-            ctx.launch(kernels.polar_moments, dim=phi.size, inputs=[
-                ctx.array(phi.ravel()), self._coefficients(ctx), self._law(variant), int(order), mean, sd,
-            ])
+            ctx.launch(kernels.polar_moments, dim=phi.size,
+                       inputs=[ctx.array(phi.ravel()), self._params(ctx, variant, order), mean, sd])
         return ctx.numpy(mean).reshape(phi.shape), ctx.numpy(sd).reshape(phi.shape)
 
     def bind(self, ctx: KernelContext, extent: Extent, *, grid: bool = False) -> KernelBinding:
         """The closed-form kernels (``kernels/polar.py``): one row per CPU thread; on the CPU a vector
         of cells or points at a time (``kernels/polar_lanes.py``)."""
-        params = (self._coefficients(ctx), self._law(), self.kernel_order, ctx.array(self.pose.as_array()))
         notes = {"variant": self.variant, "truncated_mass": self.truncated_mass}
         if self.sigma_heading > 0.0:
             notes["heading_order"] = self.heading_order
-        if ctx.device == "cpu":
-            return KernelBinding(polar_lanes.polar_grid_lanes, polar_lanes.polar_points_lanes, params,
-                                 "polar_lanes.polar_grid_lanes", notes, row_loop=True, bands_per_thread=1)
-        return KernelBinding(kernels.polar_grid, kernels.polar_points, params, "polar.polar_grid", notes, row_loop=True,
-                             bands_per_thread=1)
+        family = polar_lanes.KERNELS if ctx.device == "cpu" else kernels.KERNELS
+        return KernelBinding(family, self._params(ctx), notes)
 
     # --- batches (bananagrid.engine.batch) ----------------------------------------------------
 
@@ -642,12 +639,8 @@ class PolarBanana(MotionModel):
         coefs = np.array([
             kernels.coefficients(m.v0, m.t, m.sigma_a, m.sigma_omega, m.sigma_heading) for m in models
         ])
-        variants = np.array([m._law() for m in models], dtype=np.int32)
-        orders = np.array([m.kernel_order for m in models], dtype=np.int32)
-        poses = np.array([m.pose.as_array() for m in models])
-        params = (ctx.array(coefs), ctx.array(variants, dtype=np.int32), ctx.array(orders, dtype=np.int32),
-                  ctx.array(poses))
-        if ctx.device == "cpu":  # the grids of bind(), row for row
-            return KernelBinding(polar_lanes.polar_batch_grid_lanes, polar_lanes.polar_batch_points_lanes, params,
-                                 "polar_lanes.polar_batch_grid_lanes")
-        return KernelBinding(kernels.polar_batch_grid, kernels.polar_batch_points, params, "polar.polar_batch_grid")
+        params = ctx.structs(kernels.POLAR, len(models), **dict(zip(kernels.COEFFICIENTS, coefs.T)),
+                             pose=np.array([m.pose.as_array() for m in models]),
+                             variant=[m._law() for m in models], order=[m.kernel_order for m in models])
+        # the grids of bind(), row for row
+        return KernelBinding(polar_lanes.KERNELS if ctx.device == "cpu" else kernels.KERNELS, params)

@@ -180,7 +180,7 @@ def test_float32_exp_atan2_sqrt_and_sinc():
 
 
 def _scalar_kernel(model, x, y, dtype=np.float64, inputs=None):
-    """The density by the scalar kernel (``polar.polar_points``, which the GPU and heading-noise
+    """The density by the scalar kernel (``polar.KERNELS.points``, which the GPU and heading-noise
     paths run) in ``dtype``, launched here directly (``model.pdf`` itself takes the lane kernel);
     with ``inputs=np.float32`` the coordinates, pose and coefficients are first rounded to
     float32 (what a float32 kernel is given), then computed in ``dtype``."""
@@ -191,12 +191,19 @@ def _scalar_kernel(model, x, y, dtype=np.float64, inputs=None):
         rounded = np.ascontiguousarray(values, dtype=inputs).ravel().astype(dtype)
         return wp.array(rounded, dtype=scalar, device="cpu")
 
+    def rounded(values):
+        return np.asarray(values, dtype=inputs).astype(dtype)
+
     coef = polar.coefficients(model.v0, model.t, model.sigma_a, model.sigma_omega, model.sigma_heading)
-    law = polar.ROUGH if model.variant == "rough" else polar.IMPROVED
+    params = polar.POLAR.of(scalar)()
+    for name, value in zip(polar.COEFFICIENTS, rounded(coef)):
+        setattr(params, name, value)
+    params.pose = wp.types.vector(4, scalar)(*rounded(model.pose.as_array()))
+    params.variant = polar.ROUGH if model.variant == "rough" else polar.IMPROVED
+    params.order = model.kernel_order
     xs, ys = device_array(x), device_array(y)
     out = wp.zeros(xs.shape[0], dtype=scalar, device="cpu")
-    wp.launch(polar.polar_points, dim=xs.shape[0], device="cpu", inputs=[
-        xs, ys, 0, device_array(coef), law, model.kernel_order, device_array(model.pose.as_array()), out])
+    wp.launch(polar.KERNELS.points, dim=xs.shape[0], device="cpu", inputs=[xs, ys, 0, params, out])
     return out.numpy().reshape(np.shape(x))
 
 
@@ -347,16 +354,17 @@ def test_lane_grid_at_the_origin_and_past_the_improved_domain(variant, dtype):
 
 
 def _scalar_bearing(model, x, y, dtype):
-    """The bearing density by the scalar kernel (``bearing.bearing_points``, the GPU path's),
+    """The bearing density by the scalar kernel (``bearing.KERNELS.points``, the GPU path's),
     launched here directly in ``dtype`` (``model.pdf`` takes the lane kernel on the CPU)."""
     scalar = wp.float64 if dtype == np.float64 else wp.float32
     xs = wp.array(np.ravel(x).astype(dtype), dtype=scalar, device="cpu")
     ys = wp.array(np.ravel(y).astype(dtype), dtype=scalar, device="cpu")
     out = wp.zeros(xs.shape[0], dtype=scalar, device="cpu")
-    params = wp.array(model.kernel_parameters().astype(dtype), dtype=scalar, device="cpu")
-    law = bearing.EXACT if model.variant == "exact" else bearing.LINEAR
-    wp.launch(bearing.bearing_points, dim=xs.shape[0], device="cpu",
-              inputs=[xs, ys, 0, params, len(model.sensors), law, out])
+    params = bearing.BEARING.of(scalar)()
+    params.params = wp.array(model.kernel_parameters().astype(dtype), dtype=scalar, device="cpu")
+    params.n_sensors = len(model.sensors)
+    params.variant = bearing.EXACT if model.variant == "exact" else bearing.LINEAR
+    wp.launch(bearing.KERNELS.points, dim=xs.shape[0], device="cpu", inputs=[xs, ys, 0, params, out])
     return out.numpy().reshape(np.shape(x))
 
 
@@ -546,8 +554,11 @@ def test_cat_lane_scan_equals_the_scalar_scan_bit_for_bit(case):
         binding = model.bind(ctx, None, grid=True)
         assert binding.kernel_name == "cat_lanes.cat_grid_lanes"
         out = ctx.zeros(x.size)
-        wp.launch(cat.cat_points, dim=x.size, device="cpu", inputs=[
-            ctx.array(x.ravel()), ctx.array(y.ravel()), 0, binding.params[0], *binding.params[2:], out])
+        params = cat.CAT.of(ctx.scalar_type)()  # the lane binding's parameters but the node groups
+        for name in cat.CAT.fields:
+            setattr(params, name, getattr(binding.params, name))
+        wp.launch(cat.KERNELS.points, dim=x.size, device="cpu", inputs=[
+            ctx.array(x.ravel()), ctx.array(y.ravel()), 0, params, out])
         scalar = out.numpy().reshape(x.shape)
         assert np.array_equal(lanes.values, scalar.astype(dtype))
         if computed == dtype:

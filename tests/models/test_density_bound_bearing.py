@@ -30,13 +30,11 @@ def kernel_values(model, xs, ys, dtype) -> np.ndarray:
     far from the world origin (``working_dtype``), so float32 rounding is fully exercised."""
     ctx = WarpContext(dtype, "cpu", threads=1)
     binding = model.bind(ctx, None, grid=True)
-    ctx.load(binding.grid_kernel)
+    ctx.load(binding.kernels.grid)
     out = ctx.zeros((len(ys), len(xs)))
-    if binding.row_loop:  # the lane kernel: a whole row per thread
-        dim, head = (len(ys), 1), [ctx.array(xs), ctx.array(ys), 0, len(xs)]
-    else:
-        dim, head = (len(ys), len(xs)), [ctx.array(xs), ctx.array(ys), 0]
-    ctx.launch(binding.grid_kernel, dim=dim, inputs=[*head, *binding.params, out])
+    # a whole row per thread
+    ctx.launch(binding.kernels.grid, dim=(len(ys), 1), inputs=[ctx.array(xs), ctx.array(ys), 0, len(xs), binding.params,
+                                                                out])
     return ctx.numpy(out).astype(np.float64)
 
 

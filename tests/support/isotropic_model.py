@@ -1,8 +1,10 @@
 """A model defined only in the tests: an isotropic normal N(mean, sigma^2 I).
 
-It shows that a model plugs into bananagrid through the model protocol alone: its Warp kernels
-are written here, its class derives from ``bananagrid.Model``, and a registry entry
-(``ISOTROPIC``) gives it scene layers. Nothing in the package names it.
+It shows that a model plugs into bananagrid through the model protocol alone: its maths is a
+``@wp.func`` density over a typed parameter struct, written here, from which the package's
+generator makes its grid and points kernels (no launch code); its class derives from
+``bananagrid.Model``, and a registry entry (``ISOTROPIC``) gives it scene layers. Nothing in the
+package names it.
 """
 
 import math
@@ -13,40 +15,22 @@ import numpy as np
 import warp as wp
 
 import bananagrid as bg
+from bananagrid.kernels.generate import SCALAR, Params, density_kernels
 from bananagrid.protocol import KernelBinding, SceneKey, SceneSchema
 from bananagrid.validate import point, positive
 
 
 @wp.func
-def isotropic_density(x: Any, y: Any, params: wp.array(dtype=Any)):
-    """params = (mean_x, mean_y, 1 / sigma^2, 1 / (2 pi sigma^2))."""
-    dx = x - params[0]
-    dy = y - params[1]
-    return params[3] * wp.exp(type(x)(-0.5) * (dx * dx + dy * dy) * params[2])
+def isotropic_density(x: Any, y: Any, p: Any):
+    """Density per m^2 at the world point (x, y): its maths, all that it writes of kernels."""
+    dx = x - p.mean_x
+    dy = y - p.mean_y
+    return p.norm * wp.exp(type(x)(-0.5) * (dx * dx + dy * dy) * p.inv_var)
 
 
-@wp.kernel
-def isotropic_grid(
-    xs: wp.array(dtype=Any), ys: wp.array(dtype=Any), row0: int, params: wp.array(dtype=Any),
-    out: wp.array2d(dtype=Any),
-):
-    i, j = wp.tid()
-    out[row0 + i, j] = isotropic_density(xs[j], ys[row0 + i], params)
-
-
-@wp.kernel
-def isotropic_points(
-    xs: wp.array(dtype=Any), ys: wp.array(dtype=Any), start: int, params: wp.array(dtype=Any),
-    out: wp.array(dtype=Any),
-):
-    k = start + wp.tid()
-    out[k] = isotropic_density(xs[k], ys[k], params)
-
-
-for _scalar in (wp.float32, wp.float64):
-    _vec = wp.array(dtype=_scalar)
-    wp.overload(isotropic_grid, {"xs": _vec, "ys": _vec, "params": _vec, "out": wp.array2d(dtype=_scalar)})
-    wp.overload(isotropic_points, {"xs": _vec, "ys": _vec, "params": _vec, "out": _vec})
+#: Its parameters: the mean, 1 / sigma^2 and 1 / (2 pi sigma^2); its kernels, generated.
+PARAMS = Params("IsotropicParams", __name__, mean_x=SCALAR, mean_y=SCALAR, inv_var=SCALAR, norm=SCALAR)
+KERNELS = density_kernels(isotropic_density, PARAMS, "isotropic")
 
 
 @dataclass(frozen=True)
@@ -74,8 +58,8 @@ class IsotropicNormal(bg.Model):
 
     def bind(self, ctx, extent, *, grid=False):
         s2 = self.sigma * self.sigma
-        params = ctx.array(np.array([self.mean[0], self.mean[1], 1.0 / s2, 1.0 / (2.0 * math.pi * s2)]))
-        return KernelBinding(isotropic_grid, isotropic_points, (params,), "isotropic.isotropic_grid")
+        return KernelBinding(KERNELS, ctx.struct(PARAMS, mean_x=self.mean[0], mean_y=self.mean[1], inv_var=1.0 / s2,
+                                                 norm=1.0 / (2.0 * math.pi * s2)))
 
     def sample(self, n, rng):
         return rng.normal(self.mean, self.sigma, (n, 2))

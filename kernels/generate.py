@@ -1,0 +1,212 @@
+"""Launch kernels generated from a family's device maths (as ``warp.fem`` builds its integration
+kernels from a geometry's functions): a kernel module writes a density and a typed parameter
+struct, and :func:`density_kernels` writes the grid, points and batch kernels around them.
+
+A family declares its parameters once, with :class:`Params` (a ``wp.struct`` in float32 and in
+float64, made from one list of fields), and its maths as a ``@wp.func density(x, y, p)``: the
+density per m^2 at the world point (x, y) under the parameters ``p``. With ``lanes=True`` the
+density takes vectors of world points (``kernels/lanes.py``, CPU only) and the kernels move a
+vector of cells or points at a time. Every generated kernel of a family calls the one density,
+so that grids, points and batches agree bit for bit. The kernels join the density's module
+(one module per family, one build) and take its module options.
+
+Kernel arguments (``P`` the struct):
+
+* grid ``(xs, ys, row0, columns, p: P, out[ny, nx])`` over ``(rows, blocks)``: ``columns``
+  cells of a row per thread (a whole row on the CPU, where Warp's 2-D thread index costs an
+  integer division per thread; one cell on a GPU);
+* points ``(xs, ys, start, p: P, out[n])`` over a chunk of points from ``start``;
+* batch grid ``(xs[H, nx], ys[H, ny], h0, ps: array of P, out[H, ny, nx])`` over
+  ``(hypotheses, rows)``, and batch points ``(xs, ys, h0, ps, out[H, n])`` over hypotheses.
+
+A family whose grid kernel works on blocks of rows (Butterly's tiles) passes its own ``grid``
+with ``tile_rows``, ``scratch_width`` and ``quad_width`` (the engine's ``grid_block`` gives it
+``(xs, ys, row0, row_end, rows, columns, step_x, step_y, p, scratch, quads, band, out)``); the
+generator then writes the others.
+"""
+
+import inspect
+from dataclasses import dataclass
+from typing import Any
+
+import warp as wp
+
+from .lanes import lane_count, load_lanes, store_lanes
+
+SCALARS = (wp.float32, wp.float64)
+
+
+def SCALAR(scalar):
+    """Field type: the kernels' scalar."""
+    return scalar
+
+
+def VEC4(scalar):
+    """Field type: four scalars (a pose: origin x, origin y, cos heading, sin heading)."""
+    return wp.types.vector(4, scalar)
+
+
+def ARRAY(scalar):
+    """Field type: a device array of scalars."""
+    return wp.array(dtype=scalar)
+
+
+def ARRAY2D(scalar):
+    """Field type: a 2-D device array of scalars."""
+    return wp.array2d(dtype=scalar)
+
+
+class Params:
+    """A family's typed parameter struct, in float32 and in float64 (``of(scalar)``).
+
+    ``fields`` map each name to a Warp type (``int``) or to a function of the scalar type
+    (:func:`SCALAR`, :func:`VEC4`, :func:`ARRAY`, ...). ``module`` is the family's module.
+    """
+
+    def __init__(self, name: str, module: str, **fields):
+        self.name = name
+        self.fields = fields
+        self.structs = {}
+        for scalar in SCALARS:
+            annotations = {k: (f(scalar) if inspect.isfunction(f) else f) for k, f in fields.items()}
+            key = f"{name}{8 * wp.types.type_size_in_bytes(scalar)}"
+            cls = type(key, (), {"__annotations__": annotations, "__module__": module, "__qualname__": key})
+            self.structs[scalar] = wp.struct(cls)
+
+    def of(self, scalar):
+        """The struct of ``scalar`` (``wp.float32`` or ``wp.float64``)."""
+        return self.structs[scalar]
+
+
+@dataclass(frozen=True)
+class DensityKernels:
+    """The launch kernels of a family and how the engine lays them out.
+
+    Attributes
+    ----------
+    name : str
+        ``module.kernel`` of the grid kernel, for provenance.
+    params : Params
+    grid, points, batch_grid, batch_points : Warp kernels (the batch ones None without ``batch``)
+    bands_per_thread : int
+        Row bands per CPU thread: one where every row costs the same (fewest launches), many
+        where the cost follows the density.
+    tile_rows, scratch_width, quad_width : int
+        Of a family's own block kernel (0 for the generated grid kernel): rows per thread on the
+        CPU, and scalar and 4-vector scratch per band.
+    """
+
+    name: str
+    params: Params
+    grid: Any
+    points: Any
+    batch_grid: Any = None
+    batch_points: Any = None
+    bands_per_thread: int = 16
+    tile_rows: int = 0
+    scratch_width: int = 0
+    quad_width: int = 0
+
+
+def density_kernels(density, params: Params, name: str, *, lanes: bool = False, batch: bool = False,
+                    bands_per_thread: int = 16, suffix: str | None = None, grid=None, tile_rows: int = 0,
+                    scratch_width: int = 0, quad_width: int = 0) -> DensityKernels:
+    """The grid and points kernels (and with ``batch`` the batch kernels) of ``density``, named
+    ``NAME_grid``, ``NAME_points``, ... (``suffix`` appended: by default ``_lanes`` with ``lanes``), in its module and
+    overloaded for both scalar types; ``grid``: the family's own grid kernel instead."""
+    module = density.module
+    suffix = ("_lanes" if lanes else "") if suffix is None else suffix
+
+    def make(f, kind):
+        return wp.kernel(f, name=f"{name}_{kind}{suffix}", module=module)
+
+    if lanes:
+        def grid_kernel(xs: wp.array(dtype=Any), ys: wp.array(dtype=Any), row0: int, columns: int, p: Any,
+                        out: wp.array2d(dtype=Any)):
+            i, block = wp.tid()
+            row = row0 + i
+            j1 = wp.min((block + 1) * columns, xs.shape[0])
+            y = ys[row]
+            j = block * columns
+            while j < j1:
+                x = load_lanes(xs, j)
+                store_lanes(out[row], j, density(x, type(x)(y), p), j1 - j)
+                j += lane_count(xs)
+
+        def points_kernel(xs: wp.array(dtype=Any), ys: wp.array(dtype=Any), start: int, p: Any,
+                          out: wp.array(dtype=Any)):
+            # the thread of every lane-count-th point (counted from the first of all, so that a
+            # vector is computed once where it straddles two launches' chunks) fills it and the
+            # next ones; the others return
+            k = start + wp.tid()
+            if k % lane_count(xs) == 0:
+                store_lanes(out, k, density(load_lanes(xs, k), load_lanes(ys, k), p), xs.shape[0] - k)
+
+        def batch_grid_kernel(xs: wp.array2d(dtype=Any), ys: wp.array2d(dtype=Any), h0: int, ps: wp.array(dtype=Any),
+                              out: wp.array3d(dtype=Any)):
+            hh, i = wp.tid()
+            h = h0 + hh
+            p = ps[h]  # loaded once: the output's stores could alias it
+            xs_h = xs[h]
+            y = ys[h, i]
+            j = int(0)
+            while j < xs.shape[1]:
+                x = load_lanes(xs_h, j)
+                store_lanes(out[h, i], j, density(x, type(x)(y), p), xs.shape[1] - j)
+                j += lane_count(xs_h)
+
+        def batch_points_kernel(xs: wp.array(dtype=Any), ys: wp.array(dtype=Any), h0: int, ps: wp.array(dtype=Any),
+                                out: wp.array2d(dtype=Any)):
+            h = h0 + wp.tid()
+            p = ps[h]
+            k = int(0)
+            while k < xs.shape[0]:
+                store_lanes(out[h], k, density(load_lanes(xs, k), load_lanes(ys, k), p), xs.shape[0] - k)
+                k += lane_count(xs)
+    else:
+        def grid_kernel(xs: wp.array(dtype=Any), ys: wp.array(dtype=Any), row0: int, columns: int, p: Any,
+                        out: wp.array2d(dtype=Any)):
+            i, block = wp.tid()
+            row = row0 + i
+            y = ys[row]
+            for j in range(block * columns, wp.min((block + 1) * columns, xs.shape[0])):
+                out[row, j] = density(xs[j], y, p)
+
+        def points_kernel(xs: wp.array(dtype=Any), ys: wp.array(dtype=Any), start: int, p: Any,
+                          out: wp.array(dtype=Any)):
+            k = start + wp.tid()
+            out[k] = density(xs[k], ys[k], p)
+
+        def batch_grid_kernel(xs: wp.array2d(dtype=Any), ys: wp.array2d(dtype=Any), h0: int, ps: wp.array(dtype=Any),
+                              out: wp.array3d(dtype=Any)):
+            hh, i = wp.tid()
+            h = h0 + hh
+            p = ps[h]  # loaded once: the output's stores could alias it
+            y = ys[h, i]
+            for j in range(xs.shape[1]):
+                out[h, i, j] = density(xs[h, j], y, p)
+
+        def batch_points_kernel(xs: wp.array(dtype=Any), ys: wp.array(dtype=Any), h0: int, ps: wp.array(dtype=Any),
+                                out: wp.array2d(dtype=Any)):
+            h = h0 + wp.tid()
+            p = ps[h]
+            for k in range(xs.shape[0]):
+                out[h, k] = density(xs[k], ys[k], p)
+
+    own_grid = grid is not None
+    grid = grid if own_grid else make(grid_kernel, "grid")
+    points = make(points_kernel, "points")
+    batch_grid = make(batch_grid_kernel, "batch_grid") if batch else None
+    batch_points = make(batch_points_kernel, "batch_points") if batch else None
+    for scalar in SCALARS:
+        vec, mat, struct = wp.array(dtype=scalar), wp.array2d(dtype=scalar), params.of(scalar)
+        if not own_grid:
+            wp.overload(grid, {"xs": vec, "ys": vec, "p": struct, "out": mat})
+        wp.overload(points, {"xs": vec, "ys": vec, "p": struct, "out": vec})
+        if batch:
+            many = wp.array(dtype=struct)
+            wp.overload(batch_grid, {"xs": mat, "ys": mat, "ps": many, "out": wp.array3d(dtype=scalar)})
+            wp.overload(batch_points, {"xs": vec, "ys": vec, "ps": many, "out": mat})
+    short = module.name.rsplit(".", 1)[-1]
+    return DensityKernels(f"{short}.{grid.key}", params, grid, points, batch_grid, batch_points, bands_per_thread,
+                          tile_rows, scratch_width, quad_width)
