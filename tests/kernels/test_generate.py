@@ -111,7 +111,7 @@ def test_generated_grid_and_points_cover_every_cell_and_agree(nx, ny, n_points, 
     points = launch_points(ctx, binding, px, py)
     # float64: exp's argument carries a few roundings of its size (<= 2e3 here) and exp's own;
     # float32: the same at eps32, and the inputs' float32 rounding moves the argument by
-    # |arg| eps32 more; the lane exp is within 3 ulp of libm's (tests/test_lanes.py)
+    # |arg| eps32 more; the lane exp is within 3 ulp of libm's (tests/kernels/test_lanes.py)
     eps = np.finfo(dtype).eps
     for got, gx, gy in ((values, x, y), (points, px, py)):
         reference = _oracle(gx.astype(dtype).astype(float), gy.astype(dtype).astype(float), centre, sigma)

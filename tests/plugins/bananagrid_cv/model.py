@@ -45,8 +45,8 @@ class ConstantVelocity(Model):
         mu, s = self.law
         inverse = np.linalg.inv(s)
         norm = 1.0 / (2.0 * math.pi * math.sqrt(np.linalg.det(s)))
-        params = ctx.array(np.array([mu[0], mu[1], inverse[0, 0], inverse[0, 1], inverse[1, 1], norm]))
-        return KernelBinding(kernels.cv_grid, kernels.cv_points, (params,), "bananagrid_cv.kernels.cv_grid")
+        return KernelBinding(kernels.KERNELS, ctx.struct(kernels.PARAMS, mean_x=mu[0], mean_y=mu[1], a=inverse[0, 0],
+                                                          b=inverse[0, 1], c=inverse[1, 1], norm=norm))
 
     def sample(self, n, rng):
         n, rng = check_n(n), check_rng(rng)
