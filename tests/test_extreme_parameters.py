@@ -72,6 +72,18 @@ def test_grids_at_the_extremes(x0, y0, dx, dy, nx, ny):
     if grid is not None:
         finite(grid.x, grid.y, grid.extent, grid.cell_area)
         assert grid.cell_area > 0.0
+        cells_apart(grid)
+
+
+def cells_apart(grid):
+    """Every cell centre of ``grid`` in order and where float64 puts it, to 4e-3 of a cell: cells
+    smaller than float64 resolves at their coordinates are refused, not collapsed (a cell spans at
+    least MIN_CELL_ULPS = 1024 ulps; a centre origin + (k + 1/2) d and its offset from the origin
+    take three roundings of at most one ulp each, 3 / 1024 < 4e-3)."""
+    for values, start, step, n in ((grid.x, grid.origin[0], grid.dx, grid.nx), (grid.y, grid.origin[1], grid.dy, grid.ny)):
+        exact = (np.arange(n) + 0.5) * step  # offsets from the origin; subtracted exactly below
+        assert np.all(np.diff(values) > 0.0)
+        assert np.all(np.abs((values - start) - exact) <= 4e-3 * step), (values, start, step)
 
 
 @SWEEP
@@ -81,6 +93,18 @@ def test_grids_from_bounds_at_the_extremes(x0, width, y0, height, step):
                       ["x", "y", "step", "grid", "dx", "dy"])
     if grid is not None and grid.nx * grid.ny <= 10**6:
         finite(grid.x, grid.y, grid.extent)
+        cells_apart(grid)
+
+
+@SWEEP
+@given(SIGNED, st.floats(1.0, 2.0**40), st.integers(1, 6))
+def test_grids_finer_than_float64_resolves_are_refused(start, cells_per_ulp, n):
+    """Cells of a few ulps of their coordinates (1e-154 m cells at 1e-30, 1e-17 m at 1, 1e-11 m
+    at 1e6: every centre the same float, maps of 0): refused naming dx, or resolved."""
+    step = math.ulp(abs(start) + 1e-300) * cells_per_ulp
+    grid = refused_or(lambda: bg.Grid(origin=(start, 0.0), dx=step, dy=1.0, nx=n, ny=1), ["dx", "origin", "grid"])
+    if grid is not None:
+        cells_apart(grid)
 
 
 @SWEEP

@@ -21,6 +21,11 @@ MAX_CELLS = 2**28
 #: tiles on Dask workers and written to Zarr (:mod:`bananagrid.engine.tiles`).
 MAX_TILED_CELLS = 2**38
 
+#: Fewest float64 steps (ulps of the largest coordinate) across a cell: below, the cells' centres
+#: and edges would collapse onto each other or be placed wrong by more than a thousandth of a
+#: cell (1e-30 m cells about x = 1: every centre at the same x, every map 0 or garbage).
+MIN_CELL_ULPS = 1024
+
 
 @dataclass(frozen=True)
 class Grid:
@@ -61,6 +66,15 @@ class Grid:
         for name, start, extent in (("x", self.origin[0], self.nx * self.dx), ("y", self.origin[1], self.ny * self.dy)):
             if not (math.isfinite(extent) and math.isfinite(start + extent)):
                 raise BananagridError(f"grid extent in {name} is not finite (origin {start!r}, {extent!r} m)")
+        for name, step, start, extent in (("dx", self.dx, self.origin[0], self.nx * self.dx),
+                                          ("dy", self.dy, self.origin[1], self.ny * self.dy)):
+            ulp = math.ulp(max(abs(start), abs(start + extent)))
+            if not step >= MIN_CELL_ULPS * ulp:
+                raise BananagridError(
+                    f"{name} = {step!r}: below float64's resolution at coordinates up to "
+                    f"{max(abs(start), abs(start + extent)):.6g} m (cells need at least {MIN_CELL_ULPS} steps of "
+                    f"{ulp:.3g} m, so {MIN_CELL_ULPS * ulp:.3g} m); use larger cells or an origin nearer 0"
+                )
         area = self.dx * self.dy
         if not (math.isfinite(area) and area > 0.0):  # 1e308 squared overflows, 1e-308 squared underflows
             raise BananagridError(
