@@ -35,7 +35,7 @@ import bananagrid as bg
 from bananagrid import atomic, cli
 from bananagrid.atomic import OutputSet, check_target
 from bananagrid.geo.zarr_store import check_store_target, is_bananagrid_store, write_zarr
-from bananagrid.scenes import run as run_module
+from bananagrid.scenes import run_cells, run_grid
 
 ROOT = Path(__file__).resolve().parents[1]
 #: pytest shows PendingDeprecationWarnings that a user's run does not (rasterio's use of affine, inside
@@ -165,7 +165,8 @@ def no_computing(monkeypatch):
     def never(*args, **kwargs):
         raise AssertionError("computed before the targets were checked")
 
-    monkeypatch.setattr(run_module, "rasterise", never)
+    for runner in (run_grid, run_cells):  # the one runner's domain steps: grid layers, angular cells
+        monkeypatch.setattr(runner, "rasterise", never)
     monkeypatch.setattr(cli, "dask_client", never)
     monkeypatch.setattr(cli, "run_scene_tiled", never)
 

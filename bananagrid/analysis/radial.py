@@ -98,6 +98,16 @@ def _check_angles(angles) -> np.ndarray:
     return values
 
 
+def _nodes(lo: float, hi: float, n: int) -> np.ndarray:
+    """``n`` equally spaced nodes from ``lo`` to ``hi``: ``numpy.linspace``'s, except for spans
+    near float64's largest value, where linspace's ``k * step`` overflows; there each node is
+    ``lo (1 - f) + hi f`` for ``f = k / (n - 1)``, which never passes ``hi``."""
+    if hi - lo < np.finfo(float).max / 4:
+        return np.linspace(lo, hi, n)
+    f = np.arange(n) / (n - 1.0)
+    return lo * (1.0 - f) + hi * f
+
+
 def _profile(model: DensityModel, pose: Pose, angles: np.ndarray, r_max, threads):
     """Shared trapezoid nodes and the values r p(r, theta), shape (nodes, angles), over the
     union of the rays' supports."""
@@ -107,7 +117,7 @@ def _profile(model: DensityModel, pose: Pose, angles: np.ndarray, r_max, threads
         if not (math.isfinite(bound) and bound > 0.0):
             raise BananagridError(f"r_max = {r_max!r}: must be finite and > 0")
     coarse_n = int(min(MAX_NODES, max(256, math.ceil(bound / scale * COARSE_PER_SCALE))))
-    coarse = np.linspace(0.0, bound, coarse_n)
+    coarse = _nodes(0.0, bound, coarse_n)
     q = coarse[:, None] * model.ray_values(pose, coarse, angles, threads=threads)
     peaks = q.max(axis=0)
     if not (peaks > 0.0).all():
@@ -118,7 +128,7 @@ def _profile(model: DensityModel, pose: Pose, angles: np.ndarray, r_max, threads
     lo = max(0.0, coarse[keep[0]] - 2 * step)
     hi = min(bound, coarse[keep[-1]] + 2 * step)
     n = int(min(MAX_NODES, max(512, math.ceil((hi - lo) / scale * FINE_PER_SCALE) + 1)))
-    radii = np.linspace(lo, hi, n)
+    radii = _nodes(lo, hi, n)
     return radii, radii[:, None] * model.ray_values(pose, radii, angles, threads=threads)
 
 
