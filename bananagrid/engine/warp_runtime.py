@@ -111,7 +111,7 @@ def _pool(pid: int, workers: int) -> ThreadPoolExecutor:
     """The helper threads of :func:`run_bands` for ``workers`` helpers in process ``pid``, made on
     first use and kept: starting threads for each call cost 100-300 us a call, more than a small
     grid's kernel (a forked child has none of its parent's threads, hence the pid)."""
-    return ThreadPoolExecutor(max_workers=workers, thread_name_prefix="bananagrid-band")
+    return ThreadPoolExecutor(max_workers=workers, thread_name_prefix=f"bananagrid-bands{workers}")
 
 
 def run_bands(launch_band, bands: list[tuple[int, int]], threads: int) -> None:
