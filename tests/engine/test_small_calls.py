@@ -159,3 +159,22 @@ def test_a_kept_binding_is_the_one_made_and_stays_in_its_process(model):
     assert np.array_equal(copy.pdf(pts[:, 0], pts[:, 1]), values)
     fresh = type(model)(**{k: getattr(model, k) for k in model.__dataclass_fields__})
     assert np.array_equal(fresh.pdf(pts[:, 0], pts[:, 1]), values)
+
+
+@settings(max_examples=200, deadline=None, derandomize=True, database=None)
+@given(ox=st.floats(-1e12, 1e12), oy=st.floats(-1e12, 1e12), dx=st.floats(1e-3, 1e6), dy=st.floats(1e-3, 1e6),
+       nx=st.integers(1, 5000), ny=st.integers(1, 5000), px=st.floats(-1e12, 1e12), py=st.floats(-1e12, 1e12))
+def test_a_grids_extent_is_that_of_all_its_centres(ox, oy, dx, dy, nx, ny, px, py):
+    """GridExtent's nearest and farthest distances, from the first and last centres alone,
+    equal those of every centre's coordinates (Grid.x and Grid.y computed in full)."""
+    from bananagrid.engine.grid_kernel import GridExtent
+
+    try:
+        grid = bg.Grid(origin=(ox, oy), dx=dx, dy=dy, nx=nx, ny=ny)
+    except bg.BananagridError:
+        return  # cells below the coordinates' resolution: no grid
+    xs, ys = grid.x - px, grid.y - py
+    near_x = 0.0 if xs[0] <= 0.0 <= xs[-1] else float(np.abs(xs).min())
+    near_y = 0.0 if ys[0] <= 0.0 <= ys[-1] else float(np.abs(ys).min())
+    far = math.hypot(float(np.abs(xs).max()), float(np.abs(ys).max()))
+    assert GridExtent(grid).radii((px, py)) == (math.hypot(near_x, near_y), far)
