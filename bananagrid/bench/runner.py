@@ -35,6 +35,7 @@ from ..domains.angular_lattice import AngularLattice
 from ..domains.grid import Grid
 from ..engine.batch import frame, rasterise_batch
 from ..engine.grid_kernel import GridExtent
+from ..engine.points import evaluate_points
 from ..engine.rasterise import rasterise
 from ..engine.warp_runtime import default_threads, device_name
 from ..models.bearing import bearing_to, two_bearing_variances
@@ -502,8 +503,6 @@ def small_calls(threads: int, repeat: int, log=print) -> dict:
     SMALL_POINTS points for each SMALL_ROWS model on one thread and on ``threads``; framing
     SMALL_HYPOTHESES hypotheses against rasterising them on the framed grids (``threads``).
     Process CPU time (every thread's) and wall time, microseconds."""
-    from ..engine.points import evaluate_points
-
     rows = []
     log(f"small calls, float64, per call: process CPU time (all threads) and wall time, us, best of {repeat}")
     log(f"{'call':<28} {'model':<16} {'threads':>7} {'cpu us':>9} {'wall us':>9} {'calls':>6}")

@@ -16,6 +16,7 @@ from hypothesis import strategies as st
 import bananagrid as bg
 from bananagrid.engine import memory
 from bananagrid.engine.batch import grids_in
+from bananagrid.engine.grid_kernel import GridExtent
 from bananagrid.engine.points import check_model
 from bananagrid.engine.warp_runtime import WarpContext, run_bands
 
@@ -167,8 +168,6 @@ def test_a_kept_binding_is_the_one_made_and_stays_in_its_process(model):
 def test_a_grids_extent_is_that_of_all_its_centres(ox, oy, dx, dy, nx, ny, px, py):
     """GridExtent's nearest and farthest distances, from the first and last centres alone,
     equal those of every centre's coordinates (Grid.x and Grid.y computed in full)."""
-    from bananagrid.engine.grid_kernel import GridExtent
-
     try:
         grid = bg.Grid(origin=(ox, oy), dx=dx, dy=dy, nx=nx, ny=ny)
     except bg.BananagridError:
