@@ -12,6 +12,8 @@ containment probability of 10^6 geometries is timed too. Times are the best of `
 runs after a warm-up (the first Warp compile is not timed). The exact CAT and the Butterly
 baselines take about a minute or more on the full grid, so by default they run on every 10th
 row and their time is scaled to the full grid (``--baseline-stride 1`` runs them all).
+``--small`` times what a tracker pays on every update, per call: ``rasterise`` on 100 x 100
+cells and ``pdf`` at 1,000 points, and framing 1,000 hypotheses against their batch launch.
 """
 
 from __future__ import annotations
@@ -33,6 +35,7 @@ from ..domains.angular_lattice import AngularLattice
 from ..domains.grid import Grid
 from ..engine.batch import frame, rasterise_batch
 from ..engine.grid_kernel import GridExtent
+from ..engine.points import evaluate_points
 from ..engine.rasterise import rasterise
 from ..engine.warp_runtime import default_threads, device_name
 from ..models.bearing import bearing_to, two_bearing_variances
@@ -188,14 +191,7 @@ class _BatchJob:
     HYPOTHESES = 10_000
 
     def __init__(self):
-        rng = np.random.default_rng(20261121)
-        polar = MODEL_KINDS["polar"]
-        self.models = [
-            polar.build(dict(v0=float(rng.uniform(150.0, 300.0)), t=10.0, sigma_a=float(rng.uniform(0.5, 2.0)),
-                             sigma_omega=float(rng.uniform(0.02, 0.06)), origin=tuple(rng.uniform(-1e4, 1e4, 2)),
-                             heading=float(rng.uniform(-math.pi, math.pi))))
-            for _ in range(self.HYPOTHESES)
-        ]
+        self.models = batch_hypotheses(self.HYPOTHESES)
         self.grids = frame(self.models)
         self.cells = self.HYPOTHESES * 64 * 64
 
@@ -466,6 +462,78 @@ def containment_timing(n: int = CONTAINMENT_GEOMETRIES, seed: int = 0, repeat: i
     return out
 
 
+#: Small calls, what a tracker pays on every update: ``rasterise`` on a grid of SMALL_SIDE x
+#: SMALL_SIDE cells over a row's frame, ``pdf`` at SMALL_POINTS of the model's own samples, and
+#: framing and rasterising SMALL_HYPOTHESES polar hypotheses on grids of each SMALL_BATCH_SHAPES.
+SMALL_SIDE, SMALL_POINTS, SMALL_HYPOTHESES = 100, 1000, 1000
+SMALL_ROWS = ("polar-improved", "cat", "bearing-exact")
+SMALL_BATCH_SHAPES = ((64, 64), (16, 16))
+#: Each timing runs calls for about this many seconds of wall time, the best of ``repeat``.
+SMALL_SECONDS = 0.05
+
+
+def _per_call(repeat: int, fn) -> tuple[float, float, int]:
+    """``(process CPU seconds, wall seconds, calls)`` per call of ``fn``: best of ``repeat`` runs
+    of about SMALL_SECONDS each, after two warm-up calls (the first loads the kernel)."""
+    fn()
+    start = time.perf_counter()
+    fn()
+    calls = max(1, int(SMALL_SECONDS / max(time.perf_counter() - start, 1e-7)))
+    cpu = wall = math.inf
+    for _ in range(repeat):
+        c0, w0 = time.process_time(), time.perf_counter()
+        for _ in range(calls):
+            fn()
+        cpu, wall = min(cpu, (time.process_time() - c0) / calls), min(wall, (time.perf_counter() - w0) / calls)
+    return cpu, wall, calls
+
+
+def batch_hypotheses(n: int, seed: int = 20261121) -> list:
+    """``n`` polar hypotheses spread over 20 km (the ``polar-batch`` row's draw)."""
+    rng = np.random.default_rng(seed)
+    polar = MODEL_KINDS["polar"]
+    return [polar.build(dict(v0=float(rng.uniform(150.0, 300.0)), t=10.0, sigma_a=float(rng.uniform(0.5, 2.0)),
+                             sigma_omega=float(rng.uniform(0.02, 0.06)), origin=tuple(rng.uniform(-1e4, 1e4, 2)),
+                             heading=float(rng.uniform(-math.pi, math.pi))))
+            for _ in range(n)]
+
+
+def small_calls(threads: int, repeat: int, log=print) -> dict:
+    """Per-call times of small calls, float64: ``rasterise`` on SMALL_SIDE^2 cells and ``pdf`` at
+    SMALL_POINTS points for each SMALL_ROWS model on one thread and on ``threads``; framing
+    SMALL_HYPOTHESES hypotheses against rasterising them on the framed grids (``threads``).
+    Process CPU time (every thread's) and wall time, microseconds."""
+    rows = []
+    log(f"small calls, float64, per call: process CPU time (all threads) and wall time, us, best of {repeat}")
+    log(f"{'call':<28} {'model':<16} {'threads':>7} {'cpu us':>9} {'wall us':>9} {'calls':>6}")
+    for name in SMALL_ROWS:
+        model = grid_model(name)
+        x0, x1, y0, y1 = _grid_for(name, 4.0).extent
+        grid = Grid.from_bounds(x=(x0, x1), y=(y0, y1), dx=(x1 - x0) / SMALL_SIDE, dy=(y1 - y0) / SMALL_SIDE)
+        points = model.sample(SMALL_POINTS, np.random.default_rng(1))
+        px, py = np.ascontiguousarray(points[:, 0]), np.ascontiguousarray(points[:, 1])
+        for n in sorted({1, threads}):
+            for call, fn in ((f"rasterise {SMALL_SIDE} x {SMALL_SIDE}", lambda: rasterise(model, grid, threads=n)),
+                             (f"pdf {SMALL_POINTS:,} points", lambda: evaluate_points(model, px, py, threads=n))):
+                cpu, wall, calls = _per_call(repeat, fn)
+                rows.append({"call": call, "model": name, "threads": n, "cpu_us": cpu * 1e6, "wall_us": wall * 1e6,
+                             "calls": calls})
+                log(f"{call:<28} {name:<16} {n:>7} {cpu * 1e6:>9.1f} {wall * 1e6:>9.1f} {calls:>6}")
+    hypotheses = batch_hypotheses(SMALL_HYPOTHESES)
+    batches = []
+    for shape in SMALL_BATCH_SHAPES:
+        grids = frame(hypotheses, shape)
+        f_cpu, f_wall, _ = _per_call(repeat, lambda: frame(hypotheses, shape))
+        l_cpu, l_wall, _ = _per_call(repeat, lambda: rasterise_batch(hypotheses, grids, threads=threads))
+        batches.append({"hypotheses": SMALL_HYPOTHESES, "shape": list(shape), "threads": threads,
+                        "frame_cpu_us": f_cpu * 1e6, "frame_wall_us": f_wall * 1e6, "launch_cpu_us": l_cpu * 1e6,
+                        "launch_wall_us": l_wall * 1e6, "frame_over_launch_wall": f_wall / l_wall})
+        log(f"batch of {SMALL_HYPOTHESES:,} polar hypotheses on {shape[0]} x {shape[1]}, {threads} threads: frame "
+            f"{f_wall * 1e3:.2f} ms, rasterise_batch on the framed grids {l_wall * 1e3:.2f} ms (wall; CPU "
+            f"{f_cpu * 1e3:.2f} and {l_cpu * 1e3:.2f} ms): framing costs {f_wall / l_wall:.2f}x the launch")
+    return {"calls": rows, "batches": batches}
+
+
 def memory_probe(side: int = MEMORY_SIDE) -> dict:
     """Peak resident memory (ru_maxrss) of a fresh process that imports bananagrid, initialises
     Warp and rasterises a side x side float32 polar map: everything a user's process holds."""
@@ -528,6 +596,11 @@ def _parser() -> argparse.ArgumentParser:
                         "(results copied back to the host included), its first call (building or loading the kernel "
                         "module) is reported beside it, the baseline is still NumPy on the CPU, and the CPU-only "
                         "parts (peers, thread scaling, containment, memory probe) are skipped")
+    p.add_argument("--small", action="store_true",
+                   help=f"time small calls, what a tracker pays on every update: rasterise on {SMALL_SIDE} x "
+                        f"{SMALL_SIDE} cells and pdf at {SMALL_POINTS:,} points ({', '.join(SMALL_ROWS)}; one thread "
+                        f"and --threads), and framing {SMALL_HYPOTHESES:,} hypotheses against their batch launch. "
+                        "Alone (without --kernels) it runs only these rows.")
     c = p.add_argument_group(
         "cluster rows (the cluster extra; minutes)",
         "--cluster measures tiles and hypothesis shards on a fresh local Dask cluster: a Butterly map on a "
@@ -552,12 +625,13 @@ def _parser() -> argparse.ArgumentParser:
 def main(argv: list[str] | None = None) -> int:
     """Entry point of ``bananagrid bench``; returns the exit code."""
     args = _parser().parse_args(argv)
-    if args.cluster and not any(a == "--kernels" or a.startswith("--kernels=") for a in (argv or sys.argv[1:])):
-        args.kernels = ""  # the cluster rows alone
+    if (args.cluster or args.small) and not any(a == "--kernels" or a.startswith("--kernels=")
+                                                for a in (argv or sys.argv[1:])):
+        args.kernels = ""  # the cluster or small-call rows alone
     kernels = [k.strip() for k in args.kernels.split(",") if k.strip()]
     unknown = [k for k in kernels if k not in KERNELS]
     problems = []
-    if unknown or not (kernels or args.cluster):
+    if unknown or not (kernels or args.cluster or args.small):
         problems.append(f"--kernels = {args.kernels!r}: choose from {', '.join(KERNELS)}")
     for name in ("threads", "repeat", "baseline_stride", "workers", "hypotheses"):
         if getattr(args, name) < 1:
@@ -576,6 +650,8 @@ def main(argv: list[str] | None = None) -> int:
     device = "cpu"
     if gpu and args.cluster:
         problems.append(f"--device = {args.device!r}: the cluster rows run on the CPU; drop --cluster or --device")
+    if gpu and args.small:
+        problems.append(f"--device = {args.device!r}: the small-call rows run on the CPU; drop --small or --device")
     if not problems:
         try:
             device = device_name(args.device)
@@ -604,6 +680,8 @@ def main(argv: list[str] | None = None) -> int:
         print(HEADER)
         records = run(kernels, args.step, args.threads, args.repeat, args.baseline_stride, device=args.device)
     result = {"machine": machine(), "device": device, "step": args.step, "records": records}
+    if args.small:
+        result["small_calls"] = small_calls(args.threads, args.repeat)
     if args.cluster:
         result["cluster_zarr"] = cluster.zarr_row(side=args.cluster_side, workers=args.workers,
                                                   memory_limit=args.memory_limit)

@@ -18,10 +18,16 @@ from __future__ import annotations
 
 from ..validate import BananagridError
 
-__all__ = ["RASTERISE_BYTES_PER_CELL", "available_bytes", "check_memory", "format_bytes", "memory_limit"]
+__all__ = ["RASTERISE_BYTES_PER_CELL", "UNCHECKED_BYTES", "available_bytes", "check_memory", "format_bytes", "memory_limit"]
 
 #: Peak bytes per grid cell of ``rasterise`` (float64 result + float64 kernel output + margin).
 RASTERISE_BYTES_PER_CELL = 32
+
+#: Estimates up to this many bytes are allowed without asking the system (reading
+#: ``/proc/meminfo`` costs about 8 us, as much as the rest of a small call's checks): the process
+#: asking already holds Python, NumPy and Warp, over 100 MB, so a system that cannot give it
+#: 4 MiB more is swapping whatever we check. A ``limit`` given is always checked.
+UNCHECKED_BYTES = 4 * 2**20
 
 
 def available_bytes() -> int | None:
@@ -61,7 +67,8 @@ def check_memory(cells: int, bytes_per_cell: float, what: str, *, base: float = 
     base : float
         Bytes needed whatever the size (beyond the process as it is).
     limit : float, optional
-        Bytes allowed; default what the system has available.
+        Bytes allowed; default what the system has available (not asked for an estimate of at
+        most :data:`UNCHECKED_BYTES`).
     option : str
         How a user raises the limit, added to the message (e.g. ``"--max-memory GB"``).
 
@@ -71,6 +78,8 @@ def check_memory(cells: int, bytes_per_cell: float, what: str, *, base: float = 
         The estimate above the limit: one line with both figures and the ways out.
     """
     estimate = float(base) + float(cells) * float(bytes_per_cell)
+    if limit is None and estimate <= UNCHECKED_BYTES:
+        return estimate
     allowed = available_bytes() if limit is None else float(limit)
     if allowed is not None and estimate > allowed:
         source = "available" if limit is None else "allowed"

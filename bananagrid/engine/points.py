@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import functools
+
 import numpy as np
 
 from ..protocol import DensityModel, KernelBinding
@@ -31,10 +33,27 @@ class PointsExtent:
 
 def check_model(model: object, what: str = "not a bananagrid model") -> DensityModel:
     """``model`` if it follows :class:`~bananagrid.protocol.DensityModel`, else an error
-    ``model = TYPE: WHAT``."""
+    ``model = TYPE: WHAT``.
+
+    The protocol's ``isinstance`` looks up each of its 25 members on the object (about 20 us);
+    a class whose instance passed once is remembered (:func:`_follows_protocol`), so a tracker's
+    every call pays a set lookup. Only a pass is remembered: an object that fails is checked,
+    and refused, each time."""
+    kind = type(model)
+    if kind in _follows_protocol():
+        return model
     if not isinstance(model, DensityModel):
-        raise BananagridError(f"model = {type(model).__name__}: {what}")
+        raise BananagridError(f"model = {kind.__name__}: {what}")
+    _follows_protocol().add(kind)
     return model
+
+
+@functools.cache
+def _follows_protocol() -> set:
+    """Classes an instance of which followed :class:`~bananagrid.protocol.DensityModel`. Every
+    instance of such a class does: the protocol's members are methods and properties of the
+    class or fields every instance of a model (a frozen dataclass) sets in ``__init__``."""
+    return set()
 
 
 def check_finite(values: np.ndarray, model: DensityModel) -> None:
@@ -66,12 +85,16 @@ def evaluate_points(model: DensityModel, x, y, *, dtype=np.float64, device: str 
         ) from None
     if not (np.isfinite(bx).all() and np.isfinite(by).all()):
         raise BananagridError("x, y: points must be finite (NaN or inf given)")
-    asked = WarpContext(dtype, device, threads).dtype
+    ctx = WarpContext(dtype, device, threads)
+    asked = ctx.dtype
     if bx.size == 0:
         return np.zeros(bx.shape, dtype=asked)
     check_model(model)
     extent = extent if extent is not None else PointsExtent(bx, by)
-    ctx = WarpContext(working_dtype(model, asked, extent.radii((0.0, 0.0))[1]), device, threads)
+    if asked == np.float32:  # float64 computes in float64 wherever the points lie
+        working = working_dtype(model, asked, extent.radii((0.0, 0.0))[1])
+        if working != asked:
+            ctx = WarpContext(working, device, threads)
     binding = model.bind(ctx, extent, grid=False)
     ctx.load(binding.kernels.points)
     return launch_points(ctx, binding, bx, by).astype(asked, copy=False)
@@ -81,9 +104,13 @@ def launch_points(ctx: WarpContext, binding: KernelBinding, bx: np.ndarray, by: 
     """Run a bound points kernel over (bx, by) in chunks from the thread pool (one launch on a
     GPU); the result has bx's shape. The kernel's module must be loaded."""
     n = bx.size
-    xs = ctx.array(bx.ravel())
-    ys = ctx.array(by.ravel())
-    out = ctx.zeros(n)
+    xs = ctx.host_array(bx.ravel())
+    ys = ctx.host_array(by.ravel())
+    if ctx.cpu:
+        values = np.empty(n, dtype=ctx.dtype)  # the chunks cover every point
+        out = ctx.shared(values)
+    else:
+        out = ctx.zeros(n)
 
     def launch_chunk(a, b):
         ctx.launch(binding.kernels.points, dim=b - a, inputs=[xs, ys, a, binding.params, out])
@@ -92,4 +119,6 @@ def launch_points(ctx: WarpContext, binding: KernelBinding, bx: np.ndarray, by: 
     size = max(MIN_POINT_CHUNK, min(POINT_CHUNK, -(-n // ctx.threads)))
     chunks = [(a, min(n, a + size)) for a in range(0, n, size)] if ctx.cpu else [(0, n)]
     ctx.run_bands(launch_chunk, chunks)
+    if ctx.cpu:  # a CPU launch has finished when it returns
+        return values.reshape(bx.shape)
     return ctx.numpy(out).reshape(bx.shape)

@@ -106,18 +106,33 @@ def row_sums(block: np.ndarray) -> np.ndarray:
     return np.ascontiguousarray(block).sum(axis=1, dtype=np.float64)
 
 
+@functools.cache
+def _pool(pid: int, workers: int) -> ThreadPoolExecutor:
+    """The helper threads of :func:`run_bands` for ``workers`` helpers in process ``pid``, made on
+    first use and kept: starting threads for each call cost 100-300 us a call, more than a small
+    grid's kernel (a forked child has none of its parent's threads, hence the pid)."""
+    return ThreadPoolExecutor(max_workers=workers, thread_name_prefix=f"bananagrid-bands{workers}")
+
+
 def run_bands(launch_band, bands: list[tuple[int, int]], threads: int) -> None:
     """Call ``launch_band(start, stop)`` for every band; on several threads, the calling one
     among them, each taking the next band when it finishes one (the cost of a band follows the
     density). The kernel's module must already be loaded (concurrent first launches would each
-    build it)."""
+    build it).
+
+    The helpers come from a pool kept for the process. The caller waits for the bands, not for
+    its helpers: a helper still queued behind another call's work when the bands run out has
+    nothing left to do, so calls from several threads (or from inside a band) never wait on one
+    another's queue. The first error of any band is raised once every band has finished."""
     workers = min(threads, len(bands))
     if workers == 1:
         for band in bands:
             launch_band(*band)
         return
     pending = iter(bands)
-    lock = threading.Lock()
+    lock = threading.Condition()
+    left = [len(bands)]
+    errors = []
 
     def drain():
         while True:
@@ -125,14 +140,25 @@ def run_bands(launch_band, bands: list[tuple[int, int]], threads: int) -> None:
                 band = next(pending, None)
             if band is None:
                 return
-            launch_band(*band)
+            try:
+                launch_band(*band)
+            except BaseException as exc:  # noqa: BLE001 - raised in the caller's thread below
+                errors.append(exc)
+            finally:
+                with lock:
+                    left[0] -= 1
+                    if not left[0]:
+                        lock.notify_all()
 
-    # the caller drains too: one thread fewer to start, and no core idles while it waits
-    with ThreadPoolExecutor(max_workers=workers - 1) as pool:
-        helpers = [pool.submit(drain) for _ in range(workers - 1)]
-        drain()
-        for helper in helpers:
-            helper.result()
+    # the caller drains too: one thread fewer to wake, and no core idles while it waits
+    pool = _pool(os.getpid(), workers - 1)
+    for _ in range(workers - 1):
+        pool.submit(drain)
+    drain()
+    with lock:
+        lock.wait_for(lambda: not left[0])
+    if errors:
+        raise errors[0]
 
 
 class WarpContext:
@@ -219,6 +245,14 @@ class WarpContext:
         for name, column in columns.items():
             records[name] = column
         return self.wp.array(records, dtype=struct, device=self.device)
+
+    def host_array(self, values):
+        """A device array of ``values`` in the scalar type for the kernels to read: on the CPU it
+        shares a contiguous host copy (none where ``values`` already is one), one copy fewer
+        than :meth:`array` (Warp copies what it is given)."""
+        if not self.cpu:
+            return self.array(values)
+        return self.shared(np.ascontiguousarray(values, dtype=self.dtype))
 
     def shared(self, values: np.ndarray):
         """A device array that shares the memory of ``values`` on the CPU (same dtype)."""

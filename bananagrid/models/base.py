@@ -132,6 +132,26 @@ class Model:
         self.__dict__["_peak_lower_bound"] = peak  # a frozen dataclass: its __dict__ caches
         return peak
 
+    def bind_once(self, ctx, make, *key):
+        """``make()``, a :class:`~bananagrid.protocol.KernelBinding` that depends on the model, the
+        context's dtype and device and ``key`` only (never on the extent), made once and kept for
+        later calls: a frozen model's parameter struct and arrays are the same every call, and
+        making them cost 20-140 us, as much as a small grid's kernel. Kept in the instance (not
+        pickled: a copy in another process makes its own)."""
+        bindings = self.__dict__.setdefault("_bindings", {})
+        index = (np.dtype(ctx.dtype), str(ctx.device), *key)
+        binding = bindings.get(index)
+        if binding is None:  # two threads may both make it: the same binding, the last one kept
+            binding = bindings[index] = make()
+        return binding
+
+    def __getstate__(self):
+        """The instance's state without the kept bindings (Warp structs and arrays do not
+        pickle, and belong to this process's devices)."""
+        state = dict(self.__dict__)
+        state.pop("_bindings", None)
+        return state
+
     def singular_points(self) -> np.ndarray:
         """No point of infinite density (:meth:`bananagrid.protocol.DensityModel.singular_points`)."""
         return np.zeros((0, 2))

@@ -731,6 +731,9 @@ class BearingFix(Model):
 
     def bind(self, ctx: KernelContext, extent: Extent, *, grid: bool = False) -> KernelBinding:
         """The bearing kernels (``kernels/bearing.py``) of ``variant``; on the CPU their lane twins."""
+        return self.bind_once(ctx, lambda: self._binding(ctx))
+
+    def _binding(self, ctx: KernelContext) -> KernelBinding:
         params = ctx.struct(kernels.BEARING, params=ctx.array(self.kernel_parameters()), n_sensors=len(self.sensors),
                             variant=kernels.EXACT if self.variant == "exact" else kernels.LINEAR)
         # on the CPU a vector of cells or points at a time (kernels/bearing_lanes.py)

@@ -600,6 +600,9 @@ class PolarBanana(MotionModel):
     def bind(self, ctx: KernelContext, extent: Extent, *, grid: bool = False) -> KernelBinding:
         """The closed-form kernels (``kernels/polar.py``): one row per CPU thread; on the CPU a vector
         of cells or points at a time (``kernels/polar_lanes.py``)."""
+        return self.bind_once(ctx, lambda: self._binding(ctx))
+
+    def _binding(self, ctx: KernelContext) -> KernelBinding:
         notes = {"variant": self.variant, "truncated_mass": self.truncated_mass}
         if self.sigma_heading > 0.0:
             notes["heading_order"] = self.heading_order

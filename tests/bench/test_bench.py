@@ -186,3 +186,27 @@ def test_bench_refuses_a_json_target_that_is_not_a_file_before_timing(tmp_path, 
         assert bench.main(["--kernels", "polar-rough", "--json", str(tmp_path / name)]) == 2
         err = capsys.readouterr().err
         assert err.count("\n") == 1 and what in err and name in err, err
+
+
+def test_bench_times_small_calls(tmp_path, capsys, monkeypatch):
+    """``--small`` alone runs only the small-call rows: rasterise and pdf of each of its models on
+    one thread and on --threads, and the batch's framing against its launch, into the JSON."""
+    monkeypatch.setattr(bench, "SMALL_SECONDS", 1e-3)  # one or a few calls a timing: records, not figures
+    monkeypatch.setattr(bench, "SMALL_HYPOTHESES", 20)
+    out = tmp_path / "bench.json"
+    assert bench.main(["--small", "--threads", "2", "--repeat", "1", "--json", str(out)]) == 0
+    result = json.loads(out.read_text())
+    assert result["records"] == []  # no kernel rows without --kernels
+    calls = result["small_calls"]["calls"]
+    assert {(r["call"], r["model"], r["threads"]) for r in calls} == {
+        (call, name, n) for call in ("rasterise 100 x 100", "pdf 1,000 points") for name in bench.SMALL_ROWS
+        for n in (1, 2)}
+    assert all(r["cpu_us"] > 0 and r["wall_us"] > 0 and r["calls"] >= 1 for r in calls)
+    batches = result["small_calls"]["batches"]
+    assert [b["shape"] for b in batches] == [list(s) for s in bench.SMALL_BATCH_SHAPES]
+    for b in batches:
+        assert b["hypotheses"] == 20 and b["frame_over_launch_wall"] == b["frame_wall_us"] / b["launch_wall_us"]
+    text = capsys.readouterr().out
+    assert "small calls, float64, per call" in text and "framing costs" in text
+    assert bench.main(["--small", "--device", "cuda"]) == 2
+    assert "the small-call rows run on the CPU" in capsys.readouterr().err

@@ -17,6 +17,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 import bananagrid as bg
+from bananagrid.engine import grid_kernel
 from bananagrid.engine.batch import rasterise_batch
 from bananagrid.engine.warp_runtime import row_sums
 
@@ -34,6 +35,15 @@ COLUMNS = (1, 3, 17, 64)
 DTYPES = (np.float64, np.float32)
 #: CAT with heading noise builds its table (about a second) in every call: fewer calls of it.
 SLOW = {"cat-heading": {np.float64: (3, 8), np.float32: (5,)}}
+
+
+@pytest.fixture(scope="module", autouse=True)
+def bands_on_every_grid():
+    """Grids this small run as one band on the calling thread (``grid_kernel.SERIAL_CELLS``):
+    here they are cut into bands for every thread count, as a large grid is."""
+    with pytest.MonkeyPatch.context() as patch:
+        patch.setattr(grid_kernel, "SERIAL_CELLS", 0)
+        yield
 
 
 def _same(a, b) -> bool:
@@ -160,3 +170,19 @@ def test_angular_cells(name):
         for threads in (2, 5):
             many = bg.rasterise(model, lattice, region=region, dtype=dtype, threads=threads)
             assert _same(many.prob, one.prob) and _same(many.error, one.error), (name, dtype, threads)
+
+
+@pytest.mark.parametrize("name", CASES)
+def test_small_grids_on_one_thread_are_the_bits_of_the_bands(name):
+    """A grid of at most ``SERIAL_CELLS`` cells runs as one band on the calling thread: the
+    same values and mass as the same grid cut into bands on 3 threads, both dtypes."""
+    case = CASES[name]
+    grid = _grid(case, 31, 17)
+    for dtype in DTYPES:
+        model = case.model()
+        banded = bg.rasterise(model, grid, dtype=dtype, threads=3)
+        with pytest.MonkeyPatch.context() as patch:
+            patch.setattr(grid_kernel, "SERIAL_CELLS", 31 * 17)
+            serial = bg.rasterise(model, grid, dtype=dtype, threads=3)
+        assert _same(serial.values, banded.values), (name, dtype)
+        assert _same(serial.mass, banded.mass), (name, dtype)
