@@ -30,6 +30,7 @@ from .contours import DEFAULT_LEVELS, format_area, mass_levels
 from .engine.cluster import CONNECT_SECONDS, check_memory_limit, check_scheduler, check_workers, dask_client, worker_need
 from .engine.memory import memory_limit
 from .engine.tiles import DEFAULT_CHUNK
+from .engine.warp_runtime import compile_notice
 from .engine.work import work_limit
 from .geo.zarr_store import check_store_target
 from .recording.compare import write_compare_recording, write_sweep_recording
@@ -301,11 +302,13 @@ def _run(args: argparse.Namespace) -> int:
     for scene in scenes:
         progress = None if args.quiet else _Progress(scene.name, sys.stderr)
         failed = True
+        notice = compile_notice.set(None if progress is None else progress.compiling)
         try:
             rows += run_scene(scene, args.out, npz=args.npz, threads=args.threads, progress=progress,
                               max_memory=limit, max_seconds=max_seconds, **exports)
             failed = False
         finally:
+            compile_notice.reset(notice)
             if progress is not None:
                 progress.close()
             if failed and written:  # the scenes before this one are complete: say so
@@ -608,6 +611,10 @@ def _region_size(region) -> str:
     return format_area(region.area) if np.isfinite(region.area) else f"{region.cells:,} cells"
 
 
+#: What the progress line says while Warp compiles a kernel module (the first run on a machine).
+COMPILING = "compiling kernels (first run, cached after)"
+
+
 class _Progress:
     """Progress lines ``[3/6] scene: layer t=10 s ... 0.09 s`` for :func:`run_scene`.
 
@@ -624,11 +631,13 @@ class _Progress:
         self.started: float | None = None
         self.head = ""
         self.broken = False
+        self.said_compiling = False
 
     def __call__(self, done: int, total: int, label: str) -> None:
         if self.started is None:
             self.started = time.perf_counter()
             self.head, self.broken = f"[{done + 1}/{total}] {self.scene}: {label} ...", False
+            self.said_compiling = False
             print(self.head, end="", file=self.stream, flush=True)
             _Progress.open_line = self
         else:
@@ -637,6 +646,13 @@ class _Progress:
             _Progress.open_line = None
             # after a warning the line is restated, so the time is not left alone on a line
             print(f"{self.head if self.broken else ''} {seconds:.2f} s", file=self.stream, flush=True)
+
+    def compiling(self) -> None:
+        """Say on the open line that Warp is compiling kernels (called from a timer thread while
+        a kernel module loads: :data:`~bananagrid.engine.warp_runtime.compile_notice`), once a line."""
+        if self.started is not None and not self.said_compiling:
+            self.said_compiling = True
+            print(f" {COMPILING} ...", end="", file=self.stream, flush=True)
 
     def close(self) -> None:
         """End a line left open by an item that failed, so the error starts on its own line."""

@@ -69,7 +69,7 @@ from typing import Any
 
 import warp as wp
 
-from .generate import ARRAY, SCALARS, Params, density_kernels
+from .generate import ARRAY, SCALARS, Params, density_kernels, overload_on_use
 
 # No adjoints: nothing differentiates these kernels, and the backward kernels Warp would
 # generate for every launch kernel are most of a module's code (the CAT module's CUDA build:
@@ -775,9 +775,9 @@ def butterly_world(x: Any, y: Any, p: Any):
 #: The parameters: the array laid out as HEAD and PER_SPEED say, and the speeds' count.
 BUTTERLY = Params("ButterlyParams", __name__, params=ARRAY, n_speeds=int)
 for _scalar in SCALARS:
-    wp.overload(butterly_grid, {"xs": wp.array(dtype=_scalar), "ys": wp.array(dtype=_scalar), "step_x": _scalar,
-                                "step_y": _scalar, "p": BUTTERLY.of(_scalar), "scratch": wp.array2d(dtype=_scalar),
-                                "quads": wp.array2d(dtype=wp.types.vector(4, _scalar)),
-                                "out": wp.array2d(dtype=_scalar)})
+    overload_on_use(butterly_grid, _scalar, {
+        "xs": wp.array(dtype=_scalar), "ys": wp.array(dtype=_scalar), "step_x": _scalar, "step_y": _scalar,
+        "p": BUTTERLY.of(_scalar), "scratch": wp.array2d(dtype=_scalar),
+        "quads": wp.array2d(dtype=wp.types.vector(4, _scalar)), "out": wp.array2d(dtype=_scalar)})
 KERNELS = density_kernels(butterly_world, BUTTERLY, "butterly", grid=butterly_grid, tile_rows=TILE,
                           scratch_width=SCRATCH, quad_width=QUAD_SCRATCH)

@@ -21,7 +21,7 @@ from typing import Any
 import warp as wp
 
 from .common import cat_basis, normal_pdf, world_to_local
-from .generate import ARRAY2D, SCALAR, SCALARS, VEC4, Params, density_kernels
+from .generate import ARRAY2D, SCALAR, SCALARS, VEC4, Params, density_kernels, overload_on_use
 
 #: Table columns: omega; the coefficients of F = hx*y - hy*x - c and of
 #: dF/domega = dhx*y - dhy*x - dc; and of the acceleration of the line through P,
@@ -448,5 +448,5 @@ CAT = Params("CatParams", __name__, table=ARRAY2D, v0=SCALAR, t=SCALAR, sigma_a=
              tol=SCALAR, eps=SCALAR)
 KERNELS = density_kernels(cat_density, CAT, "cat")
 for _scalar in SCALARS:
-    wp.overload(cat_table, {"omegas": wp.array(dtype=_scalar), "v0": _scalar, "t": _scalar,
+    overload_on_use(cat_table, _scalar, {"omegas": wp.array(dtype=_scalar), "v0": _scalar, "t": _scalar,
                             "table": wp.array2d(dtype=_scalar)})

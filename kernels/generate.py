@@ -10,6 +10,17 @@ vector of cells or points at a time. Every generated kernel of a family calls th
 so that grids, points and batches agree bit for bit. The kernels join the density's module
 (one module per family, one build) and take its module options.
 
+Overloads on first use. Warp builds a module with every overload registered in it, so a module
+that registered both scalar types and every kernel (the GPU path's scalar kernels beside the CPU
+lanes, the batch kernels) built all of them for a run that launches one: the polar lane module
+took 7.7 s of CPU to build, its float64 grid kernel alone 1.3 s (float32 16-lane kernels are the
+costly part). Each kernel's overloads are therefore recorded here (:func:`overload_on_use`) and
+registered only when the engine loads the kernel for a dtype (:func:`use_overload`, called by
+``WarpContext.load``): a module is built with the overloads a run launches, and the kernel
+cache keeps each combination. The code of each overload is the same whatever else its module
+holds (Warp writes one C++ function per overload; the compiler contracts within a statement
+only), so the values are the same bits.
+
 Kernel arguments (``P`` the struct):
 
 * grid ``(xs, ys, row0, columns, p: P, out[ny, nx])`` over ``(rows, blocks)``: ``columns``
@@ -26,6 +37,7 @@ generator then writes the others.
 """
 
 import inspect
+import threading
 from dataclasses import dataclass
 from typing import Any
 
@@ -54,6 +66,38 @@ def ARRAY(scalar):
 def ARRAY2D(scalar):
     """Field type: a 2-D device array of scalars."""
     return wp.array2d(dtype=scalar)
+
+
+#: Each kernel's overloads by scalar type, registered on first use (:func:`use_overload`): a list
+#: of (kernel, argument types) shared by the kernels registered together.
+_ON_USE: dict = {}
+_ON_USE_LOCK = threading.Lock()
+
+
+def overload_on_use(kernel, scalar, arg_types: dict, *together) -> None:
+    """Record the overload of the generic ``kernel`` for ``scalar`` (argument name -> Warp type)
+    and of the ``together`` pairs ``(kernel, arg_types)``: :func:`use_overload` registers them
+    all when a launch in ``scalar`` first needs one of them (kernels launched side by side, a
+    family's grid and points, so that their module is built once, not once for each)."""
+    group = [(kernel, arg_types), *together]
+    for member, _ in group:
+        _ON_USE.setdefault(member, {})[scalar] = group
+
+
+def use_overload(kernel, scalar) -> None:
+    """Register ``kernel``'s overload for ``scalar`` and those recorded with it, if waiting (once;
+    thread safe); other kernels are left as they are (Warp infers a generic kernel's overload at
+    launch)."""
+    waiting = _ON_USE.get(kernel)
+    if not waiting or scalar not in waiting:
+        return
+    with _ON_USE_LOCK:
+        group = waiting.get(scalar)
+        if group is None:
+            return
+        for member, arg_types in group:
+            wp.overload(member, arg_types)
+            _ON_USE[member].pop(scalar, None)
 
 
 class Params:
@@ -113,7 +157,8 @@ def density_kernels(density, params: Params, name: str, *, lanes: bool = False, 
                     scratch_width: int = 0, quad_width: int = 0) -> DensityKernels:
     """The grid and points kernels (and with ``batch`` the batch kernels) of ``density``, named
     ``NAME_grid``, ``NAME_points``, ... (``suffix`` appended: by default ``_lanes`` with ``lanes``), in its module and
-    overloaded for both scalar types; ``grid``: the family's own grid kernel instead."""
+    overloaded for both scalar types on first use (:func:`overload_on_use`); ``grid``: the
+    family's own grid kernel instead (its overloads the family's to record)."""
     module = density.module
     suffix = ("_lanes" if lanes else "") if suffix is None else suffix
 
@@ -200,13 +245,16 @@ def density_kernels(density, params: Params, name: str, *, lanes: bool = False, 
     batch_points = make(batch_points_kernel, "batch_points") if batch else None
     for scalar in SCALARS:
         vec, mat, struct = wp.array(dtype=scalar), wp.array2d(dtype=scalar), params.of(scalar)
-        if not own_grid:
-            wp.overload(grid, {"xs": vec, "ys": vec, "p": struct, "out": mat})
-        wp.overload(points, {"xs": vec, "ys": vec, "p": struct, "out": vec})
+        # the grid and points kernels together: a run that rasterises also evaluates points
+        # (a tile's seams, a pdf), and adding one to a built module would build it again
+        # (a family's own grid kernel: with the overloads it recorded)
+        grids = _ON_USE.get(grid, {}).get(scalar, []) if own_grid else [(grid, {"xs": vec, "ys": vec, "p": struct,
+                                                                                "out": mat})]
+        overload_on_use(points, scalar, {"xs": vec, "ys": vec, "p": struct, "out": vec}, *grids)
         if batch:
             many = wp.array(dtype=struct)
-            wp.overload(batch_grid, {"xs": mat, "ys": mat, "ps": many, "out": wp.array3d(dtype=scalar)})
-            wp.overload(batch_points, {"xs": vec, "ys": vec, "ps": many, "out": mat})
+            overload_on_use(batch_grid, scalar, {"xs": mat, "ys": mat, "ps": many, "out": wp.array3d(dtype=scalar)})
+            overload_on_use(batch_points, scalar, {"xs": vec, "ys": vec, "ps": many, "out": mat})
     short = module.name.rsplit(".", 1)[-1]
     return DensityKernels(f"{short}.{grid.key}", params, grid, points, batch_grid, batch_points, bands_per_thread,
                           tile_rows, scratch_width, quad_width)

@@ -37,7 +37,7 @@ from typing import Any
 import warp as wp
 
 from .common import atan2_fast, each_mul, lane0, scc_of, sinc_derivatives, sinc_of, world_to_local
-from .generate import SCALAR, SCALARS, VEC4, Params, density_kernels
+from .generate import SCALAR, SCALARS, VEC4, Params, density_kernels, overload_on_use
 
 # No adjoints: nothing differentiates these kernels, and the backward kernels Warp would
 # generate for every launch kernel are most of a module's code (the CAT module's CUDA build:
@@ -264,5 +264,6 @@ POLAR = Params("PolarParams", __name__, **dict.fromkeys(COEFFICIENTS, SCALAR), p
 KERNELS = density_kernels(polar_density, POLAR, "polar", batch=True, bands_per_thread=1)
 for _scalar in SCALARS:
     _vec = wp.array(dtype=_scalar)
-    wp.overload(polar_moments, {"phis": _vec, "p": POLAR.of(_scalar), "mean": _vec, "sd": _vec})
-    wp.overload(polar_derivatives, {"phis": _vec, "p": POLAR.of(_scalar), "out": wp.array2d(dtype=_scalar)})
+    overload_on_use(polar_moments, _scalar, {"phis": _vec, "p": POLAR.of(_scalar), "mean": _vec, "sd": _vec})
+    overload_on_use(polar_derivatives, _scalar,
+                    {"phis": _vec, "p": POLAR.of(_scalar), "out": wp.array2d(dtype=_scalar)})

@@ -52,6 +52,7 @@ from typing import Any
 import warp as wp
 
 from .common import INV_SQRT2, erfcx_pos, normal_cdf, normal_interval, normal_sf
+from .generate import overload_on_use
 
 SQRT_2PI = 2.5066282746310002
 SQRT_HALF_PI = 1.2533141373155003
@@ -705,6 +706,7 @@ def special_functions(
 
 
 def _register_overloads():
+    # registered when a run in that dtype loads the kernel (generate.use_overload)
     vec64 = wp.array(dtype=wp.float64)
     mat64 = wp.array2d(dtype=wp.float64)
     for scalar in (wp.float32, wp.float64):
@@ -714,13 +716,14 @@ def _register_overloads():
             "piece_a": vec, "piece_b": vec, "phi_lo": vec, "phi_hi": vec, "box": vec, "box_far": scalar,
             "comp": mat, "rule": mat, "gl": mat, "rtol": scalar, "log_atol": scalar, "prob": vec, "err": vec,
         }
-        wp.overload(plane_cells, {**cells, "rho_lo": vec, "rho_hi": vec})
-        wp.overload(frustum_cells, {**cells, "tau_lo": vec, "tau_hi": vec, "depth_lo": scalar, "depth_hi": scalar})
+        overload_on_use(plane_cells, scalar, {**cells, "rho_lo": vec, "rho_hi": vec})
+        overload_on_use(frustum_cells, scalar,
+                        {**cells, "tau_lo": vec, "tau_hi": vec, "depth_lo": scalar, "depth_hi": scalar})
         # float64 geometry and arithmetic in both overloads (cancellation, see grid_cells)
-        wp.overload(grid_cells, {"x_edges": vec64, "y_edges": vec64, "comp": mat64, "bvn_rule": mat64,
-                                 "density": mat, "prob": mat})
-        wp.overload(rectangles, {"lims": mat64, "bvn_rule": mat64, "out": vec})
-        wp.overload(special_functions, {"xs": vec, "gl": mat, "out": mat})
+        overload_on_use(grid_cells, scalar, {"x_edges": vec64, "y_edges": vec64, "comp": mat64, "bvn_rule": mat64,
+                                             "density": mat, "prob": mat})
+        overload_on_use(rectangles, scalar, {"lims": mat64, "bvn_rule": mat64, "out": vec})
+        overload_on_use(special_functions, scalar, {"xs": vec, "gl": mat, "out": mat})
 
 
 _register_overloads()

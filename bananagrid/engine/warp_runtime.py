@@ -8,6 +8,7 @@ across concurrent launches).
 
 from __future__ import annotations
 
+import contextvars
 import functools
 import os
 import sys
@@ -18,12 +19,19 @@ from concurrent.futures import ThreadPoolExecutor
 import numpy as np
 import warp as wp
 
+from ..kernels.generate import use_overload
 from ..validate import BananagridError
 
 __all__ = ["WarpContext", "warp", "default_threads", "check_threads", "bands", "run_bands", "row_sums"]
 
 _DTYPES = {np.dtype(np.float32): wp.float32, np.dtype(np.float64): wp.float64}
 _FIXED = {np.dtype(np.float64): wp.float64, np.dtype(np.int32): wp.int32}
+
+#: Called (on a timer thread, at most once a load) when loading a kernel module takes longer than
+#: :data:`COMPILE_NOTICE_SECONDS`: Warp is compiling it, not reading its kernel cache (about
+#: 2 ms). The CLI sets it to say so on its progress line; None (the default) says nothing.
+compile_notice: contextvars.ContextVar = contextvars.ContextVar("compile_notice", default=None)
+COMPILE_NOTICE_SECONDS = 0.3
 
 #: What Warp's native library prints on every machine without an NVIDIA driver. It is not news
 #: to a CPU user and lands in the middle of the CLI's progress line, so it is filtered out.
@@ -269,8 +277,22 @@ class WarpContext:
         return self.wp.types.vector(length, self.scalar_type)
 
     def load(self, kernel) -> None:
-        """Compile or load ``kernel``'s module before concurrent launches need it."""
-        self.wp.load_module(kernel.module, device=self.device)
+        """Compile or load ``kernel``'s module before concurrent launches need it, with the
+        kernel's overload for this dtype registered first: a module's kernels are overloaded on
+        first use (:func:`bananagrid.kernels.generate.use_overload`), so a run builds only the
+        overloads it launches. A load that compiles calls :data:`compile_notice`'s callable."""
+        use_overload(kernel, self.scalar_type)
+        notice = compile_notice.get()
+        if notice is None:
+            self.wp.load_module(kernel.module, device=self.device)
+            return
+        timer = threading.Timer(COMPILE_NOTICE_SECONDS, notice)
+        timer.daemon = True
+        timer.start()
+        try:
+            self.wp.load_module(kernel.module, device=self.device)
+        finally:
+            timer.cancel()
 
     def launch(self, kernel, *, dim, inputs) -> None:
         self.wp.launch(kernel, dim=dim, inputs=inputs, device=self.device)

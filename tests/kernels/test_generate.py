@@ -83,10 +83,27 @@ def test_generated_kernels_join_the_density_module_under_the_family_names():
     assert [k.key for k in (LANE_KERNELS.grid, LANE_KERNELS.points, LANE_KERNELS.batch_grid,
                             LANE_KERNELS.batch_points)] == ["bump_grid_lanes", "bump_points_lanes",
                                                             "bump_batch_grid_lanes", "bump_batch_points_lanes"]
-    # one overload per scalar type, each taking that type's struct
-    for kernel in (SCALAR_KERNELS.grid, SCALAR_KERNELS.points, LANE_KERNELS.batch_grid):
-        assert len(kernel.overloads) == len(SCALARS)
     assert {BUMP.of(s).vars["scale"].type for s in SCALARS} == set(SCALARS)
+
+
+def test_overloads_are_registered_on_first_use_for_that_dtype_only():
+    """A module is built with the overloads registered in it, so none is registered before a
+    context loads the kernel; loading one registers its dtype's overload (and the grid's with the
+    points', launched side by side), taking that type's struct, and nothing else."""
+    family = density_kernels(bump, BUMP, "bump_on_use", batch=True)
+    kernels = (family.grid, family.points, family.batch_grid, family.batch_points)
+    assert [len(k.overloads) for k in kernels] == [0, 0, 0, 0]
+    for done, scalar in enumerate(SCALARS, start=1):
+        ctx = WarpContext({wp.float32: np.float32, wp.float64: np.float64}[scalar], "cpu", 1)
+        ctx.load(family.points)
+        assert [len(k.overloads) for k in kernels] == [done, done, 0, 0]
+        for kernel in (family.grid, family.points):
+            structs = {a.label: a.type for a in list(kernel.overloads.values())[-1].adj.args}
+            assert structs["p"] is BUMP.of(scalar)
+        ctx.load(family.points)  # once
+        assert len(family.points.overloads) == done
+    WarpContext(np.float64, "cpu", 1).load(family.batch_points)
+    assert [len(k.overloads) for k in kernels] == [2, 2, 0, 1]
 
 
 @settings(max_examples=40, deadline=None, derandomize=True, database=None,
