@@ -214,6 +214,19 @@ CASES = {
                                  {**ROOM, "z": (-3.0, 0.0)}),
 }
 GRID_CASES = [name for name, case in CASES.items() if case.domain == "grid"]
+
+
+def assert_counts_follow(counts, expected):
+    """Pearson's chi-square of sample counts against expected counts per cell, cells expecting
+    fewer than 5 pooled into one, at level ALPHA."""
+    big = expected >= 5
+    obs = np.append(counts[big], counts[~big].sum())
+    exp = np.append(expected[big], expected[~big].sum())
+    if exp[-1] < 5:  # too little pooled mass for Pearson's approximation
+        obs, exp = obs[:-1], exp[:-1] * (obs[:-1].sum() / exp[:-1].sum())
+    chi2 = float(np.sum((obs - exp) ** 2 / exp))
+    p_value = stats.chi2.sf(chi2, df=len(obs) - 1)
+    assert p_value > ALPHA, f"chi2 = {chi2:.1f} on {len(obs) - 1} dof, p = {p_value:.2e}"
 ARRAY_CASES = [name for name, case in CASES.items() if case.domain == "array"]
 
 
@@ -291,14 +304,7 @@ def test_density_matches_its_own_samples(name):
                                   range=((y0, y0 + ny * case.step * 1.0), (x0, x0 + nx * case.step)))
     assert counts.sum() > (1.0 - 1e-3) * N_SAMPLES  # the grid holds the samples too
     expected = probs * counts.sum()
-    big = expected >= 5
-    obs = np.append(counts[big], counts[~big].sum())
-    exp = np.append(expected[big], expected[~big].sum())
-    if exp[-1] < 5:  # too little pooled mass for Pearson's approximation
-        obs, exp = obs[:-1], exp[:-1] * (obs[:-1].sum() / exp[:-1].sum())
-    chi2 = float(np.sum((obs - exp) ** 2 / exp))
-    p_value = stats.chi2.sf(chi2, df=len(obs) - 1)
-    assert p_value > ALPHA, f"chi2 = {chi2:.1f} on {len(obs) - 1} dof, p = {p_value:.2e}"
+    assert_counts_follow(counts, expected)
 
 
 @pytest.mark.parametrize("name", GRID_CASES)
@@ -434,14 +440,7 @@ def test_array_cells_match_their_own_samples(name):
         counts = bin_samples(pts, lattice.azimuth_edges, lattice.elevation_edges, depths)
     expected = (cells * len(pts)).ravel()
     counts = counts.ravel()
-    big = expected >= 5
-    obs = np.append(counts[big], counts[~big].sum())
-    exp = np.append(expected[big], expected[~big].sum())
-    if exp[-1] < 5:  # too little pooled mass for Pearson's approximation
-        obs, exp = obs[:-1], exp[:-1] * (obs[:-1].sum() / exp[:-1].sum())
-    chi2 = float(np.sum((obs - exp) ** 2 / exp))
-    p_value = stats.chi2.sf(chi2, df=len(obs) - 1)
-    assert p_value > ALPHA, f"chi2 = {chi2:.1f} on {len(obs) - 1} dof, p = {p_value:.2e}"
+    assert_counts_follow(counts, expected)
 
 
 @pytest.mark.parametrize("name", ARRAY_CASES)
