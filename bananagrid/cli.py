@@ -76,7 +76,7 @@ def main(argv: list[str] | None = None) -> int:
     """Run the command line with ``argv`` (default ``sys.argv[1:]``); return the exit code."""
     parser, commands = build_parser()
     with warnings.catch_warnings():
-        warnings.showwarning = _show_warning
+        warnings.showwarning = _warning_printer()
         try:
             args, rest = parser.parse_known_args(argv)
             if args.command == "bench":
@@ -731,10 +731,22 @@ def native_log_held():
             os.write(2, bytes(held))
 
 
-def _show_warning(message, category, filename, lineno, file=None, line=None) -> None:
-    """Warnings as one line each, like errors (on a line of their own)."""
-    _Progress.interrupt()
-    print(f"bananagrid: warning: {_one_line(message)}", file=sys.stderr)
+def _warning_printer():
+    """A ``warnings.showwarning`` for one command: each warning as one line, like errors (on a
+    line of their own), and each text once, however many places raise it (a model built for the
+    scene, for each time and for the blueprint; Python's own once-per-place filter would print it
+    as many times as there are places, fewer where an earlier command in the process saw one)."""
+    shown: set[str] = set()
+
+    def show(message, category, filename, lineno, file=None, line=None) -> None:
+        text = _one_line(message)
+        if text in shown:
+            return
+        shown.add(text)
+        _Progress.interrupt()
+        print(f"bananagrid: warning: {text}", file=sys.stderr)
+
+    return show
 
 
 def _one_line(exc) -> str:
