@@ -1,9 +1,16 @@
-"""``rasterise``: a model's density on a grid (or its cells on a polar lattice)."""
+"""``rasterise``: the entry for every domain. It validates the call and hands it to the function
+of its domain and quantity, each of which makes one kind of result:
+
+* a grid's densities, :func:`bananagrid.engine.grid_density.density_raster` (a ``Raster``), or
+  lazily in blocks, :func:`bananagrid.engine.tiles.rasterise_tiles` (a ``TiledRaster``);
+* a grid's cell probabilities, :func:`bananagrid.engine.grid_cells.probability_raster`
+  (a ``Raster`` of ``quantity == "probability"``);
+* a polar lattice's densities and cells, :func:`bananagrid.engine.polar_cells.rasterise_lattice`
+  (a ``PolarRaster``);
+* an angular lattice's cells, the model's own cell plan (a ``CellMap``).
+"""
 
 from __future__ import annotations
-
-import math
-import time
 
 import numpy as np
 
@@ -13,12 +20,10 @@ from ..domains.polar_lattice import PolarLattice
 from ..protocol import DensityModel, PresenceModel
 from ..results import CellMap, PolarRaster, Raster, TiledRaster
 from ..validate import BananagridError
-from .memory import RASTERISE_BYTES_PER_CELL, check_memory
-from .points import check_finite, check_model
-from .work import check_work
+from .grid_density import density_raster
+from .points import check_model
 from .grid_cells import probability_raster
 from .polar_cells import rasterise_lattice
-from .grid_kernel import grid_block, grid_context
 from .warp_runtime import WarpContext
 from .tiles import rasterise_tiles
 
@@ -27,21 +32,6 @@ __all__ = ["rasterise", "QUANTITIES"]
 
 #: What :func:`rasterise` computes on a grid.
 QUANTITIES = ("density", "probability")
-
-
-def narrow(values: np.ndarray, dtype: np.dtype, total: float, model: DensityModel) -> np.ndarray:
-    """``values`` cast to ``dtype``; an error, not inf, where a density exceeds its range
-    (checked only when their sum ``total`` does)."""
-    if total <= np.finfo(dtype).max:
-        return values.astype(dtype)
-    with np.errstate(over="ignore"):
-        cast = values.astype(dtype)
-    if not np.isfinite(cast).all():
-        raise BananagridError(
-            f"{type(model).__name__}: densities up to {float(values.max()):.3g} per m^2 exceed {dtype.name}'s range "
-            f"({float(np.finfo(dtype).max):.3g}); rasterise with dtype=np.float64"
-        )
-    return cast
 
 
 def rasterise(model: DensityModel | PresenceModel, grid: Grid | PolarLattice | AngularLattice, *,
@@ -128,32 +118,7 @@ def rasterise(model: DensityModel | PresenceModel, grid: Grid | PolarLattice | A
     grid.check_in_memory()
     if quantity == "probability":
         return probability_raster(model, grid, dtype=dtype, device=device, threads=threads, max_seconds=max_seconds)
-    asked, ctx, extent = grid_context(model, grid, dtype, device, threads)
-    if ctx.cpu:  # an allocation the machine cannot give would abort the process without a word
-        what = f"rasterise on a grid of {grid.nx} x {grid.ny} = {grid.nx * grid.ny:,} cells"
-        check_memory(grid.nx * grid.ny, RASTERISE_BYTES_PER_CELL, what)
-        check_work(model.work_estimate(grid.nx * grid.ny, extent), ctx.launch_threads,
-                   f"{type(model).__name__}: {what}", limit=max_seconds, option="max_seconds=S")
-    start = time.perf_counter()
-    binding = model.bind(ctx, extent, grid=True)
-    values, total = grid_block(ctx, binding, grid, with_sum=True)
-    seconds = time.perf_counter() - start
-    if not math.isfinite(total):
-        check_finite(values, model)
-    if asked != ctx.dtype:  # float32 asked, computed in float64 (engine.precision)
-        values = narrow(values, asked, total, model)
-    mass = total * grid.cell_area
-    provenance = {
-        **model.parameters(),
-        "kernel": binding.kernel_name,
-        "dtype": asked.name,
-        "computed_in": ctx.dtype.name,
-        "device": ctx.device,
-        "threads": ctx.launch_threads,
-        "seconds": seconds,
-        **binding.notes,
-    }
-    return Raster(values=values, grid=grid, mass=mass, normalised=False, provenance=provenance)
+    return density_raster(model, grid, dtype=dtype, device=device, threads=threads, max_seconds=max_seconds)
 
 
 def _angular_cells(model, lattice: AngularLattice, region, *, dtype, device, threads, chunks) -> CellMap:
