@@ -280,8 +280,7 @@ def test_bearing_cells_where_seams_of_several_stations_meet(seed, n, where, side
         centre = tuple(0.5 * (sensors[0] + sensors[1]))
     grid = cell_oracle.cells_around((centre[0] + offset[0] * side, centre[1] + offset[1] * side), side)
     density = cell_oracle.bearing_density(model)
-    checked = _check(model, grid, lambda cell: cell_oracle.seams_cell(density, cell, model.seams()), min_checked=0)
-    assume(checked >= 1)  # cells that hold mass, not only tails (those test nothing relative)
+    _check(model, grid, lambda cell: cell_oracle.seams_cell(density, cell, model.seams()))
 
 
 # --- polar lattices about any origin: seams that cross the cells along curves ------------------
