@@ -25,6 +25,8 @@ from .models.containment import containment, containment_radius
 from .models.polar import PolarBanana
 from .models.presence import GaussianMixture, UniformPresence, cell_probabilities, grid_probabilities
 from .models.registry import MODEL_KINDS, ModelKind
+from .planning.allocation import Allocation, allocate
+from .planning.detection import DetectionLaw, detection_law
 from .protocol import DensityModel
 from .results import BatchRaster, CellMap, GridPresence, PolarRaster, Raster, ShardedBatch, TiledRaster
 from .scenes.load import load_scene, parse_scene
@@ -47,6 +49,8 @@ __all__ = [
     # analysis
     "radial_moments", "radial_density", "RadialMoments", "RadialDensity", "compare", "Comparison",
     "bearing_to", "containment", "containment_radius",
+    # where to look next
+    "allocate", "Allocation", "DetectionLaw", "detection_law",
     # scenes
     "load_scene", "parse_scene", "run_scene",
     # your own models

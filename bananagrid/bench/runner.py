@@ -43,7 +43,9 @@ from ..models.cat import cell_turn_edges, clear_heading_tables, scan_nodes
 from ..models.containment import containment
 from ..models.presence import GaussianMixture, cell_probabilities, grid_probabilities
 from ..models.registry import MODEL_KINDS
+from ..planning.allocation import allocate
 from ..protocol import DensityModel
+from ..results import Raster
 from ..validate import BananagridError
 from ..engine.cluster import check_memory_limit
 from . import baselines, cluster, peers
@@ -272,10 +274,47 @@ class _ButterlyCellJob(_CellJob):
         return (time.perf_counter() - start) * self.cells / len(cells)
 
 
+class _AllocateJob:
+    """``allocate``: optimal random-search effort (``bg.allocate``) on a 1000 x 1000 map of
+    cell probabilities (the ``polar-improved`` density over the Figure 1 frame, times the cell
+    area, normalised), effort a tenth of the frame's area; the sort and the closed form of the
+    multiplier are NumPy on one core whatever the threads. Baseline: NumPy bisection of the
+    multiplier (60 halvings of ln lambda, each a pass over every cell), what one writes without
+    the sorted closed form."""
+
+    dtypes = (np.float64,)
+    SIDE = 1000
+
+    def __init__(self):
+        x0, x1, y0, y1 = _grid_for("polar-improved", 4.0).extent
+        grid = Grid.from_bounds(x=(x0, x1), y=(y0, y1), dx=(x1 - x0) / self.SIDE, dy=(y1 - y0) / self.SIDE)
+        density = rasterise(grid_model("polar-improved"), grid).values.astype(np.float64)
+        p = density / density.sum()
+        self.map = Raster(values=p, grid=grid, mass=1.0, quantity="probability")
+        self.cells = grid.nx * grid.ny
+        self.effort = 0.1 * (x1 - x0) * (y1 - y0)
+
+    def work(self, dtype, threads, device="cpu"):
+        allocate(self.map, self.effort)
+
+    def baseline(self, stride: int, repeat: int) -> float:
+        p, area = self.map.values.ravel(), self.map.grid.cell_area
+        keep = p > 0
+        log_d = np.log(p[keep] / area)
+        start = time.perf_counter()
+        lo, hi = log_d.min() - self.effort / (area * keep.sum()), log_d.max()
+        for _ in range(60):
+            mid = 0.5 * (lo + hi)
+            spent = area * np.maximum(log_d - mid, 0.0).sum()
+            lo, hi = (mid, hi) if spent > self.effort else (lo, mid)
+        return time.perf_counter() - start
+
+
 #: Kernels timed on work other than one grid.
 JOBS = {
     "presence-plane": _PresenceJob, "presence-frustum": _PresenceFrustumJob, "presence-grid": _PresenceGridJob,
     "polar-batch": _BatchJob, "cat-cells": _CatCellJob, "butterly-cells": _ButterlyCellJob,
+    "allocate": _AllocateJob,
 }
 
 #: Every row of the bench, in order: a grid row's model factory, or None for a job.
