@@ -27,6 +27,7 @@ from .models.presence import GaussianMixture, UniformPresence, cell_probabilitie
 from .models.registry import MODEL_KINDS, ModelKind
 from .planning.allocation import Allocation, allocate
 from .planning.detection import DetectionLaw, detection_law
+from .planning.rectangles import SearchPlan, SearchRectangle, search_rectangles
 from .protocol import DensityModel
 from .results import BatchRaster, CellMap, GridPresence, PolarRaster, Raster, ShardedBatch, TiledRaster
 from .scenes.load import load_scene, parse_scene
@@ -50,7 +51,7 @@ __all__ = [
     "radial_moments", "radial_density", "RadialMoments", "RadialDensity", "compare", "Comparison",
     "bearing_to", "containment", "containment_radius",
     # where to look next
-    "allocate", "Allocation", "DetectionLaw", "detection_law",
+    "allocate", "Allocation", "DetectionLaw", "detection_law", "search_rectangles", "SearchPlan", "SearchRectangle",
     # scenes
     "load_scene", "parse_scene", "run_scene",
     # your own models

@@ -361,3 +361,37 @@ def _piece_lonlat(piece, frame, poles, antimeridian, shapely) -> list:
 def _plain(value: float) -> float | None:
     """NaN (a level not reached) as JSON null."""
     return None if math.isnan(value) else float(value)
+
+
+def polygons_lonlat(geometry, frame):
+    """A (Multi)Polygon in the frame's local metres as an RFC 7946 MultiPolygon of (lon, lat):
+    cut at the antimeridian and about the poles as the search areas are (see the module)."""
+    shapely = require("shapely", SHAPELY_PURPOSE)
+    return _to_lonlat(geometry, frame, shapely)
+
+
+def line_lonlat(xy, frame) -> list[list[list[float]]]:
+    """A polyline in the frame's local metres as the parts of an RFC 7946 MultiLineString in
+    (lon, lat): edges that turn more than :data:`MAX_EDGE_TURN` degrees of longitude divided,
+    and the line cut where it crosses the antimeridian (each part's end on +-180)."""
+    xy = np.asarray(xy, dtype=float)
+    lon = _lonlat(frame, xy)[:, 0]
+    turn = np.abs(np.remainder(np.diff(lon) + 180.0, 360.0) - 180.0)
+    dense = [xy[:1]]
+    for k, parts in enumerate(np.maximum(np.ceil(turn / MAX_EDGE_TURN), 1).astype(int)):
+        dense.append(xy[k] + (np.arange(1, parts + 1)[:, None] / parts) * (xy[k + 1] - xy[k]))
+    lonlat = _lonlat(frame, np.concatenate(dense))
+    parts, part = [], [lonlat[0]]
+    for a, b in zip(lonlat[:-1], lonlat[1:]):
+        if abs(b[0] - a[0]) > 180.0:  # crossing the antimeridian: end this part on it
+            east = 180.0 if a[0] > 0 else -180.0
+            b_shift = b[0] + (360.0 if a[0] > 0 else -360.0)
+            f = (east - a[0]) / (b_shift - a[0])
+            lat = a[1] + f * (b[1] - a[1])
+            part.append(np.array([east, lat]))
+            parts.append(part)
+            part = [np.array([-east, lat])]
+        part.append(b)
+    parts.append(part)
+    return [[[round(float(lon), COORDINATE_DECIMALS), round(float(lat), COORDINATE_DECIMALS)] for lon, lat in p]
+            for p in parts if len(p) > 1]

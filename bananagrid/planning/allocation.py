@@ -133,6 +133,14 @@ def allocate(cells, effort: float, law="exponential") -> Allocation:
                       pos=pos, marginal_gain=lam, total_effort=z, law=law, cells=p, areas=np.asarray(areas))
 
 
+def optimal_coverage(p: np.ndarray, areas, z: float, law: DetectionLaw) -> tuple[np.ndarray, float, float]:
+    """The optimal coverage of cells of probabilities ``p`` and areas ``areas`` under ``law``
+    for effort ``z`` (unchecked): (coverage per cell, the multiplier lambda, POS)."""
+    p = np.asarray(p, dtype=np.float64)
+    coverage, lam, pos = _SortedMap(p.ravel(), np.broadcast_to(areas, p.shape).ravel(), law).solve(z)
+    return coverage.reshape(p.shape), lam, pos
+
+
 def _effort(name: str, value) -> float:
     try:
         z = float(value)
