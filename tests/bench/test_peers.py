@@ -44,6 +44,28 @@ def test_each_peer_computes_the_density_rasterise_computes(name, variant, dtype)
             assert values[i, j] == pytest.approx(truth, rel=10 * peers.AGREE_RTOL[np.dtype(dtype)])
 
 
+@pytest.mark.parametrize("dtype", [np.float64, np.float32])
+def test_the_numba_peer_is_what_a_skilled_user_writes(dtype):
+    """Branch-free (no ``if`` statement in the loop: selects only), no libm call for atan2, exp,
+    sin or cos, and the loop vectorised by LLVM (vector types in its IR), in both dtypes: the
+    peer is the fast kernel, not one that calls libm per cell."""
+    import re
+
+    source = peers.skilled_polar_source(dtype)
+    body = source.split("for j in range", 1)[1]
+    assert not re.search(r"^\s*if\b", body, flags=re.M)
+    assert not re.search(r"\b(math|np)\.(atan2|arctan2|exp|sin|cos)\b", body)
+    model, grid = _case("improved")
+    peer = peers.NumbaPolar(model, grid, dtype)
+    llvm = "".join(peer.kernel.inspect_llvm().values())
+    lanes = {int(n) for n in re.findall(r"<(\d+) x (?:double|float)>", llvm)}
+    assert lanes and max(lanes) >= 2, lanes
+    # its polynomials' accuracy (float64 fit: 6.7e-16 measured; bound 1e-15)
+    a = np.linspace(0.0, peers.TAN_PI_8, 100001)[1:]
+    c = peers.atan_coefficients(peers.ATAN_TERMS[np.dtype(np.float64)])
+    assert np.max(np.abs(a * np.polyval(c[::-1], a * a) / np.arctan(a) - 1.0)) < 1e-15
+
+
 def test_the_equality_check_refuses_a_wrong_peer():
     model, grid = _case("improved")
     reference = bg.rasterise(model, grid, threads=1).values
