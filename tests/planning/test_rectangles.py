@@ -118,3 +118,25 @@ def test_bad_input_is_one_line(banana_cells):
     plan = bg.search_rectangles(allocation, 1, 100.0)
     with pytest.raises(bg.BananagridError, match="geographic frame"):
         plan.geojson()
+
+
+def test_the_planners_picture_shows_the_plan_and_its_curve(banana_cells):
+    pytest.importorskip("matplotlib")
+    from bananagrid.planning.figures import plot_allocation
+
+    allocation = bg.allocate(banana_cells, 2.0e6)
+    plan = bg.search_rectangles(allocation, 2, sweep_width=200.0)
+    fig = plot_allocation(allocation, plan, title="test")
+    left, right = fig.axes[:2]  # the colour bar's axes come after
+    # the curve passes through the allocation's point, and the plan's square sits at its POS
+    points = {line.get_label(): line.get_xydata() for line in right.get_lines()}
+    curve = points["optimal allocation"]
+    assert np.interp(allocation.total_effort / 1e6, curve[:, 0], curve[:, 1]) == pytest.approx(allocation.pos, rel=1e-3)
+    plan_point = [xy for label, xy in points.items() if label.startswith("2 rectangles")][0]
+    assert plan_point[0, 1] == pytest.approx(plan.pos)
+    # each rectangle's outline is drawn (km)
+    outlines = [line.get_xydata() for line in left.get_lines() if line.get_color() == "red"]
+    assert len(outlines) == 2
+    np.testing.assert_allclose(outlines[0][:4], plan.rectangles[0].corners / 1000.0)
+    with pytest.raises(bg.BananagridError):
+        plot_allocation("not an allocation")
