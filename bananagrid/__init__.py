@@ -27,7 +27,9 @@ from .models.presence import GaussianMixture, UniformPresence, cell_probabilitie
 from .models.registry import MODEL_KINDS, ModelKind
 from .planning.allocation import Allocation, allocate
 from .planning.detection import DetectionLaw, detection_law
+from .planning.figures import plot_allocation
 from .planning.rectangles import SearchPlan, SearchRectangle, search_rectangles
+from .planning.regions import RegionPlan, SearchRegion, search_regions
 from .protocol import DensityModel
 from .results import BatchRaster, CellMap, GridPresence, PolarRaster, Raster, ShardedBatch, TiledRaster
 from .scenes.load import load_scene, parse_scene
@@ -52,6 +54,7 @@ __all__ = [
     "bearing_to", "containment", "containment_radius",
     # where to look next
     "allocate", "Allocation", "DetectionLaw", "detection_law", "search_rectangles", "SearchPlan", "SearchRectangle",
+    "search_regions", "RegionPlan", "SearchRegion", "plot_allocation",
     # scenes
     "load_scene", "parse_scene", "run_scene",
     # your own models

@@ -26,7 +26,6 @@ cell's area (the map's resolution: a cell's probability is not known finer than 
 
 from __future__ import annotations
 
-import json
 import math
 import os
 from dataclasses import dataclass
@@ -34,13 +33,11 @@ from pathlib import Path
 
 import numpy as np
 
-from ..geo.files import writing
-from ..geo.geojson import line_lonlat, polygons_lonlat
 from ..geo.libraries import require
 from ..results import Raster
-from ..validate import BananagridError, positive, positive_int, show
-from ..version import __version__
+from ..validate import BananagridError, positive, positive_int
 from .allocation import Allocation, optimal_coverage
+from .plan_files import plan_collection, write_collection
 
 #: Lloyd iterations of the k-means (it stops earlier when no cell changes cluster).
 KMEANS_ITERATIONS = 100
@@ -126,35 +123,19 @@ class SearchPlan:
     def geojson(self) -> dict:
         """The rectangles (Polygons) and their tracks (MultiLineStrings) as an RFC 7946
         FeatureCollection in WGS84 longitude and latitude; needs a geographic map."""
-        if self.frame is None:
-            raise BananagridError("GeoJSON is in longitude and latitude: the map needs a geographic frame "
-                                  "(a scene's [geo] table, or Raster.frame)")
         shapely = require("shapely")
-        features = []
-        for index, r in enumerate(self.rectangles):
-            props = {"rectangle": index, "probability": r.probability, "pod": r.pod, "pos": r.probability * r.pod,
-                     "coverage": r.coverage, "legs": r.legs, "track_spacing_m": r.track_spacing,
-                     "effort_m2": r.effort, "length_m": r.length, "width_m": r.width,
-                     "orientation_deg": math.degrees(r.orientation)}
-            area = polygons_lonlat(shapely.Polygon(r.corners), self.frame)
-            features.append({"type": "Feature", "geometry": shapely.geometry.mapping(area),
-                             "properties": {"kind": "area", **props}})
-            features.append({"type": "Feature",
-                             "geometry": {"type": "MultiLineString", "coordinates": line_lonlat(r.track, self.frame)},
-                             "properties": {"kind": "track", "rectangle": index, "track_spacing_m": r.track_spacing,
-                                            "length_m": r.legs * r.length + (r.legs - 1) * r.track_spacing}})
-        return {"type": "FeatureCollection",
-                "bananagrid": {"version": __version__, "pos": self.pos, "ideal_pos": self.ideal_pos,
-                               "effort_m2": self.effort, "sweep_width_m": self.sweep_width, "law": self.law,
-                               "frame": self.frame.describe()},
-                "features": features}
+        areas = [(shapely.Polygon(r.corners), [r.track],
+                  {"probability": r.probability, "pod": r.pod, "pos": r.probability * r.pod, "coverage": r.coverage,
+                   "legs": r.legs, "track_spacing_m": r.track_spacing, "effort_m2": r.effort, "length_m": r.length,
+                   "width_m": r.width, "orientation_deg": math.degrees(r.orientation)})
+                 for r in self.rectangles]
+        summary = {"pos": self.pos, "ideal_pos": self.ideal_pos, "effort_m2": self.effort,
+                   "sweep_width_m": self.sweep_width, "law": self.law}
+        return plan_collection(areas, summary, self.frame)
 
     def write_geojson(self, path: str | os.PathLike) -> Path:
         """Write :meth:`geojson` to ``path`` (a temporary name, renamed when complete)."""
-        collection = self.geojson()
-        with writing(path, "GeoJSON file") as partial:
-            partial.write_text(json.dumps(collection, allow_nan=False) + "\n", encoding="utf-8")
-        return Path(path)
+        return write_collection(path, self.geojson())
 
 
 def search_rectangles(allocation: Allocation, k: int, sweep_width: float) -> SearchPlan:
