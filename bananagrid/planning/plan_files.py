@@ -43,3 +43,20 @@ def write_collection(path: str | os.PathLike, collection: dict) -> Path:
     with writing(path, "GeoJSON file") as partial:
         partial.write_text(json.dumps(collection, allow_nan=False) + "\n", encoding="utf-8")
     return Path(path)
+
+
+class PlanGeoJSON:
+    """What a plan (rectangles or bands) shares: its GeoJSON. A plan has ``pos``, ``ideal_pos``,
+    ``effort``, ``sweep_width``, ``law`` and ``frame``, and lists its areas with
+    ``geojson_areas()``: (polygon, tracks, properties) each."""
+
+    def geojson(self) -> dict:
+        """The plan's areas (Polygons) and sweep legs (MultiLineStrings) as an RFC 7946
+        FeatureCollection in WGS84 longitude and latitude; needs a geographic map."""
+        summary = {"pos": self.pos, "ideal_pos": self.ideal_pos, "effort_m2": self.effort,
+                   "sweep_width_m": self.sweep_width, "law": self.law}
+        return plan_collection(self.geojson_areas(), summary, self.frame)
+
+    def write_geojson(self, path: str | os.PathLike) -> Path:
+        """Write :meth:`geojson` to ``path`` (a temporary name, renamed when complete)."""
+        return write_collection(path, self.geojson())

@@ -27,9 +27,7 @@ cell's area (the map's resolution: a cell's probability is not known finer than 
 from __future__ import annotations
 
 import math
-import os
 from dataclasses import dataclass
-from pathlib import Path
 
 import numpy as np
 
@@ -37,7 +35,7 @@ from ..geo.libraries import require
 from ..results import Raster
 from ..validate import BananagridError, positive, positive_int
 from .allocation import Allocation, optimal_coverage
-from .plan_files import plan_collection, write_collection
+from .plan_files import PlanGeoJSON
 
 #: Lloyd iterations of the k-means (it stops earlier when no cell changes cluster).
 KMEANS_ITERATIONS = 100
@@ -91,7 +89,7 @@ class SearchRectangle:
 
 
 @dataclass(frozen=True)
-class SearchPlan:
+class SearchPlan(PlanGeoJSON):
     """Rectangles a crew can fly, with their probability of success on the map.
 
     Attributes
@@ -120,22 +118,14 @@ class SearchPlan:
     law: str
     frame: object = None
 
-    def geojson(self) -> dict:
-        """The rectangles (Polygons) and their tracks (MultiLineStrings) as an RFC 7946
-        FeatureCollection in WGS84 longitude and latitude; needs a geographic map."""
+    def geojson_areas(self) -> list:
+        """(polygon, tracks, properties) of each area, for :meth:`geojson`."""
         shapely = require("shapely")
-        areas = [(shapely.Polygon(r.corners), [r.track],
-                  {"probability": r.probability, "pod": r.pod, "pos": r.probability * r.pod, "coverage": r.coverage,
-                   "legs": r.legs, "track_spacing_m": r.track_spacing, "effort_m2": r.effort, "length_m": r.length,
-                   "width_m": r.width, "orientation_deg": math.degrees(r.orientation)})
-                 for r in self.rectangles]
-        summary = {"pos": self.pos, "ideal_pos": self.ideal_pos, "effort_m2": self.effort,
-                   "sweep_width_m": self.sweep_width, "law": self.law}
-        return plan_collection(areas, summary, self.frame)
-
-    def write_geojson(self, path: str | os.PathLike) -> Path:
-        """Write :meth:`geojson` to ``path`` (a temporary name, renamed when complete)."""
-        return write_collection(path, self.geojson())
+        return [(shapely.Polygon(r.corners), [r.track],
+                {"probability": r.probability, "pod": r.pod, "pos": r.probability * r.pod, "coverage": r.coverage,
+                 "legs": r.legs, "track_spacing_m": r.track_spacing, "effort_m2": r.effort, "length_m": r.length,
+                 "width_m": r.width, "orientation_deg": math.degrees(r.orientation)})
+                for r in self.rectangles]
 
 
 def search_rectangles(allocation: Allocation, k: int, sweep_width: float) -> SearchPlan:

@@ -16,9 +16,7 @@ allocation's (even coverage over a band is one allocation of the same effort).
 from __future__ import annotations
 
 import math
-import os
 from dataclasses import dataclass
-from pathlib import Path
 
 import numpy as np
 
@@ -26,7 +24,7 @@ from ..geo.libraries import require
 from ..results import Raster
 from ..validate import BananagridError, positive, positive_int
 from .allocation import Allocation, optimal_coverage
-from .plan_files import plan_collection, write_collection
+from .plan_files import PlanGeoJSON
 
 #: The most bands of a plan.
 MAX_BANDS = 16
@@ -70,7 +68,7 @@ class SearchRegion:
 
 
 @dataclass(frozen=True)
-class RegionPlan:
+class RegionPlan(PlanGeoJSON):
     """Bands of a map searched at one track spacing each, with their exact probability of
     success (``pos``) beside the ideal allocation's (``ideal_pos``)."""
 
@@ -82,20 +80,12 @@ class RegionPlan:
     law: str
     frame: object = None
 
-    def geojson(self) -> dict:
-        """The bands (MultiPolygons) and their sweep legs as an RFC 7946 FeatureCollection in
-        WGS84 longitude and latitude; needs a geographic map."""
-        areas = [(r.polygon, r.tracks,
-                  {"probability": r.probability, "pod": r.pod, "pos": r.probability * r.pod, "coverage": r.coverage,
-                   "track_spacing_m": r.track_spacing, "effort_m2": r.effort, "area_m2": r.area})
-                 for r in self.regions if r.coverage > 0]
-        summary = {"pos": self.pos, "ideal_pos": self.ideal_pos, "effort_m2": self.effort,
-                   "sweep_width_m": self.sweep_width, "law": self.law}
-        return plan_collection(areas, summary, self.frame)
-
-    def write_geojson(self, path: str | os.PathLike) -> Path:
-        """Write :meth:`geojson` to ``path`` (a temporary name, renamed when complete)."""
-        return write_collection(path, self.geojson())
+    def geojson_areas(self) -> list:
+        """(polygon, tracks, properties) of each area, for :meth:`geojson`."""
+        return [(r.polygon, r.tracks,
+                {"probability": r.probability, "pod": r.pod, "pos": r.probability * r.pod, "coverage": r.coverage,
+                 "track_spacing_m": r.track_spacing, "effort_m2": r.effort, "area_m2": r.area})
+                for r in self.regions if r.coverage > 0]
 
 
 def search_regions(allocation: Allocation, k: int, sweep_width: float) -> RegionPlan:
