@@ -1,4 +1,4 @@
-"""A griffe extension for the API reference: a model's docstring as Python shows it.
+"""A griffe extension for the API reference: docstrings as Python shows them, in Markdown.
 
 griffe reads the source without importing it, but a ``@modelclass`` model's "Parameters"
 section is written when the class is made, from its parameters' declarations
@@ -6,24 +6,40 @@ section is written when the class is made, from its parameters' declarations
 module (no Warp kernel is built or launched: importing declares them) and takes the docstring
 that ``help()`` shows, and its constructor's signature (a dataclass made by ``modelclass``, which
 griffe's dataclass support does not know), so the reference and the runtime cannot differ.
+
+The docstrings cross-reference in Sphinx's roles (``:class:`Grid```, ``:meth:`~Raster.plot```);
+Markdown has none, so each becomes the name in code (``Grid``, ``plot``).
 """
 
 from __future__ import annotations
 
 import importlib
 import inspect
+import re
 
 import griffe
 
+#: A Sphinx role: ``:class:`name```, ``:meth:`~a.b```, ``:func:`text <target>```.
+ROLE = re.compile(r":(?:py:)?(?:class|meth|func|mod|attr|data|exc|obj|const):`(~?)([^`<]*?)(?:\s*<[^`>]*>)?`")
+
+
+def plain_roles(text: str) -> str:
+    """``text`` with each Sphinx role replaced by its name in code (``~`` keeps the last part)."""
+    return ROLE.sub(lambda m: f"``{m.group(2).rsplit('.', 1)[-1] if m.group(1) else m.group(2)}``", text)
+
 
 class ModelclassDocstrings(griffe.Extension):
-    """Replace a ``@modelclass`` class's source docstring by its generated one."""
+    """A ``@modelclass`` class's generated docstring and signature; Sphinx roles as code."""
+
+    def on_instance(self, *, obj: griffe.Object, **kwargs) -> None:
+        if obj.docstring is not None:
+            obj.docstring.value = plain_roles(obj.docstring.value)
 
     def on_class_instance(self, *, cls: griffe.Class, **kwargs) -> None:
         if not any(str(d.value).split("(")[0].endswith("modelclass") for d in cls.decorators):
             return
         runtime = getattr(importlib.import_module(cls.module.path), cls.name)
-        text = inspect.cleandoc(runtime.__doc__ or "")
+        text = plain_roles(inspect.cleandoc(runtime.__doc__ or ""))
         if cls.docstring is None:
             cls.docstring = griffe.Docstring(text, parent=cls)
         else:

@@ -180,14 +180,18 @@ def test_every_command_is_run_or_listed():
         assert any(needed in c for c in runnable()), needed
 
 
-@pytest.fixture(scope="module")
-def workdir(tmp_path_factory):
-    """A directory like the repository root: the scenes, and the package's sources for the
+def like_the_root(work: Path) -> Path:
+    """``work`` made like the repository root: the scenes, and the package's sources for the
     commands run from a checkout."""
-    work = tmp_path_factory.mktemp("docs")
     for name in ("scenes", "bananagrid", "kernels", "docs", "pyproject.toml"):
         (work / name).symlink_to(ROOT / name)
     return work
+
+
+@pytest.fixture(scope="module")
+def workdir(tmp_path_factory):
+    """Where the commands run, in reading order (``inspect`` reads what ``run`` wrote)."""
+    return like_the_root(tmp_path_factory.mktemp("docs"))
 
 
 def as_run_here(command: str) -> list[str]:
@@ -280,10 +284,11 @@ def test_every_page_with_python_is_checked():
 
 
 @pytest.mark.parametrize("page", sorted(FIGURES))
-def test_python_blocks_run_and_give_the_figures_shown(page, workdir, tmp_path, monkeypatch):
+def test_python_blocks_run_and_give_the_figures_shown(page, tmp_path, monkeypatch):
     """Run as a script is run (``__main__``, from a file): worker processes that Dask starts
-    import that file, and only what the guard keeps from them is not run there."""
-    monkeypatch.chdir(workdir)
+    import that file, and only what the guard keeps from them is not run there. Each page in a
+    folder of its own, like the repository root (what one page writes is not another's)."""
+    monkeypatch.chdir(like_the_root(tmp_path))
     script = tmp_path / (page.replace("/", "-") + ".py")
     script.write_text(page_script(page))
     with contextlib.redirect_stdout(io.StringIO()):
@@ -404,8 +409,10 @@ def test_the_site_builds_offline(tmp_path, monkeypatch):
     api = (site / "api" / "index.html").read_text()
     for name in bg.__all__:
         assert f'id="bananagrid.{name}"' in api, name
-    # a model's generated Parameters section, as help() shows it (docs/griffe_modelclass.py)
+    # a model's generated Parameters section, as help() shows it, and no Sphinx role left raw
+    # (docs/griffe_modelclass.py)
     assert "Standard deviation of the turn rate" in api
+    assert re.findall(r":(?:class|meth|func|mod|attr|data|exc|obj):", api) == []
     fetched = [path.name for path in site.rglob("*") if path.is_file() and path.suffix in (".html", ".css", ".js")
                and re.search(r"fonts\.(googleapis|gstatic)\.com", path.read_text(errors="replace"))]
     assert fetched == []
