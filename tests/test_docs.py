@@ -26,6 +26,8 @@ from pathlib import Path
 
 import pytest
 import yaml
+from mkdocs.commands.build import build
+from mkdocs.config import load_config
 
 import bananagrid as bg
 from bananagrid import cli
@@ -383,9 +385,6 @@ def test_the_site_builds_offline(tmp_path, monkeypatch):
     """``mkdocs build --strict``: any warning (a broken link or anchor, a page left out of the nav,
     a docstring griffe cannot parse) fails it; with every socket refused, so that nothing (a web
     font, a remote inventory) is fetched at build time."""
-    from mkdocs.commands.build import build
-    from mkdocs.config import load_config
-
     config = yaml.safe_load(MKDOCS.read_text())
     assert config["theme"]["font"] is False  # Material would link Google's fonts otherwise
     monkeypatch.setenv("NO_MKDOCS_2_WARNING", "1")  # the theme's banner about its successor
