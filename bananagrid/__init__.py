@@ -1,6 +1,6 @@
 """bananagrid: probability maps from target-motion and sensing models.
 
-The public face: every name below is documented in the README's API section. Models follow one
+The public face: every name below is documented on the API page (docs/api.md). Models follow one
 protocol (:class:`DensityModel`); ``rasterise`` computes any of them on a grid or a polar
 lattice with Warp kernels, ``cell_probabilities`` the presence laws on an array's angular cells.
 """

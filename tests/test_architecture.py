@@ -270,9 +270,9 @@ def test_shared_helpers_live_in_support():
 
 
 #: Where a test file is named by its path (tests/...py): each such path must exist. (The
-#: README's commands are quoted verbatim in test_readme.py's table, which follows the README.)
+#: documentation's commands are quoted verbatim in test_docs.py's table, which follows the pages.)
 NAMING_TEST_PATHS = ["pyproject.toml", "bananagrid", "kernels", "docs", "tests", "README.md"]
-QUOTING_THE_README = TESTS / "test_readme.py"
+QUOTING_THE_README = TESTS / "test_docs.py"
 
 
 def test_every_test_path_named_exists():

@@ -1,6 +1,6 @@
 """Pictures without a viewer: Raster.plot (contours, labels, colour scale, frame, the geometry
 a provenance names), the notebook representations and short reprs, bananagrid plot on scenes,
-recordings and arrays, its one-line errors, and the README's pictures."""
+recordings and arrays, its one-line errors, and the gallery's pictures."""
 
 from __future__ import annotations
 
@@ -325,10 +325,10 @@ def test_plot_refuses_other_inputs_outputs_and_array_scenes(tmp_path, scene_file
     assert not list(tmp_path.glob("*.png"))
 
 
-# --- the README's pictures ---------------------------------------------------------------------
+# --- the gallery's pictures --------------------------------------------------------------------
 
 
-def test_readme_pictures_are_made_from_every_grid_scene(tmp_path):
+def test_gallery_pictures_are_made_from_every_grid_scene(tmp_path):
     sys.path.insert(0, str(ROOT / "docs"))
     try:
         import make_pictures
@@ -339,8 +339,8 @@ def test_readme_pictures_are_made_from_every_grid_scene(tmp_path):
         grid_scenes = {path.stem for path in (ROOT / "scenes").glob("*.toml")
                        if load_scene(path).gridded}
     assert set(make_pictures.PICTURED) == grid_scenes
-    readme = (ROOT / "README.md").read_text()
-    shown = re.findall(r"!\[[^\]]+\]\((docs/pictures/[\w-]+\.png)\)", readme)
+    gallery = (ROOT / "docs" / "gallery.md").read_text()
+    shown = [f"docs/{path}" for path in re.findall(r"!\[[^\]]+\]\((pictures/[\w-]+\.png)\)", gallery)]
     assert sorted(shown) == sorted(f"docs/pictures/{name}.png" for name in make_pictures.PICTURED)
     total = 0
     for picture in shown:

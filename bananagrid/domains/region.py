@@ -27,6 +27,8 @@ def _interval(name: str, value) -> tuple[float, float]:
 class Region:
     """The target region S: a box with an x range, optionally a y range and a z range.
 
+    The dimension (1, 2 or 3) is the number of ranges given; |S| is its length, area or volume.
+
     Parameters
     ----------
     x : (float, float)
@@ -35,8 +37,6 @@ class Region:
         ``(y0, y1)``, m (a plane or a slab).
     z : (float, float), optional
         ``(z0, z1)``, m, heights in the array frame (z up, the floor at negative z); needs y.
-
-    The dimension (1, 2 or 3) is the number of ranges given; |S| is its length, area or volume.
     """
 
     x: tuple[float, float]
