@@ -249,6 +249,12 @@ def check_dask(ns):
     assert (Path("out") / "ocean.zarr").is_dir()
 
 
+def check_planning(ns):
+    assert (round(ns["plan"].pos, 3), list(ns["plan"].pos_curve([1e6, 4e6]).round(3))) == (0.814, [0.64, 0.933])
+    assert (round(ns["flown"].pos, 3), [r.legs for r in ns["flown"].rectangles]) == (0.758, [3, 3, 3])
+    assert round(ns["bands"].pos, 3) == 0.812
+
+
 def check_api(ns):
     assert (ns["bg"].__version__, sorted(ns["bg"].MODEL_KINDS)) == (
         "0.1.0", ["bearing_fix", "butterly", "cat", "mixture", "polar", "uniform"])
@@ -266,6 +272,7 @@ FIGURES = {
     "docs/guide/cell-probabilities.md": check_cell_probabilities,
     "docs/guide/geographic.md": None,  # its loop asserts each search area's probability
     "docs/guide/dask.md": check_dask,
+    "docs/guide/planning.md": check_planning,
     "docs/api.md": check_api,
     "docs/scenes.md": None,
 }
