@@ -26,7 +26,7 @@ from bananagrid.domains.grid import Grid  # noqa: E402
 from bananagrid.plotting import FLOOR_DECADES, figure_layout, map_frame, map_geometry  # noqa: E402
 from bananagrid.scenes.examples import example_path  # noqa: E402
 from bananagrid.scenes.load import load_scene  # noqa: E402
-from bananagrid.scenes.pictures import read_picture  # noqa: E402
+from bananagrid.scenes.pictures import picture_layout, read_picture  # noqa: E402
 
 from cases import small_scene  # noqa: E402
 
@@ -253,7 +253,7 @@ def test_plot_command_reads_scenes_recordings_and_arrays(tmp_path, scene_file, r
     assert capsys.readouterr().out.strip() == f"wrote {out}"
     picture = read_picture(given)
     assert [(p.layer, p.t) for p in picture.panels] == [("a", 4.0), ("b", 4.0)]  # the last time
-    _, columns, size = figure_layout([map_frame(p.raster) for p in picture.panels])
+    _, columns, size = picture_layout([map_frame(p.raster) for p in picture.panels])
     assert columns == 2
     check_png(out, pixels(size, 40))
     assert not list(tmp_path.glob(".*partial"))
@@ -268,7 +268,7 @@ def test_plot_picks_layers_a_time_and_a_resolution(tmp_path, scene_file):
     out = tmp_path / "a.png"
     assert cli.main(["plot", str(scene_file), "-o", str(out), "--layer", "a", "--t", "2", "--dpi", "40"]) == 0
     picture = read_picture(scene_file, layers=["a"], t=2.0)
-    _, _, size = figure_layout([map_frame(picture.panels[0].raster)])
+    _, _, size = picture_layout([map_frame(picture.panels[0].raster)])
     check_png(out, pixels(size, 40))
     assert cli.main(["plot", str(scene_file), "-o", str(out), "--layer", "a", "--t", "2", "--dpi", "80"]) == 0
     check_png(out, pixels(size, 80))
@@ -279,7 +279,7 @@ def test_plot_example_draws_the_bundled_scene(tmp_path, capsys):
     out = tmp_path / "folding.png"
     assert cli.main(["plot", "--example", "folding", "--step", "200", "-o", str(out), "--dpi", "30"]) == 0
     picture = read_picture(example_path("folding"), step=200.0)
-    _, _, size = figure_layout([map_frame(p.raster) for p in picture.panels])
+    _, _, size = picture_layout([map_frame(p.raster) for p in picture.panels])
     check_png(out, pixels(size, 30))
     capsys.readouterr()
     assert cli.main(["plot", "x.toml", "--example", "folding", "-o", str(out)]) == 2
