@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import math
 import re
+import socket
 import subprocess
 import sys
 import warnings
@@ -23,10 +24,20 @@ import bananagrid as bg  # noqa: E402
 from bananagrid import BananagridError, Raster, cli  # noqa: E402
 from bananagrid.contours import format_level, mass_regions  # noqa: E402
 from bananagrid.domains.grid import Grid  # noqa: E402
-from bananagrid.plotting import FLOOR_DECADES, figure_layout, map_frame, map_geometry  # noqa: E402
+from bananagrid.geo.chart import chart  # noqa: E402
+from bananagrid.plotting import (  # noqa: E402
+    FLOOR_DECADES,
+    MASS_COLOURS,
+    colour_range,
+    figure_layout,
+    map_frame,
+    map_geometry,
+    shared_colour_range,
+)
 from bananagrid.scenes.examples import example_path  # noqa: E402
 from bananagrid.scenes.load import load_scene  # noqa: E402
-from bananagrid.scenes.pictures import picture_layout, read_picture  # noqa: E402
+from bananagrid.scenes.pictures import draw_picture, picture_layout, read_picture, read_timeline  # noqa: E402
+from PIL import Image  # noqa: E402
 
 from cases import small_scene  # noqa: E402
 
@@ -353,3 +364,180 @@ def test_readme_pictures_are_made_from_every_grid_scene(tmp_path):
     assert run.returncode == 0, run.stderr
     made = check_png(tmp_path / "rice_isotropic.png")
     assert made.shape == mpimg.imread(ROOT / "docs" / "pictures" / "rice_isotropic.png").shape
+
+
+# --- panels side by side: one colour range, one colour bar, a key to the contour colours ------
+
+
+def test_panels_share_one_colour_range_one_bar_and_one_key(scene_file):
+    """Side by side, every map is drawn in the union of the panels' own ranges (so a colour
+    means one density in every panel), with one colour bar; the key names each level in the
+    colour its contours are drawn in."""
+    picture = read_picture(scene_file, t=2.0)
+    levels = picture.mass_levels
+    extents = [map_frame(p.raster, levels) for p in picture.panels]
+    own = [colour_range(p.raster, levels) for p in picture.panels]
+    assert own[0] != own[1]  # the layers differ: a shared range is a choice, not a coincidence
+    figure = plt.figure(figsize=picture_layout(extents)[2], layout="constrained")
+    axes = draw_picture(figure, picture, levels, clim=shared_colour_range(own), extents=extents)
+    union = (min(r[0] for r in own), max(r[1] for r in own))
+    assert [ax.images[0].get_clim() for ax in axes] == [pytest.approx(union)] * len(axes)
+    bars = [ax for ax in figure.axes if ax.get_ylabel() == "log10 density [m⁻²]"]
+    assert len(bars) == 1 and not any(ax.child_axes for ax in axes)
+    (key,) = figure.legends
+    assert [t.get_text() for t in key.get_texts()] == [f"{100 * p:g} % region" for p in levels]
+    for handle, level in zip(key.legend_handles, levels):
+        drawn = {line.get_color() for line in axes[0].get_lines() if line.get_gid() == f"mass-contour-{level:g}"}
+        assert drawn in ({handle.get_color()}, set())  # an unreached level draws nothing
+        assert handle.get_color() == MASS_COLOURS[list(levels).index(level) % len(MASS_COLOURS)]
+    plt.close(figure)
+
+
+def test_a_single_map_has_the_key_in_it():
+    ax = gaussian_raster().plot()
+    legend = ax.get_legend()
+    assert [t.get_text() for t in legend.get_texts()] == ["50 % region", "90 % region", "95 % region", "99 % region"]
+    plt.close(ax.figure)
+
+
+# --- charts of geographic scenes --------------------------------------------------------------
+
+
+@pytest.fixture(scope="module")
+def coast_scene(tmp_path_factory) -> Path:
+    """A geographic scene off Bergen whose map reaches the coast (Sotra, 5 to 20 km east)."""
+    path = tmp_path_factory.mktemp("coast") / "coast.toml"
+    path.write_text("""\
+[scene]
+name = "coast"
+times = [600.0, 1200.0]
+
+[geo]
+origin_latlon = [60.35, 4.90]
+time = "2026-11-24T23:50:00Z"
+
+[grid]
+x = [-15000.0, 15000.0]
+y = [-15000.0, 15000.0]
+step = 500.0
+
+[layers.drift]
+model = "butterly"
+mean_latlon = [60.35, 4.90]
+sigma_x = 500.0
+sigma_y = 500.0
+speed_law = "normal"
+speed_mean = 5.0
+speed_sd = 2.0
+course_kappa = 1.0
+course_mean_deg = 90.0
+""")
+    return path
+
+
+@pytest.fixture(scope="module")
+def coast_picture(coast_scene):
+    return read_picture(coast_scene)
+
+
+def test_a_geographic_map_is_a_chart_from_bundled_land_offline(coast_picture, monkeypatch):
+    """Graticule lines with latitude and longitude labels where they cross the edges, the land
+    filled from the bundled data with sockets refused, a scale bar, and the UTC time (the
+    scene's time + t, past midnight here) in the title."""
+    picture = coast_picture
+    panel = picture.panels[0]
+    assert panel.raster.frame is not None
+
+    def refuse(*args, **kwargs):
+        raise AssertionError("the chart tried to use the network")
+
+    monkeypatch.setattr(socket, "socket", refuse)
+    monkeypatch.setattr(socket, "create_connection", refuse)
+    extents = [map_frame(panel.raster, picture.mass_levels)]
+    figure = plt.figure(figsize=picture_layout(extents)[2], layout="constrained")
+    (ax,) = draw_picture(figure, picture, picture.mass_levels, clim=colour_range(panel.raster), extents=extents)
+    assert ax.get_title().splitlines() == ["drift (Butterly), t = 1200 s (20 min)", "2026-11-25 00:10:00 UTC"]
+    land = [p for p in ax.patches if p.get_gid() == "land"]
+    assert len(land) == 1 and len(land[0].get_path().vertices) > 100
+    # inland Store Sotra (60.25 N, 5.05 E) is inside the drawn land, the origin at sea is not
+    x, y = panel.raster.frame.local(60.25, 5.05)
+    assert land[0].get_path().contains_point((float(x) / 1e3, float(y) / 1e3))
+    assert not land[0].get_path().contains_point((0.0, 0.0))
+    drawn = chart(panel.raster.frame, extents[0], land=False)
+    labels = [t.get_text() for t in ax.get_xticklabels()]
+    assert labels == [t.label for t in drawn.ticks if t.edge == "bottom"] and all(s.endswith("E") for s in labels)
+    assert ax.get_xticks() == pytest.approx([t.position / 1e3 for t in drawn.ticks if t.edge == "bottom"])
+    assert [t.get_text() for t in ax.get_yticklabels()] == [t.label for t in drawn.ticks if t.edge == "left"]
+    gids = {line.get_gid() for line in ax.get_lines()}
+    assert {f"graticule-{line.kind}-{line.value:.10g}" for line in drawn.lines} <= gids
+    assert any(getattr(a, "get_gid", lambda: None)() == "scale-bar" for a in ax.artists)
+    assert "km" not in ax.get_xlabel()
+    plt.close(figure)
+
+
+@pytest.mark.parametrize("t, utc", [(0.0, "2026-11-24 23:50:00 UTC"), (600.0, "2026-11-25 00:00:00 UTC"),
+                                    (90061.5, "2026-11-26 00:51:01 UTC")])
+def test_titles_carry_the_utc_time(coast_picture, t, utc):
+    """The frame's time plus t, to the whole second below (the scene's time is
+    2026-11-24T23:50:00Z; 90061.5 s is a day, an hour, a minute and 1.5 s)."""
+    ax = coast_picture.panels[0].raster.plot(t=t)
+    assert ax.get_title().splitlines()[-1] == utc
+    plt.close(ax.figure)
+
+
+# --- animations -------------------------------------------------------------------------------
+
+
+def test_animate_writes_one_gif_frame_per_time(tmp_path, coast_scene, capsys):
+    out = tmp_path / "coast.gif"
+    assert cli.main(["plot", str(coast_scene), "--animate", str(out), "--dpi", "30", "--fps", "4"]) == 0
+    captured = capsys.readouterr()
+    assert captured.out.strip() == f"wrote {out} (2 frames)"
+    assert captured.err.splitlines() == ["frame 1/2: t = 600 s", "frame 2/2: t = 1200 s"]
+    frames = read_timeline(coast_scene)
+    extents = [map_frame(p.raster) for p in frames[0].panels]
+    with Image.open(out) as gif:
+        assert gif.format == "GIF" and gif.n_frames == 2
+        assert gif.info["duration"] == 250  # ms: 4 frames per second
+        # every frame at the picture's size (frames are framed on the union over the timeline)
+        union = [(min(a[0], b[0]), max(a[1], b[1]), min(a[2], b[2]), max(a[3], b[3]))
+                 for a, b in zip(extents, [map_frame(p.raster) for p in frames[1].panels])]
+        assert abs(gif.size[0] - pixels(picture_layout(union)[2], 30)[0]) <= 1
+        pictures = []
+        for k in range(gif.n_frames):
+            gif.seek(k)
+            pictures.append(np.asarray(gif.convert("RGB"), dtype=float))
+        assert np.abs(pictures[0] - pictures[1]).mean() > 1.0  # the frames differ: time moves
+    assert not list(tmp_path.glob(".*partial"))
+
+
+def test_timeline_frames_hold_every_layer_at_its_time(scene_file):
+    frames = read_timeline(scene_file)
+    assert [[(p.layer, p.t) for p in f.panels] for f in frames] == [[("a", 2.0), ("b", 2.0)], [("a", 4.0), ("b", 4.0)]]
+    assert [[p.layer for p in f.panels] for f in read_timeline(scene_file, layers=["b"])] == [["b"], ["b"]]
+
+
+@pytest.mark.parametrize("argv, message", [
+    (["--animate", "{tmp}/x.avi"], r"--animate .*x\.avi: an animation is a GIF or an MP4; give a name ending in \.gif or \.mp4$"),
+    (["--animate", "{tmp}/x.gif", "--fps", "0"], r"--fps = 0\.0: frames per second must lie in \(0, 50\]$"),
+    (["--animate", "{tmp}/x.gif", "--fps", "-2"], r"--fps = -2\.0: frames per second must lie in \(0, 50\]$"),
+    (["--animate", "{tmp}/x.gif", "--fps", "nan"], r"--fps = nan: frames per second"),
+    (["--animate", "{tmp}/x.gif", "--fps", "100"], r"--fps = 100\.0: frames per second must lie in \(0, 50\]$"),
+    (["--animate", "{tmp}/x.gif", "--t", "2"], r"--t = 2: an animation shows every time"),
+    (["--animate", "{tmp}/missing/x.gif"], r"cannot write there"),
+    ([], r"plot: nothing to write; give -o OUT\.png, --animate OUT\.gif, or both$"),
+])
+def test_bad_animation_arguments_are_one_line_cli_errors(tmp_path, scene_file, capsys, argv, message):
+    argv = [a.replace("{tmp}", str(tmp_path)) for a in argv]
+    assert cli.main(["plot", str(scene_file), *argv]) == 2
+    err = capsys.readouterr().err.strip()
+    assert re.search(message, err) and "\n" not in err, err
+    assert not list(tmp_path.iterdir())
+
+
+def test_mp4_without_ffmpeg_is_refused_naming_it(tmp_path, scene_file, capsys, monkeypatch):
+    monkeypatch.setitem(matplotlib.rcParams, "animation.ffmpeg_path", "ffmpeg-that-is-not-installed")
+    assert cli.main(["plot", str(scene_file), "--animate", str(tmp_path / "x.mp4")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "writing MP4 needs ffmpeg, which is not on PATH" in err and "\n" not in err
+    assert not list(tmp_path.iterdir())

@@ -256,7 +256,9 @@ def draw_picture(figure, picture: Picture, levels: Sequence[float], *, clim: tup
         ax.set_visible(False)
     figure.colorbar(drawn[0].images[0], ax=list(axes.flat), label="log10 density [m⁻²]", shrink=0.9, aspect=30,
                     pad=0.02)
-    figure.legend(handles=legend_handles(levels), loc="outside lower center", ncols=len(levels), fontsize=8,
+    # the key in one row where the figure is wide enough (about 1.4 in an entry), else in two
+    columns_of_key = len(levels) if size[0] >= 1.4 * len(levels) else -(-len(levels) // 2)
+    figure.legend(handles=legend_handles(levels), loc="outside lower center", ncols=columns_of_key, fontsize=8,
                   title="probability mass (contours)", title_fontsize=8, frameon=False)
     figure.suptitle("\n".join(textwrap.wrap(picture.heading, max(30, int(size[0] / 0.085)))), fontsize=11)
     return drawn
