@@ -331,7 +331,7 @@ def plot_raster(
                     bbox={"boxstyle": "round,pad=0.2", "facecolor": "white", "alpha": 0.85, "linewidth": 0})
 
     notes = _draw_bearings(ax, shown, frame)
-    notes += _draw_markers(ax, points, frame, shown.heading)
+    notes += _draw_markers(ax, points, frame, shown.heading, getattr(drawn, "place", None))
 
     ax.set_xlim(fx0 / 1e3, fx1 / 1e3)
     ax.set_ylim(fy0 / 1e3, fy1 / 1e3)
@@ -575,9 +575,10 @@ def _draw_bearings(ax, geometry: MapGeometry, frame) -> list[str]:
     return [f"bearings (gold), ±{WEDGE_SIGMAS:g}σ dashed"]
 
 
-def _draw_markers(ax, markers, frame, heading) -> list[str]:
+def _draw_markers(ax, markers, frame, heading, place=None) -> list[str]:
     """Markers inside the frame as labelled points (a start with an arrow along its heading);
-    those beyond it as notes naming them, where they are and which way."""
+    those beyond it as notes naming them, where they are (km, or latitude and longitude by
+    ``place(x, y)`` on a chart) and which way."""
     patheffects = importlib.import_module("matplotlib.patheffects")  # present: pyplot() has been called
     outline = [patheffects.withStroke(linewidth=2.5, foreground="black")]
     x0, x1, y0, y1 = frame
@@ -599,8 +600,10 @@ def _draw_markers(ax, markers, frame, heading) -> list[str]:
                         color="white", path_effects=outline, zorder=7)
         else:
             way = _ARROWS[round(math.atan2(y - (y0 + y1) / 2, x - (x0 + x1) / 2) / (math.pi / 4)) % 8]
-            beyond.append(f"{way} {label} ({_km(x)}, {_km(y)})")
-    return [f"beyond the frame (km): {', '.join(beyond)}"] if beyond else []
+            beyond.append(f"{way} {label} ({_km(x)}, {_km(y)})" if place is None else f"{way} {label} {place(x, y)}")
+    if not beyond:
+        return []
+    return [f"beyond the frame{' (km)' if place is None else ''}: {', '.join(beyond)}"]
 
 
 #: Which way a point beyond the frame lies, by the eighth of a turn counter-clockwise from east.

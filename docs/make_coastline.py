@@ -22,15 +22,18 @@ from __future__ import annotations
 import argparse
 import io
 import struct
+import sys
 import zipfile
 from pathlib import Path
 
 import numpy as np
 import shapely
 
-from bananagrid.atomic import atomic_write
-
 ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))  # this checkout's bananagrid, whichever is installed
+
+from bananagrid.atomic import atomic_write  # noqa: E402
+
 OUT = ROOT / "bananagrid" / "geo" / "data" / "land.npz"
 MEMBER = "ne_10m_land.shp"
 #: Douglas-Peucker tolerance, degrees (about 220 m of latitude).

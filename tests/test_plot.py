@@ -541,3 +541,14 @@ def test_mp4_without_ffmpeg_is_refused_naming_it(tmp_path, scene_file, capsys, m
     err = capsys.readouterr().err.strip()
     assert "writing MP4 needs ffmpeg, which is not on PATH" in err and "\n" not in err
     assert not list(tmp_path.iterdir())
+
+
+def test_stations_beyond_a_chart_are_named_with_their_positions():
+    """geo_bearing's stations, Marstein (60.1279 N, 5.0086 E) and Hellisoy (60.7517 N,
+    4.7131 E), lie 38 and 49 km off its map: named at the edge in degrees and minutes."""
+    picture = read_picture(example_path("geo_bearing"), step=500.0, layers=["exact"])
+    panel = picture.panels[0]
+    ax = panel.raster.plot()  # a raster with a frame is drawn as a chart
+    label = " ".join(ax.get_xlabel().split())
+    assert "↘ sensor 0 60°07.7′N 5°00.5′E" in label and "↗ sensor 1 60°45.1′N 4°42.8′E" in label
+    plt.close(ax.figure)

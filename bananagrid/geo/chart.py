@@ -90,6 +90,8 @@ class Chart:
         local metres.
     spacing : (float, float)
         The parallels' and the meridians' spacing, degrees.
+    frame : GeoFrame or None
+        The frame it was computed in (:meth:`place` names points in it).
     source : str
         Where the land comes from.
     """
@@ -99,7 +101,14 @@ class Chart:
     ticks: tuple
     land: tuple
     spacing: tuple
+    frame: GeoFrame | None = None
     source: str = LAND_SOURCE
+
+    def place(self, x: float, y: float) -> str:
+        """A local point (m) as latitude and longitude in degrees and decimal minutes, as a
+        chart gives a position: ``60°07.7′N 5°00.5′E``."""
+        lat, lon = self.frame.geographic(x, y)
+        return f"{_minutes(float(lat), 'NS')} {_minutes(float(lon), 'EW')}"
 
 
 def graticule_spacing(span: float) -> float:
@@ -163,7 +172,7 @@ def chart(frame: GeoFrame, extent, *, land: bool = True) -> Chart:
             ticks += [Tick("left" if kind == "lat" else "bottom", p, kind, float(value), label)
                       for p in _crossings(frame, (x0, x1, y0, y1), kind, value)]
     polygons = land_polygons(frame, lat_range, lon_range) if land else ()
-    return Chart((x0, x1, y0, y1), tuple(lines), tuple(ticks), polygons, (lat_step, lon_step))
+    return Chart((x0, x1, y0, y1), tuple(lines), tuple(ticks), polygons, (lat_step, lon_step), frame)
 
 
 def load_land():
@@ -212,6 +221,14 @@ def land_polygons(frame: GeoFrame, lat_range, lon_range) -> tuple:
 
 
 # --- helpers ----------------------------------------------------------------------------------
+
+
+def _minutes(value: float, sides: str) -> str:
+    """``60°07.7′N``: degrees and minutes to a tenth (about 185 m of latitude)."""
+    tenths = round(abs(value) * 600.0)
+    degrees, rest = divmod(tenths, 600)
+    side = sides[0] if value >= 0.0 else sides[1]
+    return f"{degrees}°{rest / 10.0:04.1f}′{side}"
 
 
 def _wrapped(lon):
