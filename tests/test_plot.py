@@ -4,11 +4,14 @@ recordings and arrays, its one-line errors, and the README's pictures."""
 
 from __future__ import annotations
 
+import json
 import math
+import os
 import re
 import socket
 import subprocess
 import sys
+import textwrap
 import warnings
 from pathlib import Path
 
@@ -552,3 +555,31 @@ def test_stations_beyond_a_chart_are_named_with_their_positions():
     label = " ".join(ax.get_xlabel().split())
     assert "↘ sensor 0 60°07.7′N 5°00.5′E" in label and "↗ sensor 1 60°45.1′N 4°42.8′E" in label
     plt.close(ax.figure)
+
+
+def test_mp4_frames_go_to_ffmpeg_one_per_time(tmp_path, scene_file, capsys, monkeypatch):
+    """Where ffmpeg is, each frame is piped to it as raw RGBA at the figure's size, for H.264 in
+    yuv420p padded to even sides, into a temporary name renamed when ffmpeg is done. The ffmpeg
+    here is a stand-in that keeps what it is sent: the real one is not in the test install."""
+    fake = tmp_path / "bin" / "ffmpeg"
+    fake.parent.mkdir()
+    fake.write_text(f"#!{sys.executable}\n" + textwrap.dedent("""\
+        import json, sys
+        args = sys.argv[1:]
+        data = sys.stdin.buffer.read()
+        with open(args[-1], "wb") as out:
+            out.write(data)
+        with open(args[-1] + ".args.json", "w") as out:
+            json.dump(args, out)
+    """))
+    fake.chmod(0o755)
+    monkeypatch.setenv("PATH", f"{fake.parent}{os.pathsep}{os.environ['PATH']}")
+    out = tmp_path / "pic.mp4"
+    assert cli.main(["plot", str(scene_file), "--animate", str(out), "--dpi", "30"]) == 0
+    assert capsys.readouterr().out.strip() == f"wrote {out} (2 frames)"
+    (args_file,) = tmp_path.glob(".pic.mp4.*.partial.args.json")  # ffmpeg wrote the temporary name
+    args = json.loads(args_file.read_text())
+    width, height = (int(v) for v in args[args.index("-s") + 1].split("x"))
+    assert out.stat().st_size == 2 * width * height * 4  # two frames of RGBA
+    assert args[args.index("-pix_fmt", args.index("-i")) + 1] == "yuv420p"
+    assert "pad=ceil(iw/2)*2:ceil(ih/2)*2" in args and args[args.index("-f", args.index("-i")) + 1] == "mp4"

@@ -378,11 +378,18 @@ def _write_gif(path, figure, frames, levels, clim, extents, charts, dpi, fps, pr
 
 def _write_mp4(path, figure, frames, levels, clim, extents, charts, dpi, fps, progress) -> None:
     animation = importlib.import_module("matplotlib.animation")
-    writer = animation.FFMpegWriter(fps=fps, codec="libx264", extra_args=["-pix_fmt", "yuv420p", "-f", "mp4"])
-    with writer.saving(figure, str(path), int(dpi)):
-        for _ in _draw_frames(figure, frames, levels, clim, extents, charts, progress):
-            figure.canvas.draw()  # the layout settles before the frame is grabbed
-            writer.grab_frame()
+    subprocess = importlib.import_module("subprocess")
+    # H.264 in yuv420p (what every player reads) needs even sides: pad by a pixel where odd
+    writer = animation.FFMpegWriter(fps=fps, codec="libx264", extra_args=[
+        "-vf", "pad=ceil(iw/2)*2:ceil(ih/2)*2", "-pix_fmt", "yuv420p", "-f", "mp4"])
+    try:
+        with writer.saving(figure, str(path), int(dpi)):
+            for _ in _draw_frames(figure, frames, levels, clim, extents, charts, progress):
+                figure.canvas.draw()  # the layout settles before the frame is grabbed
+                writer.grab_frame()
+    except (subprocess.CalledProcessError, OSError) as exc:
+        reason = (str(exc).splitlines() or [type(exc).__name__])[0]
+        raise BananagridError(f"--animate: ffmpeg failed writing the MP4 ({reason})") from None
 
 
 def check_picture_options(out: str | os.PathLike, dpi: int) -> Path:
