@@ -78,6 +78,8 @@ _MARKER_STYLES = {  # by the first word of a marker's label
 }
 _OTHER_MARKER = {"marker": "o", "color": "cyan", "markersize": 7}
 _BEARING_COLOUR = "gold"
+#: Other spots along its line that a contour label may take where its own is taken.
+LABEL_CANDIDATES = 24
 #: The land of a chart, filled lightly over the map, and its coast.
 LAND_COLOUR = "#efe6cf"
 COAST_COLOUR = "0.2"
@@ -320,15 +322,21 @@ def plot_raster(
     shown = map_geometry(getattr(raster, "provenance", None)) if geometry else MapGeometry()
     points = list(shown.markers) + extra
     inside = [(x, y) for x, y, _ in points if fx0 <= x <= fx1 and fy0 <= y <= fy1]
-    spots = label_positions(_within(lines, frame), avoid=inside)  # labels away from the marked points
+    visible = _within(lines, frame)
+    spots = label_positions(visible, avoid=inside)  # labels away from the marked points
+    labels = []
     for density, group in sharing.items():
         if density in spots:
             x, y = spots[density]
+            along = np.concatenate([p for p in visible[density]]) if visible[density] else np.empty((0, 2))
+            others = along[np.linspace(0, len(along) - 1, min(len(along), LABEL_CANDIDATES)).astype(int)] / 1e3
             text = format_level(group[0]) if len(group) == 1 else \
                 f"{', '.join(f'{100 * r.probability:g}' for r in group)} % · {format_area(group[0].area)}"
-            ax.text(x / 1e3, y / 1e3, text, fontsize=7.5, ha="center", va="center", zorder=5,
-                    gid=f"mass-label-{group[0].probability:g}",
-                    bbox={"boxstyle": "round,pad=0.2", "facecolor": "white", "alpha": 0.85, "linewidth": 0})
+            label = ax.text(x / 1e3, y / 1e3, text, fontsize=7.5, ha="center", va="center", zorder=5,
+                            gid=f"mass-label-{group[0].probability:g}",
+                            bbox={"boxstyle": "round,pad=0.2", "facecolor": "white", "alpha": 0.85, "linewidth": 0})
+            labels.append((label, [(x / 1e3, y / 1e3)] + [tuple(p) for p in others]))
+    _keep_apart(ax, labels)
 
     notes = _draw_bearings(ax, shown, frame)
     notes += _draw_markers(ax, points, frame, shown.heading, getattr(drawn, "place", None))
@@ -502,6 +510,42 @@ def _chart_axes(ax, chart, frame) -> None:
     bar.set_gid("scale-bar")
     bar.set_zorder(8)
     ax.add_artist(bar)
+
+
+def _keep_apart(ax, labels) -> None:
+    """At every draw, once the layout is final, put each contour label at the first of its
+    spots (``(text, [(x, y) km, ...])``: the chosen one, then others along its line) where it
+    overlaps no label placed before it nor a marker's name; where none is free (tiny regions in
+    a wide frame, an animation's first frames) the label is left out and the key names the
+    colour. Done by an artist drawn just before the labels."""
+    artist = importlib.import_module("matplotlib.artist")
+    texts = [label for label, _ in labels]
+
+    class KeepApart(artist.Artist):
+        def draw(self, renderer):
+            names = [t for t in ax.texts if t not in texts and t.get_text() and t.get_visible()]
+            placed = [_padded(t.get_window_extent(renderer)) for t in names]
+            for label, spots in labels:
+                label.set_visible(True)  # a hidden text has no extent
+                for spot in spots:
+                    label.set_position(spot)
+                    box = _padded(label.get_window_extent(renderer))
+                    if not any(box.overlaps(other) for other in placed):
+                        placed.append(box)
+                        break
+                else:
+                    label.set_position(spots[0])
+                    label.set_visible(False)
+
+    guard = KeepApart()
+    guard.set_zorder(4.99)  # before the labels (5): their visibility is set for this draw
+    guard.set_gid("mass-label-guard")
+    ax.add_artist(guard)
+
+
+def _padded(box, pixels: float = 3.0):
+    """A window extent grown by a few pixels on each side (a label's box has padding)."""
+    return box.expanded(1.0, 1.0).from_extents(box.x0 - pixels, box.y0 - pixels, box.x1 + pixels, box.y1 + pixels)
 
 
 def _round_length(limit: float) -> float:

@@ -35,6 +35,7 @@ from bananagrid.plotting import (  # noqa: E402
     figure_layout,
     map_frame,
     map_geometry,
+    plot_raster,
     shared_colour_range,
 )
 from bananagrid.scenes.examples import example_path  # noqa: E402
@@ -583,3 +584,29 @@ def test_mp4_frames_go_to_ffmpeg_one_per_time(tmp_path, scene_file, capsys, monk
     assert out.stat().st_size == 2 * width * height * 4  # two frames of RGBA
     assert args[args.index("-pix_fmt", args.index("-i")) + 1] == "yuv420p"
     assert "pad=ceil(iw/2)*2:ceil(ih/2)*2" in args and args[args.index("-f", args.index("-i")) + 1] == "mp4"
+
+
+@pytest.mark.parametrize("zoom", [1.0, 4.0, 30.0])
+def test_contour_labels_never_overlap(zoom):
+    """However small the regions in the frame (an animation frames its first times on the
+    last's extent), the labels shown overlap neither each other nor a marker's name; in the
+    map's own frame every level keeps its label."""
+    raster = gaussian_raster(provenance={"model": "test", "t": 5.0, "origin_x": 10.0, "origin_y": 0.0})
+    x0, x1, y0, y1 = map_frame(raster)
+    cx, cy = (x0 + x1) / 2, (y0 + y1) / 2
+    extent = (cx - zoom * (cx - x0), cx + zoom * (x1 - cx), cy - zoom * (cy - y0), cy + zoom * (y1 - cy))
+    figure, ax = plt.subplots(figsize=figure_layout([map_frame(raster)])[2], layout="constrained")  # as .plot()
+    plot_raster(raster, ax, extent=extent)
+    figure.canvas.draw()
+    renderer = figure.canvas.get_renderer()
+    shown = [t for t in ax.texts if t.get_visible() and t.get_text()]
+    labels = [t for t in shown if (t.get_gid() or "").startswith("mass-label-")]
+    if zoom == 1.0:
+        assert len(labels) == 4
+    boxes = [t.get_window_extent(renderer) for t in shown]
+    for i in range(len(boxes)):
+        for j in range(i):
+            assert not boxes[i].overlaps(boxes[j]), (shown[i].get_text(), shown[j].get_text())
+    if zoom == 30.0:
+        assert len(labels) < 4  # a dot of a map: its labels would overlap; the key names the colours
+    plt.close(figure)

@@ -508,7 +508,11 @@ def _from_npz(path: Path) -> tuple[str, list[Panel]]:
     found = []
     for key, entry in provenance["arrays"].items():
         given = dict(entry.get("provenance") or {})
-        frame = GeoFrame.from_identity(given["geo"]) if isinstance(given.get("geo"), dict) else None
+        try:  # the frame the provenance names (run writes it for a geographic scene)
+            frame = GeoFrame.from_identity(given["geo"]) if isinstance(given.get("geo"), dict) else None
+        except (KeyError, TypeError, ValueError, BananagridError) as exc:
+            raise BananagridError(f"{path}: damaged geographic frame in its provenance ({type(exc).__name__}: "
+                                  f"{(str(exc).splitlines() or [''])[0]})") from None
         raster = Raster(values=np.asarray(arrays[key], dtype=np.float64), grid=grid, mass=float(entry["mass"]),
                         normalised=bool(entry["normalised"]), provenance=given, frame=frame)
         found.append(Panel(entry["layer"], float(entry["t"]), raster))
