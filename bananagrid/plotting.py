@@ -45,7 +45,7 @@ from .validate import BananagridError, finite, show
 
 __all__ = [
     "FLOOR_DECADES", "MASS_COLOURS", "WEDGE_SIGMAS", "MapGeometry", "MatplotlibMissing", "colour_range", "draw_chart",
-    "figure_layout", "format_time", "legend_handles", "map_frame", "map_geometry", "plot_raster", "png_bytes", "pyplot",
+    "figure_layout", "format_time", "legend_handles", "map_frame", "map_geometry", "plot_overview", "plot_raster", "png_bytes", "pyplot",
     "raster_html", "shared_colour_range", "utc_label",
 ]
 
@@ -82,6 +82,8 @@ _BEARING_COLOUR = "gold"
 LABEL_CANDIDATES = 24
 #: The land of a chart, filled lightly over the map, and its coast.
 LAND_COLOUR = "#efe6cf"
+#: The sea of an overview chart (no map under it).
+SEA_COLOUR = "#dcebf5"
 COAST_COLOUR = "0.2"
 
 
@@ -398,10 +400,10 @@ def legend_handles(mass_levels: Iterable[float] = DEFAULT_MASS_LEVELS) -> list:
             for k, level in enumerate(levels)]
 
 
-def draw_chart(ax, chart) -> None:
+def draw_chart(ax, chart, *, graticule_colour: str = "white") -> None:
     """Draw a chart (:class:`bananagrid.geo.chart.Chart`, duck-typed: ``land`` rings and
     graticule ``lines`` in local metres) on ``ax`` in km: the land filled lightly over the map
-    with its coast as a dark line, and the graticule as thin light lines."""
+    with its coast as a dark line, and the graticule as thin lines (light over a map)."""
     path_module = importlib.import_module("matplotlib.path")
     patches = importlib.import_module("matplotlib.patches")
     vertices, codes = [], []
@@ -417,8 +419,33 @@ def draw_chart(ax, chart) -> None:
                                        gid="coast"))
     for line in chart.lines:
         xy = np.asarray(line.xy, dtype=float) / 1e3
-        ax.plot(xy[:, 0], xy[:, 1], color="white", alpha=0.55, linewidth=0.6, zorder=1.8,
+        ax.plot(xy[:, 0], xy[:, 1], color=graticule_colour, alpha=0.55, linewidth=0.6, zorder=1.8,
                 gid=f"graticule-{line.kind}-{line.value:.10g}")
+
+
+def plot_overview(ax, geometry: MapGeometry, boxes: Sequence[tuple[float, float, float, float]], extent, chart,
+                  *, title: str = "where the maps lie") -> None:
+    """An overview chart on ``ax``: the land and graticule of ``chart`` over ``extent``
+    (m), the frame of each map (``boxes``, m) as a red rectangle (``gid`` ``"overview-frame-K"``),
+    and ``geometry``'s points with their names (``"marker-<label>"``), bearing lines and wedges:
+    where the stations or the start that a map's frame leaves out lie."""
+    x0, x1, y0, y1 = _checked_extent(extent)
+    pyplot()
+    patches = importlib.import_module("matplotlib.patches")
+    ax.set_facecolor(SEA_COLOUR)
+    draw_chart(ax, chart, graticule_colour="0.35")
+    for k, (bx0, bx1, by0, by1) in enumerate(boxes):
+        ax.add_patch(patches.Rectangle((bx0 / 1e3, by0 / 1e3), (bx1 - bx0) / 1e3, (by1 - by0) / 1e3, fill=False,
+                                       edgecolor="crimson", linewidth=1.3, zorder=6, gid=f"overview-frame-{k}"))
+    _draw_bearings(ax, geometry, (x0, x1, y0, y1))
+    notes = _draw_markers(ax, geometry.markers, (x0, x1, y0, y1), geometry.heading, getattr(chart, "place", None))
+    ax.set_xlim(x0 / 1e3, x1 / 1e3)
+    ax.set_ylim(y0 / 1e3, y1 / 1e3)
+    ax.set_aspect("equal")
+    _chart_axes(ax, chart, (x0, x1, y0, y1))
+    ax.set_xlabel("\n".join(_wrapped(notes, _label_width(ax))))
+    ax.set_title(title, fontsize=10)
+    ax.set_gid("overview")
 
 
 def png_bytes(raster, *, dpi: int = 80, **kwargs) -> bytes:
@@ -499,7 +526,7 @@ def _chart_axes(ax, chart, frame) -> None:
         ticks[tick.edge].append((tick.position / 1e3, tick.label))
     ax.set_xticks([p for p, _ in ticks["bottom"]], [label for _, label in ticks["bottom"]], fontsize=7)
     ax.set_yticks([p for p, _ in ticks["left"]], [label for _, label in ticks["left"]], fontsize=7)
-    if len(ticks["bottom"]) > 4:  # long labels side by side would touch
+    if len(ticks["bottom"]) > 3:  # long labels side by side would touch
         ax.tick_params(axis="x", labelrotation=30)
     x0, x1, _, _ = frame
     length = _round_length(0.25 * (x1 - x0))

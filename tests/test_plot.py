@@ -40,7 +40,13 @@ from bananagrid.plotting import (  # noqa: E402
 )
 from bananagrid.scenes.examples import example_path  # noqa: E402
 from bananagrid.scenes.load import load_scene  # noqa: E402
-from bananagrid.scenes.pictures import draw_picture, picture_layout, read_picture, read_timeline  # noqa: E402
+from bananagrid.scenes.pictures import (  # noqa: E402
+    draw_picture,
+    picture_layout,
+    picture_overview,
+    read_picture,
+    read_timeline,
+)
 from PIL import Image  # noqa: E402
 
 from cases import small_scene  # noqa: E402
@@ -610,3 +616,35 @@ def test_contour_labels_never_overlap(zoom):
     if zoom == 30.0:
         assert len(labels) < 4  # a dot of a map: its labels would overlap; the key names the colours
     plt.close(figure)
+
+
+def test_a_chart_that_leaves_out_its_stations_gets_an_overview(coast_picture):
+    """geo_bearing's maps leave out both stations: a last panel shows the coast, the stations
+    by name (on land: Marstein and Hellisoy are lighthouses on islets), their bearings, and
+    each map's frame as a rectangle."""
+    picture = read_picture(example_path("geo_bearing"), step=500.0)
+    extents = [map_frame(p.raster) for p in picture.panels]
+    overview = picture_overview(picture, extents)
+    assert overview is not None
+    extent, drawn, geometry = overview
+    assert {label for _, _, label in geometry.markers} == {"sensor 0", "sensor 1", "fix"}
+    for x, y, _ in geometry.markers:
+        assert extent[0] < x < extent[1] and extent[2] < y < extent[3]
+    figure = plt.figure(figsize=picture_layout(extents + [extent])[2], layout="constrained")
+    draw_picture(figure, picture, picture.mass_levels, clim=colour_range(picture.panels[0].raster),
+                 extents=extents, overview=overview)
+    (ax,) = [a for a in figure.axes if a.get_gid() == "overview"]
+    gids = [line.get_gid() for line in ax.get_lines()]
+    assert {"marker-sensor 0", "marker-sensor 1", "marker-fix", "bearing-0", "bearing-1"} <= set(gids)
+    frames = [p for p in ax.patches if (p.get_gid() or "").startswith("overview-frame-")]
+    assert [(p.get_x() * 1e3, p.get_y() * 1e3) for p in frames] == [pytest.approx((e[0], e[2])) for e in extents]
+    (land,) = [p for p in ax.patches if p.get_gid() == "land"]
+    frame = picture.panels[0].raster.frame
+    marstein = frame.local(60.1279, 5.0086)
+    path = land.get_path()
+    # the islet is below the bundled land's 220 m simplification; the coast is within 2 km of it
+    near = np.hypot(path.vertices[:, 0] - marstein[0] / 1e3, path.vertices[:, 1] - marstein[1] / 1e3).min()
+    assert near < 2.0
+    plt.close(figure)
+    # maps that hold every point they name (the coast scene's start mean) have none
+    assert picture_overview(coast_picture, [map_frame(p.raster) for p in coast_picture.panels]) is None

@@ -168,6 +168,8 @@ def chart(frame: GeoFrame, extent, *, land: bool = True) -> Chart:
             along = np.linspace(other_low, other_high, SAMPLES)
             lat, lon = (np.full_like(along, value), along) if kind == "lat" else (along, np.full_like(along, value))
             x, y = frame.project_points(np.clip(lat, -90.0, 90.0), _wrapped(lon))
+            if not np.any((x >= x0) & (x <= x1) & (y >= y0) & (y <= y1)):
+                continue  # it clips a corner between samples, or misses the map: nothing to see
             lines.append(GraticuleLine(kind, float(value), label, np.column_stack([x, y])))
             ticks += [Tick("left" if kind == "lat" else "bottom", p, kind, float(value), label)
                       for p in _crossings(frame, (x0, x1, y0, y1), kind, value)]

@@ -41,8 +41,11 @@ from ..plotting import (
     colour_range,
     figure_layout,
     format_time,
+    MapGeometry,
     legend_handles,
     map_frame,
+    map_geometry,
+    plot_overview,
     plot_raster,
     pyplot,
     shared_colour_range,
@@ -222,11 +225,12 @@ def write_picture(out: str | os.PathLike, picture: Picture, *, mass_levels: Iter
         raise BananagridError(f"{out}: nothing to draw")
     plt = pyplot(headless=True)
     extents = [map_frame(p.raster, levels) for p in picture.panels]
-    _, _, size = picture_layout(extents)
+    overview = picture_overview(picture, extents)
+    _, _, size = picture_layout(extents + ([overview[0]] if overview else []))
     figure = plt.figure(figsize=size, layout="constrained")
     try:
         clim = shared_colour_range(colour_range(p.raster, levels) for p in picture.panels)
-        draw_picture(figure, picture, levels, clim=clim, extents=extents)
+        draw_picture(figure, picture, levels, clim=clim, extents=extents, overview=overview)
         figure.canvas.draw()  # the layout settles on the second pass (equal-aspect maps and titles)
         with atomic_write(out) as partial:
             figure.savefig(partial, format="png", dpi=int(dpi))
@@ -236,13 +240,15 @@ def write_picture(out: str | os.PathLike, picture: Picture, *, mass_levels: Iter
 
 
 def draw_picture(figure, picture: Picture, levels: Sequence[float], *, clim: tuple[float, float],
-                 extents: Sequence[tuple[float, float, float, float]], charts: Sequence | None = None) -> list:
+                 extents: Sequence[tuple[float, float, float, float]], charts: Sequence | None = None,
+                 overview: tuple | None = None) -> list:
     """Draw ``picture`` on the empty ``figure``: a map per panel framed on ``extents`` (m), all
     in the colour range ``clim`` (log10 m^-2) with one colour bar, one key to the contour
     colours under them, and the heading above. A panel with a geographic frame is a chart
     (``charts``: one per panel, each a :class:`bananagrid.geo.chart.Chart` or None; computed
-    when not given). Returns the axes of the panels."""
-    rows, columns, size = picture_layout(extents)
+    when not given); ``overview`` (:func:`picture_overview`) adds a last panel showing where
+    the maps lie among what they leave out. Returns the axes of the panels."""
+    rows, columns, size = picture_layout(list(extents) + ([overview[0]] if overview else []))
     axes = figure.subplots(rows, columns, squeeze=False)
     if charts is None:
         charts = [panel_chart(p, e) for p, e in zip(picture.panels, extents)]
@@ -252,7 +258,11 @@ def draw_picture(figure, picture: Picture, levels: Sequence[float], *, clim: tup
                     colorbar=False, legend=False, clim=clim, extent=extent,
                     chart=None if chart is None else (lambda _, c=chart: c))
         drawn.append(ax)
-    for ax in list(axes.flat)[len(picture.panels):]:
+    spare = list(axes.flat)[len(picture.panels):]
+    if overview:
+        extent, chart, geometry = overview
+        plot_overview(spare.pop(0), geometry, extents, extent, chart)
+    for ax in spare:
         ax.set_visible(False)
     figure.colorbar(drawn[0].images[0], ax=list(axes.flat), label="log10 density [m⁻²]", shrink=0.9, aspect=30,
                     pad=0.02)
@@ -262,6 +272,46 @@ def draw_picture(figure, picture: Picture, levels: Sequence[float], *, clim: tup
                   title="probability mass (contours)", title_fontsize=8, frameon=False)
     figure.suptitle("\n".join(textwrap.wrap(picture.heading, max(30, int(size[0] / 0.085)))), fontsize=11)
     return drawn
+
+
+#: An overview reaches this fraction of its size beyond the outermost point or map it shows.
+OVERVIEW_MARGIN = 0.12
+
+
+def picture_overview(picture: Picture, extents) -> tuple | None:
+    """``(extent, chart, geometry)`` of an overview of a geographic picture whose maps leave
+    out a point their provenance names (a bearing fix's stations, a start), else None: the
+    extent holds every map's frame and every point, with a margin, at an aspect (width over
+    height) between 0.6 and 3; the chart is :func:`bananagrid.geo.chart.chart`'s of it."""
+    frames = [getattr(p.raster, "frame", None) for p in picture.panels]
+    if not frames or any(frame is None for frame in frames):
+        return None
+    seen, markers, bearings, heading = set(), [], [], None
+    for panel in picture.panels:
+        shown = map_geometry(panel.raster.provenance)
+        for x, y, label in list(shown.markers) + list(panel.markers):
+            if (round(x, 3), round(y, 3), label) not in seen:
+                seen.add((round(x, 3), round(y, 3), label))
+                markers.append((x, y, label))
+        bearings = bearings or list(shown.bearings)
+        heading = heading or shown.heading
+    left_out = [(x, y) for panel, (x0, x1, y0, y1) in zip(picture.panels, extents)
+                for x, y, _ in list(map_geometry(panel.raster.provenance).markers) + list(panel.markers)
+                if not (x0 <= x <= x1 and y0 <= y <= y1)]
+    if not left_out:
+        return None
+    xs = [v for e in extents for v in e[:2]] + [x for x, _, _ in markers]
+    ys = [v for e in extents for v in e[2:]] + [y for _, y, _ in markers]
+    x0, x1, y0, y1 = min(xs), max(xs), min(ys), max(ys)
+    grow = OVERVIEW_MARGIN * max(x1 - x0, y1 - y0)
+    x0, x1, y0, y1 = x0 - grow, x1 + grow, y0 - grow, y1 + grow
+    width, height = x1 - x0, y1 - y0
+    if width < 0.6 * height:
+        x0, x1 = (x0 + x1) / 2 - 0.3 * height, (x0 + x1) / 2 + 0.3 * height
+    elif width > 3.0 * height:
+        y0, y1 = (y0 + y1) / 2 - width / 6.0, (y0 + y1) / 2 + width / 6.0
+    extent = (x0, x1, y0, y1)
+    return extent, geo_chart(frames[0], extent), MapGeometry(tuple(markers), tuple(bearings), heading)
 
 
 def panel_chart(panel: Panel, extent):
@@ -335,15 +385,16 @@ def write_animation(out: str | os.PathLike, frames: Sequence[Picture], *, mass_l
         extents.append((boxes[:, 0].min(), boxes[:, 1].max(), boxes[:, 2].min(), boxes[:, 3].max()))
     clim = shared_colour_range(colour_range(p.raster, levels) for frame in frames for p in frame.panels)
     charts = [panel_chart(panel, extent) for panel, extent in zip(frames[0].panels, extents)]  # one per layer
+    overview = picture_overview(frames[0], extents)
     plt = pyplot(headless=True)
-    _, _, size = picture_layout(extents)
+    _, _, size = picture_layout(extents + ([overview[0]] if overview else []))
     figure = plt.figure(figsize=size, layout="constrained")
     try:
         with atomic_write(out) as partial:
             if out.suffix.lower() == ".gif":
-                _write_gif(partial, figure, frames, levels, clim, extents, charts, dpi, fps, progress)
+                _write_gif(partial, figure, frames, levels, clim, extents, (charts, overview), dpi, fps, progress)
             else:
-                _write_mp4(partial, figure, frames, levels, clim, extents, charts, dpi, fps, progress)
+                _write_mp4(partial, figure, frames, levels, clim, extents, (charts, overview), dpi, fps, progress)
     finally:
         plt.close(figure)
     return out
@@ -354,10 +405,11 @@ def _frame_time(frame: Picture) -> float:
 
 
 def _draw_frames(figure, frames, levels, clim, extents, charts, progress):
-    """Each frame drawn on the cleared figure in turn; yields after each."""
+    """Each frame drawn on the cleared figure in turn (``charts``: the panels' charts and the
+    overview); yields after each."""
     for k, frame in enumerate(frames):
         figure.clear()
-        draw_picture(figure, frame, levels, clim=clim, extents=extents, charts=charts)
+        draw_picture(figure, frame, levels, clim=clim, extents=extents, charts=charts[0], overview=charts[1])
         yield
         if progress is not None:
             progress(k + 1, len(frames), _frame_time(frame))

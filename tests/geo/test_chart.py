@@ -78,7 +78,7 @@ def test_graticule_lies_where_proj_puts_it(lat, lon, crs, width, aspect, dx, dy)
     for line in drawn.lines:
         x, y = line.xy[:, 0], line.xy[:, 1]
         inside = np.isfinite(x) & (x >= extent[0]) & (x <= extent[1]) & (y >= extent[2]) & (y <= extent[3])
-        assert inside.sum() >= 2, (line.kind, line.value)  # a line is kept only if it crosses the map
+        assert inside.sum() >= 1, (line.kind, line.value)  # a line is kept only if it crosses the map
         got_lat, got_lon = to_latlon(x[inside], y[inside])
         if line.kind == "lat":
             assert np.max(np.abs(got_lat - line.value)) < 1e-9
