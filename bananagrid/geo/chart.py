@@ -196,10 +196,11 @@ def land_polygons(frame: GeoFrame, lat_range, lon_range) -> tuple:
     shapely = require("shapely", "charts of geographic scenes")
     polygons, _ = load_land()
     (la0, la1), (lo0, lo1) = lat_range, lon_range
-    grow = CLIP_MARGIN * max(la1 - la0, lo1 - lo0, 1e-3)
-    la0, la1, lo0, lo1 = max(la0 - grow, -90.0), min(la1 + grow, 90.0), lo0 - grow, lo1 + grow
+    grow_lat, grow_lon = CLIP_MARGIN * max(la1 - la0, 1e-3), CLIP_MARGIN * max(lo1 - lo0, 1e-3)
+    la0, la1 = max(la0 - grow_lat, -90.0), min(la1 + grow_lat, 90.0)
+    lo0, lo1 = (-180.0, 180.0) if lo1 - lo0 + 2 * grow_lon >= 360.0 else (lo0 - grow_lon, lo1 + grow_lon)
     bounds = shapely.bounds(polygons)
-    densify = DENSIFY_FRACTION * max(la1 - la0, lo1 - lo0)
+    densify = DENSIFY_FRACTION * min(la1 - la0, lo1 - lo0)
     found = []
     for shift in (-360.0, 0.0, 360.0):  # the box in the data's [-180, 180]: a box past 180 wraps
         a, b = lo0 - shift, lo1 - shift
