@@ -169,6 +169,8 @@ PLACES = [
     ((67.0, 180.0, "aeqd"), 150_000.0, (67.0, 179.5), True),        # Chukotka, west of 180
     ((67.0, 180.0, "aeqd"), 150_000.0, (67.0, -179.5), True),       # Chukotka, east of 180
     ((-16.8, 179.9, "aeqd"), 150_000.0, (-17.5, -179.0), False),    # the Koro Sea, Fiji, east of 180
+    ((89.9, 10.0, "aeqd"), 50_000.0, (89.95, 100.0), False),        # the Arctic Ocean at the pole
+    ((-89.9, 0.0, "aeqd"), 50_000.0, (-89.95, 45.0), True),         # the Antarctic plateau at the pole
 ]
 
 
