@@ -8,6 +8,9 @@ from __future__ import annotations
 import math
 import re
 import socket
+import subprocess
+import tomllib
+from pathlib import Path
 
 import numpy as np
 import pyproj
@@ -16,7 +19,7 @@ from hypothesis import HealthCheck, Phase, given, seed, settings, strategies as 
 from matplotlib.path import Path as MplPath
 
 from bananagrid import BananagridError
-from bananagrid.geo.chart import MIN_LINES, SPACINGS_DEG, chart, format_angle, graticule_spacing, load_land
+from bananagrid.geo.chart import LAND_FILE, MIN_LINES, SPACINGS_DEG, chart, format_angle, graticule_spacing, load_land
 from bananagrid.geo.frame import GeoFrame
 
 
@@ -201,3 +204,14 @@ def test_a_bad_extent_is_one_line():
     with pytest.raises(BananagridError, match=r"chart extent = .*: expected finite x0 < x1") as info:
         chart(frame, (0.0, 0.0, 0.0, 1.0))
     assert "\n" not in str(info.value)
+
+
+def test_the_land_file_ships_as_package_data():
+    """The wheel carries the file (pyproject's package-data names it) and git tracks it (the
+    repository ignores *.npz elsewhere)."""
+    root = Path(__file__).resolve().parents[2]
+    config = tomllib.loads((root / "pyproject.toml").read_text())
+    globs = config["tool"]["setuptools"]["package-data"]["bananagrid.geo"]
+    assert [p.name for g in globs for p in (root / "bananagrid" / "geo").glob(g)] == [LAND_FILE]
+    ignored = subprocess.run(["git", "check-ignore", "-q", f"bananagrid/geo/data/{LAND_FILE}"], cwd=root)
+    assert ignored.returncode == 1  # 1: not ignored (0 would be ignored)
