@@ -8,7 +8,13 @@ the tails show), the probability-mass contours (:func:`bananagrid.contours.mass_
 labelled once on its line with its area, and the geometry the raster's provenance names (as the
 recordings draw it): a bearing fix's sensors, bearing lines with +-2 sigma wedges and the fix; a
 motion model's start with its initial heading; a Butterly start's mean. Points off the frame
-are named at the edge they lie beyond.
+are named at the edge they lie beyond. Contour labels are placed when the figure is drawn,
+where they overlap no other label or name; a key names the contour colours.
+
+Given a chart (:mod:`bananagrid.geo.chart`, for a map on the Earth), the map carries latitude
+and longitude lines labelled at its edges, the land filled lightly with its coast, a km scale
+bar and the UTC time in its title instead of km axes (:func:`draw_chart`, :func:`plot_overview`).
+Panels side by side share one colour range (:func:`shared_colour_range`).
 
 matplotlib is loaded (with importlib) only when a picture is drawn, so the rest of the package
 never needs it. Rasters are taken duck-typed (``values``, ``x``, ``y``, ``grid``, ``mass``,
