@@ -439,7 +439,7 @@ def _plot(args: argparse.Namespace) -> int:
             print(f"frame {k}/{n}: t = {t:g} s", file=sys.stderr, flush=True)
 
         out = write_animation(args.animate, frames, mass_levels=levels, dpi=args.dpi, fps=args.fps, progress=progress)
-        print(f"wrote {out} ({len(frames)} frames)")
+        print(f"wrote {out} ({len(frames)} frame{'' if len(frames) == 1 else 's'})")
         if args.output is not None:
             picture = frames[-1] if args.t is None else \
                 read_picture(source, layers=args.layer, t=args.t, threads=args.threads, step=args.step)
