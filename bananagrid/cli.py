@@ -38,7 +38,16 @@ from .recording.core import recording_id_for
 from .recording.inspect import cell_map_summaries, format_inspection, inspect_recording, json_ready, layer_summaries
 from .scenes.examples import example_names, example_path, example_title, scene_source
 from .scenes.load import Scene, load_scene
-from .scenes.pictures import check_picture_options, read_picture, write_picture
+from .scenes.pictures import (
+    DEFAULT_FPS,
+    MAX_FPS,
+    check_animation_options,
+    check_picture_options,
+    read_picture,
+    read_timeline,
+    write_animation,
+    write_picture,
+)
 from .scenes.run_tiled import check_tiled, format_tiled_summary, run_scene_tiled, tiled_maps
 from .scenes.run import (RUN_ONLY_PROVENANCE, check_exports, check_run_memory, check_run_work, compute, export_paths,
                          plan_outputs, run_scene)
@@ -175,18 +184,27 @@ def build_parser() -> tuple[argparse.ArgumentParser, dict[str, argparse.Argument
     examples.set_defaults(handler=_examples)
 
     plot = sub.add_parser(
-        "plot", help="draw a scene's maps to a PNG (needs matplotlib: the plot extra)",
-        description="Draw every layer (or --layer) at the last time (or --t) as log10 maps in km, "
-        "north up, with a colour bar and labelled probability-mass contours, one panel per layer. "
+        "plot", help="draw a scene's maps to a PNG, or animate its timeline (needs matplotlib: the plot extra)",
+        description="Draw every layer (or --layer) at the last time (or --t) as log10 maps, north up, "
+        "with labelled probability-mass contours and their key, one panel per layer in one colour range "
+        "with one colour bar. A geographic scene ([geo]) is drawn as a chart: latitude and longitude lines "
+        "and labels, the land (bundled Natural Earth data, no download), a km scale bar and the UTC time; "
+        "other scenes have km axes. --animate OUT.gif draws one frame per time of the scene's timeline "
+        "(GIF with Pillow; OUT.mp4 needs ffmpeg). "
         "INPUT is a scene .toml (computed as run does), or a .rrd, .npz or .nc written by run.",
     )
     plot.add_argument("input", nargs="?", metavar="INPUT", type=Path,
                       help="SCENE.toml, FILE.rrd, FILE.npz or FILE.nc (or --example)")
     plot.add_argument("--example", metavar="NAME",
                       help="the bundled scene NAME instead of INPUT (`bananagrid examples` lists them)")
-    plot.add_argument("-o", "--output", required=True, type=Path, metavar="OUT.png", help="the PNG to write")
+    plot.add_argument("-o", "--output", type=Path, metavar="OUT.png", help="the PNG to write (this, --animate, or both)")
+    plot.add_argument("--animate", type=Path, metavar="OUT.gif",
+                      help="also, or instead, an animation with one frame per time: OUT.gif (Pillow) or OUT.mp4 "
+                      "(needs ffmpeg); every frame in one colour range and frame; a line per frame on stderr")
+    plot.add_argument("--fps", type=float, default=DEFAULT_FPS, metavar="F",
+                      help=f"frames per second of --animate, in (0, {MAX_FPS:g}] (default {DEFAULT_FPS:g})")
     plot.add_argument("--layer", action="append", default=[], metavar="NAME", help="only this layer (repeatable)")
-    plot.add_argument("--t", type=float, metavar="T", help="elapsed time, s (default: the last)")
+    plot.add_argument("--t", type=float, metavar="T", help="elapsed time of the PNG, s (default: the last)")
     plot.add_argument("--mass-levels", metavar="P1,P2,...",
                       help="probability-mass contours, each in (0, 1) (default: a scene's output.mass_levels, "
                       "else 0.5,0.9,0.95,0.99)")
@@ -391,8 +409,8 @@ def _examples(args: argparse.Namespace) -> int:
 
 
 def _plot(args: argparse.Namespace) -> int:
-    """``bananagrid plot``: one PNG of a scene's layers at one time
-    (:mod:`bananagrid.scenes.pictures`); every option checked before any computing."""
+    """``bananagrid plot``: one PNG of a scene's layers at one time, and/or an animation over its
+    times (:mod:`bananagrid.scenes.pictures`); every option checked before any computing."""
     levels = None
     if args.mass_levels is not None:
         levels = mass_levels(_split(args.mass_levels, "--mass-levels"), key="--mass-levels")
@@ -400,10 +418,33 @@ def _plot(args: argparse.Namespace) -> int:
         raise BananagridError(f"--threads = {args.threads}: must be >= 1")
     if args.step is not None:
         positive("--step", args.step)
-    check_picture_options(args.output, args.dpi)
-    check_writable(args.output.parent if str(args.output.parent) else Path("."))
-    check_target(args.output, "PNG")  # a directory or a link there: refused before computing
+    if args.output is None and args.animate is None:
+        raise BananagridError("plot: nothing to write; give -o OUT.png, --animate OUT.gif, or both")
+    if args.output is None and args.t is not None:
+        raise BananagridError(f"--t = {args.t:g}: an animation shows every time; --t picks the time of the PNG (-o)")
+    for path, what in ((args.output, "PNG"), (args.animate, "animation")):
+        if path is None:
+            continue
+        if what == "PNG":
+            check_picture_options(path, args.dpi)
+        else:
+            check_animation_options(path, args.fps, args.dpi)
+        check_writable(path.parent if str(path.parent) else Path("."))
+        check_target(path, what)  # a directory or a link there: refused before computing
     source = scene_source(args.input, args.example, what="INPUT")
+    if args.animate is not None:
+        frames = read_timeline(source, layers=args.layer, threads=args.threads, step=args.step)
+
+        def progress(k: int, n: int, t: float) -> None:
+            print(f"frame {k}/{n}: t = {t:g} s", file=sys.stderr, flush=True)
+
+        out = write_animation(args.animate, frames, mass_levels=levels, dpi=args.dpi, fps=args.fps, progress=progress)
+        print(f"wrote {out} ({len(frames)} frame{'' if len(frames) == 1 else 's'})")
+        if args.output is not None:
+            picture = frames[-1] if args.t is None else \
+                read_picture(source, layers=args.layer, t=args.t, threads=args.threads, step=args.step)
+            print(f"wrote {write_picture(args.output, picture, mass_levels=levels, dpi=args.dpi)}")
+        return OK
     picture = read_picture(source, layers=args.layer, t=args.t, threads=args.threads, step=args.step)
     out = write_picture(args.output, picture, mass_levels=levels, dpi=args.dpi)
     print(f"wrote {out}")

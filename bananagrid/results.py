@@ -14,6 +14,7 @@ cell centre, or a probability integrated over a cell.
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass, field, replace
 
@@ -23,6 +24,7 @@ from .domains.angular_lattice import AngularLattice
 from .domains.grid import Grid
 from .domains.polar_lattice import PolarLattice
 from .domains.region import Region
+from .geo.chart import chart as geo_chart
 from .geo.dataset import cell_map_dataset, polar_dataset, raster_dataset
 from .geo.zarr_store import write_batch_zarr, write_zarr
 from .geo.frame import GeoFrame
@@ -96,10 +98,12 @@ class Raster:
         provenance names (a bearing fix's sensors, bearings and fix; a start and its heading).
         Arguments as for :func:`bananagrid.plotting.plot_raster`: ``mass_levels`` (in (0, 1)),
         ``title``, ``t`` (s, for the default title), ``markers`` (``(x, y, label)`` in metres),
-        ``geometry``, ``colorbar``.
+        ``geometry``, ``colorbar``. A raster with a geographic :attr:`frame` is drawn as a chart
+        (latitude and longitude lines and labels, the land: :mod:`bananagrid.geo.chart`).
         """
+        drawn = None if self.frame is None else functools.partial(geo_chart, self.frame)
         return plotting.plot_raster(self, ax, mass_levels=mass_levels, title=title, t=t, markers=markers,
-                                    geometry=geometry, colorbar=colorbar)
+                                    geometry=geometry, colorbar=colorbar, chart=drawn)
 
     def _repr_png_(self) -> bytes | None:
         """The map as PNG bytes for notebooks (None without matplotlib: the HTML says why)."""

@@ -19,15 +19,18 @@ into ``docs/pictures``); ``python docs/make_pictures.py --gallery`` (only the pa
 from __future__ import annotations
 
 import argparse
+import sys
 from pathlib import Path
 
 from PIL import Image  # installed with matplotlib
 
-from bananagrid.atomic import atomic_write
-from bananagrid.scenes.examples import example_title
-from bananagrid.scenes.pictures import read_picture, write_picture
-
 ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))  # this checkout's bananagrid draws, whichever is installed
+
+from bananagrid.atomic import atomic_write  # noqa: E402
+from bananagrid.scenes.examples import example_title  # noqa: E402
+from bananagrid.scenes.pictures import read_picture, write_picture  # noqa: E402
+
 SCENES = ROOT / "scenes"
 OUT = ROOT / "docs" / "pictures"
 GALLERY = ROOT / "docs" / "gallery.md"
