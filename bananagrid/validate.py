@@ -73,8 +73,8 @@ def unknown_key(where: str, key: str, allowed, note: str = "") -> str:
     one is close enough)."""
     allowed = [str(k) for k in allowed]
     nearest = difflib.get_close_matches(str(key), allowed, n=1)
-    hint = f"; did you mean {show(nearest[0])}?" if nearest else ""
-    return f"{where}: unknown key{note}{hint}; allowed: {', '.join(allowed)}"
+    hint = f"; did you mean {show(nearest[0])}? allowed" if nearest else "; allowed"
+    return f"{where}: unknown key{note}{hint}: {', '.join(allowed)}"
 
 
 def _real(name: str, value) -> float:

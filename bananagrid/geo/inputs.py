@@ -225,7 +225,7 @@ def read_track(path: str | os.PathLike, *, format: str | None = None, mmsi: int 
     else:
         rows = _csv_rows(source, text)
     if mmsi is not None and kind != "nmea":
-        raise BananagridError(f"{source}: mmsi = {mmsi!r} selects AIS reports of an NMEA file; this is {kind.upper()}")
+        raise BananagridError(f"{source}: mmsi = {mmsi!r}: selects AIS reports of an NMEA file; this is {kind.upper()}")
     return _track(source, rows)
 
 

@@ -753,6 +753,9 @@ def _fix_file(table: dict, directory: Path):
     try:
         return read_track(path, mmsi=mmsi).last_fix()
     except BananagridError as exc:
+        rest = str(exc).removeprefix(f"{path}: ")
+        if rest.startswith("mmsi = "):  # the vessel asked for: that key's error
+            raise SceneKeyError(f"geo.fix_mmsi = {show(mmsi)}: {rest.partition(': ')[2]}") from None
         raise SceneKeyError(f"geo.fix_file = {show(table['fix_file'])}: {_file_message(str(exc), path)}") from None
 
 
@@ -766,8 +769,10 @@ def _bearings_file(table: dict, directory: Path):
 
 
 def _file_message(message: str, path: Path) -> str:
-    """A reader's ``PATH: line N: ...`` without the path the key already names."""
-    return message.removeprefix(f"{path}: ")
+    """A reader's ``PATH: line N: ...`` without the path the key already names (kept where the
+    file itself is missing or unreadable: the path says where it was looked for)."""
+    rest = message.removeprefix(f"{path}: ")
+    return rest if rest.startswith("line ") else message
 
 
 def _geo_message(message: str, other: str = "[geo]: ") -> str:

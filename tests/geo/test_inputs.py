@@ -195,7 +195,7 @@ def test_rmc_course_and_speed(tmp_path):
 
 # --- AIS ------------------------------------------------------------------------------------------
 
-#: Published decodes (pyais's tests, tests/test_ais.py, which checked them against ais.tbsalling.dk
+#: Published decodes (pyais's test suite, its test_ais.py, which checked them against ais.tbsalling.dk
 #: and aislib): (payload, type, MMSI, lat, lon, SOG kn, COG deg, second).
 AIS_REFERENCE = [
     ("15M67FC000G?ufbE`FepT@3n00Sa", 1, 366053209, 37.802118, -122.341618, 0.0, 219.3, 59),
