@@ -193,3 +193,34 @@ def test_the_example_of_a_mistyped_key():
     with pytest.raises(bg.BananagridError, match=r'^s\.toml: layers\.a\.sigma_omgea: unknown key \(model "cat"\); '
                                                  r'did you mean "sigma_omega"\? allowed: model, v0'):
         parse_scene(text, source="s.toml")
+
+
+def test_docs_name_every_geo_key():
+    doc = (ROOT / "docs" / "scenes.md").read_text()
+    assert [key for key in GEO_KEYS if f"| `{key}` |" not in doc] == []
+
+
+def test_fix_mmsi_picks_a_vessel_of_an_ais_log(tmp_path):
+    # two vessels (pyais's published decodes, see tests/geo/test_inputs.py), received at UNIX times
+    (tmp_path / "ais.nmea").write_text("!AIVDM,1,1,,B,15M67FC000G?ufbE`FepT@3n00Sa,0*5C,1420070398\n"
+                                       "!AIVDM,1,1,,A,35NSH95001G?wopE`beasVk@0E5:,0*6F,1420070460\n")
+    # the Butterly layer's mean lies off Bergen, 8,000 km away: the CAT layer alone
+    text = from_file(SHIP, 'fix_file = "ais.nmea"\nfix_mmsi = 367581220').split("[layers.butterly]")[0]
+    scene = parse_scene(text, source="s.toml", directory=tmp_path)
+    assert round(scene.geo.lat, 4) == 37.8107 and round(scene.geo.lon, 4) == -122.3343
+    assert scene.geo.time.isoformat() == "2015-01-01T00:00:40+00:00"
+    with pytest.raises(bg.BananagridError, match=r'geo\.fix_mmsi = 1: no AIS position report of it \(vessels: '
+                                                 r'366053209, 367581220\)'):
+        parse_scene(text.replace("fix_mmsi = 367581220", "fix_mmsi = 1"), source="s.toml", directory=tmp_path)
+
+
+def test_a_scene_with_a_fix_file_runs(tmp_path, capsys):
+    from bananagrid.cli import main
+
+    (tmp_path / "track.gpx").write_text(TRACK_GPX)
+    text = from_file(SHIP, 'fix_file = "track.gpx"').replace("v0 = 5.0\n", "").replace("heading_deg = 200.0", "")
+    text = text.split("[layers.butterly]")[0].replace("times = [300.0, 600.0, 900.0]", "times = [300.0]")
+    (tmp_path / "ship.toml").write_text(text)
+    assert main(["run", str(tmp_path / "ship.toml"), "--out", str(tmp_path / "out"), "--step", "250", "--quiet"]) == 0
+    assert (tmp_path / "out" / "geo_ship.rrd").is_file()
+    assert "geo_ship" in capsys.readouterr().out
