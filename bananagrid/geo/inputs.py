@@ -56,7 +56,7 @@ from .frame import parse_utc
 from .libraries import require
 
 __all__ = ["Track", "Fix", "Bearings", "read_track", "read_fix", "read_bearings", "FORMATS", "MAX_INPUT_BYTES",
-           "KNOT", "nmea_checksum", "decode_ais"]
+           "KNOT", "PASS_MMSI", "nmea_checksum", "decode_ais"]
 
 #: The formats a track or fix may be read from (``format=``; by default recognised by content).
 FORMATS = ("csv", "gpx", "nmea", "geojson")
@@ -64,6 +64,8 @@ FORMATS = ("csv", "gpx", "nmea", "geojson")
 MAX_INPUT_BYTES = 256 * 1024 * 1024
 #: One knot in m/s (1852 m per hour).
 KNOT = 1852.0 / 3600.0
+#: How a message asks for one vessel of several (a scene says which key to give instead).
+PASS_MMSI = "pass the mmsi of the vessel wanted"
 
 
 @dataclass(frozen=True)
@@ -214,8 +216,8 @@ def read_track(path: str | os.PathLike, *, format: str | None = None, mmsi: int 
         One line naming the file, the line (or JSON path) and what is allowed.
     """
     source = Path(path)
-    text, raw = _read_text(source)
-    kind = _format(source, text, format)
+    text, raw = _read_text(source, xml=format in (None, "gpx"))
+    kind = "gpx" if text is None else _format(source, text, format)
     if kind == "gpx":
         rows = _gpx_rows(source, raw)
     elif kind == "geojson":
@@ -278,8 +280,10 @@ def read_bearings(path: str | os.PathLike) -> Bearings:
 # --- reading and recognising ----------------------------------------------------------------------
 
 
-def _read_text(path: Path) -> tuple[str, bytes]:
-    """The file's text (UTF-8, a byte-order mark dropped) and bytes, or one line saying why not."""
+def _read_text(path: Path, xml: bool = False) -> tuple[str | None, bytes]:
+    """The file's text (UTF-8, a byte-order mark dropped) and bytes, or one line saying why not;
+    with ``xml``, an XML document in another encoding it declares gives None for the text (expat
+    reads the bytes)."""
     path = regular_file(path, "a track or bearings file")
     size = path.stat().st_size
     if size > MAX_INPUT_BYTES:
@@ -296,6 +300,8 @@ def _read_text(path: Path) -> tuple[str, bytes]:
     try:
         text = raw.decode("utf-8-sig")
     except UnicodeDecodeError as exc:
+        if xml and re.match(rb"\s*<\?xml[^>]*encoding=", raw):
+            return None, raw
         line = raw[: exc.start].count(b"\n") + 1
         raise BananagridError(f"{path}: line {line}: not UTF-8 text (byte {exc.start}); save the file as UTF-8") from None
     return text, raw
@@ -646,6 +652,7 @@ def _nmea_rows(path: Path, text: str, mmsi: int | None) -> list[_Row]:
     gnss: list[_Row] = []
     ais: dict[int, list[_Row]] = {}
     day: date | None = None
+    dated: datetime | None = None  # the time of the RMC that gave ``day``
     for line, sentence in enumerate(text.splitlines(), start=1):
         sentence = sentence.strip()
         if not sentence:
@@ -678,8 +685,11 @@ def _nmea_rows(path: Path, text: str, mmsi: int | None) -> list[_Row]:
             continue  # GSV, VTG, GSA, ...: no position
         if kind == "RMC":
             row, day = _rmc(path, line, fields)
+            dated = row.time if row is not None else datetime(day.year, day.month, day.day, tzinfo=timezone.utc)
         else:
             row = _gga(path, line, fields, day)
+            if row is not None and dated is not None and row.time < dated - timedelta(hours=12):
+                row.time += timedelta(days=1)  # past midnight since the RMC that gave the date
         if row is None:
             continue
         if gnss and gnss[-1].time == row.time:  # GGA and RMC of one epoch: one point, RMC's motion
@@ -695,10 +705,10 @@ def _nmea_rows(path: Path, text: str, mmsi: int | None) -> list[_Row]:
         return ais[mmsi]
     if ais and gnss:
         raise BananagridError(f"{path}: holds the receiver's own GGA/RMC positions and AIS reports of "
-                              f"{', '.join(map(str, sorted(ais)[:5]))}; pass the mmsi of the vessel wanted")
+                              f"{', '.join(map(str, sorted(ais)[:5]))}; {PASS_MMSI}")
     if len(ais) > 1:
         raise BananagridError(f"{path}: AIS reports of {len(ais)} vessels ({', '.join(map(str, sorted(ais)[:5]))}"
-                              f"{', ...' if len(ais) > 5 else ''}); pass the mmsi of the vessel wanted")
+                              f"{', ...' if len(ais) > 5 else ''}); {PASS_MMSI}")
     return next(iter(ais.values())) if ais else gnss
 
 

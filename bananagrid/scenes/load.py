@@ -32,7 +32,7 @@ from ..domains.angular_lattice import AngularLattice
 from ..domains.grid import Grid
 from ..domains.region import Region
 from ..geo.frame import DEFAULT_MAX_SCALE_ERROR, GeoFrame
-from ..geo.inputs import read_bearings, read_track
+from ..geo.inputs import PASS_MMSI, read_bearings, read_track
 from ..models.registry import MODEL_KINDS, ModelKind, Registry, installed_kinds
 from ..protocol import DensityModel
 from ..recording.core import MAX_ELAPSED_S, colormaps
@@ -756,7 +756,8 @@ def _fix_file(table: dict, directory: Path):
         rest = str(exc).removeprefix(f"{path}: ")
         if rest.startswith("mmsi = "):  # the vessel asked for: that key's error
             raise SceneKeyError(f"geo.fix_mmsi = {show(mmsi)}: {rest.partition(': ')[2]}") from None
-        raise SceneKeyError(f"geo.fix_file = {show(table['fix_file'])}: {_file_message(str(exc), path)}") from None
+        message = _file_message(str(exc), path).replace(PASS_MMSI, "give geo.fix_mmsi, the MMSI of the vessel wanted")
+        raise SceneKeyError(f"geo.fix_file = {show(table['fix_file'])}: {message}") from None
 
 
 def _bearings_file(table: dict, directory: Path):

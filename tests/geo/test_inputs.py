@@ -193,6 +193,24 @@ def test_rmc_course_and_speed(tmp_path):
     assert fix.course == pytest.approx(math.radians(200.5), rel=1e-15)
 
 
+def test_gga_past_midnight_keeps_the_date_running(tmp_path):
+    path = tmp_path / "own.nmea"
+    path.write_text("\n".join([
+        sentence("GPRMC,235959.00,A,6027.0000,N,00436.0000,E,,,241126,,,A"),
+        sentence("GPGGA,000001.00,6027.0010,N,00436.0000,E,1,08,0.9,10.0,M,45.0,M,,"),  # before the next RMC
+        sentence("GPRMC,000002.00,A,6027.0020,N,00436.0000,E,,,251126,,,A"),
+    ]))
+    assert [t.isoformat() for t in bg.read_track(path).times] == [
+        "2026-11-24T23:59:59+00:00", "2026-11-25T00:00:01+00:00", "2026-11-25T00:00:02+00:00"]
+
+
+def test_gpx_in_a_declared_encoding(tmp_path):
+    path = tmp_path / "t.gpx"
+    path.write_bytes('<?xml version="1.0" encoding="ISO-8859-1"?>\n<gpx><wpt lat="60.39" lon="5.32"><name>Sør</name>'
+                     '<time>2026-11-24T05:00:00Z</time></wpt></gpx>'.encode("latin-1"))
+    assert bg.read_fix(path).lat == 60.39
+
+
 # --- AIS ------------------------------------------------------------------------------------------
 
 #: Published decodes (pyais's test suite, its test_ais.py, which checked them against ais.tbsalling.dk

@@ -212,6 +212,9 @@ def test_fix_mmsi_picks_a_vessel_of_an_ais_log(tmp_path):
     with pytest.raises(bg.BananagridError, match=r'geo\.fix_mmsi = 1: no AIS position report of it \(vessels: '
                                                  r'366053209, 367581220\)'):
         parse_scene(text.replace("fix_mmsi = 367581220", "fix_mmsi = 1"), source="s.toml", directory=tmp_path)
+    with pytest.raises(bg.BananagridError, match=r'AIS reports of 2 vessels \(366053209, 367581220\); give geo\.fix_mmsi, '
+                                                 'the MMSI of the vessel wanted$'):
+        parse_scene(text.replace("fix_mmsi = 367581220", ""), source="s.toml", directory=tmp_path)
 
 
 def test_a_scene_with_a_fix_file_runs(tmp_path, capsys):
