@@ -71,6 +71,10 @@ MISTAKES = {
     "heading in degrees": (lambda: bg.Pose(heading=90.0), r"Pose: heading = 90 rad is more than a full turn"),
     "heading error in degrees": (lambda: _cat(sigma_heading=10.0), r"CAT: sigma_heading = 10 rad is more than a full turn"),
     "bearing beyond a turn": (_bearings_in_turns, r"BearingFix: bearings = \[6.7468\d*, 5.8195\d*\] rad is more than a full turn"),
+    "bearings that cross poorly": (
+        lambda: bg.BearingFix(sensors=[(0.0, 0.0), (1000.0, 0.0)], sigmas=[0.01, 0.01],
+                              bearings=[math.atan2(500.0, 5000.0), math.atan2(-500.0, 5000.0) % (2.0 * math.pi)]),
+        r"bearings cross at 11.4 deg \(< 20.0 deg\): the linearised covariance and containment are optimistic"),
     "a grid that misses the target": (_grid_that_misses,
                                       r"rasterise: the grid captured .* of CAT's probability \(below 0.99\): it misses part"),
 }
