@@ -94,7 +94,7 @@ class Fix:
     source: str = ""
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)  # arrays: compare their fields, not the objects
 class Track:
     """Timed positions, times strictly increasing.
 
@@ -156,7 +156,7 @@ class Track:
                    source=where)
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)
 class Bearings:
     """Bearings taken at stations.
 
