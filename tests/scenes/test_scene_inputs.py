@@ -153,6 +153,10 @@ def _tables():
     yield "presence", ("kind",), room.replace('kind = "uniform"\n', 'kind = "uniform"\n{line}\n')
     yield "output (array)", presence.OUTPUT_KEYS, room + "[output]\n{line}\n"
     yield "top (array)", presence.TOP_KEYS, "{line}\n" + room
+    mixture = (ROOT / "scenes" / "room_mixture.toml").read_text()
+    yield "presence (mixture)", ("kind", "components"), mixture.replace('kind = "mixture"\n', 'kind = "mixture"\n{line}\n')
+    yield ("a mixture's component", ("weight", "mean", "cov", "sd_x", "sd_y", "rho"),
+           mixture.replace("rho = 0.3\n", "rho = 0.3\n{line}\n"))
 
 
 TABLES = list(_tables())
