@@ -108,9 +108,10 @@ def test_plausible_values_do_not_warn():
         bg.rasterise(_cat(), bg.Grid.from_bounds(x=(-100.0, 100.0), y=(-100.0, 100.0), step=10.0), min_mass=0.0)
 
 
-def test_bad_min_mass():
-    with pytest.raises(bg.BananagridError, match=r"min_mass = 1.5: must be in \[0, 1\]"):
-        bg.rasterise(_cat(), bg.Grid.from_bounds(x=(-100.0, 100.0), y=(-100.0, 100.0), step=10.0), min_mass=1.5)
+@pytest.mark.parametrize("value", [1.5, -0.1, math.nan, True, "0.9"])
+def test_bad_min_mass_before_computing(no_kernels, value):
+    with pytest.raises(bg.BananagridError, match=r"min_mass = .*: must be a number in \[0, 1\]"):
+        bg.rasterise(_cat(), bg.Grid.from_bounds(x=(-100.0, 100.0), y=(-100.0, 100.0), step=10.0), min_mass=value)
 
 
 def test_a_scene_says_it_once_with_the_key():

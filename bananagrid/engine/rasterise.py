@@ -116,6 +116,8 @@ def rasterise(model: DensityModel | PresenceModel, grid: Grid | PolarLattice | A
     """
     if quantity not in QUANTITIES:
         raise BananagridError(f"quantity = {quantity!r}: expected one of {', '.join(map(repr, QUANTITIES))}")
+    if isinstance(min_mass, bool) or not isinstance(min_mass, (int, float)) or not 0.0 <= min_mass <= 1.0:
+        raise BananagridError(f"min_mass = {min_mass!r}: must be a number in [0, 1] (0 switches the warning off)")
     if isinstance(grid, AngularLattice):
         return _angular_cells(model, grid, region, dtype=dtype, device=device, threads=threads, chunks=chunks)
     if region is not None:
@@ -142,8 +144,6 @@ def rasterise(model: DensityModel | PresenceModel, grid: Grid | PolarLattice | A
 
 def _covered(model, result, min_mass: float):
     """``result``, after a warning if it captured less than ``min_mass`` of a probability density."""
-    if not 0.0 <= min_mass <= 1.0:
-        raise BananagridError(f"min_mass = {min_mass!r}: must be in [0, 1] (0 switches the warning off)")
     mass = float(result.mass)
     if getattr(model, "integrates_to_one", False) and mass < min_mass:
         where = "polar lattice" if isinstance(result, PolarRaster) else "grid"

@@ -695,11 +695,11 @@ def _geo(table: dict, directory: Path) -> tuple[GeoFrame, float, dict]:
         if abs(fix.lat) == 90.0:
             raise SceneKeyError(f"geo.fix_file = {show(table['fix_file'])}: its last fix ({fix.source}) lies at a "
                                 "pole, where true north has no direction; a scene's origin needs a latitude in (-90, 90)")
-        where = f"geo.fix_file = {show(table['fix_file'])}"
+        where = f"geo.fix_file ({show(table['fix_file'])})"  # a value's key path in messages: the file's field
         table = {**table, "origin_latlon": [fix.lat, fix.lon], "time": fix.time}
-        supplied["heading"] = ((f"{where} (its course)", math.degrees(fix.course), fix.course) if fix.course is not None
+        supplied["heading"] = ((f"{where}: course_deg", math.degrees(fix.course), fix.course) if fix.course is not None
                                else (f"{where} gives no course (one point, or its last two at one place)", None, None))
-        supplied["v0"] = ((f"{where} (its speed)", fix.speed, fix.speed) if fix.speed is not None
+        supplied["v0"] = ((f"{where}: speed (m/s)", fix.speed, fix.speed) if fix.speed is not None
                           else (f"{where} gives no speed (one point without one)", None, None))
     elif bearings is not None and "time" not in table:
         table = {**table, "time": max(bearings.times)}  # the bearings' own time, as a fix's
@@ -725,14 +725,16 @@ def _geo(table: dict, directory: Path) -> tuple[GeoFrame, float, dict]:
     except BananagridError as exc:
         raise SceneKeyError(_geo_message(str(exc))) from None
     if bearings is not None:
-        where = f"geo.bearings_file = {show(table['bearings_file'])}"
+        where = f"geo.bearings_file ({show(table['bearings_file'])})"
         try:
             x, y = frame.local(bearings.lat, bearings.lon)
         except BananagridError as exc:
             raise SceneKeyError(f"{where}: a station: {exc}") from None
-        supplied["sensors"] = (where, bearings.lat.tolist(), [(float(a), float(b)) for a, b in zip(x, y)])
-        supplied["bearings"] = (where, [math.degrees(b) for b in bearings.bearings], bearings.bearings.tolist())
-        supplied["sigmas"] = (where, [math.degrees(s) for s in bearings.sigmas], bearings.sigmas.tolist())
+        stations = [[float(a), float(b)] for a, b in zip(bearings.lat, bearings.lon)]
+        supplied["sensors"] = (f"{where}: stations", stations, [(float(a), float(b)) for a, b in zip(x, y)])
+        supplied["bearings"] = (f"{where}: bearing_deg", [math.degrees(b) for b in bearings.bearings],
+                                bearings.bearings.tolist())
+        supplied["sigmas"] = (f"{where}: sigma_deg", [math.degrees(s) for s in bearings.sigmas], bearings.sigmas.tolist())
     return frame, limit, supplied
 
 

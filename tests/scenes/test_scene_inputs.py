@@ -79,7 +79,7 @@ def test_course_from_the_last_two_points(tmp_path):
     ('fix_file = ""', 'geo.fix_file = "": expected a file name (relative to the scene file)'),
     ('fix_file = "bad.csv"', 'geo.fix_file = "bad.csv": line 3: time 2026-11-24T05:00:00Z is not after 2026-11-24T05:00:00Z '
                              '(line 2); a track\'s times must strictly increase'),
-    ('fix_file = "one.csv"', 'layers.cat: heading: geo.fix_file = "one.csv" gives no course (one point, or its last two '
+    ('fix_file = "one.csv"', 'layers.cat: heading: geo.fix_file ("one.csv") gives no course (one point, or its last two '
                              'at one place); give heading (or heading_deg) in [layers.cat] or [defaults]'),
     ('fix_file = "track.gpx"\nfix_mmsi = 12', 'geo.fix_mmsi = 12: selects AIS reports of an NMEA file; this is GPX'),
     ('fix_mmsi = 12\norigin_latlon = [60.0, 4.0]', "geo.fix_mmsi = 12: picks a vessel of geo.fix_file's AIS reports"),
@@ -97,6 +97,14 @@ def test_bad_input_files(tmp_path, geo, message):
         parse_scene(text, source="s.toml", directory=tmp_path)
     assert str(info.value).startswith("s.toml: " + message.replace("DIR", str(tmp_path))), str(info.value)
     assert "\n" not in str(info.value)
+
+
+def test_a_value_from_the_fix_the_model_refuses_names_the_file(tmp_path):
+    (tmp_path / "still.csv").write_text("time,lat,lon,speed_mps,course_deg\n2026-11-24T05:00:00Z,60,5,0,10\n")
+    text = from_file(SHIP, 'fix_file = "still.csv"').replace("v0 = 5.0\n", "")
+    with pytest.raises(bg.BananagridError, match=r'^s\.toml: geo\.fix_file \("still\.csv"\): speed \(m/s\) = 0\.0: '
+                                                 r'must be > 0$'):
+        parse_scene(text, source="s.toml", directory=tmp_path)
 
 
 def test_bearings_file_gives_the_stations_bearings_and_errors(tmp_path):
