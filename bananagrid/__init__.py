@@ -17,6 +17,7 @@ from .engine.batch_shards import pdf_batch_shards, rasterise_batch_shards
 from .engine.cluster import dask_client
 from .engine.rasterise import rasterise
 from .geo.frame import GeoFrame
+from .geo.inputs import Bearings, Fix, Track, read_bearings, read_fix, read_track
 from .models.base import Model
 from .models.bearing import BearingFix, bearing_to
 from .models.butterly import Butterly, NormalSpeed, TabulatedSpeed, UniformSpeed
@@ -57,6 +58,8 @@ __all__ = [
     "search_regions", "RegionPlan", "SearchRegion", "plot_allocation",
     # scenes
     "load_scene", "parse_scene", "run_scene",
+    # inputs from the field: tracks, last fixes and bearings from CSV, GPX, NMEA/AIS and GeoJSON
+    "read_track", "read_fix", "read_bearings", "Track", "Fix", "Bearings",
     # your own models
     "DensityModel", "Model", "ModelKind", "MODEL_KINDS",
     "BananagridError", "BananagridWarning", "__version__",

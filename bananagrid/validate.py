@@ -6,6 +6,7 @@ error can be traced to its key (the scene layer prefixes the key path).
 
 from __future__ import annotations
 
+import difflib
 import json
 import math
 import os
@@ -23,7 +24,8 @@ import numpy as np
 
 __all__ = ["finite", "positive", "non_negative", "positive_int", "pair", "point", "real_array", "show", "step_ratio",
            "covariance", "polygon", "timed_track", "MAX_CONDITION",
-           "BananagridError", "BananagridWarning", "regular_file", "checked_in_child"]
+           "BananagridError", "BananagridWarning", "regular_file", "checked_in_child", "radian_doubt", "DEGREES_MEANT",
+           "unknown_key"]
 
 
 class BananagridError(ValueError):
@@ -34,6 +36,45 @@ class BananagridWarning(UserWarning):
     """A likely mistake that still gives a result: a grid that misses the target, an angle that
     looks like degrees given in radians, a contour level the map never reaches. The CLI prints
     it as one line; ``warnings.simplefilter("error", BananagridWarning)`` makes it an error."""
+
+
+#: The question that ends every warning about an angle that looks like degrees given in radians
+#: (a scene, which names the key and its ``_deg`` form, keeps its own and silences the model's).
+DEGREES_MEANT = "were degrees meant?"
+
+
+def radian_doubt(name: str, value, unit: str, t: float | None = None) -> str | None:
+    """A warning's text when radians look like degrees, else None: an angle (``unit`` "rad")
+    beyond a full turn, ``|value| > 2 pi``, or a rate ("rad/s") that turns more than a full
+    turn in the elapsed time ``t``, ``|value| t > 2 pi``. Neither describes a plausible target;
+    both are what a number meant in degrees gives. ``value`` may be a number or numbers."""
+    values = np.abs(np.ravel(np.asarray(value, dtype=float)))
+    values = values[np.isfinite(values)]
+    if not values.size:
+        return None
+    largest = float(values.max())
+    if unit == "rad" and largest > 2.0 * math.pi:
+        return (f"{name} = {_plain(value)} rad is more than a full turn: {DEGREES_MEANT} "
+                f"Pass math.radians({largest:g})")
+    if unit == "rad/s" and t is not None and math.isfinite(t) and largest * t > 2.0 * math.pi:
+        return (f"{name} = {_plain(value)} rad/s turns more than a full turn in t = {t:g} s "
+                f"({math.degrees(largest * t):.3g} deg): {DEGREES_MEANT} Pass math.radians({largest:g})")
+    return None
+
+
+def _plain(value) -> str:
+    array = np.asarray(value, dtype=float)
+    return f"{float(array):g}" if array.ndim == 0 else "[" + ", ".join(f"{v:g}" for v in array.ravel()) + "]"
+
+
+def unknown_key(where: str, key: str, allowed, note: str = "") -> str:
+    """The message for a key outside ``allowed``: ``WHERE: unknown key NOTE; did you mean
+    "NEAREST"? allowed: ...`` (the nearest allowed key by :func:`difflib.get_close_matches`, where
+    one is close enough)."""
+    allowed = [str(k) for k in allowed]
+    nearest = difflib.get_close_matches(str(key), allowed, n=1)
+    hint = f"; did you mean {show(nearest[0])}? allowed" if nearest else "; allowed"
+    return f"{where}: unknown key{note}{hint}: {', '.join(allowed)}"
 
 
 def _real(name: str, value) -> float:

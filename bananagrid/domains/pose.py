@@ -3,11 +3,12 @@
 from __future__ import annotations
 
 import math
+import warnings
 from dataclasses import dataclass
 
 import numpy as np
 
-from ..validate import finite, point
+from ..validate import BananagridWarning, finite, point, radian_doubt
 
 __all__ = ["Pose"]
 
@@ -30,6 +31,9 @@ class Pose:
     def __post_init__(self):
         object.__setattr__(self, "origin", point("origin", self.origin))
         object.__setattr__(self, "heading", finite("heading", self.heading))
+        doubt = radian_doubt("Pose: heading", self.heading, "rad")
+        if doubt is not None:  # a heading beyond a full turn is degrees typed as radians, most likely
+            warnings.warn(doubt, BananagridWarning, stacklevel=3)
 
     def as_array(self) -> np.ndarray:
         """(ox, oy, cos heading, sin heading): the kernels' pose argument."""

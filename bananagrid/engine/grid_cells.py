@@ -42,7 +42,7 @@ import numpy as np
 from ..domains.grid import Grid
 from ..protocol import DensityModel
 from ..results import Raster
-from ..validate import BananagridError
+from ..validate import BananagridError, BananagridWarning
 from .memory import check_memory
 from .points import check_finite, evaluate_points
 from .quadrature import (GAUSS_TOL, MAX_ORDER, MAX_SUBINTERVALS, axis_plan, graded_rule, narrowing, normal_shares,
@@ -276,7 +276,7 @@ def _quadrature(model: DensityModel, grid: Grid, ctx, what: str, max_seconds) ->
             f"grid cell probabilities: the node cap ({MAX_NODES:,} nodes, {q.cap} sub-intervals per cell and "
             f"axis) limits their accuracy to about {min(q.error, 1.0):.2g} of the mass per sub-cell (target "
             f"{GAUSS_TOL:g}); use larger cells or a smaller grid",
-            stacklevel=4,
+            BananagridWarning, stacklevel=4,
         )
     probability = np.zeros(grid.shape)
     extent = _GridBox(grid)

@@ -29,7 +29,7 @@ import numpy as np
 from ..domains.polar_lattice import PolarLattice
 from ..protocol import DensityModel
 from ..results import PolarRaster
-from ..validate import BananagridError
+from ..validate import BananagridError, BananagridWarning
 from .points import check_finite, check_model, evaluate_points
 from .quadrature import (GAUSS_TOL, MAX_ORDER, MAX_SUBINTERVALS, axis_plan, graded_rule, narrowing, normal_shares,
                          ray_circle_points, seam_ranges, split_segments, unit_rule)
@@ -110,7 +110,7 @@ def _plan(model: DensityModel, lattice: PolarLattice) -> _Plan:
             f"polar lattice: the node caps ({MAX_SUBINTERVALS} sub-intervals per cell and axis, "
             f"{MAX_NODES:,} nodes in all; {cap} sub-intervals used) {effect} (target "
             f"{GAUSS_TOL:g}); use smaller cells or a smaller lattice",
-            stacklevel=4,
+            BananagridWarning, stacklevel=4,
         )
     return _Plan(
         radial=(rm, rn),

@@ -12,6 +12,8 @@ of its domain and quantity, each of which makes one kind of result:
 
 from __future__ import annotations
 
+import warnings
+
 import numpy as np
 
 from ..domains.angular_lattice import AngularLattice
@@ -19,7 +21,7 @@ from ..domains.grid import Grid
 from ..domains.polar_lattice import PolarLattice
 from ..protocol import DensityModel, PresenceModel
 from ..results import CellMap, PolarRaster, Raster, TiledRaster
-from ..validate import BananagridError
+from ..validate import BananagridError, BananagridWarning
 from .grid_density import density_raster
 from .points import check_model
 from .grid_cells import probability_raster
@@ -27,7 +29,11 @@ from .polar_cells import rasterise_lattice
 from .warp_runtime import WarpContext
 from .tiles import rasterise_tiles
 
-__all__ = ["rasterise", "QUANTITIES"]
+__all__ = ["rasterise", "QUANTITIES", "MIN_MASS"]
+
+#: Captured mass below which :func:`rasterise` warns that the grid misses part of the target
+#: (the scenes' default ``output.min_mass``).
+MIN_MASS = 0.99
 
 
 #: What :func:`rasterise` computes on a grid.
@@ -37,7 +43,7 @@ QUANTITIES = ("density", "probability")
 def rasterise(model: DensityModel | PresenceModel, grid: Grid | PolarLattice | AngularLattice, *,
               quantity: str = "density", dtype=np.float64, device: str = "cpu", threads=None,
               max_seconds: float | None = None, chunks=None,
-              region=None) -> Raster | PolarRaster | TiledRaster | CellMap:
+              region=None, min_mass: float = MIN_MASS) -> Raster | PolarRaster | TiledRaster | CellMap:
     """Density of ``model`` at the cell centres of ``grid`` or the probability of each cell, or
     both on a polar lattice, or the probability of each angular cell.
 
@@ -91,15 +97,27 @@ def rasterise(model: DensityModel | PresenceModel, grid: Grid | PolarLattice | A
 
     region : Region, optional
         An angular lattice's conditioning box S (the other domains take none).
+    min_mass : float, default 0.99
+        A probability density (``model.integrates_to_one``) whose grid or polar lattice
+        captures less than this warns that the grid misses part of the target (0: never).
 
     Returns
     -------
     Raster
         Raw (not normalised) densities per m^2, with the captured mass and provenance
         (a PolarRaster for a PolarLattice, a CellMap for an AngularLattice).
+
+    Warns
+    -----
+    BananagridWarning
+        When the grid captures less than ``min_mass`` of a probability density (it misses
+        part of the target: the grid is too small or misplaced, or a parameter's unit is
+        wrong), and where the model's or the quadrature's own limits cost accuracy.
     """
     if quantity not in QUANTITIES:
         raise BananagridError(f"quantity = {quantity!r}: expected one of {', '.join(map(repr, QUANTITIES))}")
+    if isinstance(min_mass, bool) or not isinstance(min_mass, (int, float)) or not 0.0 <= min_mass <= 1.0:
+        raise BananagridError(f"min_mass = {min_mass!r}: must be a number in [0, 1] (0 switches the warning off)")
     if isinstance(grid, AngularLattice):
         return _angular_cells(model, grid, region, dtype=dtype, device=device, threads=threads, chunks=chunks)
     if region is not None:
@@ -107,7 +125,8 @@ def rasterise(model: DensityModel | PresenceModel, grid: Grid | PolarLattice | A
     if not callable(getattr(model, "bind", None)) and callable(getattr(model, "cell_plan", None)):
         model.cell_plan(grid)  # a law with cells but no planar kernels (a presence law) says where they are
     if isinstance(grid, PolarLattice):
-        return rasterise_lattice(model, grid, dtype=dtype, device=device, threads=threads, max_seconds=max_seconds)
+        return _covered(model, rasterise_lattice(model, grid, dtype=dtype, device=device, threads=threads,
+                                                 max_seconds=max_seconds), min_mass)
     if not isinstance(grid, Grid):
         raise BananagridError(f"grid = {grid!r}: expected a bananagrid.Grid")
     if chunks is not None:
@@ -117,8 +136,23 @@ def rasterise(model: DensityModel | PresenceModel, grid: Grid | PolarLattice | A
     check_model(model)
     grid.check_in_memory()
     if quantity == "probability":
-        return probability_raster(model, grid, dtype=dtype, device=device, threads=threads, max_seconds=max_seconds)
-    return density_raster(model, grid, dtype=dtype, device=device, threads=threads, max_seconds=max_seconds)
+        raster = probability_raster(model, grid, dtype=dtype, device=device, threads=threads, max_seconds=max_seconds)
+    else:
+        raster = density_raster(model, grid, dtype=dtype, device=device, threads=threads, max_seconds=max_seconds)
+    return _covered(model, raster, min_mass)
+
+
+def _covered(model, result, min_mass: float):
+    """``result``, after a warning if it captured less than ``min_mass`` of a probability density."""
+    mass = float(result.mass)
+    if getattr(model, "integrates_to_one", False) and mass < min_mass:
+        where = "polar lattice" if isinstance(result, PolarRaster) else "grid"
+        warnings.warn(
+            f"rasterise: the {where} captured {mass:.3g} of {type(model).__name__}'s probability (below "
+            f"{min_mass:g}): it misses part of the target; move or enlarge it, or check the parameters' units "
+            "(min_mass=0 switches this off)", BananagridWarning, stacklevel=3,
+        )
+    return result
 
 
 def _angular_cells(model, lattice: AngularLattice, region, *, dtype, device, threads, chunks) -> CellMap:

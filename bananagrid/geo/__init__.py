@@ -9,6 +9,8 @@
 * :mod:`~bananagrid.geo.geojson` — search areas as RFC 7946 GeoJSON in WGS84;
 * :mod:`~bananagrid.geo.panels`, :mod:`~bananagrid.geo.files` — the maps a file holds, checked
   once, and files written whole or not at all;
+* :mod:`~bananagrid.geo.inputs` — tracks, last fixes and bearings read from CSV, GPX, NMEA 0183
+  (GGA, RMC, AIS position reports) and GeoJSON;
 * :mod:`~bananagrid.geo.libraries` — the optional libraries of the ``geo`` extra.
 
 pyproj, xarray, netCDF4, rasterio and shapely are the ``geo`` extra

@@ -43,7 +43,7 @@ from ..engine.points import evaluate_points, launch_points
 from ..engine.warp_runtime import WarpContext
 from ..kernels import tabulated
 from ..protocol import KernelBinding, KernelContext
-from ..validate import BananagridError
+from ..validate import BananagridError, BananagridWarning
 from .motion import MotionModel, natural_scales
 
 __all__ = [
@@ -200,7 +200,7 @@ def build_heading_table(model: MotionModel, r_lo: float, r_hi: float, *, threads
         f"error estimate is {table.error_estimate:.2g} (target {TARGET_ERROR:g}) where the density "
         f"exceeds {CHECK_LEVEL:g} of its peak; sharp features such as the folds of a banana that "
         "turns over itself are not resolved better within the lattice size limit",
-        stacklevel=6,
+        BananagridWarning, stacklevel=6,
     )
     return table
 

@@ -22,7 +22,7 @@ from ..domains.pose import Pose
 from ..kernels import bearing as kernels
 from ..kernels import bearing_lanes
 from ..protocol import Extent, KernelBinding, KernelContext, SceneSchema
-from ..validate import BananagridError, real_array
+from ..validate import BananagridError, BananagridWarning, real_array
 from .base import RANGE_SDS, Model, check_n, check_rng
 from .containment import containment, containment_radius
 from .params import modelclass, param
@@ -465,7 +465,7 @@ class BearingFix(Model):
         if angle < POOR_CROSSING_DEG:
             warnings.warn(
                 f"bearings cross at {angle:.3g} deg (< {POOR_CROSSING_DEG} deg): the linearised "
-                "covariance and containment are optimistic", stacklevel=5,
+                "covariance and containment are optimistic", BananagridWarning, stacklevel=5,
             )
 
     def _solve(self) -> tuple[np.ndarray, np.ndarray | None, int | None]:
@@ -555,7 +555,7 @@ class BearingFix(Model):
             if len(self.sensors) == 2:
                 raise BananagridError(text + " (the lines cross on the far side of the station)")
             warnings.warn(text + " (its bearing is off by more than 90 deg at the likelihood's maximum): "
-                          "check it", stacklevel=5)
+                          "check it", BananagridWarning, stacklevel=5)
 
     def _bearing_gradients(self, point) -> np.ndarray:
         """d bearing_i / d(x, y) at ``point``: (dy, -dx) / r^2, shape (n, 2)."""

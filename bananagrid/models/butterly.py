@@ -30,7 +30,7 @@ from scipy import special, stats
 from ..domains.pose import Pose
 from ..kernels import butterly as kernels
 from ..protocol import Extent, KernelBinding, KernelContext, SceneKey, SceneSchema
-from ..validate import BananagridError, covariance, finite, non_negative, point, positive, real_array, show
+from ..validate import BananagridError, BananagridWarning, covariance, finite, non_negative, point, positive, real_array, show
 from ._butterly_series import series_density
 from .base import RANGE_SDS, Model, check_n, check_rng
 from .params import modelclass, param
@@ -541,7 +541,7 @@ class Butterly(Model):
                 object.__setattr__(self, "weights", frozen)
         if v.size > MANY_SPEED_NODES:
             warnings.warn(
-                f"Butterly: {v.size} speed nodes; each costs a course integral per cell", stacklevel=4
+                f"Butterly: {v.size} speed nodes; each costs a course integral per cell", BananagridWarning, stacklevel=4
             )
         v = np.ascontiguousarray(v, dtype=float)
         w = np.ascontiguousarray(w, dtype=float)
@@ -772,7 +772,8 @@ class Butterly(Model):
             if previous is not None and abs(estimate - previous) <= rtol * abs(estimate):
                 return estimate
             if n >= 2**22:
-                warnings.warn(f"range_pdf: course integral not converged to {rtol:g} with {n} nodes", stacklevel=3)
+                warnings.warn(f"range_pdf: course integral not converged to {rtol:g} with {n} nodes",
+                              BananagridWarning, stacklevel=3)
                 return estimate
             previous = estimate
             n *= 2

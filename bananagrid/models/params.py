@@ -34,11 +34,13 @@ from __future__ import annotations
 import dataclasses
 import inspect
 import re
+import warnings
 from collections.abc import Callable
 from dataclasses import MISSING, dataclass, field, fields
 from typing import Any, dataclass_transform
 
 from ..protocol import SceneKey, SceneSchema
+from ..validate import BananagridWarning, radian_doubt
 
 __all__ = ["Param", "param", "modelclass", "declared", "scene_keys", "plain_parameters", "parameters_section", "METADATA"]
 
@@ -230,6 +232,23 @@ def _with_section(doc: str | None, section: str) -> str:
 
 
 @dataclass_transform(frozen_default=True, field_specifiers=(param, field))
+def _warn_degrees(model) -> None:
+    """Warn where a parameter in radians that has a degrees form in scenes (``alias="deg"``)
+    looks like degrees (:func:`~bananagrid.validate.radian_doubt`: an angle beyond a full
+    turn, a turn rate that turns more than one in the model's elapsed time ``t``)."""
+    t = getattr(model, "t", None)
+    for f, spec in declared(type(model)):
+        if spec.alias != "deg":
+            continue
+        try:
+            text = radian_doubt(f"{type(model).__name__}: {f.name}", getattr(model, f.name), spec.unit,
+                                t if isinstance(t, (int, float)) else None)
+        except (TypeError, ValueError):  # not numbers: the checks' business
+            continue
+        if text is not None:
+            warnings.warn(text, BananagridWarning, stacklevel=4)  # the caller of the class
+
+
 def modelclass(cls=None, /, **options):
     """A frozen dataclass of declared parameters (:func:`param`), with what derives from them:
     ``scene``'s keys, required keys and ``build`` where its :class:`SceneSchema` leaves them
@@ -249,6 +268,7 @@ def modelclass(cls=None, /, **options):
                     object.__setattr__(self, f.name, spec.check(f.name, getattr(self, f.name)))
             if own is not None:
                 own(self)
+            _warn_degrees(self)
 
         __post_init__.__doc__ = "Run the declared parameters' checks, then the class's own rules."
         __post_init__.own = own

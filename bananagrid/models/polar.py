@@ -15,7 +15,7 @@ from ..engine.warp_runtime import WarpContext
 from ..kernels import polar as kernels
 from ..kernels import polar_lanes
 from ..protocol import Extent, KernelBinding, KernelContext, SceneSchema
-from ..validate import BananagridError
+from ..validate import BananagridError, BananagridWarning
 from .base import check_n, check_rng
 from .motion import MotionModel, motion_param, pose_arguments
 from .params import modelclass, param
@@ -224,7 +224,7 @@ class PolarBanana(MotionModel):
             warnings.warn(
                 f"P_sigma (11) is not positive for |phi| > {self.sigma_positive_limit:.4g} rad; "
                 "the improved density is 0 there",
-                stacklevel=4,
+                BananagridWarning, stacklevel=4,
             )
 
     @property

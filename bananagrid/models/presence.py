@@ -32,7 +32,7 @@ from ..engine.warp_runtime import WarpContext, check_threads
 from ..kernels import presence as kp
 from ..results import CellMap, GridPresence
 from ..protocol import CellPlan, SceneKey, SceneSchema
-from ..validate import MAX_CONDITION, BananagridError, covariance, positive, real_array, show
+from ..validate import MAX_CONDITION, BananagridError, covariance, positive, real_array, show, unknown_key
 from .base import check_n, check_rng
 from .params import modelclass, param, plain_parameters
 
@@ -495,7 +495,7 @@ def _check_keys(table: Mapping, allowed, path: str, note: str = "") -> None:
     """Refuse keys outside ``allowed``, naming the key path."""
     for key in table:
         if key not in allowed:
-            raise BananagridError(f"{path}.{key}: unknown key{note}; allowed: {', '.join(allowed)}")
+            raise BananagridError(unknown_key(f"{path}.{key}", key, allowed, note))
 
 
 def _number(value, path: str) -> float:

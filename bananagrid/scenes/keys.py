@@ -13,7 +13,7 @@ import re
 from collections.abc import Mapping
 
 from ..protocol import LATLON, SceneKey
-from ..validate import BananagridError, show
+from ..validate import BananagridError, show, unknown_key
 
 __all__ = [
     "SceneKeyError", "check_keys", "table", "name", "text", "number", "numbers", "pairs", "matrix", "pair",
@@ -33,11 +33,12 @@ class SceneKeyError(Exception):
 
 
 def check_keys(table: dict, allowed, path: str, note: str = "") -> None:
-    """Refuse keys outside ``allowed``, naming the full key path."""
+    """Refuse keys outside ``allowed``, naming the full key path and the nearest allowed key
+    (:func:`~bananagrid.validate.unknown_key`)."""
     for key in table:
         if key not in allowed:
             where = f"{path}.{key}" if path else key
-            raise SceneKeyError(f"{where}: unknown key{note}; allowed: {', '.join(allowed)}")
+            raise SceneKeyError(unknown_key(where, key, allowed, note))
 
 
 def table(doc: dict, key: str, required: bool = False) -> dict:

@@ -32,10 +32,11 @@ from ..domains.angular_lattice import AngularLattice
 from ..domains.grid import Grid
 from ..domains.region import Region
 from ..geo.frame import DEFAULT_MAX_SCALE_ERROR, GeoFrame
+from ..geo.inputs import PASS_MMSI, read_bearings, read_track
 from ..models.registry import MODEL_KINDS, ModelKind, Registry, installed_kinds
 from ..protocol import DensityModel
 from ..recording.core import MAX_ELAPSED_S, colormaps
-from ..validate import BananagridError, BananagridWarning, positive
+from ..validate import DEGREES_MEANT, BananagridError, BananagridWarning, positive
 from . import keys
 from .keys import DTYPES, NAME_PATTERN, SceneKeyError, check_keys, show
 from .presence import LAYER_NAME, array_scene_fields
@@ -49,7 +50,12 @@ __all__ = [
 PARAMETER_KEYS = MappingProxyType({kind: spec.scene.key_names for kind, spec in MODEL_KINDS.on("grid").items()})
 
 TOP_KEYS = ("scene", "grid", "geo", "output", "defaults", "layers", "radial")
-GEO_KEYS = ("origin_latlon", "time", "crs", "max_scale_error")
+GEO_KEYS = ("origin_latlon", "time", "crs", "max_scale_error", "fix_file", "fix_mmsi", "bearings_file")
+#: What a ``[geo] fix_file``'s last fix gives a layer that sets neither the parameter nor its
+#: ``[defaults]``: the motion models' initial heading (its course over ground, true) and speed.
+FIX_PARAMETERS = {"heading": "course", "v0": "speed"}
+#: What a ``[geo] bearings_file`` gives a layer (a bearing fix's stations, bearings and errors).
+BEARING_PARAMETERS = ("sensors", "bearings", "sigmas")
 RADIAL_KEYS = ("layers", "density_bearings_deg", "moments_max_deg", "moments_step_deg")
 SCENE_KEYS = ("name", "title", "description", "times")
 GRID_KEYS = ("x", "y", "step", "dx", "dy")
@@ -103,7 +109,10 @@ class Layer:
                 kwargs["t"] = t
             if "t" not in kwargs:
                 raise BananagridError(f"layer {self.name}: no elapsed time t; pass model(t=...)")
-        return self.model_kind.build(kwargs)
+        with warnings.catch_warnings():
+            # the scene says so once, naming the key and its _deg form (_radian_doubts)
+            warnings.filterwarnings("ignore", message=".*" + re.escape(DEGREES_MEANT), category=BananagridWarning)
+            return self.model_kind.build(kwargs)
 
 
 @dataclass(frozen=True)
@@ -257,7 +266,7 @@ class Scene:
         if not self.gridded:
             warnings.warn(
                 f"{self.source}: --step {step:g} does not apply to a presence scene (angular lattice, "
-                "no grid); it runs at its own array steps", UserWarning, stacklevel=2,
+                "no grid); it runs at its own array steps", BananagridWarning, stacklevel=2,
             )
             return self
         step = positive("step", step)
@@ -302,12 +311,16 @@ def load_scene(path: str | os.PathLike, *, kinds: Registry | None = None, tiled:
         text = data.decode("utf-8")
     except UnicodeDecodeError as exc:
         raise BananagridError(f"{path}: not UTF-8 text (byte {exc.start})") from None
-    return parse_scene(text, source=str(path), kinds=kinds, tiled=tiled)
+    return parse_scene(text, source=str(path), kinds=kinds, tiled=tiled, directory=path.parent)
 
 
 def parse_scene(text: str, source: str = "<string>", *, kinds: Registry | None = None,
-                tiled: bool = False) -> Scene:
+                tiled: bool = False, directory: str | os.PathLike | None = None) -> Scene:
     """Parse and validate scene TOML ``text``; ``source`` names it in error messages.
+
+    ``directory``: where the files a scene names (``[geo] fix_file``, ``bearings_file``) are
+    found when their paths are relative (default: the current directory; :func:`load_scene`
+    passes the scene file's own).
 
     ``tiled``: the scene will be computed in tiles (``bananagrid run --zarr``), so its grid may
     exceed :data:`~bananagrid.domains.grid.MAX_CELLS` (up to ``MAX_TILED_CELLS``).
@@ -326,7 +339,7 @@ def parse_scene(text: str, source: str = "<string>", *, kinds: Registry | None =
     try:
         if "array" in doc:  # the [array] domain instead of [grid]: bananagrid.scenes.presence
             return _build_array(doc, text, source, kinds)
-        return _build(doc, text, source, kinds, tiled)
+        return _build(doc, text, source, kinds, tiled, Path.cwd() if directory is None else Path(directory))
     except SceneKeyError as exc:
         raise BananagridError(f"{source}: {exc}") from None
 
@@ -343,10 +356,12 @@ def _build_array(doc: dict, text: str, source: str, kinds: Registry) -> Scene:
                  colormap="viridis", **fields)
 
 
-def _build(doc: dict, text: str, source: str, kinds: Registry, tiled: bool = False) -> Scene:
+def _build(doc: dict, text: str, source: str, kinds: Registry, tiled: bool = False,
+           directory: Path | None = None) -> Scene:
     """Validate the parsed document table by table and assemble the Scene."""
     check_keys(doc, TOP_KEYS, "")
-    geo, max_scale_error = _geo(keys.table(doc, "geo")) if "geo" in doc else (None, 0.0)
+    geo, max_scale_error, supplied = (_geo(keys.table(doc, "geo"), directory or Path.cwd()) if "geo" in doc
+                                      else (None, 0.0, {}))
     head = keys.table(doc, "scene", required=True)
     check_keys(head, SCENE_KEYS, "scene")
     name = keys.name(head.get("name"), "scene.name", required=True)
@@ -374,7 +389,11 @@ def _build(doc: dict, text: str, source: str, kinds: Registry, tiled: bool = Fal
         )
     shared = keys.parameters(defaults, "defaults", keys.merged_keys(kind.scene.keys for kind in kinds.values()), geo)
     found: list[str] = []
-    layers = _layers(keys.table(doc, "layers", required=True), shared, times, kinds, found, geo)
+    layers = _layers(keys.table(doc, "layers", required=True), shared, times, kinds, found, geo, supplied)
+    if any(where.startswith("geo.bearings_file") for where, _, _ in supplied.values()) and not any(
+            all(p in layer.model_kind.scene.key_names for p in BEARING_PARAMETERS) for layer in layers):
+        raise SceneKeyError("geo.bearings_file: no layer takes bearings (sensors, bearings, sigmas: model "
+                            "\"bearing_fix\"); drop the key or add such a layer")
     radial = _radial(doc["radial"], layers) if "radial" in doc else None
     if geo is not None:  # every UTC time of the scene inside the calendar
         try:
@@ -536,10 +555,12 @@ def _colormaps() -> tuple[str, ...]:
     return colormaps()
 
 
-def _layers(tables: dict, shared: dict, times, kinds: Registry, found: list[str], geo=None) -> tuple[Layer, ...]:
+def _layers(tables: dict, shared: dict, times, kinds: Registry, found: list[str], geo=None,
+            supplied: Mapping | None = None) -> tuple[Layer, ...]:
     """``[layers.NAME]`` tables in file order, each merged over ``[defaults]`` and checked.
 
-    ``shared`` holds the ``[defaults]`` parameters as returned by :func:`keys.parameters`;
+    ``shared`` holds the ``[defaults]`` parameters as returned by :func:`keys.parameters`, and
+    ``supplied`` those that ``[geo]``'s files give (below ``[defaults]``), in the same form;
     likely mistakes are appended to ``found``.
     """
     if not tables:
@@ -551,11 +572,12 @@ def _layers(tables: dict, shared: dict, times, kinds: Registry, found: list[str]
             raise SceneKeyError(f"layers.{show(layer_name)}: a layer name must be letters, digits, _ and -")
         if not isinstance(body, dict):
             raise SceneKeyError(f"{path} = {show(body)}: expected a table [layers.{layer_name}]")
-        layers.append(_layer(layer_name, body, shared, times, kinds, found, geo))
+        layers.append(_layer(layer_name, body, shared, times, kinds, found, geo, supplied))
     return tuple(layers)
 
 
-def _layer(layer_name: str, body: dict, shared: dict, times, kinds: Registry, found: list[str], geo=None) -> Layer:
+def _layer(layer_name: str, body: dict, shared: dict, times, kinds: Registry, found: list[str], geo=None,
+           supplied: Mapping | None = None) -> Layer:
     """Validate one layer: its keys, its values, and its model at every elapsed time; likely
     mistakes (:func:`_radian_doubts`) are appended to ``found``. In a geographic scene its
     bearings are true bearings, turned into grid bearings where they are measured."""
@@ -578,7 +600,12 @@ def _layer(layer_name: str, body: dict, shared: dict, times, kinds: Registry, fo
     # Where each parameter comes from: {param: (key path, value as written, value in SI)}.
     # Defaults of another model kind (k_sigma, variant) do not apply to this layer.
     own = {key.name: key for key in schema.keys}
-    given = {p: v for p, v in shared.items() if p in own}
+    given = {p: v for p, v in (supplied or {}).items() if p in own and _takes_supplied(own, p, body, shared)}
+    given.update({p: v for p, v in shared.items() if p in own})
+    for param, (where, _, si) in list(given.items()):
+        if si is None:  # a file that cannot give what the layer takes from it
+            alias = f" (or {param}_{own[param].alias})" if own[param].alias else ""
+            raise SceneKeyError(f"{path}: {param}: {where}; give {param}{alias} in [{path}] or [defaults]")
     given.update(keys.parameters({k: v for k, v in body.items() if k != "model"}, path, own, geo))
     required = schema.required or ()
     needed = required if times is not None or not schema.timed else (*required, "t")
@@ -636,10 +663,46 @@ def _grid_bearing(geo: GeoFrame, bearing: float, at) -> float:
     return geo.grid_bearing(bearing, *at)
 
 
-def _geo(table: dict) -> tuple[GeoFrame, float]:
+def _takes_supplied(own: Mapping, param: str, body: dict, shared: dict) -> bool:
+    """Whether a layer takes a value of ``[geo]``'s files for ``param``: it sets neither the
+    parameter nor, for the bearing fix's three lists, any of them (a layer's own stations
+    with the file's bearings would mix two sources)."""
+    group = BEARING_PARAMETERS if param in BEARING_PARAMETERS else (param,)
+    written = {keys.base_key(k) for k in body} | set(shared)
+    return not any(p in written for p in group)
+
+
+def _geo(table: dict, directory: Path) -> tuple[GeoFrame, float, dict]:
     """``[geo]``: the origin in latitude and longitude, the UTC time of t = 0, the projection
-    and the largest scale error it may have over the grid."""
+    and the largest scale error it may have over the grid; with them the parameters the files
+    it names give the layers (``{param: (key path, written, SI value)}``): a ``fix_file``'s
+    course and speed (:data:`FIX_PARAMETERS`), a ``bearings_file``'s stations, bearings and
+    errors (:data:`BEARING_PARAMETERS`)."""
     check_keys(table, GEO_KEYS, "geo")
+    fix = _fix_file(table, directory) if "fix_file" in table else None
+    if "fix_mmsi" in table and fix is None:
+        raise SceneKeyError(f"geo.fix_mmsi = {show(table['fix_mmsi'])}: picks a vessel of geo.fix_file's AIS reports; "
+                            "give geo.fix_file too")
+    bearings = _bearings_file(table, directory) if "bearings_file" in table else None
+    supplied: dict = {}
+    if fix is not None:
+        for key in ("origin_latlon", "time"):
+            if key in table:
+                raise SceneKeyError(
+                    f"geo.{key} = {show(table[key])}: given with geo.fix_file, whose last fix is the origin and whose "
+                    "time is t = 0; give one or the other"
+                )
+        if abs(fix.lat) == 90.0:
+            raise SceneKeyError(f"geo.fix_file = {show(table['fix_file'])}: its last fix ({fix.source}) lies at a "
+                                "pole, where true north has no direction; a scene's origin needs a latitude in (-90, 90)")
+        where = f"geo.fix_file ({show(table['fix_file'])})"  # a value's key path in messages: the file's field
+        table = {**table, "origin_latlon": [fix.lat, fix.lon], "time": fix.time}
+        supplied["heading"] = ((f"{where}: course_deg", math.degrees(fix.course), fix.course) if fix.course is not None
+                               else (f"{where} gives no course (one point, or its last two at one place)", None, None))
+        supplied["v0"] = ((f"{where}: speed (m/s)", fix.speed, fix.speed) if fix.speed is not None
+                          else (f"{where} gives no speed (one point without one)", None, None))
+    elif bearings is not None and "time" not in table:
+        table = {**table, "time": max(bearings.times)}  # the bearings' own time, as a fix's
     if "origin_latlon" not in table:
         raise SceneKeyError("geo.origin_latlon: missing; expected [latitude, longitude] in degrees of the local origin")
     lat, lon = keys.pair(table, "origin_latlon", "geo", unit="degrees")
@@ -658,9 +721,61 @@ def _geo(table: dict) -> tuple[GeoFrame, float]:
     if not 0.0 < limit < 1.0:
         raise SceneKeyError(f"geo.max_scale_error = {show(table['max_scale_error'])}: must lie in (0, 1)")
     try:  # GeoFrame checks the crs (a string it knows) and the time
-        return GeoFrame(lat, lon, time=table.get("time"), crs=table.get("crs", "aeqd")), limit
+        frame = GeoFrame(lat, lon, time=table.get("time"), crs=table.get("crs", "aeqd"))
     except BananagridError as exc:
         raise SceneKeyError(_geo_message(str(exc))) from None
+    if bearings is not None:
+        where = f"geo.bearings_file ({show(table['bearings_file'])})"
+        try:
+            x, y = frame.local(bearings.lat, bearings.lon)
+        except BananagridError as exc:
+            raise SceneKeyError(f"{where}: a station: {exc}") from None
+        stations = [[float(a), float(b)] for a, b in zip(bearings.lat, bearings.lon)]
+        supplied["sensors"] = (f"{where}: stations", stations, [(float(a), float(b)) for a, b in zip(x, y)])
+        supplied["bearings"] = (f"{where}: bearing_deg", [math.degrees(b) for b in bearings.bearings],
+                                bearings.bearings.tolist())
+        supplied["sigmas"] = (f"{where}: sigma_deg", [math.degrees(s) for s in bearings.sigmas], bearings.sigmas.tolist())
+    return frame, limit, supplied
+
+
+def _input_path(table: dict, key: str, directory: Path) -> Path:
+    """The file ``[geo] KEY`` names, relative to the scene's directory."""
+    value = table[key]
+    if not isinstance(value, str) or not value.strip():
+        raise SceneKeyError(f"geo.{key} = {show(value)}: expected a file name (relative to the scene file)")
+    return directory / value
+
+
+def _fix_file(table: dict, directory: Path):
+    """The last fix of ``geo.fix_file`` (of ``geo.fix_mmsi``'s AIS reports where given)."""
+    mmsi = table.get("fix_mmsi")
+    if mmsi is not None and (isinstance(mmsi, bool) or not isinstance(mmsi, int) or not 0 < mmsi < 10**9):
+        raise SceneKeyError(f"geo.fix_mmsi = {show(mmsi)}: expected a vessel's MMSI, an integer of up to 9 digits")
+    path = _input_path(table, "fix_file", directory)
+    try:
+        return read_track(path, mmsi=mmsi).last_fix()
+    except BananagridError as exc:
+        rest = str(exc).removeprefix(f"{path}: ")
+        if rest.startswith("mmsi = "):  # the vessel asked for: that key's error
+            raise SceneKeyError(f"geo.fix_mmsi = {show(mmsi)}: {rest.partition(': ')[2]}") from None
+        message = _file_message(str(exc), path).replace(PASS_MMSI, "give geo.fix_mmsi, the MMSI of the vessel wanted")
+        raise SceneKeyError(f"geo.fix_file = {show(table['fix_file'])}: {message}") from None
+
+
+def _bearings_file(table: dict, directory: Path):
+    """The bearings of ``geo.bearings_file``."""
+    path = _input_path(table, "bearings_file", directory)
+    try:
+        return read_bearings(path)
+    except BananagridError as exc:
+        raise SceneKeyError(f"geo.bearings_file = {show(table['bearings_file'])}: {_file_message(str(exc), path)}") from None
+
+
+def _file_message(message: str, path: Path) -> str:
+    """A reader's ``PATH: line N: ...`` without the path the key already names (kept where the
+    file itself is missing or unreadable: the path says where it was looked for)."""
+    rest = message.removeprefix(f"{path}: ")
+    return rest if rest.startswith("line ") else message
 
 
 def _geo_message(message: str, other: str = "[geo]: ") -> str:
@@ -680,7 +795,7 @@ def _radian_doubts(given: dict, own: Mapping, t: float | None) -> list[str]:
     doubts = []
     for param, (where, written, si) in given.items():
         spec = own.get(param)
-        if spec is None or spec.alias != "deg" or where.endswith("_deg"):
+        if spec is None or spec.alias != "deg" or where.endswith("_deg") or where.startswith("geo."):
             continue
         values = si if isinstance(si, list) else [si]
         if spec.unit == "rad" and any(abs(v) > 2.0 * math.pi for v in values):

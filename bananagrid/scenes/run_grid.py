@@ -250,7 +250,7 @@ def compute(scene: Scene, layer: Layer, t: float, *, threads: int | None = None,
     start = time.perf_counter()
     model = layer.model(t) if model is None else model
     raster = rasterise(model, scene.grid, quantity=quantity, dtype=np.dtype(scene.dtype), threads=threads,
-                       max_seconds=max_seconds)
+                       max_seconds=max_seconds, min_mass=0.0)  # the run warns itself, naming the edges
     if scene.normalise:
         if not raster.mass > 0.0:
             raise BananagridError(

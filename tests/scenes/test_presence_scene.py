@@ -154,7 +154,8 @@ BAD = [
     ("uniform with components", ('kind = "mixture"', 'kind = "uniform"'),
      'presence.components: a uniform law has no components (kind = "uniform")'),
     ("component key of another geometry", ("sd_y = 0.2", "sd_y = 0.2\nsd_z = 0.1"),
-     'presence.components.a.sd_z: unknown key (geometry "plane": axes x, y); allowed: weight, mean, cov, sd_x, sd_y, rho'),
+     'presence.components.a.sd_z: unknown key (geometry "plane": axes x, y); did you mean "sd_y"? allowed: weight, '
+     'mean, cov, sd_x, sd_y, rho'),
     ("weight", ("weight = 0.6", "weight = 1.6"), "presence.components.a.weight = 1.6: must be in [0, 1]"),
     ("weights that do not sum to 1", ("weight = 0.6", "weight = 0.5"),
      "presence.components: the weights (a = 0.5, b = 0.4) sum to 0.9, not 1 (allowed error 1e-09); divide them by their sum"),
