@@ -60,7 +60,7 @@ __all__ = ["main", "build_parser"]
 OK, USER_ERROR, INTERRUPTED = 0, 2, 130
 
 
-#: ``bananagrid inspect --json``: what scripts get (the help's epilog; README repeats it).
+#: ``bananagrid inspect --json``: what scripts get (the help's epilog; the docs repeat it).
 INSPECT_JSON_SCHEMA = """\
 --json prints a list, one object per file (numbers as numbers, whole counts as integers, NaN as null):
   path, application_id, recording_id, blueprint (bool)

@@ -120,7 +120,7 @@ def test_batches_on_the_gpu_match_the_cpu(dtype):
 #: Cell probabilities: the CAT's exact rule (``kernels/cat_cells.py``) walks lines through the
 #: grid and integrates between the turn rates where they pass a cell corner; a corner pass that
 #: moves by an ulp moves a sub-piece's end, so GPU and CPU may differ by up to the rule's stated
-#: error on either side (5e-5 of a cell + 1e-12, README): 1e-4 relative. Every other model's
+#: error on either side (5e-5 of a cell + 1e-12, docs): 1e-4 relative. Every other model's
 #: cells are fixed tensor Gauss-Legendre rules over its densities: the densities' agreement.
 CELL_RTOL = {"cat": 1e-4}
 
@@ -220,7 +220,7 @@ def _mixtures():
 #: Presence cells: each component's adaptive Gauss-Kronrod integral stops once |K15 - G7| <=
 #: rtol |K15|; an ulp of difference can stop a panel one split earlier or later on either
 #: device, so the two agree to the stated accuracy (1e-6 relative for cells holding 1e-9 of the
-#: mass in float64, README), not to the ulp; float32 to its rtol, FLOAT32_RTOL, times 10.
+#: mass in float64, docs), not to the ulp; float32 to its rtol, FLOAT32_RTOL, times 10.
 PRESENCE_RTOL = {np.float64: 2e-6, np.float32: 10 * FLOAT32_RTOL}
 
 
@@ -254,7 +254,7 @@ def test_presence_grids_on_the_gpu_match_the_cpu(dtype):
     print(f"cuda vs cpu presence grid {np.dtype(dtype).name}: max relative {rel:.2e} over {int(inside.sum())} cells "
           f"holding >= 1e-9, sums {g.sum()!r} vs {c.sum()!r}")
     # float64: the same closed form (Genz's BVN) on both devices, a few ulp amplified by the
-    # orthant differences of neighbouring corners (the README's 1e-9 for cells holding 1e-9);
+    # orthant differences of neighbouring corners (the docs' 1e-9 for cells holding 1e-9);
     # float32: float32 output of the float64 arithmetic, so its rounding, 6e-8, times a margin.
     assert rel <= {np.float64: 1e-9, np.float32: 1e-6}[dtype], rel
     d, e = np.asarray(gpu.density, dtype=float), np.asarray(cpu.density, dtype=float)

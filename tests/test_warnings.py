@@ -104,7 +104,7 @@ def test_plausible_values_do_not_warn():
         warnings.simplefilter("error", bg.BananagridWarning)
         _cat(sigma_omega=0.5, sigma_heading=0.3)  # 0.5 rad/s over 10 s: 5 rad, less than a turn
         bg.Pose(heading=-2.0 * math.pi)  # a full turn exactly is a heading still
-        bg.rasterise(_cat(), bg.Grid.from_bounds(x=(-3000.0, 3000.0), y=(-200.0, 3400.0), step=50.0))  # the README's grid
+        bg.rasterise(_cat(), bg.Grid.from_bounds(x=(-3000.0, 3000.0), y=(-200.0, 3400.0), step=50.0))  # the docs' grid
         bg.rasterise(_cat(), bg.Grid.from_bounds(x=(-100.0, 100.0), y=(-100.0, 100.0), step=10.0), min_mass=0.0)
 
 

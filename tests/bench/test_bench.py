@@ -136,7 +136,7 @@ def test_bench_refuses_an_unwritable_json_path_before_timing(tmp_path, capsys, m
 def test_bench_times_cell_probabilities_against_their_densities(tmp_path, monkeypatch, capsys):
     """The cell-probability rows: both dtypes, a baseline on a sample of cells, and each row's
     cost against the densities on the same grid (timed in the same run; CAT's lines cost more
-    than its centre densities, as the README says)."""
+    than its centre densities, as the docs say)."""
     monkeypatch.setattr(bench._ButterlyCellJob, "SIDE", 64)
     out = tmp_path / "bench.json"
     argv = ["--kernels", "cat-cells,butterly-cells", "--repeat", "1", "--threads", "1", "--baseline-stride", "4",

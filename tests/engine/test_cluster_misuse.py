@@ -242,7 +242,7 @@ def test_the_cli_names_the_option_and_exits_2_within_the_default_timeout(capsys,
                   "running there? a slow one: a longer connect timeout)\n"
     assert elapsed < TIMEOUT + SLACK + 5.0  # + loading the scene and planning its tiles (under 2 s measured)
     assert list(tmp_path.iterdir()) == []
-    assert CONNECT_SECONDS == 10.0  # the documented default (README, --help)
+    assert CONNECT_SECONDS == 10.0  # the documented default (docs, --help)
 
 
 @pytest.mark.parametrize("argv, message", [

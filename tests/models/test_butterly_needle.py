@@ -19,7 +19,7 @@ from hypothesis import HealthCheck, given, settings, strategies as st
 import bananagrid as bg
 from butterly_oracle import needle_density
 
-#: The README's accuracy statement: relative error 1e-9 wherever the density is a normal
+#: The docs' accuracy statement: relative error 1e-9 wherever the density is a normal
 #: float64 number.
 RTOL = 1e-9
 TINY = np.finfo(float).tiny
@@ -100,7 +100,7 @@ def test_needle_grid_cells_near_a_cusp(ratio):
     """The same in rasterise's own paths, tiles (rules up to 2048 nodes, r / sigma_min = 100)
     and each cell walking from its peak beyond (3000): a grid about a cusp of a start at
     rho = 1 - 1e-8, against the oracle at 60 cells where the density is above 1e-12 of its peak
-    (the README's grid statement)."""
+    (the docs' grid statement)."""
     sx, sy, rho = 100.0, 250.0, 1.0 - 1e-8
     cov = [[sx * sx, rho * sx * sy], [rho * sx * sy, sy * sy]]
     s_min, s_max, q1, q2 = frame(cov)

@@ -128,7 +128,7 @@ def test_both_sides_of_the_caustic(name):
 @pytest.mark.parametrize("name", FOLDS)
 def test_float32_near_the_caustic(name):
     """float32 against float64 at the fold points from 1e-6 v0 t: within max(2e-4, 4e-8 v0 t / d)
-    (the README's statement). float32 coordinates carry 6e-8 relative, so the distance to the
+    (the docs' statement). float32 coordinates carry 6e-8 relative, so the distance to the
     caustic is known to about 6e-8 v0 t, and the density goes like d^(-1/2): half of that
     relative error, 3e-8 v0 t / d, plus the kernel's own float32 error away from folds."""
     params = FOLDS[name]

@@ -71,7 +71,7 @@ class Case:
     #: pdf against rasterise: 0 is bit for bit; Butterly's grid kernel sums its series about tile
     #: centres (a different summation order from the points kernel) and zeroes cells it proves
     #: below 1e-13 of the peak: 1e-11 relative where the density exceeds 1e-12 of its maximum
-    #: (its stated agreement, README). Thread counts change no bit of any model.
+    #: (its stated agreement, docs). Thread counts change no bit of any model.
     pdf_rtol: float = 0.0
     pose: dict | None = None  # pose of the rays for radial moments (None: the model's own)
     kinds: bg.models.registry.Registry = field(default=bg.MODEL_KINDS)
@@ -341,7 +341,7 @@ def test_radial_moments_along_rays(name):
 #: for exp's amplification of the quadratic form's rounding (|q| < 60 at these points).
 ORACLE_RTOL = 1e-12
 #: A cell's relative error in float64 is below 1e-6 wherever it holds 1e-9 of the mass (the
-#: quadrature's stated bound, README), so sums of cells agree with an independent p(S) to 1e-6.
+#: quadrature's stated bound, docs), so sums of cells agree with an independent p(S) to 1e-6.
 CELL_SUM_RTOL = 1e-6
 
 
