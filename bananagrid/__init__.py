@@ -16,6 +16,8 @@ from .engine.batch import pdf_batch, rasterise_batch
 from .engine.batch_shards import pdf_batch_shards, rasterise_batch_shards
 from .engine.cluster import dask_client
 from .engine.rasterise import rasterise
+from .evidence import (AreaSearch, BearingReport, Exclusion, PolarPosterior, PositionReport, Posterior, TrackSearch,
+                       posterior)
 from .geo.frame import GeoFrame
 from .models.base import Model
 from .models.bearing import BearingFix, bearing_to
@@ -49,6 +51,9 @@ __all__ = [
     # analysis
     "radial_moments", "radial_density", "RadialMoments", "RadialDensity", "compare", "Comparison",
     "bearing_to", "containment", "containment_radius",
+    # evidence on the map
+    "AreaSearch", "TrackSearch", "PositionReport", "BearingReport", "Exclusion", "posterior", "Posterior",
+    "PolarPosterior",
     # where to look next
     "allocate", "Allocation", "DetectionLaw", "detection_law",
     # scenes

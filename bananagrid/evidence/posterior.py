@@ -1,0 +1,400 @@
+"""``posterior``: the map of cell probabilities after evidence at the map's own time.
+
+For a prior with density p and cell probabilities P_c (the prior's own cell rule: exact for
+CAT, Gaussian mixtures and uniform laws, Gauss-Legendre for the others), and a likelihood L
+(the product of every evidence's factor), each cell's posterior mass is
+
+    Q_c = int_c p L = P_c f_c,    f_c = int_c p L / int_c p,
+
+and the posterior is Q_c / sum Q. Where every factor is constant on a cell (a grid cell wholly
+inside or outside each polygon, away from a definite-range track's edge) f_c is that constant
+and Q_c = P_c L exactly. Elsewhere f_c is the density-weighted mean of L over n x n equal
+sub-cells: the sub-cell's exact area fraction inside each polygon (a grid's rectangles;
+:meth:`~bananagrid.evidence.geometry.Polygon.fraction`), the factor at the sub-cell's centre for
+the others, weighted by p at the centre. Whatever p does inside the cell, f_c lies between the
+least and greatest products of the factors' bounds on the cell (a weighted mean of values
+between them), so a cell whose only varying factors are polygons (1 - POD inside, 1 outside)
+or a definite-range corridor errs by at most P_c (max L - min L) there; their sum is
+``provenance["posterior"]["boundary_mass"]``, a bound on the absolute error of the
+unnormalised posterior. For p and L smooth on the cell the rule's error is O((h / n)^2) of
+the cell's mass (midpoint rule; measured in the tests).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+
+from ..domains.grid import Grid
+from ..domains.polar_lattice import PolarLattice
+from ..engine.rasterise import rasterise
+from ..models.presence import grid_probabilities
+from ..results import PolarRaster, Raster
+from ..validate import BananagridError, positive_int
+from .geometry import distance_to_track
+from .reports import BearingReport, Exclusion, PositionReport
+from .searches import AreaSearch, TrackSearch
+
+__all__ = ["posterior", "Posterior", "PolarPosterior", "MIN_NORMALISER", "SUBDIVISIONS", "EVIDENCE_TYPES"]
+
+#: Below this the evidence contradicts the prior: the searches would have found the target almost
+#: surely, or a report lies where the prior holds no mass (the map would be rounding noise).
+MIN_NORMALISER = 1e-12
+#: Sub-cells per side of a cell on which a factor varies.
+SUBDIVISIONS = 8
+#: Sub-cell centres per evaluation of the prior's density (bounds the arrays' memory).
+POINT_CHUNK = 2**18
+#: Registry kinds whose map is an approximation without a path per parameter: earlier evidence
+#: cannot be carried to the map's time through them, with the exact model to use instead.
+NO_PATHS = {"polar": "bg.CAT (exact, a path per (a, omega))"}
+EVIDENCE_TYPES = (AreaSearch, TrackSearch, PositionReport, BearingReport, Exclusion)
+
+
+@dataclass(frozen=True)
+class Posterior(Raster):
+    """A posterior map on a grid: a :class:`~bananagrid.Raster` of cell probabilities (POC,
+    ``quantity == "probability"``, summing to one over the grid; ``mass`` is the unnormalised
+    sum of P_c f_c), with what the searches would have found.
+
+    Attributes
+    ----------
+    pos : float
+        Probability that the searches together would have detected the target, under the prior
+        restricted to the grid: sum_c P_c POD_c / sum_c P_c.
+    search_pos : tuple of float
+        Each search's own POS, in the order of the evidence's searches.
+    pod : ndarray, shape (ny, nx)
+        The cumulative POD of each cell: 1 - the density-weighted mean over the cell of the
+        product of every search's 1 - POD.
+    normaliser : float
+        sum_c P_c f_c / sum_c P_c: the probability of the evidence under the prior (for searches
+        alone, 1 - pos), with reports' likelihoods scaled to a peak of at most one.
+    prior : ndarray, shape (ny, nx)
+        The prior's cell probabilities P_c.
+    """
+
+    pos: float = math.nan
+    search_pos: tuple = ()
+    pod: np.ndarray | None = field(default=None, repr=False)
+    normaliser: float = math.nan
+    prior: np.ndarray | None = field(default=None, repr=False)
+
+
+@dataclass(frozen=True)
+class PolarPosterior(PolarRaster):
+    """A posterior on a polar lattice: ``probability`` holds the posterior cell probabilities
+    (summing to one), ``density`` the prior's density at the cell centres times the cells'
+    f_c / normaliser; attributes as :class:`Posterior`."""
+
+    pos: float = math.nan
+    search_pos: tuple = ()
+    pod: np.ndarray | None = field(default=None, repr=False)
+    normaliser: float = math.nan
+    prior: np.ndarray | None = field(default=None, repr=False)
+
+
+def posterior(prior, grid, evidence=(), *, subdivisions: int = SUBDIVISIONS, threads=None):
+    """The posterior cell probabilities of ``prior`` on ``grid`` after ``evidence``, at the
+    prior's own time.
+
+    Parameters
+    ----------
+    prior : model
+        A CAT, PolarBanana, Butterly, BearingFix, GaussianMixture (2-D) or UniformPresence
+        (2-D), or any model of the protocol with cell probabilities. A model with a time ``t``
+        is the target's position law at ``t``; one without (the presence laws, a bearing fix) is
+        a stationary target's, at every time.
+    grid : Grid or PolarLattice
+    evidence : sequence
+        :class:`AreaSearch`, :class:`TrackSearch`, :class:`PositionReport`,
+        :class:`BearingReport`, :class:`Exclusion`. A search or report whose time span holds the
+        prior's ``t`` is evidence at the map's time; the target is taken to stay where it is
+        while a search lasts. Earlier evidence is refused for now (its carry-forward along the
+        model's paths is the kernels' work), later evidence always.
+    subdivisions : int, default 8
+        Sub-cells per side of a cell on which a factor varies (module docstring).
+    threads : int, optional
+        CPU threads of the prior's cell probabilities.
+
+    Returns
+    -------
+    Posterior or PolarPosterior
+
+    Raises
+    ------
+    BananagridError
+        Evidence of the wrong type, at a time the map cannot take, or contradicting the prior
+        (normaliser below :data:`MIN_NORMALISER`).
+    """
+    n = positive_int("subdivisions", subdivisions)
+    evidence = _checked_evidence(prior, evidence)
+    if isinstance(grid, PolarLattice):
+        return _polar_posterior(prior, grid, evidence, n, threads)
+    if not isinstance(grid, Grid):
+        raise BananagridError(f"grid = {grid!r}: expected a bananagrid Grid or PolarLattice")
+    cells, provenance, frame = _grid_prior(prior, grid, threads)
+    ny, nx = grid.shape
+    x_edges = grid.origin[0] + grid.dx * np.arange(nx + 1)
+    y_edges = grid.origin[1] + grid.dy * np.arange(ny + 1)
+    factors = [_GridFactor(e, grid, x_edges, y_edges) for e in evidence]
+    varying = np.zeros((ny, nx), dtype=bool)
+    for factor in factors:
+        varying |= factor.varying
+    # f of every factor and of the searches' product; constant cells first
+    per = [np.array(f.constant, dtype=float) for f in factors]
+    rows, cols = np.nonzero(varying)
+    if rows.size:
+        means = _varying_means(prior, factors, x_edges, y_edges, rows, cols, n, cells[rows, cols] > 0.0)
+        for k in range(len(factors)):
+            per[k][rows, cols] = means["each"][k]
+    total = _product(per, (ny, nx))
+    searches = [k for k, e in enumerate(evidence) if e.kind == "search"]
+    no_find = _product([per[k] for k in searches], (ny, nx))
+    if rows.size:
+        total[rows, cols] = means["all"]
+        no_find[rows, cols] = means["searches"]
+    bound = _boundary_mass(factors, cells, varying)
+    return _finish(Posterior, dict(grid=grid, frame=frame), cells, total, no_find, per, searches, evidence,
+                   provenance, bound, n)
+
+
+def _product(arrays, shape):
+    out = np.ones(shape)
+    for a in arrays:
+        out = out * a
+    return out
+
+
+def _finish(cls, where, cells, total, no_find, per, searches, evidence, provenance, bound, n):
+    mass = float(np.sum(cells))
+    if not mass > 0.0:
+        raise BananagridError("grid: the prior holds no mass on it; the posterior needs the prior's support")
+    q = cells * total
+    q_sum = float(np.sum(q))
+    normaliser = q_sum / mass
+    if not normaliser >= MIN_NORMALISER:
+        raise BananagridError(
+            f"evidence: the probability of the evidence under the prior is {normaliser:.3g}, below "
+            f"{MIN_NORMALISER:g}; the evidence contradicts the prior (the searches would almost surely have found "
+            "the target, or a report lies where the prior holds no mass); check the evidence's places and times")
+    pod = 1.0 - no_find
+    pos = float(np.sum(cells * pod)) / mass
+    search_pos = tuple(float(np.sum(cells * (1.0 - per[k]))) / mass for k in searches)
+    info = {"pos": pos, "search_pos": list(search_pos), "normaliser": normaliser, "prior_mass": mass,
+            "boundary_mass": bound, "subdivisions": n, "evidence": [e.describe() for e in evidence]}
+    provenance = {**provenance, "posterior": info}
+    common = dict(pos=pos, search_pos=search_pos, pod=pod, normaliser=normaliser, prior=cells,
+                  provenance=provenance, normalised=True, mass=q_sum)
+    if cls is Posterior:
+        return Posterior(values=q / q_sum, quantity="probability", **where, **common)
+    return PolarPosterior(probability=q / q_sum, **where, **common)
+
+
+def _checked_evidence(prior, evidence) -> list:
+    if isinstance(evidence, EVIDENCE_TYPES):
+        evidence = [evidence]
+    try:
+        evidence = list(evidence)
+    except TypeError:
+        raise BananagridError(f"evidence = {evidence!r}: expected a list of bananagrid evidence") from None
+    t_map = getattr(prior, "t", None)
+    for k, e in enumerate(evidence):
+        if not isinstance(e, EVIDENCE_TYPES):
+            raise BananagridError(f"evidence[{k}] = {e!r}: expected one of "
+                                  f"{', '.join('bg.' + c.__name__ for c in EVIDENCE_TYPES)}")
+        span = e.time_span
+        if span is None or t_map is None:
+            continue  # land holds at every time; a stationary target's law at every time
+        t0, t1 = span
+        if t0 > t_map:
+            raise BananagridError(f"evidence[{k}].t = {t0!r}: after the map's time t = {t_map!r}; evidence must not "
+                                  "be later than the map it updates")
+        if t1 < t_map:
+            kind = getattr(prior, "kind", None)
+            if kind in NO_PATHS:
+                raise BananagridError(
+                    f"evidence[{k}].t = {t1!r}: earlier than the map's time t = {t_map!r}; {type(prior).__name__} is "
+                    "an approximation with no path per parameter, so earlier evidence cannot be carried to t: use "
+                    f"{NO_PATHS[kind]} or give evidence at t")
+            raise BananagridError(
+                f"evidence[{k}].t = {t1!r}: earlier than the map's time t = {t_map!r}; carrying earlier evidence "
+                f"through {type(prior).__name__}'s paths is not yet available: give evidence at t")
+    return evidence
+
+
+def _grid_prior(prior, grid: Grid, threads):
+    """The prior's cell probabilities on ``grid``, its provenance and frame."""
+    kind = getattr(prior, "kind", None)
+    if not callable(getattr(prior, "bind", None)) and kind == "mixture":  # a presence law: its exact rectangles
+        presence = grid_probabilities(prior, grid, threads=threads)
+        return np.asarray(presence.probability, dtype=float), dict(presence.provenance), None
+    if not callable(getattr(prior, "bind", None)) and kind == "uniform":
+        return _uniform_cells(prior, grid), {"model": type(prior).__name__, **prior.parameters()}, None
+    raster = rasterise(prior, grid, quantity="probability", threads=threads)
+    return np.asarray(raster.values, dtype=float), dict(raster.provenance), raster.frame
+
+
+def _uniform_cells(law, grid: Grid) -> np.ndarray:
+    """Exact cell probabilities of a law uniform on a box: overlap area / box area."""
+    if law.dim != 2:
+        raise BananagridError(f"prior: a {law.dim}-D uniform law; a map on a grid needs a 2-D one")
+    (bx0, bx1), (by0, by1) = law.region.bounds[0], law.region.bounds[1]
+    xe = grid.origin[0] + grid.dx * np.arange(grid.nx + 1)
+    ye = grid.origin[1] + grid.dy * np.arange(grid.ny + 1)
+    wx = np.clip(np.minimum(xe[1:], bx1) - np.maximum(xe[:-1], bx0), 0.0, None)
+    wy = np.clip(np.minimum(ye[1:], by1) - np.maximum(ye[:-1], by0), 0.0, None)
+    return np.outer(wy, wx) / ((bx1 - bx0) * (by1 - by0))
+
+
+class _GridFactor:
+    """One evidence's factor on a grid: its value on the cells where it is constant, which
+    cells it varies on, its mean over sub-cells, and its bounds on a varying cell."""
+
+    def __init__(self, e, grid: Grid, x_edges, y_edges):
+        self.e = e
+        shape = grid.shape
+        if isinstance(e, (AreaSearch, Exclusion)):
+            regions = [e.region] if isinstance(e, AreaSearch) else list(e.regions)
+            self.regions, self.low = regions, 1.0 - e.pod
+            self.constant = np.ones(shape)
+            self.varying = np.zeros(shape, dtype=bool)
+            xc, yc = grid.x[None, :], grid.y[:, None]
+            for region in regions:
+                touched = region.cells_touched(x_edges, y_edges)
+                inside = region.contains(xc, yc) & ~touched
+                self.constant = np.where(inside, self.constant * self.low, self.constant)
+                self.varying |= touched
+            self.indicator = True
+        elif isinstance(e, TrackSearch) and e.law == "definite":
+            # the corridor's edge is within half a diagonal of a cell centre it crosses
+            half_diagonal = 0.5 * math.hypot(grid.dx, grid.dy)
+            xc, yc = np.meshgrid(grid.x, grid.y)
+            dist = distance_to_track(np.column_stack((xc.ravel(), yc.ravel())), e.track[:, :2]).reshape(shape)
+            w2 = 0.5 * e.sweep_width
+            self.varying = np.abs(dist - w2) <= half_diagonal * (1.0 + 1e-9)
+            self.constant = np.where(dist < w2, 0.0, 1.0)
+            self.regions, self.low, self.indicator = None, 0.0, True
+        else:
+            self.varying = np.ones(shape, dtype=bool)
+            self.constant = np.ones(shape)
+            self.regions, self.low, self.indicator = None, 0.0, False
+
+    def sub_means(self, x0, x1, y0, y1) -> np.ndarray:
+        """The factor's mean over each sub-rectangle: exact for polygons, the centre's value else."""
+        if self.regions is not None:
+            out = np.ones(x0.shape)
+            for region in self.regions:
+                out = out * (1.0 - (1.0 - self.low) * region.fraction(x0, x1, y0, y1))
+            return out
+        return self.e.likelihood(0.5 * (x0 + x1), 0.5 * (y0 + y1))
+
+
+def _varying_means(prior, factors, x_edges, y_edges, rows, cols, n, has_mass):
+    """Density-weighted means over each varying cell of every factor, of their product and of
+    the searches' product. Cells without prior mass (``has_mass`` False) are not weighted by
+    the density (their posterior is 0 whatever the weights): their means are area means, for
+    the POD map."""
+    k_cells = rows.size
+    dx = x_edges[1] - x_edges[0]
+    dy = y_edges[1] - y_edges[0]
+    u = np.arange(n)
+    each = [np.empty(k_cells) for _ in factors]
+    all_mean, search_mean = np.empty(k_cells), np.empty(k_cells)
+    is_search = [f.e.kind == "search" for f in factors]
+    per_chunk = max(1, POINT_CHUNK // (n * n))
+    for start in range(0, k_cells, per_chunk):
+        sl = slice(start, min(start + per_chunk, k_cells))
+        r, c = rows[sl], cols[sl]
+        # sub-cell edges from the cell's own edges (the last sub-cell ends on the cell's edge)
+        sx = x_edges[c][:, None] + dx * u[None, :] / n
+        sx1 = np.where(u[None, :] == n - 1, x_edges[c + 1][:, None], x_edges[c][:, None] + dx * (u[None, :] + 1) / n)
+        sy = y_edges[r][:, None] + dy * u[None, :] / n
+        sy1 = np.where(u[None, :] == n - 1, y_edges[r + 1][:, None], y_edges[r][:, None] + dy * (u[None, :] + 1) / n)
+        x0 = np.broadcast_to(sx[:, None, :], (len(r), n, n)).reshape(len(r), -1)
+        x1 = np.broadcast_to(sx1[:, None, :], (len(r), n, n)).reshape(len(r), -1)
+        y0 = np.broadcast_to(sy[:, :, None], (len(r), n, n)).reshape(len(r), -1)
+        y1 = np.broadcast_to(sy1[:, :, None], (len(r), n, n)).reshape(len(r), -1)
+        weights = _weights(prior, 0.5 * (x0 + x1), 0.5 * (y0 + y1), has_mass[sl])
+        means = [f.sub_means(x0, x1, y0, y1) for f in factors]
+        total = np.ones_like(weights)
+        searches = np.ones_like(weights)
+        for k, m in enumerate(means):
+            each[k][sl] = _weighted(weights, m)
+            total = total * m
+            if is_search[k]:
+                searches = searches * m
+        all_mean[sl] = _weighted(weights, total)
+        search_mean[sl] = _weighted(weights, searches)
+    return {"each": each, "all": all_mean, "searches": search_mean}
+
+
+def _weights(prior, x, y, has_mass) -> np.ndarray:
+    """The prior's density at sub-cell centres, rows of cells; a row with no finite positive
+    weight (a cell whose mass sits between the centres, or on an infinite caustic) gets equal
+    weights, so that its mean is the plain area mean."""
+    w = np.ones(x.shape)
+    if has_mass.any():
+        w[has_mass] = np.asarray(prior.pdf(x[has_mass].ravel(), y[has_mass].ravel()), dtype=float).reshape(
+            int(has_mass.sum()), -1)
+    bad = ~np.isfinite(w).all(axis=1) | ~(np.sum(np.where(np.isfinite(w), w, 0.0), axis=1) > 0.0)
+    w = np.where(bad[:, None], 1.0, w)
+    return w
+
+
+def _weighted(weights, values) -> np.ndarray:
+    return np.sum(weights * values, axis=1) / np.sum(weights, axis=1)
+
+
+def _boundary_mass(factors, cells, varying) -> float | None:
+    """sum over varying cells of P_c (prod of the factors' highs - prod of their lows) when
+    every varying factor is an indicator (polygons, definite corridors), else None (no bound
+    without bounds of the smooth factors on each cell)."""
+    if not all(f.indicator for f in factors if f.varying.any()):
+        return None
+    high = np.ones(cells.shape)
+    low = np.ones(cells.shape)
+    for f in factors:
+        high = high * np.where(f.varying, 1.0, f.constant)
+        low = low * np.where(f.varying, f.low, f.constant)
+    return float(np.sum(np.where(varying, cells * (high - low), 0.0)))
+
+
+def _polar_posterior(prior, lattice: PolarLattice, evidence, n, threads):
+    """On a polar lattice: every cell by the rule of n x n sub-cells in (range, bearing), each
+    weighted by its exact area times the density at its centre, each factor at the centre."""
+    raster = rasterise(prior, lattice, threads=threads)
+    cells = np.asarray(raster.probability, dtype=float)
+    re, be = lattice.range_edges, lattice.bearing_edges
+    # sub-cell edges along each axis
+    sub_r = np.concatenate([np.linspace(re[i], re[i + 1], n + 1)[:-1] for i in range(len(re) - 1)] + [re[-1:]])
+    sub_b = np.concatenate([np.linspace(be[j], be[j + 1], n + 1)[:-1] for j in range(len(be) - 1)] + [be[-1:]])
+    rc, bc = 0.5 * (sub_r[1:] + sub_r[:-1]), 0.5 * (sub_b[1:] + sub_b[:-1])
+    ring = 0.5 * (sub_r[1:] - sub_r[:-1]) * (sub_r[1:] + sub_r[:-1])
+    area = ring[:, None] * np.diff(sub_b)[None, :]
+    x, y = lattice.to_world(rc[:, None], bc[None, :])
+    w = np.asarray(prior.pdf(x.ravel(), y.ravel()), dtype=float).reshape(x.shape)
+    w = np.where(np.isfinite(w), w, 0.0) * area
+    nr, nb = lattice.shape
+
+    def cell_sum(a):
+        return a.reshape(nr, n, nb, n).sum(axis=(1, 3))
+
+    w_cell = cell_sum(w)
+    empty = ~(w_cell > 0.0)
+    w = np.where(np.repeat(np.repeat(empty, n, axis=0), n, axis=1), area, w)  # no weight: the area mean
+    w_cell = cell_sum(w)
+    per, total, no_find, searches = [], np.ones(x.shape), np.ones(x.shape), []
+    for k, e in enumerate(evidence):
+        values = e.likelihood(x, y)
+        per.append(cell_sum(w * values) / w_cell)
+        total = total * values
+        if e.kind == "search":
+            no_find, searches = no_find * values, searches + [k]
+    f_all = cell_sum(w * total) / w_cell
+    f_search = cell_sum(w * no_find) / w_cell
+    where = dict(lattice=lattice, frame=raster.frame)
+    result = _finish(PolarPosterior, where, cells, f_all, f_search, per, searches, evidence,
+                     dict(raster.provenance), None, n)
+    return replace(result, density=np.asarray(raster.density, dtype=float) * f_all / result.normaliser)
