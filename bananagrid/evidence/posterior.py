@@ -257,7 +257,7 @@ class _GridFactor:
         shape = grid.shape
         if isinstance(e, (AreaSearch, Exclusion)):
             regions = [e.region] if isinstance(e, AreaSearch) else list(e.regions)
-            self.regions, self.low = regions, 1.0 - e.pod
+            self.regions, self.low = regions, e.miss
             self.constant = np.ones(shape)
             self.varying = np.zeros(shape, dtype=bool)
             xc, yc = grid.x[None, :], grid.y[:, None]

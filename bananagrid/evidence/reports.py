@@ -174,6 +174,7 @@ class Exclusion:
 
     kind = "exclusion"
     pod = 1.0
+    miss = 0.0
 
     def __post_init__(self):
         if isinstance(self.polygon, (dict, str, os.PathLike)):

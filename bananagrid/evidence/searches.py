@@ -70,7 +70,8 @@ class AreaSearch:
         (Koopman 1946; Stone, *Theory of Optimal Search*, eq. (2.2.3)). Give ``pod`` or
         ``coverage``, not both.
 
-    The likelihood of "nothing found" is 1 - POD inside the polygon and 1 outside.
+    The likelihood of "nothing found" is 1 - POD inside the polygon (``miss``: exp(-C) from a
+    coverage, exactly, however close POD is to 1) and 1 outside.
     """
 
     polygon: np.ndarray
@@ -78,6 +79,7 @@ class AreaSearch:
     pod: float | None = None
     coverage: float | None = None
     region: Polygon = field(init=False, repr=False, compare=False)
+    miss: float = field(init=False, repr=False, compare=False)
 
     kind = "search"
 
@@ -93,11 +95,13 @@ class AreaSearch:
                 raise BananagridError(f"coverage = {c!r}: must be >= 0 (effort per unit area)")
             object.__setattr__(self, "coverage", c)
             object.__setattr__(self, "pod", float(-math.expm1(-c)))
+            object.__setattr__(self, "miss", math.exp(-c))  # 1 - POD without its rounding
         else:
             p = finite("pod", self.pod)
             if not 0.0 <= p <= 1.0:
                 raise BananagridError(f"pod = {p!r}: must be in [0, 1]")
             object.__setattr__(self, "pod", p)
+            object.__setattr__(self, "miss", 1.0 - p)
         object.__setattr__(self, "region", Polygon(self.polygon))
 
     @property
@@ -106,7 +110,7 @@ class AreaSearch:
 
     def likelihood(self, x, y) -> np.ndarray:
         """1 - POD at each point (broadcast ``x``, ``y``)."""
-        return np.where(self.region.contains(x, y), 1.0 - self.pod, 1.0)
+        return np.where(self.region.contains(x, y), self.miss, 1.0)
 
     def describe(self) -> dict:
         """Plain data for provenance."""
