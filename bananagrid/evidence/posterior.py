@@ -264,6 +264,12 @@ class _GridFactor:
             for region in regions:
                 touched = region.cells_touched(x_edges, y_edges)
                 inside = region.contains(xc, yc) & ~touched
+                # a touched cell whose exact fraction is 0 or 1 (an edge along its side) is not cut
+                i, j = np.nonzero(touched)
+                share = region.fraction(x_edges[j], x_edges[j + 1], y_edges[i], y_edges[i + 1])
+                whole = (share == 0.0) | (share == 1.0)
+                touched[i[whole], j[whole]] = False
+                inside[i[whole], j[whole]] = share[whole] == 1.0
                 self.constant = np.where(inside, self.constant * self.low, self.constant)
                 self.varying |= touched
             self.indicator = True
@@ -394,7 +400,7 @@ def _polar_posterior(prior, lattice: PolarLattice, evidence, n, threads):
             no_find, searches = no_find * values, searches + [k]
     f_all = cell_sum(w * total) / w_cell
     f_search = cell_sum(w * no_find) / w_cell
-    where = dict(lattice=lattice, frame=raster.frame)
+    where = dict(lattice=lattice, frame=raster.frame, density=raster.density)
     result = _finish(PolarPosterior, where, cells, f_all, f_search, per, searches, evidence,
                      dict(raster.provenance), None, n)
     return replace(result, density=np.asarray(raster.density, dtype=float) * f_all / result.normaliser)

@@ -49,18 +49,31 @@ def cutting_evidence(t: float | None, centre, scale: float) -> list:
             bg.Exclusion(land)]
 
 
-def undetected_histogram(model, grid: bg.Grid, evidence, n: int, seed: int):
-    """(counts per cell of the draws the evidence leaves, draws kept in the grid, draws kept)."""
+def undetected(model, evidence, n: int, seed: int):
+    """(the draws of ``model.sample`` that the evidence leaves, all draws): each draw is kept
+    with probability L(draw), the product of the evidence's factors there (a search's 1 - POD)."""
     rng = np.random.default_rng(seed)
     points = model.sample(n, rng)
     keep = np.ones(len(points))
     for e in evidence:
         keep = keep * e.likelihood(points[:, 0], points[:, 1])
-    kept = points[rng.uniform(size=len(points)) < keep]
+    return points[rng.uniform(size=len(points)) < keep], points
+
+
+def grid_counts(points: np.ndarray, grid: bg.Grid) -> np.ndarray:
+    """Draws per cell of ``grid``, (ny, nx)."""
     x_edges = grid.origin[0] + grid.dx * np.arange(grid.nx + 1)
     y_edges = grid.origin[1] + grid.dy * np.arange(grid.ny + 1)
-    counts, _, _ = np.histogram2d(kept[:, 1], kept[:, 0], bins=[y_edges, x_edges])
-    return counts, int(counts.sum()), len(kept)
+    counts, _, _ = np.histogram2d(points[:, 1], points[:, 0], bins=[y_edges, x_edges])
+    return counts
+
+
+def lattice_counts(points: np.ndarray, lattice: bg.PolarLattice) -> np.ndarray:
+    """Draws per cell of a polar lattice about the origin, heading north, (n_range, n_bearing)."""
+    r = np.hypot(points[:, 0], points[:, 1])
+    b = np.arctan2(points[:, 0], points[:, 1])
+    counts, _, _ = np.histogram2d(r, b, bins=[lattice.range_edges, lattice.bearing_edges])
+    return counts
 
 
 def chi_square_p(counts: np.ndarray, probabilities: np.ndarray) -> float:
