@@ -11,7 +11,9 @@ inside or outside each polygon, away from a definite-range track's edge) f_c is 
 and Q_c = P_c L exactly. Elsewhere f_c is the density-weighted mean of L over n x n equal
 sub-cells: the sub-cell's exact area fraction inside each polygon (a grid's rectangles;
 :meth:`~bananagrid.evidence.geometry.Polygon.fraction`), the factor at the sub-cell's centre for
-the others, weighted by p at the centre. Whatever p does inside the cell, f_c lies between the
+the others, weighted by p at the centre (n / 2 x n / 2 sub-cells on a cell that only smooth
+factors vary on: a position report, bearings, an inverse-cube track). Whatever p does inside
+the cell, f_c lies between the
 least and greatest products of the factors' bounds on the cell (a weighted mean of values
 between them), so a cell whose only varying factors are polygons (1 - POD inside, 1 outside)
 or a definite-range corridor errs by at most P_c (max L - min L) there; their sum is
@@ -52,7 +54,7 @@ NO_PATHS = {"polar": "bg.CAT (exact, a path per (a, omega))"}
 EVIDENCE_TYPES = (AreaSearch, TrackSearch, PositionReport, BearingReport, Exclusion)
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, repr=False)
 class Posterior(Raster):
     """A posterior map on a grid: a :class:`~bananagrid.Raster` of cell probabilities (POC,
     ``quantity == "probability"``, summing to one over the grid; ``mass`` is the unnormalised
@@ -81,8 +83,12 @@ class Posterior(Raster):
     normaliser: float = math.nan
     prior: np.ndarray | None = field(default=None, repr=False)
 
+    def __repr__(self) -> str:
+        """The map's line (never the values) and what the searches would have found."""
+        return f"Posterior({super().__repr__()}, POS {self.pos:.6g}, normaliser {self.normaliser:.6g})"
 
-@dataclass(frozen=True)
+
+@dataclass(frozen=True, repr=False)
 class PolarPosterior(PolarRaster):
     """A posterior on a polar lattice: ``probability`` holds the posterior cell probabilities
     (summing to one), ``density`` the prior's density at the cell centres times the cells'
@@ -114,7 +120,8 @@ def posterior(prior, grid, evidence=(), *, subdivisions: int = SUBDIVISIONS, thr
         while a search lasts. Earlier evidence is refused for now (its carry-forward along the
         model's paths is the kernels' work), later evidence always.
     subdivisions : int, default 8
-        Sub-cells per side of a cell on which a factor varies (module docstring).
+        Sub-cells per side of a cell that a polygon or a definite-range corridor cuts (half as
+        many where only smooth factors vary; module docstring).
     threads : int, optional
         CPU threads of the prior's cell probabilities.
 
@@ -144,15 +151,25 @@ def posterior(prior, grid, evidence=(), *, subdivisions: int = SUBDIVISIONS, thr
         varying |= factor.varying
     # f of every factor and of the searches' product; constant cells first
     per = [np.array(f.constant, dtype=float) for f in factors]
-    rows, cols = np.nonzero(varying)
-    if rows.size:
-        means = _varying_means(prior, factors, x_edges, y_edges, rows, cols, n, cells[rows, cols] > 0.0)
-        for k in range(len(factors)):
-            per[k][rows, cols] = means["each"][k]
     total = _product(per, (ny, nx))
     searches = [k for k, e in enumerate(evidence) if e.kind == "search"]
     no_find = _product([per[k] for k in searches], (ny, nx))
-    if rows.size:
+    # cells with prior mass by the sub-cell rule: n x n where a polygon or a corridor cuts them,
+    # half that where only smooth factors vary (a quarter of the density evaluations); cells
+    # without prior mass (their posterior is 0 whatever the rule) by the cell itself, for the POD map
+    cut = np.zeros((ny, nx), dtype=bool)
+    for factor in factors:
+        if factor.indicator:
+            cut |= factor.varying
+    groups = ((varying & cut & (cells > 0.0), n, True), (varying & ~cut & (cells > 0.0), max(1, n // 2), True),
+              (varying & ~(cells > 0.0), 1, False))
+    for mask, subdivide, weighted in groups:
+        rows, cols = np.nonzero(mask)
+        if not rows.size:
+            continue
+        means = _varying_means(prior, factors, x_edges, y_edges, rows, cols, subdivide, weighted)
+        for k in range(len(factors)):
+            per[k][rows, cols] = means["each"][k]
         total[rows, cols] = means["all"]
         no_find[rows, cols] = means["searches"]
     bound = _boundary_mass(factors, cells, varying)
@@ -297,11 +314,11 @@ class _GridFactor:
         return self.e.likelihood(0.5 * (x0 + x1), 0.5 * (y0 + y1))
 
 
-def _varying_means(prior, factors, x_edges, y_edges, rows, cols, n, has_mass):
-    """Density-weighted means over each varying cell of every factor, of their product and of
-    the searches' product. Cells without prior mass (``has_mass`` False) are not weighted by
-    the density (their posterior is 0 whatever the weights): their means are area means, for
-    the POD map."""
+def _varying_means(prior, factors, x_edges, y_edges, rows, cols, n, weighted: bool):
+    """Means over each cell (``rows``, ``cols``) on n x n sub-cells of every factor, of their
+    product and of the searches' product: weighted by the prior's density at the sub-cell
+    centres (``weighted``), else by area (cells without prior mass, for the POD map). A factor
+    is evaluated on the sub-cells of the cells it varies on; elsewhere it is its constant."""
     k_cells = rows.size
     dx = x_edges[1] - x_edges[0]
     dy = y_edges[1] - y_edges[0]
@@ -318,15 +335,19 @@ def _varying_means(prior, factors, x_edges, y_edges, rows, cols, n, has_mass):
         sx1 = np.where(u[None, :] == n - 1, x_edges[c + 1][:, None], x_edges[c][:, None] + dx * (u[None, :] + 1) / n)
         sy = y_edges[r][:, None] + dy * u[None, :] / n
         sy1 = np.where(u[None, :] == n - 1, y_edges[r + 1][:, None], y_edges[r][:, None] + dy * (u[None, :] + 1) / n)
-        x0 = np.broadcast_to(sx[:, None, :], (len(r), n, n)).reshape(len(r), -1)
-        x1 = np.broadcast_to(sx1[:, None, :], (len(r), n, n)).reshape(len(r), -1)
-        y0 = np.broadcast_to(sy[:, :, None], (len(r), n, n)).reshape(len(r), -1)
-        y1 = np.broadcast_to(sy1[:, :, None], (len(r), n, n)).reshape(len(r), -1)
-        weights = _weights(prior, 0.5 * (x0 + x1), 0.5 * (y0 + y1), has_mass[sl])
-        means = [f.sub_means(x0, x1, y0, y1) for f in factors]
-        total = np.ones_like(weights)
-        searches = np.ones_like(weights)
-        for k, m in enumerate(means):
+        shape = (len(r), n * n)
+        x0 = np.broadcast_to(sx[:, None, :], (len(r), n, n)).reshape(shape)
+        x1 = np.broadcast_to(sx1[:, None, :], (len(r), n, n)).reshape(shape)
+        y0 = np.broadcast_to(sy[:, :, None], (len(r), n, n)).reshape(shape)
+        y1 = np.broadcast_to(sy1[:, :, None], (len(r), n, n)).reshape(shape)
+        weights = _weights(prior, 0.5 * (x0 + x1), 0.5 * (y0 + y1)) if weighted else np.ones(shape)
+        total = np.ones(shape)
+        searches = np.ones(shape)
+        for k, f in enumerate(factors):
+            m = np.repeat(f.constant[r, c][:, None], n * n, axis=1)
+            here = f.varying[r, c]
+            if here.any():
+                m[here] = f.sub_means(x0[here], x1[here], y0[here], y1[here])
             each[k][sl] = _weighted(weights, m)
             total = total * m
             if is_search[k]:
@@ -336,14 +357,11 @@ def _varying_means(prior, factors, x_edges, y_edges, rows, cols, n, has_mass):
     return {"each": each, "all": all_mean, "searches": search_mean}
 
 
-def _weights(prior, x, y, has_mass) -> np.ndarray:
+def _weights(prior, x, y) -> np.ndarray:
     """The prior's density at sub-cell centres, rows of cells; a row with no finite positive
     weight (a cell whose mass sits between the centres, or on an infinite caustic) gets equal
     weights, so that its mean is the plain area mean."""
-    w = np.ones(x.shape)
-    if has_mass.any():
-        w[has_mass] = np.asarray(prior.pdf(x[has_mass].ravel(), y[has_mass].ravel()), dtype=float).reshape(
-            int(has_mass.sum()), -1)
+    w = np.asarray(prior.pdf(x.ravel(), y.ravel()), dtype=float).reshape(x.shape)
     bad = ~np.isfinite(w).all(axis=1) | ~(np.sum(np.where(np.isfinite(w), w, 0.0), axis=1) > 0.0)
     w = np.where(bad[:, None], 1.0, w)
     return w

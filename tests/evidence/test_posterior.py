@@ -195,7 +195,10 @@ def test_a_posterior_is_a_map_to_plan_on():
     assert isinstance(post, bg.Raster) and post.quantity == "probability"
     plan = bg.allocate(post, effort=1e6)
     assert 0.0 < plan.pos < 1.0
-    assert "pos" in post.provenance["posterior"] and "Raster(" in repr(post) or "Posterior(" in repr(post)
+    assert repr(post).startswith("Posterior(Raster(") and "POS" in repr(post) and len(repr(post)) < 400
+    lattice = bg.PolarLattice(ranges=(0.0, 3400.0), range_step=200.0, bearings=(-1.0, 1.0), bearing_step=0.1)
+    polar = bg.posterior(model, lattice, cutting_evidence(model.t, centre, scale))
+    assert repr(polar).startswith("PolarPosterior(") and len(repr(polar)) < 2000
 
 
 def test_no_evidence_is_the_normalised_prior():
