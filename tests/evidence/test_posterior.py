@@ -306,3 +306,28 @@ def test_posterior_sweep(name, seed_value, pod, scale_factor, law):
         likelihood = area.likelihood(xc, yc) * track.likelihood(xc, yc)
         np.testing.assert_allclose(post.values[steady] * post.mass, post.prior[steady] * likelihood[steady],
                                    rtol=1e-12, atol=1e-300)
+
+
+def test_polar_same_time_update_is_prior_times_likelihood_where_it_is_constant():
+    """On a polar lattice, a wedge along two of its bearing edges (an area search) and one along
+    others (land) leave every cell wholly in or out: the posterior is P_c L_c / sum P L to 1e-12
+    (P the lattice's own cell probabilities), and POS is the wedge's prior mass times its POD."""
+    model = bg.CAT(**FIG1)
+    lattice = bg.PolarLattice(ranges=(0.0, 3400.0), range_step=100.0, bearings=(-math.pi / 2, math.pi / 2),
+                              bearing_step=math.pi / 90)
+    edges = lattice.bearing_edges
+
+    def wedge(b0, b1):
+        reach = 2.0 * 3400.0 / math.cos(0.5 * (b1 - b0))  # beyond the lattice's outer arc
+        return [(0.0, 0.0), (reach * math.sin(b0), reach * math.cos(b0)), (reach * math.sin(b1), reach * math.cos(b1))]
+
+    search = bg.AreaSearch(wedge(edges[40], edges[55]), t=model.t, pod=0.65)
+    land = bg.Exclusion(wedge(edges[70], edges[90]))
+    post = bg.posterior(model, lattice, [search, land])
+    cells = bg.rasterise(model, lattice).probability
+    likelihood = np.ones_like(cells)
+    likelihood[:, 40:55] = 0.35
+    likelihood[:, 70:90] = 0.0
+    expected = cells * likelihood / np.sum(cells * likelihood)
+    np.testing.assert_allclose(post.probability, expected, rtol=1e-12, atol=1e-300)
+    assert math.isclose(post.pos, 0.65 * cells[:, 40:55].sum() / cells.sum(), rel_tol=1e-12)
