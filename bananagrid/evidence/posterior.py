@@ -12,14 +12,17 @@ and Q_c = P_c L exactly. Elsewhere f_c is the density-weighted mean of L over n 
 sub-cells: the sub-cell's exact area fraction inside each polygon (a grid's rectangles;
 :meth:`~bananagrid.evidence.geometry.Polygon.fraction`), the factor at the sub-cell's centre for
 the others, weighted by p at the centre (n / 2 x n / 2 sub-cells on a cell that only smooth
-factors vary on: a position report, bearings, an inverse-cube track). Whatever p does inside
-the cell, f_c lies between the
-least and greatest products of the factors' bounds on the cell (a weighted mean of values
-between them), so a cell whose only varying factors are polygons (1 - POD inside, 1 outside)
-or a definite-range corridor errs by at most P_c (max L - min L) there; their sum is
-``provenance["posterior"]["boundary_mass"]``, a bound on the absolute error of the
-unnormalised posterior. For p and L smooth on the cell the rule's error is O((h / n)^2) of
-the cell's mass (midpoint rule; measured in the tests).
+factors vary on: a position report, bearings, an inverse-cube track).
+
+Error bound: whatever p does inside a cell, f_c lies between the least and greatest products
+of the factors' bounds on the cell (a weighted mean of values between them), so a cell whose
+only varying factors are polygons (1 - POD inside, 1 outside) or a definite-range corridor errs
+by at most P_c (max L - min L); their sum is ``provenance["posterior"]["boundary_mass"]``, a
+bound on the absolute error of the unnormalised posterior (None where a smooth factor varies).
+For p and L smooth on the cell the rule is second order, O((h / n)^2) of the cell's mass:
+measured, 8 sub-cells per side differ from 32 by under 1e-3 of the bound (5.2e-5 in all
+against a bound of 0.087 for the Figure 1 CAT at 100 m cells; the tests hold it for a CAT, a
+Butterly and a mixture).
 
 On a polar lattice every cell with prior mass takes the rule on n x n sub-cells in (range,
 bearing), each weighted by its exact area times p at its centre, every factor (polygons

@@ -56,11 +56,13 @@ def test_the_inverse_cube_exposure_of_a_leg_is_koopmans():
 def test_the_lateral_range_curve_integrates_to_the_sweep_width(law):
     """int p(x) dx over the line is W (the definition of the sweep width; quad to 1e-12)."""
     for width in (0.5, 30.0, 2000.0):
-        half = integrate.quad(lambda x: float(lateral_range(x, width, law)), 0.0, np.inf, epsabs=0.0, epsrel=1e-12,
-                              limit=500, points=None)[0] if law == "inverse_cube" else 0.5 * width
-        if law == "definite":
-            half = integrate.quad(lambda x: float(lateral_range(x, width, law)), 0.0, width, points=[0.5 * width],
-                                  epsabs=0.0, epsrel=1e-12)[0]
+        def curve(x):
+            return float(lateral_range(x, width, law))
+
+        if law == "inverse_cube":
+            half = integrate.quad(curve, 0.0, np.inf, epsabs=0.0, epsrel=1e-12, limit=500)[0]
+        else:
+            half = integrate.quad(curve, 0.0, width, points=[0.5 * width], epsabs=0.0, epsrel=1e-12)[0]
         assert math.isclose(2.0 * half, width, rel_tol=1e-9)
 
 
