@@ -72,9 +72,12 @@ class Posterior(Raster):
     ----------
     pos : float
         Probability that the searches together would have detected the target, under the prior
-        restricted to the grid: sum_c P_c POD_c / sum_c P_c.
+        restricted to the grid and given the other evidence (land, reports): 1 - sum_c P_c f_c /
+        sum_c P_c g_c, g_c the cell mean of the other evidence's product (with searches alone,
+        1 - normaliser, and sum_c P_c POD_c / sum_c P_c).
     search_pos : tuple of float
-        Each search's own POS, in the order of the evidence's searches.
+        Each search's own POS (given the other evidence, not the other searches), in the order
+        of the evidence's searches.
     pod : ndarray, shape (ny, nx)
         The cumulative POD of each cell: 1 - the density-weighted mean over the cell of the
         product of every search's 1 - POD.
@@ -157,11 +160,9 @@ def posterior(prior, grid, evidence=(), *, subdivisions: int = SUBDIVISIONS, thr
     varying = np.zeros((ny, nx), dtype=bool)
     for factor in factors:
         varying |= factor.varying
-    # f of every factor and of the searches' product; constant cells first
-    per = [np.array(f.constant, dtype=float) for f in factors]
-    total = _product(per, (ny, nx))
-    searches = [k for k, e in enumerate(evidence) if e.kind == "search"]
-    no_find = _product([per[k] for k in searches], (ny, nx))
+    combos = _combos(evidence)
+    # each combination's cell means (f_c of its product); the cells no factor varies on first
+    means = {key: _product([factors[k].constant for k in members], (ny, nx)) for key, members in combos.items()}
     # cells with prior mass by the sub-cell rule: n x n where a polygon or a corridor cuts them,
     # half that where only smooth factors vary (a quarter of the density evaluations); cells
     # without prior mass (their posterior is 0 whatever the rule) by the cell itself, for the POD map
@@ -173,16 +174,23 @@ def posterior(prior, grid, evidence=(), *, subdivisions: int = SUBDIVISIONS, thr
               (varying & ~(cells > 0.0), 1, False))
     for mask, subdivide, weighted in groups:
         rows, cols = np.nonzero(mask)
-        if not rows.size:
-            continue
-        means = _varying_means(prior, factors, x_edges, y_edges, rows, cols, subdivide, weighted)
-        for k in range(len(factors)):
-            per[k][rows, cols] = means["each"][k]
-        total[rows, cols] = means["all"]
-        no_find[rows, cols] = means["searches"]
+        if rows.size:
+            found = _varying_means(prior, factors, combos, x_edges, y_edges, rows, cols, subdivide, weighted)
+            for key in combos:
+                means[key][rows, cols] = found[key]
     bound = _boundary_mass(factors, cells, varying)
-    return _finish(Posterior, dict(grid=grid, frame=frame), cells, total, no_find, per, searches, evidence,
-                   provenance, bound, n)
+    return _finish(Posterior, dict(grid=grid, frame=frame), cells, means, evidence, provenance, bound, n)
+
+
+def _combos(evidence) -> dict:
+    """The products whose cell means the posterior needs, as lists of evidence indices: all of
+    them, the searches (the POD map), the rest (reports, land: what POS is conditioned on),
+    and each search with the rest (its own POS)."""
+    searches = [k for k, e in enumerate(evidence) if e.kind == "search"]
+    others = [k for k, e in enumerate(evidence) if e.kind != "search"]
+    combos = {"all": list(range(len(evidence))), "searches": searches, "others": others}
+    combos.update({("search", k): [k, *others] for k in searches})
+    return combos
 
 
 def _product(arrays, shape):
@@ -192,11 +200,11 @@ def _product(arrays, shape):
     return out
 
 
-def _finish(cls, where, cells, total, no_find, per, searches, evidence, provenance, bound, n):
+def _finish(cls, where, cells, means, evidence, provenance, bound, n):
     mass = float(np.sum(cells))
     if not mass > 0.0:
         raise BananagridError("grid: the prior holds no mass on it; the posterior needs the prior's support")
-    q = cells * total
+    q = cells * means["all"]
     q_sum = float(np.sum(q))
     normaliser = q_sum / mass
     if not normaliser >= MIN_NORMALISER:
@@ -204,9 +212,12 @@ def _finish(cls, where, cells, total, no_find, per, searches, evidence, provenan
             f"evidence: the probability of the evidence under the prior is {normaliser:.3g}, below "
             f"{MIN_NORMALISER:g}; the evidence contradicts the prior (the searches would almost surely have found "
             "the target, or a report lies where the prior holds no mass); check the evidence's places and times")
-    pod = 1.0 - no_find
-    pos = float(np.sum(cells * pod)) / mass
-    search_pos = tuple(float(np.sum(cells * (1.0 - per[k]))) / mass for k in searches)
+    # POS given the other evidence (land, reports): 1 - P(no search finds it, others) / P(others)
+    given = float(np.sum(cells * means["others"]))
+    pos = 1.0 - q_sum / given
+    searches = [key[1] for key in means if isinstance(key, tuple)]
+    search_pos = tuple(1.0 - float(np.sum(cells * means[("search", k)])) / given for k in searches)
+    pod = 1.0 - means["searches"]
     info = {"pos": pos, "search_pos": list(search_pos), "normaliser": normaliser, "prior_mass": mass,
             "boundary_mass": bound, "subdivisions": n, "evidence": [e.describe() for e in evidence]}
     provenance = {**provenance, "posterior": info}
@@ -322,18 +333,16 @@ class _GridFactor:
         return self.e.likelihood(0.5 * (x0 + x1), 0.5 * (y0 + y1))
 
 
-def _varying_means(prior, factors, x_edges, y_edges, rows, cols, n, weighted: bool):
-    """Means over each cell (``rows``, ``cols``) on n x n sub-cells of every factor, of their
-    product and of the searches' product: weighted by the prior's density at the sub-cell
+def _varying_means(prior, factors, combos, x_edges, y_edges, rows, cols, n, weighted: bool) -> dict:
+    """Means over each cell (``rows``, ``cols``) on n x n sub-cells of each combination's
+    product of factors (:func:`_combos`): weighted by the prior's density at the sub-cell
     centres (``weighted``), else by area (cells without prior mass, for the POD map). A factor
     is evaluated on the sub-cells of the cells it varies on; elsewhere it is its constant."""
     k_cells = rows.size
     dx = x_edges[1] - x_edges[0]
     dy = y_edges[1] - y_edges[0]
     u = np.arange(n)
-    each = [np.empty(k_cells) for _ in factors]
-    all_mean, search_mean = np.empty(k_cells), np.empty(k_cells)
-    is_search = [f.e.kind == "search" for f in factors]
+    out = {key: np.empty(k_cells) for key in combos}
     per_chunk = max(1, POINT_CHUNK // (n * n))
     for start in range(0, k_cells, per_chunk):
         sl = slice(start, min(start + per_chunk, k_cells))
@@ -349,20 +358,16 @@ def _varying_means(prior, factors, x_edges, y_edges, rows, cols, n, weighted: bo
         y0 = np.broadcast_to(sy[:, :, None], (len(r), n, n)).reshape(shape)
         y1 = np.broadcast_to(sy1[:, :, None], (len(r), n, n)).reshape(shape)
         weights = _weights(prior, 0.5 * (x0 + x1), 0.5 * (y0 + y1)) if weighted else np.ones(shape)
-        total = np.ones(shape)
-        searches = np.ones(shape)
-        for k, f in enumerate(factors):
+        values = []
+        for f in factors:
             m = np.repeat(f.constant[r, c][:, None], n * n, axis=1)
             here = f.varying[r, c]
             if here.any():
                 m[here] = f.sub_means(x0[here], x1[here], y0[here], y1[here])
-            each[k][sl] = _weighted(weights, m)
-            total = total * m
-            if is_search[k]:
-                searches = searches * m
-        all_mean[sl] = _weighted(weights, total)
-        search_mean[sl] = _weighted(weights, searches)
-    return {"each": each, "all": all_mean, "searches": search_mean}
+            values.append(m)
+        for key, members in combos.items():
+            out[key][sl] = _weighted(weights, _product([values[k] for k in members], shape))
+    return out
 
 
 def _weights(prior, x, y) -> np.ndarray:
@@ -420,16 +425,9 @@ def _polar_posterior(prior, lattice: PolarLattice, evidence, n, threads):
     empty = ~(w_cell > 0.0)
     w = np.where(np.repeat(np.repeat(empty, n, axis=0), n, axis=1), area, w)  # no weight: the area mean
     w_cell = cell_sum(w)
-    per, total, no_find, searches = [], np.ones(x.shape), np.ones(x.shape), []
-    for k, e in enumerate(evidence):
-        values = e.likelihood(x, y)
-        per.append(cell_sum(w * values) / w_cell)
-        total = total * values
-        if e.kind == "search":
-            no_find, searches = no_find * values, searches + [k]
-    f_all = cell_sum(w * total) / w_cell
-    f_search = cell_sum(w * no_find) / w_cell
+    values = [e.likelihood(x, y) for e in evidence]
+    means = {key: cell_sum(w * _product([values[k] for k in members], x.shape)) / w_cell
+             for key, members in _combos(evidence).items()}
     where = dict(lattice=lattice, frame=raster.frame, density=raster.density)
-    result = _finish(PolarPosterior, where, cells, f_all, f_search, per, searches, evidence,
-                     dict(raster.provenance), None, n)
-    return replace(result, density=np.asarray(raster.density, dtype=float) * f_all / result.normaliser)
+    result = _finish(PolarPosterior, where, cells, means, evidence, dict(raster.provenance), None, n)
+    return replace(result, density=np.asarray(raster.density, dtype=float) * means["all"] / result.normaliser)

@@ -74,6 +74,14 @@ def test_posterior_matches_monte_carlo_of_the_models_own_samples(name):
     assert cut.sum() > 10
     assert binomial_within(int(counts[cut].sum()), int(counts.sum()), float(post.values[cut].sum()))
     assert 0.0 < post.pos < 1.0 and max(post.search_pos) <= post.pos + 1e-15
+    # POS given land and reports: of the draws the other evidence keeps (the same uniforms), the
+    # share the searches would have found
+    searches = [e for e in evidence if e.kind == "search"]
+    others = [e for e in evidence if e.kind != "search"]
+    kept_by_others, _ = undetected(model, others, DRAWS, seed=20261127)
+    n_others = int(in_grid(kept_by_others, grid).sum())
+    assert binomial_within(n_others - int(counts.sum()), n_others, post.pos)
+    assert searches
 
 
 def test_polar_lattice_posterior_matches_monte_carlo():
@@ -311,7 +319,8 @@ def test_posterior_sweep(name, seed_value, pod, scale_factor, law):
 def test_polar_same_time_update_is_prior_times_likelihood_where_it_is_constant():
     """On a polar lattice, a wedge along two of its bearing edges (an area search) and one along
     others (land) leave every cell wholly in or out: the posterior is P_c L_c / sum P L to 1e-12
-    (P the lattice's own cell probabilities), and POS is the wedge's prior mass times its POD."""
+    (P the lattice's own cell probabilities), and POS is the wedge's prior mass off the land,
+    times its POD."""
     model = bg.CAT(**FIG1)
     lattice = bg.PolarLattice(ranges=(0.0, 3400.0), range_step=100.0, bearings=(-math.pi / 2, math.pi / 2),
                               bearing_step=math.pi / 90)
@@ -330,4 +339,5 @@ def test_polar_same_time_update_is_prior_times_likelihood_where_it_is_constant()
     likelihood[:, 70:90] = 0.0
     expected = cells * likelihood / np.sum(cells * likelihood)
     np.testing.assert_allclose(post.probability, expected, rtol=1e-12, atol=1e-300)
-    assert math.isclose(post.pos, 0.65 * cells[:, 40:55].sum() / cells.sum(), rel_tol=1e-12)
+    off_land = cells.sum() - cells[:, 70:90].sum()
+    assert math.isclose(post.pos, 0.65 * cells[:, 40:55].sum() / off_land, rel_tol=1e-12)
