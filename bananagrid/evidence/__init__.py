@@ -8,33 +8,36 @@ laws), :mod:`~bananagrid.evidence.reports` (``PositionReport``, ``BearingReport`
 
 Carrying earlier evidence forward (the plan for the kernels; not built yet)
 ---------------------------------------------------------------------------
-Evidence at t1 < t is a weight on the parameters that fix a path, evaluated where that path
-is at t1; the map at t is then the kernels' own integral with that weight inside it:
+A path is fixed by the map point x at t and the parameters the kernels already sum or
+integrate over, so evidence at t1 < t is a weight w on those parameters, evaluated at the
+path's position at t1, x1 = x(t1), and the map at t is the kernels' own integral with w inside:
 
-* CAT: a root (a, omega) of the map at t fixes the whole path x(s; a, omega), s in [0, t]
-  (the motion model's closed form, origin and pose as now). Its weight is
-  w(a, omega) = prod_k (1 - POD_k(x(t_k; a, omega))) for point-time evidence, with
-  POD_k = pod inside the polygon at t_k (area search), 1 - exp(-(W^2 / (8 pi)) int ds / r^3)
-  along the relative motion of the target's path and the searcher's legs over the track's span
-  (inverse cube; the legs' times give the searcher's position at each s: the exposure is an
-  integral in time of W^2 v_leg / (8 pi r(s)^3), by Gauss-Legendre on each leg's overlap with
-  the path), and the reports' likelihoods at x(t_k). The cell kernel's sum over roots of
-  g(a) g(omega) / |det J| becomes the sum of w g(a) g(omega) / |det J|; the cell rule (exact in
-  a) integrates w g(a) along its lines, so w must be evaluated at the same (a, omega) nodes. With
-  heading noise the extra parameter joins (a, omega).
-* Butterly: a course node theta (and speed node v) with start s0 gives the path
-  s0 + v u(theta) s; w(s0, theta, v) is the same product at t_k. The start is integrated
-  in closed form today (the normal convolved with the ring); with a weight that depends on s0
-  it is not, so the kernel must integrate w over the start's normal too (a Gauss-Hermite rule
-  in the start, per course node), which is the 3x budget of the bench row.
-* What the kernels receive: polygons as flat edge arrays (x0, y0, x1, y1) with an offset per
-  polygon, each polygon's time span and POD; tracks as leg arrays (x0, y0, t0, x1, y1, t1) with
-  W and a law code; reports as (x, y, precision, t) and bearings as (sensor, bearing,
-  1 / sigma, t); land as polygons without time. Searches with an interval (t0, t1) weight a
-  path by the POD of its positions over the interval (the target moves while the area is
-  searched: the fraction of the interval it spends inside, times the coverage rate).
-* ``posterior`` then refuses nothing earlier for CAT and Butterly; the polar banana keeps its
-  refusal (no path per parameter).
+    w = prod_k l_k(x1_k),   l_k = 1 - POD_k (a search), the report's likelihood, 0 on land.
+
+* CAT: a root (a, omega) of x at t fixes the path, and x(t1; a, omega) is the motion model's
+  closed form with the same pose. The density becomes sum over roots of w g(a) g(omega) /
+  |det J|. The cell rule (exact in a along lines of constant omega, Gauss-Legendre in omega
+  between corner passes) keeps its exactness for an area search or land: along a line, x(t1)
+  is a curve in a, whose crossings with the polygon's edges split the a-interval into pieces
+  of constant w (the Phi differences of each piece, weighted). Smooth factors (an inverse-cube
+  track, reports) take Gauss-Legendre nodes in a on each piece. With heading noise the extra
+  heading parameter joins (a, omega) the same way.
+* Butterly: for a course c and speed V the start is s0 = x - V t e(c), so the position at t1
+  is x1 = x - V (t - t1) e(c): no integral over the start is needed, only the weight inside the
+  course integral, P_i(x) = int N(x - V_i t e(c); mean, cov) p(c) w(x - V_i (t - t1) e(c)) dc.
+  The kernel's course integral (closed form over c today) becomes a quadrature over course
+  nodes, split where x1(c), a circle of radius V_i (t - t1) about x, crosses a polygon edge
+  (exact for polygons, as for the CAT), Gauss-Legendre between; the speed nodes stay.
+* A search over an interval (t0, t1) or a track: the POD of a path is 1 - exp(-int gamma dt)
+  along the relative motion (inverse cube: gamma = W^2 v_leg / (8 pi r(s)^3) on each leg, by
+  Gauss-Legendre over the leg's time overlap with the path), an area search's coverage spread
+  over its interval (the fraction of the interval the path spends inside times C), or its POD
+  where the path is at the interval's end (a point-time search).
+* What the kernels receive: polygons as flat edge arrays (x0, y0, x1, y1) with an offset and a
+  time span, POD (or coverage) per polygon; tracks as leg arrays (x0, y0, t0, x1, y1, t1) with W
+  and a law code; reports as (x, y, precision, t); bearings as (sensor x, y, bearing,
+  1 / sigma, t); land as polygons without time. ``posterior`` then takes earlier evidence for
+  CAT and Butterly; the polar banana keeps its refusal (no path per parameter).
 """
 
 from .posterior import PolarPosterior, Posterior, posterior
