@@ -27,7 +27,9 @@ Butterly and a mixture).
 On a polar lattice every cell with prior mass takes the rule on n x n sub-cells in (range,
 bearing), each weighted by its exact area times p at its centre, every factor (polygons
 included) at the centre: a polygon's edge is resolved to a sub-cell there (error O(1 / n) of
-the mass of the cells it cuts), and no cell is taken as constant.
+the mass of the cells it cuts), and no cell is taken as constant. A presence law (a Gaussian
+mixture, a uniform law) has no polar cell rule: its cell probabilities there are the same
+sub-cells' midpoint rule.
 """
 
 from __future__ import annotations
@@ -401,8 +403,17 @@ def _boundary_mass(factors, cells, varying) -> float | None:
 def _polar_posterior(prior, lattice: PolarLattice, evidence, n, threads):
     """On a polar lattice: every cell by the rule of n x n sub-cells in (range, bearing), each
     weighted by its exact area times the density at its centre, each factor at the centre."""
-    raster = rasterise(prior, lattice, threads=threads)
-    cells = np.asarray(raster.probability, dtype=float)
+    presence = not callable(getattr(prior, "bind", None)) and getattr(prior, "kind", None) in ("mixture", "uniform")
+    if presence:  # a presence law has no polar kernels: its cells by the sub-cell rule below
+        xc, yc = lattice.world_centres
+        raster = PolarRaster(density=np.asarray(prior.pdf(xc.ravel(), yc.ravel()), dtype=float).reshape(xc.shape)
+                             * lattice.range_centres[:, None], probability=np.zeros(lattice.shape), lattice=lattice,
+                             mass=0.0, provenance={"model": type(prior).__name__, **prior.parameters(),
+                                                   "cell_method": f"midpoint rule on {n} x {n} sub-cells"})
+        cells = np.ones(lattice.shape)  # every cell weighted by the density below
+    else:
+        raster = rasterise(prior, lattice, threads=threads)
+        cells = np.asarray(raster.probability, dtype=float)
     re, be = lattice.range_edges, lattice.bearing_edges
     # sub-cell edges along each axis
     sub_r = np.concatenate([np.linspace(re[i], re[i + 1], n + 1)[:-1] for i in range(len(re) - 1)] + [re[-1:]])
@@ -422,6 +433,8 @@ def _polar_posterior(prior, lattice: PolarLattice, evidence, n, threads):
         return a.reshape(nr, n, nb, n).sum(axis=(1, 3))
 
     w_cell = cell_sum(w)
+    if presence:
+        cells = w_cell  # the midpoint rule's cell probabilities: O((h / n)^2) of each cell's mass
     empty = ~(w_cell > 0.0)
     w = np.where(np.repeat(np.repeat(empty, n, axis=0), n, axis=1), area, w)  # no weight: the area mean
     w_cell = cell_sum(w)

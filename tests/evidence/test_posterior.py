@@ -84,12 +84,21 @@ def test_posterior_matches_monte_carlo_of_the_models_own_samples(name):
     assert searches
 
 
-def test_polar_lattice_posterior_matches_monte_carlo():
-    """The same on a polar lattice about the last fix (CAT, Figure 1): chi-square over the cells."""
-    model = bg.CAT(**FIG1)
-    lattice = bg.PolarLattice(ranges=(0.0, 3400.0), range_step=100.0, bearings=(-math.pi / 2, math.pi / 2),
-                              bearing_step=math.pi / 90)
-    evidence = cutting_evidence(model.t, (0.0, 2700.0), 700.0)
+POLAR_CASES = {
+    "cat": (bg.CAT(**FIG1), bg.PolarLattice(ranges=(0.0, 3400.0), range_step=100.0,
+                                            bearings=(-math.pi / 2, math.pi / 2), bearing_step=math.pi / 90)),
+    "mixture": (PRIORS["mixture"][0], bg.PolarLattice(ranges=(0.0, 5000.0), range_step=200.0,
+                                                      bearings=(-math.pi, math.pi), bearing_step=math.pi / 36)),
+}
+
+
+@pytest.mark.parametrize("name", list(POLAR_CASES))
+def test_polar_lattice_posterior_matches_monte_carlo(name):
+    """The same on a polar lattice about the origin (the CAT's last fix; a mixture, whose polar
+    cells are the sub-cells' midpoint rule): chi-square over the cells."""
+    model, lattice = POLAR_CASES[name]
+    _, _, centre, scale = PRIORS[name]
+    evidence = cutting_evidence(getattr(model, "t", None), centre, scale)
     post = bg.posterior(model, lattice, evidence)
     kept, _ = undetected(model, evidence, DRAWS, seed=7)
     assert chi_square_p(lattice_counts(kept, lattice), post.probability) > ALPHA
