@@ -39,12 +39,33 @@ class Polygon:
         boundary may fall either way, a set of zero area)."""
         x, y = np.broadcast_arrays(np.asarray(x, dtype=float), np.asarray(y, dtype=float))
         inside = np.zeros(x.shape, dtype=bool)
+        x0, x1, y0, y1 = self.bounds
+        near = (x >= x0) & (x <= x1) & (y >= y0) & (y <= y1)  # outside the box: outside
+        px, py = x[near], y[near]
+        hit = np.zeros(px.shape, dtype=bool)
         a, b = self.edges
         for (ax, ay), (bx, by) in zip(a, b):
-            straddles = (ay > y) != (by > y)
+            straddles = (ay > py) != (by > py)
             with np.errstate(divide="ignore", invalid="ignore"):
-                cross_x = ax + (y - ay) * (bx - ax) / (by - ay)
-            inside ^= straddles & (x < cross_x)
+                cross_x = ax + (py - ay) * (bx - ax) / (by - ay)
+            hit ^= straddles & (px < cross_x)
+        inside[near] = hit
+        return inside
+
+    def contains_grid(self, x: np.ndarray, y: np.ndarray) -> np.ndarray:
+        """:meth:`contains` at the points (x[j], y[i]) of a grid, ``(len(y), len(x))``, row by
+        row: the crossings of a row's line with the edges, sorted, and each point's count of
+        crossings east of it (odd: inside). O(rows x edges + points) instead of O(points x edges)."""
+        a, b = self.edges
+        inside = np.zeros((len(y), len(x)), dtype=bool)
+        for i, yi in enumerate(y):
+            straddles = (a[:, 1] > yi) != (b[:, 1] > yi)
+            if not straddles.any():
+                continue
+            pa, pb = a[straddles], b[straddles]
+            cross = np.sort(pa[:, 0] + (yi - pa[:, 1]) * (pb[:, 0] - pa[:, 0]) / (pb[:, 1] - pa[:, 1]))
+            east = len(cross) - np.searchsorted(cross, x, side="right")  # crossings with x < cross
+            inside[i] = east % 2 == 1
         return inside
 
     def fraction(self, x0, x1, y0, y1) -> np.ndarray:
@@ -58,22 +79,34 @@ class Polygon:
         rectangle's corner, so the rounding is of the rectangle's size, not of the world's.
         """
         x0, x1, y0, y1 = np.broadcast_arrays(*(np.asarray(v, dtype=float) for v in (x0, x1, y0, y1)))
+        shape = x0.shape
+        x0, x1, y0, y1 = (v.ravel() for v in (x0, x1, y0, y1))
+        # rectangles sorted by their west edge: an edge reaches only those whose west edge lies
+        # within the widest rectangle's width west of the edge's east end (a band, by bisection)
+        order = np.argsort(x0, kind="stable")
+        x0, x1, y0, y1 = x0[order], x1[order], y0[order], y1[order]
         width, height = x1 - x0, y1 - y0
+        widest = float(width.max()) if width.size else 0.0
         area = np.zeros(x0.shape)
         a, b = self.edges
         for (ax, ay), (bx, by) in zip(a, b):
             if ax == bx:
                 continue  # a vertical edge encloses no area between vertical lines
-            # the edge in the rectangle's own coordinates (origin at its south-west corner)
-            pax, pay, pbx, pby = ax - x0, ay - y0, bx - x0, by - y0
-            lo = np.clip(np.minimum(pax, pbx), 0.0, width)
-            hi = np.clip(np.maximum(pax, pbx), 0.0, width)
+            lo_edge, hi_edge = min(ax, bx), max(ax, bx)
+            band = slice(int(np.searchsorted(x0, lo_edge - widest, side="left")),
+                         int(np.searchsorted(x0, hi_edge, side="right")))
+            bx0, by0, bw, bh = x0[band], y0[band], width[band], height[band]
+            # the edge in each rectangle's own coordinates (origin at its south-west corner)
+            pax, pay, pbx, pby = ax - bx0, ay - by0, bx - bx0, by - by0
+            lo = np.clip(np.minimum(pax, pbx), 0.0, bw)
+            hi = np.clip(np.maximum(pax, pbx), 0.0, bw)
             slope = (pby - pay) / (pbx - pax)
             ya = pay + slope * (lo - pax)
             yb = pay + slope * (hi - pax)
-            integral = (hi - lo) * _mean_clamped(ya, yb, height)
-            area -= np.sign(bx - ax) * integral
-        return np.clip(area / (width * height), 0.0, 1.0)
+            area[band] -= math.copysign(1.0, bx - ax) * (hi - lo) * _mean_clamped(ya, yb, bh)
+        out = np.empty(x0.shape)
+        out[order] = np.clip(area / (width * height), 0.0, 1.0)
+        return out.reshape(shape)
 
     def cells_touched(self, x_edges: np.ndarray, y_edges: np.ndarray) -> np.ndarray:
         """Mask ``(ny, nx)`` of the cells of a grid (cell edges ``x_edges`` (nx + 1,), ``y_edges``

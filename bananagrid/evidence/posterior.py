@@ -298,10 +298,9 @@ class _GridFactor:
             self.regions, self.low = regions, e.miss
             self.constant = np.ones(shape)
             self.varying = np.zeros(shape, dtype=bool)
-            xc, yc = grid.x[None, :], grid.y[:, None]
             for region in regions:
                 touched = region.cells_touched(x_edges, y_edges)
-                inside = region.contains(xc, yc) & ~touched
+                inside = region.contains_grid(grid.x, grid.y) & ~touched
                 # a touched cell whose exact fraction is 0 or 1 (an edge along its side) is not cut
                 i, j = np.nonzero(touched)
                 share = region.fraction(x_edges[j], x_edges[j + 1], y_edges[i], y_edges[i + 1])

@@ -128,3 +128,13 @@ def test_distance_to_track():
     track = np.array([[0.0, 0.0], [10.0, 0.0], [10.0, 10.0]])
     points = np.array([[5.0, 3.0], [-4.0, 3.0], [13.0, 5.0], [12.0, 14.0]])
     np.testing.assert_allclose(distance_to_track(points, track), [3.0, 5.0, 3.0, math.hypot(2.0, 4.0)], rtol=1e-15)
+
+
+def test_contains_on_a_grid_is_contains_at_its_points():
+    """The row-by-row scan gives the point test's answer at every grid point (even-odd rule, the
+    same crossing arithmetic), for polygons of few and many vertices."""
+    rng = np.random.default_rng(5)
+    for n in (4, 9, 400):
+        poly = Polygon(star_polygon(rng, n=n))
+        x, y = np.linspace(-120.0, 120.0, 181), np.linspace(-110.0, 115.0, 157)
+        np.testing.assert_array_equal(poly.contains_grid(x, y), poly.contains(x[None, :], y[:, None]))
