@@ -1,4 +1,5 @@
-"""Plane geometry of evidence: polygons against grid cells and sub-cells, tracks against points.
+"""Plane geometry of evidence: polygons against grid cells and sub-cells, tracks against points,
+and polygons read from vertices or GeoJSON (longitude and latitude through a frame).
 
 Everything here is float64 NumPy, exact but for rounding where it says so: the area of a
 polygon inside a rectangle (the clipped trapezoid rule below), which cells an edge touches
@@ -9,11 +10,16 @@ cancellation of its textbook antiderivative.
 
 from __future__ import annotations
 
+import json
 import math
+import os
+from pathlib import Path
 
 import numpy as np
 
-__all__ = ["Polygon", "segment_inverse_cube", "distance_to_track"]
+from ..validate import BananagridError, polygon
+
+__all__ = ["Polygon", "polygons_from", "segment_inverse_cube", "distance_to_track"]
 
 
 class Polygon:
@@ -127,6 +133,61 @@ class Polygon:
             cy0, cy1 = y_edges[i0:i1][:, None], y_edges[i0 + 1:i1 + 1][:, None]
             touched[i0:i1, j0:j1] |= _segment_meets_box(p, q, cx0, cx1, cy0, cy1)
         return touched
+
+
+def _rings(name: str, value) -> list:
+    """The polygons' outer rings of a GeoJSON object (a dict, or a path to a file)."""
+    if isinstance(value, (str, os.PathLike)):
+        path = Path(value)
+        try:
+            value = json.loads(path.read_text(encoding="utf-8"))
+        except OSError as error:
+            raise BananagridError(f"{name} = {str(path)!r}: cannot read it ({error.strerror or error})") from None
+        except (json.JSONDecodeError, UnicodeDecodeError) as error:
+            raise BananagridError(f"{name} = {str(path)!r}: not a GeoJSON file ({error})") from None
+    if not isinstance(value, dict):
+        raise BananagridError(f"{name}: a GeoJSON {type(value).__name__}; expected a GeoJSON object")
+    kind = value.get("type")
+    if kind == "FeatureCollection":
+        return [ring for feature in value.get("features", []) for ring in _rings(name, feature)]
+    if kind == "Feature":
+        return _rings(name, value.get("geometry") or {})
+    if kind in ("Polygon", "MultiPolygon"):
+        polygons = [value.get("coordinates")] if kind == "Polygon" else value.get("coordinates") or []
+        rings = []
+        for rings_of_one in polygons:
+            if not isinstance(rings_of_one, list) or not rings_of_one:
+                raise BananagridError(f"{name}: a {kind} without coordinates")
+            if len(rings_of_one) > 1:
+                raise BananagridError(f"{name}: a polygon with {len(rings_of_one) - 1} hole(s); "
+                                      "give the land as polygons without holes")
+            rings.append(rings_of_one[0])
+        return rings
+    raise BananagridError(f"{name}: GeoJSON type {kind!r}; expected a Polygon, MultiPolygon, Feature or "
+                          "FeatureCollection of them")
+
+
+def polygons_from(name: str, value, frame=None) -> list[np.ndarray]:
+    """Validated vertex arrays (read-only, local metres) of ``value``: vertices ``(n, 2)``, a
+    GeoJSON dict, or a path to a GeoJSON file. With ``frame`` (a GeoFrame) the coordinates
+    are [longitude, latitude] degrees, projected by ``frame.local`` vertex by vertex."""
+    if isinstance(value, (dict, str, os.PathLike)):
+        rings = _rings(name, value)
+        if not rings:
+            raise BananagridError(f"{name}: the GeoJSON holds no polygon")
+        names = [f"{name}[{k}]" for k in range(len(rings))] if len(rings) > 1 else [name]
+    else:
+        rings, names = [value], [name]
+    out = []
+    for label, ring in zip(names, rings):
+        if frame is not None:
+            lonlat = polygon(label, ring)  # finite, simple in degrees first: then each vertex projects
+            x, y = frame.local(lonlat[:, 1], lonlat[:, 0])
+            ring = np.column_stack((x, y))
+        vertices = polygon(label, ring)
+        vertices.setflags(write=False)
+        out.append(vertices)
+    return out
 
 
 def _mean_clamped(ya, yb, height):

@@ -8,17 +8,14 @@ probability-like number that a contradiction drives towards zero).
 
 from __future__ import annotations
 
-import json
 import math
-import os
 from dataclasses import dataclass, field
-from pathlib import Path
 
 import numpy as np
 
 from ..models.bearing import bearing_to
-from ..validate import BananagridError, covariance, point, polygon, positive
-from .geometry import Polygon
+from ..validate import BananagridError, covariance, point, positive
+from .geometry import Polygon, polygons_from
 from .searches import search_time
 
 __all__ = ["PositionReport", "BearingReport", "Exclusion"]
@@ -127,36 +124,6 @@ class BearingReport:
                 "bearings": self.fix.bearings.tolist(), "sigmas": self.fix.sigmas.tolist()}
 
 
-def _rings(name: str, value) -> list:
-    """The polygons' outer rings of a GeoJSON object (a dict, or a path to a file)."""
-    if isinstance(value, (str, os.PathLike)):
-        path = Path(value)
-        try:
-            value = json.loads(path.read_text(encoding="utf-8"))
-        except OSError as error:
-            raise BananagridError(f"{name} = {str(path)!r}: cannot read it ({error.strerror or error})") from None
-        except (json.JSONDecodeError, UnicodeDecodeError) as error:
-            raise BananagridError(f"{name} = {str(path)!r}: not a GeoJSON file ({error})") from None
-    kind = value.get("type")
-    if kind == "FeatureCollection":
-        return [ring for feature in value.get("features", []) for ring in _rings(name, feature)]
-    if kind == "Feature":
-        return _rings(name, value.get("geometry") or {})
-    if kind in ("Polygon", "MultiPolygon"):
-        polygons = [value.get("coordinates")] if kind == "Polygon" else value.get("coordinates") or []
-        rings = []
-        for rings_of_one in polygons:
-            if not isinstance(rings_of_one, list) or not rings_of_one:
-                raise BananagridError(f"{name}: a {kind} without coordinates")
-            if len(rings_of_one) > 1:
-                raise BananagridError(f"{name}: a polygon with {len(rings_of_one) - 1} hole(s); "
-                                      "give the land as polygons without holes")
-            rings.append(rings_of_one[0])
-        return rings
-    raise BananagridError(f"{name}: GeoJSON type {kind!r}; expected a Polygon, MultiPolygon, Feature or "
-                          "FeatureCollection of them")
-
-
 @dataclass(frozen=True)
 class Exclusion:
     """A region the target cannot be in (land): likelihood 0 inside, 1 outside, at every time.
@@ -165,11 +132,16 @@ class Exclusion:
     ----------
     polygon : array_like (n, 2), GeoJSON dict, or path to a GeoJSON file
         The region's vertices (m, world frame), or a GeoJSON Polygon, MultiPolygon, Feature or
-        FeatureCollection whose coordinates are in the same local metres (every outer ring a
-        simple polygon; holes are refused). Several polygons exclude their union.
+        FeatureCollection (every outer ring a simple polygon; holes are refused). Several
+        polygons exclude their union.
+    frame : GeoFrame, optional
+        With a frame the coordinates are [longitude, latitude] in degrees (GeoJSON's order,
+        RFC 7946), projected to the frame's local metres vertex by vertex (edges straight in
+        the local metres); without one they are local metres.
     """
 
     polygon: object
+    frame: object = None
     regions: tuple = field(init=False, repr=False, compare=False)
 
     kind = "exclusion"
@@ -177,15 +149,7 @@ class Exclusion:
     miss = 0.0
 
     def __post_init__(self):
-        if isinstance(self.polygon, (dict, str, os.PathLike)):
-            rings = _rings("polygon", self.polygon)
-            if not rings:
-                raise BananagridError("polygon: the GeoJSON holds no polygon")
-            vertices = tuple(polygon(f"polygon[{k}]", ring) for k, ring in enumerate(rings))
-        else:
-            vertices = (polygon("polygon", self.polygon),)
-        for v in vertices:
-            v.setflags(write=False)
+        vertices = polygons_from("polygon", self.polygon, self.frame)
         object.__setattr__(self, "regions", tuple(Polygon(v) for v in vertices))
 
     @property

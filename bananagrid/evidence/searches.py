@@ -13,8 +13,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..validate import BananagridError, finite, polygon, positive, real_array, timed_track
-from .geometry import Polygon, distance_to_track, segment_inverse_cube
+from ..validate import BananagridError, finite, positive, real_array, timed_track
+from .geometry import Polygon, distance_to_track, polygons_from, segment_inverse_cube
 
 __all__ = ["AreaSearch", "TrackSearch", "LAWS", "lateral_range", "search_time"]
 
@@ -59,8 +59,9 @@ class AreaSearch:
 
     Parameters
     ----------
-    polygon : array_like, shape (n, 2)
-        The area's vertices (m, world frame), a simple polygon (a closing vertex is dropped).
+    polygon : array_like (n, 2), GeoJSON dict, or path to a GeoJSON file
+        The area's vertices (m, world frame), a simple polygon (a closing vertex is dropped), or
+        a GeoJSON Polygon (or a Feature or FeatureCollection holding exactly one).
     t : float or (float, float)
         When it was searched, s since the last fix (the prior's clock).
     pod : float, optional
@@ -69,6 +70,9 @@ class AreaSearch:
         The coverage factor C >= 0 (effort / area); then POD = 1 - exp(-C), random search
         (Koopman 1946; Stone, *Theory of Optimal Search*, eq. (2.2.3)). Give ``pod`` or
         ``coverage``, not both.
+    frame : GeoFrame, optional
+        With a frame the polygon's coordinates are [longitude, latitude] degrees (GeoJSON's
+        order), projected to the frame's local metres vertex by vertex.
 
     The likelihood of "nothing found" is 1 - POD inside the polygon (``miss``: exp(-C) from a
     coverage, exactly, however close POD is to 1) and 1 outside.
@@ -78,14 +82,18 @@ class AreaSearch:
     t: tuple[float, float]
     pod: float | None = None
     coverage: float | None = None
+    frame: object = None
     region: Polygon = field(init=False, repr=False, compare=False)
     miss: float = field(init=False, repr=False, compare=False)
 
     kind = "search"
 
     def __post_init__(self):
-        object.__setattr__(self, "polygon", polygon("polygon", self.polygon))
-        self.polygon.setflags(write=False)
+        shapes = polygons_from("polygon", self.polygon, self.frame)
+        if len(shapes) != 1:
+            raise BananagridError(f"polygon: the GeoJSON holds {len(shapes)} polygons; an area search is one "
+                                  "(give one AreaSearch per area)")
+        object.__setattr__(self, "polygon", shapes[0])
         object.__setattr__(self, "t", search_time("t", self.t))
         if (self.pod is None) == (self.coverage is None):
             raise BananagridError(f"pod = {self.pod!r}, coverage = {self.coverage!r}: give exactly one of them")

@@ -92,3 +92,30 @@ def test_land_file_not_geojson(tmp_path):
     path.write_text("not json")
     with pytest.raises(bg.BananagridError, match=r"not a GeoJSON file"):
         bg.Exclusion(path)
+
+
+def test_geojson_in_longitude_and_latitude_through_a_frame():
+    """With a GeoFrame a GeoJSON's [lon, lat] vertices are the frame's local metres of them
+    (frame.local, vertex by vertex), for land and for an area search."""
+    frame = bg.GeoFrame(lat=59.9, lon=10.7)
+    lonlat = [(10.70, 59.90), (10.72, 59.90), (10.72, 59.91), (10.70, 59.915)]
+    x, y = frame.local([p[1] for p in lonlat], [p[0] for p in lonlat])
+    local = np.column_stack((x, y))
+    feature = {"type": "Feature", "properties": {}, "geometry": {"type": "Polygon", "coordinates": [lonlat]}}
+    land = bg.Exclusion(feature, frame=frame)
+    np.testing.assert_array_equal(land.regions[0].vertices, bg.Exclusion(local).regions[0].vertices)
+    search = bg.AreaSearch(feature, t=0.0, pod=0.5, frame=frame)
+    np.testing.assert_array_equal(search.polygon, bg.AreaSearch(local, t=0.0, pod=0.5).polygon)
+    assert 500.0 < search.region.area / 1e3 < 2.5e3  # about 1.1 km x 1.3 km, in m^2 / 1000
+
+
+def test_geojson_refusals(tmp_path):
+    two = {"type": "MultiPolygon", "coordinates": [[LAND], [ISLAND]]}
+    with pytest.raises(bg.BananagridError, match=r"^polygon: the GeoJSON holds 2 polygons; an area search is one"):
+        bg.AreaSearch(two, t=0.0, pod=0.5)
+    path = tmp_path / "list.geojson"
+    path.write_text("[1, 2]")
+    with pytest.raises(bg.BananagridError, match=r"^polygon: a GeoJSON list; expected a GeoJSON object"):
+        bg.Exclusion(path)
+    with pytest.raises(bg.BananagridError, match=r"latitude 95\.0: must lie in"):
+        bg.Exclusion([(10.0, 59.0), (10.1, 95.0), (10.2, 59.0)], frame=bg.GeoFrame(lat=59.9, lon=10.7))
