@@ -336,7 +336,7 @@ def timed_track(name: str, times, positions) -> tuple[np.ndarray, np.ndarray]:
     if back.size:
         k = int(back[0]) + 1
         raise BananagridError(
-            f"{name}.times[{k}] = {t[k]!r}: must be later than the time before it ({t[k - 1]!r}); times strictly increase"
+            f"{name}.times[{k}] = {float(t[k])!r}: must be later than the time before it ({float(t[k - 1])!r}); times strictly increase"
         )
     return t, p
 

@@ -1,0 +1,211 @@
+"""Searches that found nothing: an area searched with a probability of detection, and a
+searcher's timed track with its lateral-range law.
+
+Each search gives, for a target at a point (held there while the search lasts), the probability
+of not detecting it, 1 - POD(point): the likelihood of "nothing found". Several searches are
+independent looks: their (1 - POD) multiply.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..validate import BananagridError, finite, positive, real_array, timed_track
+from .geometry import Polygon, distance_to_track, polygons_from, segment_inverse_cube
+
+__all__ = ["AreaSearch", "TrackSearch", "LAWS", "lateral_range", "search_time"]
+
+#: The lateral-range laws of :class:`TrackSearch`.
+LAWS = ("inverse_cube", "definite")
+
+
+def search_time(name: str, t) -> tuple[float, float]:
+    """``t`` (a time, or a pair (t0, t1) with t0 <= t1), s since the last fix, as (t0, t1)."""
+    if isinstance(t, (tuple, list, np.ndarray)):
+        if len(t) != 2:
+            raise BananagridError(f"{name} = {t!r}: expected a time (s) or a pair (t0, t1)")
+        t0, t1 = finite(f"{name}[0]", t[0]), finite(f"{name}[1]", t[1])
+    else:
+        t0 = t1 = finite(name, t)
+    if t0 < 0.0:
+        raise BananagridError(f"{name} = {t!r}: times must be >= 0 (s since the last fix)")
+    if t1 < t0:
+        raise BananagridError(f"{name} = {t!r}: the search ends before it starts; expected t0 <= t1")
+    return t0, t1
+
+
+def lateral_range(x, sweep_width: float, law: str = "inverse_cube") -> np.ndarray:
+    """POD of a stationary target at lateral distance ``x`` (m) from an infinite straight leg.
+
+    ``"inverse_cube"``: p(x) = 1 - exp(-W^2 / (4 pi x^2)); ``"definite"``: p(x) = 1 for |x| <=
+    W / 2, else 0. Both integrate over x to the sweep width W (see :class:`TrackSearch`).
+    """
+    x = np.abs(np.asarray(x, dtype=float))
+    w = positive("sweep_width", sweep_width)
+    if law == "definite":
+        return np.where(x <= 0.5 * w, 1.0, 0.0)
+    if law != "inverse_cube":
+        raise BananagridError(f"law = {law!r}: expected one of {', '.join(map(repr, LAWS))}")
+    with np.errstate(divide="ignore"):
+        return -np.expm1(-w * w / (4.0 * math.pi * x * x))
+
+
+@dataclass(frozen=True)
+class AreaSearch:
+    """An area searched at time ``t`` (or over ``t = (t0, t1)``) that found nothing.
+
+    Parameters
+    ----------
+    polygon : array_like (n, 2), GeoJSON dict, or path to a GeoJSON file
+        The area's vertices (m, world frame), a simple polygon (a closing vertex is dropped), or
+        a GeoJSON Polygon (or a Feature or FeatureCollection holding exactly one).
+    t : float or (float, float)
+        When it was searched, s since the last fix (the prior's clock).
+    pod : float, optional
+        Probability of detecting a target inside the area, in [0, 1].
+    coverage : float, optional
+        The coverage factor C >= 0 (effort / area); then POD = 1 - exp(-C), random search
+        (Koopman 1946; Stone, *Theory of Optimal Search*, eq. (2.2.3)). Give ``pod`` or
+        ``coverage``, not both.
+    frame : GeoFrame, optional
+        With a frame the polygon's coordinates are [longitude, latitude] degrees (GeoJSON's
+        order), projected to the frame's local metres vertex by vertex.
+
+    The likelihood of "nothing found" is 1 - POD inside the polygon (``miss``: exp(-C) from a
+    coverage, exactly, however close POD is to 1) and 1 outside.
+    """
+
+    polygon: np.ndarray
+    t: tuple[float, float]
+    pod: float | None = None
+    coverage: float | None = None
+    frame: object = None
+    region: Polygon = field(init=False, repr=False, compare=False)
+    miss: float = field(init=False, repr=False, compare=False)
+
+    kind = "search"
+
+    def __post_init__(self):
+        shapes = polygons_from("polygon", self.polygon, self.frame)
+        if len(shapes) != 1:
+            raise BananagridError(f"polygon: the GeoJSON holds {len(shapes)} polygons; an area search is one "
+                                  "(give one AreaSearch per area)")
+        object.__setattr__(self, "polygon", shapes[0])
+        object.__setattr__(self, "t", search_time("t", self.t))
+        if (self.pod is None) == (self.coverage is None):
+            raise BananagridError(f"pod = {self.pod!r}, coverage = {self.coverage!r}: give exactly one of them")
+        if self.coverage is not None:
+            c = finite("coverage", self.coverage)
+            if c < 0.0:
+                raise BananagridError(f"coverage = {c!r}: must be >= 0 (effort per unit area)")
+            object.__setattr__(self, "coverage", c)
+            object.__setattr__(self, "pod", float(-math.expm1(-c)))
+            object.__setattr__(self, "miss", math.exp(-c))  # 1 - POD without its rounding
+        else:
+            p = finite("pod", self.pod)
+            if not 0.0 <= p <= 1.0:
+                raise BananagridError(f"pod = {p!r}: must be in [0, 1]")
+            object.__setattr__(self, "pod", p)
+            object.__setattr__(self, "miss", 1.0 - p)
+        object.__setattr__(self, "region", Polygon(self.polygon))
+
+    @property
+    def time_span(self) -> tuple[float, float]:
+        return self.t
+
+    def likelihood(self, x, y) -> np.ndarray:
+        """1 - POD at each point (broadcast ``x``, ``y``)."""
+        return np.where(self.region.contains(x, y), self.miss, 1.0)
+
+    def describe(self) -> dict:
+        """Plain data for provenance."""
+        return {"kind": "area_search", "t": list(self.t), "pod": self.pod, "coverage": self.coverage,
+                "vertices": len(self.polygon), "area_m2": self.region.area}
+
+
+@dataclass(frozen=True)
+class TrackSearch:
+    """A searcher's timed track that found nothing, with its sweep width and lateral-range law.
+
+    Parameters
+    ----------
+    track : array_like, shape (n, 3)
+        ``[(x, y, t), ...]``: positions (m, world frame) at times (s since the last fix,
+        strictly increasing), at least 2; the searcher runs straight between them.
+    sweep_width : float
+        W > 0, m: the integral over lateral distance of the lateral-range curve.
+    law : {"inverse_cube", "definite"}, default "inverse_cube"
+        ``"inverse_cube"``: Koopman's detection rate of a sensor at height h looking down at a
+        wake, gamma(r) = k h / r^3 per unit time (Koopman, *Search and Screening*, 1946 and
+        1980, Section 3.4; Washburn, *Search and Detection*, Section 2.3). Along a straight leg
+        flown at speed v past a stationary target at lateral distance x, the exposure is
+        int gamma dt = (k h / v) int ds / (x^2 + s^2)^(3/2) = 2 k h / (v x^2), so the
+        lateral-range curve is p(x) = 1 - exp(-2 k h / (v x^2)); its integral over x is the
+        sweep width W = 2 sqrt(2 pi k h / v), so p(x) = 1 - exp(-W^2 / (4 pi x^2)). Written per
+        metre of track, the exposure of a point at range r(s) from the searcher is
+        (W^2 / (8 pi)) int ds / r(s)^3; each leg's integral is closed-form
+        (:func:`~bananagrid.evidence.geometry.segment_inverse_cube`). ``"definite"``: the
+        target is detected iff the track's closest approach is within W / 2 (the definite-range
+        law, Koopman 1946): p(x) = 1 for |x| <= W / 2, else 0.
+
+    Notes
+    -----
+    For a target path x(t) the POD is 1 - exp(-int gamma(|x(t) - s(t)|) dt) along the relative
+    motion. A map at a time within the track's span takes the target stationary over the track's
+    duration: the exposure of each point is the integral along the track's legs above (for a
+    straight leg that is the lateral-range curve; tested).
+    """
+
+    track: np.ndarray
+    sweep_width: float
+    law: str = "inverse_cube"
+
+    kind = "search"
+
+    def __post_init__(self):
+        points = real_array("track", self.track, "a list of (x, y, t) points")
+        if points.ndim != 2 or points.shape[1] != 3:
+            raise BananagridError(f"track = {self.track!r}: expected a list of (x, y, t) points, got shape {points.shape}")
+        times, positions = timed_track("track", points[:, 2], points[:, :2])
+        if times[0] < 0.0:
+            raise BananagridError(f"track.times[0] = {times[0]!r}: times must be >= 0 (s since the last fix)")
+        same = np.flatnonzero(np.all(positions[1:] == positions[:-1], axis=1))
+        if same.size:
+            k = int(same[0]) + 1
+            raise BananagridError(f"track.positions[{k}] = {positions[k].tolist()!r}: repeats the position before it "
+                                  "(a searcher that waits in place sweeps no width)")
+        track = np.column_stack((positions, times))
+        track.setflags(write=False)
+        object.__setattr__(self, "track", track)
+        object.__setattr__(self, "sweep_width", positive("sweep_width", self.sweep_width))
+        if self.law not in LAWS:
+            raise BananagridError(f"law = {self.law!r}: expected one of {', '.join(map(repr, LAWS))}")
+
+    @property
+    def time_span(self) -> tuple[float, float]:
+        return float(self.track[0, 2]), float(self.track[-1, 2])
+
+    def exposure(self, x, y) -> np.ndarray:
+        """The inverse-cube exposure (W^2 / (8 pi)) sum over legs of int ds / r^3 at each point."""
+        x, y = np.broadcast_arrays(np.asarray(x, dtype=float), np.asarray(y, dtype=float))
+        points = np.column_stack((x.ravel(), y.ravel()))
+        total = np.zeros(len(points))
+        for a, b in zip(self.track[:-1, :2], self.track[1:, :2]):
+            total += segment_inverse_cube(points, a, b)
+        return (self.sweep_width**2 / (8.0 * math.pi) * total).reshape(x.shape)
+
+    def likelihood(self, x, y) -> np.ndarray:
+        """1 - POD of a target held at each point while the searcher flies the track."""
+        x, y = np.broadcast_arrays(np.asarray(x, dtype=float), np.asarray(y, dtype=float))
+        if self.law == "definite":
+            d = distance_to_track(np.column_stack((x.ravel(), y.ravel())), self.track[:, :2]).reshape(x.shape)
+            return np.where(d <= 0.5 * self.sweep_width, 0.0, 1.0)
+        return np.exp(-self.exposure(x, y))
+
+    def describe(self) -> dict:
+        """Plain data for provenance."""
+        return {"kind": "track_search", "t": list(self.time_span), "sweep_width_m": self.sweep_width,
+                "law": self.law, "points": len(self.track)}
