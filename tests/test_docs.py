@@ -249,6 +249,11 @@ def check_dask(ns):
     assert (Path("out") / "ocean.zarr").is_dir()
 
 
+def check_evidence(ns):
+    assert (round(ns["post"].pos, 3), [round(p, 3) for p in ns["post"].search_pos]) == (0.494, [0.424, 0.082])
+    assert round(ns["plan"].pos, 3) == 0.826
+
+
 def check_planning(ns):
     assert (round(ns["plan"].pos, 3), list(ns["plan"].pos_curve([1e6, 4e6]).round(3))) == (0.814, [0.64, 0.933])
     assert (round(ns["flown"].pos, 3), [r.legs for r in ns["flown"].rectangles]) == (0.758, [3, 3, 3])
@@ -272,6 +277,7 @@ FIGURES = {
     "docs/guide/cell-probabilities.md": check_cell_probabilities,
     "docs/guide/geographic.md": None,  # its loop asserts each search area's probability
     "docs/guide/dask.md": check_dask,
+    "docs/guide/evidence.md": check_evidence,
     "docs/guide/planning.md": check_planning,
     "docs/api.md": check_api,
     "docs/scenes.md": None,

@@ -23,7 +23,9 @@ __all__ = ["PositionReport", "BearingReport", "Exclusion"]
 
 @dataclass(frozen=True)
 class PositionReport:
-    """A report of the target's position at time ``t`` with a normal error.
+    """A report of the target's position at time ``t`` with a normal error. The likelihood is
+    exp(-d^T C^-1 d / 2), d the point minus the report (the normal density without its
+    constant).
 
     Parameters
     ----------
@@ -35,9 +37,6 @@ class PositionReport:
         Standard deviation of a circular error, m (give ``sigma`` or ``cov``).
     cov : array_like, shape (2, 2), optional
         Covariance of the error, m^2.
-
-    The likelihood is exp(-d^T C^-1 d / 2), d the point minus the report (the normal density
-    without its constant).
     """
 
     position: tuple[float, float]

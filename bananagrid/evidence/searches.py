@@ -55,7 +55,9 @@ def lateral_range(x, sweep_width: float, law: str = "inverse_cube") -> np.ndarra
 
 @dataclass(frozen=True)
 class AreaSearch:
-    """An area searched at time ``t`` (or over ``t = (t0, t1)``) that found nothing.
+    """An area searched at time ``t`` (or over ``t = (t0, t1)``) that found nothing. The
+    likelihood of "nothing found" is 1 - POD inside the polygon (``miss``: exp(-C) from a
+    coverage, exactly, however close POD is to 1) and 1 outside.
 
     Parameters
     ----------
@@ -73,9 +75,6 @@ class AreaSearch:
     frame : GeoFrame, optional
         With a frame the polygon's coordinates are [longitude, latitude] degrees (GeoJSON's
         order), projected to the frame's local metres vertex by vertex.
-
-    The likelihood of "nothing found" is 1 - POD inside the polygon (``miss``: exp(-C) from a
-    coverage, exactly, however close POD is to 1) and 1 outside.
     """
 
     polygon: np.ndarray
