@@ -8,8 +8,9 @@ Panoply, QGIS and GDAL read it without help:
   ``projection_y_coordinate``; local metres about the origin when there is no frame), with
   ``x_bounds``, ``y_bounds`` holding the cell edges;
 * with a :class:`~bananagrid.geo.frame.GeoFrame`: ``lat``, ``lon`` (y, x), the latitude and
-  longitude of every cell centre, and ``crs``, the grid mapping (pyproj's CF attributes and the
-  WKT2 as ``crs_wkt`` and ``spatial_ref``);
+  longitude of every cell centre, and ``crs``, the grid mapping (pyproj's CF attributes, and as
+  ``crs_wkt`` and ``spatial_ref`` the WKT that GDAL 3.6 / PROJ 9.1 and later read:
+  :attr:`GeoFrame.portable_wkt <bananagrid.geo.frame.GeoFrame.portable_wkt>`);
 * ``time``: with a frame time, the UTC times (decoded to datetime64 in memory, written as
   ``seconds since`` the frame time), with the auxiliary coordinate ``elapsed`` (s since the
   fix); without one, the time dimension is ``elapsed`` itself (units ``s``: CF keeps a
@@ -256,8 +257,10 @@ def _crs_attrs(frame) -> dict:
             attrs[key] = value
         elif isinstance(value, (list, tuple)) and value and all(isinstance(v, (int, float)) for v in value):
             attrs[key] = np.asarray(value, dtype=float)
-    attrs["crs_wkt"] = frame.wkt
-    attrs["spatial_ref"] = frame.wkt  # the name GDAL (and so QGIS) reads first
+    # WKT that the GDAL and PROJ of current LTS distributions read (GeoFrame.portable_wkt): the
+    # WKT2 of a newer PROJ may name a method they do not know, and gdalwarp then fails
+    attrs["crs_wkt"] = frame.portable_wkt
+    attrs["spatial_ref"] = frame.portable_wkt  # the name GDAL (and so QGIS) reads first
     attrs["long_name"] = f"coordinate reference system of x and y ({frame.crs_name})"
     return attrs
 

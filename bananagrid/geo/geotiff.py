@@ -8,7 +8,8 @@ given, all on the scene's one grid:
 * the affine transform maps pixel corners to projected coordinates: pixel (0, 0)'s outer
   corner is the grid's west and north edges (``E0 + x0``, ``N0 + y0 + ny dy``), pixels are
   ``dx`` wide and ``dy`` high;
-* the CRS is the frame's projected CRS (its WKT2); without a frame there is none, and the
+* the CRS is the frame's projected CRS (:attr:`~bananagrid.geo.frame.GeoFrame.portable_wkt`, as the
+  NetCDF carries it); without a frame there is none, and the
   coordinates are local metres about the origin (a GIS shows the map, but cannot place it);
 * no nodata value: every pixel holds a density (0 where the model puts none), and zero is a
   value, not a gap;
@@ -106,7 +107,7 @@ def write_geotiff(path: str | os.PathLike, panels: Sequence, frame=None, *, titl
     west, north = e0 + grid.origin[0], n0 + grid.origin[1] + grid.ny * grid.dy
     profile = {
         "driver": "GTiff", "width": grid.nx, "height": grid.ny, "count": len(checked), "dtype": "float32",
-        "crs": None if frame is None else rasterio.crs.CRS.from_wkt(frame.wkt),
+        "crs": None if frame is None else rasterio.crs.CRS.from_wkt(frame.portable_wkt),
         "transform": transform_of(west, north, grid.dx, grid.dy),
         "nodata": None, "compress": "deflate", "predictor": 3,
     }
