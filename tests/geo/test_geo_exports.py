@@ -19,6 +19,7 @@ from bananagrid import Raster, cli
 from bananagrid.geo.kml import KML_NAMESPACE
 from bananagrid.geo.zarr_store import write_zarr
 from bananagrid.scenes.load import parse_scene
+from bananagrid.scenes.run_grid import EXPORT_BYTES_PER_MAP_CELL, check_run_memory
 from gdal_tools import check_warped_peaks, gdalinfo, needs_gdal, warp_to_wgs84
 from test_kml import assert_same_areas, geojson_areas, kml_areas
 
@@ -127,3 +128,11 @@ def test_the_kml_holds_the_geojsons_areas_and_the_fix(written):
     assert fixes == ["4.6,60.45"]
     levels = {f["properties"]["level"] for f in json.loads((written / "poc-areas.geojson").read_text())["features"]}
     assert levels == {0.5, 0.9, 0.95, 0.99}
+
+
+def test_the_memory_estimate_counts_the_cell_probabilities_kept_for_the_files():
+    """A map kept for the files costs EXPORT_BYTES_PER_MAP_CELL per cell, and its cell
+    probabilities as much again."""
+    scene = parse_scene(SCENE)
+    kept = check_run_memory(scene, exports=True, limit=1e12) - check_run_memory(scene, limit=1e12)
+    assert kept == pytest.approx(scene.grid.nx * scene.grid.ny * EXPORT_BYTES_PER_MAP_CELL * 2 * len(scene.jobs()))
