@@ -172,12 +172,15 @@ def _time_folder(parent, panel, features: list[dict]) -> None:
     folder = _child(parent, "Folder")
     utc = features[0]["properties"]["time_utc"] if features else None
     _text(folder, "name", f"{panel.layer} t = {panel.t:g} s" + (f" ({utc})" if utc else ""))
+    missing = [f"{f['properties']['level']:g}" for f in features if f["geometry"] is None]
+    if missing:  # levels the grid does not reach: said, not drawn (KML's order: description, then time)
+        _text(folder, "description", f"The grid holds less than {', '.join(missing)}: no area at "
+                                     f"{'that level' if len(missing) == 1 else 'those levels'}.")
     if utc:
         _text(_child(folder, "TimeStamp"), "when", utc)
     for feature in features:
         props = feature["properties"]
-        if feature["geometry"] is None:  # a level the grid does not reach: said, not drawn
-            _text(folder, "description", f"The grid holds less than {props['level']:g}: no {props['level']:g} area.")
+        if feature["geometry"] is None:
             continue
         placemark = _child(folder, "Placemark")
         _text(placemark, "name", f"{100.0 * props['level']:g} %")

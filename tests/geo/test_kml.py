@@ -203,3 +203,16 @@ def test_run_refuses_kml_of_a_local_scene_before_computing(tmp_path, capsys):
         "figure1.toml: --kml: search areas are written in latitude and longitude, and this scene has no [geo] "
         "table (geo.origin_latlon); --netcdf and --geotiff work in local metres")
     assert not out.exists() or not any(out.iterdir())
+
+
+def test_a_level_the_grid_does_not_reach_is_said_not_drawn(tmp_path):
+    """A map holding 0.6 of the probability (the rest off the grid): its 50 % area is drawn,
+    its 90 % area is not, and the time's folder says so (as the GeoJSON's null geometry does)."""
+    partial = ring_map(4)
+    partial = Raster(values=0.6 * partial.values, grid=GRID, mass=0.6, provenance={"model": "test"})
+    path = write_kml(tmp_path / "partial.kml", [("ring", 60.0, partial)], GeoFrame(60.45, 4.6), (0.5, 0.9))
+    root = ET.parse(path).getroot()
+    names = [p.find("k:name", NS).text for p in root.iter(f"{{{KML_NAMESPACE}}}Placemark")]
+    assert names == ["50 %"]
+    (folder,) = root.iterfind("k:Document/k:Folder/k:Folder", NS)
+    assert folder.find("k:description", NS).text == "The grid holds less than 0.9: no area at that level."
