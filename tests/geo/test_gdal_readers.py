@@ -26,7 +26,7 @@ from bananagrid.geo.frame import GeoFrame
 from bananagrid.geo.geotiff import write_geotiff
 from bananagrid.scenes.load import load_scene
 from geo_cases import FRAME_CRSS
-from gdal_tools import check_warped_peaks, gdalinfo, layer_sources, needs_gdal, warp_to_wgs84
+from gdal_tools import check_warped_peaks, gdalinfo, layer_sources, needs_gdal, to_lonlat, warp_to_wgs84
 
 pytestmark = [needs_gdal, pytest.mark.filterwarnings("ignore:Use `@` matmul:PendingDeprecationWarning")]
 
@@ -59,6 +59,23 @@ def check_frame(tmp_path: Path, frame: GeoFrame, seed: int) -> None:
 @pytest.mark.parametrize("crs, lat, lon", FRAME_CRSS)
 def test_gdal_reads_and_warps_the_files_of_each_kind_of_crs(tmp_path, crs, lat, lon):
     check_frame(tmp_path, GeoFrame(lat, lon, crs=crs), seed=int(abs(lat * 10)))
+
+
+@pytest.mark.parametrize("crs, lat, lon", FRAME_CRSS)
+def test_gdals_proj_maps_the_files_crs_as_the_frame_does(crs, lat, lon):
+    """GDAL's PROJ (9.1 on Debian 12), given the WKT the files carry, takes projected points to
+    the latitudes and longitudes pyproj's PROJ gives the frame, to 1e-9 degrees (0.1 mm): at the
+    grid's corners and 300 km away, where an approximate azimuthal equidistant (EPSG's
+    "Modified", as GDAL names the WKT1 method) would be metres off."""
+    frame = GeoFrame(lat, lon, crs=crs)
+    x = np.array([GRID.extent[0], GRID.extent[1], 3e5, -2e5])
+    y = np.array([GRID.extent[2], GRID.extent[3], -1e5, 3e5])
+    plat, plon = frame.geographic(x, y)
+    held = np.isfinite(plat) & np.isfinite(plon)
+    e, n = frame.projected(x[held], y[held])
+    got = to_lonlat(frame.portable_wkt, e, n)
+    np.testing.assert_allclose(got[:, 0], plon[held], rtol=0, atol=1e-9)
+    np.testing.assert_allclose(got[:, 1], plat[held], rtol=0, atol=1e-9)
 
 
 @hypothesis.seed(35)

@@ -15,10 +15,12 @@ import numpy as np
 import pytest
 import rasterio
 
+#: The tools the tests run (all in Debian's gdal-bin).
+TOOLS = ("gdalinfo", "gdalwarp", "gdaltransform", "ogrinfo")
 #: Skips a test where the system has no GDAL tools (CI installs gdal-bin: .ci/run).
-needs_gdal = pytest.mark.skipif(shutil.which("gdalinfo") is None or shutil.which("gdalwarp") is None,
-                                reason="GDAL's command-line tools (gdalinfo, gdalwarp) are not installed "
-                                       "(apt-get install gdal-bin)")
+needs_gdal = pytest.mark.skipif(any(shutil.which(tool) is None for tool in TOOLS),
+                                reason="GDAL's command-line tools (gdalinfo, gdalwarp, gdaltransform, ogrinfo) are not "
+                                       "installed (apt-get install gdal-bin)")
 #: Seconds any one GDAL command may take (each takes well under one on these small files).
 TIMEOUT = 120
 
@@ -30,8 +32,14 @@ def gdal(*args: str) -> subprocess.CompletedProcess:
     return done
 
 
-def gdal_version() -> str:
-    return subprocess.run(["gdalinfo", "--version"], capture_output=True, text=True, timeout=TIMEOUT).stdout.strip()
+def to_lonlat(wkt: str, e, n) -> np.ndarray:
+    """``gdaltransform -s_srs WKT -t_srs WGS84``: GDAL's PROJ taking projected points (E, N) to
+    (lon, lat), as GDAL reads the CRS a file carries."""
+    points = "".join(f"{float(x)!r} {float(y)!r}\n" for x, y in zip(np.ravel(e), np.ravel(n)))
+    done = subprocess.run(["gdaltransform", "-s_srs", wkt, "-t_srs", "+proj=longlat +datum=WGS84", "-output_xy"],
+                          input=points, capture_output=True, text=True, timeout=TIMEOUT)
+    assert done.returncode == 0 and "ERROR" not in done.stderr, done.stderr
+    return np.array([[float(v) for v in line.split()] for line in done.stdout.splitlines()])
 
 
 def gdalinfo(source: str | Path) -> dict:
@@ -45,7 +53,7 @@ def warp_to_wgs84(source: str | Path, target: Path, grid, frame) -> Path:
     a cell wide and high at the origin (``-tr``: GDAL's own choice may be coarser than a cell
     along one axis, and nearest-neighbour sampling would then skip cells, the peak among them)."""
     lat = math.radians(frame.lat)
-    size = (0.5 * grid.dx / (METRES_PER_DEGREE * math.cos(lat)), 0.5 * grid.dy / METRES_PER_DEGREE)
+    size = (float(0.5 * grid.dx / (METRES_PER_DEGREE * math.cos(lat))), float(0.5 * grid.dy / METRES_PER_DEGREE))
     gdal("gdalwarp", "-q", "-overwrite", "-t_srs", "EPSG:4326", "-r", "near", "-tr", repr(min(size)), repr(min(size)),
          "-of", "GTiff", source, target)
     return target
