@@ -126,7 +126,7 @@ def build_parser() -> tuple[argparse.ArgumentParser, dict[str, argparse.Argument
     run = sub.add_parser(
         "run", help="rasterise scene files into .rrd recordings",
         description="Rasterise every layer of each scene at every time and write OUT/NAME.rrd "
-        "(and OUT/NAME.npz with --npz; the map files of --netcdf, --geotiff and --geojson, which need "
+        "(and OUT/NAME.npz with --npz; the map files of --netcdf, --geotiff, --geojson and --kml, which need "
         "the geo extra). Progress goes to stderr, a summary table to stdout.",
     )
     run.add_argument("scenes", nargs="*", metavar="SCENE.toml", type=Path, help="scene files")
@@ -141,6 +141,9 @@ def build_parser() -> tuple[argparse.ArgumentParser, dict[str, argparse.Argument
                      help="also write NAME.tif: one georeferenced float32 band per layer and time")
     run.add_argument("--geojson", action="store_true",
                      help="also write NAME-areas.geojson: the probability-mass regions as WGS84 polygons (needs [geo])")
+    run.add_argument("--kml", action="store_true",
+                     help="also write NAME.kml for Google Earth and chart plotters: the probability-mass regions, "
+                     "styled per level, and the fix and stations as placemarks (needs [geo])")
     run.add_argument("--step", type=float, metavar="S",
                      help="override the grid step of every scene, m (e.g. for a quick look)")
     run.add_argument("--threads", type=int, metavar="N",
@@ -305,7 +308,7 @@ def _run(args: argparse.Namespace) -> int:
     if args.step is not None:
         scenes = [scene.with_step(args.step) for scene in scenes]
     _check_unique_names(scenes)
-    exports = {"netcdf": args.netcdf, "geotiff": args.geotiff, "geojson": args.geojson}
+    exports = {"netcdf": args.netcdf, "geotiff": args.geotiff, "geojson": args.geojson, "kml": args.kml}
     limit = None if args.max_memory is None else memory_limit(args.max_memory)
     max_seconds = None if args.max_seconds is None else work_limit(args.max_seconds)
     for scene in scenes:  # every scene's checks before any computing
@@ -334,7 +337,7 @@ def _run(args: argparse.Namespace) -> int:
         written.append(args.out / f"{scene.name}.rrd")
         if args.npz:
             written.append(args.out / f"{scene.name}.npz")
-        written += export_paths(scene.name, args.out, **exports).values()
+        written += export_paths(scene.name, args.out, **exports, cell_probabilities=scene.cell_probabilities).values()
     print(format_summary(rows))
     print()
     for path in written:
@@ -346,7 +349,7 @@ def _run_tiled(args: argparse.Namespace, paths: list[Path]) -> int:
     """``bananagrid run SCENE --zarr OUT.zarr``: one scene in tiles on a Dask cluster, into Zarr."""
     if len(paths) != 1:
         raise BananagridError(f"--zarr {args.zarr}: writes one scene's store; {len(paths)} scenes given")
-    combined = [f"--{k}" for k in ("npz", "netcdf", "geotiff", "geojson") if getattr(args, k)]
+    combined = [f"--{k}" for k in ("npz", "netcdf", "geotiff", "geojson", "kml") if getattr(args, k)]
     if combined:
         raise BananagridError(f"--zarr cannot be combined with {', '.join(combined)} (those files hold a grid in memory)")
     if args.threads is not None:

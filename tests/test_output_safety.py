@@ -69,11 +69,11 @@ heading_deg = 200.0
 
 #: Every file a `run` of the scene writes, by the option that asks for it (the .rrd always).
 FILES = {"rrd": "tiny.rrd", "npz": "tiny.npz", "netcdf": "tiny.nc", "geotiff": "tiny.tif",
-         "geojson": "tiny-areas.geojson"}
-EVERY_FILE = ["--npz", "--netcdf", "--geotiff", "--geojson"]
+         "geojson": "tiny-areas.geojson", "kml": "tiny.kml"}
+EVERY_FILE = ["--npz", "--netcdf", "--geotiff", "--geojson", "--kml"]
 #: What each writer calls its file (the error's wording).
 WHAT = {"rrd": "recording", "npz": ".npz arrays", "netcdf": "NetCDF file", "geotiff": "GeoTIFF",
-        "geojson": "GeoJSON file"}
+        "geojson": "GeoJSON file", "kml": "KML file"}
 
 
 # --- what may be at a target ---------------------------------------------------------------------
@@ -450,7 +450,7 @@ STEPS = {
     **{f"{option} writer": (lambda mp, name=name: _fail_when_staged(mp, name), name) for option, name in FILES.items()
        if option != "npz"},
     "npz writer, midway": (_fail_npz_midway, FILES["npz"]),
-    **{f"rename {k} of 5": (lambda mp, k=k: _fail_rename(mp, k), name) for k, name in enumerate(FILES.values(), 1)},
+    **{f"rename {k} of {len(FILES)}": (lambda mp, k=k: _fail_rename(mp, k), name) for k, name in enumerate(FILES.values(), 1)},
 }
 
 

@@ -7,6 +7,8 @@
 * :mod:`~bananagrid.geo.areas` — search areas: probability-mass regions as polygons, with the
   probability they enclose recomputed from the cells and its bound;
 * :mod:`~bananagrid.geo.geojson` — search areas as RFC 7946 GeoJSON in WGS84;
+* :mod:`~bananagrid.geo.kml` — the same search areas, and the fix and stations, as KML for
+  Google Earth and chart plotters;
 * :mod:`~bananagrid.geo.panels`, :mod:`~bananagrid.geo.files` — the maps a file holds, checked
   once, and files written whole or not at all;
 * :mod:`~bananagrid.geo.inputs` — tracks, last fixes and bearings read from CSV, GPX, NMEA 0183

@@ -8,8 +8,9 @@ Panoply, QGIS and GDAL read it without help:
   ``projection_y_coordinate``; local metres about the origin when there is no frame), with
   ``x_bounds``, ``y_bounds`` holding the cell edges;
 * with a :class:`~bananagrid.geo.frame.GeoFrame`: ``lat``, ``lon`` (y, x), the latitude and
-  longitude of every cell centre, and ``crs``, the grid mapping (pyproj's CF attributes and the
-  WKT2 as ``crs_wkt`` and ``spatial_ref``);
+  longitude of every cell centre, and ``crs``, the grid mapping (pyproj's CF attributes, and as
+  ``crs_wkt`` and ``spatial_ref`` the WKT that GDAL 3.6 / PROJ 9.1 and later read:
+  :attr:`GeoFrame.portable_wkt <bananagrid.geo.frame.GeoFrame.portable_wkt>`);
 * ``time``: with a frame time, the UTC times (decoded to datetime64 in memory, written as
   ``seconds since`` the frame time), with the auxiliary coordinate ``elapsed`` (s since the
   fix); without one, the time dimension is ``elapsed`` itself (units ``s``: CF keeps a
@@ -20,7 +21,11 @@ Panoply, QGIS and GDAL read it without help:
 * one variable per layer, named for the layer: the density per m^2 at each cell centre,
   dims (time, y, x), with ``LAYER_mass`` (the probability mass the grid captured before any
   normalisation, per time) and ``LAYER_normalised`` (a 0/1 flag per time); the provenance of
-  each time as JSON in the attribute ``bananagrid_provenance``.
+  each time as JSON in the attribute ``bananagrid_provenance``;
+* where cell probabilities are given (a scene's ``output.cell_probabilities``):
+  ``LAYER_probability``, dims as the layer's, the probability that the target is in each cell
+  (the probability of containment, POC, of search planning: units ``1``, ``cell_methods =
+  "area: sum"``, the layer named in ``bananagrid_cells_of``), as computed, to the bit.
 
 Layers at different times: when every layer has the same elapsed times they share the
 dimension ``time``; otherwise each layer has its own time dimension and coordinates,
@@ -53,7 +58,7 @@ from ..version import __version__
 from .files import writing
 from .frame import iso_utc
 from .libraries import CLUSTER_EXTRA, CLUSTER_PURPOSE, require
-from .panels import check_panels, frame_of, provenance_json, variable_name
+from .panels import check_cells, check_panels, frame_of, provenance_json, variable_name
 
 __all__ = [
     "CONVENTIONS", "DENSITY_UNITS", "ELAPSED_LONG_NAME", "NETCDF_PURPOSE", "raster_dataset", "polar_dataset",
@@ -85,7 +90,7 @@ def time_units(frame) -> str:
     return f"seconds since {iso_utc(frame.time)}"
 
 
-def raster_dataset(panels: Sequence, frame=None, *, title: str = "", source: str = ""):
+def raster_dataset(panels: Sequence, frame=None, *, title: str = "", source: str = "", cells=None):
     """A scene's maps as one CF-1.10 :class:`xarray.Dataset`.
 
     Parameters
@@ -101,6 +106,10 @@ def raster_dataset(panels: Sequence, frame=None, *, title: str = "", source: str
     title, source : str
         The global ``title`` and ``source`` attributes (``source`` defaults to
         ``"bananagrid VERSION"``).
+    cells : mapping of (str, float) to Raster, optional
+        Cell probabilities (rasters of ``quantity == "probability"``) by ``(layer_name, t)``, for
+        every time of the layers that have them (:func:`~bananagrid.geo.panels.check_cells`):
+        each such layer gets ``LAYER_probability`` beside its density.
 
     Returns
     -------
@@ -117,6 +126,7 @@ def raster_dataset(panels: Sequence, frame=None, *, title: str = "", source: str
     """
     xr = require("xarray", NETCDF_PURPOSE)
     checked = check_panels(panels)
+    probabilities = check_cells(cells, checked)
     frame = frame_of(checked, frame)
     grid = checked[0].raster.grid
     layers: dict[str, list] = {}
@@ -135,6 +145,8 @@ def raster_dataset(panels: Sequence, frame=None, *, title: str = "", source: str
     for layer, series in layers.items():
         var = names[layer]
         derived = {"mass": f"{var}_mass", "normalised": f"{var}_normalised"}
+        if (layer, series[0].t) in probabilities:
+            derived["probability"] = f"{var}_probability"
         if not shared:
             derived.update(time=f"time_{var}", elapsed=f"elapsed_{var}")
         for name in derived.values():
@@ -146,6 +158,9 @@ def raster_dataset(panels: Sequence, frame=None, *, title: str = "", source: str
         if tdim not in coords:
             coords.update(_time_variables(tdim, elapsed, [p.t for p in series], frame))
         data_vars[var] = _layer_variable(xr, layer, series, tdim, elapsed, frame)
+        if "probability" in derived:
+            data_vars[derived["probability"]] = _probability_variable(
+                xr, layer, [probabilities[layer, p.t] for p in series], data_vars[var])
         data_vars[derived["mass"]] = xr.Variable(
             (tdim,), _stack([getattr(p.raster, "lazy_mass", None) if _lazy(p.raster.values) else float(p.raster.mass)
                              for p in series]),
@@ -256,8 +271,10 @@ def _crs_attrs(frame) -> dict:
             attrs[key] = value
         elif isinstance(value, (list, tuple)) and value and all(isinstance(v, (int, float)) for v in value):
             attrs[key] = np.asarray(value, dtype=float)
-    attrs["crs_wkt"] = frame.wkt
-    attrs["spatial_ref"] = frame.wkt  # the name GDAL (and so QGIS) reads first
+    # WKT that the GDAL and PROJ of current LTS distributions read (GeoFrame.portable_wkt): the
+    # WKT2 of a newer PROJ may name a method they do not know, and gdalwarp then fails
+    attrs["crs_wkt"] = frame.portable_wkt
+    attrs["spatial_ref"] = frame.portable_wkt  # the name GDAL (and so QGIS) reads first
     attrs["long_name"] = f"coordinate reference system of x and y ({frame.crs_name})"
     return attrs
 
@@ -301,6 +318,24 @@ def _layer_variable(xr, layer: str, series: list, tdim: str, elapsed: str, frame
     if coordinates:
         encoding["coordinates"] = " ".join(coordinates)
     return xr.Variable((tdim, "y", "x"), values, attrs, encoding=encoding)
+
+
+def _probability_variable(xr, layer: str, cells: list, density):
+    """A layer's cell probabilities (probability of containment, POC) beside its density
+    variable ``density``: the same dimensions, coordinates and grid mapping, the values as
+    computed (so that they equal the .npz's to the bit)."""
+    attrs = {
+        "long_name": (f"probability that the target is in the cell (probability of containment, POC): layer {layer}; "
+                      "the density integrated over the cell, not sampled at its centre"),
+        "units": "1",
+        "cell_methods": "area: sum",
+        "bananagrid_cells_of": layer,
+        "bananagrid_provenance": "[" + ", ".join(provenance_json(c.provenance) for c in cells) + "]",
+    }
+    if "grid_mapping" in density.attrs:
+        attrs["grid_mapping"] = density.attrs["grid_mapping"]
+    encoding = {k: v for k, v in density.encoding.items() if k == "coordinates"}
+    return xr.Variable(density.dims, _stack([c.values for c in cells]), attrs, encoding=encoding)
 
 
 def _global_attrs(title: str, source: str, frame) -> dict:

@@ -67,6 +67,10 @@ LAST_UTC = datetime.max.replace(tzinfo=timezone.utc)
 #: local, and back to latitude and longitude) that a frame accepts: a map file's coordinates
 #: then place every cell where the model put it, to a millimetre.
 MAX_ROUND_TRIP_M = 1e-3
+#: How far from the origin (m) :attr:`GeoFrame.portable_wkt` checks that the WKT1 it writes maps
+#: points as the frame's CRS does: beyond any grid a scale bound of 1e-3 lets an aeqd hold
+#: (a radius of about 500 km), so a parameter WKT1 lost would show.
+PORTABLE_CHECK_M = 1e6
 
 
 def iso_utc(when: datetime) -> str:
@@ -190,8 +194,47 @@ class GeoFrame:
 
     @property
     def wkt(self) -> str:
-        """The projected CRS as WKT2 (what NetCDF, GeoTIFF and GIS read)."""
+        """The projected CRS as WKT2 (2019), as this pyproj's PROJ writes it: exact, but it may
+        name a method an older PROJ does not know (:attr:`portable_wkt` is what files carry)."""
         return self.crs.to_wkt()
+
+    @cached_property
+    def portable_wkt(self) -> str:
+        """The projected CRS as the map files write it: GDAL's WKT1 (``WKT1_GDAL``), which the
+        GDAL and PROJ of every current LTS distribution read, wherever it describes the same
+        projection; else WKT2 (2015).
+
+        The WKT2 a recent PROJ writes names each method by its newest EPSG code: PROJ 9.2 and
+        later write the azimuthal equidistant as ``METHOD["Azimuthal Equidistant", ID["EPSG",
+        1125]]``, which PROJ 9.1 (GDAL 3.6, Debian 12) does not know, so it has no inverse and
+        ``gdalwarp`` fails. WKT1 names the projection by GDAL's stable name
+        (``PROJECTION["Azimuthal_Equidistant"]``), read since GDAL 1 and PROJ 6; a CRS WKT1
+        cannot describe is carried in it as PROJ's own string (``EXTENSION["PROJ4", ...]``).
+        "The same projection" is checked, not assumed: pyproj must read the WKT1 back and map
+        the origin and points 1,000 km about it to within :data:`MAX_ROUND_TRIP_M` of this
+        frame's CRS.
+        """
+        pyproj = require("pyproj")
+        wkt1 = self.crs.to_wkt("WKT1_GDAL")
+        if wkt1 and self._same_projection(pyproj, wkt1):
+            return wkt1
+        return self.crs.to_wkt("WKT2_2015")
+
+    def _same_projection(self, pyproj, wkt: str) -> bool:
+        """Whether the CRS ``wkt`` maps the origin and points :data:`PORTABLE_CHECK_M` about it
+        (where the projection holds them) as this frame's CRS does, to :data:`MAX_ROUND_TRIP_M`."""
+        try:
+            other = pyproj.Transformer.from_crs(WGS84, pyproj.CRS.from_wkt(wkt), always_xy=True)
+        except pyproj.exceptions.ProjError:
+            return False
+        reach = np.array([0.0, PORTABLE_CHECK_M, -PORTABLE_CHECK_M])
+        x, y = (v.ravel() for v in np.meshgrid(reach, reach))
+        e, n = self.projected(x, y)
+        with np.errstate(all="ignore"):
+            lat, lon = self.geographic(x, y)
+            e2, n2 = (np.asarray(v, dtype=float) for v in other.transform(lon, lat))
+        held = np.isfinite(lat) & np.isfinite(lon) & np.isfinite(e) & np.isfinite(n)
+        return bool(held[0] and np.all(np.hypot(e2 - e, n2 - n)[held] <= MAX_ROUND_TRIP_M))
 
     @cached_property
     def _forward(self):

@@ -21,7 +21,7 @@ import numpy as np
 
 from ..validate import BananagridError, show
 
-__all__ = ["Panel", "check_panels", "frame_of", "provenance_json", "variable_name"]
+__all__ = ["Panel", "check_panels", "check_cells", "frame_of", "provenance_json", "variable_name", "PROBABILITY"]
 
 #: A NetCDF (and CF) variable name: a letter, then letters, digits and underscores.
 _CF_NAME = re.compile(r"[A-Za-z][A-Za-z0-9_]*")
@@ -83,6 +83,58 @@ def check_panels(panels: Sequence, what: str = "panels") -> list[Panel]:
                 f"({panel.raster.grid.describe()}) than {what}[0] ({first.describe()}): one file holds one grid"
             )
     frame_of(checked, None, what)
+    return checked
+
+
+#: The ``quantity`` of a raster of cell probabilities (:func:`bananagrid.rasterise` with
+#: ``quantity="probability"``): the probability that the target is in each cell.
+PROBABILITY = "probability"
+
+
+def check_cells(cells, panels: Sequence[Panel], what: str = "cells") -> dict[tuple[str, float], object]:
+    """The cell probabilities of the panels' maps: ``{(layer, t): raster}``, checked once.
+
+    Parameters
+    ----------
+    cells : mapping of (str, float) to Raster, or None
+        For some layers, their cell probabilities (rasters of ``quantity == "probability"``) at
+        every time those layers have a panel, on the panels' grid.
+    panels : list of Panel
+        The checked panels (:func:`check_panels`).
+
+    Raises
+    ------
+    BananagridError
+        A key that names no panel, a raster that is not one of cell probabilities or lies on
+        another grid, or a layer whose probabilities are given at some of its times only (a
+        file would have to pad the others).
+    """
+    if cells is None:
+        return {}
+    if not hasattr(cells, "items"):
+        raise BananagridError(f"{what} = {show(cells)}: expected a mapping of (layer_name, t) to a Raster of cell "
+                              "probabilities")
+    times: dict[str, set[float]] = {}
+    for panel in panels:
+        times.setdefault(panel.layer, set()).add(panel.t)
+    checked = {}
+    for key, raster in cells.items():
+        if not (isinstance(key, tuple) and len(key) == 2 and key[0] in times and isinstance(key[1], (int, float))
+                and float(key[1]) in times[key[0]]):
+            raise BananagridError(f"{what}: key {show(key)} names no map (layer_name, t) of the panels")
+        layer, t = key[0], float(key[1])
+        if getattr(raster, "quantity", None) != PROBABILITY or not _has(raster, "values") or not _has(raster, "grid"):
+            raise BananagridError(f"{what}[{layer!r}, {t:g}]: expected a Raster of cell probabilities "
+                                  f"(quantity {PROBABILITY!r}), got {type(raster).__name__}"
+                                  f" of quantity {show(getattr(raster, 'quantity', None))}")
+        if raster.grid != panels[0].raster.grid or np.shape(raster.values) != raster.grid.shape:
+            raise BananagridError(f"{what}[{layer!r}, {t:g}]: not on the panels' grid ({panels[0].raster.grid.describe()})")
+        checked[layer, t] = raster
+    for layer in {layer for layer, _ in checked}:
+        missing = sorted(times[layer] - {t for other, t in checked if other == layer})
+        if missing:
+            raise BananagridError(f"{what}: layer {layer!r} has cell probabilities at some of its times but not at "
+                                  f"t = {', '.join(f'{t:g}' for t in missing)} s; give them at every time or at none")
     return checked
 
 

@@ -135,7 +135,7 @@ def _current_client():
 
 
 def write_zarr(path: str | os.PathLike, panels: Sequence, frame=None, *, title: str = "", source: str = "",
-               progress: bool = False, stage=None) -> Path:
+               progress: bool = False, stage=None, cells=None) -> Path:
     """Write a scene's maps to the Zarr store ``path`` (a directory), whole or not at all.
 
     Parameters
@@ -154,6 +154,9 @@ def write_zarr(path: str | os.PathLike, panels: Sequence, frame=None, *, title: 
     stage : callable, optional
         A run's :meth:`bananagrid.atomic.OutputSet.stage` (the run planned ``path`` and commits
         it with its other files); default: the store is put in place when complete.
+    cells : mapping of (str, float) to Raster, optional
+        Cell probabilities by ``(layer, t)`` (rasters in memory), stored as ``LAYER_probability``
+        as :func:`~bananagrid.geo.dataset.raster_dataset` puts them in the NetCDF.
 
     Returns
     -------
@@ -170,7 +173,7 @@ def write_zarr(path: str | os.PathLike, panels: Sequence, frame=None, *, title: 
     """
     xr = require("xarray", CLUSTER_PURPOSE, CLUSTER_EXTRA)
     final = check_store_target(path)
-    dataset = raster_dataset(panels, frame, title=title, source=source)
+    dataset = raster_dataset(panels, frame, title=title, source=source, cells=cells)
     if not isinstance(dataset, xr.Dataset):  # pragma: no cover - raster_dataset always returns one
         raise BananagridError("write_zarr: expected the maps as an xarray.Dataset")
     encoding = {}

@@ -56,6 +56,7 @@ def run_scene(
     netcdf: bool = False,
     geotiff: bool = False,
     geojson: bool = False,
+    kml: bool = False,
     threads: int | None = None,
     progress: Progress | None = None,
     max_memory: float | None = None,
@@ -87,6 +88,10 @@ def run_scene(
         Also write ``NAME-areas.geojson``: the probability-mass regions at the scene's
         ``mass_levels`` as WGS84 polygons (:func:`bananagrid.geo.geojson.write_geojson`); needs
         ``[geo]``.
+    kml : bool, default False
+        Also write ``NAME.kml``: the same search areas and the layers' landmarks (fix, stations,
+        bearings) for Google Earth and chart plotters (:func:`bananagrid.geo.kml.write_kml`);
+        needs ``[geo]``.
     threads : int, optional
         CPU threads per rasterisation (default: every core).
     progress : callable, optional
@@ -128,7 +133,7 @@ def run_scene(
         fixed contour levels outside the map's range. A grid scene's own warnings and these are
         listed in the recording's summary document.
     """
-    asked = dict(netcdf=netcdf, geotiff=geotiff, geojson=geojson)
+    asked = dict(netcdf=netcdf, geotiff=geotiff, geojson=geojson, kml=kml)
     kind = domain_run(scene)
     kind.check_exports(scene, **asked)
     kind.check_memory(scene, exports=any(asked.values()), limit=max_memory)
@@ -158,11 +163,12 @@ def run_scene(
     return rows
 
 
-def check_exports(scene: Scene, *, netcdf: bool = False, geotiff: bool = False, geojson: bool = False) -> None:
+def check_exports(scene: Scene, *, netcdf: bool = False, geotiff: bool = False, geojson: bool = False,
+                  kml: bool = False) -> None:
     """Refuse, before any computing, a map file the scene cannot give or whose library is
     missing: an [array] scene maps angular cells, not a grid; GeoJSON search areas are in
     latitude and longitude, so they need a geographic scene (``[geo]``)."""
-    domain_run(scene).check_exports(scene, netcdf=netcdf, geotiff=geotiff, geojson=geojson)
+    domain_run(scene).check_exports(scene, netcdf=netcdf, geotiff=geotiff, geojson=geojson, kml=kml)
 
 
 def check_run_memory(scene: Scene, *, exports: bool = False, limit: float | None = None) -> float | None:

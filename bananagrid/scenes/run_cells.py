@@ -46,10 +46,11 @@ class CellRun:
     """
 
     @staticmethod
-    def check_exports(scene: Scene, *, netcdf: bool = False, geotiff: bool = False, geojson: bool = False) -> None:
+    def check_exports(scene: Scene, *, netcdf: bool = False, geotiff: bool = False, geojson: bool = False,
+                      kml: bool = False) -> None:
         """Refuse map files: angular cells are not a grid."""
-        asked = [option for option, wanted in (("--netcdf", netcdf), ("--geotiff", geotiff), ("--geojson", geojson))
-                 if wanted]
+        asked = [option for option, wanted in (("--netcdf", netcdf), ("--geotiff", geotiff), ("--geojson", geojson),
+                                               ("--kml", kml)) if wanted]
         if asked:
             raise BananagridError(f"{scene.source}: {', '.join(asked)}: an [array] scene maps angular cells, "
                                   "not a grid; its cell tables are in the .rrd and .npz")
@@ -65,7 +66,7 @@ class CellRun:
         return None
 
     def __init__(self, scene: Scene, out_dir: Path, outputs: OutputSet, *, npz: bool = False, netcdf: bool = False,
-                 geotiff: bool = False, geojson: bool = False, threads: int | None = None):
+                 geotiff: bool = False, geojson: bool = False, kml: bool = False, threads: int | None = None):
         self.scene = scene
         self.outputs = outputs
         self.npz_path = Path(out_dir) / f"{scene.name}.npz" if npz else None

@@ -62,7 +62,7 @@ class GridRun:
     out_dir : Path
     outputs : OutputSet
         The run's planned files (:func:`bananagrid.scenes.run_outputs.plan_outputs`).
-    npz, netcdf, geotiff, geojson : bool
+    npz, netcdf, geotiff, geojson, kml : bool
         The files asked for.
     threads : int or None
         CPU threads per rasterisation.
@@ -84,17 +84,19 @@ class GridRun:
         return check_run_work(scene, threads=threads, limit=limit)
 
     def __init__(self, scene: Scene, out_dir: Path, outputs: OutputSet, *, npz: bool = False, netcdf: bool = False,
-                 geotiff: bool = False, geojson: bool = False, threads: int | None = None):
+                 geotiff: bool = False, geojson: bool = False, kml: bool = False, threads: int | None = None):
         self.scene = scene
         self.out_dir = Path(out_dir)
         self.outputs = outputs
         self.npz_path = self.out_dir / f"{scene.name}.npz" if npz else None
-        self.exports = dict(netcdf=netcdf, geotiff=geotiff, geojson=geojson)
+        self.exports = dict(netcdf=netcdf, geotiff=geotiff, geojson=geojson, kml=kml)
         self.threads = threads
         self.panels: list | None = [] if any(self.exports.values()) else None
         self.found: list[str] = list(scene.warnings)
         self.frames: dict[str, list] = {}
         self.areas: dict[tuple[str, float], list] = {}  # a geographic scene's search areas, by (layer, t)
+        self.cells: dict[tuple[str, float], Raster] = {}  # the cell probabilities kept for the map files
+        self.marks: dict[str, dict] = {}  # each layer's landmarks (fix, stations), for the KML
         self.marked: set[str] = set()  # layers whose landmarks are on the map (static, logged once)
         self.archive = None
 
@@ -121,8 +123,8 @@ class GridRun:
                 if self.archive is not None:
                     self.archive.abandon()
         if self.panels is not None:
-            write_exports(scene, self.out_dir, self.panels, **self.exports, areas=self.areas,
-                          stage=self.outputs.stage)
+            write_exports(scene, self.out_dir, self.panels, **self.exports, areas=self.areas, cells=self.cells,
+                          marks=self.marks, stage=self.outputs.stage)
 
     def record(self, rec, layer: Layer, t: float) -> dict:
         """Compute one layer at ``t``, log it and keep it for the files; its summary row."""
@@ -163,6 +165,8 @@ class GridRun:
             self.archive.add(layer.name, t, raster, cells)
         if self.panels is not None:
             self.panels.append((layer.name, t, raster))
+            if cells is not None:
+                self.cells[layer.name, t] = cells
         return _row(scene, layer, t, raster, seconds, regions)
 
     def _log_map(self, rec, layer: Layer, t: float, model, raster: Raster) -> None:
@@ -171,6 +175,7 @@ class GridRun:
         if layer.name not in self.marked:
             log_map_marks(rec, layer.name, model, scene.geo)
             self.marked.add(layer.name)
+            self.marks[layer.name] = model.landmarks()
         self.areas[layer.name, t] = search_areas(raster, scene.mass_levels)
         log_map_areas(rec, layer.name, self.areas[layer.name, t], scene.geo)
 
@@ -205,7 +210,8 @@ def check_run_memory(scene: Scene, *, exports: bool = False, limit: float | None
     system has available), before any computing; returns the estimate. See
     :mod:`bananagrid.engine.memory`."""
     cells = scene.grid.nx * scene.grid.ny
-    per_cell = (RUN_BYTES_PER_CELL + (EXPORT_BYTES_PER_MAP_CELL * len(scene.jobs()) if exports else 0)
+    kept = len(scene.jobs()) * (2 if scene.cell_probabilities else 1)  # maps kept for the files: densities, cells
+    per_cell = (RUN_BYTES_PER_CELL + (EXPORT_BYTES_PER_MAP_CELL * kept if exports else 0)
                 + (PROBABILITY_BYTES_PER_CELL if scene.cell_probabilities else 0))
     return check_memory(cells, per_cell, f"{scene.source}: a grid of {scene.grid.nx} x {scene.grid.ny} = {cells:,} cells",
                         limit=limit, option="--max-memory GB")
@@ -226,13 +232,20 @@ def check_run_work(scene: Scene, *, threads: int | None = None, limit: float | N
                       limit=limit, option="--max-seconds S")
 
 
-def check_exports(scene: Scene, *, netcdf: bool = False, geotiff: bool = False, geojson: bool = False) -> None:
+def check_exports(scene: Scene, *, netcdf: bool = False, geotiff: bool = False, geojson: bool = False,
+                  kml: bool = False) -> None:
     """Refuse, before any computing, a map file the scene cannot give or whose library is
-    missing: GeoJSON search areas are in latitude and longitude, so they need a geographic
-    scene (``[geo]``)."""
-    for wanted, libraries in ((netcdf, ("xarray", "netCDF4")), (geotiff, ("rasterio",)), (geojson, ("shapely", "pyproj"))):
+    missing: GeoJSON and KML search areas are in latitude and longitude, so they need a
+    geographic scene (``[geo]``)."""
+    for wanted, libraries in ((netcdf, ("xarray", "netCDF4")), (geotiff, ("rasterio",)),
+                              (geojson or kml, ("shapely", "pyproj"))):
         for library in libraries if wanted else ():
-            require(library, "map files (--netcdf, --geotiff, --geojson)")
+            require(library, "map files (--netcdf, --geotiff, --geojson, --kml)")
+    if kml and scene.geo is None:
+        raise BananagridError(
+            f"{scene.source}: --kml: search areas are written in latitude and longitude, and this scene "
+            "has no [geo] table (geo.origin_latlon); --netcdf and --geotiff work in local metres"
+        )
     if geojson and scene.geo is None:
         raise BananagridError(
             f"{scene.source}: --geojson: search areas are written in latitude and longitude, and this scene "

@@ -1,5 +1,5 @@
 """The files of a scene's run, planned before any computing: ``NAME.rrd``, ``NAME.npz`` and the
-map files (NetCDF, GeoTIFF, GeoJSON), all one :class:`~bananagrid.atomic.OutputSet`."""
+map files (NetCDF, GeoTIFF, GeoJSON, KML), all one :class:`~bananagrid.atomic.OutputSet`."""
 
 from __future__ import annotations
 
@@ -10,10 +10,11 @@ from ..atomic import OutputSet
 from ..geo.dataset import raster_dataset, write_netcdf
 from ..geo.geojson import write_geojson
 from ..geo.geotiff import write_geotiff
+from ..geo.kml import write_kml
 from ..validate import BananagridError
 
-__all__ = ["plan_outputs", "export_paths", "write_exports", "EXPORT_SUFFIXES", "EXPORT_NAMES", "NPZ",
-           "RUN_ONLY_PROVENANCE"]
+__all__ = ["plan_outputs", "export_paths", "write_exports", "EXPORT_SUFFIXES", "EXPORT_NAMES", "EXPORT_OPTIONS", "NPZ",
+           "RUN_ONLY_PROVENANCE", "PROBABILITY_GEOTIFF"]
 
 #: Provenance keys that describe the run rather than the result. They stay out of the
 #: recording, so that running a scene twice gives equal recordings; the summary rows and the
@@ -21,8 +22,8 @@ __all__ = ["plan_outputs", "export_paths", "write_exports", "EXPORT_SUFFIXES", "
 RUN_ONLY_PROVENANCE = ("seconds", "threads")
 
 
-def plan_outputs(scene, out_dir: str | os.PathLike, *, npz: bool = False,
-                 netcdf: bool = False, geotiff: bool = False, geojson: bool = False) -> OutputSet:
+def plan_outputs(scene, out_dir: str | os.PathLike, *, npz: bool = False, netcdf: bool = False,
+                 geotiff: bool = False, geojson: bool = False, kml: bool = False) -> OutputSet:
     """The files a run of ``scene`` writes in ``out_dir`` (``NAME.rrd``, and ``NAME.npz`` and the
     map files asked for), each checked now, before any computing: the directory must exist and
     take new files, and each target must be absent or a regular file (a directory, a link or
@@ -40,47 +41,72 @@ def plan_outputs(scene, out_dir: str | os.PathLike, *, npz: bool = False,
     outputs.add(out_dir / f"{scene.name}.rrd", "recording")
     if npz:
         outputs.add(out_dir / f"{scene.name}.npz", NPZ)
-    for option, path in export_paths(scene.name, out_dir, netcdf=netcdf, geotiff=geotiff, geojson=geojson).items():
+    for option, path in export_paths(scene.name, out_dir, netcdf=netcdf, geotiff=geotiff, geojson=geojson, kml=kml,
+                                     cell_probabilities=_cells(scene)).items():
         outputs.add(path, EXPORT_NAMES[option])
     return outputs
 
 
+#: The map options of ``bananagrid run`` (``--netcdf``, ...), in the order their files are written.
+EXPORT_OPTIONS = ("netcdf", "geotiff", "geojson", "kml")
+#: The GeoTIFF of the cell probabilities (float64, unit 1), beside the densities' GeoTIFF when a
+#: scene asks for them (``output.cell_probabilities``): one quantity and one unit per file.
+PROBABILITY_GEOTIFF = "geotiff_probability"
 #: The map files' names after the scene's name, by option.
-EXPORT_SUFFIXES = {"netcdf": ".nc", "geotiff": ".tif", "geojson": "-areas.geojson"}
+EXPORT_SUFFIXES = {"netcdf": ".nc", "geotiff": ".tif", PROBABILITY_GEOTIFF: "-probability.tif",
+                   "geojson": "-areas.geojson", "kml": ".kml"}
 #: What each map file is called in messages (as its writer calls it).
-EXPORT_NAMES = {"netcdf": "NetCDF file", "geotiff": "GeoTIFF", "geojson": "GeoJSON file"}
+EXPORT_NAMES = {"netcdf": "NetCDF file", "geotiff": "GeoTIFF", PROBABILITY_GEOTIFF: "GeoTIFF",
+                "geojson": "GeoJSON file", "kml": "KML file"}
 #: What the .npz is called in messages.
 NPZ = ".npz arrays"
 
 
 def export_paths(name: str, out_dir: Path, *, netcdf: bool = False, geotiff: bool = False,
-                 geojson: bool = False) -> dict[str, Path]:
-    """``{option: path}`` of the map files asked for, for scene ``name`` in ``out_dir``."""
-    wanted = {"netcdf": netcdf, "geotiff": geotiff, "geojson": geojson}
+                 geojson: bool = False, kml: bool = False, cell_probabilities: bool = False) -> dict[str, Path]:
+    """``{option: path}`` of the map files asked for, for scene ``name`` in ``out_dir``; with
+    ``cell_probabilities`` and ``geotiff``, also the cell probabilities' GeoTIFF
+    (:data:`PROBABILITY_GEOTIFF`)."""
+    wanted = {"netcdf": netcdf, "geotiff": geotiff, PROBABILITY_GEOTIFF: geotiff and cell_probabilities,
+              "geojson": geojson, "kml": kml}
     return {option: Path(out_dir) / f"{name}{suffix}" for option, suffix in EXPORT_SUFFIXES.items() if wanted[option]}
 
 
 def write_exports(scene, out_dir: Path, panels: list, *, netcdf: bool = False, geotiff: bool = False,
-                  geojson: bool = False, areas: dict | None = None, stage=None) -> list[Path]:
+                  geojson: bool = False, kml: bool = False, areas: dict | None = None, cells: dict | None = None,
+                  marks: dict | None = None, stage=None) -> list[Path]:
     """The map files of a scene's ``panels`` (``(layer, t, raster)``), written together or not at
     all (``stage``: a run's :meth:`~bananagrid.atomic.OutputSet.stage`, whose commit puts them in
     place with its other files; default: put in place here when all are complete). Returns their
-    paths. ``areas``: the panels' search areas by ``(layer, t)`` where already found."""
-    paths = export_paths(scene.name, out_dir, netcdf=netcdf, geotiff=geotiff, geojson=geojson)
+    paths. ``areas``: the panels' search areas by ``(layer, t)`` where already found; ``cells``:
+    the cell probabilities by ``(layer, t)`` (a scene's ``output.cell_probabilities``), into the
+    NetCDF and a GeoTIFF of their own; ``marks``: each layer's model's ``landmarks()``, for the KML."""
+    cells = cells or {}
+    paths = export_paths(scene.name, out_dir, netcdf=netcdf, geotiff=geotiff, geojson=geojson, kml=kml,
+                         cell_probabilities=bool(cells))
     with OutputSet() as own:
         if stage is None:
             for option, path in paths.items():
                 own.add(path, EXPORT_NAMES[option])
             stage = own.stage
         if netcdf:
-            dataset = raster_dataset(panels, scene.geo, title=scene.title, source=scene.source)
+            dataset = raster_dataset(panels, scene.geo, title=scene.title, source=scene.source, cells=cells)
             write_netcdf(paths["netcdf"], dataset, stage=stage)
         if geotiff:
             write_geotiff(paths["geotiff"], panels, scene.geo, title=scene.title, stage=stage)
+            if cells:
+                write_geotiff(paths[PROBABILITY_GEOTIFF], [(layer, t, cells[layer, t]) for layer, t, _ in panels],
+                              scene.geo, title=scene.title, stage=stage)
         if geojson:
             write_geojson(paths["geojson"], panels, scene.geo, scene.mass_levels, title=scene.title, areas=areas,
                           stage=stage)
+        if kml:
+            write_kml(paths["kml"], panels, scene.geo, scene.mass_levels, title=scene.title, areas=areas, marks=marks,
+                      stage=stage)
         own.commit()
     return list(paths.values())
 
 
+def _cells(scene) -> bool:
+    """Whether a scene's run computes cell probabilities (a grid scene's ``output.cell_probabilities``)."""
+    return bool(getattr(scene, "cell_probabilities", False))

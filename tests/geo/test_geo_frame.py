@@ -21,6 +21,7 @@ from bananagrid import BananagridError
 from bananagrid.geo import libraries
 from bananagrid.geo.frame import GeoFrame, parse_utc
 from bananagrid.scenes.load import load_scene, parse_scene
+from geo_cases import FRAME_CRSS
 
 SCENES = Path(__file__).resolve().parents[2] / "scenes"
 GEOD = pyproj.Geod(ellps="WGS84")
@@ -296,3 +297,24 @@ def test_a_geographic_scene_without_the_geo_extra_says_how_to_install_it(monkeyp
     assert str(info.value).endswith(
         "geo_ship.toml: [geo]: geographic scenes and map files need pyproj: pip install 'bananagrid[geo]' "
         "(or pip install pyproj)")
+
+
+@pytest.mark.parametrize("crs, lat, lon", FRAME_CRSS)
+def test_map_files_carry_gdal_wkt1_that_maps_points_as_the_frame_does(crs, lat, lon):
+    """The WKT a map file carries is GDAL's WKT1 (what PROJ 9.1 reads: the WKT2 of PROJ 9.5
+    names the azimuthal equidistant by EPSG method 1125, which PROJ 9.1 does not know), and
+    read back by pyproj it is the frame's projection: points within 100 km of the origin map to
+    the same projected coordinates as the frame's own CRS, to a micrometre (float64 noise of
+    1e7 m coordinates is 1e-9 m; a lost or misread parameter moves points by metres or more)."""
+    frame = GeoFrame(lat, lon, crs=crs)
+    wkt = frame.portable_wkt
+    assert wkt.startswith("PROJCS[") and "1125" not in wkt
+    if crs == "aeqd":
+        assert 'PROJECTION["Azimuthal_Equidistant"]' in wkt
+    to_file = pyproj.Transformer.from_crs("EPSG:4326", pyproj.CRS.from_wkt(wkt), always_xy=True)
+    x, y = (v.ravel() for v in np.meshgrid(np.linspace(-1e5, 1e5, 5), np.linspace(-1e5, 1e5, 5)))
+    plat, plon = frame.geographic(x, y)
+    e, n = to_file.transform(plon, plat)
+    e0, n0 = frame.projected(*frame.local(plat, plon))  # the frame's own forward projection
+    np.testing.assert_allclose(e, e0, rtol=0, atol=1e-6)
+    np.testing.assert_allclose(n, n0, rtol=0, atol=1e-6)

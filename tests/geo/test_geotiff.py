@@ -116,3 +116,29 @@ def test_a_failure_while_writing_leaves_nothing_behind(tmp_path, monkeypatch):
     with pytest.raises(KeyboardInterrupt):
         write_geotiff(tmp_path / "a.tif", panels())
     assert len(calls) == 2 and os.listdir(tmp_path) == []
+
+
+def cell_probabilities(seed: int) -> Raster:
+    """Cell probabilities over 300 decades: float32 would round them and flush most to 0."""
+    values = 10.0 ** np.random.default_rng(seed).uniform(-300.0, 0.0, GRID.shape)
+    return Raster(values=values / values.sum(), grid=GRID, mass=0.9, normalised=True, quantity="probability",
+                  provenance={"model": "test", "seed": seed})
+
+
+def test_cell_probabilities_are_float64_bands_of_unit_one_to_the_bit(tmp_path):
+    frame = GeoFrame(LAT, LON, time=FIX_TIME)
+    given = [("cat", 600.0, cell_probabilities(1)), ("cat", 1200.0, cell_probabilities(2))]
+    path = write_geotiff(tmp_path / "poc.tif", given, frame)
+    with rasterio.open(path) as src:
+        assert src.dtypes == ("float64", "float64") and src.units == ("1", "1") and src.nodata is None
+        assert src.descriptions == ("cat t=600 s", "cat t=1200 s") and src.tags()["unit"] == "1"
+        assert "probability of containment" in src.tags(1)["quantity"]
+        for band, (_, _, r) in enumerate(given, start=1):
+            np.testing.assert_array_equal(src.read(band)[::-1], r.values)  # north up in the file; exact
+
+
+def test_densities_and_cell_probabilities_in_one_file_are_refused(tmp_path):
+    with pytest.raises(BananagridError, match="^GeoTIFF: panels of quantities density, probability: one file holds one "
+                                              r"quantity \(write the cell probabilities to a file of their own\)$"):
+        write_geotiff(tmp_path / "mixed.tif", [("cat", 600.0, raster(1)), ("poc", 600.0, cell_probabilities(1))])
+    assert not os.listdir(tmp_path)

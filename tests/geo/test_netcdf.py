@@ -26,7 +26,7 @@ from bananagrid import BananagridError, Raster
 from bananagrid.domains.angular_lattice import AngularLattice
 from bananagrid.domains.grid import Grid
 from bananagrid.domains.polar_lattice import PolarLattice
-from bananagrid.geo.dataset import raster_dataset, write_netcdf
+from bananagrid.geo.dataset import raster_dataset, read_maps, write_netcdf
 from bananagrid.geo.frame import GeoFrame
 from bananagrid.results import CellMap, PolarRaster
 
@@ -45,6 +45,13 @@ def raster(seed: int, dtype=np.float64, grid: Grid = GRID, t: float = 10.0) -> R
     values = np.random.default_rng(seed).random(grid.shape).astype(dtype)
     return Raster(values=values, grid=grid, mass=0.5 + seed / 100.0, normalised=bool(seed % 2),
                   provenance={"model": "test", "t": t, "seed": seed, "dtype": np.dtype(dtype).name})
+
+
+def cell_probabilities(seed: int, grid: Grid = GRID) -> Raster:
+    """A raster of cell probabilities (sum 1), spread over many decades as far cells' are."""
+    values = 10.0 ** np.random.default_rng(seed).uniform(-300.0, 0.0, grid.shape)
+    return Raster(values=values / values.sum(), grid=grid, mass=0.9, normalised=True, quantity="probability",
+                  provenance={"model": "test", "seed": seed, "quantity": "probability"})
 
 
 def scene_panels(dtype=np.float64):
@@ -231,10 +238,48 @@ def test_the_cf_compliance_checker_passes_every_check(tmp_path, frame):
     warnings alike, on files with and without a geographic frame and its time."""
     frames = {"dated": GeoFrame(LAT, LON, time=FIX_TIME), "undated": GeoFrame(LAT, LON), "none": None}
     panels = scene_panels() + [("other", 60.0, raster(9))]  # two time dimensions
-    path = write_netcdf(tmp_path / "scene.nc", raster_dataset(panels, frames[frame], title="checked"))
+    cells = {("cat", 600.0): cell_probabilities(1), ("cat", 1200.0): cell_probabilities(2),
+             ("other", 60.0): cell_probabilities(3)}  # with the cell probabilities of two layers
+    path = write_netcdf(tmp_path / "scene.nc", raster_dataset(panels, frames[frame], title="checked", cells=cells))
     run = subprocess.run([str(Path(sys.executable).parent / "compliance-checker"), "--test=cf:1.10", str(path)],
                          capture_output=True, text=True, timeout=300)
     assert run.returncode == 0 and "All tests passed!" in run.stdout, run.stdout + run.stderr
+
+
+@pytest.mark.parametrize("crs_name", sorted(CRSS))
+def test_cell_probabilities_sit_beside_their_layer_to_the_bit(tmp_path, crs_name):
+    """A layer's cell probabilities (POC) are LAYER_probability: its dimensions, coordinates
+    and grid mapping, units 1, the values exactly as given (float64, however small)."""
+    panels = scene_panels()
+    cells = {("cat-course", 600.0): cell_probabilities(5), ("cat-course", 1200.0): cell_probabilities(6)}
+    frame = GeoFrame(LAT, LON, time=FIX_TIME, crs=crs_name)
+    path = write_netcdf(tmp_path / "scene.nc", raster_dataset(panels, frame, cells=cells))
+    with netCDF4.Dataset(path) as nc:
+        assert "cat_probability" not in nc.variables  # only the layer given them
+        var = nc["cat_course_probability"]
+        assert var.dimensions == nc["cat_course"].dimensions == ("time", "y", "x") and var.dtype == np.float64
+        np.testing.assert_array_equal(var[:].data, np.stack([cells["cat-course", t].values for t in (600.0, 1200.0)]))
+        assert (var.units, var.cell_methods, var.bananagrid_cells_of, var.grid_mapping) == (
+            "1", "area: sum", "cat-course", "crs")
+        assert "probability of containment" in var.long_name and set(var.coordinates.split()) == {"elapsed", "lat", "lon"}
+        assert [p["seed"] for p in json.loads(var.bananagrid_provenance)] == [5, 6]
+    title, maps = read_maps(path)  # the plot reader takes the densities only
+    assert sorted({m["layer"] for m in maps}) == ["cat", "cat-course"]
+
+
+@pytest.mark.parametrize("cells, message", [
+    ({("nope", 600.0): None}, r"^cells: key \('nope', 600.0\) names no map \(layer_name, t\) of the panels$"),
+    ({("cat", 600.0): raster(1)}, r"^cells\['cat', 600\]: expected a Raster of cell probabilities \(quantity "
+                                  r"'probability'\), got Raster of quantity \"density\"$"),
+    ({("cat", 600.0): cell_probabilities(1)}, r"^cells: layer 'cat' has cell probabilities at some of its times but "
+                                              r"not at t = 1200 s; give them at every time or at none$"),
+    ({("cat", 600.0): cell_probabilities(1, Grid.from_bounds(x=(0.0, 400.0), y=(0.0, 400.0), step=100.0)),
+      ("cat", 1200.0): cell_probabilities(2)}, r"^cells\['cat', 600\]: not on the panels' grid"),
+    ([1, 2], r"^cells = \[1, 2\]: expected a mapping of \(layer_name, t\) to a Raster of cell probabilities$"),
+])
+def test_bad_cell_probabilities_are_refused_in_one_line(cells, message):
+    with pytest.raises(BananagridError, match=message):
+        raster_dataset(scene_panels(), cells=cells)
 
 
 # --- bad input --------------------------------------------------------------------------------

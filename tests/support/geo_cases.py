@@ -21,6 +21,23 @@ from bananagrid.scenes.load import parse_scene
 
 GEOD = pyproj.Geod(ellps="WGS84")
 
+#: CRSs a user may give (geo.crs: an EPSG code, a PROJ string) with an origin each holds: the
+#: projection methods of the field (polar stereographic, Lambert conformal and equal-area, the
+#: oblique stereographic of the Dutch grid, Web Mercator, a transverse Mercator by the antimeridian).
+FRAME_CRSS = [
+    ("EPSG:32632", 60.39, 5.32),
+    ("EPSG:3413", 75.0, -40.0),
+    ("EPSG:3031", -75.0, 100.0),
+    ("EPSG:3035", 52.0, 10.0),
+    ("EPSG:28992", 52.1, 5.4),
+    ("EPSG:3857", 60.0, 5.0),
+    ("+proj=lcc +lat_1=33 +lat_2=45 +lat_0=39 +lon_0=-96 +datum=WGS84 +units=m", 39.5, -95.0),
+    ("+proj=tmerc +lat_0=0 +lon_0=179 +k=0.9996 +x_0=500000 +y_0=10000000 +datum=WGS84 +units=m", -17.0, 178.8),
+    ("aeqd", 60.45, 4.6),
+    ("aeqd", -54.0, -67.0),
+    ("utm", -33.9, 18.4),
+]
+
 
 def toml_text(doc: dict) -> str:
     from test_scene_fuzz import toml_text as text  # the fuzzers' writer (imported late: it imports this module)
