@@ -6,7 +6,9 @@ store (:func:`bananagrid.geo.zarr_store.write_zarr`): the CF dataset of the NetC
 the grid, CRS, latitude and longitude of a geographic scene, times and provenance, whole or not
 at all. The maps are the raw densities (a tiled map is not normalised: that would take a second
 pass over it); each layer's captured mass is stored beside it (``LAYER_mass``), computed in the
-same pass, so a reader divides by it to normalise. No recording is written (a viewer cannot
+same pass, so a reader divides by it to normalise. With ``output.cell_probabilities = true``
+each cell's probability (POC) is stored beside its layer (``LAYER_probability``), computed in
+the same tiles by the cell rules. No recording is written (a viewer cannot
 hold such grids; ``bananagrid run`` without ``--zarr`` records a scene that fits in memory).
 """
 
@@ -29,22 +31,21 @@ __all__ = ["run_scene_tiled", "tiled_maps", "check_tiled", "format_tiled_summary
 
 
 def check_tiled(scene: Scene) -> Scene:
-    """Refuse what cannot be tiled: an [array] scene (angular cells, not a grid), a scene that
-    asks for cell probabilities (tiles compute densities)."""
+    """Refuse what cannot be tiled: an [array] scene (angular cells, not a grid)."""
     if not scene.gridded:
         raise BananagridError(f"{scene.source}: --zarr: an [array] scene's angular cells are not a grid; "
                               "run it without --zarr")
-    if scene.cell_probabilities:
-        raise BananagridError(f"{scene.source}: --zarr computes densities in tiles; set "
-                              "output.cell_probabilities = false (or run without --zarr)")
     return scene
 
 
-def tiled_maps(scene: Scene, chunks, *, max_seconds: float | None = None) -> list[tuple[str, float, TiledRaster]]:
-    """The scene's panels ``(layer, t, TiledRaster)``, lazily (nothing computed yet)."""
+def tiled_maps(scene: Scene, chunks, *, max_seconds: float | None = None,
+               quantity: str = "density") -> list[tuple[str, float, TiledRaster]]:
+    """The scene's panels ``(layer, t, TiledRaster)`` of densities (or cell probabilities),
+    lazily (nothing computed yet)."""
     panels = []
     for layer, t in scene.jobs():
-        tiled = rasterise_tiles(layer.model(t), scene.grid, chunks, dtype=np.dtype(scene.dtype), max_seconds=max_seconds)
+        tiled = rasterise_tiles(layer.model(t), scene.grid, chunks, dtype=np.dtype(scene.dtype), max_seconds=max_seconds,
+                                quantity=quantity)
         if scene.geo is not None:  # the frame travels in the provenance too: readers rebuild it
             tiled = replace(tiled, frame=scene.geo, provenance={**tiled.provenance, "geo": scene.geo.identity()})
         panels.append((layer.name, t, tiled))
@@ -62,7 +63,11 @@ def run_scene_tiled(scene: Scene, path: Path, chunks, *, progress: bool = False,
     check_store_target(path)
     start = time.perf_counter()
     panels = tiled_maps(scene, chunks, max_seconds=max_seconds)
-    write_zarr(path, panels, scene.geo, title=scene.title, source=scene.source, progress=progress)
+    cells = None
+    if scene.cell_probabilities:  # each cell's probability beside its density, in the same tiles
+        cells = {(layer, t): tiled for layer, t, tiled in tiled_maps(scene, chunks, max_seconds=max_seconds,
+                                                                      quantity="probability")}
+    write_zarr(path, panels, scene.geo, title=scene.title, source=scene.source, progress=progress, cells=cells)
     seconds = time.perf_counter() - start
     rows = []
     with xr.open_zarr(path) as stored:
