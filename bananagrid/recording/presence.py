@@ -53,7 +53,7 @@ from .core import MASS_COLOURS, entity_path, flatten, strict
 from .labels import LabelBoard, log_placed, place_all
 
 __all__ = [
-    "log_cell_map", "plane_frame", "scale_colours", "PLANE_PANEL_POINTS", "TABLE_PANEL_POINTS", "presence_blueprint", "cell_colours", "table_image", "log10_probabilities", "summary_values",
+    "log_cell_map", "plane_frame", "seen_on_plane", "scale_colours", "PLANE_PANEL_POINTS", "TABLE_PANEL_POINTS", "presence_blueprint", "cell_colours", "table_image", "log10_probabilities", "summary_values",
     "cell_mesh", "VIRIDIS", "LOG10_FLOOR", "MAX_PIECE_DEG", "RUN_ONLY_PROVENANCE",
 ]
 
@@ -189,7 +189,7 @@ def log_cell_map(
     colours, (lo, top) = cell_colours(cell_map.prob, log10_floor)
     plane = f"{entity}/plane"
     board = LabelBoard(plane_frame(lattice, region, far), PLANE_PANEL_POINTS)
-    board.reserve((0.0, 0.0), "array")
+    board.reserve(seen_on_plane((0.0, 0.0, 0.0), board.frame, lattice.h), "array")
     with strict():
         rec.log(f"{plane}/array", rr.Points3D([(0.0, 0.0, 0.0)], colors=ARRAY_COLOUR,
                                                radii=rr.Radius.ui_points(6.0), labels=["array"]), static=True)
@@ -450,15 +450,27 @@ def plane_eye(lattice, region, far: float | None) -> rrb.EyeControls3D:
     the room and the labels are seen nearly as on a map (north up). It frames the room's
     rectangle, else a disc of radius ``far`` (default 10 h) around the array
     (:func:`plane_frame`), and the colour scale east of it."""
-    x0, x1, y0, y1 = plane_frame(lattice, region, far)
-    west, width = _scale_strip((x0, x1, y0, y1))
+    position, target = _eye(plane_frame(lattice, region, far), lattice.h)
+    return rrb.EyeControls3D(position=position, look_target=target, eye_up=(0.0, 0.0, 1.0))
+
+
+def _eye(frame: tuple[float, float, float, float], h: float) -> tuple[tuple, tuple]:
+    """:func:`plane_eye`'s camera position and target for the plane's ``frame`` at z = -h."""
+    x0, x1, y0, y1 = frame
+    west, width = _scale_strip(frame)
     x1 = west + 2.0 * width  # the strip and its labels
     cx, cy = 0.5 * (x0 + x1), 0.5 * (y0 + y1)
     size = max(x1 - x0, y1 - y0)
-    target = (cx, cy, -lattice.h)
-    return rrb.EyeControls3D(
-        position=(cx, cy - 0.3 * size, -lattice.h + 1.5 * size), look_target=target, eye_up=(0.0, 0.0, 1.0),
-    )
+    return (cx, cy - 0.3 * size, -h + 1.5 * size), (cx, cy, -h)
+
+
+def seen_on_plane(point, frame: tuple[float, float, float, float], h: float) -> tuple[float, float]:
+    """Where ``point`` (x, y, z) appears on the plane z = -h from :func:`plane_eye`'s camera: the
+    plane's point on the same line of sight (the array, 1.8 m above the plane, appears north of
+    its nadir), so that its label is kept apart from the plane's as they are seen."""
+    (ex, ey, ez), _ = _eye(frame, h)
+    t = (ez + h) / (ez - point[2])
+    return ex + t * (point[0] - ex), ey + t * (point[1] - ey)
 
 
 def presence_blueprint(entity: str = "presence", scene_entity: str = "scene", *,

@@ -25,7 +25,7 @@ from bananagrid.recording.blueprint import (
 from bananagrid.recording.labels import PANEL_SLACK
 from bananagrid.recording.layers import SHARED_LEGEND
 from bananagrid.recording.legend import SHARED_TITLE
-from bananagrid.recording.presence import PLANE_PANEL_POINTS, plane_frame, scale_colours
+from bananagrid.recording.presence import PLANE_PANEL_POINTS, plane_frame, scale_colours, seen_on_plane
 from bananagrid.recording.raster import log_raster_layer
 from bananagrid.recording.stream import write_recording
 from bananagrid.recording.timeline import UTC, utc_nanos
@@ -167,14 +167,15 @@ def test_a_geographic_scene_has_a_utc_timeline_and_one_shared_colour_bar(tmp_pat
         assert first(bar, "Points2D:labels")[-1] == SHARED_TITLE
 
 
-def test_an_array_scene_draws_its_colour_scale_beside_the_cells(tmp_path):
+@pytest.mark.parametrize("name", ["room_mixture", "room_uniform"])
+def test_an_array_scene_draws_its_colour_scale_beside_the_cells(tmp_path, name):
     """rerun has no colour bar for a mesh: the cells' scale is a strip east of the room, coloured
     as the cells are (log10 p from the floor at its south end to the largest at its north end),
     with its decades labelled at their heights; the plane's labels (the scale's, the regions',
     the components') lie apart."""
-    scene = load_scene(SCENES / "room_mixture.toml")
+    scene = load_scene(SCENES / f"{name}.toml")
     run_scene(scene, tmp_path)
-    path = tmp_path / "room_mixture.rrd"
+    path = tmp_path / f"{name}.rrd"
     peak = first(rows(path, "/presence/summary"), "peak")
     lo, top = scene.log10_floor, math.log10(peak[0] if isinstance(peak, list) else peak)
     x0, x1, y0, y1 = plane_frame(scene.domain, scene.region, scene.far)
@@ -190,11 +191,31 @@ def test_an_array_scene_draws_its_colour_scale_beside_the_cells(tmp_path):
     ticks = rows(path, "/presence/plane/colour_scale/ticks")
     texts, spots = first(ticks, "Points3D:labels"), first(ticks, "Points3D:positions")
     decades = [t for t in texts if t.startswith("1e")]
-    assert len(decades) >= 3  # room_mixture spans 1e-12 to 1e-3: most of the decades labelled
+    assert len(decades) >= 3  # the rooms' cells span 1e-12 to 1e-3 or 1e-4: most decades labelled
     for text, (_, y, _) in zip(texts, spots):
         if text.startswith("1e"):
             assert y == pytest.approx(y0 + (int(text[2:]) - lo) / (top - lo) * (y1 - y0), rel=1e-6)
     scale = PANEL_SLACK * max((x1 - x0) / PLANE_PANEL_POINTS[0], (y1 - y0) / PLANE_PANEL_POINTS[1])
-    labels = shown_labels(path, "/presence/plane") + [("array", (0.0, 0.0), "/presence/plane/array")]
-    assert {"array", "50 % · 215 cells"} <= {text for text, _, _ in labels}
+    # the array hangs 1.8 m above the plane: its label is seen where its line of sight meets it
+    array = seen_on_plane((0.0, 0.0, 0.0), (x0, x1, y0, y1), scene.domain.h)
+    assert array[1] > 0.0  # north of its nadir, seen from the south
+    labels = shown_labels(path, "/presence/plane") + [("array", array, "/presence/plane/array")]
+    assert any(text.startswith("50 % · ") for text, _, _ in labels)
     assert_apart(labels, scale)
+
+
+def test_a_comparison_shows_both_maps_in_one_colour_range(tmp_path):
+    """``bananagrid compare`` puts the reference and the model side by side: one colour range,
+    one shared colour bar under each, and the blueprint (sent last) names it."""
+    from bananagrid.analysis.compare import compare
+    from bananagrid.recording.compare import write_compare_recording
+
+    grid = Grid.from_bounds(x=(-1500.0, 1500.0), y=(-1500.0, 1500.0), step=30.0)
+    reference, model = elongated(grid, 200.0, 300.0), elongated(grid, 250.0, 280.0)
+    path = tmp_path / "c.rrd"
+    write_compare_recording(path, recording_id="c", scene_text="", names=("ref", "mod"), rasters=(reference, model),
+                            comparison=compare(reference, model), levels=(1e-7, 1e-8))
+    titles = [first(rows(path, f"/layers/{n}/{SHARED_LEGEND}/ticks"), "Points2D:labels")[-1] for n in ("ref", "mod")]
+    assert titles == [SHARED_TITLE, SHARED_TITLE]
+    ranges = [first(rows(path, f"/layers/{n}/{SHARED_LEGEND}/colour_bar"), "DepthImage:depth_range") for n in ("ref", "mod")]
+    assert ranges[0] == ranges[1]
