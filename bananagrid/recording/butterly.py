@@ -31,6 +31,7 @@ from scipy import stats
 from ..models.butterly import Butterly
 from ..results import Raster
 from .core import entity_path, strict
+from .labels import LabelBoard, log_placed, place_all
 
 __all__ = [
     "log_layer_extras", "layer_views", "log_butterly_geometry", "range_comparison", "log_range_comparison",
@@ -72,28 +73,49 @@ def is_isotropic(model: Butterly) -> bool:
     return abs(c[0, 0] - c[1, 1]) <= 1e-12 * c[0, 0] and abs(c[0, 1]) <= 1e-12 * c[0, 0]
 
 
-def log_butterly_geometry(rec: rr.RecordingStream, entity: str, model: Butterly) -> None:
+def layer_extent(model: Butterly) -> tuple[float, float, float, float]:
+    """What the layer's map must hold beside its regions: the start's 2-sigma ellipse
+    (x0, x1, y0, y1, m)."""
+    points = start_ellipse(model, 2.0)
+    return float(points[:, 0].min()), float(points[:, 0].max()), float(points[:, 1].min()), float(points[:, 1].max())
+
+
+def log_butterly_geometry(rec: rr.RecordingStream, entity: str, model: Butterly, *,
+                          board: LabelBoard | None = None) -> None:
     """Log the start's mean, 1- and 2-sigma ellipses, the speeds' rings and the scales under
-    ``entity`` (``layers/NAME/geometry``)."""
+    ``entity`` (``layers/NAME/geometry``).
+
+    The texts stay on their primitives for hovering and are drawn as ``labels`` placed by the
+    map's label ``board`` (:mod:`bananagrid.recording.labels`; a board of the start's own
+    :func:`layer_extent` if none): the mean's first, then each ellipse and each ring on its
+    line, none over another (a ring's label with no free spot is left off)."""
     entity = entity_path(entity)
     s1, s2, beta = model.axes
     ranges = np.unique(model.ranges)
     if ranges.size > MAX_RINGS:
         ranges = ranges[[0, -1]]
+    board = LabelBoard(layer_extent(model)) if board is None else board
+    ellipses = [start_ellipse(model, 1.0), start_ellipse(model, 2.0)]
+    ellipse_texts = ["1 sigma (39.3 %)", "2 sigma (86.5 %)"]
+    rings = [_circle(model.mean, float(r)) for r in ranges if r > 0.0]
+    ring_texts = [f"r = {r:.0f} m" for r in ranges if r > 0.0]
+    placed = place_all(board, [("start mean", model.mean), *((t, [e]) for t, e in zip(ellipse_texts, ellipses)),
+                               *((t, [r]) for t, r in zip(ring_texts, rings))])
     with strict():
-        rec.log(f"{entity}/mean", rr.Points2D([model.mean], colors=MEAN_COLOUR, radii=rr.Radius.ui_points(5.0), labels=["start mean"]))
+        rec.log(f"{entity}/mean", rr.Points2D([model.mean], colors=MEAN_COLOUR, radii=rr.Radius.ui_points(5.0),
+                                              labels=["start mean"], show_labels=False))
         rec.log(
             f"{entity}/ellipses",
-            rr.LineStrips2D([start_ellipse(model, 1.0), start_ellipse(model, 2.0)], colors=list(ELLIPSE_COLOURS),
-                            radii=rr.Radius.ui_points(1.5), labels=["1 sigma (39.3 %)", "2 sigma (86.5 %)"]),
+            rr.LineStrips2D(ellipses, colors=list(ELLIPSE_COLOURS), radii=rr.Radius.ui_points(1.5),
+                            labels=ellipse_texts, show_labels=False),
         )
-        rings = [_circle(model.mean, float(r)) for r in ranges if r > 0.0]
         if rings:
             rec.log(
                 f"{entity}/rings",
                 rr.LineStrips2D(rings, colors=RING_COLOUR, radii=rr.Radius.ui_points(0.7),
-                                labels=[f"r = {r:.0f} m" for r in ranges if r > 0.0]),
+                                labels=ring_texts, show_labels=False),
             )
+        log_placed(rec, entity, placed)
         rec.log(
             f"{entity}/parameters",
             rr.AnyValues(sigma_min=math.sqrt(s1), sigma_max=math.sqrt(s2), axis_angle_deg=math.degrees(beta),
@@ -163,10 +185,12 @@ def log_range_comparison(rec: rr.RecordingStream, entity: str, raster: Raster, m
     return result
 
 
-def log_layer_extras(rec: rr.RecordingStream, entity: str, model: Butterly, raster: Raster, *, compute) -> None:
-    """Beside a Butterly layer: the start's geometry (``entity/geometry``) and, for an isotropic
-    start, the raster's range law beside Rice's (``entity/range``)."""
-    log_butterly_geometry(rec, f"{entity}/geometry", model)
+def log_layer_extras(rec: rr.RecordingStream, entity: str, model: Butterly, raster: Raster, *, compute,
+                     board: LabelBoard | None = None) -> None:
+    """Beside a Butterly layer: the start's geometry (``entity/geometry``, labelled on the map's
+    ``board``) and, for an isotropic start, the raster's range law beside Rice's
+    (``entity/range``)."""
+    log_butterly_geometry(rec, f"{entity}/geometry", model, board=board)
     if is_isotropic(model):
         log_range_comparison(rec, f"{entity}/range", raster, model)
 

@@ -2,7 +2,7 @@
 (``bananagrid sweep``).
 
 A comparison recording holds both layers as usual (``layers/REFERENCE``, ``layers/MODEL``,
-see :func:`record.log_raster`), the model's relative error q / p - 1 as an image in world
+see :func:`record.log_raster`; their maps in one colour range, with a shared colour bar), the model's relative error q / p - 1 as an image in world
 metres (``compare/relative_error``: diverging colormap, symmetric range; 0 where the reference
 is below the lowest contour level, where the table does not look), the table as a text
 document (``compare/table``) and its numbers as ``AnyValues`` (``compare/summary``).
@@ -25,7 +25,9 @@ import rerun.blueprint as rrb
 
 from ..analysis.compare import Comparison
 from ..results import Raster
-from .core import default_blueprint, log_raster, log_scene_text, log_signed_image, strict, write_recording
+from .core import default_blueprint, log_scene_text, log_signed_image, send_blueprint, strict, write_recording
+from .layers import log_shared_colours
+from .raster import log_raster_layer
 
 __all__ = ["write_compare_recording", "write_sweep_recording"]
 
@@ -45,20 +47,23 @@ def write_compare_recording(
 
     def build(rec):
         log_scene_text(rec, scene_text)
-        for name, raster in zip(names, rasters):
-            log_raster(rec, f"layers/{name}", raster, levels=levels, colormap=colormap)
+        logged = {f"layers/{name}": [log_raster_layer(rec, f"layers/{name}", raster, levels=levels, colormap=colormap)]
+                  for name, raster in zip(names, rasters)}
+        colours = log_shared_colours(rec, logged)  # side by side: one colour range
         north_up = "compare"
         rec.log(north_up, rr.Transform3D(scale=(1.0, -1.0, 1.0)), static=True)
         log_relative_error(rec, "compare/relative_error", reference, comparison, min(levels))
         with strict():
             rec.log("compare/table", rr.TextDocument(f"```\n{comparison.table()}\n```", media_type=rr.MediaType.MARKDOWN))
             rec.log("compare/summary", rr.AnyValues(**comparison.summary()))
+        # sent last, as a scene run's: the maps' colour range is known once both are logged
+        send_blueprint(rec, default_blueprint(
+            [f"layers/{n}" for n in names], text_entities=["compare/table"],
+            extra_views=[rrb.Spatial2DView(origin="/", contents=["/compare/relative_error"], name="relative error")],
+            colours=colours, frames={entity: maps[0].frame for entity, maps in logged.items()},
+        ))
 
-    blueprint = default_blueprint(
-        [f"layers/{n}" for n in names], text_entities=["compare/table"],
-        extra_views=[rrb.Spatial2DView(origin="/", contents=["/compare/relative_error"], name="relative error")],
-    )
-    write_recording(path, build, recording_id=recording_id, blueprint=blueprint)
+    write_recording(path, build, recording_id=recording_id)
 
 
 def write_sweep_recording(path: Path, result, *, recording_id: str, levels, stage=None) -> None:

@@ -50,7 +50,7 @@ from .stream import (
     verify_recording,
     write_recording,
 )
-from .timeline import ELAPSED, MAX_ELAPSED_S, elapsed_nanos, set_elapsed
+from .timeline import ELAPSED, MAX_ELAPSED_S, UTC, elapsed_nanos, set_elapsed, set_times
 
 __all__ = [
     "RecordingWriteError",
@@ -71,6 +71,8 @@ __all__ = [
     "recording_id_for",
     "send_blueprint",
     "set_elapsed",
+    "set_times",
+    "UTC",
     "strict",
     "union_extent",
     "values_from_image",

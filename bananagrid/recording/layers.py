@@ -12,6 +12,14 @@ Such a module provides
 * ``layer_views(entity, model) -> (extra_images, extra_views)``: image names under ``entity``
   shown as more tabs of the layer, and further blueprint views;
 
+and may provide
+
+* ``layer_extent(model) -> (x0, x1, y0, y1)``: what its geometry needs the map to hold beyond
+  the probability regions (a fix's R95 circle): the map's frame grows to hold it;
+* a ``board`` keyword of ``log_layer_extras``: the map's
+  :class:`~bananagrid.recording.labels.LabelBoard`, on which it places its labels, so that
+  they keep clear of the contours' and the legend's (:func:`log_layer` passes it);
+
 and, for a kind whose schema adds ``[output]`` switches
 (:attr:`bananagrid.protocol.SceneSchema.options`),
 
@@ -22,17 +30,23 @@ and, for a kind whose schema adds ``[output]`` switches
 
 from __future__ import annotations
 
-from collections.abc import Callable
+import inspect
+from collections.abc import Callable, Iterable
 from types import ModuleType
 
 import rerun as rr
 
 from ..models.registry import ModelKind
 from ..protocol import DensityModel
+from ..contours import DEFAULT_MASS_LEVELS
 from ..results import Raster
 from . import bearing, butterly
+from .blueprint import ColourRange, union_extent
+from .labels import PANEL_POINTS, LabelBoard
+from .legend import log_shared_colour_bar
+from .raster import LOG10_COLORMAP, LoggedRaster, log_raster_layer
 
-__all__ = ["extras_module", "log_layer_extras", "layer_views", "log_scene_extras", "scene_texts", "EXTRAS"]
+__all__ = ["extras_module", "log_layer", "log_shared_colours", "SHARED_LEGEND", "log_layer_extras", "layer_views", "log_scene_extras", "scene_texts", "EXTRAS"]
 
 #: This package's extras modules by the model class each records.
 EXTRAS = {module.MODEL: module for module in (bearing, butterly)}
@@ -43,12 +57,52 @@ def extras_module(kind: ModelKind) -> ModuleType | None:
     return kind.recording if kind.recording is not None else EXTRAS.get(kind.cls)
 
 
+def log_layer(rec: rr.RecordingStream, entity: str, kind: ModelKind, model: DensityModel, raster: Raster, *,
+              compute: Callable[[DensityModel], Raster], levels: Iterable[float] = (),
+              mass_levels: Iterable[float] = DEFAULT_MASS_LEVELS, colormap: str = "viridis",
+              panel: tuple[float, float] = PANEL_POINTS) -> LoggedRaster:
+    """One layer of a scene: the raster (:func:`~bananagrid.recording.raster.log_raster_layer`)
+    framed to hold the kind's geometry too (its module's ``layer_extent``), then the kind's
+    extras, whose labels go on the same map's label board as the contours' and the legend's
+    (placed for a map ``panel`` of (width, height) points,
+    :func:`~bananagrid.recording.blueprint.map_panel_points`)."""
+    module = extras_module(kind)
+    extent = getattr(module, "layer_extent", None)
+    logged = log_raster_layer(rec, entity, raster, levels=levels, mass_levels=mass_levels, colormap=colormap,
+                              include=None if extent is None else extent(model), panel=panel)
+    log_layer_extras(rec, entity, kind, model, raster, compute=compute, board=logged.board)
+    return logged
+
+
+#: Under a layer's entity: the colour bar its maps show when every map shares one range.
+SHARED_LEGEND = "shared_legend"
+
+
+def log_shared_colours(rec: rr.RecordingStream, logged: dict[str, list[LoggedRaster]],
+                       panel: tuple[float, float] = PANEL_POINTS) -> ColourRange | None:
+    """With two layers or more, one colour range for every map (:meth:`ColourRange.shared` of
+    each map's, over every layer and time, since a blueprint's range holds at every time) and,
+    under each layer, a colour bar of it (static, :data:`SHARED_LEGEND`, east of the layer's
+    frames' union: where its views open) that its log10 view shows instead of its own; the
+    range, for :func:`~bananagrid.recording.blueprint.default_blueprint` (None for one layer)."""
+    if len(logged) < 2:
+        return None
+    shared = ColourRange.shared([(m.floor, m.top, m.peak) for maps in logged.values() for m in maps])
+    for entity, maps in logged.items():
+        log_shared_colour_bar(rec, f"{entity}/{SHARED_LEGEND}", union_extent([m.frame for m in maps]), *shared.log10,
+                              LOG10_COLORMAP, panel)
+    return shared
+
+
 def log_layer_extras(rec: rr.RecordingStream, entity: str, kind: ModelKind, model: DensityModel, raster: Raster, *,
-                     compute: Callable[[DensityModel], Raster]) -> None:
-    """Log ``kind``'s extras for one layer (nothing for a kind without a recording module)."""
+                     compute: Callable[[DensityModel], Raster], board: LabelBoard | None = None) -> None:
+    """Log ``kind``'s extras for one layer (nothing for a kind without a recording module); a
+    module that takes a ``board`` places its labels on ``board`` (the layer's map's)."""
     module = extras_module(kind)
     if module is not None:
-        module.log_layer_extras(rec, entity, model, raster, compute=compute)
+        takes_board = board is not None and "board" in inspect.signature(module.log_layer_extras).parameters
+        more = {"board": board} if takes_board else {}
+        module.log_layer_extras(rec, entity, model, raster, compute=compute, **more)
 
 
 def layer_views(entity: str, kind: ModelKind, model: DensityModel) -> tuple[list[str], list]:

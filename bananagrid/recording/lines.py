@@ -8,6 +8,7 @@ import numpy as np
 import rerun as rr
 
 from ..contours import label_positions
+from .labels import LabelBoard
 
 __all__ = ["CONTOUR_DRAW_ORDER", "LEVEL_COLOURS", "MASS_COLOURS", "log_lines"]
 
@@ -28,9 +29,12 @@ CONTOUR_DRAW_ORDER = 30.0
 def log_lines(
     rec: rr.RecordingStream, path: str, lines: dict[float, list[np.ndarray]], labels: Sequence[str],
     colours: Sequence[tuple[int, int, int]], *, avoid: Sequence[tuple[float, float]] = (),
+    board: LabelBoard | None = None,
 ) -> list[tuple[float, float]]:
     """Contour lines under ``path/lines`` (one colour per level, unlabelled) and one label per
-    level under ``path/labels``, placed on its line apart from the others and from ``avoid``
+    level under ``path/labels``, placed on its line by the map's ``board``
+    (:class:`~bananagrid.recording.labels.LabelBoard`: over no other label of the map, a level
+    with no free spot left unlabelled), else apart from the others and from ``avoid``
     (:func:`bananagrid.contours.label_positions`); returns the label positions. Empty lists
     clear both at this time. rerun writes a label in its point's colour on a dark box, so the
     label points are white whatever the line's colour."""
@@ -43,7 +47,14 @@ def log_lines(
         rr.LineStrips2D(strips, colors=strip_colours, radii=rr.Radius.ui_points(1.5), draw_order=CONTOUR_DRAW_ORDER),
     )
     text = dict(zip(lines, labels))
-    spots = label_positions(lines, avoid=avoid)
+    if board is None:
+        spots = label_positions(lines, avoid=avoid)
+    else:
+        spots = {}
+        for level, pieces in lines.items():
+            spot = board.place_on_line(text[level], pieces)
+            if spot is not None:
+                spots[level] = spot
     rec.log(
         f"{path}/labels",
         rr.Points2D(

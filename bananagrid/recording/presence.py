@@ -16,6 +16,16 @@ the array frame (x, y horizontal, z up, the array at the origin, the target plan
 - ``entity/plane/components``: each Gaussian component's (x, y) marginal 1-, 2- and 3-sigma
   ellipses on the target plane (line: its 1-, 2- and 3-sigma intervals), labelled.
 - ``entity/plane/array``: the array, a point at the origin.
+- ``entity/plane/colour_scale``: the cells' colour scale, which rerun does not draw for a mesh:
+  a strip on the target plane east of the room (``strip``, a ``Mesh3D`` coloured as the cells
+  are, from ``log10_floor`` at its south end to the largest at its north end) with a label at
+  each whole decade and its title (``ticks``). It lies beside the cells, in the same view and
+  perspective as they are, so it is read where the colours are (a separate panel would be
+  compared across the screen).
+- ``entity/plane/marks``: the labels of the components' ellipses and the regions, placed by one
+  :class:`~bananagrid.recording.labels.LabelBoard` for the plane (none over another or over the
+  colour scale's; one with no free spot is left off, its line keeps the text for hovering), with
+  ``leaders`` to any moved off its point.
 - ``entity/table``: the probabilities as a ``DepthImage`` (float32) with the azimuths along the
   columns and the elevations down the rows (row 0 the first elevation, e.g. the horizon, the
   last row the nadir), range (0, largest); the line geometry gives one row.
@@ -38,11 +48,12 @@ from ..domains.region import Region
 from ..models.presence import GaussianMixture, UniformPresence
 from ..results import CellMap
 from ..validate import BananagridError, positive
-from ..contours import DEFAULT_MASS_LEVELS, MassRegion, cell_regions, label_positions
+from ..contours import DEFAULT_MASS_LEVELS, MassRegion, cell_regions
 from .core import MASS_COLOURS, entity_path, flatten, strict
+from .labels import LabelBoard, log_placed, place_all
 
 __all__ = [
-    "log_cell_map", "presence_blueprint", "cell_colours", "table_image", "log10_probabilities", "summary_values",
+    "log_cell_map", "plane_frame", "seen_on_plane", "scale_colours", "PLANE_PANEL_POINTS", "TABLE_PANEL_POINTS", "presence_blueprint", "cell_colours", "table_image", "log10_probabilities", "summary_values",
     "cell_mesh", "VIRIDIS", "LOG10_FLOOR", "MAX_PIECE_DEG", "RUN_ONLY_PROVENANCE",
 ]
 
@@ -61,6 +72,16 @@ VIRIDIS = np.array([
 #: Provenance keys left out of the recording (they change from run to run).
 RUN_ONLY_PROVENANCE = ("seconds", "threads")
 
+#: The plane as seen in its 3D view (what a flat map panel of this size would show it as) and the
+#: log10 table's view, in the array layout (:func:`presence_blueprint`) of the reference viewer
+#: window (1100 x 680 points for the views). The 3D view is 660 points wide, but :func:`plane_eye`
+#: stands back: room_mixture's 6 m x 5 m room measured 397 x 317 points on the screenshot (the
+#: tilt shortens north-south), i.e. a panel of 397 x 317 times PANEL_SLACK.
+PLANE_PANEL_POINTS = (456.0, 364.0)
+TABLE_PANEL_POINTS = (440.0, 310.0)
+#: Quads along the colour scale's strip.
+SCALE_STEPS = 64
+
 ROOM_COLOUR = (255, 255, 255)
 ARRAY_COLOUR = (255, 60, 60)
 SIGMA_COLOURS = {1: (255, 255, 255), 2: (255, 200, 0), 3: (255, 0, 255)}
@@ -77,11 +98,16 @@ def cell_colours(prob: np.ndarray, log10_floor: float = LOG10_FLOOR) -> tuple[np
     logs = log10_probabilities(prob, log10_floor)
     top = float(np.max(logs, initial=log10_floor))
     top = top if top > log10_floor else log10_floor + 1.0
-    s = np.clip((logs - log10_floor) / (top - log10_floor), 0.0, 1.0) * (len(VIRIDIS) - 1)
+    return scale_colours(logs, log10_floor, top), (log10_floor, top)
+
+
+def scale_colours(logs: np.ndarray, lo: float, top: float) -> np.ndarray:
+    """RGB (uint8) of log10 values on the viridis scale from ``lo`` to ``top`` (clipped)."""
+    s = np.clip((np.asarray(logs, dtype=float) - lo) / (top - lo), 0.0, 1.0) * (len(VIRIDIS) - 1)
     k = np.minimum(np.floor(s).astype(int), len(VIRIDIS) - 2)
     f = (s - k)[..., None]
     rgb = VIRIDIS[k] * (1.0 - f) + VIRIDIS[k + 1] * f
-    return np.round(rgb).astype(np.uint8), (log10_floor, top)
+    return np.round(rgb).astype(np.uint8)
 
 
 def table_image(values: np.ndarray) -> np.ndarray:
@@ -162,9 +188,12 @@ def log_cell_map(
         raise BananagridError(f"names = {names!r}: expected {n_comp} names, one per component")
     colours, (lo, top) = cell_colours(cell_map.prob, log10_floor)
     plane = f"{entity}/plane"
+    board = LabelBoard(plane_frame(lattice, region, far), PLANE_PANEL_POINTS)
+    board.reserve(seen_on_plane((0.0, 0.0, 0.0), board.frame, lattice.h), "array")
     with strict():
         rec.log(f"{plane}/array", rr.Points3D([(0.0, 0.0, 0.0)], colors=ARRAY_COLOUR,
                                                radii=rr.Radius.ui_points(6.0), labels=["array"]), static=True)
+        log_colour_scale(rec, f"{plane}/colour_scale", board, lo, top, -lattice.h)
         if lattice.geometry == "line":
             strips, strip_colours = _line_cells(lattice, region, far, colours)
             rec.log(f"{plane}/cells", rr.LineStrips3D(strips, colors=strip_colours, radii=rr.Radius.ui_points(4.0)))
@@ -175,17 +204,21 @@ def log_cell_map(
         room = _room_strips(lattice, region, room_z)
         if room:
             rec.log(f"{plane}/room", rr.LineStrips3D(room, colors=ROOM_COLOUR, radii=rr.Radius.ui_points(1.5)))
+        regions = cell_regions(cell_map.prob, mass_levels)
+        _log_regions(rec, plane, f"{entity}/log10_table/regions", cell_map, regions, region, far, board)
         if n_comp:
             strips, strip_colours, labels = _component_strips(presence, lattice, names)
             rec.log(f"{plane}/components", rr.LineStrips3D(strips, colors=strip_colours, labels=labels,
-                                                            radii=rr.Radius.ui_points(1.2)))
+                                                            radii=rr.Radius.ui_points(1.2), show_labels=False))
+            # the widest ellipse of each component first: it has the most room for its label
+            order = sorted(range(len(strips)), key=lambda k: -(k % 3))
+            placed = place_all(board, [(labels[k], [np.asarray(strips[k], float)[:, :2]]) for k in order])
+            log_placed(rec, f"{plane}/marks", placed, three_d_z=-lattice.h)
         peak = float(np.max(cell_map.prob))
         rec.log(f"{entity}/table", rr.DepthImage(table_image(cell_map.prob), meter=1.0, colormap="viridis",
                                                  depth_range=(0.0, peak if peak > 0.0 else 1.0)))
         rec.log(f"{entity}/log10_table", rr.DepthImage(table_image(log10_probabilities(cell_map.prob, log10_floor)),
                                                        meter=1.0, colormap="viridis", depth_range=(lo, top)))
-        regions = cell_regions(cell_map.prob, mass_levels)
-        _log_regions(rec, plane, f"{entity}/log10_table/regions", cell_map, regions, region, far)
         info = summary_values(cell_map)
         info.update(flatten("regions", {f"{100 * r.probability:g}": r.describe() for r in regions}))
         rec.log(f"{entity}/summary", rr.AnyValues(**info))
@@ -222,9 +255,10 @@ def region_edges(inside: np.ndarray, wrap: bool) -> tuple[np.ndarray, np.ndarray
     return np.argwhere(across), np.argwhere(rings)
 
 
-def _log_regions(rec, plane: str, table: str, cell_map: CellMap, regions, region, far: float) -> None:
+def _log_regions(rec, plane: str, table: str, cell_map: CellMap, regions, region, far: float, board: LabelBoard) -> None:
     """Outline each probability-mass region of cells on the plane (``plane/regions``) and on
-    the log10 table (``table``), one colour per level, one label per level."""
+    the log10 table (``table``), one colour per level, one label per level (placed on the
+    plane's ``board``, and on the table's own)."""
     lattice = cell_map.lattice
     prob = np.asarray(cell_map.prob, dtype=float)
     grid_prob = prob[:, None] if prob.ndim == 1 else prob
@@ -242,14 +276,24 @@ def _log_regions(rec, plane: str, table: str, cell_map: CellMap, regions, region
         else:
             on_plane[key] = _plane_edges(lattice, region, far, radial, arcs)
     colours = {key: MASS_COLOURS[k % len(MASS_COLOURS)] for k, key in enumerate(texts)}
-    spots = label_positions({k: v for k, v in on_plane.items() if v})
+    spots = {}
+    for key, pieces in on_plane.items():
+        spot = board.place_on_line(texts[key], pieces) if pieces else None
+        if spot is not None:
+            spots[key] = spot
     rec.log(f"{plane}/regions/lines", rr.LineStrips3D(
         [np.column_stack([piece, np.full(len(piece), -lattice.h)]) for key in on_plane for piece in on_plane[key]],
         colors=[colours[key] for key in on_plane for _ in on_plane[key]], radii=rr.Radius.ui_points(1.5)))
     rec.log(f"{plane}/regions/labels", rr.Points3D(
         [(x, y, -lattice.h) for x, y in spots.values()], labels=[texts[key] for key in spots],
         colors=[(255, 255, 255)] * len(spots), radii=rr.Radius.ui_points(2.5), show_labels=True))
-    table_spots = label_positions(on_table)
+    n_az, n_el = grid_prob.shape
+    table_board = LabelBoard((0.0, float(n_az), 0.0, float(n_el)), TABLE_PANEL_POINTS, y_down=True)
+    table_spots = {}
+    for key, pieces in on_table.items():
+        spot = table_board.place_on_line(texts[key], pieces) if pieces else None
+        if spot is not None:
+            table_spots[key] = spot
     rec.log(f"{table}/lines", rr.LineStrips2D(
         [piece for key in on_table for piece in on_table[key]],
         colors=[colours[key] for key in on_table for _ in on_table[key]], radii=rr.Radius.ui_points(1.0),
@@ -351,23 +395,82 @@ def summary_values(cell_map: CellMap) -> dict:
     return dict(flatten("", info))
 
 
-def plane_eye(lattice, region, far: float | None) -> rrb.EyeControls3D:
-    """A camera looking down on the target plane from above and a little south, so the cells,
-    the room and the labels are seen nearly as on a map (north up). It frames the room's
-    rectangle, else a disc of radius ``far`` (default 10 h) around the array."""
+def plane_frame(lattice, region, far: float | None) -> tuple[float, float, float, float]:
+    """What the plane's view frames (x0, x1, y0, y1, m): the room's rectangle, else a square of
+    half-side ``far`` (default 10 h) about the array (a line's room: its x interval, and a
+    quarter of it each side of the line)."""
     if region is not None:
         bounds = region.bounds
         x0, x1 = bounds[0]
         y0, y1 = bounds[1] if len(bounds) > 1 else (-0.25 * (x1 - x0), 0.25 * (x1 - x0))  # a line's room: x only
-    else:
-        reach = 10.0 * lattice.h if far is None else far
-        x0, x1, y0, y1 = -reach, reach, -reach, reach
+        return float(x0), float(x1), float(y0), float(y1)
+    reach = 10.0 * lattice.h if far is None else far
+    return -reach, reach, -reach, reach
+
+
+def _scale_strip(frame: tuple[float, float, float, float]) -> tuple[float, float]:
+    """The colour scale's strip east of ``frame``: its west edge and width (m)."""
+    x0, x1, y0, y1 = frame
+    size = max(x1 - x0, y1 - y0)
+    return x1 + 0.05 * size, 0.04 * size
+
+
+def log_colour_scale(rec: rr.RecordingStream, path: str, board: LabelBoard, lo: float, top: float, z: float) -> None:
+    """The cells' colour scale east of ``board``'s frame on the plane at height ``z``: a strip
+    coloured as :func:`cell_colours` colours the cells, log10 ``lo`` (south end) to ``top``
+    (north end), a label at each whole decade (one that would overlap another is left off) and
+    the title; the labels held on ``board``."""
+    x0, x1, y0, y1 = board.frame
+    west, width = _scale_strip(board.frame)
+    ys = np.linspace(y0, y1, SCALE_STEPS + 1)
+    rgb = scale_colours(np.linspace(lo, top, SCALE_STEPS + 1), lo, top)
+    positions = np.array([(x, y, z) for y in ys for x in (west, west + width)], dtype=np.float32)
+    k = 2 * np.arange(SCALE_STEPS)[:, None]
+    triangles = np.concatenate([np.hstack([k, k + 1, k + 3]), np.hstack([k, k + 3, k + 2])]).astype(np.uint32)
+    rec.log(f"{path}/strip", rr.Mesh3D(vertex_positions=positions, triangle_indices=triangles,
+                                       vertex_colors=np.repeat(rgb, 2, axis=0)))
+    title = "log10 p(C | S)"
+    title_at = (west + 0.5 * width, y1 + 0.06 * (y1 - y0))
+    board.reserve(title_at, title)
+    decades = np.arange(math.ceil(lo), math.floor(top) + 1)
+    ticks, texts = [], []
+    for d in decades:
+        at = (west + width, y0 + (d - lo) / (top - lo) * (y1 - y0))
+        text = f"1e{int(d)}"
+        if board.place(text, np.array([at]), inside=False) is not None:
+            ticks.append(at)
+            texts.append(text)
+    rec.log(f"{path}/ticks", rr.Points3D([(x, y, z) for x, y in [*ticks, title_at]], labels=[*texts, title],
+                                         colors=[(255, 255, 255)] * (len(ticks) + 1), radii=rr.Radius.ui_points(1.5),
+                                         show_labels=True))
+
+
+def plane_eye(lattice, region, far: float | None) -> rrb.EyeControls3D:
+    """A camera looking down on the target plane from above and a little south, so the cells,
+    the room and the labels are seen nearly as on a map (north up). It frames the room's
+    rectangle, else a disc of radius ``far`` (default 10 h) around the array
+    (:func:`plane_frame`), and the colour scale east of it."""
+    position, target = _eye(plane_frame(lattice, region, far), lattice.h)
+    return rrb.EyeControls3D(position=position, look_target=target, eye_up=(0.0, 0.0, 1.0))
+
+
+def _eye(frame: tuple[float, float, float, float], h: float) -> tuple[tuple, tuple]:
+    """:func:`plane_eye`'s camera position and target for the plane's ``frame`` at z = -h."""
+    x0, x1, y0, y1 = frame
+    west, width = _scale_strip(frame)
+    x1 = west + 2.0 * width  # the strip and its labels
     cx, cy = 0.5 * (x0 + x1), 0.5 * (y0 + y1)
     size = max(x1 - x0, y1 - y0)
-    target = (cx, cy, -lattice.h)
-    return rrb.EyeControls3D(
-        position=(cx, cy - 0.3 * size, -lattice.h + 1.5 * size), look_target=target, eye_up=(0.0, 0.0, 1.0),
-    )
+    return (cx, cy - 0.3 * size, -h + 1.5 * size), (cx, cy, -h)
+
+
+def seen_on_plane(point, frame: tuple[float, float, float, float], h: float) -> tuple[float, float]:
+    """Where ``point`` (x, y, z) appears on the plane z = -h from :func:`plane_eye`'s camera: the
+    plane's point on the same line of sight (the array, 1.8 m above the plane, appears north of
+    its nadir), so that its label is kept apart from the plane's as they are seen."""
+    (ex, ey, ez), _ = _eye(frame, h)
+    t = (ez + h) / (ez - point[2])
+    return ex + t * (point[0] - ex), ey + t * (point[1] - ey)
 
 
 def presence_blueprint(entity: str = "presence", scene_entity: str = "scene", *,

@@ -25,6 +25,7 @@ Layout of one layer ``entity`` (all of it in world metres, x east, y north):
 from __future__ import annotations
 
 from collections.abc import Iterable
+from dataclasses import dataclass
 
 import rerun as rr
 
@@ -34,10 +35,40 @@ from ..validate import positive
 from .entities import entity_path, strict
 from .images import check_values, log10_floor, log_density, log_log10_density, log_north_up
 from .info import flatten, raster_info
+from .labels import PANEL_POINTS, LabelBoard
 from .legend import log_legend
 from .lines import LEVEL_COLOURS, MASS_COLOURS, log_lines
 
-__all__ = ["log_raster"]
+#: The log10 density's colormap: its dark ends keep the tails and the peak apart.
+LOG10_COLORMAP = "turbo"
+
+__all__ = ["LOG10_COLORMAP", "LoggedRaster", "log_raster", "log_raster_layer", "grow_extent"]
+
+
+@dataclass
+class LoggedRaster:
+    """What :func:`log_raster_layer` drew: the regions, the map's frame (the extent its view
+    must hold, before the legend's margins), the log10 colour range and the map's label board
+    (for labels drawn on the map after it, e.g. a layer's geometry)."""
+
+    regions: list[MassRegion]
+    frame: tuple[float, float, float, float]
+    floor: float
+    top: float
+    peak: float
+    board: LabelBoard
+
+
+def grow_extent(extent: tuple[float, float, float, float], other: tuple[float, float, float, float] | None,
+                margin: float = 0.0) -> tuple[float, float, float, float]:
+    """The smallest extent holding ``extent`` and ``other`` (padded by ``margin`` of its own
+    size on each side); ``extent`` when ``other`` is None."""
+    if other is None:
+        return extent
+    x0, x1, y0, y1 = other
+    pad_x, pad_y = margin * (x1 - x0), margin * (y1 - y0)
+    return (min(extent[0], x0 - pad_x), max(extent[1], x1 + pad_x),
+            min(extent[2], y0 - pad_y), max(extent[3], y1 + pad_y))
 
 
 def log_raster(
@@ -48,8 +79,31 @@ def log_raster(
     levels: Iterable[float] = (),
     mass_levels: Iterable[float] = DEFAULT_MASS_LEVELS,
     colormap: str = "viridis",
-    log10_colormap: str = "turbo",
+    log10_colormap: str = LOG10_COLORMAP,
 ) -> list[MassRegion]:
+    """Log one raster as a layer under ``entity`` at the current ``elapsed`` time; the
+    probability-mass regions drawn (:func:`log_raster_layer` tells more)."""
+    return log_raster_layer(rec, entity, raster, levels=levels, mass_levels=mass_levels, colormap=colormap,
+                            log10_colormap=log10_colormap).regions
+
+
+#: The map's frame reaches this share of a layer's geometry (:func:`log_raster_layer`'s
+#: ``include``) beyond it, so that a circle is not drawn on the frame's edge.
+INCLUDE_MARGIN = 0.05
+
+
+def log_raster_layer(
+    rec: rr.RecordingStream,
+    entity: str,
+    raster: Raster,
+    *,
+    levels: Iterable[float] = (),
+    mass_levels: Iterable[float] = DEFAULT_MASS_LEVELS,
+    colormap: str = "viridis",
+    log10_colormap: str = LOG10_COLORMAP,
+    include: tuple[float, float, float, float] | None = None,
+    panel: tuple[float, float] = PANEL_POINTS,
+) -> LoggedRaster:
     """Log one raster as a layer under ``entity`` at the current ``elapsed`` time.
 
     See the module docstring for the entities written. Call :func:`set_elapsed` first when a
@@ -81,23 +135,26 @@ def log_raster(
     check_values(raster)
     regions = mass_regions(raster, mass_levels)
     floor = log10_floor(levels, regions, raster.peak)
+    frame = grow_extent(focus_extent(raster, regions), include, INCLUDE_MARGIN)
+    board = LabelBoard(frame, panel)
     with strict():
         log_north_up(rec, entity)
         log_density(rec, f"{entity}/density", raster, colormap)
         top = log_log10_density(rec, f"{entity}/log10_density", raster, floor, log10_colormap)
+        # the legend's labels first: the map's labels keep clear of them
+        log_legend(rec, f"{entity}/legend", frame, floor, top, log10_colormap, board=board)
         reached = [r for r in regions if r.reached]
-        placed = log_lines(
+        log_lines(
             rec, f"{entity}/contours", contour_lines(raster, [r.density for r in reached]),
-            [format_level(r) for r in reached], MASS_COLOURS,
+            [format_level(r) for r in reached], MASS_COLOURS, board=board,
         )
         if levels:
             log_lines(
                 rec, f"{entity}/density_contours", contour_lines(raster, levels),
-                [f"{level:g} m^-2" for level in levels], LEVEL_COLOURS, avoid=placed,
+                [f"{level:g} m^-2" for level in levels], LEVEL_COLOURS, board=board,
             )
-        log_legend(rec, f"{entity}/legend", focus_extent(raster, regions), floor, top, log10_colormap)
         info = raster_info(raster)
         info.update(flatten("regions", {f"{100 * r.probability:g}": r.describe() for r in regions}))
         rec.log(f"{entity}/info", rr.AnyValues(**info))
         rec.log(f"{entity}/mass", rr.Scalars(float(raster.mass)))
-    return regions
+    return LoggedRaster(regions, frame, floor, top, float(raster.peak), board)

@@ -60,6 +60,12 @@ def summary_markdown(title: str, rows: Sequence[dict], warnings: Sequence[str]) 
         "of a line reads (x, −y) in metres; over an image it reads the pixel (column from the "
         "west edge, row from the north edge).",
     ]
+    if len({row["layer"] for row in rows}) > 1:
+        out += ["", "**Colours.** Every map shares one colour range (the highest floor and the highest top of "
+                "the maps', over every layer and time), so maps side by side compare colour for colour; "
+                "the colour bar says \"all maps\"."]
+    out += ["", "**Labels.** Each label sits on its own line (or beside its point, with a leader) where it "
+            "covers no other; one with no free spot is left off the map, and hovering its line shows it."]
     sources = sorted({row["mass_from"] for row in rows if row.get("mass_from")})
     if sources:
         out += ["", f"**Captured mass** is the sum of {' and '.join(sources)} (the tab `{CELL_TAB}` of each layer: "

@@ -29,18 +29,17 @@ from ..engine.work import check_work
 from ..geo.areas import search_areas
 from ..geo.libraries import require
 from ..protocol import DensityModel
+from ..recording.blueprint import ColourRange, map_panel_points
 from ..recording.core import (
     default_blueprint,
-    focus_extent,
     log_cell_probabilities,
-    log_raster,
     recording_id_for,
     send_blueprint,
-    set_elapsed,
     union_extent,
 )
 from ..recording.geomap import log_map_areas, log_map_marks, map_view
-from ..recording.layers import layer_views, log_layer_extras, log_scene_extras, scene_texts
+from ..recording.layers import layer_views, log_layer, log_scene_extras, log_shared_colours, scene_texts
+from ..recording.timeline import ELAPSED, UTC, set_times
 from ..recording.radial import log_radial_curves, radial_groups, radial_views
 from ..recording.summary import CELL_TAB, log_summary
 from ..results import Raster
@@ -94,6 +93,7 @@ class GridRun:
         self.panels: list | None = [] if any(self.exports.values()) else None
         self.found: list[str] = list(scene.warnings)
         self.frames: dict[str, list] = {}
+        self.logged: dict[str, list] = {}  # what each layer's maps drew (frames, colour ranges)
         self.areas: dict[tuple[str, float], list] = {}  # a geographic scene's search areas, by (layer, t)
         self.cells: dict[tuple[str, float], Raster] = {}  # the cell probabilities kept for the map files
         self.marks: dict[str, dict] = {}  # each layer's landmarks (fix, stations), for the KML
@@ -138,25 +138,25 @@ class GridRun:
             seconds += more
             raster = replace(raster, mass=cells.mass,
                              provenance={**raster.provenance, "mass_from": "the cell probabilities"})
-        set_elapsed(rec, t)  # runs on the recording's thread: set_elapsed is per thread
+        set_times(rec, t, scene.geo)  # runs on the recording's thread: the times are per thread
         entity = f"layers/{layer.name}"
         if cells is not None:
             log_cell_probabilities(rec, f"{entity}/{CELL_IMAGE}", _recordable(cells), colormap=scene.colormap)
-        regions = log_raster(
-            rec, entity, _recordable(raster), levels=scene.levels, mass_levels=scene.mass_levels,
-            colormap=scene.colormap,
+        logged = log_layer(
+            rec, entity, layer.model_kind, model, _recordable(raster), levels=scene.levels,
+            mass_levels=scene.mass_levels, colormap=scene.colormap,
+            panel=_panel(scene),
+            compute=lambda other: compute(scene, layer, t, threads=threads, model=other, max_seconds=math.inf)[0],
         )
-        self.frames.setdefault(entity, []).append(focus_extent(raster, regions))
+        regions = logged.regions
+        self.frames.setdefault(entity, []).append(logged.frame)
+        self.logged.setdefault(entity, []).append(logged)
         where = f"{scene.name}: layer {layer.name} at t = {t:g} s"
         for message in (coverage_warnings(raster, regions, where=where, threshold=scene.min_mass,
                                           integrates_to_one=model.integrates_to_one)
                         + level_warnings(raster, scene.levels, where=where)):
             warnings.warn(message, BananagridWarning, stacklevel=2)
             self.found.append(message)
-        log_layer_extras(
-            rec, entity, layer.model_kind, model, raster,
-            compute=lambda other: compute(scene, layer, t, threads=threads, model=other, max_seconds=math.inf)[0],
-        )
         if scene.radial is not None and layer.name in scene.radial.layers:
             _log_radial(rec, scene, layer, t, threads)
         if scene.geo is not None:
@@ -185,7 +185,10 @@ class GridRun:
         log_scene_extras(rec, scene.kinds.values(), scene.options)
         log_summary(rec, scene.title, rows, self.found)
         # The maps open framed on what was found, so the blueprint comes last.
-        send_blueprint(rec, _blueprint(scene, {e: union_extent(extents) for e, extents in self.frames.items()}))
+        colours = log_shared_colours(rec, self.logged, _panel(scene))
+        send_blueprint(rec, _blueprint(scene, {e: union_extent(extents) for e, extents in self.frames.items()},
+                                       colours=colours,
+                                       mass_top=max((row["mass"] for row in rows), default=1.0)))
         if self.archive is not None:
             self.archive.close()
 
@@ -276,7 +279,12 @@ def compute(scene: Scene, layer: Layer, t: float, *, threads: int | None = None,
     return raster, time.perf_counter() - start
 
 
-def _blueprint(scene: Scene, frames: dict):
+def _panel(scene: Scene) -> tuple[float, float]:
+    """The size of each map's panel in the default layout (its labels are placed for it)."""
+    return map_panel_points(len(scene.layers) + (scene.geo is not None))
+
+
+def _blueprint(scene: Scene, frames: dict, *, colours: ColourRange | None = None, mass_top: float = 1.0):
     """The default layout, with each kind's extra images and views (from the registry's
     recording modules), the radial curves and the validation table if any."""
     views, images = [], []
@@ -301,6 +309,9 @@ def _blueprint(scene: Scene, frames: dict):
         several_times=scene.times is not None and len(scene.times) > 1,
         frames=frames,
         map_view=None if scene.geo is None else map_view(scene.geo, scene.grid.extent, models),
+        colours=colours,
+        mass_top=mass_top,
+        timeline=UTC if scene.geo is not None and scene.geo.time is not None else ELAPSED,
     )
 
 
