@@ -126,7 +126,8 @@ def test_polar_cells_at_the_origin_with_the_seam():
 
 
 @pytest.mark.filterwarnings("ignore:P_sigma")
-@settings(max_examples=12, deadline=None, derandomize=True, database=None,
+@seed(20261127)  # a fixed seed, not derandomize (whose examples depend on the checkout's path)
+@settings(max_examples=12, deadline=None, derandomize=False, database=None,
           suppress_health_check=[HealthCheck.too_slow])
 @given(variant=st.sampled_from(["rough", "improved"]),
        sigma_phi=st.floats(0.3, 2.5), range_sd=st.floats(0.02, 2.0), heading=st.floats(-math.pi, math.pi),
@@ -254,7 +255,8 @@ def _back_ray_crossings(model):
 
 
 @pytest.mark.filterwarnings("ignore:bearings cross at", "ignore:the fix lies behind")
-@settings(max_examples=8, deadline=None, derandomize=True, database=None,
+@seed(20261127)  # a fixed seed, not derandomize (whose examples depend on the checkout's path)
+@settings(max_examples=8, deadline=None, derandomize=False, database=None,
           suppress_health_check=[HealthCheck.too_slow, HealthCheck.filter_too_much],
           phases=[Phase.explicit, Phase.generate])  # each example is seconds of quad: no shrinking
 @given(seed=st.integers(0, 2**32 - 1), n=st.integers(3, 4), where=st.sampled_from(["crossing", "stations"]),
