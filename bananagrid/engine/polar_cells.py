@@ -250,8 +250,10 @@ def _integrate(model: DensityModel, lattice: PolarLattice, plan: _Plan, *, dtype
         probability = _law_cells(model, lattice, law)
     else:
         probability = _tensor_cells(model, lattice, plan, dtype=dtype, device=device, threads=threads)
-    _foreign_cells(model, lattice, plan, probability, dtype=dtype, device=device, threads=threads)
-    _point_cells(model, lattice, plan, probability, dtype=dtype, device=device, threads=threads)
+    # the cells swept about a point are set there: the rule in the lattice's frame skips them
+    choice = _point_choice(model, lattice, plan)
+    _foreign_cells(model, lattice, plan, probability, set(choice[2]), dtype=dtype, device=device, threads=threads)
+    _point_cells(model, lattice, probability, choice, dtype=dtype, device=device, threads=threads)
     return probability
 
 
@@ -391,11 +393,11 @@ def _near_cells(lattice: PolarLattice, plan: _Plan, starts: np.ndarray) -> set:
     return out
 
 
-def _foreign_cells(model: DensityModel, lattice: PolarLattice, plan: _Plan, probability: np.ndarray, *, dtype,
-                   device, threads) -> None:
+def _foreign_cells(model: DensityModel, lattice: PolarLattice, plan: _Plan, probability: np.ndarray, skip: set, *,
+                   dtype, device, threads) -> None:
     """Integrate again the cells that seams off the lattice's rays cross (``foreign`` of
-    :func:`_split_seams`), and those near a seam's start off the origin, and set them in
-    ``probability``.
+    :func:`_split_seams`), and those near a seam's start off the origin, but not those of
+    ``skip`` (swept about a point, :func:`_point_cells`), and set them in ``probability``.
 
     A seam that is a half-line from Q not through the origin O meets the ray from O at bearing
     b at one range r*(b) at most (:func:`~bananagrid.engine.quadrature.seam_ranges`): each
@@ -414,7 +416,7 @@ def _foreign_cells(model: DensityModel, lattice: PolarLattice, plan: _Plan, prob
     starts = starts[np.hypot(starts[:, 0] - ox, starts[:, 1] - oy) > 0.0]
     if not len(starts) and not len(foreign):
         return
-    cells = sorted(_crossed_cells(lattice, foreign) | _near_cells(lattice, plan, starts))
+    cells = sorted((_crossed_cells(lattice, foreign) | _near_cells(lattice, plan, starts)) - skip)
     if not cells:
         return
     r_edges, b_edges = lattice.range_edges, lattice.bearing_edges
@@ -796,23 +798,18 @@ def _law_untrusted_cells(lattice: PolarLattice, plan: _Plan, point, law) -> set:
     return set(map(tuple, np.argwhere(untrusted).tolist()))
 
 
-def _point_cells(model: DensityModel, lattice: PolarLattice, plan: _Plan, probability: np.ndarray, *, dtype,
-                 device, threads) -> None:
-    """Integrate again, swept about the point (:func:`_swept_lattice_cell`), the cells that hold
-    a seam's start or a 1 / r point off the lattice's origin, and the cells that the seams of a
-    point with a polar law cross (exact in range about it, graded toward its seams where the
-    range SD narrows: the improved polar banana's P_sigma = 0 edge); set them in
-    ``probability``."""
+def _point_choice(model: DensityModel, lattice: PolarLattice, plan: _Plan) -> tuple[list, np.ndarray, dict]:
+    """``(points, seams, chosen)``: the seams' starts and 1 / r points off the lattice's origin,
+    the model's seams, and the cells to sweep about one of them, ``{(i, j): point index}``:
+    the cell that holds a point, and for a point with a polar law (a polar banana's start) the
+    cells its seams cross (:func:`_crossed_cells`) and those the tensor rule about the
+    lattice's origin cannot be trusted on (:func:`_law_untrusted_cells`)."""
     origin = lattice.pose.origin
     seams = np.asarray(model.seams(), dtype=float).reshape(-1, 3)
     points = [tuple(map(float, p)) for p in np.asarray(model.singular_points(), dtype=float).reshape(-1, 2)]
     points += [tuple(map(float, p)) for p in seams[:, :2] if tuple(map(float, p)) not in points]
     points = [p for p in points if p != tuple(map(float, origin))]
-    if not points:
-        return
     r_edges, b_edges = lattice.range_edges, lattice.bearing_edges
-    feature = float(model.feature_scale())
-    extent = LatticeExtent(lattice)
     chosen = {}
     for k, point in enumerate(points):
         own = seams[(seams[:, 0] == point[0]) & (seams[:, 1] == point[1])]
@@ -827,6 +824,20 @@ def _point_cells(model: DensityModel, lattice: PolarLattice, plan: _Plan, probab
         j = int(np.searchsorted(b_edges, rel, side="right")) - 1
         if 0 <= i < lattice.n_range and 0 <= j < lattice.n_bearing:
             chosen[(i, j)] = k
+    return points, seams, chosen
+
+
+def _point_cells(model: DensityModel, lattice: PolarLattice, probability: np.ndarray, choice, *, dtype, device,
+                 threads) -> None:
+    """Integrate again, swept about their point, the cells of ``choice`` (:func:`_point_choice`),
+    and set them in ``probability``: exact in range about a point with a polar law
+    (:func:`_swept_law_cells`), else Gauss in range (:func:`_swept_lattice_cell`)."""
+    points, seams, chosen = choice
+    if not chosen:
+        return
+    r_edges, b_edges = lattice.range_edges, lattice.bearing_edges
+    feature = float(model.feature_scale())
+    extent = LatticeExtent(lattice)
     by_point = {}
     for cell, k in sorted(chosen.items()):
         by_point.setdefault(k, []).append(cell)
