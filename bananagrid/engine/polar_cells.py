@@ -10,11 +10,16 @@ b): the cells it crosses are integrated again with each bearing node's range int
 at r*(b) and the bearings where it crosses the cells' arcs as breaks (:func:`_foreign_cells`),
 as are the cells near a seam's start (a station, about which the density changes with the
 direction) with sub-intervals of a quarter of their distance to it. A cell that holds a seam's
-start or a 1 / r point off the origin, and a cell crossed by the seams of a point about which
-the model has a closed radial law (a polar banana posed elsewhere: its ridge narrows to a
-point on the improved variant's P_sigma = 0 edge), is swept in polar coordinates about that
-point over the annular sector (:func:`_point_cells`). Every node is evaluated by the model's
-own kernels through :func:`bananagrid.engine.points.evaluate_points`.
+start or a 1 / r point off the origin is swept in polar coordinates about that point over the
+annular sector (:func:`_point_cells`). About a point where the model has a closed radial law
+(a polar banana posed elsewhere) the sweep is exact in range, and it takes the cells that
+point's seams cross and every cell where the tensor rule about the lattice's origin is not to
+be trusted: near the point, or where the law's SD or the arc over which its ridge moves by an
+SD is narrower than the rule's length scale (behind the start, and at the improved
+variant's P_sigma = 0 edge, where the ridge narrows to a point). Its bearing is cut where the
+rays' clip by the cell changes (corners, tangents, the bounding lines' directions) and where
+the ridge crosses the cell's edges. Every node is evaluated by the model's own kernels
+through :func:`bananagrid.engine.points.evaluate_points`.
 """
 
 from __future__ import annotations
@@ -31,8 +36,8 @@ from ..protocol import DensityModel
 from ..results import PolarRaster
 from ..validate import BananagridError
 from .points import check_finite, check_model, evaluate_points
-from .quadrature import (GAUSS_TOL, GRADE_SPLIT, MAX_ORDER, MAX_SUBINTERVALS, axis_plan, graded_rule, narrowing, normal_shares,
-                         ray_circle_points, seam_ranges, split_segments, unit_rule)
+from .quadrature import (GAUSS_TOL, GRADE_SPLIT, MAX_ORDER, MAX_SUBINTERVALS, axis_plan, graded_rule, narrowing,
+                         normal_shares, ray_circle_points, seam_ranges, split_segments, unit_rule)
 from .warp_runtime import check_threads
 from .work import check_work
 
@@ -742,11 +747,14 @@ def _law_untrusted_cells(lattice: PolarLattice, plan: _Plan, point, law) -> set:
     """The cells that the tensor rule about the lattice's origin cannot be trusted on for a
     density that is g N(rho; mu, sd) / rho about ``point`` (a polar banana's start off the
     origin), to be swept about the point: cells nearer it than NEAR_SWEEP of their diameters
-    (the ridge's bends are compressed like 1 / rho there: the density changes over sd rho /
-    |mu'| across the bearings), and cells over whose bearings about it the law's SD falls
-    below the tensor rule's length scale or to 0 (behind the improved banana's start, at its
-    P_sigma = 0 edge, where the ridge narrows to a point); but not cells in the law's far
-    tail on every bearing they span (beyond TAIL_SDS SDs of every probed mean)."""
+    (1 / rho, and a density that changes with the direction there), and cells where one of
+    the density's Cartesian length scales falls below the tensor rule's (``plan.scales[0]``):
+    the law's range SD over the bearings the cell spans about the point (SPAN_PROBES probes;
+    it falls behind the improved banana's start and to 0 at its P_sigma = 0 edge, where the
+    ridge narrows to a point), or the arc over which the ridge moves by an SD at the cell's
+    nearest range, rho sd / |mu'| (its bends are compressed like rho near the start), or the
+    cell spans bearings where the law has no mass next to ones where it has; but not cells in
+    the law's far tail on every bearing they span (beyond TAIL_SDS SDs of every probed mean)."""
     r_edges, b_edges = lattice.range_edges, lattice.bearing_edges
     origin, heading = lattice.pose.origin, lattice.pose.heading
     px, py = point

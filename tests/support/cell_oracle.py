@@ -1,10 +1,13 @@
-"""Independent references for cell probabilities (tests/engine/test_cell_probabilities.py).
+"""Independent references for cell probabilities (tests/engine/test_cell_probabilities.py,
+tests/engine/test_cell_kinks.py).
 
 CAT: for each turn rate the line P(a) = pos(a, omega) is clipped to the cell in NumPy (the
 cell's two slabs, not the kernel's walk), and Phi(z_out) - Phi(z_in) is integrated over omega by
 SciPy's adaptive ``quad`` with the normal weight, between the turn rates whose lines pass the
 cell's corners (where the share has kinks), to 1e-11 relative. Other models: SciPy
 ``dblquad`` of ``pdf`` over the cell, or over the cell in polar coordinates about a point.
+A polar banana's cell of a polar lattice about any origin: exact in the banana's own range,
+adaptive ``quad`` over its bearing (``banana_lattice_cell``).
 """
 
 import math
@@ -455,10 +458,11 @@ def banana_lattice_cell(model, origin, heading, ranges, bearings, eps=1e-12, sca
     over theta in (h - pi, h + pi], every theta at which the pieces' structure changes a
     breakpoint: the bearings from S of the cell's corners and of the lattice's origin, the
     tangents from S to the cell's two circles, the directions of its bounding rays' lines
-    (there a ray's crossing with one runs off to infinity), the seams (the wrap at h +- pi, the P_sigma = 0
-    edge at h +- its limit), and where the ridge S + mu(theta) w(theta) crosses the cell's
-    circles and bounding lines (there a share turns over sd / mu of a radian: a sharp feature
-    where the ridge narrows)."""
+    (there a ray's crossing with one runs off to infinity), the seams (the wrap at h +- pi,
+    the P_sigma = 0 edge at h +- its limit), and where the ridge S + mu(theta) w(theta)
+    crosses the cell's circles and bounding lines (there a share steps over a turn of sd
+    over the rate at which ridge and edge part: a sharp feature where the ridge narrows or
+    runs along an edge)."""
     law = polar_banana_law(model)
     sx, sy = (float(c) for c in model.pose.origin)
     h = float(model.pose.heading)
