@@ -473,6 +473,10 @@ def _foreign_cells(model: DensityModel, lattice: PolarLattice, plan: _Plan, prob
     probability[rows, columns] = totals
 
 
+#: A point within this fraction of its distance inside a cell's circle is taken as on it (its
+#: tangents at right angles to its radius are breaks of the sweep about it).
+TANGENT_SLACK = 1e-12
+
 #: Widest bearing sub-interval of a lattice cell swept about a point (radians).
 SWEEP_ANGLE = 0.25
 
@@ -545,8 +549,10 @@ def _sweep_breaks(point, own_bearings, cell, origin, heading):
             cx = origin[0] + radius * math.sin(heading + bearing)
             cy = origin[1] + radius * math.cos(heading + bearing)
             breaks.add(math.atan2(cx - px, cy - py))
-        if 0.0 < radius < distance:
-            half = math.asin(radius / distance)
+        # tangents from the point to the circle; a point on it (to rounding) has them at right
+        # angles to its radius: the rays on one side cross the disk, on the other they miss it
+        if 0.0 < radius <= distance * (1.0 + TANGENT_SLACK):
+            half = math.asin(min(1.0, radius / distance))
             graded |= {centre - half, centre + half}
     graded |= {heading + bearing + turn for bearing in (b0, b1) for turn in (0.0, math.pi)}
     breaks |= graded | {centre} | set(own_bearings)
@@ -779,8 +785,7 @@ def _law_untrusted_cells(lattice: PolarLattice, plan: _Plan, point, law) -> set:
     pad = 0.125 * (hi - lo)  # the arcs between the samples bulge a little beyond them
     lo, hi = lo - pad, hi + pad
     far = np.hypot(x, y).max(axis=2) + lattice.range_step / OUTLINE_SAMPLES
-    near = np.array([[_distance_to_cell([point], origin, heading, (r_edges[i], r_edges[i + 1]),
-                                        (b_edges[j], b_edges[j + 1])) for j in range(n_b)] for i in range(n_r)])
+    near = _cell_distances(lattice, point)
     around = near <= 0.0  # the cell holds the point (or reaches round it): every bearing
     lo, hi = np.where(around, -math.pi, lo), np.where(around, math.pi, hi)
     probes = centre[..., 0, None] + lo[..., None] + (hi - lo)[..., None] * np.linspace(0.0, 1.0, SPAN_PROBES)
@@ -801,8 +806,7 @@ def _law_untrusted_cells(lattice: PolarLattice, plan: _Plan, point, law) -> set:
     with np.errstate(divide="ignore", invalid="ignore"):
         across = np.where(steepest > 0.0, near * least / steepest, np.inf)
     narrow = (np.minimum(least, across) < plan.scales[0]) | (live.any(axis=2) & ~live.all(axis=2))
-    diameter = np.hypot(lattice.range_step, r1[..., 0] * lattice.bearing_step)
-    untrusted = ((near < NEAR_SWEEP * diameter) | narrow) & ~tail
+    untrusted = ((near < NEAR_SWEEP * _cell_diameters(lattice)[:, None]) | narrow) & ~tail
     return set(map(tuple, np.argwhere(untrusted).tolist()))
 
 
@@ -825,6 +829,12 @@ def _point_choice(model: DensityModel, lattice: PolarLattice, plan: _Plan) -> tu
         if law is not None:
             for cell in _crossed_cells(lattice, own) | _law_untrusted_cells(lattice, plan, point, law):
                 chosen.setdefault(cell, k)
+        # the cells beside the point too: on their edge (to rounding) or nearer than a
+        # quarter of their diameter, where the rule in the lattice's frame would need
+        # sub-intervals finer than its caps allow
+        beside = _cell_distances(lattice, point) < TOUCH_FRACTION * _cell_diameters(lattice)[:, None]
+        for cell in map(tuple, np.argwhere(beside).tolist()):
+            chosen.setdefault(cell, k)
         dx, dy = point[0] - origin[0], point[1] - origin[1]
         r = math.hypot(dx, dy)
         rel = b_edges[0] + (math.atan2(dx, dy) - lattice.pose.heading - b_edges[0]) % (2.0 * math.pi)
@@ -833,6 +843,32 @@ def _point_choice(model: DensityModel, lattice: PolarLattice, plan: _Plan) -> tu
         if 0 <= i < lattice.n_range and 0 <= j < lattice.n_bearing:
             chosen[(i, j)] = k
     return points, seams, chosen
+
+
+#: Cells nearer a seam's start or 1 / r point than this fraction of their diameter are swept
+#: about it.
+TOUCH_FRACTION = 0.25
+
+
+def _cell_diameters(lattice: PolarLattice) -> np.ndarray:
+    """Per row, the diagonal of a cell at its outer arc: hypot(dr, r1 db)."""
+    return np.hypot(lattice.range_step, lattice.range_edges[1:] * lattice.bearing_step)
+
+
+def _cell_distances(lattice: PolarLattice, point) -> np.ndarray:
+    """A lower bound of the distance from ``point`` to every cell, shape (n_range, n_bearing):
+    the gap to the cell's annulus, or the distance to the nearer bounding ray where the
+    point's bearing lies outside the cell's (as :func:`_distance_to_cell`)."""
+    r_edges, b_edges = lattice.range_edges, lattice.bearing_edges
+    dx, dy = point[0] - lattice.pose.origin[0], point[1] - lattice.pose.origin[1]
+    r = math.hypot(dx, dy)
+    radial = np.maximum(0.0, np.maximum(r_edges[:-1] - r, r - r_edges[1:]))
+    rel = b_edges[0] + (math.atan2(dx, dy) - lattice.pose.heading - b_edges[0]) % (2.0 * math.pi)
+    circular = lambda d: np.abs((d + math.pi) % (2.0 * math.pi) - math.pi)  # noqa: E731
+    gap = np.where((b_edges[:-1] <= rel) & (rel <= b_edges[1:]), 0.0,
+                   np.minimum(circular(rel - b_edges[:-1]), circular(rel - b_edges[1:])))
+    across = r * np.sin(np.minimum(gap, 0.5 * math.pi))
+    return np.maximum(radial[:, None], across[None, :])
 
 
 def _point_cells(model: DensityModel, lattice: PolarLattice, probability: np.ndarray, choice, *, dtype, device,

@@ -481,8 +481,8 @@ def banana_lattice_cell(model, origin, heading, ranges, bearings, eps=1e-12, sca
         towards = math.atan2(-dx, -dy)
         breaks.add(towards)
         for radius in (r0, r1):
-            if 0.0 < radius < distance:
-                half = math.asin(radius / distance)
+            if 0.0 < radius <= distance * (1.0 + 1e-12):  # on the circle: at right angles
+                half = math.asin(min(1.0, radius / distance))
                 breaks |= {towards - half, towards + half}
     # along a bounding ray's line the ray's crossing with it runs off to infinity
     breaks |= {heading + b + turn for b in (b0, b1) for turn in (0.0, math.pi)}
@@ -563,8 +563,8 @@ def point_lattice_cell(density, point, origin, heading, ranges, bearings, seams,
         towards = math.atan2(-dx, -dy)
         breaks.add(towards)
         for radius in (r0, r1):
-            if 0.0 < radius < distance:
-                half = math.asin(radius / distance)
+            if 0.0 < radius <= distance * (1.0 + 1e-12):  # on the circle: at right angles
+                half = math.asin(min(1.0, radius / distance))
                 breaks |= {towards - half, towards + half}
     breaks |= {heading + b + turn for b in (b0, b1) for turn in (0.0, math.pi)}
     for qx, qy, beta in seams:
