@@ -66,7 +66,7 @@ def axis_plan(width: float, scale: float, cap: int) -> tuple[int, int, float]:
 
 def unit_rule(m: int, n: int) -> tuple[np.ndarray, np.ndarray]:
     """Composite Gauss-Legendre rule on [0, 1]: m sub-intervals of n nodes; (nodes, weights)."""
-    x, w = np.polynomial.legendre.leggauss(n)
+    x, w = _legendre(n)  # cached: a lattice asks for it once per cell
     nodes = (np.arange(m)[:, None] + 0.5 * (x[None, :] + 1.0)) / m
     return nodes.ravel(), np.tile(0.5 * w / m, m)
 
