@@ -411,8 +411,8 @@ def _foreign_cells(model: DensityModel, lattice: PolarLattice, plan: _Plan, prob
     outside the cell, and each node's integral is smooth in b: those bearings are breaks. About
     Q the density changes with the direction on the scale of the distance: sub-intervals are at
     most NEAR_FRACTION of the cell's distance to the nearest start, and no wider than the
-    tensor rule's, MAX_ORDER nodes each. (A cell that holds a start is integrated the same way:
-    no accuracy is claimed for it.)"""
+    tensor rule's, MAX_ORDER nodes each. A cell that holds a start, touches it or lies within
+    TOUCH_FRACTION of its diameter of it is swept about it instead (``skip``)."""
     cuts, foreign = _split_seams(model, lattice)
     origin, heading = lattice.pose.origin, lattice.pose.heading
     ox, oy = origin
@@ -921,7 +921,10 @@ def rasterise_lattice(
 
     Where the model's density about the lattice's origin is g(theta) N(r; mu, sd) / r (a polar
     banana on a lattice at its start: ``model.polar_law``), each cell is exact in r and
-    Gauss-Legendre in the bearing (:func:`_law_cells`), cut at the model's seams. Otherwise the
+    Gauss-Legendre in the bearing (:func:`_law_cells`), cut at the model's seams; such a banana
+    on a lattice about another origin is integrated exact in its own range about its start,
+    in the cells its seams cross and wherever the rule below is not to be trusted
+    (:func:`_point_cells`). Otherwise the
     integral is a tensor Gauss-Legendre rule over sub-cells no larger than the model's
     length scales (``model.polar_scales``): per axis, m equal sub-intervals of at most the scale
     and the fewest nodes n (<= 8) whose remainder bound for a normal feature of that SD is below
