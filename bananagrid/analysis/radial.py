@@ -182,6 +182,10 @@ def radial_density(model: DensityModel, angle, r=None, *, pose: Pose | None = No
         raise BananagridError(f"angle = {angle!r}: expected one angle (radians)")
     radii, q = _profile(model, pose, np.atleast_1d(angle), r_max, threads)
     mass, mean, sd = (float(v[0]) for v in _moments(radii, q))
+    if not sd > 0.0:  # the ray's spread underflows (a range scanned far below the model's scale)
+        name, value = ("r_max", r_max) if r_max is not None else ("angle", float(angle))
+        raise BananagridError(f"{name} = {value!r}: the density along this ray has no spread that float64 "
+                              "resolves (SD 0), so p(r | theta) has no normal to compare with")
     q = q[:, 0]
     if r is None:
         at, density = radii, q / mass

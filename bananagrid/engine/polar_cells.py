@@ -10,11 +10,16 @@ b): the cells it crosses are integrated again with each bearing node's range int
 at r*(b) and the bearings where it crosses the cells' arcs as breaks (:func:`_foreign_cells`),
 as are the cells near a seam's start (a station, about which the density changes with the
 direction) with sub-intervals of a quarter of their distance to it. A cell that holds a seam's
-start or a 1 / r point off the origin, and a cell crossed by the seams of a point about which
-the model has a closed radial law (a polar banana posed elsewhere: its ridge narrows to a
-point on the improved variant's P_sigma = 0 edge), is swept in polar coordinates about that
-point over the annular sector (:func:`_point_cells`). Every node is evaluated by the model's
-own kernels through :func:`bananagrid.engine.points.evaluate_points`.
+start or a 1 / r point off the origin is swept in polar coordinates about that point over the
+annular sector (:func:`_point_cells`). About a point where the model has a closed radial law
+(a polar banana posed elsewhere) the sweep is exact in range, and it takes the cells that
+point's seams cross and every cell where the tensor rule about the lattice's origin is not to
+be trusted: near the point, or where the law's SD or the arc over which its ridge moves by an
+SD is narrower than the rule's length scale (behind the start, and at the improved
+variant's P_sigma = 0 edge, where the ridge narrows to a point). Its bearing is cut where the
+rays' clip by the cell changes (corners, tangents, the bounding lines' directions) and where
+the ridge crosses the cell's edges. Every node is evaluated by the model's own kernels
+through :func:`bananagrid.engine.points.evaluate_points`.
 """
 
 from __future__ import annotations
@@ -31,8 +36,8 @@ from ..protocol import DensityModel
 from ..results import PolarRaster
 from ..validate import BananagridError, BananagridWarning
 from .points import check_finite, check_model, evaluate_points
-from .quadrature import (GAUSS_TOL, MAX_ORDER, MAX_SUBINTERVALS, axis_plan, graded_rule, narrowing, normal_shares,
-                         ray_circle_points, seam_ranges, split_segments, unit_rule)
+from .quadrature import (GAUSS_TOL, GRADE_SPLIT, MAX_ORDER, MAX_SUBINTERVALS, axis_plan, graded_rule, narrowing,
+                         normal_shares, ray_circle_points, seam_ranges, split_segments, unit_rule)
 from .warp_runtime import check_threads
 from .work import check_work
 
@@ -250,8 +255,10 @@ def _integrate(model: DensityModel, lattice: PolarLattice, plan: _Plan, *, dtype
         probability = _law_cells(model, lattice, law)
     else:
         probability = _tensor_cells(model, lattice, plan, dtype=dtype, device=device, threads=threads)
-    _foreign_cells(model, lattice, plan, probability, dtype=dtype, device=device, threads=threads)
-    _point_cells(model, lattice, plan, probability, dtype=dtype, device=device, threads=threads)
+    # the cells swept about a point are set there: the rule in the lattice's frame skips them
+    choice = _point_choice(model, lattice, plan)
+    _foreign_cells(model, lattice, plan, probability, set(choice[2]), dtype=dtype, device=device, threads=threads)
+    _point_cells(model, lattice, probability, choice, dtype=dtype, device=device, threads=threads)
     return probability
 
 
@@ -391,11 +398,11 @@ def _near_cells(lattice: PolarLattice, plan: _Plan, starts: np.ndarray) -> set:
     return out
 
 
-def _foreign_cells(model: DensityModel, lattice: PolarLattice, plan: _Plan, probability: np.ndarray, *, dtype,
-                   device, threads) -> None:
+def _foreign_cells(model: DensityModel, lattice: PolarLattice, plan: _Plan, probability: np.ndarray, skip: set, *,
+                   dtype, device, threads) -> None:
     """Integrate again the cells that seams off the lattice's rays cross (``foreign`` of
-    :func:`_split_seams`), and those near a seam's start off the origin, and set them in
-    ``probability``.
+    :func:`_split_seams`), and those near a seam's start off the origin, but not those of
+    ``skip`` (swept about a point, :func:`_point_cells`), and set them in ``probability``.
 
     A seam that is a half-line from Q not through the origin O meets the ray from O at bearing
     b at one range r*(b) at most (:func:`~bananagrid.engine.quadrature.seam_ranges`): each
@@ -404,8 +411,8 @@ def _foreign_cells(model: DensityModel, lattice: PolarLattice, plan: _Plan, prob
     outside the cell, and each node's integral is smooth in b: those bearings are breaks. About
     Q the density changes with the direction on the scale of the distance: sub-intervals are at
     most NEAR_FRACTION of the cell's distance to the nearest start, and no wider than the
-    tensor rule's, MAX_ORDER nodes each. (A cell that holds a start is integrated the same way:
-    no accuracy is claimed for it.)"""
+    tensor rule's, MAX_ORDER nodes each. A cell that holds a start, touches it or lies within
+    TOUCH_FRACTION of its diameter of it is swept about it instead (``skip``)."""
     cuts, foreign = _split_seams(model, lattice)
     origin, heading = lattice.pose.origin, lattice.pose.heading
     ox, oy = origin
@@ -414,7 +421,7 @@ def _foreign_cells(model: DensityModel, lattice: PolarLattice, plan: _Plan, prob
     starts = starts[np.hypot(starts[:, 0] - ox, starts[:, 1] - oy) > 0.0]
     if not len(starts) and not len(foreign):
         return
-    cells = sorted(_crossed_cells(lattice, foreign) | _near_cells(lattice, plan, starts))
+    cells = sorted((_crossed_cells(lattice, foreign) | _near_cells(lattice, plan, starts)) - skip)
     if not cells:
         return
     r_edges, b_edges = lattice.range_edges, lattice.bearing_edges
@@ -466,6 +473,10 @@ def _foreign_cells(model: DensityModel, lattice: PolarLattice, plan: _Plan, prob
     probability[rows, columns] = totals
 
 
+#: A point within this fraction of its distance inside a cell's circle is taken as on it (its
+#: tangents at right angles to its radius are breaks of the sweep about it).
+TANGENT_SLACK = 1e-12
+
 #: Widest bearing sub-interval of a lattice cell swept about a point (radians).
 SWEEP_ANGLE = 0.25
 
@@ -473,45 +484,61 @@ SWEEP_ANGLE = 0.25
 def _sector_segments(point, phi, ranges, bearings, origin, heading, foreign) -> tuple[np.ndarray, np.ndarray]:
     """The pieces ``(lo, hi)`` (shape (T, K), empty ones lo = hi) of the rays from ``point`` at
     bearings ``phi`` that lie in the annular sector ``ranges`` x ``bearings`` about ``origin``
-    (bearings from ``heading``), split where a seam of ``foreign`` crosses them: a ray enters
-    or leaves the sector where it crosses a range circle (a quadratic in its range) or a
-    bounding ray, and a piece between two such events is in or out as its midpoint is."""
-    (r0, r1), (b0, b1) = ranges, bearings
+    (bearings from ``heading``; each of r0, r1, b0, b1 a number or one per ray), split where a
+    seam of ``foreign`` crosses them: a ray enters or leaves the sector where it crosses a
+    range circle (a quadratic in its range) or a bounding ray, and a piece between two such
+    events is in or out as its midpoint is."""
+    (r0, r1), (b0, b1) = (np.broadcast_to(np.asarray(v, dtype=float), phi.shape) for v in ranges), \
+        (np.broadcast_to(np.asarray(v, dtype=float), phi.shape) for v in bearings)
     wx, wy = np.sin(phi), np.cos(phi)
     dx, dy = point[0] - origin[0], point[1] - origin[1]
     along = dx * wx + dy * wy
     distance = math.hypot(dx, dy)
     far = distance + r1
-    events = [np.zeros_like(phi), np.full_like(phi, far)]
+    events = [np.zeros_like(phi), far]
     for radius in (r0, r1):
-        if radius > 0.0:
-            disc = along * along + (radius - distance) * (radius + distance)
-            root = np.sqrt(np.maximum(disc, 0.0))
-            for s in (-along - root, -along + root):
-                events.append(np.where((disc >= 0.0) & (s > 0.0), s, np.nan))
-    sides = np.array([(origin[0], origin[1], heading + b0), (origin[0], origin[1], heading + b1)])
-    cuts = seam_ranges(point, phi, np.concatenate([sides, np.asarray(foreign, dtype=float).reshape(-1, 3)]))
+        disc = along * along + (radius - distance) * (radius + distance)
+        root = np.sqrt(np.maximum(disc, 0.0))
+        for s in (-along - root, -along + root):
+            events.append(np.where((radius > 0.0) & (disc >= 0.0) & (s > 0.0), s, np.nan))
+    # the bounding rays O + s u(heading + b), s >= 0: the ray meets one at r = (q x u) / (w x u)
+    # with q = O - point (the formula of seam_ranges, one bounding ray per ray)
+    for b in (b0, b1):
+        ux, uy = np.sin(heading + b), np.cos(heading + b)
+        den = wx * uy - wy * ux
+        with np.errstate(divide="ignore", invalid="ignore"):
+            r = (-dx * uy + dy * ux) / den
+            s = (-dx * wy + dy * wx) / den
+        events.append(np.where((den != 0.0) & (r > 0.0) & (s >= 0.0) & np.isfinite(r), r, np.nan))
+    cuts = seam_ranges(point, phi, np.asarray(foreign, dtype=float).reshape(-1, 3))
     stacked = np.column_stack(events + [cuts])
-    stacked = np.sort(np.where(np.isnan(stacked), far, np.minimum(stacked, far)), axis=1)
+    stacked = np.sort(np.where(np.isnan(stacked), far[:, None], np.minimum(stacked, far[:, None])), axis=1)
     lo, hi = stacked[:, :-1], stacked[:, 1:]
     mid = 0.5 * (lo + hi)
     mx, my = dx + mid * wx[:, None], dy + mid * wy[:, None]
     r = np.hypot(mx, my)
-    rel = b0 + (np.arctan2(mx, my) - heading - b0) % (2.0 * math.pi)
-    inside = (r0 <= r) & (r <= r1) & (rel <= b1) & (hi > lo)
+    rel = b0[:, None] + (np.arctan2(mx, my) - heading - b0[:, None]) % (2.0 * math.pi)
+    inside = (r0[:, None] <= r) & (r <= r1[:, None]) & (rel <= b1[:, None]) & (hi > lo)
     return lo, np.where(inside, hi, lo)
 
 
-def _swept_lattice_cell(model, point, own_bearings, law, cell, lattice, plan, foreign, feature):
-    """Nodes of a lattice cell swept in polar coordinates about ``point`` (a seam's start or a
-    1 / r point off the lattice's origin, which the cell holds, or whose polar law the seams
-    crossing the cell come from): ``("law", theta, w, lo, hi)`` (the cell's probability is
-    sum(w g [Phi] over the pieces)) or ``("pdf", x, y, w)``. The bearing about the point is cut
-    at the cell's corners, the tangents from the point to its arcs (graded toward them: a
-    piece's ends move like the square root of the turn there), the bearing of the lattice's
-    origin, and the point's seams (graded toward them where the law's SD narrows)."""
+def _near_end(end: float, width: float, side: float, points) -> bool:
+    """Whether one of ``points`` lies at ``end`` of a piece ``width`` wide, or beyond it (on
+    ``side``: -1 before a piece's start, +1 after its end) by less than ``width``."""
+    return any(0.0 <= (p - end) * side < width for p in points)
+
+
+def _sweep_breaks(point, own_bearings, cell, origin, heading):
+    """``(edges, graded, seams, far)`` of a lattice cell swept about ``point``: the bearings
+    about the point that cut the turn (unwrapped from the direction away from the lattice's
+    origin, sorted, the whole turn's ends included), those of them to grade toward, the
+    point's own seams among them, and the farthest range from the point the cell can reach.
+    The cuts: the cell's corners, the tangents from the point to its arcs (graded: a ray's
+    entry or exit moves like the square root of the turn there), the bearing of the lattice's
+    origin, the bearings of the bounding rays' lines (graded: a ray's crossing with one runs
+    off to infinity there) and the point's seams. Between two cuts a ray meets the cell or
+    misses it all along."""
     (r0, r1), (b0, b1) = cell
-    origin, heading = lattice.pose.origin, lattice.pose.heading
     px, py = point
     dx, dy = px - origin[0], py - origin[1]
     distance = math.hypot(dx, dy)
@@ -522,40 +549,180 @@ def _swept_lattice_cell(model, point, own_bearings, law, cell, lattice, plan, fo
             cx = origin[0] + radius * math.sin(heading + bearing)
             cy = origin[1] + radius * math.cos(heading + bearing)
             breaks.add(math.atan2(cx - px, cy - py))
-        if 0.0 < radius < distance:
-            half = math.asin(radius / distance)
+        # tangents from the point to the circle; a point on it (to rounding) has them at right
+        # angles to its radius: the rays on one side cross the disk, on the other they miss it
+        if 0.0 < radius <= distance * (1.0 + TANGENT_SLACK):
+            half = math.asin(min(1.0, radius / distance))
             graded |= {centre - half, centre + half}
+    graded |= {heading + bearing + turn for bearing in (b0, b1) for turn in (0.0, math.pi)}
     breaks |= graded | {centre} | set(own_bearings)
     start = centre - math.pi
     unwrap = lambda b: start + (b - start) % (2.0 * math.pi)  # noqa: E731
     edges = sorted({start, start + 2.0 * math.pi} | {unwrap(b) for b in breaks})
-    seams = {unwrap(b) for b in own_bearings}
-    graded = {unwrap(b) for b in graded}
-    radial, angular = model.polar_scales(point)
-    far = distance + r1
-    # no wider than a quarter radian: the pieces span the whole turn about the point
-    angular = min(angular, SWEEP_ANGLE, feature / max(far, 1e-300))
-    out = []
-    for a, b in zip(edges[:-1], edges[1:]):
-        if not b > a:
-            continue
-        grade = [a in graded, b in graded]
+    return edges, {unwrap(b) for b in graded}, {unwrap(b) for b in own_bearings}, distance + r1
+
+
+def _piece_rules(pieces, law, sd_probes):
+    """Nodes and weights of each swept piece ``(a, b, graded, seams, angular, far)``: sub-intervals
+    no wider than ``angular`` nor, with a radial law, than half its least SD (``sd_probes``, a
+    row of LAW_PROBES per piece, or None) over the farthest range (a share turns over sd /
+    r there); graded toward an end where a singular bearing lies at it or beyond it by less
+    than the piece's width (a corner's bearing a hair past a tangent's still bends the
+    integrand next to the end): one step per halving, the integrand turning like a square
+    root there; GRADE_SPLIT where the end is a seam toward which the law's SD narrows (the
+    improved banana's P_sigma = 0 edge, where the ridge narrows to a point)."""
+    rules = []
+    for k, (a, b, graded, seams, angular, far, sharp) in enumerate(pieces):
+        grade = [_near_end(a, b - a, -1.0, graded), _near_end(b, b - a, 1.0, graded)]
+        split = [1, 1]
         scale = angular
-        if law is not None:
-            _, _, sd = law(np.linspace(a, b, LAW_PROBES))
+        if sd_probes is not None:
+            sd = sd_probes[k]
             live = sd[sd > 0.0]
             scale = min(angular, 0.5 * float(live.min()) / far) if live.size else angular
             narrow = narrowing(sd)
-            grade = [grade[0] or (a in seams and narrow[0]), grade[1] or (b in seams and narrow[1])]
-        theta, w_t = graded_rule(a, b, scale, tuple(grade))
-        lo, hi = _sector_segments(point, theta, (r0, r1), (b0, b1), origin, heading, foreign)
-        out.append((theta, w_t, lo, hi))
-    theta, w_t, lo, hi = (np.concatenate(parts) for parts in zip(*out))
-    if law is not None:
-        return "law", theta, w_t, lo, hi
+            ridge = [narrow[0] and _near_end(a, b - a, -1.0, seams), narrow[1] and _near_end(b, b - a, 1.0, seams)]
+            grade = [grade[0] or ridge[0] or a in sharp, grade[1] or ridge[1] or b in sharp]
+            split = [GRADE_SPLIT if ridge[0] else 1, GRADE_SPLIT if ridge[1] else 1]
+        rules.append(graded_rule(a, b, scale, tuple(grade), split=tuple(split)))
+    return rules
+
+
+#: Bisections of the bearings at which a radial law's ridge crosses a cell's edges.
+RIDGE_BISECTIONS = 60
+
+
+def _ridge_crossings(point, law, pieces, cell_r, cell_b, origin, heading) -> list:
+    """Per piece ``(a, b, ...)`` of a sweep about ``point``, the bearings inside it at which the
+    law's ridge, the point at range mu(theta) on the ray, crosses one of its cell's circles or
+    bounding rays' lines: there the ray's share steps over a turn of sd over the rate at which
+    the ridge and the edge part, which no scale set in advance resolves (the edge's crossing
+    runs off to infinity next to a ray along a bounding line; the improved banana's SD falls
+    to 0 at its P_sigma = 0 edge). Sign changes over LAW_PROBES probes, refined by
+    RIDGE_BISECTIONS bisections of all at once."""
+    a = np.array([p[0] for p in pieces])
+    b = np.array([p[1] for p in pieces])
+    probes = np.linspace(a, b, LAW_PROBES, axis=1)
+    dx, dy = point[0] - origin[0], point[1] - origin[1]
+    u = [(np.sin(heading + cell_b[:, k]), np.cos(heading + cell_b[:, k])) for k in (0, 1)]
+
+    def sides(theta, rows):
+        """The ridge's signed distances from the piece's cell's circles and lines, (..., 4)."""
+        _, mu, sd = law(theta.ravel())
+        mu, sd = mu.reshape(theta.shape), sd.reshape(theta.shape)
+        x, y = dx + mu * np.sin(theta), dy + mu * np.cos(theta)
+        r = np.hypot(x, y)
+        shape = (-1,) + (1,) * (theta.ndim - 1)
+        out = [r - cell_r[rows, 0].reshape(shape), r - cell_r[rows, 1].reshape(shape)]
+        out += [x * u[k][1][rows].reshape(shape) - y * u[k][0][rows].reshape(shape) for k in (0, 1)]
+        return np.stack(out, axis=-1), sd
+
+    rows = np.arange(len(pieces))
+    f, sd = sides(probes, rows)
+    live = sd > 0.0
+    change = (np.sign(f[:, :-1]) * np.sign(f[:, 1:]) < 0.0) & (live[:, :-1] & live[:, 1:])[..., None]
+    piece, k, edge = np.nonzero(change)
+    out = [[] for _ in pieces]
+    if not piece.size:
+        return out
+    lo, hi = probes[piece, k], probes[piece, k + 1]
+    f_lo = f[piece, k, edge]
+    for _ in range(RIDGE_BISECTIONS):
+        mid = 0.5 * (lo + hi)
+        f_mid = sides(mid, piece)[0][np.arange(mid.size), edge]
+        left = np.sign(f_mid) == np.sign(f_lo)
+        lo, hi = np.where(left, mid, lo), np.where(left, hi, mid)
+        f_lo = np.where(left, f_mid, f_lo)
+    for n, t in zip(piece.tolist(), (0.5 * (lo + hi)).tolist()):
+        if pieces[n][0] < t < pieces[n][1]:
+            out[n].append(t)
+    return out
+
+
+def _swept_lattice_cell(model, point, own_bearings, cell, lattice, foreign, feature):
+    """Nodes ``(x, y, w)`` of a lattice cell swept in polar coordinates about ``point`` (a
+    seam's start or a 1 / r point off the lattice's origin, which the cell holds), for a model
+    without a radial law about it (:func:`_sweep_breaks`, :func:`_piece_rules`), each ray's
+    pieces in the cell by a Gauss rule in range."""
+    (r0, r1), (b0, b1) = cell
+    origin, heading = lattice.pose.origin, lattice.pose.heading
+    edges, graded, seams, far = _sweep_breaks(point, own_bearings, cell, origin, heading)
+    radial, angular = model.polar_scales(point)
+    # no wider than a quarter radian: the pieces span the whole turn about the point
+    angular = min(angular, SWEEP_ANGLE, feature / max(far, 1e-300))
+    pieces = [(a, b, graded, seams, angular, far, ()) for a, b in zip(edges[:-1], edges[1:]) if b > a]
+    rules = _piece_rules(pieces, None, None)
+    theta = np.concatenate([t for t, _ in rules])
+    w_t = np.concatenate([w for _, w in rules])
+    lo, hi = _sector_segments(point, theta, (r0, r1), (b0, b1), origin, heading, foreign)
     m_r, _, _ = axis_plan(math.hypot(r1 - r0, r1 * (b1 - b0)), min(radial, feature), MAX_SUBINTERVALS)
-    x, y, w = _radial_nodes(point, theta, w_t, lo, hi, unit_rule(m_r, MAX_ORDER))
-    return "pdf", x, y, w
+    return _radial_nodes(point, theta, w_t, lo, hi, unit_rule(m_r, MAX_ORDER))
+
+
+def _swept_law_cells(model, point, own_bearings, law, cells, lattice, foreign, feature) -> np.ndarray:
+    """Probabilities of lattice ``cells`` swept about ``point``, about which the density is
+    g(theta) N(rho; mu, sd) / rho (``law``: a polar banana's start off the lattice's origin):
+    per ray the pieces in the cell (:func:`_sector_segments`) are exact, sums of normal-CDF
+    differences; over the bearing, Gauss rules between the cuts of :func:`_sweep_breaks` where
+    the rays meet the cell (:func:`_piece_rules`). All cells at once: one evaluation of the
+    law for the probes and at most NODE_CHUNK nodes per evaluation after."""
+    origin, heading = lattice.pose.origin, lattice.pose.heading
+    r_edges, b_edges = lattice.range_edges, lattice.bearing_edges
+    angular = min(model.polar_scales(point)[1], SWEEP_ANGLE)
+    pieces, owner = [], []
+    for n, (i, j) in enumerate(cells):
+        cell = ((float(r_edges[i]), float(r_edges[i + 1])), (float(b_edges[j]), float(b_edges[j + 1])))
+        edges, graded, seams, far = _sweep_breaks(point, own_bearings, cell, origin, heading)
+        scale = min(angular, feature / max(far, 1e-300))
+        for a, b in zip(edges[:-1], edges[1:]):
+            if b > a:
+                pieces.append((a, b, graded, seams, scale, far, ()))
+                owner.append(n)
+    if not pieces:
+        return np.zeros(len(cells))
+    owner = np.array(owner)
+    cell_r = np.array([(r_edges[i], r_edges[i + 1]) for i, _ in cells], dtype=float)[owner]
+    cell_b = np.array([(b_edges[j], b_edges[j + 1]) for _, j in cells], dtype=float)[owner]
+    # the pieces whose rays meet the cell (the same all along a piece: three probes for safety)
+    a, b = np.array([p[0] for p in pieces]), np.array([p[1] for p in pieces])
+    probe = (a[:, None] + (b - a)[:, None] * np.array([0.25, 0.5, 0.75])).ravel()
+    lo, hi = _sector_segments(point, probe, (np.repeat(cell_r[:, 0], 3), np.repeat(cell_r[:, 1], 3)),
+                              (np.repeat(cell_b[:, 0], 3), np.repeat(cell_b[:, 1], 3)), origin, heading, foreign)
+    meets = (hi > lo).any(axis=1).reshape(-1, 3).any(axis=1)
+    keep = np.flatnonzero(meets)
+    pieces = [pieces[k] for k in keep]
+    owner, cell_r, cell_b = owner[keep], cell_r[keep], cell_b[keep]
+    totals = np.zeros(len(cells))
+    if not pieces:
+        return totals
+    # split the pieces where the ridge crosses the cell's edges with its SD narrowed
+    crossings = _ridge_crossings(point, law, pieces, cell_r, cell_b, origin, heading)
+    split, index = [], []
+    for k, (piece, at) in enumerate(zip(pieces, crossings)):
+        a, b, graded, seams, scale, far, _ = piece
+        cuts = sorted({a, b, *at})
+        for u, v in zip(cuts[:-1], cuts[1:]):
+            if v > u:
+                split.append((u, v, graded, seams, scale, far, frozenset(at)))
+                index.append(k)
+    pieces, index = split, np.array(index)
+    owner, cell_r, cell_b = owner[index], cell_r[index], cell_b[index]
+    probes = np.linspace([p[0] for p in pieces], [p[1] for p in pieces], LAW_PROBES, axis=1)
+    _, _, sd_probes = law(probes.ravel())
+    rules = _piece_rules(pieces, law, sd_probes.reshape(probes.shape))
+    sizes = np.array([t.size for t, _ in rules])
+    theta = np.concatenate([t for t, _ in rules])
+    w_t = np.concatenate([w for _, w in rules])
+    node_owner = np.repeat(owner, sizes)
+    node_r, node_b = np.repeat(cell_r, sizes, axis=0), np.repeat(cell_b, sizes, axis=0)
+    for c0 in range(0, theta.size, NODE_CHUNK):
+        part = slice(c0, c0 + NODE_CHUNK)
+        lo, hi = _sector_segments(point, theta[part], (node_r[part, 0], node_r[part, 1]),
+                                  (node_b[part, 0], node_b[part, 1]), origin, heading, foreign)
+        g, mu, sd = law(theta[part])
+        shares = normal_shares(g[:, None], mu[:, None], sd[:, None], lo, hi).sum(axis=1)
+        totals += np.bincount(node_owner[part], weights=w_t[part] * shares, minlength=len(cells))  # node order
+    return totals
 
 
 def _radial_nodes(point, theta, w_t, lo, hi, rule):
@@ -570,29 +737,104 @@ def _radial_nodes(point, theta, w_t, lo, hi, rule):
     return (point[0] + r * np.sin(theta[t])[:, None]).ravel(), (point[1] + r * np.cos(theta[t])[:, None]).ravel(), w
 
 
-def _point_cells(model: DensityModel, lattice: PolarLattice, plan: _Plan, probability: np.ndarray, *, dtype,
-                 device, threads) -> None:
-    """Integrate again, swept about the point (:func:`_swept_lattice_cell`), the cells that hold
-    a seam's start or a 1 / r point off the lattice's origin, and the cells that the seams of a
-    point with a polar law cross (exact in range about it, graded toward its seams where the
-    range SD narrows: the improved polar banana's P_sigma = 0 edge); set them in
-    ``probability``."""
+#: Cells nearer a polar law's point than this many of their diameters are swept about it.
+NEAR_SWEEP = 2.0
+
+#: Probes per cell of the law's SD over the bearings the cell spans about the point, and
+#: samples per cell side of the cell's outline.
+SPAN_PROBES = 17
+OUTLINE_SAMPLES = 9
+
+#: Range SDs beyond which a cell lies in the law's tail on every probed bearing.
+TAIL_SDS = 12.0
+
+
+def _law_untrusted_cells(lattice: PolarLattice, plan: _Plan, point, law) -> set:
+    """The cells that the tensor rule about the lattice's origin cannot be trusted on for a
+    density that is g N(rho; mu, sd) / rho about ``point`` (a polar banana's start off the
+    origin), to be swept about the point: cells nearer it than NEAR_SWEEP of their diameters
+    (1 / rho, and a density that changes with the direction there), and cells where one of
+    the density's Cartesian length scales falls below the tensor rule's (``plan.scales[0]``):
+    the law's range SD over the bearings the cell spans about the point (SPAN_PROBES probes;
+    it falls behind the improved banana's start and to 0 at its P_sigma = 0 edge, where the
+    ridge narrows to a point), or the arc over which the ridge moves by an SD at the cell's
+    nearest range, rho sd / |mu'| (its bends are compressed like rho near the start), or the
+    cell spans bearings where the law has no mass next to ones where it has; but not cells in
+    the law's far tail on every bearing they span (beyond TAIL_SDS SDs of every probed mean)."""
+    r_edges, b_edges = lattice.range_edges, lattice.bearing_edges
+    origin, heading = lattice.pose.origin, lattice.pose.heading
+    px, py = point
+    n_r, n_b = lattice.n_range, lattice.n_bearing
+    # each cell's outline, sampled: its arcs and its radial sides, shape (n_r, n_b, P)
+    f = np.linspace(0.0, 1.0, OUTLINE_SAMPLES)
+    r0, r1 = r_edges[:-1, None, None], r_edges[1:, None, None]
+    a0, a1 = b_edges[None, :-1, None], b_edges[None, 1:, None]
+    shape = (n_r, n_b, OUTLINE_SAMPLES)
+    radius = np.concatenate([np.broadcast_to(r0, shape), np.broadcast_to(r1, shape),
+                             np.broadcast_to(r0 + (r1 - r0) * f, shape), np.broadcast_to(r0 + (r1 - r0) * f, shape)],
+                            axis=2)
+    bearing = np.concatenate([np.broadcast_to(a0 + (a1 - a0) * f, shape), np.broadcast_to(a0 + (a1 - a0) * f, shape),
+                              np.broadcast_to(a0, shape), np.broadcast_to(a1, shape)], axis=2)
+    x = origin[0] + radius * np.sin(heading + bearing) - px
+    y = origin[1] + radius * np.cos(heading + bearing) - py
+    # bearings about the point, unwrapped about the direction to the cell's middle
+    rm, bm = 0.5 * (r0 + r1), 0.5 * (a0 + a1)
+    centre = np.arctan2(origin[0] + rm * np.sin(heading + bm) - px, origin[1] + rm * np.cos(heading + bm) - py)
+    turn = (np.arctan2(x, y) - centre + math.pi) % (2.0 * math.pi) - math.pi
+    lo, hi = turn.min(axis=2), turn.max(axis=2)
+    pad = 0.125 * (hi - lo)  # the arcs between the samples bulge a little beyond them
+    lo, hi = lo - pad, hi + pad
+    far = np.hypot(x, y).max(axis=2) + lattice.range_step / OUTLINE_SAMPLES
+    near = _cell_distances(lattice, point)
+    around = near <= 0.0  # the cell holds the point (or reaches round it): every bearing
+    lo, hi = np.where(around, -math.pi, lo), np.where(around, math.pi, hi)
+    probes = centre[..., 0, None] + lo[..., None] + (hi - lo)[..., None] * np.linspace(0.0, 1.0, SPAN_PROBES)
+    _, mu, sd = law(probes.ravel())
+    mu, sd = mu.reshape(probes.shape), sd.reshape(probes.shape)
+    live = sd > 0.0
+    widest = np.max(np.where(live, sd, 0.0), axis=2)
+    top = np.max(np.where(live, mu, -np.inf), axis=2) + TAIL_SDS * widest
+    bottom = np.min(np.where(live, mu, np.inf), axis=2) - TAIL_SDS * widest
+    tail = ~live.any(axis=2) | (near > top) | (far < bottom)
+    # the density's Cartesian length scales over the cell: the range SD, and across the
+    # bearings the turn that moves the ridge by an SD (sd / |mu'|) at the cell's nearest range
+    step = ((hi - lo) / (SPAN_PROBES - 1))[..., None]
+    slope = np.abs(np.gradient(mu, axis=2)) / np.maximum(step, 1e-300)
+    least = np.min(np.where(live, sd, np.inf), axis=2)
+    steepest = np.max(np.where(live[..., 1:] & live[..., :-1], np.maximum(slope[..., 1:], slope[..., :-1]), 0.0),
+                      axis=2)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        across = np.where(steepest > 0.0, near * least / steepest, np.inf)
+    narrow = (np.minimum(least, across) < plan.scales[0]) | (live.any(axis=2) & ~live.all(axis=2))
+    untrusted = ((near < NEAR_SWEEP * _cell_diameters(lattice)[:, None]) | narrow) & ~tail
+    return set(map(tuple, np.argwhere(untrusted).tolist()))
+
+
+def _point_choice(model: DensityModel, lattice: PolarLattice, plan: _Plan) -> tuple[list, np.ndarray, dict]:
+    """``(points, seams, chosen)``: the seams' starts and 1 / r points off the lattice's origin,
+    the model's seams, and the cells to sweep about one of them, ``{(i, j): point index}``:
+    the cell that holds a point, and for a point with a polar law (a polar banana's start) the
+    cells its seams cross (:func:`_crossed_cells`) and those the tensor rule about the
+    lattice's origin cannot be trusted on (:func:`_law_untrusted_cells`)."""
     origin = lattice.pose.origin
     seams = np.asarray(model.seams(), dtype=float).reshape(-1, 3)
     points = [tuple(map(float, p)) for p in np.asarray(model.singular_points(), dtype=float).reshape(-1, 2)]
     points += [tuple(map(float, p)) for p in seams[:, :2] if tuple(map(float, p)) not in points]
     points = [p for p in points if p != tuple(map(float, origin))]
-    if not points:
-        return
     r_edges, b_edges = lattice.range_edges, lattice.bearing_edges
-    feature = float(model.feature_scale())
-    extent = LatticeExtent(lattice)
     chosen = {}
     for k, point in enumerate(points):
         own = seams[(seams[:, 0] == point[0]) & (seams[:, 1] == point[1])]
-        if model.polar_law(point) is not None:
-            for cell in _crossed_cells(lattice, own):
+        law = model.polar_law(point)
+        if law is not None:
+            for cell in _crossed_cells(lattice, own) | _law_untrusted_cells(lattice, plan, point, law):
                 chosen.setdefault(cell, k)
+        # the cells beside the point too: on their edge (to rounding) or nearer than a
+        # quarter of their diameter, where the rule in the lattice's frame would need
+        # sub-intervals finer than its caps allow
+        beside = _cell_distances(lattice, point) < TOUCH_FRACTION * _cell_diameters(lattice)[:, None]
+        for cell in map(tuple, np.argwhere(beside).tolist()):
+            chosen.setdefault(cell, k)
         dx, dy = point[0] - origin[0], point[1] - origin[1]
         r = math.hypot(dx, dy)
         rel = b_edges[0] + (math.atan2(dx, dy) - lattice.pose.heading - b_edges[0]) % (2.0 * math.pi)
@@ -600,19 +842,62 @@ def _point_cells(model: DensityModel, lattice: PolarLattice, plan: _Plan, probab
         j = int(np.searchsorted(b_edges, rel, side="right")) - 1
         if 0 <= i < lattice.n_range and 0 <= j < lattice.n_bearing:
             chosen[(i, j)] = k
-    for (i, j), k in sorted(chosen.items()):
+    return points, seams, chosen
+
+
+#: Cells nearer a seam's start or 1 / r point than this fraction of their diameter are swept
+#: about it.
+TOUCH_FRACTION = 0.25
+
+
+def _cell_diameters(lattice: PolarLattice) -> np.ndarray:
+    """Per row, the diagonal of a cell at its outer arc: hypot(dr, r1 db)."""
+    return np.hypot(lattice.range_step, lattice.range_edges[1:] * lattice.bearing_step)
+
+
+def _cell_distances(lattice: PolarLattice, point) -> np.ndarray:
+    """A lower bound of the distance from ``point`` to every cell, shape (n_range, n_bearing):
+    the gap to the cell's annulus, or the distance to the nearer bounding ray where the
+    point's bearing lies outside the cell's (as :func:`_distance_to_cell`)."""
+    r_edges, b_edges = lattice.range_edges, lattice.bearing_edges
+    dx, dy = point[0] - lattice.pose.origin[0], point[1] - lattice.pose.origin[1]
+    r = math.hypot(dx, dy)
+    radial = np.maximum(0.0, np.maximum(r_edges[:-1] - r, r - r_edges[1:]))
+    rel = b_edges[0] + (math.atan2(dx, dy) - lattice.pose.heading - b_edges[0]) % (2.0 * math.pi)
+    circular = lambda d: np.abs((d + math.pi) % (2.0 * math.pi) - math.pi)  # noqa: E731
+    gap = np.where((b_edges[:-1] <= rel) & (rel <= b_edges[1:]), 0.0,
+                   np.minimum(circular(rel - b_edges[:-1]), circular(rel - b_edges[1:])))
+    across = r * np.sin(np.minimum(gap, 0.5 * math.pi))
+    return np.maximum(radial[:, None], across[None, :])
+
+
+def _point_cells(model: DensityModel, lattice: PolarLattice, probability: np.ndarray, choice, *, dtype, device,
+                 threads) -> None:
+    """Integrate again, swept about their point, the cells of ``choice`` (:func:`_point_choice`),
+    and set them in ``probability``: exact in range about a point with a polar law
+    (:func:`_swept_law_cells`), else Gauss in range (:func:`_swept_lattice_cell`)."""
+    points, seams, chosen = choice
+    if not chosen:
+        return
+    r_edges, b_edges = lattice.range_edges, lattice.bearing_edges
+    feature = float(model.feature_scale())
+    extent = LatticeExtent(lattice)
+    by_point = {}
+    for cell, k in sorted(chosen.items()):
+        by_point.setdefault(k, []).append(cell)
+    for k, cells in sorted(by_point.items()):
         point = points[k]
-        own = seams[(seams[:, 0] == point[0]) & (seams[:, 1] == point[1])]
-        foreign = seams[~((seams[:, 0] == point[0]) & (seams[:, 1] == point[1]))]
+        mine = (seams[:, 0] == point[0]) & (seams[:, 1] == point[1])
+        own, foreign = seams[mine, 2], seams[~mine]
         law = model.polar_law(point)
-        cell = ((float(r_edges[i]), float(r_edges[i + 1])), (float(b_edges[j]), float(b_edges[j + 1])))
-        kind, *nodes = _swept_lattice_cell(model, point, own[:, 2], law, cell, lattice, plan, foreign, feature)
-        if kind == "law":
-            theta, w, lo, hi = nodes
-            g, mu, sd = law(theta)
-            probability[i, j] = float(np.sum(w[:, None] * normal_shares(g[:, None], mu[:, None], sd[:, None], lo, hi)))
-        else:
-            xs, ys, w = nodes
+        if law is not None:
+            values = _swept_law_cells(model, point, own, law, cells, lattice, foreign, feature)
+            for (i, j), value in zip(cells, values):
+                probability[i, j] = value
+            continue
+        for i, j in cells:
+            cell = ((float(r_edges[i]), float(r_edges[i + 1])), (float(b_edges[j]), float(b_edges[j + 1])))
+            xs, ys, w = _swept_lattice_cell(model, point, own, cell, lattice, foreign, feature)
             total = 0.0
             for c0 in range(0, xs.size, NODE_CHUNK):
                 values = evaluate_points(model, xs[c0:c0 + NODE_CHUNK], ys[c0:c0 + NODE_CHUNK], dtype=dtype,
@@ -636,7 +921,10 @@ def rasterise_lattice(
 
     Where the model's density about the lattice's origin is g(theta) N(r; mu, sd) / r (a polar
     banana on a lattice at its start: ``model.polar_law``), each cell is exact in r and
-    Gauss-Legendre in the bearing (:func:`_law_cells`), cut at the model's seams. Otherwise the
+    Gauss-Legendre in the bearing (:func:`_law_cells`), cut at the model's seams; such a banana
+    on a lattice about another origin is integrated exact in its own range about its start,
+    in the cells its seams cross and wherever the rule below is not to be trusted
+    (:func:`_point_cells`). Otherwise the
     integral is a tensor Gauss-Legendre rule over sub-cells no larger than the model's
     length scales (``model.polar_scales``): per axis, m equal sub-intervals of at most the scale
     and the fewest nodes n (<= 8) whose remainder bound for a normal feature of that SD is below

@@ -66,7 +66,7 @@ def axis_plan(width: float, scale: float, cap: int) -> tuple[int, int, float]:
 
 def unit_rule(m: int, n: int) -> tuple[np.ndarray, np.ndarray]:
     """Composite Gauss-Legendre rule on [0, 1]: m sub-intervals of n nodes; (nodes, weights)."""
-    x, w = np.polynomial.legendre.leggauss(n)
+    x, w = _legendre(n)  # cached: a lattice asks for it once per cell
     nodes = (np.arange(m)[:, None] + 0.5 * (x[None, :] + 1.0)) / m
     return nodes.ravel(), np.tile(0.5 * w / m, m)
 
@@ -83,21 +83,25 @@ def narrowing(sd: np.ndarray) -> tuple[bool, bool]:
     return bool(sd[0] < 0.25 * top), bool(sd[-1] < 0.25 * top)
 
 
-def graded_rule(a: float, b: float, scale: float, graded: tuple[bool, bool], extra=frozenset()):
+def graded_rule(a: float, b: float, scale: float, graded: tuple[bool, bool], extra=frozenset(),
+                split: tuple[int, int] = (GRADE_SPLIT, GRADE_SPLIT)):
     """Gauss-Legendre nodes and weights on [a, b]: sub-intervals no wider than ``scale``, and
-    toward an end that is a seam, also geometrically graded ones (GRADE_LEVELS halvings), so
-    that features narrowing in proportion to the distance from the seam (the improved polar
-    banana's range SD P_sigma as it falls to 0) stay resolved; ``extra`` adds breakpoints.
-    MAX_ORDER nodes per sub-interval."""
+    toward an end that is a seam, also geometrically graded ones (GRADE_LEVELS halvings, each
+    in ``split`` equal steps at that end), so that features narrowing in proportion to the
+    distance from the seam (the improved polar banana's range SD P_sigma as it falls to 0)
+    stay resolved; one step per halving is enough for an end where the integrand only turns
+    like a square root (a ray's tangency to an arc). ``extra`` adds breakpoints. MAX_ORDER
+    nodes per sub-interval."""
     m = max(1, min(MAX_SUBINTERVALS, math.ceil((b - a) / scale * (1.0 - 1e-12))))
     points = set((a + (b - a) * np.arange(m + 1) / m).tolist()) | set(extra)
-    # GRADE_SPLIT equal steps within each halving: a feature at a distance d from the seam and
-    # as narrow as a small multiple of d sees steps of d / (2 GRADE_SPLIT)
-    fractions = (0.5 ** np.arange(1, GRADE_LEVELS + 1)[:, None] * (1.0 + np.arange(GRADE_SPLIT) / GRADE_SPLIT)).ravel()
+    # ``split`` equal steps within each halving: a feature at a distance d from the seam and
+    # as narrow as a small multiple of d sees steps of d / (2 split)
+    def fractions(k):
+        return (0.5 ** np.arange(1, GRADE_LEVELS + 1)[:, None] * (1.0 + np.arange(k) / k)).ravel()
     if graded[0]:
-        points |= set((a + (b - a) * fractions).tolist())
+        points |= set((a + (b - a) * fractions(split[0])).tolist())
     if graded[1]:
-        points |= set((b - (b - a) * fractions).tolist())
+        points |= set((b - (b - a) * fractions(split[1])).tolist())
     edges = np.array(sorted(points))
     x, w = _legendre(MAX_ORDER)
     half = 0.5 * np.diff(edges)[:, None]

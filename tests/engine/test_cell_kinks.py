@@ -126,7 +126,8 @@ def test_polar_cells_at_the_origin_with_the_seam():
 
 
 @pytest.mark.filterwarnings("ignore:P_sigma")
-@settings(max_examples=12, deadline=None, derandomize=True, database=None,
+@seed(20261127)  # a fixed seed, not derandomize (whose examples depend on the checkout's path)
+@settings(max_examples=12, deadline=None, derandomize=False, database=None,
           suppress_health_check=[HealthCheck.too_slow])
 @given(variant=st.sampled_from(["rough", "improved"]),
        sigma_phi=st.floats(0.3, 2.5), range_sd=st.floats(0.02, 2.0), heading=st.floats(-math.pi, math.pi),
@@ -254,7 +255,8 @@ def _back_ray_crossings(model):
 
 
 @pytest.mark.filterwarnings("ignore:bearings cross at", "ignore:the fix lies behind")
-@settings(max_examples=8, deadline=None, derandomize=True, database=None,
+@seed(20261127)  # a fixed seed, not derandomize (whose examples depend on the checkout's path)
+@settings(max_examples=8, deadline=None, derandomize=False, database=None,
           suppress_health_check=[HealthCheck.too_slow, HealthCheck.filter_too_much],
           phases=[Phase.explicit, Phase.generate])  # each example is seconds of quad: no shrinking
 @given(seed=st.integers(0, 2**32 - 1), n=st.integers(3, 4), where=st.sampled_from(["crossing", "stations"]),
@@ -300,40 +302,105 @@ def _lattice_model(kind, rng):
     return bg.PolarBanana(**BROAD["improved-wide" if kind == "improved" else "rough-wide"], pose=pose), 1000.0
 
 
-#: What lattices about any origin are held to (see the sweep's comments for the measured errors).
-ANY_ORIGIN_ATOL = 1e-7
-ANY_ORIGIN_RTOL = 1e-4
+def _lattice_about(origin, centre, side, heading=0.3):
+    """A 3 x 3 polar lattice about ``origin`` whose middle cell (``side`` m in range and arc)
+    is centred on ``centre``."""
+    r_c = math.dist(centre, origin)
+    b_c = math.atan2(centre[0] - origin[0], centre[1] - origin[1]) - heading
+    db = side / r_c
+    return bg.PolarLattice(ranges=(r_c - 1.5 * side, r_c + 1.5 * side), range_step=side,
+                           bearings=(b_c - 1.5 * db, b_c + 1.5 * db), bearing_step=db,
+                           pose=Pose(origin=origin, heading=heading))
 
 
 @pytest.mark.filterwarnings("ignore:P_sigma")
+def test_the_exact_lattice_oracle_against_sampling_and_nested_quad():
+    """``cell_oracle.banana_lattice_cell`` (exact in the banana's own range) is checked two
+    independent ways: against nested ``quad`` in the lattice's (b, r) on a rough banana's
+    ridge away from its start, where that one converges (both adaptive to 1e-11 or better:
+    agreement to 1e-10 relative), and against the fraction of 2 million samples of
+    ``model.sample`` in each cell (times the plane mass, ``cell_oracle.banana_mass``) where the
+    nested one does not converge: cells about the improved banana's P_sigma = 0 edge, where
+    the ridge narrows to a point, and about its start (within 5 binomial SDs; a wrong clip of
+    the rays would be off by a share of the cell)."""
+    rough = bg.PolarBanana(**BROAD["rough-wide"], pose=Pose(origin=(300.0, -120.0), heading=0.7))
+    ridge = (300.0 + 900.0 * math.sin(1.0), -120.0 + 900.0 * math.cos(1.0))
+    lattice = _lattice_about((-400.0, 500.0), ridge, 120.0)
+    density = cell_oracle.polar_banana_density(rough)
+    for i in range(3):
+        for j in range(3):
+            rr, bb = lattice.range_edges[i:i + 2], lattice.bearing_edges[j:j + 2]
+            exact = cell_oracle.banana_lattice_cell(rough, lattice.pose.origin, lattice.pose.heading, rr, bb)
+            nested = cell_oracle.lattice_cell(density, lattice.pose.origin, lattice.pose.heading, rr, bb, rough.seams())
+            assert exact > 1e-4 and abs(exact - nested) <= 1e-10 * exact, ((i, j), exact, nested)
+    edge = bg.PolarBanana(v0=1.0, t=10.0, sigma_a=0.5, sigma_omega=0.3, variant="improved",
+                          pose=Pose(origin=(300.0, -120.0), heading=-0.4))
+    _, point = _edge_point(edge)
+    mass = cell_oracle.banana_mass(edge)
+    rng = np.random.default_rng(5)
+    samples = np.concatenate([edge.sample(500_000, rng) for _ in range(4)])
+    n = len(samples)
+    for lattice in (_lattice_about((310.0, -95.0), point, 1.5), _lattice_about((290.0, -100.0), edge.pose.origin, 3.0)):
+        (ox, oy), h = lattice.pose.origin, lattice.pose.heading
+        r = np.hypot(samples[:, 0] - ox, samples[:, 1] - oy)
+        b = lattice.bearing_edges[0] + (np.arctan2(samples[:, 0] - ox, samples[:, 1] - oy) - h
+                                        - lattice.bearing_edges[0]) % (2.0 * math.pi)
+        i = np.searchsorted(lattice.range_edges, r) - 1
+        j = np.searchsorted(lattice.bearing_edges, b) - 1
+        inside = (i >= 0) & (i < 3) & (j >= 0) & (j < 3)
+        counts = np.zeros((3, 3))
+        np.add.at(counts, (i[inside], j[inside]), 1.0)
+        held = 0
+        for i in range(3):
+            for j in range(3):
+                exact = cell_oracle.banana_lattice_cell(edge, (ox, oy), h, lattice.range_edges[i:i + 2],
+                                                        lattice.bearing_edges[j:j + 2])
+                share = exact / mass
+                assert abs(counts[i, j] / n - share) <= 5.0 * math.sqrt(share * (1.0 - share) / n) + 1.0 / n, \
+                    ((i, j), counts[i, j] / n, share)
+                held += share > 1e-3
+        assert held >= 3  # cells that hold mass, not only tails
+
+
+#: The lattice's stated accuracy in every cell (README, polar lattice): 1e-9 of the mass.
+LATTICE_ATOL = 1e-9
+
+
+#: Examples per kind of model and placement of the origin (16 pairs): 3 here (48 in all, about
+#: 60 s on two cores); the sweep reported in the README ran 8 each.
+ANY_ORIGIN_EXAMPLES = 3
+
+
+@pytest.mark.filterwarnings("ignore:P_sigma")
+@pytest.mark.parametrize("kind", ["bearing", "rough", "improved", "improved-edge"])
+@pytest.mark.parametrize("where", ["anywhere", "on the seam", "behind the start", "holding the start"])
 # a fixed seed, not derandomize: hypothesis derives a derandomised test's seed from where the
 # module was imported from, so each checkout drew other examples (and found other edges)
 @seed(20261127)
-@settings(max_examples=40, deadline=None, derandomize=False, database=None,
+@settings(max_examples=ANY_ORIGIN_EXAMPLES, deadline=None, derandomize=False, database=None,
           suppress_health_check=[HealthCheck.too_slow, HealthCheck.filter_too_much],
           phases=[Phase.explicit, Phase.generate])
-@given(seed=st.integers(0, 2**32 - 1), kind=st.sampled_from(["bearing", "rough", "improved", "improved-edge"]),
-       where=st.sampled_from(["anywhere", "on the seam", "behind the start", "holding the start"]),
-       along=st.floats(0.1, 0.5), size=st.floats(0.15, 0.4), away=st.floats(2.5, 20.0),
-       offset=st.tuples(st.floats(-0.5, 0.5), st.floats(-0.5, 0.5)))
-def test_polar_lattice_cells_over_seams_from_any_origin(seed, kind, where, along, size, away, offset):
+@given(seed=st.integers(0, 2**32 - 1), along=st.floats(0.1, 0.5), size=st.floats(0.15, 0.4),
+       away=st.floats(2.5, 20.0), offset=st.tuples(st.floats(-0.5, 0.5), st.floats(-0.5, 0.5)))
+def test_polar_lattice_cells_over_seams_from_any_origin(kind, where, seed, along, size, away, offset):
     """Polar lattices whose origin is anywhere (2.5 to 20 cells from the cells), on a seam
     between its start and the cells, or on its line behind the start: 3 x 3 cells of 0.15 to
     0.4 of their distance from the seam's start, placed over the seam 0.1 to 0.5 of the
     model's reach from it (a station's back ray, a polar banana's wrap behind the start or its
     P_sigma = 0 edge, where the ridge narrows to a point), or cells around the start itself (a
-    station, a polar banana's 1 / r origin), against nested ``quad`` in the lattice's (b, r)
-    with the seams' crossings and the nearest approach to each start as breakpoints. A seam
-    that misses the origin is a curve in (r, b): only seams from the origin were cut before
-    (4e-4 to 8e-2 relative off). Not swept: the improved banana's origin inside a cell, where
-    this oracle does not converge to 1e-8."""
-    # Not swept (a known gap, stated in the README): the edge kind, where the improved ridge
-    # narrows to a point. This nested quad does not converge there (5.3e-6 off on a cell, seed
-    # 310, where an integral exact in range about the start agrees with the rule to 3e-10), and
-    # from an origin on its seam the two differ by 8.6e-6 (seed 74135), not yet decided. Nor cells
-    # holding a banana's 1 / r start seen from another origin: 7.4e-4 relative (seed 11336), 2.6e-8
-    # absolute (seed 3743263), where this oracle's quad meets the singular point.
-    assume(kind != "improved-edge" and not (where == "holding the start" and kind != "bearing"))
+    station, a polar banana's 1 / r origin). Against, for a polar banana, an integral exact in
+    its own range about its start (``cell_oracle.banana_lattice_cell``: adaptive ``quad`` over
+    its bearing with every change of the ray's clip and every crossing of the ridge as a
+    breakpoint), for a bearing fix nested ``quad`` in the lattice's (b, r) with the seams'
+    crossings and the nearest approach to each station as breakpoints. A seam that misses the
+    origin is a curve in (r, b): only seams from the origin were cut before (4e-4 to 8e-2
+    relative off); then a banana's cells near its start, behind it and at its edge, held to
+    1e-7, were off by up to 2.6e-7 (a tensor rule about the lattice's origin where the ridge's
+    bends are compressed near the start or its SD narrows), swept cells by up to 4.2e-8 (a
+    corner's bearing a hair past a tangent's, a ray along a cell's side, the ridge crossing a
+    cell's edge as a sharp step), and with the start or a station on a cell's edge (offsets of
+    +-0.5) by 2.4e-4 and 1e-7 (no tangent break for a point on a circle; the neighbouring
+    cells not swept). Every kind and placement is drawn ANY_ORIGIN_EXAMPLES times."""
     rng = np.random.default_rng(seed)
     model, reach = _lattice_model(kind, rng)
     seams = model.seams()
@@ -360,27 +427,56 @@ def test_polar_lattice_cells_over_seams_from_any_origin(seed, kind, where, along
                               bearings=(b_c - 1.5 * db, b_c + 1.5 * db), bearing_step=db,
                               pose=Pose(origin=tuple(origin), heading=heading))
     got = bg.rasterise(model, lattice).probability
-    density = cell_oracle.bearing_density(model) if kind == "bearing" else cell_oracle.polar_banana_density(model)
+    if kind == "bearing":
+        density = cell_oracle.bearing_density(model)
+        oracle = lambda rr, bb: cell_oracle.lattice_cell(density, tuple(origin), heading, rr, bb, seams)  # noqa: E731
+    else:
+        oracle = lambda rr, bb: cell_oracle.banana_lattice_cell(model, tuple(origin), heading, rr, bb)  # noqa: E731
     crossed = _crossed_by_seams(lattice, seams)
     assert crossed  # the seam runs through the cells
     checked = 0
     for i in range(lattice.n_range):
         for j in range(lattice.n_bearing):
-            want = cell_oracle.lattice_cell(density, tuple(origin), heading, lattice.range_edges[i:i + 2],
-                                            lattice.bearing_edges[j:j + 2], seams)
-            # Lattices about an origin other than the seams' starts do not reach the lattice's
-            # 1e-9 absolute and the cell rules' 1e-8 relative everywhere (measured 1.3e-9 and
-            # 2.6e-8 absolute, seeds 2000 and 3743263; 6.4e-5 relative in a cell of an improved
-            # banana, seed 10308165; 4.6e-8 in a station's cell, seed 2596132: the rule's or this
-            # oracle's, not yet decided). Held here: what the README states for them, 1e-7
-            # absolute in every cell and 1e-4 relative in a cell a seam crosses or ends in.
-            assert abs(got[i, j] - want) <= ANY_ORIGIN_ATOL, ((i, j), got[i, j], want)
+            want = oracle(lattice.range_edges[i:i + 2], lattice.bearing_edges[j:j + 2])
+            assert abs(got[i, j] - want) <= LATTICE_ATOL, ((i, j), got[i, j], want)
             if (i, j) in crossed:
-                assert abs(got[i, j] - want) <= ANY_ORIGIN_RTOL * want + ATOL, ((i, j), got[i, j], want)
-                checked += ANY_ORIGIN_RTOL * want > ATOL
+                assert abs(got[i, j] - want) <= RTOL * want + ATOL, ((i, j), got[i, j], want)
+                checked += RTOL * want > ATOL
     # an example whose crossed cells hold only tails (below ATOL / RTOL) tests the absolute bound
     # alone: it is not counted, so that every counted example holds a crossed cell to 1e-8
     assume(checked >= 1)
+
+
+@pytest.mark.filterwarnings("ignore:P_sigma")
+@pytest.mark.parametrize("kind", ["rough", "improved", "improved-edge"])
+def test_banana_lattices_about_another_origin_in_every_cell(kind):
+    """A 5 x 6 lattice about an origin 0.8 of the banana's reach from its start, over the start,
+    the ground behind it and (for the edge banana) its P_sigma = 0 edge: the cells the rule
+    leaves to the tensor rule about the lattice's origin and those it sweeps about the start
+    alike, every one against the integral exact in the banana's range, to the lattice's 1e-9
+    absolute (1e-8 relative where a seam crosses: README). Before, the rough banana's cell
+    beside its start was 9.7e-9 off, the improved one's 1.2e-4 relative in a crossed cell and
+    the edge banana's 2.5e-7 beside its edge (cells left to the tensor rule or swept without
+    every break)."""
+    model, reach = _lattice_model(kind, np.random.default_rng(3))
+    start = np.array(model.pose.origin)
+    h = model.pose.heading + 2.4  # from beside and behind the start
+    origin = start + 0.8 * reach * np.array([math.sin(h), math.cos(h)])
+    towards = math.atan2(*(start - origin))
+    lattice = bg.PolarLattice(ranges=(0.3 * reach, 1.4 * reach), range_step=0.22 * reach,
+                              bearings=(towards - 0.6, towards + 0.6), bearing_step=0.2, pose=Pose(origin=tuple(origin)))
+    got = bg.rasterise(model, lattice).probability
+    crossed = _crossed_by_seams(lattice, model.seams())
+    held = 0
+    for i in range(lattice.n_range):
+        for j in range(lattice.n_bearing):
+            want = cell_oracle.banana_lattice_cell(model, tuple(origin), 0.0, lattice.range_edges[i:i + 2],
+                                                   lattice.bearing_edges[j:j + 2])
+            assert abs(got[i, j] - want) <= LATTICE_ATOL, ((i, j), got[i, j], want)
+            if (i, j) in crossed:
+                assert abs(got[i, j] - want) <= RTOL * want + ATOL, ((i, j), got[i, j], want)
+            held += want > 1e-4
+    assert held >= 8  # cells that hold mass, not only tails
 
 
 def _crossed_by_seams(lattice, seams, samples=20001):

@@ -1,10 +1,13 @@
-"""Independent references for cell probabilities (tests/engine/test_cell_probabilities.py).
+"""Independent references for cell probabilities (tests/engine/test_cell_probabilities.py,
+tests/engine/test_cell_kinks.py).
 
 CAT: for each turn rate the line P(a) = pos(a, omega) is clipped to the cell in NumPy (the
 cell's two slabs, not the kernel's walk), and Phi(z_out) - Phi(z_in) is integrated over omega by
 SciPy's adaptive ``quad`` with the normal weight, between the turn rates whose lines pass the
 cell's corners (where the share has kinks), to 1e-11 relative. Other models: SciPy
 ``dblquad`` of ``pdf`` over the cell, or over the cell in polar coordinates about a point.
+A polar banana's cell of a polar lattice about any origin: exact in the banana's own range,
+adaptive ``quad`` over its bearing (``banana_lattice_cell``).
 """
 
 import math
@@ -368,3 +371,234 @@ def polar_banana_density(model):
         return g * math.exp(-0.5 * ((rho - mu) / sd) ** 2) / (math.sqrt(2.0 * math.pi) * sd * rho)
 
     return density
+
+
+# --- a polar banana's cells on a lattice about another origin: exact in its own range ----------
+
+
+def _sector_inside(rel_x, rel_y, ranges, bearings, heading):
+    """Whether the point (rel_x, rel_y) from a lattice's origin lies in its annular sector."""
+    (r0, r1), (b0, b1) = ranges, bearings
+    r = math.hypot(rel_x, rel_y)
+    rel = b0 + (math.atan2(rel_x, rel_y) - heading - b0) % (2.0 * math.pi)
+    return r0 <= r <= r1 and rel <= b1
+
+
+def sector_ray_pieces(start, theta, origin, heading, ranges, bearings):
+    """The range intervals ``[(lo, hi), ...]`` of the ray from ``start`` at bearing ``theta``
+    that lie in the annular sector ``ranges`` x ``bearings`` (clockwise from ``heading``) about
+    ``origin``. Written with ``math`` from the geometry alone: the ray (d + rho w from the
+    origin, d = start - origin) meets a circle of radius R where rho^2 + 2 rho (d.w) + |d|^2 -
+    R^2 = 0 and the line of a bounding ray u where (d + rho w) x u = 0; between consecutive
+    events it is in or out of the sector as its midpoint is."""
+    (r0, r1), (b0, b1) = ranges, bearings
+    dx, dy = start[0] - origin[0], start[1] - origin[1]
+    wx, wy = math.sin(theta), math.cos(theta)
+    along = dx * wx + dy * wy
+    d2 = dx * dx + dy * dy
+    far = 2.0 * (math.sqrt(d2) + r1) + 1.0
+    events = {0.0, far}
+    for radius in (r0, r1):
+        disc = along * along - d2 + radius * radius
+        if disc >= 0.0:
+            for rho in (-along - math.sqrt(disc), -along + math.sqrt(disc)):
+                if 0.0 < rho < far:
+                    events.add(rho)
+    for b in (b0, b1):
+        ux, uy = math.sin(heading + b), math.cos(heading + b)
+        den = wx * uy - wy * ux
+        if den != 0.0:
+            rho = -(dx * uy - dy * ux) / den
+            if 0.0 < rho < far:
+                events.add(rho)
+    events = sorted(events)
+    pieces = []
+    for lo, hi in zip(events[:-1], events[1:]):
+        mid = 0.5 * (lo + hi)
+        if hi > lo and _sector_inside(dx + mid * wx, dy + mid * wy, ranges, bearings, heading):
+            if pieces and pieces[-1][1] == lo:
+                pieces[-1] = (pieces[-1][0], hi)
+            else:
+                pieces.append((lo, hi))
+    return pieces
+
+
+def _normal_share(mu, sd, lo, hi):
+    """N(mu, sd)'s mass on [lo, hi], from the upper tails where both ends lie above the mean."""
+    z_in, z_out = (lo - mu) / sd, (hi - mu) / sd
+    return float(ndtr(-z_in) - ndtr(-z_out)) if z_in > 0.0 else float(ndtr(z_out) - ndtr(z_in))
+
+
+def _sign_changes(f, a, b, scan):
+    """Roots of ``f`` on [a, b] (None where it is not defined): sign changes on a
+    ``scan``-point grid refined by ``brentq``."""
+    xs = np.linspace(a, b, scan)
+    values = [f(x) for x in xs]
+    roots = []
+    for k in range(scan - 1):
+        u, v = values[k], values[k + 1]
+        if u is None or v is None:
+            continue
+        if u == 0.0:
+            roots.append(float(xs[k]))
+        elif u * v < 0.0:
+            roots.append(optimize.brentq(f, xs[k], xs[k + 1], xtol=1e-15, rtol=1e-15))
+    return roots
+
+
+def banana_lattice_cell(model, origin, heading, ranges, bearings, eps=1e-12, scan=4001):
+    """The probability of a polar lattice cell (``ranges`` = (r0, r1), ``bearings`` = (b0, b1)
+    clockwise from ``heading`` about ``origin``, any origin) under a rough or improved
+    PolarBanana without heading noise, exact in the banana's own range.
+
+    In polar coordinates (rho, theta) about the banana's start S the density is g N(rho; mu,
+    sd) / rho (:func:`polar_banana_law`) and the area element rho drho dtheta: along each ray
+    from S the mass inside the cell is a sum of normal-CDF differences over the ray's pieces
+    inside it (:func:`sector_ray_pieces`, closed form). SciPy's adaptive ``quad`` integrates that
+    over theta in (h - pi, h + pi], every theta at which the pieces' structure changes a
+    breakpoint: the bearings from S of the cell's corners and of the lattice's origin, the
+    tangents from S to the cell's two circles, the directions of its bounding rays' lines
+    (there a ray's crossing with one runs off to infinity), the seams (the wrap at h +- pi,
+    the P_sigma = 0 edge at h +- its limit), and where the ridge S + mu(theta) w(theta)
+    crosses the cell's circles and bounding lines (there a share steps over a turn of sd
+    over the rate at which ridge and edge part: a sharp feature where the ridge narrows or
+    runs along an edge)."""
+    law = polar_banana_law(model)
+    sx, sy = (float(c) for c in model.pose.origin)
+    h = float(model.pose.heading)
+    (r0, r1), (b0, b1) = (float(v) for v in ranges), (float(v) for v in bearings)
+    ranges, bearings = (r0, r1), (b0, b1)
+    ox, oy = (float(c) for c in origin)
+    dx, dy = sx - ox, sy - oy
+    distance = math.hypot(dx, dy)
+    lo_t, hi_t = h - math.pi, h + math.pi
+    unwrap = lambda t: lo_t + (t - lo_t) % (2.0 * math.pi)  # noqa: E731
+    breaks = set()
+    for radius in (r0, r1):
+        for b in (b0, b1):
+            breaks.add(math.atan2(ox + radius * math.sin(heading + b) - sx, oy + radius * math.cos(heading + b) - sy))
+    if distance > 0.0:
+        towards = math.atan2(-dx, -dy)
+        breaks.add(towards)
+        for radius in (r0, r1):
+            if 0.0 < radius <= distance * (1.0 + 1e-12):  # on the circle: at right angles
+                half = math.asin(min(1.0, radius / distance))
+                breaks |= {towards - half, towards + half}
+    # along a bounding ray's line the ray's crossing with it runs off to infinity
+    breaks |= {heading + b + turn for b in (b0, b1) for turn in (0.0, math.pi)}
+    if model.variant == "improved" and model.sigma_positive_limit < math.pi:
+        breaks |= {h - model.sigma_positive_limit, h + model.sigma_positive_limit}
+
+    def ridge(theta):
+        _, mu, _ = law(theta)
+        return dx + mu * math.sin(theta), dy + mu * math.cos(theta)
+
+    def live(theta):
+        return law(theta)[2] > 0.0
+
+    crossing = [lambda t, R=R: math.hypot(*ridge(t)) - R for R in (r0, r1)]
+    for b in (b0, b1):
+        ux, uy = math.sin(heading + b), math.cos(heading + b)
+        crossing.append(lambda t, ux=ux, uy=uy: (lambda p: p[0] * uy - p[1] * ux)(ridge(t)))
+    for f in crossing:
+        breaks |= set(_sign_changes(lambda t, f=f: f(t) if live(t) else None, lo_t, hi_t, scan))
+    points = sorted({unwrap(t) for t in breaks} - {lo_t})
+    edges = [lo_t] + [t for t in points if lo_t < t < hi_t] + [hi_t]
+
+    def f(theta):
+        g, mu, sd = law(theta)
+        if not sd > 0.0 or g == 0.0:
+            return 0.0
+        return g * math.fsum(_normal_share(mu, sd, lo, hi)
+                             for lo, hi in sector_ray_pieces((sx, sy), theta, (ox, oy), heading, ranges, bearings))
+
+    parts = []
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", integrate.IntegrationWarning)
+        for a, b in zip(edges[:-1], edges[1:]):
+            if b > a:
+                parts.append(integrate.quad(f, a, b, epsabs=1e-18, epsrel=eps, limit=1000)[0])
+    return math.fsum(parts)
+
+
+def banana_mass(model, eps=1e-13):
+    """The plane mass of a rough or improved PolarBanana without heading noise: the integral
+    of g(theta) Phi(mu / sd) over theta in (h - pi, h + pi] (rho > 0 only), the P_sigma = 0
+    edge a breakpoint."""
+    law = polar_banana_law(model)
+    h = float(model.pose.heading)
+    points = []
+    if model.variant == "improved" and model.sigma_positive_limit < math.pi:
+        points = [h - model.sigma_positive_limit, h + model.sigma_positive_limit]
+
+    def f(theta):
+        g, mu, sd = law(theta)
+        return g * float(ndtr(mu / sd)) if sd > 0.0 else 0.0
+
+    return integrate.quad(f, h - math.pi, h + math.pi, points=points or None, epsabs=0.0, epsrel=eps, limit=500)[0]
+
+
+def point_lattice_cell(density, point, origin, heading, ranges, bearings, seams, eps=1e-11):
+    """The probability of a polar lattice cell (as for :func:`banana_lattice_cell`) by nested
+    adaptive ``quad`` of ``density(x, y) rho`` in polar coordinates (theta, rho) about
+    ``point`` (a station inside or beside the cell, about which the density changes with
+    the direction only), the ray's pieces in the cell from :func:`sector_ray_pieces`. The
+    inner integral's breakpoints: the ranges at which each seam crosses the ray and the
+    ray's nearest approach to each seam's start; the outer's: the bearings from the point of
+    the cell's corners, of the lattice's origin, of every seam's start and of a seam's
+    crossings with the cell's circles, the tangents to the circles, the directions of the
+    bounding rays' lines and of every seam (and their opposites)."""
+    (r0, r1), (b0, b1) = (float(v) for v in ranges), (float(v) for v in bearings)
+    ranges, bearings = (r0, r1), (b0, b1)
+    px, py = (float(c) for c in point)
+    ox, oy = (float(c) for c in origin)
+    seams = [tuple(float(v) for v in s) for s in np.asarray(seams, dtype=float).reshape(-1, 3)]
+    dx, dy = px - ox, py - oy
+    distance = math.hypot(dx, dy)
+    breaks = set()
+    for radius in (r0, r1):
+        for b in (b0, b1):
+            breaks.add(math.atan2(ox + radius * math.sin(heading + b) - px, oy + radius * math.cos(heading + b) - py))
+    if distance > 0.0:
+        towards = math.atan2(-dx, -dy)
+        breaks.add(towards)
+        for radius in (r0, r1):
+            if 0.0 < radius <= distance * (1.0 + 1e-12):  # on the circle: at right angles
+                half = math.asin(min(1.0, radius / distance))
+                breaks |= {towards - half, towards + half}
+    breaks |= {heading + b + turn for b in (b0, b1) for turn in (0.0, math.pi)}
+    for qx, qy, beta in seams:
+        breaks |= {beta, beta + math.pi}
+        if (qx, qy) != (px, py):
+            breaks.add(math.atan2(qx - px, qy - py))
+        vx, vy = math.sin(beta), math.cos(beta)
+        along = (qx - ox) * vx + (qy - oy) * vy
+        d2 = (qx - ox) ** 2 + (qy - oy) ** 2
+        for radius in (r0, r1):
+            disc = along * along - d2 + radius * radius
+            if disc >= 0.0:
+                for s in (-along - math.sqrt(disc), -along + math.sqrt(disc)):
+                    if s >= 0.0 and (qx + s * vx, qy + s * vy) != (px, py):
+                        breaks.add(math.atan2(qx + s * vx - px, qy + s * vy - py))
+    lo_t = -math.pi
+    points = sorted({lo_t + (t - lo_t) % (2.0 * math.pi) for t in breaks} - {lo_t})
+    edges = [lo_t] + [t for t in points if lo_t < t < math.pi] + [math.pi]
+
+    def inner(theta):
+        s, c = math.sin(theta), math.cos(theta)
+        total = 0.0
+        for lo, hi in sector_ray_pieces((px, py), theta, (ox, oy), heading, ranges, bearings):
+            near = [(qx - px) * s + (qy - py) * c for qx, qy, _ in seams]
+            cuts = sorted({r for r in (*(_ray_meets((px, py), theta, seam) for seam in seams), *near)
+                           if r is not None and lo < r < hi})
+            total += integrate.quad(lambda r: density(px + r * s, py + r * c) * r, lo, hi, points=cuts or None,
+                                    epsabs=0.0, epsrel=eps, limit=400)[0]
+        return total
+
+    parts = []
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", integrate.IntegrationWarning)
+        for a, b in zip(edges[:-1], edges[1:]):
+            if b > a:
+                parts.append(integrate.quad(inner, a, b, epsabs=0.0, epsrel=eps, limit=400)[0])
+    return math.fsum(parts)
