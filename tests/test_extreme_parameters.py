@@ -185,7 +185,7 @@ def test_regions_and_poses_at_the_extremes(x0, wx, y0, wy, origin, heading):
 # -- models ----------------------------------------------------------------------------------
 
 #: Points to 1e300 m (a point farther than float64 can measure from a model's origin, near
-#: 1.8e308 on both axes, is not swept: see the README).
+#: 1.8e308 on both axes, is not swept: see docs/accuracy.md).
 POINTS_X = [0.0, 1.0, -5.0, 1e4, 1e300, -1e300]
 POINTS_Y = [0.0, 2.0, 3.0, -1e4, -1e300, 1e300]
 
@@ -427,7 +427,7 @@ def test_mixture_covariances_near_the_smallest_floats(variance, ratio, rho, shif
     line naming ``covs``, or densities that are finite (at the mean, a few SDs off and far away)
     and cell probabilities on a grid of its own scale that are the unit-variance mixture's (a
     rectangle's probability is invariant under scaling both), to 1e-9 relative plus 1e-14
-    (README's presence cells: Genz's BVNU is accurate to about 1e-15 absolute)."""
+    (docs/accuracy.md, presence cells: Genz's BVNU is accurate to about 1e-15 absolute)."""
     vx, vy = variance, variance * ratio
 
     def mixture(scale_x, scale_y, mean):
@@ -473,7 +473,7 @@ def test_butterly_at_tiny_times_and_covariances(variance, ratio, rho, t, speed):
     in one line naming ``cov`` or ``t``, or densities that are finite and are the same law's in
     units of its SD (the density scales as 1 / variance: the model with covariance cov / v and
     time t / sqrt(v) at the points divided by sqrt(v), where that one is ordinary), to the
-    README's 1e-9 relative (plus 1e-9 of the peak, for points in the tails)."""
+    docs/accuracy.md's 1e-9 relative (plus 1e-9 of the peak, for points in the tails)."""
     c = rho * math.sqrt(variance) * math.sqrt(variance * ratio)
 
     def build(v, cc, time):

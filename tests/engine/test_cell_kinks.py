@@ -13,7 +13,7 @@ speed law); the CAT's folds are caustics, which its own rule takes exactly in th
 Cells are placed across each: the oracles (``tests/support/cell_oracle.py``) are SciPy's adaptive
 ``quad`` in polar coordinates about the kink's point with the kinks and the corners' bearings
 as breakpoints, exact in r for a polar banana's radial law written with ``math``, nested over
-``model.pdf`` otherwise. Stated accuracy (README, cell probabilities): 1e-8 relative for the
+``model.pdf`` otherwise. Stated accuracy (docs/accuracy.md, cell probabilities): 1e-8 relative for the
 engine's quadrature.
 """
 
@@ -29,7 +29,7 @@ from bananagrid.domains.pose import Pose
 
 import cell_oracle
 
-#: The stated accuracy of every cell rule but the CAT's (README): relative to the cell, plus an
+#: The stated accuracy of every cell rule but the CAT's (docs/accuracy.md): relative to the cell, plus an
 #: absolute floor of 1e-14 for cells in a density's far tail (the rule's error there is an
 #: absolute one, far below any cell a planner looks at; the same floor as
 #: tests/engine/test_cell_probabilities.py).
@@ -190,7 +190,7 @@ def test_polar_lattice_cells_cut_at_the_seam():
             g, mu, sd = law(b)
             return g * (ndtr((r_edges[i + 1] - mu) / sd) - ndtr((r_edges[i] - mu) / sd))
         want = integrate.quad(f, b_edges[j], b_edges[j + 1], points=[math.pi], epsabs=0.0, epsrel=1e-12)[0]
-        # the lattice's stated accuracy: 1e-9 absolute per cell (README, polar lattice)
+        # the lattice's stated accuracy: 1e-9 absolute per cell (docs/accuracy.md, polar lattice)
         assert abs(got[i, j] - want) <= 1e-9, (i, got[i, j], want)
         assert abs(got[i, j] - want) <= RTOL * want + ATOL, (i, got[i, j], want)
 
@@ -362,12 +362,12 @@ def test_the_exact_lattice_oracle_against_sampling_and_nested_quad():
         assert held >= 3  # cells that hold mass, not only tails
 
 
-#: The lattice's stated accuracy in every cell (README, polar lattice): 1e-9 of the mass.
+#: The lattice's stated accuracy in every cell (docs/accuracy.md, polar lattice): 1e-9 of the mass.
 LATTICE_ATOL = 1e-9
 
 
 #: Examples per kind of model and placement of the origin (16 pairs): 3 here (48 in all, about
-#: 60 s on two cores); the sweep reported in the README ran 8 each.
+#: 60 s on two cores); the sweep reported in docs/accuracy.md ran 8 each.
 ANY_ORIGIN_EXAMPLES = 3
 
 
@@ -454,7 +454,7 @@ def test_banana_lattices_about_another_origin_in_every_cell(kind):
     the ground behind it and (for the edge banana) its P_sigma = 0 edge: the cells the rule
     leaves to the tensor rule about the lattice's origin and those it sweeps about the start
     alike, every one against the integral exact in the banana's range, to the lattice's 1e-9
-    absolute (1e-8 relative where a seam crosses: README). Before, the rough banana's cell
+    absolute (1e-8 relative where a seam crosses: docs/accuracy.md). Before, the rough banana's cell
     beside its start was 9.7e-9 off, the improved one's 1.2e-4 relative in a crossed cell and
     the edge banana's 2.5e-7 beside its edge (cells left to the tensor rule or swept without
     every break)."""
