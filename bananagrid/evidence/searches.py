@@ -183,6 +183,30 @@ class TrackSearch:
         if self.law not in LAWS:
             raise BananagridError(f"law = {self.law!r}: expected one of {', '.join(map(repr, LAWS))}")
 
+    @classmethod
+    def from_track(cls, track, frame, sweep_width: float, law: str = "inverse_cube") -> "TrackSearch":
+        """A search along a track read from a file (``bg.read_track``: longitude, latitude and
+        UTC times), placed in ``frame``'s local metres and timed in seconds since the frame's
+        time (the last fix's).
+
+        Raises
+        ------
+        BananagridError
+            A frame without a time, a track without longitude, latitude and times, or a point
+            the frame cannot place; and what the constructor refuses.
+        """
+        if getattr(frame, "time", None) is None:
+            raise BananagridError("frame: a GeoFrame with a time (the last fix's UTC time) is needed to time a track "
+                                  "read from a file")
+        try:
+            lon, lat, times = np.asarray(track.lon, dtype=float), np.asarray(track.lat, dtype=float), track.times
+        except AttributeError:
+            raise BananagridError(f"track = {type(track).__name__}: expected a track read by bg.read_track "
+                                  "(longitude, latitude, UTC times)") from None
+        x, y = frame.local(lat, lon)
+        seconds = [(when - frame.time).total_seconds() for when in times]
+        return cls(np.column_stack((x, y, seconds)), sweep_width, law)
+
     @property
     def time_span(self) -> tuple[float, float]:
         return float(self.track[0, 2]), float(self.track[-1, 2])

@@ -155,3 +155,22 @@ def test_searches_are_frozen():
     with pytest.raises(ValueError):
         track.track[0, 0] = 5.0
     assert search.time_span == (1.0, 2.0) and track.time_span == (0.0, 10.0)
+
+
+def test_a_searched_track_from_a_gpx_file(tmp_path):
+    """A searcher's track as a file has it (GPX: longitude, latitude, UTC): placed in the
+    frame's metres and timed from the frame's time, each point where the frame puts it."""
+    frame = bg.GeoFrame(lat=60.45, lon=4.40, time="2026-11-24T06:00:00Z")
+    points = [(4.38, 60.47, "06:02:00"), (4.42, 60.47, "06:04:00"), (4.42, 60.49, "06:06:30")]
+    body = "".join(f'<trkpt lat="{lat}" lon="{lon}"><time>2026-11-24T{when}Z</time></trkpt>' for lon, lat, when in points)
+    path = tmp_path / "searcher.gpx"
+    path.write_text('<?xml version="1.0"?><gpx version="1.1" creator="test" xmlns="http://www.topografix.com/GPX/1/1">'
+                    f"<trk><trkseg>{body}</trkseg></trk></gpx>")
+    search = bg.TrackSearch.from_track(bg.read_track(path), frame, sweep_width=500.0)
+    x, y = frame.local([p[1] for p in points], [p[0] for p in points])
+    np.testing.assert_array_equal(search.track[:, :2], np.column_stack((x, y)))
+    np.testing.assert_array_equal(search.track[:, 2], [120.0, 240.0, 390.0])
+    with pytest.raises(bg.BananagridError, match="with a time"):
+        bg.TrackSearch.from_track(bg.read_track(path), bg.GeoFrame(lat=60.45, lon=4.40), sweep_width=500.0)
+    with pytest.raises(bg.BananagridError, match="bg.read_track"):
+        bg.TrackSearch.from_track([(0, 0, 0)], frame, sweep_width=500.0)
