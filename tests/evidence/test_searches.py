@@ -24,21 +24,29 @@ SWEEP = settings(max_examples=40, deadline=None, database=None, suppress_health_
 @SWEEP
 @given(st.floats(1.0, 5e3), st.floats(1e-3, 50.0), st.floats(0.0, 2.0 * math.pi), st.sampled_from(["inverse_cube", "definite"]))
 def test_a_long_straight_leg_gives_the_lateral_range_curve(width, ratio, heading, law):
-    """A stationary target abreast of a straight leg 10^7 W long (in any direction) is missed
-    with probability 1 - p(x), p the lateral-range curve, x = ratio W: to 1e-9 relative (the
-    leg's finite ends leave out an exposure of about (W / L)^2 of the infinite leg's: 1e-14)."""
+    """A stationary target abreast of a straight leg 10^5 W long (in any direction) is missed
+    with probability 1 - p(x), p the lateral-range curve, x = ratio W: to 1e-9 relative plus what
+    the geometry's rounding allows. The leg's finite ends leave out an exposure of W^2 / (8 pi
+    s^2) = 1.6e-11 (s = L / 2); the target's lateral distance x, found from coordinates of size
+    s, carries eps s of rounding, which moves the exposure E by 2 E eps s / x, and the miss,
+    exp(-E), by that relative."""
     x = ratio * width
     direction = np.array([math.sin(heading), math.cos(heading)])
     normal = np.array([direction[1], -direction[0]])
-    half = 5e6 * width
+    half = 5e4 * width
     start, end = -half * direction, half * direction
     search = bg.TrackSearch([(*start, 0.0), (*end, 100.0)], sweep_width=width, law=law)
     target = x * normal
     missed = float(search.likelihood(target[0], target[1]))
-    expected = 1.0 - float(lateral_range(x, width, law))
+    # 1 - p(x) written as the miss itself: 1 - lateral_range cancels where p is within 1e-9 of 1
+    # (x = W / 16: 1 - p = 1.4e-9, the subtraction keeps 1e-7 of it)
+    expected = math.exp(-width**2 / (4.0 * math.pi * x**2)) if law == "inverse_cube" else 1.0 - float(
+        lateral_range(x, width, law))
     if law == "definite" and abs(x - 0.5 * width) < 1e-9 * width:
         return  # on the corridor's edge the rounding of the point decides
-    assert math.isclose(missed, expected, rel_tol=1e-9, abs_tol=1e-300), (missed, expected)
+    exposure = width**2 / (4.0 * math.pi * x**2) if law == "inverse_cube" else 0.0
+    rounding = 4.0 * exposure * np.finfo(float).eps * half / x  # twice the estimate above
+    assert math.isclose(missed, expected, rel_tol=1e-9 + rounding, abs_tol=1e-300), (missed, expected)
 
 
 def test_the_inverse_cube_exposure_of_a_leg_is_koopmans():
