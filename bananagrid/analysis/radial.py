@@ -27,7 +27,7 @@ import numpy as np
 from ..domains.pose import Pose
 from ..engine.points import check_model
 from ..protocol import DensityModel
-from ..validate import BananagridError
+from ..validate import BananagridError, show
 
 __all__ = ["RadialMoments", "RadialDensity", "radial_moments", "radial_density", "ray_density"]
 
@@ -165,6 +165,10 @@ def radial_moments(model: DensityModel, angles, *, pose: Pose | None = None, r_m
     pose = _pose(model, pose)
     values = _check_angles(angles)
     radii, q = _profile(model, pose, np.atleast_1d(values), r_max, threads)
+    if not np.any(np.trapezoid(q, radii, axis=0) > 0.0):  # no ray's mass survives float64
+        name, value = ("r_max", r_max) if r_max is not None else ("angles", angles)
+        raise BananagridError(f"{name} = {show(value)}: the density along these rays holds no mass that float64 "
+                              "resolves (the integral underflows to 0), so they have no mean or SD")
     mass, mean, sd = _moments(radii, q)
     shape = values.shape
     return RadialMoments(values, mean.reshape(shape), sd.reshape(shape), mass.reshape(shape))
