@@ -19,12 +19,24 @@ rounding fewer each. The atan2 snippet does not: its rounding is then the scalar
 ``common.atan2_fast``'s, step for step, and phi feeds P_sigma, which is ill conditioned near its
 zero (an FMA there moved the density 3e-13 from the scalar kernel's).
 
+Division without the divider (AVX-512: a 512-bit ``vdivpd`` occupies it 16 cycles, ``vsqrtpd``
+longer, and the polar kernel needed six of them and a square root per vector): :func:`lane_reciprocal`
+and :func:`lane_rsqrt` refine the 14-bit ``vrcp14`` / ``vrsqrt14`` estimates by Newton steps
+(fused multiply-adds), and :func:`lane_quotient` makes a / b correctly rounded from the
+reciprocal (Markstein's correction): the division's bits at a third of its cost, which is how the
+polar density takes ``common.atan2_fast``'s three quotients and keeps the scalar kernel's phi to
+the bit. The polar density without heading noise is one snippet (:func:`lane_polar_plain`) and a
+grid row one native loop over ``CHAINS`` registers of lanes a step (:func:`polar_plain_row`).
+Without AVX-512 these snippets divide and take the square root (the same values but in the last
+ulp of 1 / x and 1 / sqrt(x), and a / b exactly).
+
 Accuracy (``tests/kernels/test_lanes.py`` measures each over its reduced range and the whole domain
 against long double references): :func:`lane_exp` within 3 ulp (float64) and 2 ulp
 (float32), :func:`lane_atan2` within 2 ulp (Cephes' rational function, as the scalar
 ``common.atan2_fast``), :func:`lane_sin` and :func:`lane_cos` within 2 ulp away from their zeros
-and one unit of 1 absolute on [-pi, pi]; :func:`lane_sqrt` is correctly rounded; the wrap and
-the selects are exact.
+and one unit of 1 absolute on [-pi, pi]; :func:`lane_sqrt` is correctly rounded, and
+:func:`lane_quotient` the division's bits; :func:`lane_reciprocal` within 1 ulp and
+:func:`lane_rsqrt` within 1.5 ulp; the wrap and the selects are exact.
 """
 
 import dataclasses
@@ -387,38 +399,45 @@ def _polar_plain(fmt: _Format) -> str:
     return _snippet(fmt, "x y", _polar_plain_steps(fmt, "vx", "vy", "res"), contract=True)
 
 
-#: Registers of lanes per step of ``polar_plain_row`` (independent chains the core overlaps).
+#: Registers of lanes per step of ``polar_plain_row``: independent chains the core overlaps.
+#: Figure 1 grid, float64, one core (Intel Xeon AVX-512): 1 register 10.0 ms a launch, 2: 8.98
+#: ms a rasterise, 4: 6.75 ms, 8: 6.67 ms and float32 5.17 -> 6.39 ms (spills).
 CHAINS = 4
 
 
 def _polar_plain_row(fmt: _Format) -> str:
     """out[row, j0 .. j1 - 1] = the density without heading noise at (xs[j], y): the grid
-    kernel's row in one loop, two registers of lanes at a time (a ``vt`` of ``2 * lanes``:
-    every operation is two instructions side by side, two independent chains that the core
-    overlaps; one chain a register wide left the core waiting on each step's latency, 7.4 ns a
-    float64 cell). Lane by lane the same operations as :func:`_polar_plain`, so the same bits
-    as the points kernel's; whole vectors loaded and stored where they lie in contiguous rows,
-    else lane by lane (the index clamped to the last element, as ``load_lanes``)."""
-    wide = dataclasses.replace(fmt, lanes=CHAINS * fmt.lanes)
-    size, n = wide.bytes, wide.lanes
-    head = (CONTRACT + f"typedef {fmt.scalar} vt __attribute__((vector_size({size})));\n"
+    kernel's row in one loop, with AVX-512 ``CHAINS`` registers of lanes a step (a ``vt`` of
+    ``CHAINS * lanes``: every operation is that many instructions side by side, independent
+    chains that the core overlaps; a chain one register wide left the core waiting on each
+    step's latency, 7.4 ns a float64 cell), elsewhere one vector of ``lanes`` (two ymm halves
+    already, and 16 registers would spill four). Lane by lane the same operations as
+    :func:`_polar_plain`, so the same bits as the points kernel's; whole vectors loaded and
+    stored where they lie in contiguous rows, else lane by lane (the index clamped to the last
+    element, as ``load_lanes``)."""
+    def loop(chains: int) -> str:
+        wide = dataclasses.replace(fmt, lanes=chains * fmt.lanes)
+        size, n = wide.bytes, wide.lanes
+        body = (
+            "{\n"
+            f"typedef {fmt.scalar} vt __attribute__((vector_size({size})));\n"
             f"typedef {fmt.integer} vi __attribute__((vector_size({size})));\n"
-            "vt zero = {};\n" + _estimates(wide))
-    body = (
-        "int last = xs.shape[0] - 1;\n"
-        f"bool contiguous = xs.strides[0] == sizeof({fmt.scalar}) && out.strides[1] == sizeof({fmt.scalar});\n"
-        "vt vy = zero + y;\n"
-        f"for (int j = j0; j < j1; j += {n}) {{\n"
-        f"bool whole = contiguous && j + {n} <= j1;\n"
-        "vt vx;\n"
-        f"if (whole) {{ __builtin_memcpy(&vx, wp::address(xs, j), {size}); }}\n"
-        f"else {{ for (int k = 0; k < {n}; ++k) {{ vx[k] = wp::index(xs, j + k < last ? j + k : last); }} }}\n"
-        + _polar_plain_steps(wide, "vx", "vy", "res") +
-        f"if (whole) {{ __builtin_memcpy(wp::address(out, row, j), &res, {size}); }}\n"
-        f"else {{ for (int k = 0; k < {n} && j + k < j1; ++k) {{ *wp::address(out, row, j + k) = res[k]; }} }}\n"
-        "}\n"
-    )
-    return head + re.sub(r"L\(([^()]+)\)", lambda m: fmt.literal(float(m.group(1))), body)
+            "vt zero = {};\n" + _estimates(wide) +
+            "vt vy = zero + y;\n"
+            f"for (int j = j0; j < j1; j += {n}) {{\n"
+            f"bool whole = contiguous && j + {n} <= j1;\n"
+            "vt vx;\n"
+            f"if (whole) {{ __builtin_memcpy(&vx, wp::address(xs, j), {size}); }}\n"
+            f"else {{ for (int k = 0; k < {n}; ++k) {{ vx[k] = wp::index(xs, j + k < last ? j + k : last); }} }}\n"
+            + _polar_plain_steps(wide, "vx", "vy", "res") +
+            f"if (whole) {{ __builtin_memcpy(wp::address(out, row, j), &res, {size}); }}\n"
+            f"else {{ for (int k = 0; k < {n} && j + k < j1; ++k) {{ *wp::address(out, row, j + k) = res[k]; }} }}\n"
+            "}\n}\n"
+        )
+        return re.sub(r"L\(([^()]+)\)", lambda m: fmt.literal(float(m.group(1))), body)
+    return (CONTRACT + "int last = xs.shape[0] - 1;\n"
+            f"bool contiguous = xs.strides[0] == sizeof({fmt.scalar}) && out.strides[1] == sizeof({fmt.scalar});\n"
+            f"#if defined(__AVX512F__)\n{loop(CHAINS)}#else\n{loop(1)}#endif\n")
 
 
 def _wrap_angle(fmt: _Format) -> str:

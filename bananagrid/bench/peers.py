@@ -32,6 +32,7 @@ import time
 from contextlib import contextmanager
 
 import numpy as np
+from numpy.polynomial import chebyshev, polynomial
 
 from ..domains.grid import Grid
 from ..engine.rasterise import rasterise
@@ -86,8 +87,6 @@ def atan_coefficients(terms: int) -> np.ndarray:
     """Power-basis coefficients c_k of atan(a) ~ a sum_k c_k a^(2k) for |a| <= tan(pi / 8): a
     Chebyshev least-squares fit of atan(sqrt(u)) / sqrt(u) in u = a^2 on 2,000 Chebyshev nodes
     (well conditioned, near-minimax), converted to powers of u."""
-    from numpy.polynomial import chebyshev, polynomial
-
     top = TAN_PI_8**2
     u = top * (0.5 + 0.5 * np.cos(np.pi * (np.arange(2000) + 0.5) / 2000))
     fit = chebyshev.Chebyshev.fit(u, np.arctan(np.sqrt(u)) / np.sqrt(u), terms - 1, domain=[0.0, top])
