@@ -109,18 +109,21 @@ CONTRACT = "#pragma clang fp contract(fast)\n"
 
 
 def _estimates(fmt: _Format) -> str:
-    """C lambdas ``rcp_est`` and ``rsqrt_est``: the AVX-512 14-bit estimates of 1 / d and
-    1 / sqrt(d) over a ``vt`` of one register or of several (``fmt.bytes`` a multiple of 64: each
-    register on its own, the instructions side by side)."""
+    """C lambdas over a ``vt`` of one AVX-512 register or of several (``fmt.bytes`` a multiple of
+    64: each register on its own, the instructions side by side): ``rcp_est(d)`` and
+    ``rsqrt_est(d)``, the 14-bit estimates of 1 / d and 1 / sqrt(d), and ``scale(p, n)``,
+    p 2^n for integral n in one rounding (``vscalefpd`` / ``ps``: gradual underflow included)."""
     parts = fmt.bytes // 64
     step = fmt.lanes // parts
+    kind = "pd" if fmt.scalar == "double" else "ps"
 
-    def estimate(builtin: str) -> str:
+    def per_register(template: str, args: tuple[str, ...]) -> str:
         if parts == 1:
-            return f"vt zero = {{}}; return {builtin}(d, zero, {fmt.mask});"
+            return f"vt zero = {{}}; return {template.format(*args)};"
         pieces = "".join(
-            f"vh p{k} = {builtin}(__builtin_shufflevector(d, d, {', '.join(map(str, range(k * step, (k + 1) * step)))}), "
-            f"zero, {fmt.mask}); " for k in range(parts))
+            f"vh p{k} = " + template.format(*(
+                f"__builtin_shufflevector({a}, {a}, {', '.join(map(str, range(k * step, (k + 1) * step)))})"
+                for a in args)) + "; " for k in range(parts))
         # join the pieces pairwise: a shuffle takes two vectors of the same size
         names, width = [f"p{k}" for k in range(parts)], step
         text = ""
@@ -138,8 +141,9 @@ def _estimates(fmt: _Format) -> str:
         return f"vh zero = {{}}; {pieces}{text}return {names[0]};"
     return ("#if defined(__AVX512F__)\n"
             f"typedef {fmt.scalar} vh __attribute__((vector_size(64)));\n"
-            f"auto rcp_est = [](vt d) -> vt {{ {estimate(fmt.rcp14)} }};\n"
-            f"auto rsqrt_est = [](vt d) -> vt {{ {estimate(fmt.rsqrt14)} }};\n"
+            f"auto rcp_est = [](vt d) -> vt {{ {per_register(fmt.rcp14 + '({0}, zero, ' + fmt.mask + ')', ('d',))} }};\n"
+            f"auto rsqrt_est = [](vt d) -> vt {{ {per_register(fmt.rsqrt14 + '({0}, zero, ' + fmt.mask + ')', ('d',))} }};\n"
+            f"auto scale = [](vt p, vt n) -> vt {{ {per_register(f'__builtin_ia32_scalef{kind}512_mask' + '({0}, {1}, zero, ' + fmt.mask + ', 4)', ('p', 'n'))} }};\n"
             "#endif\n")
 
 
@@ -159,9 +163,12 @@ def _snippet(fmt: _Format, names: str, body: str, contract: bool = False) -> str
     return head + copies + re.sub(r"L\(([^()]+)\)", lambda m: fmt.literal(float(m.group(1))), body) + tail
 
 
-def _exp_steps(fmt: _Format, x: str, out: str, upper: bool = True) -> str:
+def _exp_steps(fmt: _Format, x: str, out: str, upper: bool = True, scalef: bool = False) -> str:
     """C statements leaving ``out`` = exp(``x``) (both ``vt``; :func:`_exp`), in a block of their
-    own; without ``upper`` for an ``x`` known not positive (no test against the ceiling)."""
+    own; without ``upper`` for an ``x`` known not positive (no test against the ceiling); with
+    ``scalef`` (where :func:`_estimates`' lambdas are defined) p 2^n by one ``scale(p, n)`` on
+    AVX-512: the two factors' bits (the first product is exact, each way rounds once), in one
+    instruction instead of nine."""
     shifter = 1.5 * 2.0**fmt.mantissa
     floor, ceiling = f"L({fmt.exp_floor!r})", f"L({fmt.exp_ceiling!r})"
     horner = "".join(f"p = p * r + L({1.0 / math.factorial(k)!r});\n" for k in range(fmt.taylor - 2, -1, -1))
@@ -172,10 +179,12 @@ def _exp_steps(fmt: _Format, x: str, out: str, upper: bool = True) -> str:
         f"vt n = (v * L({1 / math.log(2)!r}) + L({shifter!r})) - L({shifter!r});\n"
         f"vt r = (v - n * L({fmt.ln2_hi!r})) - n * L({fmt.ln2_lo!r});\n"
         f"vt p = r * L({1.0 / math.factorial(fmt.taylor)!r}) + L({1.0 / math.factorial(fmt.taylor - 1)!r});\n"
-        + horner +
+        + horner
+        + ("#if defined(__AVX512F__)\n" f"{out} = scale(p, n);\n" "#else\n" if scalef else "") +
         "vi whole = __builtin_convertvector(n, vi);\n"
         "vi half = whole >> 1;\n"
         f"{out} = (p * (vt)((half + {fmt.bias}) << {fmt.mantissa})) * (vt)((whole - half + {fmt.bias}) << {fmt.mantissa});\n"
+        + ("#endif\n" if scalef else "") +
         f"{out} = {x} < {floor} ? zero : {out};\n"
         + (f"{out} = {x} > {ceiling} ? zero + {fmt.infinity} : {out};\n" if upper else "") + "}\n"
     )
@@ -379,7 +388,7 @@ def _polar_plain_steps(fmt: _Format, x: str, y: str, out: str) -> str:
         "vt z_phi = phi * inv_sigma_phi;\n"
         "vt z_r = (r - mu) * inv_sd;\n"
         "vt q = (z_phi * z_phi + z_r * z_r) * L(-0.5);\n"
-        + _exp_steps(fmt, "q", "e", upper=False) +  # q <= 0
+        + _exp_steps(fmt, "q", "e", upper=False, scalef=True) +  # q <= 0
         "vt density = ((inv_sd * inv_r) * e) * norm;\n"
         f"{out} = sd > 0 ? (r > 0 ? density : zero) : zero;\n}}\n"
     )
