@@ -156,7 +156,7 @@ def _snippet(fmt: _Format, names: str, body: str, contract: bool = False) -> str
             f"typedef {fmt.scalar} vt __attribute__((vector_size({size})));\n"
             f"typedef {fmt.integer} vi __attribute__((vector_size({size})));\n"
             "vt zero = {};\n")
-    if "_est(" in body:
+    if "_est(" in body or "scale(" in body:  # the lambdas of _estimates
         head += _estimates(fmt)
     copies = "".join(f"vt v{n}; __builtin_memcpy(&v{n}, &{n}, {size});\n" for n in names.split())
     tail = f"\nwp::vec_t<{fmt.lanes}, {fmt.scalar}> out; __builtin_memcpy(&out, &res, {size});\nreturn out;\n"
