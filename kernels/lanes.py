@@ -19,14 +19,27 @@ rounding fewer each. The atan2 snippet does not: its rounding is then the scalar
 ``common.atan2_fast``'s, step for step, and phi feeds P_sigma, which is ill conditioned near its
 zero (an FMA there moved the density 3e-13 from the scalar kernel's).
 
+Division without the divider (AVX-512: a 512-bit ``vdivpd`` occupies it 16 cycles, ``vsqrtpd``
+longer, and the polar kernel needed six of them and a square root per vector): :func:`lane_reciprocal`
+and :func:`lane_rsqrt` refine the 14-bit ``vrcp14`` / ``vrsqrt14`` estimates by Newton steps
+(fused multiply-adds), and :func:`lane_quotient` makes a / b correctly rounded from the
+reciprocal (Markstein's correction): the division's bits at a third of its cost, which is how the
+polar density takes ``common.atan2_fast``'s three quotients and keeps the scalar kernel's phi to
+the bit. The polar density without heading noise is one snippet (:func:`lane_polar_plain`) and a
+grid row one native loop over ``CHAINS`` registers of lanes a step (:func:`polar_plain_row`).
+Without AVX-512 these snippets divide and take the square root (the same values but in the last
+ulp of 1 / x and 1 / sqrt(x), and a / b exactly).
+
 Accuracy (``tests/kernels/test_lanes.py`` measures each over its reduced range and the whole domain
 against long double references): :func:`lane_exp` within 3 ulp (float64) and 2 ulp
 (float32), :func:`lane_atan2` within 2 ulp (Cephes' rational function, as the scalar
 ``common.atan2_fast``), :func:`lane_sin` and :func:`lane_cos` within 2 ulp away from their zeros
-and one unit of 1 absolute on [-pi, pi]; :func:`lane_sqrt` is correctly rounded; the wrap and
-the selects are exact.
+and one unit of 1 absolute on [-pi, pi]; :func:`lane_sqrt` is correctly rounded, and
+:func:`lane_quotient` the division's bits; :func:`lane_reciprocal` within 1 ulp and
+:func:`lane_rsqrt` within 1.5 ulp; the wrap and the selects are exact.
 """
 
+import dataclasses
 import math
 import re
 from dataclasses import dataclass
@@ -58,6 +71,10 @@ class _Format:
     pio2: tuple  # pi / 2 in parts, each times |n| <= 3 exact: the sine's Cody-Waite reduction
     sin_coefficients: tuple  # Cephes' sin(r) = r + r^3 S(r^2) and cos(r) = 1 - r^2 / 2 + r^4 C(r^2)
     cos_coefficients: tuple  # on |r| <= pi / 4, highest degree first
+    rcp14: str  # AVX-512 builtins: 14-bit estimates of 1 / x and 1 / sqrt(x), and their all-lanes mask
+    rsqrt14: str
+    mask: str
+    newton: int  # Newton steps from a 14-bit estimate to the format's precision (14 -> 28 -> 56 bits)
 
     def literal(self, value: float) -> str:
         return f"{value!r}{self.suffix}"
@@ -77,16 +94,57 @@ F64 = _Format("double", "long long", LANES64, "", 52, 1023, 6.931471803691238164
               (1.58962301576546568060e-10, -2.50507477628578072866e-8, 2.75573136213857245213e-6,
                -1.98412698295895385996e-4, 8.33333333332211858878e-3, -1.66666666666666307295e-1),
               (-1.13585365213876817300e-11, 2.08757008419747316778e-9, -2.75573141792967388112e-7,
-               2.48015872888517045348e-5, -1.38888888888730564116e-3, 4.16666666666665929218e-2))
+               2.48015872888517045348e-5, -1.38888888888730564116e-3, 4.16666666666665929218e-2),
+              "__builtin_ia32_rcp14pd512_mask", "__builtin_ia32_rsqrt14pd512_mask", "(unsigned char)-1", 2)
 F32 = _Format("float", "int", LANES32, "f", 23, 127, 6.9314575195e-01, 1.4286067653e-06, -104.0, 88.72283905206835,
              "__builtin_huge_valf()", 7, "__builtin_sqrtf", "__builtin_floorf",
              (1.5703125, 4.837512969970703125e-4, 7.54978995489188216e-8),
              (-1.9515295891e-4, 8.3321608736e-3, -1.6666654611e-1),
-             (2.443315711809948e-5, -1.388731625493765e-3, 4.166664568298827e-2))
+             (2.443315711809948e-5, -1.388731625493765e-3, 4.166664568298827e-2),
+             "__builtin_ia32_rcp14ps512_mask", "__builtin_ia32_rsqrt14ps512_mask", "(unsigned short)-1", 1)
 
 
 #: Lets the compiler fuse a * b + c in one snippet (the pragma must open its block).
 CONTRACT = "#pragma clang fp contract(fast)\n"
+
+
+def _estimates(fmt: _Format) -> str:
+    """C lambdas over a ``vt`` of one AVX-512 register or of several (``fmt.bytes`` a multiple of
+    64: each register on its own, the instructions side by side): ``rcp_est(d)`` and
+    ``rsqrt_est(d)``, the 14-bit estimates of 1 / d and 1 / sqrt(d), and ``scale(p, n)``,
+    p 2^n for integral n in one rounding (``vscalefpd`` / ``ps``: gradual underflow included)."""
+    parts = fmt.bytes // 64
+    step = fmt.lanes // parts
+    kind = "pd" if fmt.scalar == "double" else "ps"
+
+    def per_register(template: str, args: tuple[str, ...]) -> str:
+        if parts == 1:
+            return f"vt zero = {{}}; return {template.format(*args)};"
+        pieces = "".join(
+            f"vh p{k} = " + template.format(*(
+                f"__builtin_shufflevector({a}, {a}, {', '.join(map(str, range(k * step, (k + 1) * step)))})"
+                for a in args)) + "; " for k in range(parts))
+        # join the pieces pairwise: a shuffle takes two vectors of the same size
+        names, width = [f"p{k}" for k in range(parts)], step
+        text = ""
+        level = 0
+        while len(names) > 1:
+            level += 1
+            text += f"typedef {fmt.scalar} vh{level} __attribute__((vector_size({64 * 2 ** level}))); "
+            joined = []
+            for k in range(0, len(names), 2):
+                name = f"j{level}_{k // 2}"
+                text += (f"vh{level} {name} = __builtin_shufflevector({names[k]}, {names[k + 1]}, "
+                         f"{', '.join(map(str, range(2 * width)))}); ")
+                joined.append(name)
+            names, width = joined, 2 * width
+        return f"vh zero = {{}}; {pieces}{text}return {names[0]};"
+    return ("#if defined(__AVX512F__)\n"
+            f"typedef {fmt.scalar} vh __attribute__((vector_size(64)));\n"
+            f"auto rcp_est = [](vt d) -> vt {{ {per_register(fmt.rcp14 + '({0}, zero, ' + fmt.mask + ')', ('d',))} }};\n"
+            f"auto rsqrt_est = [](vt d) -> vt {{ {per_register(fmt.rsqrt14 + '({0}, zero, ' + fmt.mask + ')', ('d',))} }};\n"
+            f"auto scale = [](vt p, vt n) -> vt {{ {per_register(f'__builtin_ia32_scalef{kind}512_mask' + '({0}, {1}, zero, ' + fmt.mask + ', 4)', ('p', 'n'))} }};\n"
+            "#endif\n")
 
 
 def _snippet(fmt: _Format, names: str, body: str, contract: bool = False) -> str:
@@ -98,9 +156,38 @@ def _snippet(fmt: _Format, names: str, body: str, contract: bool = False) -> str
             f"typedef {fmt.scalar} vt __attribute__((vector_size({size})));\n"
             f"typedef {fmt.integer} vi __attribute__((vector_size({size})));\n"
             "vt zero = {};\n")
+    if "_est(" in body or "scale(" in body:  # the lambdas of _estimates
+        head += _estimates(fmt)
     copies = "".join(f"vt v{n}; __builtin_memcpy(&v{n}, &{n}, {size});\n" for n in names.split())
     tail = f"\nwp::vec_t<{fmt.lanes}, {fmt.scalar}> out; __builtin_memcpy(&out, &res, {size});\nreturn out;\n"
     return head + copies + re.sub(r"L\(([^()]+)\)", lambda m: fmt.literal(float(m.group(1))), body) + tail
+
+
+def _exp_steps(fmt: _Format, x: str, out: str, upper: bool = True, scalef: bool = False) -> str:
+    """C statements leaving ``out`` = exp(``x``) (both ``vt``; :func:`_exp`), in a block of their
+    own; without ``upper`` for an ``x`` known not positive (no test against the ceiling); with
+    ``scalef`` (where :func:`_estimates`' lambdas are defined) p 2^n by one ``scale(p, n)`` on
+    AVX-512: the two factors' bits (the first product is exact, each way rounds once), in one
+    instruction instead of nine."""
+    shifter = 1.5 * 2.0**fmt.mantissa
+    floor, ceiling = f"L({fmt.exp_floor!r})", f"L({fmt.exp_ceiling!r})"
+    horner = "".join(f"p = p * r + L({1.0 / math.factorial(k)!r});\n" for k in range(fmt.taylor - 2, -1, -1))
+    clamp = (f"vt v = {x} < {floor} ? zero + {floor} : ({x} > {ceiling} ? zero + {ceiling} : {x});\n" if upper else
+             f"vt v = {x} < {floor} ? zero + {floor} : {x};\n")
+    return (
+        f"vt {out};\n{{\n" + clamp +
+        f"vt n = (v * L({1 / math.log(2)!r}) + L({shifter!r})) - L({shifter!r});\n"
+        f"vt r = (v - n * L({fmt.ln2_hi!r})) - n * L({fmt.ln2_lo!r});\n"
+        f"vt p = r * L({1.0 / math.factorial(fmt.taylor)!r}) + L({1.0 / math.factorial(fmt.taylor - 1)!r});\n"
+        + horner
+        + ("#if defined(__AVX512F__)\n" f"{out} = scale(p, n);\n" "#else\n" if scalef else "") +
+        "vi whole = __builtin_convertvector(n, vi);\n"
+        "vi half = whole >> 1;\n"
+        f"{out} = (p * (vt)((half + {fmt.bias}) << {fmt.mantissa})) * (vt)((whole - half + {fmt.bias}) << {fmt.mantissa});\n"
+        + ("#endif\n" if scalef else "") +
+        f"{out} = {x} < {floor} ? zero : {out};\n"
+        + (f"{out} = {x} > {ceiling} ? zero + {fmt.infinity} : {out};\n" if upper else "") + "}\n"
+    )
 
 
 def _exp(fmt: _Format) -> str:
@@ -110,21 +197,7 @@ def _exp(fmt: _Format) -> str:
     by its Taylor polynomial; 2^n as two factors 2^(n/2) built from their exponent bits, so that
     results below the smallest normal underflow gradually to subnormals as libm's do and
     n = 1024 (x near the ceiling) still has a factor (one factor 2^n would wrap its exponent)."""
-    shifter = 1.5 * 2.0**fmt.mantissa
-    floor, ceiling = f"L({fmt.exp_floor!r})", f"L({fmt.exp_ceiling!r})"
-    horner = "".join(f"p = p * r + L({1.0 / math.factorial(k)!r});\n" for k in range(fmt.taylor - 2, -1, -1))
-    return _snippet(fmt, "x", contract=True, body=(
-        f"vt v = vx < {floor} ? zero + {floor} : (vx > {ceiling} ? zero + {ceiling} : vx);\n"
-        f"vt n = (v * L({1 / math.log(2)!r}) + L({shifter!r})) - L({shifter!r});\n"
-        f"vt r = (v - n * L({fmt.ln2_hi!r})) - n * L({fmt.ln2_lo!r});\n"
-        f"vt p = r * L({1.0 / math.factorial(fmt.taylor)!r}) + L({1.0 / math.factorial(fmt.taylor - 1)!r});\n"
-        + horner +
-        "vi whole = __builtin_convertvector(n, vi);\n"
-        "vi half = whole >> 1;\n"
-        f"vt res = (p * (vt)((half + {fmt.bias}) << {fmt.mantissa})) * (vt)((whole - half + {fmt.bias}) << {fmt.mantissa});\n"
-        f"res = vx < {floor} ? zero : res;\n"
-        f"res = vx > {ceiling} ? zero + {fmt.infinity} : res;"
-    ))
+    return _snippet(fmt, "x", contract=True, body=_exp_steps(fmt, "vx", "res"))
 
 
 #: atan2(x, y), the angle of (y, x) from the +y axis toward +x, lane by lane; the same steps as
@@ -194,6 +267,186 @@ def _sine(fmt: _Format, cosine: bool) -> str:
 def _sqrt(fmt: _Format) -> str:
     """sqrt lane by lane: a loop the compiler turns into one ``vsqrtpd`` / ``vsqrtps``."""
     return _snippet(fmt, "x", f"vt res;\nfor (int k = 0; k < {fmt.lanes}; ++k) res[k] = {fmt.sqrt}(vx[k]);")
+
+
+def _reciprocal_steps(fmt: _Format, d: str, out: str, guard: bool = True) -> str:
+    """C statements leaving ``out`` = 1 / ``d`` (both ``vt``). With AVX-512: the 14-bit estimate
+    (``vrcp14pd`` / ``vrcp14ps``, a fraction of a division's cost: a 512-bit division occupies the
+    divider 16 cycles) refined by Newton steps e = 1 - d x, x + x e (one for float32, two for
+    float64: 14 -> 28 -> 56 bits), each step two fused multiply-adds; where a step gives NaN (d
+    zero or infinite) the estimate stands (inf or 0, as the division gives); without ``guard``
+    (where ``d`` is known finite and nonzero, or the result is selected away there) the NaN
+    stays. Elsewhere: the division."""
+    keep = f" {out} = next == next ? next : {out};" if guard else f" {out} = next;"
+    steps = "".join(f"{{ vt e = 1 - {d} * {out}; vt next = {out} + {out} * e;{keep} }}\n" for _ in range(fmt.newton))
+    return (f"vt {out};\n#if defined(__AVX512F__)\n{out} = rcp_est({d});\n{steps}"
+            f"#else\n{out} = 1 / {d};\n#endif\n")
+
+
+def _reciprocal(fmt: _Format) -> str:
+    """1 / x lane by lane (:func:`_reciprocal_steps`): within 1 ulp on AVX-512, correctly rounded
+    elsewhere."""
+    return _snippet(fmt, "x", _reciprocal_steps(fmt, "vx", "res"), contract=True)
+
+
+def _quotient(fmt: _Format) -> str:
+    """a / b lane by lane by :func:`_quotient_steps`: the division's bits."""
+    return _snippet(fmt, "a b", _quotient_steps(fmt, "va", "vb", "res"))
+
+
+def _rsqrt_steps(fmt: _Format, x: str, out: str, guard: bool = True) -> str:
+    """C statements leaving ``out`` = 1 / sqrt(``x``) (:func:`_rsqrt`; ``guard`` as
+    :func:`_reciprocal_steps`'s)."""
+    keep = f" {out} = next == next ? next : {out};" if guard else f" {out} = next;"
+    steps = "".join(f"{{ vt e = 1 - ({x} * {out}) * {out}; vt next = {out} + ({out} * L(0.5)) * e;{keep} }}\n"
+                    for _ in range(fmt.newton))
+    return (f"vt {out};\n#if defined(__AVX512F__)\n{out} = rsqrt_est({x});\n{steps}"
+            f"#else\nfor (int k = 0; k < {fmt.lanes}; ++k) {out}[k] = 1 / {fmt.sqrt}({x}[k]);\n#endif\n")
+
+
+def _rsqrt(fmt: _Format) -> str:
+    """1 / sqrt(x) lane by lane. With AVX-512: the 14-bit estimate (``vrsqrt14pd`` / ``ps``) and
+    Newton steps e = 1 - (x y) y, y + (y / 2) e (as many as the reciprocal's); where a step gives
+    NaN (x zero or infinite) the estimate stands (inf or 0). Elsewhere: a division by the
+    correctly rounded square root. x y is then sqrt(x) to within about 1 ulp, without the
+    ``vsqrtpd``/``vdivpd`` pair."""
+    return _snippet(fmt, "x", _rsqrt_steps(fmt, "vx", "res"), contract=True)
+
+
+def _quotient_steps(fmt: _Format, a: str, b: str, out: str) -> str:
+    """C statements leaving ``out`` = a / b correctly rounded (the division's bits) without the
+    divider (a 512-bit ``vdivpd`` occupies it 16 cycles; these are 10 instructions on the FMA
+    ports): the estimate y of 1 / b by ``newton`` + 1 Newton steps becomes RN(1 / b), the
+    quotient q = RN(a y) is within 1 ulp, and Markstein's correction RN(q + (a - q b) y), the
+    remainder exact by a fused multiply-add, is RN(a / b) (Markstein, IBM J. Res. Dev. 34 (1990);
+    Cornea, Harrison and Tang, Scientific Computing on Itanium-based Systems (2002), th. 8.10).
+    The one exception of the reciprocal step, a divisor whose significand is all ones, has odds
+    of 2^-52. For b finite, nonzero and normal (the callers' divisors); explicit fused
+    multiply-adds, so that the block's contraction setting does not matter. Without AVX-512:
+    the division."""
+    fma = "__builtin_elementwise_fma"
+    steps = "".join(f"{{ vt e = {fma}(-{b}, inv_b, zero + 1); inv_b = {fma}(inv_b, e, inv_b); }}\n"
+                    for _ in range(fmt.newton + 1))
+    return (f"vt {out};\n#if defined(__AVX512F__)\n{{\nvt inv_b = rcp_est({b});\n{steps}"
+            f"vt quo = {a} * inv_b;\n{out} = {fma}({fma}(-quo, {b}, {a}), inv_b, quo);\n}}\n"
+            f"#else\n{out} = {a} / {b};\n#endif\n")
+
+
+def _cephes_angle_steps(fmt: _Format, x: str, y: str, out: str) -> str:
+    """C statements leaving ``out`` = atan2(``x``, ``y``) by ``common.atan2_fast``'s steps
+    (``_ATAN2``: Cephes, three divisions, no fused multiply-adds) with each division by
+    :func:`_quotient_steps`: the scalar kernel's bits, as the polar density's flat 1e-13
+    agreement with it needs in float64 (phi feeds P_sigma, ill conditioned near its zero, where
+    one ulp of phi moves the density 3e-13)."""
+    body = _ATAN2
+    body = body.replace("vt z = big > 0 ? (ax > ay ? ay : ax) / big : zero;",
+                        "vt small = ax > ay ? ay : ax;\nvt big_or_1 = big > 0 ? big : zero + 1;\n"
+                        + _quotient_steps(fmt, "small", "big_or_1", "ratio") + "vt z = big > 0 ? ratio : zero;")
+    body = body.replace("vt w = z > L(0.66) ? (z - 1) / (z + 1) : z;",
+                        "vt zm = z - 1;\nvt zp = z + 1;\n" + _quotient_steps(fmt, "zm", "zp", "reduced")
+                        + "vt w = z > L(0.66) ? reduced : z;")
+    body = body.replace("vt a = w + w * (s * p / q);",
+                        "vt sp = s * p;\n" + _quotient_steps(fmt, "sp", "q", "spq") + "vt a = w + w * spq;")
+    assert body.count("_est(") == 3, "the Cephes steps' divisions were not all replaced"
+    body = body.replace("vt res = vx < 0 ? -a : a;", f"{out} = vx < 0 ? -a : a;")
+    return (f"vt {out};\n{{\n#pragma clang fp contract(off)\nvt vx = {x}; vt vy = {y};\n" + body + "\n}\n")
+
+
+def _polar_plain_steps(fmt: _Format, x: str, y: str, out: str) -> str:
+    """C statements leaving ``out`` = the density without heading noise at the world points
+    (``x``, ``y``) (:func:`_polar_plain`), in a block of their own; the parameters are the
+    scalars of ``lane_polar_plain``'s signature."""
+    third = f"L({1 / 3!r})"
+    return (
+        f"vt {out};\n{{\n"
+        f"vt dx = {x} - ox;\n"
+        f"vt dy = {y} - oy;\n"
+        "vt lx = dx * c - dy * s;\n"
+        "vt ly = dx * s + dy * c;\n"
+        "vt r2 = lx * lx + ly * ly;\n"
+        + _rsqrt_steps(fmt, "r2", "inv_r", guard=False) +  # r = NaN at r2 = 0: selected away below
+        "vt r = r2 * inv_r;\n"
+        + _cephes_angle_steps(fmt, "lx", "ly", "phi") +  # the scalar kernel's phi, to the bit
+        "vt aphi = phi < 0 ? -phi : phi;\n"
+        "vt phi_or_1 = aphi < L(1.0e-4) ? zero + 1 : phi;\n"
+        + _reciprocal_steps(fmt, "phi_or_1", "inv_phi", guard=False) +  # |phi_or_1| >= 1e-4
+        f"vt sinc = aphi < L(1.0e-4) ? 1 - (phi * phi) * L({1 / 6!r}) : (lx * inv_r) * inv_phi;\n"
+        "vt mu = sinc * mean_sinc;\n"
+        "vt inv_sd;\n"
+        "vt sd = zero + sd_scale;\n"
+        "if (improved) {\n"
+        "  vt phi2 = phi * phi;\n"
+        f"  vt scc = (sinc * 4 - ly * inv_r) * {third};\n"
+        "  vt z2 = phi2 * (inv_sigma_phi * inv_sigma_phi);\n"
+        "  mu = mu + ((z2 - 1) * mean_scc) * scc;\n"
+        "  sd = ((1 + (sd_t_term - phi2 * inv_sigma_omega_sq) * sd_curvature) * sd_scale) * scc;\n"
+        + "  " + _reciprocal_steps(fmt, "sd", "inv", guard=False).replace("\n", "\n  ").rstrip() + "\n"
+        "  inv_sd = inv;\n"
+        "} else {\n"
+        "  inv_sd = zero + 1 / sd_scale;\n"
+        "}\n"
+        "vt z_phi = phi * inv_sigma_phi;\n"
+        "vt z_r = (r - mu) * inv_sd;\n"
+        "vt q = (z_phi * z_phi + z_r * z_r) * L(-0.5);\n"
+        + _exp_steps(fmt, "q", "e", upper=False, scalef=True) +  # q <= 0
+        "vt density = ((inv_sd * inv_r) * e) * norm;\n"
+        f"{out} = sd > 0 ? (r > 0 ? density : zero) : zero;\n}}\n"
+    )
+
+
+def _polar_plain(fmt: _Format) -> str:
+    """The polar-banana density without heading noise (``polar_lanes.polar_plain_lanes``'s maths)
+    at a vector of world points, in one snippet so that all of it is whole-register vector code
+    with fused multiply-adds and its constants kept in registers across the row (the same
+    formulas as Warp code compiled to half-register pieces, every multiply and add apart, and
+    took twice as long). The world point to the model's frame; r and 1 / r from one reciprocal
+    square root (:func:`_rsqrt_steps`); phi by :func:`_cephes_angle_steps`; sinc(phi) = (x / r) / phi
+    by a reciprocal (1 - phi^2 / 6 below |phi| = 1e-4); with ``improved``: scc, the mean's
+    correction (8) and P_sigma (11); 1 / sd by a reciprocal (once per call for the rough
+    variant's constant sd); one exp for both normal factors. 0 at r = 0 and where sd is not
+    positive."""
+    return _snippet(fmt, "x y", _polar_plain_steps(fmt, "vx", "vy", "res"), contract=True)
+
+
+#: Registers of lanes per step of ``polar_plain_row``: independent chains the core overlaps.
+#: Figure 1 grid, float64, one core (Intel Xeon AVX-512): 1 register 10.0 ms a launch, 2: 8.98
+#: ms a rasterise, 4: 6.75 ms, 8: 6.67 ms and float32 5.17 -> 6.39 ms (spills).
+CHAINS = 4
+
+
+def _polar_plain_row(fmt: _Format) -> str:
+    """out[row, j0 .. j1 - 1] = the density without heading noise at (xs[j], y): the grid
+    kernel's row in one loop, with AVX-512 ``CHAINS`` registers of lanes a step (a ``vt`` of
+    ``CHAINS * lanes``: every operation is that many instructions side by side, independent
+    chains that the core overlaps; a chain one register wide left the core waiting on each
+    step's latency, 7.4 ns a float64 cell), elsewhere one vector of ``lanes`` (two ymm halves
+    already, and 16 registers would spill four). Lane by lane the same operations as
+    :func:`_polar_plain`, so the same bits as the points kernel's; whole vectors loaded and
+    stored where they lie in contiguous rows, else lane by lane (the index clamped to the last
+    element, as ``load_lanes``)."""
+    def loop(chains: int) -> str:
+        wide = dataclasses.replace(fmt, lanes=chains * fmt.lanes)
+        size, n = wide.bytes, wide.lanes
+        body = (
+            "{\n"
+            f"typedef {fmt.scalar} vt __attribute__((vector_size({size})));\n"
+            f"typedef {fmt.integer} vi __attribute__((vector_size({size})));\n"
+            "vt zero = {};\n" + _estimates(wide) +
+            "vt vy = zero + y;\n"
+            f"for (int j = j0; j < j1; j += {n}) {{\n"
+            f"bool whole = contiguous && j + {n} <= j1;\n"
+            "vt vx;\n"
+            f"if (whole) {{ __builtin_memcpy(&vx, wp::address(xs, j), {size}); }}\n"
+            f"else {{ for (int k = 0; k < {n}; ++k) {{ vx[k] = wp::index(xs, j + k < last ? j + k : last); }} }}\n"
+            + _polar_plain_steps(wide, "vx", "vy", "res") +
+            f"if (whole) {{ __builtin_memcpy(wp::address(out, row, j), &res, {size}); }}\n"
+            f"else {{ for (int k = 0; k < {n} && j + k < j1; ++k) {{ *wp::address(out, row, j + k) = res[k]; }} }}\n"
+            "}\n}\n"
+        )
+        return re.sub(r"L\(([^()]+)\)", lambda m: fmt.literal(float(m.group(1))), body)
+    return (CONTRACT + "int last = xs.shape[0] - 1;\n"
+            f"bool contiguous = xs.strides[0] == sizeof({fmt.scalar}) && out.strides[1] == sizeof({fmt.scalar});\n"
+            f"#if defined(__AVX512F__)\n{loop(CHAINS)}#else\n{loop(1)}#endif\n")
 
 
 def _wrap_angle(fmt: _Format) -> str:
@@ -278,8 +531,37 @@ def lane_sqrt(x: lanes64) -> lanes64: ...
 def lane_sinc_of(phi: lanes64, sin_phi: lanes64) -> lanes64: ...
 
 
+@wp.func_native(_reciprocal(F64))
+def lane_reciprocal(x: lanes64) -> lanes64: ...
+
+
+@wp.func_native(_quotient(F64))
+def lane_quotient(a: lanes64, b: lanes64) -> lanes64: ...
+
+
+@wp.func_native(_rsqrt(F64))
+def lane_rsqrt(x: lanes64) -> lanes64: ...
+
+
 @wp.func_native(_snippet(F64, "c a", _WHERE_POSITIVE))
 def lane_where_positive(c: lanes64, a: lanes64) -> lanes64: ...
+
+
+@wp.func_native(_polar_plain(F64))
+def lane_polar_plain(x: lanes64, y: lanes64, ox: wp.float64, oy: wp.float64, c: wp.float64, s: wp.float64, mean_sinc: wp.float64, mean_scc: wp.float64,
+                     sd_scale: wp.float64, sd_t_term: wp.float64, sd_curvature: wp.float64, inv_sigma_phi: wp.float64,
+                     inv_sigma_omega_sq: wp.float64, norm: wp.float64, improved: int) -> lanes64:
+    """The polar-banana density without heading noise at the world points (x, y) (``_polar_plain``)."""
+    ...
+
+
+@wp.func_native(_polar_plain_row(F64))
+def polar_plain_row(xs: wp.array(dtype=wp.float64), y: wp.float64, out: wp.array2d(dtype=wp.float64), row: int,
+                    j0: int, j1: int, ox: wp.float64, oy: wp.float64, c: wp.float64, s: wp.float64, mean_sinc: wp.float64, mean_scc: wp.float64,
+                       sd_scale: wp.float64, sd_t_term: wp.float64, sd_curvature: wp.float64, inv_sigma_phi: wp.float64,
+                       inv_sigma_omega_sq: wp.float64, norm: wp.float64, improved: int):
+    """out[row, j0 .. j1 - 1] = the density without heading noise at (xs[j], y) (``_polar_plain_row``)."""
+    ...
 
 
 @wp.func_native(_wrap_angle(F64))
@@ -343,8 +625,35 @@ def lane_sqrt(x: lanes32) -> lanes32: ...  # noqa: F811
 def lane_sinc_of(phi: lanes32, sin_phi: lanes32) -> lanes32: ...  # noqa: F811
 
 
+@wp.func_native(_reciprocal(F32))
+def lane_reciprocal(x: lanes32) -> lanes32: ...  # noqa: F811
+
+
+@wp.func_native(_quotient(F32))
+def lane_quotient(a: lanes32, b: lanes32) -> lanes32: ...  # noqa: F811
+
+
+@wp.func_native(_rsqrt(F32))
+def lane_rsqrt(x: lanes32) -> lanes32: ...  # noqa: F811
+
+
 @wp.func_native(_snippet(F32, "c a", _WHERE_POSITIVE))
 def lane_where_positive(c: lanes32, a: lanes32) -> lanes32: ...  # noqa: F811
+
+
+@wp.func_native(_polar_plain(F32))
+def lane_polar_plain(x: lanes32, y: lanes32, ox: wp.float32, oy: wp.float32, c: wp.float32, s: wp.float32, mean_sinc: wp.float32, mean_scc: wp.float32,
+                     sd_scale: wp.float32, sd_t_term: wp.float32, sd_curvature: wp.float32, inv_sigma_phi: wp.float32,
+                     inv_sigma_omega_sq: wp.float32, norm: wp.float32, improved: int) -> lanes32:  # noqa: F811
+    ...
+
+
+@wp.func_native(_polar_plain_row(F32))
+def polar_plain_row(xs: wp.array(dtype=wp.float32), y: wp.float32, out: wp.array2d(dtype=wp.float32),  # noqa: F811
+                    row: int, j0: int, j1: int, ox: wp.float32, oy: wp.float32, c: wp.float32, s: wp.float32, mean_sinc: wp.float32, mean_scc: wp.float32,
+                       sd_scale: wp.float32, sd_t_term: wp.float32, sd_curvature: wp.float32, inv_sigma_phi: wp.float32,
+                       inv_sigma_omega_sq: wp.float32, norm: wp.float32, improved: int):
+    ...
 
 
 @wp.func_native(_wrap_angle(F32))

@@ -1,19 +1,24 @@
 """The polar-banana kernels in CPU lanes: 8 float64 or 16 float32 cells at a time, end to end.
 
 The same density as ``polar.polar_density_local``. Without heading noise (rough and improved
-variants; the formulas are in ``kernels/polar.py``): r by a lane sqrt, phi by the lane atan2,
-sinc(phi) = (x / r) / phi, cos(phi) = y / r, P_mu (8) and P_sigma (11) in lane arithmetic with
-the host's coefficients, and one lane exp for both normal factors. With initial-heading noise
-(order 2 or 4): the law's derivatives at theta_bar and the moments (15)-(16) by the generic
+variants; the formulas are in ``kernels/polar.py``): one native snippet
+(``lanes.lane_polar_plain``, and ``lanes.polar_plain_row`` for a grid row): r and 1 / r from one
+reciprocal square root, phi by the scalar kernel's atan2 steps in float64 (its divisions
+correctly rounded by reciprocals, so the bits of ``common.atan2_fast``) and by a one-reciprocal
+atan2 with a float32 polynomial of its own degree in float32, sinc(phi) = (x / r) / phi,
+cos(phi) = y / r, P_mu (8) and P_sigma (11) with the host's coefficients, one reciprocal for
+1 / sd and one exp for both normal factors; no division instruction on a CPU with AVX-512.
+With initial-heading noise (order 2 or 4): the law's derivatives at theta_bar and the moments (15)-(16) by the generic
 functions the scalar kernel runs too (``polar.polar_law_of``, ``polar.polar_heading_moments``),
 with the lane sine and both branches of the sinc derivatives selected per lane. The scalar
 kernel's branches are selects: 0 at r = 0 and where P_sigma (or the variance) is not positive.
 Values agree with the scalar kernel to about 1e-14 relative in float64 where the density is well
 conditioned (``tests/kernels/test_lanes.py`` sweeps the parameter domain).
 
-CPU only (see ``kernels/lanes.py``); the GPU path uses ``polar.KERNELS``. The grid, points
-and batch kernels are generated from :func:`polar_density_lanes`, so that ``rasterise``, ``pdf``
-and the batches agree bit for bit.
+CPU only (see ``kernels/lanes.py``); the GPU path uses ``polar.KERNELS``. The points and batch
+kernels are generated from :func:`polar_density_lanes`; the grid kernel (:data:`GRID`) runs
+a row without heading noise in ``lanes.polar_plain_row``, the same operations lane by lane, so
+that ``rasterise``, ``pdf`` and the batches agree bit for bit.
 """
 
 from typing import Any
@@ -21,46 +26,19 @@ from typing import Any
 import warp as wp
 
 from .common import SINC_SERIES_SWITCH, sinc_derivatives_recurrence, sinc_derivatives_series
-from .generate import density_kernels
+from .generate import SCALARS, density_kernels, overload_on_use
 from .lanes import (
-    lane_abs, lane_atan2, lane_cos, lane_exp, lane_sin, lane_sinc_of, lane_sqrt, lane_where_not_negative,
-    lane_where_positive,
+    lane_abs, lane_atan2, lane_cos, lane_count, lane_exp, lane_polar_plain, lane_sin, lane_sqrt, lane_where_not_negative,
+    lane_where_positive, load_lanes, polar_plain_row, store_lanes,
 )
 from .polar import POLAR, ROUGH, polar_heading_moments, polar_law_of
 
-ONE_THIRD = 1.0 / 3.0
 
 # No adjoints: nothing differentiates these kernels, and without them the module builds in half
 # the time. The lane functions are forced inline (``inline=True``): left to the compiler, a change
 # as small as a compile flag made it call them out of line, passing every vector through memory
 # (17.3 ms against 11.5 ms for the Figure 1 grid).
 wp.set_module_options({"enable_backward": False})
-
-
-@wp.func(inline=True)
-def polar_plain_lanes(x: Any, y: Any, p: Any):
-    """Density per m^2 at a vector of local points without heading noise:
-    g(phi; 0, sigma_phi) g(r; mu, sd) / r."""
-    one = type(x)(1.0)
-    r = lane_sqrt(wp.cw_mul(x, x) + wp.cw_mul(y, y))
-    inv_r = wp.cw_div(one, r)
-    phi = lane_atan2(x, y)
-    sinc_phi = lane_sinc_of(phi, wp.cw_mul(x, inv_r))
-    mu = sinc_phi * p.mean_sinc
-    sd = type(x)(p.sd_scale)
-    if p.variant != ROUGH:
-        phi2 = wp.cw_mul(phi, phi)
-        scc = wp.cw_mul(wp.cw_mul(sinc_phi, type(x)(4.0)) - wp.cw_mul(y, inv_r), type(x)(ONE_THIRD))
-        z2 = phi2 * (p.inv_sigma_phi * p.inv_sigma_phi)
-        mu = mu + wp.cw_mul((z2 - one) * p.mean_scc, scc)
-        sd = wp.cw_mul((one + (type(x)(p.sd_t_term) - phi2 * p.inv_sigma_omega_sq) * p.sd_curvature)
-                       * p.sd_scale, scc)
-    inv_sd = wp.cw_div(one, sd)
-    z_phi = phi * p.inv_sigma_phi
-    z_r = wp.cw_mul(r - mu, inv_sd)
-    e = lane_exp(wp.cw_mul(wp.cw_mul(z_phi, z_phi) + wp.cw_mul(z_r, z_r), type(x)(-0.5)))
-    density = wp.cw_mul(wp.cw_mul(inv_sd, inv_r), e) * p.norm
-    return lane_where_positive(sd, lane_where_positive(r, density))
 
 
 @wp.func(inline=True)
@@ -109,8 +87,36 @@ def polar_density_lanes(x: Any, y: Any, p: Any):
     lx = dx * p.pose[2] - dy * p.pose[3]
     ly = dx * p.pose[3] + dy * p.pose[2]
     if p.order == 0:
-        return polar_plain_lanes(lx, ly, p)
+        return lane_polar_plain(x, y, p.pose[0], p.pose[1], p.pose[2], p.pose[3], p.mean_sinc, p.mean_scc,
+                                p.sd_scale, p.sd_t_term, p.sd_curvature, p.inv_sigma_phi, p.inv_sigma_omega_sq,
+                                p.norm, wp.where(p.variant != ROUGH, 1, 0))
     return polar_heading_lanes(lx, ly, p)
 
 
-KERNELS = density_kernels(polar_density_lanes, POLAR, "polar", lanes=True, batch=True, bands_per_thread=1)
+def _polar_grid_lanes(xs: wp.array(dtype=Any), ys: wp.array(dtype=Any), row0: int, columns: int, p: Any,
+                      out: wp.array2d(dtype=Any)):
+    """The generated lane grid kernel's layout (``columns`` cells of a row per thread), with a row
+    without heading noise in one native loop (``lanes.polar_plain_row``: two registers of lanes
+    a step, the same bits as :func:`polar_density_lanes`)."""
+    i, block = wp.tid()
+    row = row0 + i
+    j0 = block * columns
+    j1 = wp.min((block + 1) * columns, xs.shape[0])
+    y = ys[row]
+    if p.order == 0:
+        polar_plain_row(xs, y, out, row, j0, j1, p.pose[0], p.pose[1], p.pose[2], p.pose[3], p.mean_sinc,
+                        p.mean_scc, p.sd_scale, p.sd_t_term, p.sd_curvature, p.inv_sigma_phi, p.inv_sigma_omega_sq,
+                        p.norm, wp.where(p.variant != ROUGH, 1, 0))
+    else:
+        j = j0
+        while j < j1:
+            x = load_lanes(xs, j)
+            store_lanes(out[row], j, polar_density_lanes(x, type(x)(y), p), j1 - j)
+            j += lane_count(xs)
+
+
+GRID = wp.kernel(_polar_grid_lanes, name="polar_grid_lanes", module=polar_density_lanes.module)
+for _scalar in SCALARS:
+    _vec = wp.array(dtype=_scalar)
+    overload_on_use(GRID, _scalar, {"xs": _vec, "ys": _vec, "p": POLAR.of(_scalar), "out": wp.array2d(dtype=_scalar)})
+KERNELS = density_kernels(polar_density_lanes, POLAR, "polar", lanes=True, batch=True, bands_per_thread=1, grid=GRID)

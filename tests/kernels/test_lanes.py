@@ -1,5 +1,6 @@
-"""CPU lanes: the lane exp, atan2, sqrt and sinc against long double references over their
-whole ranges, and the lane polar grid kernel against the scalar one across the parameter domain."""
+"""CPU lanes: the lane exp, atan2, sqrt, sinc, reciprocal and reciprocal square root against long
+double references over their whole ranges, the reciprocal-based quotient against the division's
+bits, and the lane polar grid kernel against the scalar one across the parameter domain."""
 
 import math
 import warnings
@@ -15,7 +16,8 @@ import bananagrid as bg
 from bananagrid.engine.warp_runtime import WarpContext
 from bananagrid.kernels import bearing, cat, polar
 from bananagrid.kernels.lanes import (
-    LANES32, LANES64, lane_atan2, lane_cos, lane_exp, lane_sin, lane_sinc_of, lane_sqrt, lanes32, lanes64,
+    LANES32, LANES64, lane_atan2, lane_cos, lane_exp, lane_quotient, lane_reciprocal, lane_rsqrt, lane_sin,
+    lane_sinc_of, lane_sqrt, lanes32, lanes64,
 )
 
 # np.longdouble is the x87 80-bit format here (64-bit mantissa, 11 bits beyond float64): a
@@ -34,8 +36,12 @@ def _unary(op: int, xs: wp.array(dtype=Any), out: wp.array(dtype=Any)):
         out[k] = lane_sqrt(xs[k])
     elif op == 2:
         out[k] = lane_sin(xs[k])
-    else:
+    elif op == 3:
         out[k] = lane_cos(xs[k])
+    elif op == 4:
+        out[k] = lane_reciprocal(xs[k])
+    else:
+        out[k] = lane_rsqrt(xs[k])
 
 
 @wp.kernel
@@ -43,8 +49,10 @@ def _binary(op: int, xs: wp.array(dtype=Any), ys: wp.array(dtype=Any), out: wp.a
     k = wp.tid()
     if op == 0:
         out[k] = lane_atan2(xs[k], ys[k])
-    else:
+    elif op == 1:
         out[k] = lane_sinc_of(xs[k], ys[k])
+    else:
+        out[k] = lane_quotient(xs[k], ys[k])
 
 
 for _lane_type, _ in FORMATS.values():
@@ -177,6 +185,47 @@ def test_float32_exp_atan2_sqrt_and_sinc():
     phi = np.geomspace(1e-8, 3.1, 10_000).astype(np.float32)
     got = _run(_binary, 1, phi, np.sin(phi), dtype=np.float32)
     assert np.max(np.abs(got - np.sin(phi.astype(float)) / phi)) <= 2e-7  # float32 sin and / (each <= 6e-8)
+
+
+def _spread(rng, n, dtype, decades):
+    """n positive values of ``dtype`` spread over ``decades`` decades each side of 1, with
+    significands uniform on [1, 2)."""
+    return (rng.uniform(1.0, 2.0, n) * 10.0 ** rng.uniform(-decades, decades, n)).astype(dtype)
+
+
+@pytest.mark.parametrize("dtype", [np.float64, np.float32])
+def test_quotient_is_the_division_bit_for_bit(dtype):
+    # Markstein's correction on the reciprocal: the division's bits (the float64 polar kernel
+    # takes the scalar atan2's three quotients this way); significands next to powers of two
+    # and all ones (the reciprocal step's exception) included
+    rng = np.random.default_rng(11)
+    decades = 100 if dtype == np.float64 else 15
+    a, b = _spread(rng, 200_000, dtype, decades), _spread(rng, 200_000, dtype, decades)
+    a[: a.size // 2] *= -1
+    edges = np.array([1.0, 2.0, 3.0, 0.66, 1.66, 10.0], dtype=dtype)
+    ones = np.nextafter(edges * 2, dtype(0))  # significands 1.11...1 and neighbours of powers of two
+    b = np.concatenate([b, edges, ones, np.nextafter(edges, dtype(4)), ones * 3, ones / 7])
+    a = np.concatenate([a, np.resize(_spread(rng, 64, dtype, 3), b.size - a.size)])
+    b[::5] = a[::5] + dtype(1)  # the reduction's (z - 1) / (z + 1) shape
+    got = _run(_binary, 2, a, b, dtype=dtype)
+    assert np.array_equal(got, a / b), int(np.sum(got != a / b))
+    assert _run(_binary, 2, np.zeros(3, dtype), np.array([1.0, 3.0, 1e-30], dtype), dtype=dtype).tolist() == [0.0] * 3
+
+
+@pytest.mark.parametrize("dtype", [np.float64, np.float32])
+def test_reciprocal_and_reciprocal_square_root_within_1_ulp(dtype):
+    rng = np.random.default_rng(12)
+    decades = 300 if dtype == np.float64 else 37
+    x = np.concatenate([_spread(rng, 200_000, dtype, decades), np.array([1.0, 2.0, 0.5, 3.0], dtype)])
+    xl = x.astype(np.longdouble)
+    worst = _ulps(_run(_unary, 4, x, dtype=dtype), 1 / xl, dtype).max()
+    assert worst <= 1.0, worst  # Newton's last step from within 2^-28: rounding only (measured below 0.51)
+    assert np.array_equal(_run(_unary, 4, -x, dtype=dtype), -_run(_unary, 4, x, dtype=dtype))
+    worst = _ulps(_run(_unary, 5, x, dtype=dtype), 1 / np.sqrt(xl), dtype).max()
+    assert worst <= 1.5, worst  # (x y) y and y / 2 rounded before the last step (measured below 1.1)
+    special = np.array([0.0, np.inf], dtype=dtype)
+    assert _run(_unary, 4, special, dtype=dtype).tolist() == [np.inf, 0.0]  # as the division gives
+    assert _run(_unary, 5, special, dtype=dtype).tolist() == [np.inf, 0.0]
 
 
 def _scalar_kernel(model, x, y, dtype=np.float64, inputs=None):
