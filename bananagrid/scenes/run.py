@@ -141,13 +141,21 @@ def run_scene(
         # Runs on this thread: set_elapsed is per thread.
         log_scene_text(rec, scene.text)
         jobs = scene.jobs()
+        extra = run.extra_steps()  # after the maps, e.g. a scene's plan
+        total = len(jobs) + len(extra)
         for k, (layer, t) in enumerate(jobs):
             label = run.label(layer, t)
             if progress is not None:
-                progress(k, len(jobs), label)
+                progress(k, total, label)
             rows.append(run.record(rec, layer, t))
             if progress is not None:
-                progress(k + 1, len(jobs), label)
+                progress(k + 1, total, label)
+        for k, (label, step) in enumerate(extra, start=len(jobs)):
+            if progress is not None:
+                progress(k, total, label)
+            step(rec, rows)
+            if progress is not None:
+                progress(k + 1, total, label)
         run.finish(rec, rows)
 
     with outputs:  # all or nothing: the old files stay until every new one is complete

@@ -17,6 +17,7 @@ from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
+import rerun.blueprint as rrb
 
 from ..analysis.coverage import coverage_warnings, level_warnings, peak_location
 from ..atomic import OutputSet, OutputWriteError
@@ -40,6 +41,7 @@ from ..recording.core import (
     union_extent,
 )
 from ..recording.geomap import log_map_areas, log_map_marks, map_view
+from ..recording.plan import plan_view
 from ..recording.layers import layer_views, log_layer_extras, log_scene_extras, scene_texts
 from ..recording.radial import log_radial_curves, radial_groups, radial_views
 from ..recording.summary import CELL_TAB, log_summary
@@ -48,9 +50,11 @@ from ..validate import BananagridError, BananagridWarning
 from ..version import __version__
 from .load import Layer, Scene
 from .run_outputs import NPZ, RUN_ONLY_PROVENANCE, write_exports
+from .run_plan import ScenePlan, plan_label, plan_paths, plan_scene, record_plan, write_plan_geojson
 
 __all__ = ["GridRun", "compute", "array_key", "check_exports", "check_run_memory", "check_run_work",
-           "RUN_BYTES_PER_CELL", "EXPORT_BYTES_PER_MAP_CELL", "PROBABILITY_BYTES_PER_CELL", "CELL_IMAGE"]
+           "RUN_BYTES_PER_CELL", "EXPORT_BYTES_PER_MAP_CELL", "PROBABILITY_BYTES_PER_CELL", "PLAN_BYTES_PER_CELL",
+           "CELL_IMAGE"]
 
 
 class GridRun:
@@ -97,6 +101,7 @@ class GridRun:
         self.areas: dict[tuple[str, float], list] = {}  # a geographic scene's search areas, by (layer, t)
         self.marked: set[str] = set()  # layers whose landmarks are on the map (static, logged once)
         self.archive = None
+        self.plan: ScenePlan | None = None
 
     def recording_id(self) -> str:
         """Depends on the scene text and the grid actually used (a step override changes it)."""
@@ -121,8 +126,25 @@ class GridRun:
                 if self.archive is not None:
                     self.archive.abandon()
         if self.panels is not None:
+            plan = self.plan
             write_exports(scene, self.out_dir, self.panels, **self.exports, areas=self.areas,
-                          stage=self.outputs.stage)
+                          stage=self.outputs.stage,
+                          coverage=None if plan is None else (scene.plan.layer, scene.plan.t, plan.allocation.effort))
+            for path in plan_paths(scene, self.out_dir, geojson=self.exports["geojson"]):
+                write_plan_geojson(path, scene, plan, stage=self.outputs.stage)
+
+    def extra_steps(self) -> list:
+        """``(label, step)`` of the steps after the jobs: the scene's plan, if it has one
+        (``step(rec, rows)`` computes and logs it, and gives its row the plan's numbers)."""
+        return [] if self.scene.plan is None else [(plan_label(self.scene), self._plan_step)]
+
+    def _plan_step(self, rec, rows: list[dict]) -> None:
+        scene = self.scene
+        self.plan = plan_scene(scene, threads=self.threads)
+        record_plan(rec, scene, self.plan)
+        for row in rows:
+            if row["layer"] == scene.plan.layer and row["t"] == scene.plan.t:
+                row["plan"] = self.plan.values
 
     def record(self, rec, layer: Layer, t: float) -> dict:
         """Compute one layer at ``t``, log it and keep it for the files; its summary row."""
@@ -180,7 +202,8 @@ class GridRun:
         log_scene_extras(rec, scene.kinds.values(), scene.options)
         log_summary(rec, scene.title, rows, self.found)
         # The maps open framed on what was found, so the blueprint comes last.
-        send_blueprint(rec, _blueprint(scene, {e: union_extent(extents) for e, extents in self.frames.items()}))
+        send_blueprint(rec, _blueprint(scene, {e: union_extent(extents) for e, extents in self.frames.items()},
+                                       None if self.plan is None else self.plan.extent))
         if self.archive is not None:
             self.archive.close()
 
@@ -196,6 +219,10 @@ EXPORT_BYTES_PER_MAP_CELL = 24
 #: Further bytes per cell with ``output.cell_probabilities``: their float64 sums and raster, the
 #: quadrature's per-cell plans, and the float32 image.
 PROBABILITY_BYTES_PER_CELL = 64
+#: Further bytes per cell with a ``[plan]``: its map's cell probabilities (as above), the
+#: allocation's coverage, effort and POD arrays and its sorted copies (float64, about 8 arrays),
+#: and the recorded images.
+PLAN_BYTES_PER_CELL = PROBABILITY_BYTES_PER_CELL + 96
 #: The cell probabilities' image under a layer's entity (named in the summary's note).
 CELL_IMAGE = CELL_TAB
 
@@ -206,7 +233,8 @@ def check_run_memory(scene: Scene, *, exports: bool = False, limit: float | None
     :mod:`bananagrid.engine.memory`."""
     cells = scene.grid.nx * scene.grid.ny
     per_cell = (RUN_BYTES_PER_CELL + (EXPORT_BYTES_PER_MAP_CELL * len(scene.jobs()) if exports else 0)
-                + (PROBABILITY_BYTES_PER_CELL if scene.cell_probabilities else 0))
+                + (PROBABILITY_BYTES_PER_CELL if scene.cell_probabilities else 0)
+                + (PLAN_BYTES_PER_CELL if scene.plan is not None else 0))
     return check_memory(cells, per_cell, f"{scene.source}: a grid of {scene.grid.nx} x {scene.grid.ny} = {cells:,} cells",
                         limit=limit, option="--max-memory GB")
 
@@ -221,6 +249,9 @@ def check_run_work(scene: Scene, *, threads: int | None = None, limit: float | N
     core_seconds = sum(layer.model(t).work_estimate(cells, extent) for layer, t in jobs)
     if scene.cell_probabilities:
         core_seconds += sum(probability_work(layer.model(t), scene.grid)[0] for layer, t in jobs)
+    if scene.plan is not None:  # the plan's map: the layer's cell probabilities at its time
+        planned = next(layer for layer in scene.layers if layer.name == scene.plan.layer)
+        core_seconds += probability_work(planned.model(scene.plan.t), scene.grid)[0]
     return check_work(core_seconds, check_threads(threads),
                       f"{scene.source}: {len(jobs)} layer map{'s' * (len(jobs) != 1)} of {cells:,} cells",
                       limit=limit, option="--max-seconds S")
@@ -233,6 +264,8 @@ def check_exports(scene: Scene, *, netcdf: bool = False, geotiff: bool = False, 
     for wanted, libraries in ((netcdf, ("xarray", "netCDF4")), (geotiff, ("rasterio",)), (geojson, ("shapely", "pyproj"))):
         for library in libraries if wanted else ():
             require(library, "map files (--netcdf, --geotiff, --geojson)")
+    if scene.plan is not None and scene.plan.areas:
+        require("shapely", "a [plan]'s rectangles and bands")
     if geojson and scene.geo is None:
         raise BananagridError(
             f"{scene.source}: --geojson: search areas are written in latitude and longitude, and this scene "
@@ -263,9 +296,10 @@ def compute(scene: Scene, layer: Layer, t: float, *, threads: int | None = None,
     return raster, time.perf_counter() - start
 
 
-def _blueprint(scene: Scene, frames: dict):
+def _blueprint(scene: Scene, frames: dict, plan_frame: tuple | None = None):
     """The default layout, with each kind's extra images and views (from the registry's
-    recording modules), the radial curves and the validation table if any."""
+    recording modules), the radial curves and the validation table if any; a scene's plan
+    is a panel after the maps (opened on ``plan_frame``), its geographic map a tab behind it."""
     views, images = [], []
     if scene.radial is not None:
         groups = radial_groups(scene.radial.density_bearings, scene.radial.moments_max)
@@ -287,8 +321,18 @@ def _blueprint(scene: Scene, frames: dict):
         extra_views=views,
         several_times=scene.times is not None and len(scene.times) > 1,
         frames=frames,
-        map_view=None if scene.geo is None else map_view(scene.geo, scene.grid.extent, models),
+        map_view=_with_plan(None if scene.geo is None else map_view(scene.geo, scene.grid.extent, models), scene,
+                            plan_frame),
     )
+
+
+def _with_plan(geographic, scene: Scene, plan_frame: tuple | None):
+    """The panel after the layers' maps: the plan's (:func:`~bananagrid.recording.plan.plan_view`)
+    with the geographic map a tab behind it, or the geographic map alone."""
+    if scene.plan is None:
+        return geographic
+    plan = plan_view(plan_frame)
+    return plan if geographic is None else rrb.Tabs(plan, geographic, name="plan and map")
 
 
 def _log_radial(rec, scene: Scene, layer: Layer, t: float, threads) -> None:

@@ -11,6 +11,7 @@ from ..geo.dataset import raster_dataset, write_netcdf
 from ..geo.geojson import write_geojson
 from ..geo.geotiff import write_geotiff
 from ..validate import BananagridError
+from .run_plan import plan_paths
 
 __all__ = ["plan_outputs", "export_paths", "write_exports", "EXPORT_SUFFIXES", "EXPORT_NAMES", "NPZ",
            "RUN_ONLY_PROVENANCE"]
@@ -42,6 +43,8 @@ def plan_outputs(scene, out_dir: str | os.PathLike, *, npz: bool = False,
         outputs.add(out_dir / f"{scene.name}.npz", NPZ)
     for option, path in export_paths(scene.name, out_dir, netcdf=netcdf, geotiff=geotiff, geojson=geojson).items():
         outputs.add(path, EXPORT_NAMES[option])
+    for path in plan_paths(scene, out_dir, geojson=geojson):  # a [plan]'s areas and tracks
+        outputs.add(path, EXPORT_NAMES["geojson"])
     return outputs
 
 
@@ -61,11 +64,12 @@ def export_paths(name: str, out_dir: Path, *, netcdf: bool = False, geotiff: boo
 
 
 def write_exports(scene, out_dir: Path, panels: list, *, netcdf: bool = False, geotiff: bool = False,
-                  geojson: bool = False, areas: dict | None = None, stage=None) -> list[Path]:
+                  geojson: bool = False, areas: dict | None = None, stage=None, coverage=None) -> list[Path]:
     """The map files of a scene's ``panels`` (``(layer, t, raster)``), written together or not at
     all (``stage``: a run's :meth:`~bananagrid.atomic.OutputSet.stage`, whose commit puts them in
     place with its other files; default: put in place here when all are complete). Returns their
-    paths. ``areas``: the panels' search areas by ``(layer, t)`` where already found."""
+    paths. ``areas``: the panels' search areas by ``(layer, t)`` where already found; ``coverage``:
+    a plan's ``(layer, t, effort raster)``, a variable of the NetCDF file."""
     paths = export_paths(scene.name, out_dir, netcdf=netcdf, geotiff=geotiff, geojson=geojson)
     with OutputSet() as own:
         if stage is None:
@@ -73,7 +77,7 @@ def write_exports(scene, out_dir: Path, panels: list, *, netcdf: bool = False, g
                 own.add(path, EXPORT_NAMES[option])
             stage = own.stage
         if netcdf:
-            dataset = raster_dataset(panels, scene.geo, title=scene.title, source=scene.source)
+            dataset = raster_dataset(panels, scene.geo, title=scene.title, source=scene.source, coverage=coverage)
             write_netcdf(paths["netcdf"], dataset, stage=stage)
         if geotiff:
             write_geotiff(paths["geotiff"], panels, scene.geo, title=scene.title, stage=stage)
