@@ -2,11 +2,12 @@
 
 Under ``plan`` (north up, world metres):
 
-- ``plan/probability``: the map's cell probabilities (the map searched), in grey;
-- ``plan/overlay``: the coverage (m^2 swept per m^2) as translucent colour over it, clear where
-  no effort goes; ``plan/coverage``: the coverage itself (its numbers, for reading back);
-- ``plan/rectangles`` and ``plan/bands``: the areas' outlines, each labelled with its
-  probability, POD and track spacing, and ``.../tracks``: the sweep legs;
+- ``plan/probability``: the map's cell probabilities (the map searched); ``plan/coverage``: the
+  coverage (m^2 swept per m^2), both as numbers (read back by ``bananagrid inspect``);
+- ``plan/overlay``: the two in one picture, the coverage's colour (yellow to red) over the
+  probability's grey, grey alone where no effort goes (:func:`overlay_image`);
+- ``plan/rectangles`` and ``plan/bands``: the areas' outlines, ``.../tracks``: the sweep legs,
+  ``.../labels``: each area's probability, POD and track spacing;
 - ``plan/pos_curve``: the ideal POS against the total effort (km^2), the curve a planner reads
   to decide how much to send;
 - ``plan/summary``: a markdown summary (POS, ideal POS, effort, marginal gain, each area), and
@@ -28,15 +29,16 @@ from .entities import entity_path, strict
 from .images import image_from_values, log_north_up, pixel_to_world
 
 __all__ = ["PLAN_ENTITY", "POS_CURVE_POINTS", "POS_CURVE_SPAN", "log_plan", "plan_values", "plan_markdown",
-           "plan_view", "plan_extent", "pos_curve_efforts"]
+           "plan_view", "plan_extent", "pos_curve_efforts",
+           "overlay_image"]
 
 #: Where a scene's plan is recorded.
 PLAN_ENTITY = "plan"
 #: Points of the recorded POS curve, from no effort to :data:`POS_CURVE_SPAN` times the plan's.
 POS_CURVE_POINTS = 41
 POS_CURVE_SPAN = 3.0
-#: Opacity of the coverage over the probability map: enough to read both.
-OVERLAY_ALPHA = 0.7
+#: Weight of the coverage's colour over the grey probability map: enough to read both.
+OVERLAY_ALPHA = 0.65
 #: Outline colours: rectangles cyan, bands magenta (both stand out on grey and on the
 #: yellow-to-red coverage); tracks white.
 RECTANGLE_COLOUR = (0, 220, 255)
@@ -137,22 +139,22 @@ def log_plan(rec: rr.RecordingStream, cells: Raster, allocation, rectangles=None
     with strict():
         rec.log(f"{root}/probability",
                 rr.DepthImage(image_from_values(cells.values), meter=1.0, colormap="grayscale",
-                              depth_range=(0.0, peak if peak > 0.0 else 1.0), draw_order=-20.0),
+                              depth_range=(0.0, peak if peak > 0.0 else 1.0)),
                 pixel_to_world(cells))
         rec.log(f"{root}/coverage",
                 rr.DepthImage(image_from_values(coverage), meter=1.0, colormap="inferno",
                               depth_range=(0.0, top if top > 0.0 else 1.0)),
                 pixel_to_world(cells))
-        rec.log(f"{root}/overlay", rr.Image(_overlay(coverage, top), color_model="RGBA", draw_order=-10.0),
+        rec.log(f"{root}/overlay", rr.Image(overlay_image(cells.values, coverage), color_model="RGB"),
                 pixel_to_world(cells))
         if rectangles is not None:
-            _log_areas(rec, f"{root}/rectangles", "rectangles",
-                       [(r.corners, [r.track]) for r in rectangles.rectangles if r.coverage > 0.0],
+            flown = [r for r in rectangles.rectangles if r.coverage > 0.0]
+            _log_areas(rec, f"{root}/rectangles", "rectangles", [([r.corners], [r.track], r.centre) for r in flown],
                        values, RECTANGLE_COLOUR)
         if bands is not None:
+            flown = [r for r in bands.regions if r.coverage > 0.0]
             _log_areas(rec, f"{root}/bands", "bands",
-                       [(_outline(r.polygon), list(r.tracks)) for r in bands.regions if r.coverage > 0.0],
-                       values, BAND_COLOUR)
+                       [(_outline(r.polygon), list(r.tracks), _anchor(r.polygon)) for r in flown], values, BAND_COLOUR)
         efforts = pos_curve_efforts(allocation.total_effort)
         km2 = efforts / 1e6
         rec.log(f"{root}/pos_curve",
@@ -163,15 +165,21 @@ def log_plan(rec: rr.RecordingStream, cells: Raster, allocation, rectangles=None
     return values
 
 
-def _overlay(coverage: np.ndarray, top: float) -> np.ndarray:
-    """The coverage as RGBA: yellow (low) to red (high), :data:`OVERLAY_ALPHA` opaque where
-    there is effort, clear elsewhere; rows as :func:`image_from_values`'s."""
+def overlay_image(probability: np.ndarray, coverage: np.ndarray) -> np.ndarray:
+    """The coverage over the probability map as one RGB image (rows as
+    :func:`image_from_values`'s): the cell probabilities in grey (black 0, white the largest),
+    and where effort goes the coverage's colour, yellow (least) to red (most), blended
+    :data:`OVERLAY_ALPHA` over the grey; cells without effort stay grey, exactly."""
+    p = np.asarray(probability, dtype=np.float64)
+    peak = float(p.max())
+    grey = np.clip(p / peak, 0.0, 1.0) if peak > 0.0 else np.zeros_like(p)
+    top = float(coverage.max())
     share = np.clip(coverage / top, 0.0, 1.0) if top > 0.0 else np.zeros_like(coverage)
-    rgba = np.zeros((*coverage.shape, 4), dtype=np.uint8)
-    rgba[..., 0] = 255
-    rgba[..., 1] = np.round(230.0 * (1.0 - share)).astype(np.uint8)
-    rgba[..., 3] = np.where(coverage > 0.0, round(255 * OVERLAY_ALPHA), 0).astype(np.uint8)
-    return np.ascontiguousarray(np.flipud(rgba))
+    ramp = np.stack([255.0 - 55.0 * share, 235.0 * (1.0 - share), 60.0 * (1.0 - share)], axis=-1)
+    rgb = np.repeat(255.0 * grey[..., None], 3, axis=-1)
+    covered = coverage > 0.0
+    rgb[covered] = (1.0 - OVERLAY_ALPHA) * rgb[covered] + OVERLAY_ALPHA * ramp[covered]
+    return np.ascontiguousarray(np.flipud(np.round(rgb).astype(np.uint8)))
 
 
 def _outline(polygon) -> list[np.ndarray]:
@@ -184,22 +192,29 @@ def _outline(polygon) -> list[np.ndarray]:
     return rings
 
 
+def _anchor(polygon) -> tuple[float, float]:
+    """Where a band's label goes: a point inside it (a band is often a ring about a denser one)."""
+    point = polygon.representative_point()
+    return (float(point.x), float(point.y))
+
+
 def _log_areas(rec: rr.RecordingStream, path: str, name: str, areas: Sequence, values: dict, colour) -> None:
-    """Outlines (labelled once, on the first ring) and sweep legs of one kind of areas."""
-    strips, labels, tracks = [], [], []
-    for k, (rings, legs) in enumerate(areas):
-        rings = [rings] if isinstance(rings, np.ndarray) and rings.ndim == 2 else rings
-        for j, ring in enumerate(rings):
+    """Outlines, sweep legs and labels (probability, POD, track spacing; each at its area's
+    anchor point) of one kind of areas."""
+    strips, tracks, anchors, labels = [], [], [], []
+    for k, (rings, legs, anchor) in enumerate(areas):
+        for ring in rings:
             ring = np.asarray(ring, dtype=np.float64)
-            strips.append(np.vstack([ring, ring[:1]]) if not np.array_equal(ring[0], ring[-1]) else ring)
-            labels.append(
-                f"{_label(name, k)}: p {values[f'{name}_probability'][k]:.3f}, POD {values[f'{name}_pod'][k]:.2f}, "
-                f"spacing {_spacing(values[f'{name}_track_spacing_m'][k])}" if j == 0 else "")
+            strips.append(ring if np.array_equal(ring[0], ring[-1]) else np.vstack([ring, ring[:1]]))
         tracks += [np.asarray(leg, dtype=np.float64) for leg in legs if len(leg) > 1]
-    rec.log(path, rr.LineStrips2D(strips, colors=[colour], radii=rr.Radius.ui_points(2.5), labels=labels,
-                                  show_labels=True, draw_order=40.0))
+        anchors.append(anchor)
+        labels.append(f"{_label(name, k)}: p {values[f'{name}_probability'][k]:.2f}, "
+                      f"POD {values[f'{name}_pod'][k]:.2f}, {_spacing(values[f'{name}_track_spacing_m'][k])}")
+    rec.log(path, rr.LineStrips2D(strips, colors=[colour], radii=rr.Radius.ui_points(2.0), draw_order=40.0))
     rec.log(f"{path}/tracks", rr.LineStrips2D(tracks, colors=[TRACK_COLOUR], radii=rr.Radius.ui_points(0.75),
                                               draw_order=35.0))
+    rec.log(f"{path}/labels", rr.Points2D(anchors, colors=[colour], radii=rr.Radius.ui_points(3.0), labels=labels,
+                                          show_labels=True, draw_order=45.0))
 
 
 def _spacing(metres: float) -> str:
@@ -227,20 +242,27 @@ def plan_extent(allocation, rectangles=None, bands=None, margin: float = 0.15) -
     return (x0 - pad, x1 + pad, y0 - pad, y1 + pad)
 
 
-def plan_view(extent: tuple[float, float, float, float] | None = None, entity: str = PLAN_ENTITY) -> rrb.Tabs:
-    """The plan's panel: the coverage over the probability map with the areas and tracks (the
-    active tab, opened on ``extent``), the coverage alone, the POS curve and the summary."""
+def plan_view(extent: tuple[float, float, float, float] | None = None, entity: str = PLAN_ENTITY, *,
+              rectangles: bool = True, bands: bool = False) -> rrb.Tabs:
+    """The plan's panel: the coverage over the probability map with the rectangles (the active
+    tab, opened on ``extent``) and, in a tab of their own, the bands (each with their tracks and
+    labels; one tab each keeps the labels apart), the coverage alone, the map searched, the POS
+    curve and the summary."""
     root = entity_path(entity)
     bounds = None
     if extent is not None:  # the view's y axis points down (north up): world y maps to -y
         x0, x1, y0, y1 = extent
         bounds = rrb.VisualBounds2D(x_range=(x0, x1), y_range=(-y1, -y0))
-    areas = [f"/{root}/rectangles/**", f"/{root}/bands/**"]
+    kinds = [kind for kind, wanted in (("rectangles", rectangles), ("bands", bands)) if wanted] or ["rectangles"]
+    maps = [rrb.Spatial2DView(origin="/", contents=[f"/{root}/overlay", f"/{root}/{kind}/**"],
+                              name=f"plan · {kind} over coverage (yellow → red) and probability (grey) · {HOVER_NOTE}",
+                              visual_bounds=bounds) for kind in kinds]
     return rrb.Tabs(
-        rrb.Spatial2DView(origin="/", contents=[f"/{root}/probability", f"/{root}/overlay", *areas],
-                          name=f"plan · coverage over probability · {HOVER_NOTE}", visual_bounds=bounds),
-        rrb.Spatial2DView(origin="/", contents=[f"/{root}/coverage", *areas],
+        *maps,
+        rrb.Spatial2DView(origin="/", contents=[f"/{root}/coverage", *(f"/{root}/{kind}/**" for kind in kinds)],
                           name=f"plan · coverage (m² per m²) · {HOVER_NOTE}", visual_bounds=bounds),
+        rrb.Spatial2DView(origin="/", contents=[f"/{root}/probability"],
+                          name=f"plan · the map searched (cell probabilities) · {HOVER_NOTE}", visual_bounds=bounds),
         rrb.BarChartView(origin=f"/{root}/pos_curve", name="plan · POS vs effort (km²)"),
         rrb.TextDocumentView(origin=f"/{root}/summary", name="plan · summary"),
         name="plan",

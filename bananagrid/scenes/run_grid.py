@@ -331,7 +331,7 @@ def _with_plan(geographic, scene: Scene, plan_frame: tuple | None):
     with the geographic map a tab behind it, or the geographic map alone."""
     if scene.plan is None:
         return geographic
-    plan = plan_view(plan_frame)
+    plan = plan_view(plan_frame, rectangles=scene.plan.rectangles > 0, bands=scene.plan.bands > 0)
     return plan if geographic is None else rrb.Tabs(plan, geographic, name="plan and map")
 
 
