@@ -91,7 +91,8 @@ def run_scene(
         CPU threads per rasterisation (default: every core).
     progress : callable, optional
         ``progress(done, total, label)``, called before each layer and time with ``done``
-        items finished so far, and after it (computed and logged) with ``done + 1``.
+        items finished so far, and after it (computed and logged) with ``done + 1``; then so
+        for the steps after the maps (a grid scene's ``[plan]``: ``"plan LAYER t=T s (Z km^2)"``).
     max_memory : float, optional
         Bytes the run may take (default: the memory the system has available); a grid whose
         estimate (:func:`check_run_memory`) is larger is refused before any computing.
@@ -110,7 +111,8 @@ def run_scene(
         ``output.cell_probabilities``, else the densities' midpoint sum; ``mass_from`` says
         which), its ``peak`` the largest recorded density (m^-2) at ``peak_x``, ``peak_y``; an
         array's layer (``GEOMETRY/KIND``) gives the sum of p(C | S) and the largest cell
-        probability (``peak_unit``: ``"per cell"``).
+        probability (``peak_unit``: ``"per cell"``). With a ``[plan]``, the row of its layer
+        and time has ``plan``: the plan's numbers (:func:`bananagrid.recording.plan.plan_values`).
 
     Raises
     ------
