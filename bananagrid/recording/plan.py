@@ -8,8 +8,8 @@ Under ``plan`` (north up, world metres):
   probability's grey, grey alone where no effort goes (:func:`overlay_image`);
 - ``plan/rectangles`` and ``plan/bands``: the areas' outlines, ``.../tracks``: the sweep legs,
   ``.../labels``: each area's probability, POD and track spacing;
-- ``plan/pos_curve``: the ideal POS against the total effort (km^2), the curve a planner reads
-  to decide how much to send;
+- ``plan/pos_curve/ideal``: the ideal POS against the total effort (km^2), the curve a planner
+  reads to decide how much to send, and ``plan/pos_curve/this_plan``: the plan's own effort;
 - ``plan/summary``: a markdown summary (POS, ideal POS, effort, marginal gain, each area), and
   ``plan/values``: the same numbers as ``AnyValues`` (what ``bananagrid inspect`` reports,
   :func:`plan_values`).
@@ -28,15 +28,17 @@ from .blueprint import HOVER_NOTE
 from .entities import entity_path, strict
 from .images import image_from_values, log_north_up, pixel_to_world
 
-__all__ = ["PLAN_ENTITY", "POS_CURVE_POINTS", "POS_CURVE_SPAN", "log_plan", "plan_values", "plan_markdown",
+__all__ = ["PLAN_ENTITY", "POS_CURVE_POINTS", "POS_CURVE_SPAN", "POS_CURVE_STEPS", "log_plan", "plan_values", "plan_markdown",
            "plan_view", "plan_extent", "pos_curve_efforts",
            "overlay_image"]
 
 #: Where a scene's plan is recorded.
 PLAN_ENTITY = "plan"
-#: Points of the recorded POS curve, from no effort to :data:`POS_CURVE_SPAN` times the plan's.
-POS_CURVE_POINTS = 41
-POS_CURVE_SPAN = 3.0
+#: The recorded POS curve: from no effort to :data:`POS_CURVE_SPAN` times the plan's, in steps
+#: of the plan's effort over :data:`POS_CURVE_STEPS`.
+POS_CURVE_SPAN = 3
+POS_CURVE_STEPS = 15
+POS_CURVE_POINTS = POS_CURVE_SPAN * POS_CURVE_STEPS + 1
 #: Weight of the coverage's colour over the grey probability map: enough to read both.
 OVERLAY_ALPHA = 0.65
 #: Outline colours: rectangles cyan, bands magenta (both stand out on grey and on the
@@ -48,8 +50,9 @@ TRACK_COLOUR = (255, 255, 255)
 
 def pos_curve_efforts(effort: float) -> np.ndarray:
     """The total efforts (m^2) at which the POS curve is recorded: 0 to ``POS_CURVE_SPAN`` times
-    ``effort`` in ``POS_CURVE_POINTS`` steps (the plan's own effort is one of them)."""
-    return np.linspace(0.0, POS_CURVE_SPAN * effort, POS_CURVE_POINTS)
+    ``effort`` in steps of ``effort / POS_CURVE_STEPS`` (so the plan's own effort is one of
+    them, exactly)."""
+    return effort * (np.arange(POS_CURVE_POINTS) / POS_CURVE_STEPS)
 
 
 def plan_values(allocation, rectangles=None, bands=None, *, layer: str = "", t: float = 0.0) -> dict:
@@ -101,10 +104,11 @@ def plan_markdown(values: dict) -> str:
                                                   values[f"{name}_track_spacing_m"])):
             out.append(f"| {_label(name, k)} | {p:.4f} | {pod:.4f} | {p * pod:.4f} | {spacing:,.0f} |")
     out += ["", "**Reading the plan.** The grey map is the probability of each cell; the colour over it is the "
-            "coverage (m² swept per m², yellow low, red high), clear where no effort goes. The outlines are the "
-            "areas a crew can fly (rectangles cyan, bands magenta), each labelled with its probability, POD and "
-            "track spacing, the white lines their sweep legs. The POS curve is the ideal POS against the total "
-            f"effort (km²), up to {POS_CURVE_SPAN:g} times this plan's. North is up; \"{HOVER_NOTE}\"."]
+            "coverage (m² swept per m², yellow low, red high); the map stays grey where no effort goes. The "
+            "outlines are the areas a crew can fly (rectangles cyan, bands magenta, each in its own tab), each "
+            "labelled with its probability, POD and track spacing, the white lines their sweep legs. The POS curve "
+            f"is the ideal POS against the total effort (km²), up to {POS_CURVE_SPAN:g} times this plan's (its own "
+            f"effort in cyan). North is up; \"{HOVER_NOTE}\"."]
     return "\n".join(out) + "\n"
 
 
@@ -157,9 +161,12 @@ def log_plan(rec: rr.RecordingStream, cells: Raster, allocation, rectangles=None
                        [(_outline(r.polygon), list(r.tracks), _anchor(r.polygon)) for r in flown], values, BAND_COLOUR)
         efforts = pos_curve_efforts(allocation.total_effort)
         km2 = efforts / 1e6
-        rec.log(f"{root}/pos_curve",
-                rr.BarChart(allocation.pos_curve(efforts), abscissa=km2,
-                            widths=np.full(len(km2), km2[1] - km2[0]), color=(255, 140, 0)))
+        widths = np.full(len(km2), km2[1] - km2[0])
+        rec.log(f"{root}/pos_curve/ideal",
+                rr.BarChart(allocation.pos_curve(efforts), abscissa=km2, widths=widths, color=(255, 140, 0)))
+        rec.log(f"{root}/pos_curve/this_plan",  # the plan's own effort, marked
+                rr.BarChart([allocation.pos], abscissa=[allocation.total_effort / 1e6], widths=widths[:1],
+                            color=RECTANGLE_COLOUR))
         rec.log(f"{root}/summary", rr.TextDocument(plan_markdown(values), media_type=rr.MediaType.MARKDOWN))
         rec.log(f"{root}/values", rr.AnyValues(**values))
     return values
@@ -193,9 +200,11 @@ def _outline(polygon) -> list[np.ndarray]:
 
 
 def _anchor(polygon) -> tuple[float, float]:
-    """Where a band's label goes: a point inside it (a band is often a ring about a denser one)."""
-    point = polygon.representative_point()
-    return (float(point.x), float(point.y))
+    """Where a band's label goes: the west end of its outline. Bands are nested rings about the
+    densest one, so their west ends lie apart where points inside them would not."""
+    ring = max(_outline(polygon), key=len)
+    west = ring[np.argmin(ring[:, 0])]
+    return (float(west[0]), float(west[1]))
 
 
 def _log_areas(rec: rr.RecordingStream, path: str, name: str, areas: Sequence, values: dict, colour) -> None:

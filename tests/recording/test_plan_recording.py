@@ -1,16 +1,20 @@
 """The plan's picture (bananagrid.recording.plan): the coverage's colour over the probability's
-grey, grey exactly where no effort goes; the summary's numbers."""
+grey, grey exactly where no effort goes; the summary's numbers; the POS curve through the
+plan's own effort."""
 
 from __future__ import annotations
 
 import math
 
 import numpy as np
+import pytest
 from hypothesis import given, seed, settings
 from hypothesis import strategies as st
 
 import bananagrid as bg
-from bananagrid.recording.plan import OVERLAY_ALPHA, overlay_image, plan_markdown, plan_values
+from bananagrid.recording.plan import (
+    OVERLAY_ALPHA, POS_CURVE_SPAN, POS_CURVE_STEPS, overlay_image, plan_markdown, plan_values, pos_curve_efforts,
+)
 
 
 @seed(20261127)
@@ -44,3 +48,15 @@ def test_the_summary_states_pos_effort_and_each_area():
     assert f"**POS of the bands** {bands.pos:.4f}" in text and "0.2 km²" in text
     for k, band in enumerate(r for r in bands.regions if r.coverage > 0):
         assert f"| B{k + 1} | {band.probability:.4f} | {band.pod:.4f} |" in text
+
+
+@seed(20261127)
+@settings(max_examples=200, deadline=None, database=None)
+@given(effort=st.floats(1e-300, 1e300))
+def test_the_pos_curve_passes_through_the_plans_own_effort(effort):
+    """The marked bar sits on one of the curve's: the plan's effort is a point of the curve,
+    exactly, whatever its size."""
+    efforts = pos_curve_efforts(effort)
+    assert efforts[POS_CURVE_STEPS] == effort
+    assert efforts[0] == 0.0 and np.all(np.diff(efforts) > 0)
+    assert efforts[-1] == pytest.approx(POS_CURVE_SPAN * effort, rel=1e-15)  # one rounding

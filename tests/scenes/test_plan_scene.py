@@ -15,6 +15,7 @@ from hypothesis import strategies as st
 
 import bananagrid as bg
 from bananagrid.cli import main
+from bananagrid.geo.dataset import read_maps
 from bananagrid.recording.inspect import format_inspection, inspect_recording
 from bananagrid.recording.readback import read_depth_image
 from bananagrid.scenes.load import SEVERAL_PERIODS, parse_scene
@@ -121,7 +122,8 @@ def test_the_recording_holds_the_plan(planned, reference):
     np.testing.assert_allclose(recorded, allocation.effort.values.astype(np.float32), rtol=0, atol=0)
     assert "LineStrips2D" in entities["/plan/rectangles"]["archetypes"]
     assert "LineStrips2D" in entities["/plan/bands/tracks"]["archetypes"]
-    assert "BarChart" in entities["/plan/pos_curve"]["archetypes"]
+    assert "BarChart" in entities["/plan/pos_curve/ideal"]["archetypes"]
+    assert "BarChart" in entities["/plan/pos_curve/this_plan"]["archetypes"]
     labels = entities["/plan/rectangles/labels"]
     assert labels["temporal_rows"] == 1 and "Points2D" in labels["archetypes"]
     # inspect: the plan's numbers, for scripts and for people
@@ -161,6 +163,10 @@ def test_netcdf_carries_the_coverage(planned, reference):
         assert coverage.attrs["long_name"].startswith("search effort per unit area of the plan")
         assert coverage.attrs["grid_mapping"] == "crs"
         np.testing.assert_array_equal(coverage.values, allocation.effort.values)
+    # the file's readers (bananagrid plot, notebooks) still find the layers' maps, and only them
+    _, maps = read_maps(out / "plan_ship.nc")
+    assert sorted({(m["layer"], m["t"]) for m in maps}) == [("cat", 600.0), ("cat", 900.0), ("still", 600.0),
+                                                              ("still", 900.0)]
 
 
 def test_the_plans_geojson(planned, reference):
