@@ -7,7 +7,7 @@ Under ``plan`` (north up, world metres):
 - ``plan/overlay``: the two in one picture, the coverage's colour (yellow to red) over the
   probability's grey, grey alone where no effort goes (:func:`overlay_image`);
 - ``plan/rectangles`` and ``plan/bands``: the areas' outlines, ``.../tracks``: the sweep legs,
-  ``.../labels``: each area's probability, POD and track spacing;
+  ``.../labels``: each area's name (as in the summary) and POD;
 - ``plan/pos_curve/ideal``: the ideal POS against the total effort (km^2), the curve a planner
   reads to decide how much to send, and ``plan/pos_curve/this_plan``: the plan's own effort;
 - ``plan/summary``: a markdown summary (POS, ideal POS, effort, marginal gain, each area), and
@@ -106,7 +106,7 @@ def plan_markdown(values: dict) -> str:
     out += ["", "**Reading the plan.** The grey map is the probability of each cell; the colour over it is the "
             "coverage (m² swept per m², yellow low, red high); the map stays grey where no effort goes. The "
             "outlines are the areas a crew can fly (rectangles cyan, bands magenta, each in its own tab), each "
-            "labelled with its probability, POD and track spacing, the white lines their sweep legs. The POS curve "
+            "labelled with its name in the tables above and its POD, the white lines their sweep legs. The POS curve "
             f"is the ideal POS against the total effort (km²), up to {POS_CURVE_SPAN:g} times this plan's (its own "
             f"effort in cyan). North is up; \"{HOVER_NOTE}\"."]
     return "\n".join(out) + "\n"
@@ -158,7 +158,7 @@ def log_plan(rec: rr.RecordingStream, cells: Raster, allocation, rectangles=None
         if bands is not None:
             flown = [r for r in bands.regions if r.coverage > 0.0]
             _log_areas(rec, f"{root}/bands", "bands",
-                       [(_outline(r.polygon), list(r.tracks), _anchor(r.polygon)) for r in flown], values, BAND_COLOUR)
+                       [(_outline(r.polygon), list(r.tracks), _anchor(r.polygon, k)) for k, r in enumerate(flown)], values, BAND_COLOUR)
         efforts = pos_curve_efforts(allocation.total_effort)
         km2 = efforts / 1e6
         widths = np.full(len(km2), km2[1] - km2[0])
@@ -199,17 +199,18 @@ def _outline(polygon) -> list[np.ndarray]:
     return rings
 
 
-def _anchor(polygon) -> tuple[float, float]:
-    """Where a band's label goes: the west end of its outline. Bands are nested rings about the
-    densest one, so their west ends lie apart where points inside them would not."""
+def _anchor(polygon, k: int) -> tuple[float, float]:
+    """Where band ``k``'s label goes: the west end of its outline for even ``k``, the east end
+    for odd. Bands are nested rings about the densest one, so their ends lie apart (and
+    alternate sides keep neighbours' labels apart) where points inside them would not."""
     ring = max(_outline(polygon), key=len)
-    west = ring[np.argmin(ring[:, 0])]
-    return (float(west[0]), float(west[1]))
+    end = ring[np.argmin(ring[:, 0]) if k % 2 == 0 else np.argmax(ring[:, 0])]
+    return (float(end[0]), float(end[1]))
 
 
 def _log_areas(rec: rr.RecordingStream, path: str, name: str, areas: Sequence, values: dict, colour) -> None:
-    """Outlines, sweep legs and labels (probability, POD, track spacing; each at its area's
-    anchor point) of one kind of areas."""
+    """Outlines, sweep legs and labels (its name, R1 or B1 as in the summary's tables, and its
+    POD; each at its area's anchor point) of one kind of areas."""
     strips, tracks, anchors, labels = [], [], [], []
     for k, (rings, legs, anchor) in enumerate(areas):
         for ring in rings:
@@ -217,17 +218,13 @@ def _log_areas(rec: rr.RecordingStream, path: str, name: str, areas: Sequence, v
             strips.append(ring if np.array_equal(ring[0], ring[-1]) else np.vstack([ring, ring[:1]]))
         tracks += [np.asarray(leg, dtype=np.float64) for leg in legs if len(leg) > 1]
         anchors.append(anchor)
-        labels.append(f"{_label(name, k)}: p {values[f'{name}_probability'][k]:.2f}, "
-                      f"POD {values[f'{name}_pod'][k]:.2f}, {_spacing(values[f'{name}_track_spacing_m'][k])}")
+        # short: neighbouring areas' labels must not run into each other; the summary has the rest
+        labels.append(f"{_label(name, k)} · POD {values[f'{name}_pod'][k]:.2f}")
     rec.log(path, rr.LineStrips2D(strips, colors=[colour], radii=rr.Radius.ui_points(2.0), draw_order=40.0))
     rec.log(f"{path}/tracks", rr.LineStrips2D(tracks, colors=[TRACK_COLOUR], radii=rr.Radius.ui_points(0.75),
                                               draw_order=35.0))
     rec.log(f"{path}/labels", rr.Points2D(anchors, colors=[colour], radii=rr.Radius.ui_points(3.0), labels=labels,
                                           show_labels=True, draw_order=45.0))
-
-
-def _spacing(metres: float) -> str:
-    return f"{metres / 1000:.2f} km" if metres >= 1000.0 else f"{metres:.0f} m"
 
 
 def plan_extent(allocation, rectangles=None, bands=None, margin: float = 0.15) -> tuple[float, float, float, float]:
