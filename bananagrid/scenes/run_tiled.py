@@ -30,13 +30,17 @@ __all__ = ["run_scene_tiled", "tiled_maps", "check_tiled", "format_tiled_summary
 
 def check_tiled(scene: Scene) -> Scene:
     """Refuse what cannot be tiled: an [array] scene (angular cells, not a grid), a scene that
-    asks for cell probabilities (tiles compute densities)."""
+    asks for cell probabilities or plans a search (tiles compute densities; a plan needs the
+    cell probabilities of its whole map)."""
     if not scene.gridded:
         raise BananagridError(f"{scene.source}: --zarr: an [array] scene's angular cells are not a grid; "
                               "run it without --zarr")
     if scene.cell_probabilities:
         raise BananagridError(f"{scene.source}: --zarr computes densities in tiles; set "
                               "output.cell_probabilities = false (or run without --zarr)")
+    if scene.plan is not None:
+        raise BananagridError(f"{scene.source}: --zarr computes densities in tiles; a [plan] needs its map's cell "
+                              "probabilities in memory: run it without --zarr (or drop [plan])")
     return scene
 
 

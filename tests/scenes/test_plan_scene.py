@@ -274,3 +274,13 @@ def test_every_effort_is_taken_in_si_or_refused_naming_the_key(effort, km2):
         return
     want = float(effort) * (1e6 if km2 else 1.0)
     assert scene.plan.effort == want and math.isfinite(want) and want > 0
+
+
+def test_a_tiled_run_refuses_a_plan(tmp_path, capsys):
+    """Tiles compute densities; a plan is never silently left out of a --zarr run."""
+    scene = tmp_path / "s.toml"
+    scene.write_text(SCENE + PLAN)
+    assert main(["run", str(scene), "--zarr", str(tmp_path / "s.zarr")]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "a [plan] needs its map's cell probabilities" in err
+    assert not (tmp_path / "s.zarr").exists()
