@@ -219,10 +219,11 @@ EXPORT_BYTES_PER_MAP_CELL = 24
 #: Further bytes per cell with ``output.cell_probabilities``: their float64 sums and raster, the
 #: quadrature's per-cell plans, and the float32 image.
 PROBABILITY_BYTES_PER_CELL = 64
-#: Further bytes per cell with a ``[plan]``: its map's cell probabilities (as above), the
-#: allocation's coverage, effort and POD arrays and its sorted copies (float64, about 8 arrays),
-#: and the recorded images.
-PLAN_BYTES_PER_CELL = PROBABILITY_BYTES_PER_CELL + 96
+#: Further bytes per cell with a ``[plan]``: computing the plan peaked at 80 (three bands) and
+#: 104 (three rectangles and three bands) bytes per cell of Python allocations (tracemalloc, on
+#: geo_ship's 172,800 cells: its map's cell probabilities, the allocation's arrays and sorted
+#: copies), and its recorded images take 11 more (two float32 images and an RGB one); rounded up.
+PLAN_BYTES_PER_CELL = 160
 #: The cell probabilities' image under a layer's entity (named in the summary's note).
 CELL_IMAGE = CELL_TAB
 
