@@ -49,6 +49,7 @@ from .scenes.pictures import (
     write_picture,
 )
 from .scenes.run_tiled import check_tiled, format_tiled_summary, run_scene_tiled, tiled_maps
+from .scenes.run_plan import plan_paths
 from .scenes.run import (RUN_ONLY_PROVENANCE, check_exports, check_run_memory, check_run_work, compute, export_paths,
                          plan_outputs, run_scene)
 from .validate import BananagridError, positive
@@ -338,6 +339,7 @@ def _run(args: argparse.Namespace) -> int:
         if args.npz:
             written.append(args.out / f"{scene.name}.npz")
         written += export_paths(scene.name, args.out, **exports, cell_probabilities=scene.cell_probabilities).values()
+        written += plan_paths(scene, args.out, geojson=args.geojson)
     print(format_summary(rows))
     print()
     for path in written:
@@ -645,7 +647,23 @@ def format_summary(rows: list[dict]) -> str:
             cell.ljust(w) if k < 2 else cell.rjust(w) for k, (cell, w) in enumerate(zip(cells, widths))
         ).rstrip()
 
-    return "\n".join([line(header), line(["-" * w for w in widths]), *map(line, body)])
+    plans = [format_plan(row["scene"], row["plan"]) for row in rows if row.get("plan")]
+    return "\n".join([line(header), line(["-" * w for w in widths]), *map(line, body), *plans])
+
+
+def format_plan(scene: str, plan: dict) -> str:
+    """A scene's plan (:func:`bananagrid.recording.plan.plan_values`) in a few lines: the
+    ideal POS, the effort and marginal gain, and each kind of areas' POS and areas."""
+    lines = ["", f"{scene}: plan on layer {plan['layer']} at t = {plan['t']:g} s: {plan['effort_m2'] / 1e6:g} km^2 of "
+             f"effort ({plan['law']}), ideal POS {plan['pos']:.4f}, marginal gain {plan['marginal_gain'] * 1e6:.4g} "
+             "per km^2"]
+    for name in ("rectangles", "bands"):
+        if f"{name}_pos" in plan:
+            areas = ", ".join(f"p {p:.3f} POD {pod:.2f} spacing {s:,.0f} m" for p, pod, s in
+                              zip(plan[f"{name}_probability"], plan[f"{name}_pod"], plan[f"{name}_track_spacing_m"]))
+            lines.append(f"  {len(plan[f'{name}_probability'])} {name}: POS {plan[f'{name}_pos']:.4f} "
+                         f"({plan[f'{name}_effort_m2'] / 1e6:g} km^2 flown): {areas}")
+    return "\n".join(lines)
 
 
 def _region_size(region) -> str:

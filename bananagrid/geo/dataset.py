@@ -62,7 +62,7 @@ from .panels import check_cells, check_panels, frame_of, provenance_json, variab
 
 __all__ = [
     "CONVENTIONS", "DENSITY_UNITS", "ELAPSED_LONG_NAME", "NETCDF_PURPOSE", "raster_dataset", "polar_dataset",
-    "cell_map_dataset", "write_netcdf", "time_units", "read_maps", "check_netcdf", "netcdf_digest", "DIGEST_ATTRIBUTE",
+    "cell_map_dataset", "write_netcdf", "COVERAGE_VARIABLE", "time_units", "read_maps", "check_netcdf", "netcdf_digest", "DIGEST_ATTRIBUTE",
 ]
 
 CONVENTIONS = "CF-1.10"
@@ -90,7 +90,7 @@ def time_units(frame) -> str:
     return f"seconds since {iso_utc(frame.time)}"
 
 
-def raster_dataset(panels: Sequence, frame=None, *, title: str = "", source: str = "", cells=None):
+def raster_dataset(panels: Sequence, frame=None, *, title: str = "", source: str = "", cells=None, coverage=None):
     """A scene's maps as one CF-1.10 :class:`xarray.Dataset`.
 
     Parameters
@@ -110,6 +110,9 @@ def raster_dataset(panels: Sequence, frame=None, *, title: str = "", source: str
         Cell probabilities (rasters of ``quantity == "probability"``) by ``(layer_name, t)``, for
         every time of the layers that have them (:func:`~bananagrid.geo.panels.check_cells`):
         each such layer gets ``LAYER_probability`` beside its density.
+    coverage : (str, float, Raster), optional
+        ``(layer_name, t, effort)``: a search plan's coverage on the same grid (m^2 swept per
+        m^2, ``bg.allocate(...).effort``), written as the variable :data:`COVERAGE_VARIABLE`.
 
     Returns
     -------
@@ -171,6 +174,8 @@ def raster_dataset(panels: Sequence, frame=None, *, title: str = "", source: str
             {"long_name": f"whether the density of layer {layer} was divided by its captured mass",
              "flag_values": np.array([0, 1], dtype=np.int8), "flag_meanings": "raw normalised"},
         )
+    if coverage is not None:
+        data_vars[variable_name(COVERAGE_VARIABLE, taken)] = _coverage_variable(xr, *coverage, grid, frame)
     attrs = _global_attrs(title, source, frame)
     attrs["bananagrid_grid"] = json.dumps(grid.describe())
     attrs["comment"] = (
@@ -179,6 +184,24 @@ def raster_dataset(panels: Sequence, frame=None, *, title: str = "", source: str
         + ("Layers share the time dimension." if shared else "Each layer has its own time dimension (their times differ).")
     )
     return xr.Dataset(data_vars, coords=coords, attrs=attrs)
+
+
+#: The NetCDF variable of a search plan's coverage (:func:`raster_dataset`'s ``coverage``).
+COVERAGE_VARIABLE = "plan_coverage"
+
+
+def _coverage_variable(xr, layer: str, t: float, effort, grid, frame):
+    """A plan's coverage on the layers' grid, (y, x), m^2 swept per m^2."""
+    if effort.grid.shape != grid.shape or not (np.array_equal(effort.grid.x, grid.x) and np.array_equal(effort.grid.y, grid.y)):
+        raise BananagridError("coverage: the plan's grid differs from the layers' grid")
+    attrs = {"long_name": f"search effort per unit area of the plan (coverage): layer {layer} at t = {t:g} s",
+             "units": "m2 m-2", "cell_methods": "area: mean", "bananagrid_layer": layer, "bananagrid_t": float(t),
+             "bananagrid_provenance": provenance_json(effort.provenance)}
+    encoding = {}
+    if frame is not None:
+        attrs["grid_mapping"] = "crs"
+        encoding["coordinates"] = "lat lon"
+    return xr.Variable(("y", "x"), np.asarray(effort.values, dtype=np.float64), attrs, encoding=encoding)
 
 
 def _lazy(values) -> bool:

@@ -260,8 +260,10 @@ def _legs(rects: list, p: np.ndarray, grid, allocation: Allocation, sweep_width:
     further leg falls as legs are added: the law is concave)."""
     points = _PointMasses(p, grid)
     inside = points.inside(rects)
-    lengths = np.array([2.0 * r[3] for r in rects])
-    widths = np.array([2.0 * r[4] for r in rects])
+    # legs run along the long side (as _flown lays them): moving sides may have made the
+    # rectangle's first axis the shorter one
+    lengths = np.array([2.0 * max(r[3], r[4]) for r in rects])
+    widths = np.array([2.0 * min(r[3], r[4]) for r in rects])
     cost = sweep_width * lengths  # m^2 of effort per leg
     legs = np.ones(len(rects), dtype=int)
     order = np.argsort(inside.astype(float) @ points.mass)  # least probability first

@@ -22,6 +22,7 @@ import numpy as np
 from ..contours import DEFAULT_MASS_LEVELS, cell_regions, mass_regions
 from ..domains.angular_lattice import AngularLattice
 # The readers moved to readback; they stay importable from here for existing callers.
+from .plan import PLAN_ENTITY
 from .readback import (
     IMAGE_BUFFER, IMAGE_FORMAT, RecordedCellMap, decode_image, open_recording, plain_cell,
     read_cell_maps, read_depth_image, read_layers, recording_rows, seconds,
@@ -29,7 +30,7 @@ from .readback import (
 
 __all__ = [
     "IMAGE_BUFFER", "IMAGE_FORMAT", "cell_map_summaries", "decode_image", "format_inspection", "inspect_recording",
-    "json_ready", "layer_summaries", "open_recording", "plain_cell", "read_depth_image", "recording_rows",
+    "json_ready", "layer_summaries", "open_recording", "plan_summary", "plain_cell", "read_depth_image", "recording_rows",
 ]
 
 _SCALARS = "Scalars:scalars"
@@ -69,7 +70,7 @@ def inspect_recording(path: str | os.PathLike) -> dict:
     for entity, times, cells in recording_rows(reader, store):
         _add_times(timelines, times)
         _add_row(entities.setdefault(entity, _new_entity()), times, cells)
-    return {
+    info = {
         "path": str(path),
         "application_id": store.application_id,
         "recording_id": store.recording_id,
@@ -77,6 +78,38 @@ def inspect_recording(path: str | os.PathLike) -> dict:
         "timelines": {name: _timeline_summary(t) for name, t in sorted(timelines.items())},
         "entities": {name: _entity_summary(e) for name, e in sorted(entities.items())},
     }
+    plan = plan_summary(info["entities"])
+    if plan is not None:
+        info["plan"] = plan
+    return info
+
+
+def plan_summary(entities: dict) -> dict | None:
+    """A recorded search plan (:mod:`bananagrid.recording.plan`) from :func:`inspect_recording`'s
+    ``entities``: its numbers (``layer``, ``t``, ``law``, ``effort_m2``, ``pos``,
+    ``marginal_gain``, ``map_mass``, ...) and per kind of areas (``rectangles``, ``bands``) the
+    plan's ``pos``, ``effort_m2`` and ``areas`` (``probability``, ``pod``, ``pos``,
+    ``track_spacing_m`` each); None when the recording has no plan."""
+    recorded = entities.get(f"/{PLAN_ENTITY}/values", {}).get("values")
+    if not recorded:
+        return None
+    values = dict(recorded[-1]["values"])
+    out = {key: value for key, value in values.items() if not key.startswith(("rectangles_", "bands_"))}
+    for name in ("rectangles", "bands"):
+        if f"{name}_pos" not in values:
+            continue
+        columns = [_listed(values.get(f"{name}_{key}")) for key in ("probability", "pod", "track_spacing_m")]
+        out[name] = {
+            "pos": values[f"{name}_pos"], "effort_m2": values[f"{name}_effort_m2"],
+            "areas": [{"probability": p, "pod": pod, "pos": p * pod, "track_spacing_m": spacing}
+                      for p, pod, spacing in zip(*columns)],
+        }
+    return out
+
+
+def _listed(value) -> list:
+    """A recorded list (one item comes back as a scalar)."""
+    return value if isinstance(value, list) else [] if value is None else [value]
 
 
 def _add_times(timelines: dict, times: dict) -> None:
@@ -334,6 +367,8 @@ def format_inspection(info: dict) -> str:
         lines += ["", "where the target is (angular cell maps; cell probabilities p(C | S), not densities)"]
         for item in info["cell_maps"]:
             lines += _cell_map_lines(item)
+    if info.get("plan"):
+        lines += ["", "where to look next (the recorded plan)"] + _plan_lines(info["plan"])
     lines += ["", "timelines"]
     lines += [_timeline_line(name, t) for name, t in info["timelines"].items()] or ["  (none: static only)"]
     lines += ["", "entities"]
@@ -379,6 +414,26 @@ def _cell_map_lines(item: dict) -> list[str]:
         else:
             rows.append([label, "not reached", f"{r['enclosed']:.6f}", ""])  # every cell's
     return lines + _table(rows, indent=4)
+
+
+def _plan_lines(plan: dict) -> list[str]:
+    """The plan: its map, effort and ideal POS, then each kind of areas as a table."""
+    lines = [
+        f"  layer {plan['layer']} at t = {plan['t']:g} s, law {plan['law']}, map holds {plan['map_mass']:.6f}",
+        f"    effort                 {plan['effort_m2'] / 1e6:.6g} km^2 ({plan['effort_m2']:.6g} m^2)",
+        f"    ideal POS              {plan['pos']:.6f}",
+        f"    marginal gain          {plan['marginal_gain'] * 1e6:.6g} POS per km^2",
+    ]
+    for name in ("rectangles", "bands"):
+        if name not in plan:
+            continue
+        flown = plan[name]
+        lines.append(f"    {name + ' POS':<22} {flown['pos']:.6f} ({flown['effort_m2'] / 1e6:.6g} km^2 flown)")
+        rows = [[name[:-1], "probability", "POD", "POS", "track spacing [m]"]]
+        rows += [[f"{'R' if name == 'rectangles' else 'B'}{k + 1}", f"{a['probability']:.6f}", f"{a['pod']:.6f}",
+                  f"{a['pos']:.6f}", f"{a['track_spacing_m']:,.1f}"] for k, a in enumerate(flown["areas"])]
+        lines += _table(rows, indent=6)
+    return lines
 
 
 def _captured(mass: float | None, normalised: bool) -> str:

@@ -1,8 +1,9 @@
 """The model keys of ``docs/scenes.md``, generated from the registry so that they cannot drift.
 
-``python -m bananagrid.scenes.docs`` prints the generated section; ``--check FILE`` exits 1 if
-FILE's section differs, ``--write FILE`` replaces it. The section lies between :data:`BEGIN` and
-:data:`END`; everything else in the file is written by hand.
+``python -m bananagrid.scenes.docs`` prints the generated sections; ``--check FILE`` exits 1 if
+FILE's sections differ, ``--write FILE`` replaces them. The model keys lie between :data:`BEGIN`
+and :data:`END`, the ``[plan]`` keys (:data:`~bananagrid.scenes.load.PLAN_TABLE`) between
+:data:`PLAN_BEGIN` and :data:`PLAN_END`; everything else in the file is written by hand.
 """
 
 from __future__ import annotations
@@ -14,11 +15,15 @@ from pathlib import Path
 from ..atomic import atomic_write
 from ..models.registry import MODEL_KINDS, Registry
 from ..protocol import ALIASES, KEY_TYPES, LATLON, SceneKey
+from .load import PLAN_TABLE
 
-__all__ = ["model_keys_markdown", "replace_section", "BEGIN", "END", "main"]
+__all__ = ["model_keys_markdown", "plan_keys_markdown", "replace_section", "BEGIN", "END", "PLAN_BEGIN", "PLAN_END",
+           "main"]
 
 BEGIN = "<!-- model keys: generated from the registry by `python -m bananagrid.scenes.docs --write docs/scenes.md` -->"
 END = "<!-- end of the generated model keys -->"
+PLAN_BEGIN = "<!-- plan keys: generated from bananagrid.scenes.load.PLAN_TABLE by `python -m bananagrid.scenes.docs --write docs/scenes.md` -->"
+PLAN_END = "<!-- end of the generated plan keys -->"
 
 #: Units of an alias: the SI unit with its radians (or m/s) replaced.
 _ALIAS_UNITS = {"deg": ("rad", "deg"), "kn": ("m/s", "kn")}
@@ -67,12 +72,20 @@ def model_keys_markdown(kinds: Registry = MODEL_KINDS) -> str:
     return "\n\n".join([BEGIN, *parts, END])
 
 
-def replace_section(document: str, section: str) -> str:
-    """``document`` with the text from :data:`BEGIN` to :data:`END` replaced by ``section``."""
-    start, end = document.find(BEGIN), document.find(END)
+def plan_keys_markdown() -> str:
+    """The table of the ``[plan]`` keys (:data:`~bananagrid.scenes.load.PLAN_TABLE`)."""
+    lines = ["| key | type | unit | default | allowed |", "|---|---|---|---|---|"]
+    lines += [f"| `{key}` | {kind} | {unit} | {default} | {allowed} |" for key, kind, unit, default, allowed in PLAN_TABLE]
+    return "\n".join([PLAN_BEGIN, *lines, PLAN_END])
+
+
+def replace_section(document: str, section: str, begin: str = BEGIN, end_mark: str = END) -> str:
+    """``document`` with the text from ``begin`` to ``end_mark`` (default :data:`BEGIN` to
+    :data:`END`) replaced by ``section``."""
+    start, end = document.find(begin), document.find(end_mark)
     if start < 0 or end < start:
-        raise ValueError(f"the document has no section between {BEGIN!r} and {END!r}")
-    return document[:start] + section + document[end + len(END):]
+        raise ValueError(f"the document has no section between {begin!r} and {end_mark!r}")
+    return document[:start] + section + document[end + len(end_mark):]
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -81,16 +94,16 @@ def main(argv: list[str] | None = None) -> int:
     group.add_argument("--check", metavar="FILE", type=Path, help="exit 1 if FILE's generated section is stale")
     group.add_argument("--write", metavar="FILE", type=Path, help="replace FILE's generated section")
     args = parser.parse_args(argv)
-    section = model_keys_markdown()
+    section, plan = model_keys_markdown(), plan_keys_markdown()
     if args.check is None and args.write is None:
-        print(section)
+        print(section + "\n\n" + plan)
         return 0
     path = args.check or args.write
     document = path.read_text()
-    updated = replace_section(document, section)
+    updated = replace_section(replace_section(document, section), plan, PLAN_BEGIN, PLAN_END)
     if args.check is not None:
         if updated != document:
-            print(f"{path}: the model keys differ from the registry; run {parser.prog} --write {path}", file=sys.stderr)
+            print(f"{path}: the model or plan keys differ from their declarations; run {parser.prog} --write {path}", file=sys.stderr)
             return 1
         return 0
     with atomic_write(path) as tmp:

@@ -34,6 +34,9 @@ from ..domains.region import Region
 from ..geo.frame import DEFAULT_MAX_SCALE_ERROR, GeoFrame
 from ..geo.inputs import PASS_MMSI, read_bearings, read_track
 from ..models.registry import MODEL_KINDS, ModelKind, Registry, installed_kinds
+from ..planning.detection import LAWS
+from ..planning.rectangles import MAX_RECTANGLES
+from ..planning.regions import MAX_BANDS
 from ..protocol import DensityModel
 from ..recording.core import MAX_ELAPSED_S, colormaps
 from ..validate import DEGREES_MEANT, BananagridError, BananagridWarning, positive
@@ -42,14 +45,15 @@ from .keys import DTYPES, NAME_PATTERN, SceneKeyError, check_keys, show
 from .presence import LAYER_NAME, array_scene_fields
 
 __all__ = [
-    "Layer", "Scene", "RadialOutput", "load_scene", "parse_scene", "MODEL_KINDS", "PARAMETER_KEYS",
-    "TOP_KEYS", "RADIAL_KEYS", "SCENE_KEYS", "GRID_KEYS", "OUTPUT_KEYS", "GEO_KEYS",
+    "Layer", "Scene", "RadialOutput", "PlanSpec", "load_scene", "parse_scene", "MODEL_KINDS", "PARAMETER_KEYS",
+    "TOP_KEYS", "RADIAL_KEYS", "SCENE_KEYS", "GRID_KEYS", "OUTPUT_KEYS", "GEO_KEYS", "PLAN_KEYS", "PLAN_TABLE",
+    "SEVERAL_PERIODS",
 ]
 
 #: Scene keys of every registered model kind of grid layers.
 PARAMETER_KEYS = MappingProxyType({kind: spec.scene.key_names for kind, spec in MODEL_KINDS.on("grid").items()})
 
-TOP_KEYS = ("scene", "grid", "geo", "output", "defaults", "layers", "radial")
+TOP_KEYS = ("scene", "grid", "geo", "output", "defaults", "layers", "radial", "plan")
 GEO_KEYS = ("origin_latlon", "time", "crs", "max_scale_error", "fix_file", "fix_mmsi", "bearings_file")
 #: What a ``[geo] fix_file``'s last fix gives a layer that sets neither the parameter nor its
 #: ``[defaults]``: the motion models' initial heading (its course over ground, true) and speed.
@@ -62,6 +66,25 @@ GRID_KEYS = ("x", "y", "step", "dx", "dy")
 #: Keys of ``[output]`` that every scene takes; a model kind may add switches of its own
 #: (:attr:`~bananagrid.protocol.SceneSchema.options`, e.g. the bearing fix's ``bearing_validation``).
 OUTPUT_KEYS = ("mass_levels", "contour_levels", "min_mass", "normalise", "dtype", "colormap", "cell_probabilities")
+#: ``[plan]``: where to look next on one layer's map at one time, ``(key, type, unit, default,
+#: allowed)`` each; ``docs/scenes.md`` is generated from it (:mod:`bananagrid.scenes.docs`).
+PLAN_TABLE = (
+    ("effort", "number", "m^2", "required (or `effort_km2`)",
+     "finite and > 0: the effort of one period, sweep width times track length"),
+    ("effort_km2", "number", "km^2", "instead of `effort`", "as `effort`, in km^2"),
+    ("sweep_width", "number", "m", "required with `rectangles` or `bands`",
+     "finite and > 0: the sensor's sweep width W; an area's track spacing is W / its coverage"),
+    ("law", "string", "", '`"exponential"`', ", ".join(f'`"{name}"`' for name in LAWS)
+     + ": the detection law of the coverage (random search, parallel sweeps under the inverse-cube law, definite range)"),
+    ("rectangles", "integer", "", "`0` (none)", f"0 to {MAX_RECTANGLES}: rectangles a crew can fly, any orientation"),
+    ("bands", "integer", "", "`0` (none)", f"0 to {MAX_BANDS}: bands of cells by coverage, each at one track spacing"),
+    ("t", "number", "s", "the scene's last time", "a time of the scene's timeline (`scene.times`, or the layer's `t`)"),
+    ("layer", "string", "", "the first layer", "the name of a layer of the scene"),
+)
+PLAN_KEYS = tuple(row[0] for row in PLAN_TABLE)
+#: Why a plan takes one effort and one time.
+SEVERAL_PERIODS = ("plans over several periods need the evidence of each period's search carried through the motion "
+                   "model (not yet available); give one effort and one t")
 
 
 @dataclass(frozen=True)
@@ -139,6 +162,42 @@ class RadialOutput:
 
 
 @dataclass(frozen=True)
+class PlanSpec:
+    """``[plan]``: search effort spread over one layer's cell probabilities at one time, and the
+    areas a crew can fly (:func:`bananagrid.allocate`, :func:`bananagrid.search_rectangles`,
+    :func:`bananagrid.search_regions`).
+
+    Attributes
+    ----------
+    layer : str
+        The layer whose map is searched.
+    t : float
+        Its time, s (a time of the scene's timeline).
+    effort : float
+        Total effort of the period, m^2 (sweep width times track length).
+    law : str
+        The detection law's name.
+    sweep_width : float or None
+        W, m (None when no areas are asked for).
+    rectangles, bands : int
+        How many rectangles and bands (0 for none).
+    """
+
+    layer: str
+    t: float
+    effort: float
+    law: str = "exponential"
+    sweep_width: float | None = None
+    rectangles: int = 0
+    bands: int = 0
+
+    @property
+    def areas(self) -> bool:
+        """Whether the plan has areas a crew can fly (rectangles or bands)."""
+        return self.rectangles > 0 or self.bands > 0
+
+
+@dataclass(frozen=True)
 class Scene:
     """A validated scene: a domain (a grid, or an array's angular lattice), model layers and
     recording options.
@@ -209,6 +268,8 @@ class Scene:
         m: where an array scene's cells are cut in the drawing when there is no room (default 10 h).
     log10_floor : float
         Bottom of an array scene's recorded colour scale, log10 of a probability.
+    plan : PlanSpec or None
+        Where to look next (``[plan]``); None without it.
     """
 
     name: str
@@ -238,6 +299,7 @@ class Scene:
     component_names: tuple = ()
     far: float | None = None
     log10_floor: float = -12.0
+    plan: PlanSpec | None = None
 
     @property
     def gridded(self) -> bool:
@@ -395,6 +457,7 @@ def _build(doc: dict, text: str, source: str, kinds: Registry, tiled: bool = Fal
         raise SceneKeyError("geo.bearings_file: no layer takes bearings (sensors, bearings, sigmas: model "
                             "\"bearing_fix\"); drop the key or add such a layer")
     radial = _radial(doc["radial"], layers) if "radial" in doc else None
+    plan = _plan(doc["plan"], layers, times) if "plan" in doc else None
     if geo is not None:  # every UTC time of the scene inside the calendar
         try:
             geo.check_elapsed(times or [layer.params.get("t", 0.0) for layer in layers])
@@ -405,8 +468,65 @@ def _build(doc: dict, text: str, source: str, kinds: Registry, tiled: bool = Fal
     return Scene(
         name=name, title=title, description=description, text=text, source=source,
         domain=grid, bounds=bounds, layers=layers, times=times, radial=radial, warnings=tuple(found), **output,
-        geo=geo, scale_error=scale_error, kinds=scene_kinds,
+        geo=geo, scale_error=scale_error, kinds=scene_kinds, plan=plan,
     )
+
+
+def _plan(value, layers, times) -> PlanSpec:
+    """``[plan]``: one period's effort on one layer's map at one time of the timeline, the
+    detection law, the sweep width and how many rectangles and bands."""
+    table = keys.table({"plan": value}, "plan")
+    check_keys(table, PLAN_KEYS, "plan")
+    for key in ("effort", "effort_km2", "t"):
+        if isinstance(table.get(key), list):
+            raise SceneKeyError(f"plan.{key} = {show(table[key])}: {SEVERAL_PERIODS}")
+    if "effort" in table and "effort_km2" in table:
+        raise SceneKeyError(f"plan: give effort (m^2) or effort_km2 (km^2), not both (effort = {show(table['effort'])}, "
+                            f"effort_km2 = {show(table['effort_km2'])})")
+    if "effort" not in table and "effort_km2" not in table:
+        raise SceneKeyError("plan.effort: missing; expected the effort of the period in m^2 (or effort_km2 in km^2), "
+                            "sweep width times track length")
+    key = "effort" if "effort" in table else "effort_km2"
+    effort = keys.number(table[key], f"plan.{key}")
+    if not (math.isfinite(effort) and effort > 0.0):
+        raise SceneKeyError(f"plan.{key} = {show(table[key])}: must be finite and > 0 "
+                            f"({'m^2' if key == 'effort' else 'km^2'})")
+    effort = effort if key == "effort" else effort * 1.0e6
+    if not math.isfinite(effort):  # a finite km^2 beyond the largest float in m^2
+        raise SceneKeyError(f"plan.effort_km2 = {show(table[key])}: too large (not finite in m^2)")
+    law = table.get("law", "exponential")
+    if not isinstance(law, str) or law not in LAWS:
+        raise SceneKeyError(f"plan.law = {show(law)}: must be one of {', '.join(map(show, LAWS))}")
+    counts = {}
+    for name, top in (("rectangles", MAX_RECTANGLES), ("bands", MAX_BANDS)):
+        count = table.get(name, 0)
+        if isinstance(count, bool) or not isinstance(count, int) or not 0 <= count <= top:
+            raise SceneKeyError(f"plan.{name} = {show(count)}: expected an integer from 0 (none) to {top}")
+        counts[name] = count
+    width = None
+    if "sweep_width" in table:
+        width = keys.number(table["sweep_width"], "plan.sweep_width")
+        if not (math.isfinite(width) and width > 0.0):
+            raise SceneKeyError(f"plan.sweep_width = {show(table['sweep_width'])}: must be finite and > 0 (m)")
+    elif counts["rectangles"] or counts["bands"]:
+        raise SceneKeyError("plan.sweep_width: missing; the rectangles and bands are flown at track spacings "
+                            "of the sweep width (m)")
+    names = [layer.name for layer in layers]
+    name = table.get("layer", names[0])
+    if name not in names:
+        raise SceneKeyError(f"plan.layer = {show(name)}: not a layer of this scene (those are: "
+                            f"{', '.join(map(show, names))})")
+    layer = layers[names.index(name)]
+    timeline = times if times is not None else (layer.params.get("t", 0.0),)
+    if "t" in table:
+        t = keys.number(table["t"], "plan.t")
+        if t not in timeline:
+            where = "scene.times" if times is not None else f"layers.{name}.t"
+            raise SceneKeyError(f"plan.t = {show(table['t'])}: not a time of the scene's timeline ({where}: "
+                                f"{', '.join(f'{v:g}' for v in timeline)} s)")
+    else:
+        t = max(timeline)
+    return PlanSpec(layer=name, t=float(t), effort=effort, law=law, sweep_width=width, **counts)
 
 
 def _radial(value, layers) -> RadialOutput:

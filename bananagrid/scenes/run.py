@@ -96,7 +96,8 @@ def run_scene(
         CPU threads per rasterisation (default: every core).
     progress : callable, optional
         ``progress(done, total, label)``, called before each layer and time with ``done``
-        items finished so far, and after it (computed and logged) with ``done + 1``.
+        items finished so far, and after it (computed and logged) with ``done + 1``; then so
+        for the steps after the maps (a grid scene's ``[plan]``: ``"plan LAYER t=T s (Z km^2)"``).
     max_memory : float, optional
         Bytes the run may take (default: the memory the system has available); a grid whose
         estimate (:func:`check_run_memory`) is larger is refused before any computing.
@@ -115,7 +116,8 @@ def run_scene(
         ``output.cell_probabilities``, else the densities' midpoint sum; ``mass_from`` says
         which), its ``peak`` the largest recorded density (m^-2) at ``peak_x``, ``peak_y``; an
         array's layer (``GEOMETRY/KIND``) gives the sum of p(C | S) and the largest cell
-        probability (``peak_unit``: ``"per cell"``).
+        probability (``peak_unit``: ``"per cell"``). With a ``[plan]``, the row of its layer
+        and time has ``plan``: the plan's numbers (:func:`bananagrid.recording.plan.plan_values`).
 
     Raises
     ------
@@ -146,13 +148,21 @@ def run_scene(
         # Runs on this thread: set_elapsed is per thread.
         log_scene_text(rec, scene.text)
         jobs = scene.jobs()
+        extra = run.extra_steps()  # after the maps, e.g. a scene's plan
+        total = len(jobs) + len(extra)
         for k, (layer, t) in enumerate(jobs):
             label = run.label(layer, t)
             if progress is not None:
-                progress(k, len(jobs), label)
+                progress(k, total, label)
             rows.append(run.record(rec, layer, t))
             if progress is not None:
-                progress(k + 1, len(jobs), label)
+                progress(k + 1, total, label)
+        for k, (label, step) in enumerate(extra, start=len(jobs)):
+            if progress is not None:
+                progress(k, total, label)
+            step(rec, rows)
+            if progress is not None:
+                progress(k + 1, total, label)
         run.finish(rec, rows)
 
     with outputs:  # all or nothing: the old files stay until every new one is complete

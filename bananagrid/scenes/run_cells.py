@@ -81,6 +81,10 @@ class CellRun:
         scene = self.scene
         return presence_blueprint(eye=plane_eye(scene.domain, scene.region, scene.far))
 
+    def extra_steps(self) -> list:
+        """No steps after the cell map (an array scene has no ``[plan]``)."""
+        return []
+
     def label(self, layer: Layer, t: float) -> str:
         lattice = self.scene.domain
         return f"{lattice.geometry}/{layer.kind} {' x '.join(map(str, lattice.shape))} cells"

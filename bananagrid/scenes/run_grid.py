@@ -17,6 +17,7 @@ from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
+import rerun.blueprint as rrb
 
 from ..analysis.coverage import coverage_warnings, level_warnings, peak_location
 from ..atomic import OutputSet, OutputWriteError
@@ -39,6 +40,7 @@ from ..recording.core import (
 )
 from ..recording.geomap import log_map_areas, log_map_marks, map_view
 from ..recording.layers import layer_views, log_layer, log_scene_extras, log_shared_colours, scene_texts
+from ..recording.plan import plan_view
 from ..recording.timeline import ELAPSED, UTC, set_times
 from ..recording.radial import log_radial_curves, radial_groups, radial_views
 from ..recording.summary import CELL_TAB, log_summary
@@ -47,9 +49,11 @@ from ..validate import BananagridError, BananagridWarning
 from ..version import __version__
 from .load import Layer, Scene
 from .run_outputs import NPZ, RUN_ONLY_PROVENANCE, write_exports
+from .run_plan import ScenePlan, plan_label, plan_paths, plan_scene, record_plan, write_plan_geojson
 
 __all__ = ["GridRun", "compute", "array_key", "check_exports", "check_run_memory", "check_run_work",
-           "RUN_BYTES_PER_CELL", "EXPORT_BYTES_PER_MAP_CELL", "PROBABILITY_BYTES_PER_CELL", "CELL_IMAGE"]
+           "RUN_BYTES_PER_CELL", "EXPORT_BYTES_PER_MAP_CELL", "PROBABILITY_BYTES_PER_CELL", "PLAN_BYTES_PER_CELL",
+           "CELL_IMAGE"]
 
 
 class GridRun:
@@ -99,6 +103,7 @@ class GridRun:
         self.marks: dict[str, dict] = {}  # each layer's landmarks (fix, stations), for the KML
         self.marked: set[str] = set()  # layers whose landmarks are on the map (static, logged once)
         self.archive = None
+        self.plan: ScenePlan | None = None
 
     def recording_id(self) -> str:
         """Depends on the scene text and the grid actually used (a step override changes it)."""
@@ -123,8 +128,25 @@ class GridRun:
                 if self.archive is not None:
                     self.archive.abandon()
         if self.panels is not None:
+            plan = self.plan
             write_exports(scene, self.out_dir, self.panels, **self.exports, areas=self.areas, cells=self.cells,
-                          marks=self.marks, stage=self.outputs.stage)
+                          marks=self.marks, stage=self.outputs.stage,
+                          coverage=None if plan is None else (scene.plan.layer, scene.plan.t, plan.allocation.effort))
+            for path in plan_paths(scene, self.out_dir, geojson=self.exports["geojson"]):
+                write_plan_geojson(path, scene, plan, stage=self.outputs.stage)
+
+    def extra_steps(self) -> list:
+        """``(label, step)`` of the steps after the jobs: the scene's plan, if it has one
+        (``step(rec, rows)`` computes and logs it, and gives its row the plan's numbers)."""
+        return [] if self.scene.plan is None else [(plan_label(self.scene), self._plan_step)]
+
+    def _plan_step(self, rec, rows: list[dict]) -> None:
+        scene = self.scene
+        self.plan = plan_scene(scene, threads=self.threads)
+        record_plan(rec, scene, self.plan)
+        for row in rows:
+            if row["layer"] == scene.plan.layer and row["t"] == scene.plan.t:
+                row["plan"] = self.plan.values
 
     def record(self, rec, layer: Layer, t: float) -> dict:
         """Compute one layer at ``t``, log it and keep it for the files; its summary row."""
@@ -187,7 +209,7 @@ class GridRun:
         # The maps open framed on what was found, so the blueprint comes last.
         colours = log_shared_colours(rec, self.logged, _panel(scene))
         send_blueprint(rec, _blueprint(scene, {e: union_extent(extents) for e, extents in self.frames.items()},
-                                       colours=colours,
+                                       None if self.plan is None else self.plan.extent, colours=colours,
                                        mass_top=max((row["mass"] for row in rows), default=1.0)))
         if self.archive is not None:
             self.archive.close()
@@ -204,6 +226,11 @@ EXPORT_BYTES_PER_MAP_CELL = 24
 #: Further bytes per cell with ``output.cell_probabilities``: their float64 sums and raster, the
 #: quadrature's per-cell plans, and the float32 image.
 PROBABILITY_BYTES_PER_CELL = 64
+#: Further bytes per cell with a ``[plan]``: computing the plan peaked at 80 (three bands) and
+#: 104 (three rectangles and three bands) bytes per cell of Python allocations (tracemalloc, on
+#: geo_ship's 172,800 cells: its map's cell probabilities, the allocation's arrays and sorted
+#: copies), and its recorded images take 11 more (two float32 images and an RGB one); rounded up.
+PLAN_BYTES_PER_CELL = 160
 #: The cell probabilities' image under a layer's entity (named in the summary's note).
 CELL_IMAGE = CELL_TAB
 
@@ -215,7 +242,8 @@ def check_run_memory(scene: Scene, *, exports: bool = False, limit: float | None
     cells = scene.grid.nx * scene.grid.ny
     kept = len(scene.jobs()) * (2 if scene.cell_probabilities else 1)  # maps kept for the files: densities, cells
     per_cell = (RUN_BYTES_PER_CELL + (EXPORT_BYTES_PER_MAP_CELL * kept if exports else 0)
-                + (PROBABILITY_BYTES_PER_CELL if scene.cell_probabilities else 0))
+                + (PROBABILITY_BYTES_PER_CELL if scene.cell_probabilities else 0)
+                + (PLAN_BYTES_PER_CELL if scene.plan is not None else 0))
     return check_memory(cells, per_cell, f"{scene.source}: a grid of {scene.grid.nx} x {scene.grid.ny} = {cells:,} cells",
                         limit=limit, option="--max-memory GB")
 
@@ -230,6 +258,9 @@ def check_run_work(scene: Scene, *, threads: int | None = None, limit: float | N
     core_seconds = sum(layer.model(t).work_estimate(cells, extent) for layer, t in jobs)
     if scene.cell_probabilities:
         core_seconds += sum(probability_work(layer.model(t), scene.grid)[0] for layer, t in jobs)
+    if scene.plan is not None:  # the plan's map: the layer's cell probabilities at its time
+        planned = next(layer for layer in scene.layers if layer.name == scene.plan.layer)
+        core_seconds += probability_work(planned.model(scene.plan.t), scene.grid)[0]
     return check_work(core_seconds, check_threads(threads),
                       f"{scene.source}: {len(jobs)} layer map{'s' * (len(jobs) != 1)} of {cells:,} cells",
                       limit=limit, option="--max-seconds S")
@@ -249,6 +280,8 @@ def check_exports(scene: Scene, *, netcdf: bool = False, geotiff: bool = False, 
             f"{scene.source}: --kml: search areas are written in latitude and longitude, and this scene "
             "has no [geo] table (geo.origin_latlon); --netcdf and --geotiff work in local metres"
         )
+    if scene.plan is not None and scene.plan.areas:
+        require("shapely", "a [plan]'s rectangles and bands")
     if geojson and scene.geo is None:
         raise BananagridError(
             f"{scene.source}: --geojson: search areas are written in latitude and longitude, and this scene "
@@ -284,9 +317,11 @@ def _panel(scene: Scene) -> tuple[float, float]:
     return map_panel_points(len(scene.layers) + (scene.geo is not None))
 
 
-def _blueprint(scene: Scene, frames: dict, *, colours: ColourRange | None = None, mass_top: float = 1.0):
+def _blueprint(scene: Scene, frames: dict, plan_frame: tuple | None = None, *,
+               colours: ColourRange | None = None, mass_top: float = 1.0):
     """The default layout, with each kind's extra images and views (from the registry's
-    recording modules), the radial curves and the validation table if any."""
+    recording modules), the radial curves and the validation table if any; a scene's plan
+    is a panel after the maps (opened on ``plan_frame``), its geographic map a tab behind it."""
     views, images = [], []
     if scene.radial is not None:
         groups = radial_groups(scene.radial.density_bearings, scene.radial.moments_max)
@@ -308,11 +343,21 @@ def _blueprint(scene: Scene, frames: dict, *, colours: ColourRange | None = None
         extra_views=views,
         several_times=scene.times is not None and len(scene.times) > 1,
         frames=frames,
-        map_view=None if scene.geo is None else map_view(scene.geo, scene.grid.extent, models),
+        map_view=_with_plan(None if scene.geo is None else map_view(scene.geo, scene.grid.extent, models), scene,
+                            plan_frame),
         colours=colours,
         mass_top=mass_top,
         timeline=UTC if scene.geo is not None and scene.geo.time is not None else ELAPSED,
     )
+
+
+def _with_plan(geographic, scene: Scene, plan_frame: tuple | None):
+    """The panel after the layers' maps: the plan's (:func:`~bananagrid.recording.plan.plan_view`)
+    with the geographic map a tab behind it, or the geographic map alone."""
+    if scene.plan is None:
+        return geographic
+    plan = plan_view(plan_frame, rectangles=scene.plan.rectangles > 0, bands=scene.plan.bands > 0)
+    return plan if geographic is None else rrb.Tabs(plan, geographic, name="plan and map")
 
 
 def _log_radial(rec, scene: Scene, layer: Layer, t: float, threads) -> None:

@@ -12,6 +12,7 @@ from ..geo.geojson import write_geojson
 from ..geo.geotiff import write_geotiff
 from ..geo.kml import write_kml
 from ..validate import BananagridError
+from .run_plan import plan_paths
 
 __all__ = ["plan_outputs", "export_paths", "write_exports", "EXPORT_SUFFIXES", "EXPORT_NAMES", "EXPORT_OPTIONS", "NPZ",
            "RUN_ONLY_PROVENANCE", "PROBABILITY_GEOTIFF"]
@@ -44,6 +45,8 @@ def plan_outputs(scene, out_dir: str | os.PathLike, *, npz: bool = False, netcdf
     for option, path in export_paths(scene.name, out_dir, netcdf=netcdf, geotiff=geotiff, geojson=geojson, kml=kml,
                                      cell_probabilities=_cells(scene)).items():
         outputs.add(path, EXPORT_NAMES[option])
+    for path in plan_paths(scene, out_dir, geojson=geojson):  # a [plan]'s areas and tracks
+        outputs.add(path, EXPORT_NAMES["geojson"])
     return outputs
 
 
@@ -74,13 +77,14 @@ def export_paths(name: str, out_dir: Path, *, netcdf: bool = False, geotiff: boo
 
 def write_exports(scene, out_dir: Path, panels: list, *, netcdf: bool = False, geotiff: bool = False,
                   geojson: bool = False, kml: bool = False, areas: dict | None = None, cells: dict | None = None,
-                  marks: dict | None = None, stage=None) -> list[Path]:
+                  marks: dict | None = None, stage=None, coverage=None) -> list[Path]:
     """The map files of a scene's ``panels`` (``(layer, t, raster)``), written together or not at
     all (``stage``: a run's :meth:`~bananagrid.atomic.OutputSet.stage`, whose commit puts them in
     place with its other files; default: put in place here when all are complete). Returns their
     paths. ``areas``: the panels' search areas by ``(layer, t)`` where already found; ``cells``:
     the cell probabilities by ``(layer, t)`` (a scene's ``output.cell_probabilities``), into the
-    NetCDF and a GeoTIFF of their own; ``marks``: each layer's model's ``landmarks()``, for the KML."""
+    NetCDF and a GeoTIFF of their own; ``marks``: each layer's model's ``landmarks()``, for the KML;
+    ``coverage``: a plan's ``(layer, t, effort raster)``, a variable of the NetCDF file."""
     cells = cells or {}
     paths = export_paths(scene.name, out_dir, netcdf=netcdf, geotiff=geotiff, geojson=geojson, kml=kml,
                          cell_probabilities=bool(cells))
@@ -90,7 +94,8 @@ def write_exports(scene, out_dir: Path, panels: list, *, netcdf: bool = False, g
                 own.add(path, EXPORT_NAMES[option])
             stage = own.stage
         if netcdf:
-            dataset = raster_dataset(panels, scene.geo, title=scene.title, source=scene.source, cells=cells)
+            dataset = raster_dataset(panels, scene.geo, title=scene.title, source=scene.source, cells=cells,
+                                     coverage=coverage)
             write_netcdf(paths["netcdf"], dataset, stage=stage)
         if geotiff:
             write_geotiff(paths["geotiff"], panels, scene.geo, title=scene.title, stage=stage)
