@@ -77,7 +77,8 @@ NOT_RUN = {
     "python tests/reproduce_tables.py": "about 4 minutes; tests/models/test_paper_tables.py checks the same tables",
     "bananagrid bench --kernels cat-cells,butterly-cells --repeat 3": "a minute of timing (see tests/bench/test_bench.py)",
     "bananagrid bench --repeat 5 --json bench.json": "about 15 minutes of timing; tests/bench/test_bench.py runs bench on small grids",
-    "bananagrid bench --repeat 5": "about 15 minutes of timing (see tests/bench/test_bench.py)",
+    "bananagrid bench --kernels polar-improved,polar-rough --repeat 9 --no-memory":
+        "a minute of timing (see tests/bench/test_bench.py and tests/bench/test_peers.py)",
     "bananagrid bench --kernels presence-plane --repeat 5": "minutes of SciPy baseline (see tests/bench/test_bench.py)",
     "bananagrid bench --kernels polar-rough,polar-improved,polar-heading,bearing-exact --step 2 --repeat 15 --no-peers --no-memory":
         "a minute of timing (see tests/bench/test_bench.py)",
