@@ -185,6 +185,7 @@ class OutputSet:
         missing = [str(t) for t in self._targets if t not in self._complete]
         if missing:
             raise RuntimeError(f"commit before every target was written: {', '.join(missing)}")
+        raise_if_terminated()  # a signal whose exception was swallowed: nothing goes in place
         for final, (what, ours) in self._targets.items():
             check_target(final, what, ours=ours)
         done: list[tuple[Path, Path | None]] = []  # (target, its old version kept aside)
@@ -291,13 +292,30 @@ class Terminated(BaseException):
         self.name = signal.Signals(signum).name
 
 
+#: Terminating signals received by :func:`signals_as_exceptions`'s handler, the first first. A
+#: handler's exception can be lost: raised while Python runs a weakref callback or a ``__del__``
+#: (the import system's module locks have one), it is printed as "Exception ignored" and the
+#: code goes on. So each is kept here too, and :func:`raise_if_terminated` raises it again at the
+#: checkpoints that must not pass it (an output set's commit, the end of the block).
+_received: list[int] = []
+
+
+def raise_if_terminated() -> None:
+    """Raise :class:`Terminated` if a terminating signal was received (and its exception lost)."""
+    if _received:
+        raise Terminated(_received[0])
+
+
 @contextmanager
 def signals_as_exceptions() -> Iterator[None]:
     """Within the block, SIGTERM and SIGHUP raise :class:`Terminated` in the main thread (the
-    default action kills the process at once, leaving temporary files behind). Outside the main
-    thread, where handlers cannot be installed, this does nothing."""
+    default action kills the process at once, leaving temporary files behind); a signal whose
+    exception is lost (see :data:`_received`) is raised again before any output set commits and
+    when the block ends. Outside the main thread, where handlers cannot be installed, this does
+    nothing."""
 
     def handler(signum, frame):
+        _received.append(signum)
         raise Terminated(signum)
 
     previous = {}
@@ -308,6 +326,8 @@ def signals_as_exceptions() -> Iterator[None]:
         pass
     try:
         yield
+        raise_if_terminated()
     finally:
         for signum, old in previous.items():
             signal.signal(signum, old)
+        _received.clear()
