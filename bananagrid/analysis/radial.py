@@ -132,6 +132,15 @@ def _profile(model: DensityModel, pose: Pose, angles: np.ndarray, r_max, threads
     return radii, radii[:, None] * model.ray_values(pose, radii, angles, threads=threads)
 
 
+def _check_mass(radii: np.ndarray, q: np.ndarray, named: tuple) -> None:
+    """Refuse rays none of which holds mass that float64 resolves (a range scanned far below
+    the model's scale: the integral underflows to 0, and mean and SD would be 0 / 0)."""
+    if not np.any(np.trapezoid(q, radii, axis=0) > 0.0):
+        name, value = named
+        raise BananagridError(f"{name} = {show(value)}: the density along these rays holds no mass that float64 "
+                              "resolves (the integral underflows to 0), so they have no mean or SD")
+
+
 def _moments(radii: np.ndarray, q: np.ndarray):
     """Ray mass, mean and SD of each column of q (trapezoid rule on the shared nodes)."""
     r = radii[:, None]
@@ -165,10 +174,7 @@ def radial_moments(model: DensityModel, angles, *, pose: Pose | None = None, r_m
     pose = _pose(model, pose)
     values = _check_angles(angles)
     radii, q = _profile(model, pose, np.atleast_1d(values), r_max, threads)
-    if not np.any(np.trapezoid(q, radii, axis=0) > 0.0):  # no ray's mass survives float64
-        name, value = ("r_max", r_max) if r_max is not None else ("angles", angles)
-        raise BananagridError(f"{name} = {show(value)}: the density along these rays holds no mass that float64 "
-                              "resolves (the integral underflows to 0), so they have no mean or SD")
+    _check_mass(radii, q, ("r_max", r_max) if r_max is not None else ("angles", angles))
     mass, mean, sd = _moments(radii, q)
     shape = values.shape
     return RadialMoments(values, mean.reshape(shape), sd.reshape(shape), mass.reshape(shape))
@@ -185,6 +191,7 @@ def radial_density(model: DensityModel, angle, r=None, *, pose: Pose | None = No
     if angle.ndim != 0:
         raise BananagridError(f"angle = {angle!r}: expected one angle (radians)")
     radii, q = _profile(model, pose, np.atleast_1d(angle), r_max, threads)
+    _check_mass(radii, q, ("r_max", r_max) if r_max is not None else ("angle", float(angle)))
     mass, mean, sd = (float(v[0]) for v in _moments(radii, q))
     if not sd > 0.0:  # the ray's spread underflows (a range scanned far below the model's scale)
         name, value = ("r_max", r_max) if r_max is not None else ("angle", float(angle))
