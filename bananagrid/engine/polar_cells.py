@@ -18,7 +18,8 @@ be trusted: near the point, or where the law's SD or the arc over which its ridg
 SD is narrower than the rule's length scale (behind the start, and at the improved
 variant's P_sigma = 0 edge, where the ridge narrows to a point). Its bearing is cut where the
 rays' clip by the cell changes (corners, tangents, the bounding lines' directions) and where
-the ridge crosses the cell's edges. Every node is evaluated by the model's own kernels
+the ridge crosses the cell's edges, and its sub-intervals turn an end of the rays' clip near the
+ridge by at most half an SD (a ray grazing a bounding line moves its crossing fast). Every node is evaluated by the model's own kernels
 through :func:`bananagrid.engine.points.evaluate_points`.
 """
 
@@ -708,7 +709,11 @@ def _swept_law_cells(model, point, own_bearings, law, cells, lattice, foreign, f
     pieces, index = split, np.array(index)
     owner, cell_r, cell_b = owner[index], cell_r[index], cell_b[index]
     probes = np.linspace([p[0] for p in pieces], [p[1] for p in pieces], LAW_PROBES, axis=1)
-    _, _, sd_probes = law(probes.ravel())
+    _, mu_probes, sd_probes = law(probes.ravel())
+    speed = _end_speeds(point, probes, mu_probes, sd_probes, cell_r, cell_b, origin, heading, foreign)
+    # an end of the rays' pieces may move faster than ``far`` per radian (a ray grazing a
+    # bounding line or an arc): the share turns over sd over that speed
+    pieces = [p[:5] + (max(p[5], v),) + p[6:] for p, v in zip(pieces, speed)]
     rules = _piece_rules(pieces, law, sd_probes.reshape(probes.shape))
     sizes = np.array([t.size for t, _ in rules])
     theta = np.concatenate([t for t, _ in rules])
@@ -723,6 +728,33 @@ def _swept_law_cells(model, point, own_bearings, law, cells, lattice, foreign, f
         shares = normal_shares(g[:, None], mu[:, None], sd[:, None], lo, hi).sum(axis=1)
         totals += np.bincount(node_owner[part], weights=w_t[part] * shares, minlength=len(cells))  # node order
     return totals
+
+
+def _end_speeds(point, probes, mu, sd, cell_r, cell_b, origin, heading, foreign) -> np.ndarray:
+    """Per piece (a row of ``probes``, LAW_PROBES bearings about ``point``), the fastest rate
+    (m per radian) at which an end of the rays' pieces in its cell (:func:`_sector_segments`)
+    moves while it lies within TAIL_SDS of the law's SD (``sd``) of its mean (``mu``, both
+    flat, at the probes): there the ray's share turns over sd / rate, which bounds the
+    bearing's sub-intervals like the law's SD over the farthest range does where the ends move
+    no faster than that range (a ray that grazes a bounding line or an arc moves its crossing
+    much faster). Finite differences between neighbouring probes of each end where the ray's
+    piece is not empty at both."""
+    n_pieces, k = probes.shape
+    lo, hi = _sector_segments(point, probes.ravel(), (np.repeat(cell_r[:, 0], k), np.repeat(cell_r[:, 1], k)),
+                              (np.repeat(cell_b[:, 0], k), np.repeat(cell_b[:, 1], k)), origin, heading, foreign)
+    shape = (n_pieces, k, lo.shape[1])
+    lo, hi = lo.reshape(shape), hi.reshape(shape)
+    mu, sd = mu.reshape(n_pieces, k, 1), sd.reshape(n_pieces, k, 1)
+    full = hi > lo
+    step = np.maximum(np.diff(probes, axis=1), 1e-300)[..., None]
+    both = full[:, 1:] & full[:, :-1] & (sd[:, 1:] > 0.0) & (sd[:, :-1] > 0.0)
+    fastest = np.zeros(n_pieces)
+    for end in (lo, hi):
+        near = np.abs(end - mu) <= TAIL_SDS * np.maximum(sd, 0.0)
+        rate = np.abs(np.diff(end, axis=1)) / step
+        counted = both & (near[:, 1:] | near[:, :-1])
+        fastest = np.maximum(fastest, np.max(np.where(counted, rate, 0.0), axis=(1, 2), initial=0.0))
+    return fastest
 
 
 def _radial_nodes(point, theta, w_t, lo, hi, rule):
