@@ -74,7 +74,7 @@ NOT_RUN = {
     "mkdocs build --strict": "test_the_site_builds_offline builds the site so (in-process, with the network refused)",
     "rerun out/figure1.rrd": "opens the viewer (a window); recordings are checked by inspect and rerun rrd verify",
     "rerun out/NAME.rrd": "opens the viewer (a window) on a placeholder; docs/viewer.md shows what it draws",
-    "bananagrid run scenes/NAME.toml": "a placeholder for each bundled scene; tests/scenes/test_scene.py runs them all",
+    "bananagrid run scenes/NAME.toml": "a placeholder for each bundled scene; tests/test_cli.py runs every one",
     "pytest tests/models/test_heading.py": "part of the suite itself",
     "python tests/reproduce_tables.py": "about 4 minutes; tests/models/test_paper_tables.py checks the same tables",
     "bananagrid bench --kernels cat-cells,butterly-cells --repeat 3": "a minute of timing (see tests/bench/test_bench.py)",
