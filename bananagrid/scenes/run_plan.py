@@ -25,7 +25,7 @@ from ..planning.plan_files import plan_collection
 from ..planning.rectangles import SearchPlan, search_rectangles
 from ..planning.regions import RegionPlan, search_regions
 from ..recording.plan import log_plan, plan_extent, plan_values
-from ..recording.timeline import set_elapsed
+from ..recording.timeline import set_times
 from ..results import Raster
 from .load import Scene
 
@@ -99,8 +99,9 @@ def plan_map(scene: Scene, *, threads: int | None = None) -> Raster:
 
 
 def record_plan(rec, scene: Scene, plan: ScenePlan) -> None:
-    """Log ``plan`` at its time (:func:`bananagrid.recording.plan.log_plan`)."""
-    set_elapsed(rec, scene.plan.t)
+    """Log ``plan`` at its time on the elapsed and (geographic scenes) UTC timelines
+    (:func:`bananagrid.recording.plan.log_plan`)."""
+    set_times(rec, scene.plan.t, scene.geo)  # both timelines: a geographic scene opens on utc
     log_plan(rec, plan.cells, plan.allocation, plan.rectangles, plan.bands, layer=scene.plan.layer, t=scene.plan.t)
 
 

@@ -16,6 +16,8 @@ from hypothesis import strategies as st
 import bananagrid as bg
 from bananagrid.cli import main
 from bananagrid.geo.dataset import read_maps
+from bananagrid.recording.readback import open_recording, recording_rows
+from bananagrid.recording.timeline import ELAPSED, UTC, elapsed_nanos, utc_nanos
 from bananagrid.recording.inspect import format_inspection, inspect_recording
 from bananagrid.recording.readback import read_depth_image
 from bananagrid.scenes.load import SEVERAL_PERIODS, parse_scene
@@ -208,6 +210,12 @@ def test_a_plan_on_another_layer_and_time(tmp_path):
     # 1e-12: as above
     assert row["plan"]["pos"] == pytest.approx(bg.allocate(cells, 8.0e6, law="definite").pos, abs=1e-12)
     assert "rectangles_pos" not in row["plan"] and "bands_pos" not in row["plan"]
+    # logged at its own time on both timelines (the last job's utc time was 900 s): a geographic
+    # recording opens on utc, where a plan at another time would otherwise be out of place
+    reader, store = open_recording(tmp_path / "plan_ship.rrd")
+    times = {(times.get(ELAPSED, (None, None))[1], times.get(UTC, (None, None))[1])
+             for name, times, _ in recording_rows(reader, store) if name == "/plan/coverage"}
+    assert times == {(elapsed_nanos(600.0), utc_nanos(scene.geo.utc(600.0)))}
 
 
 BAD = [
