@@ -28,6 +28,8 @@ __all__ = [
     "format_level",
     "label_positions",
     "mass_inside",
+    "points_along",
+    "polyline_length",
     "mass_levels",
     "mass_regions",
 ]
@@ -260,8 +262,8 @@ def label_positions(
         pieces = [p for p in pieces if len(p) >= 2]
         if not pieces:
             continue
-        longest = max(pieces, key=_length)
-        points = _along(longest, candidates)
+        longest = max(pieces, key=polyline_length)
+        points = points_along(longest, candidates)
         if placed or fixed:
             others = np.array(fixed + list(placed.values()))
             # Labels are text lines, several times wider than tall: east-west gaps count less.
@@ -275,11 +277,12 @@ def label_positions(
     return placed
 
 
-def _length(piece: np.ndarray) -> float:
+def polyline_length(piece: np.ndarray) -> float:
+    """Length of a polyline ``(n, 2)``."""
     return float(np.sum(np.hypot(*np.diff(piece, axis=0).T)))
 
 
-def _along(piece: np.ndarray, n: int) -> np.ndarray:
+def points_along(piece: np.ndarray, n: int) -> np.ndarray:
     """``n`` points evenly spaced by arc length along a polyline (the ends included)."""
     steps = np.hypot(*np.diff(piece, axis=0).T)
     s = np.concatenate([[0.0], np.cumsum(steps)])

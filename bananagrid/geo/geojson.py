@@ -69,7 +69,8 @@ from .frame import iso_utc
 from .libraries import require
 from .panels import check_panels, frame_of
 
-__all__ = ["COORDINATE_DECIMALS", "area_features", "write_geojson"]
+__all__ = ["COORDINATE_DECIMALS", "area_features", "write_geojson", "lonlat_panels", "panel_areas", "polygons_lonlat",
+           "line_lonlat"]
 
 #: Decimal places of the longitudes and latitudes: 1e-7 degrees is 1.1 cm of latitude.
 COORDINATE_DECIMALS = 7
@@ -150,23 +151,10 @@ def write_geojson(path: str | os.PathLike, panels: Sequence, frame=None,
         a search area smaller than the coordinates' precision, or a failure while writing
         (nothing is left behind).
     """
-    checked = check_panels(panels)
-    frame = frame_of(checked, frame)
-    if frame is None:
-        raise BananagridError(
-            "GeoJSON search areas are in longitude and latitude: the maps need a geographic frame "
-            "(a scene's [geo] table, or frame=GeoFrame(...))"
-        )
-    levels = mass_levels(levels)
-    x0, x1, y0, y1 = checked[0].raster.grid.extent
-    frame.check_round_trip((x0, x1), (y0, y1))  # polygons placed where the model put them, to a millimetre
-    known = dict(areas or {})
+    checked, frame, levels = lonlat_panels("GeoJSON", panels, frame, levels)
     features = []
     for panel in checked:
-        found = known.get((panel.layer, panel.t))
-        if found is None or [a.level for a in found] != list(levels):
-            found = search_areas(panel.raster, levels)
-        features += area_features(panel.layer, panel.t, found, frame)
+        features += area_features(panel.layer, panel.t, panel_areas(panel, areas, levels), frame)
     collection = {
         "type": "FeatureCollection",
         "bananagrid": {"version": __version__, "title": title, "frame": frame.describe(),
@@ -176,6 +164,33 @@ def write_geojson(path: str | os.PathLike, panels: Sequence, frame=None,
     with writing(path, "GeoJSON file", stage=stage) as partial:
         partial.write_text(json.dumps(collection, allow_nan=False) + "\n", encoding="utf-8")
     return Path(path)
+
+
+def lonlat_panels(what: str, panels: Sequence, frame, levels) -> tuple[list, object, tuple]:
+    """What a writer of search areas in longitude and latitude (GeoJSON, KML) checks first: the
+    panels (:func:`~bananagrid.geo.panels.check_panels`), their frame (refused without one), the
+    levels, and the frame's round trip over the grid (polygons placed where the model put them,
+    to a millimetre). ``what`` names the file kind in the refusal."""
+    checked = check_panels(panels)
+    frame = frame_of(checked, frame)
+    if frame is None:
+        raise BananagridError(
+            f"{what} search areas are in longitude and latitude: the maps need a geographic frame "
+            "(a scene's [geo] table, or frame=GeoFrame(...))"
+        )
+    levels = mass_levels(levels)
+    x0, x1, y0, y1 = checked[0].raster.grid.extent
+    frame.check_round_trip((x0, x1), (y0, y1))
+    return checked, frame, levels
+
+
+def panel_areas(panel, areas: Mapping | None, levels) -> list[SearchArea]:
+    """A panel's search areas at ``levels``: those in ``areas`` (by ``(layer, t)``) if found at
+    these levels already, else found here."""
+    found = (areas or {}).get((panel.layer, panel.t))
+    if found is None or [a.level for a in found] != list(levels):
+        found = search_areas(panel.raster, levels)
+    return found
 
 
 def _to_lonlat(geometry, frame, shapely):

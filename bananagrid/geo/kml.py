@@ -29,13 +29,10 @@ from pathlib import Path
 
 import numpy as np
 
-from ..contours import DEFAULT_MASS_LEVELS, mass_levels
-from ..validate import BananagridError
+from ..contours import DEFAULT_MASS_LEVELS
 from ..version import __version__
-from .areas import search_areas
 from .files import writing
-from .geojson import COORDINATE_DECIMALS, area_features
-from .panels import check_panels, frame_of
+from .geojson import COORDINATE_DECIMALS, area_features, lonlat_panels, panel_areas
 
 __all__ = ["KML_NAMESPACE", "write_kml", "level_style", "STYLE_COLOURS"]
 
@@ -92,17 +89,7 @@ def write_kml(path: str | os.PathLike, panels: Sequence, frame=None,
         round trip over the grid is off by more than 1 mm, a search area smaller than the
         coordinates' precision, or a failure while writing (nothing is left behind).
     """
-    checked = check_panels(panels)
-    frame = frame_of(checked, frame)
-    if frame is None:
-        raise BananagridError(
-            "KML search areas are in longitude and latitude: the maps need a geographic frame "
-            "(a scene's [geo] table, or frame=GeoFrame(...))"
-        )
-    levels = mass_levels(levels)
-    x0, x1, y0, y1 = checked[0].raster.grid.extent
-    frame.check_round_trip((x0, x1), (y0, y1))
-    known = dict(areas or {})
+    checked, frame, levels = lonlat_panels("KML", panels, frame, levels)
     ET.register_namespace("", KML_NAMESPACE)
     kml = ET.Element(_tag("kml"))
     document = _child(kml, "Document")
@@ -122,10 +109,7 @@ def write_kml(path: str | os.PathLike, panels: Sequence, frame=None,
         if marks and layer in marks:
             _landmarks(folder, layer, marks[layer], frame)
         for panel in sorted(series, key=lambda p: p.t):
-            found = known.get((panel.layer, panel.t))
-            if found is None or [a.level for a in found] != list(levels):
-                found = search_areas(panel.raster, levels)
-            _time_folder(folder, panel, area_features(panel.layer, panel.t, found, frame))
+            _time_folder(folder, panel, area_features(panel.layer, panel.t, panel_areas(panel, areas, levels), frame))
     ET.indent(kml)
     with writing(path, "KML file", stage=stage) as partial:
         ET.ElementTree(kml).write(partial, encoding="utf-8", xml_declaration=True)

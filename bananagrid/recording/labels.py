@@ -29,6 +29,8 @@ from dataclasses import dataclass, field
 import numpy as np
 import rerun as rr
 
+from ..contours import points_along, polyline_length
+
 __all__ = [
     "LabelBoard", "PANEL_POINTS", "PANEL_SLACK", "TEXT_HEIGHT_POINTS", "CHAR_POINTS", "BOX_PADDING_POINTS", "LABEL_GAP_POINTS",
     "metres_per_point", "text_box", "boxes_overlap", "line_candidates", "point_candidates", "leader",
@@ -90,10 +92,10 @@ def _inside(box, frame) -> bool:
 
 def line_candidates(pieces: Sequence[np.ndarray], n: int = LINE_CANDIDATES) -> np.ndarray:
     """``n`` points evenly spaced along each piece of a line (longest piece first), (m, 2)."""
-    pieces = sorted((np.asarray(p, dtype=float)[:, :2] for p in pieces if len(p) >= 2), key=_length, reverse=True)
+    pieces = sorted((np.asarray(p, dtype=float)[:, :2] for p in pieces if len(p) >= 2), key=polyline_length, reverse=True)
     if not pieces:
         return np.empty((0, 2))
-    return np.concatenate([_along(p, n) for p in pieces])
+    return np.concatenate([points_along(p, n) for p in pieces])
 
 
 def point_candidates(point: Sequence[float], text: str, scale: float) -> np.ndarray:
@@ -186,20 +188,6 @@ class LabelBoard:
             return None
         b = np.array(self.boxes)
         return float(b[:, 0].min()), float(b[:, 1].max()), float(b[:, 2].min()), float(b[:, 3].max())
-
-
-def _length(piece: np.ndarray) -> float:
-    return float(np.sum(np.hypot(*np.diff(piece, axis=0).T)))
-
-
-def _along(piece: np.ndarray, n: int) -> np.ndarray:
-    """``n`` points evenly spaced by arc length along a polyline (the ends included)."""
-    steps = np.hypot(*np.diff(piece, axis=0).T)
-    s = np.concatenate([[0.0], np.cumsum(steps)])
-    if s[-1] == 0.0:
-        return piece[:1].copy()
-    targets = np.linspace(0.0, s[-1], n)
-    return np.column_stack([np.interp(targets, s, piece[:, 0]), np.interp(targets, s, piece[:, 1])])
 
 
 def leader(point: Sequence[float], anchor: Sequence[float]) -> np.ndarray | None:

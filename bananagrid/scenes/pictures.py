@@ -97,6 +97,20 @@ class Picture:
     mass_levels: tuple = DEFAULT_MASS_LEVELS
 
 
+def _plot_input(source) -> tuple[Path, str]:
+    """``source`` as a path and its lower-case suffix, refused unless one of :data:`INPUTS` and a
+    regular file (a FIFO would wait for a writer)."""
+    path = Path(source)
+    suffix = path.suffix.lower()
+    if suffix not in INPUTS:
+        raise BananagridError(
+            f"{path}: cannot plot a {suffix or 'suffix-less'} file; give one of {', '.join(INPUTS)} "
+            "(a scene, or a recording, arrays or NetCDF maps written by bananagrid run)"
+        )
+    regular_file(path, "a file to plot")
+    return path, suffix
+
+
 def read_picture(source: str | os.PathLike, *, layers: Sequence[str] = (), t: float | None = None,
                  threads: int | None = None, step: float | None = None) -> Picture:
     """The panels of ``source``: every layer (or those named in ``layers``) at time ``t``
@@ -122,14 +136,7 @@ def read_picture(source: str | os.PathLike, *, layers: Sequence[str] = (), t: fl
         One line: an unknown suffix (naming those accepted), a missing file, an array scene,
         a time the file does not hold (listing its times), an unknown layer (listing them).
     """
-    path = Path(source)
-    suffix = path.suffix.lower()
-    if suffix not in INPUTS:
-        raise BananagridError(
-            f"{path}: cannot plot a {suffix or 'suffix-less'} file; give one of {', '.join(INPUTS)} "
-            "(a scene, or a recording, arrays or NetCDF maps written by bananagrid run)"
-        )
-    regular_file(path, "a file to plot")  # a FIFO would wait for a writer
+    path, suffix = _plot_input(source)
     if t is not None and not (isinstance(t, (int, float)) and np.isfinite(t)):
         raise BananagridError(f"--t = {show(t)}: expected a finite time in seconds")
     if step is not None and suffix != ".toml":
@@ -163,14 +170,7 @@ def read_timeline(source: str | os.PathLike, *, layers: Sequence[str] = (), thre
 
     Arguments and errors as for :func:`read_picture`.
     """
-    path = Path(source)
-    suffix = path.suffix.lower()
-    if suffix not in INPUTS:
-        raise BananagridError(
-            f"{path}: cannot plot a {suffix or 'suffix-less'} file; give one of {', '.join(INPUTS)} "
-            "(a scene, or a recording, arrays or NetCDF maps written by bananagrid run)"
-        )
-    regular_file(path, "a file to plot")
+    path, suffix = _plot_input(source)
     if step is not None and suffix != ".toml":
         raise BananagridError(f"step = {show(step)}: only a scene (.toml) is computed at another step")
     heading, levels, found = _panels(path, None, threads, step, every=True)

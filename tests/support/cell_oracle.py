@@ -446,6 +446,30 @@ def _sign_changes(f, a, b, scan):
     return roots
 
 
+def sector_clip_breaks(point, origin, heading, ranges, bearings) -> set:
+    """Directions from ``point`` at which its rays' clip by the lattice cell (``ranges`` x
+    ``bearings`` clockwise from ``heading`` about ``origin``) changes: towards the cell's
+    corners and the lattice's origin, tangent to the cell's two circles, and along the bounding
+    rays' lines (there a ray's crossing with one runs off to infinity)."""
+    (px, py), (ox, oy) = (float(c) for c in point), (float(c) for c in origin)
+    (r0, r1), (b0, b1) = ranges, bearings
+    dx, dy = px - ox, py - oy
+    distance = math.hypot(dx, dy)
+    breaks = set()
+    for radius in (r0, r1):
+        for b in (b0, b1):
+            breaks.add(math.atan2(ox + radius * math.sin(heading + b) - px, oy + radius * math.cos(heading + b) - py))
+    if distance > 0.0:
+        towards = math.atan2(-dx, -dy)
+        breaks.add(towards)
+        for radius in (r0, r1):
+            if 0.0 < radius <= distance * (1.0 + 1e-12):  # on the circle: at right angles
+                half = math.asin(min(1.0, radius / distance))
+                breaks |= {towards - half, towards + half}
+    breaks |= {heading + b + turn for b in (b0, b1) for turn in (0.0, math.pi)}
+    return breaks
+
+
 def banana_lattice_cell(model, origin, heading, ranges, bearings, eps=1e-12, scan=4001):
     """The probability of a polar lattice cell (``ranges`` = (r0, r1), ``bearings`` = (b0, b1)
     clockwise from ``heading`` about ``origin``, any origin) under a rough or improved
@@ -469,23 +493,10 @@ def banana_lattice_cell(model, origin, heading, ranges, bearings, eps=1e-12, sca
     (r0, r1), (b0, b1) = (float(v) for v in ranges), (float(v) for v in bearings)
     ranges, bearings = (r0, r1), (b0, b1)
     ox, oy = (float(c) for c in origin)
-    dx, dy = sx - ox, sy - oy
-    distance = math.hypot(dx, dy)
     lo_t, hi_t = h - math.pi, h + math.pi
     unwrap = lambda t: lo_t + (t - lo_t) % (2.0 * math.pi)  # noqa: E731
-    breaks = set()
-    for radius in (r0, r1):
-        for b in (b0, b1):
-            breaks.add(math.atan2(ox + radius * math.sin(heading + b) - sx, oy + radius * math.cos(heading + b) - sy))
-    if distance > 0.0:
-        towards = math.atan2(-dx, -dy)
-        breaks.add(towards)
-        for radius in (r0, r1):
-            if 0.0 < radius <= distance * (1.0 + 1e-12):  # on the circle: at right angles
-                half = math.asin(min(1.0, radius / distance))
-                breaks |= {towards - half, towards + half}
-    # along a bounding ray's line the ray's crossing with it runs off to infinity
-    breaks |= {heading + b + turn for b in (b0, b1) for turn in (0.0, math.pi)}
+    dx, dy = sx - ox, sy - oy
+    breaks = sector_clip_breaks((sx, sy), (ox, oy), heading, ranges, bearings)
     if model.variant == "improved" and model.sigma_positive_limit < math.pi:
         breaks |= {h - model.sigma_positive_limit, h + model.sigma_positive_limit}
 
@@ -553,20 +564,7 @@ def point_lattice_cell(density, point, origin, heading, ranges, bearings, seams,
     px, py = (float(c) for c in point)
     ox, oy = (float(c) for c in origin)
     seams = [tuple(float(v) for v in s) for s in np.asarray(seams, dtype=float).reshape(-1, 3)]
-    dx, dy = px - ox, py - oy
-    distance = math.hypot(dx, dy)
-    breaks = set()
-    for radius in (r0, r1):
-        for b in (b0, b1):
-            breaks.add(math.atan2(ox + radius * math.sin(heading + b) - px, oy + radius * math.cos(heading + b) - py))
-    if distance > 0.0:
-        towards = math.atan2(-dx, -dy)
-        breaks.add(towards)
-        for radius in (r0, r1):
-            if 0.0 < radius <= distance * (1.0 + 1e-12):  # on the circle: at right angles
-                half = math.asin(min(1.0, radius / distance))
-                breaks |= {towards - half, towards + half}
-    breaks |= {heading + b + turn for b in (b0, b1) for turn in (0.0, math.pi)}
+    breaks = sector_clip_breaks((px, py), (ox, oy), heading, ranges, bearings)
     for qx, qy, beta in seams:
         breaks |= {beta, beta + math.pi}
         if (qx, qy) != (px, py):
