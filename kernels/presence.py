@@ -617,10 +617,168 @@ def bvn_rectangle(x0: Any, x1: Any, y0: Any, y1: Any, r: Any, bvn_rule: wp.array
             - bvn_upper(a0, b1, rr, bvn_rule) + bvn_upper(a1, b1, rr, bvn_rule))
 
 
-#: Layout of a grid component row: log weight unused here, weight, mean x, mean y, sd x, sd y,
-#: correlation, and the whitening (B11, B21, B22) and density normaliser w / (2 pi det L).
+#: Layout of a grid component row: weight, mean x, mean y, sd x, sd y, correlation, and the
+#: whitening (B11, B21, B22) and density normaliser w / (2 pi det L).
 (G_W, G_MX, G_MY, G_SX, G_SY, G_R, G_B11, G_B21, G_B22, G_NORM) = range(10)
 GRID_COLUMNS = 10
+
+#: Standardised edges are clamped to +-EDGE_CLAMP: beyond 38.5 SDs every normal tail is 0 in
+#: float64, so no probability changes, and squares and products of edges stay finite.
+EDGE_CLAMP = 1.0e30
+
+#: Layout of a component's slab of ``bvn_nodes`` (shape (6, 20)): rows 0-4 per Gauss-Legendre
+#: node (BVN_SN: sin of the node's angle, or x_i^2 of the |r| >= 0.925 rule; BVN_W: its weight,
+#: times a / 2 in the |r| >= 0.925 rule; BVN_RS, BVN_RS1, BVN_RS2: sqrt(1 - x_i^2), 1 - that,
+#: 2 (1 + that)), row 5 the component's scalars (BVN_KIND, BVN_N, BVN_ASR, BVN_ASS, BVN_A).
+(BVN_SN, BVN_W, BVN_RS, BVN_RS1, BVN_RS2) = range(5)
+(BVN_KIND, BVN_N, BVN_ASR, BVN_ASS, BVN_A) = range(5)
+BVN_SCALARS = 5
+#: BVN_KIND: the correlation is 0 (product of tails), |r| < 0.925 (Drezner-Wesolowsky in
+#: asin r), |r| >= 0.925 (Genz's expansion about r = +-1).
+(BVN_PRODUCT, BVN_ASIN, BVN_NEAR_ONE) = range(3)
+
+
+@wp.kernel
+def bvn_node_table(
+    comp: wp.array2d(dtype=wp.float64),
+    bvn_rule: wp.array2d(dtype=wp.float64),
+    nodes: wp.array3d(dtype=wp.float64),
+):
+    """The nodes of :func:`bvn_upper` that depend on a component's correlation only, node ``i``
+    of component ``c`` (launched on (components, 20)), with the same expressions as
+    :func:`bvn_upper` for the component's own r (Drezner-Wesolowsky's sin(asin(r) (x_i + 1) / 2);
+    Genz's x_i^2 and sqrt(1 - x_i^2) near |r| = 1), so that :func:`tail_orthant` evaluates the
+    same numbers per corner that :func:`bvn_upper` evaluates per call. A reflected orthant has
+    correlation -r: sin and asin are odd, so its nodes are these negated, bit for bit."""
+    c, i = wp.tid()
+    zero = wp.float64(0.0)
+    one = wp.float64(1.0)
+    r = comp[c, G_R]
+    row = 4
+    n = 20
+    if wp.abs(r) < wp.float64(0.3):
+        row = 0
+        n = 6
+    elif wp.abs(r) < wp.float64(0.75):
+        row = 2
+        n = 12
+    kind = BVN_NEAR_ONE
+    if r == zero:
+        kind = BVN_PRODUCT
+    elif wp.abs(r) < wp.float64(0.925):
+        kind = BVN_ASIN
+    ass = (one - r) * (one + r)
+    a = wp.sqrt(wp.max(ass, zero))
+    if i == 0:
+        nodes[c, BVN_SCALARS, BVN_KIND] = wp.float64(float(kind))
+        nodes[c, BVN_SCALARS, BVN_N] = wp.float64(float(n))
+        nodes[c, BVN_SCALARS, BVN_ASR] = wp.asin(r)
+        nodes[c, BVN_SCALARS, BVN_ASS] = ass
+        nodes[c, BVN_SCALARS, BVN_A] = a
+    if i < n:
+        if kind == BVN_ASIN:
+            nodes[c, BVN_SN, i] = wp.sin(wp.float64(0.5) * wp.asin(r) * (bvn_rule[row, i] + one))
+            nodes[c, BVN_W, i] = bvn_rule[row + 1, i]
+        elif kind == BVN_NEAR_ONE:
+            half = wp.float64(0.5) * a
+            xs = half * (bvn_rule[row, i] + one)
+            xs = xs * xs
+            rs = wp.sqrt(one - xs)
+            nodes[c, BVN_SN, i] = xs
+            nodes[c, BVN_W, i] = half * bvn_rule[row + 1, i]
+            nodes[c, BVN_RS, i] = rs
+            nodes[c, BVN_RS1, i] = one - rs
+            nodes[c, BVN_RS2, i] = wp.float64(2.0) * (one + rs)
+
+
+@wp.func
+def tail_orthant(a: Any, qa: Any, b: Any, qb: Any, c: int, nodes: wp.array3d(dtype=Any)):
+    """The tail orthant of the corner (a, b) of component c's standardised edges: the quadrant
+    that faces away from the mean on both axes, P(s X > |a|, t Y > |b|) with s, t the signs of
+    a and b (+ at 0), given qa = Q(|a|) and qb = Q(|b|).
+
+    It is :func:`bvn_upper` (|a|, |b|, s t r), the orthant :func:`bvn_rectangle` takes for a
+    cell with this corner on the side away from the mean, with the correlation's nodes read
+    from ``nodes`` (:func:`bvn_node_table`) instead of recomputed: the same operations on the
+    same numbers, so the same value, bit for bit, at a cost of one exp per node (two near
+    |r| = 1) instead of a sin and an exp per node, an asin and two normal tails."""
+    zero = type(a)(0.0)
+    one = type(a)(1.0)
+    two_pi = type(a)(6.283185307179586)
+    kind = int(nodes[c, BVN_SCALARS, BVN_KIND])
+    if kind == BVN_PRODUCT:
+        return zero + qa * qb
+    h = wp.abs(a)
+    k = wp.abs(b)
+    sign = one
+    if (a < zero and b >= zero) or (a >= zero and b < zero):
+        sign = -one
+    n = int(nodes[c, BVN_SCALARS, BVN_N])
+    hk = h * k
+    bvn = zero
+    if kind == BVN_ASIN:
+        hs = type(a)(0.5) * (h * h + k * k)
+        for i in range(n):
+            sn = sign * nodes[c, BVN_SN, i]
+            bvn += nodes[c, BVN_W, i] * wp.exp((sn * hk - hs) / (one - sn * sn))
+        bvn = bvn * (sign * nodes[c, BVN_SCALARS, BVN_ASR]) / (type(a)(2.0) * two_pi)
+        return bvn + qa * qb
+    # the orthant's correlation s t r: its sign decides Genz's form near |r| = 1
+    if nodes[c, BVN_SCALARS, BVN_ASR] < zero:
+        sign = -sign
+    kk = k
+    if sign < zero:
+        kk = -k
+        hk = -hk
+    ass = nodes[c, BVN_SCALARS, BVN_ASS]
+    if ass > zero:
+        aa = nodes[c, BVN_SCALARS, BVN_A]
+        bs = (h - kk) * (h - kk)
+        cc = (type(a)(4.0) - hk) * type(a)(0.125)
+        d = (type(a)(12.0) - hk) * type(a)(0.0625)
+        asr = type(a)(-0.5) * (bs / ass + hk)
+        if asr > type(a)(-100.0):
+            bvn = aa * wp.exp(asr) * (one - cc * (bs - ass) * (one - d * bs / type(a)(5.0)) / type(a)(3.0)
+                                      + cc * d * ass * ass / type(a)(5.0))
+        if -hk < type(a)(100.0):
+            bb = wp.sqrt(bs)
+            bvn -= (wp.exp(type(a)(-0.5) * hk) * type(a)(SQRT_2PI) * normal_cdf(-bb / aa) * bb
+                    * (one - cc * bs * (one - d * bs / type(a)(5.0)) / type(a)(3.0)))
+        for i in range(n):
+            xs = nodes[c, BVN_SN, i]
+            rs = nodes[c, BVN_RS, i]
+            asr2 = type(a)(-0.5) * (bs / xs + hk)
+            if asr2 > type(a)(-100.0):
+                bvn += nodes[c, BVN_W, i] * wp.exp(asr2) * (
+                    wp.exp(-hk * nodes[c, BVN_RS1, i] / nodes[c, BVN_RS2, i]) / rs - (one + cc * xs * (one + d * xs)))
+        bvn = -bvn / two_pi
+    if sign > zero:
+        if h >= kk:
+            return bvn + qa
+        return bvn + qb
+    return -bvn
+
+
+@wp.func
+def standardised(x: Any, mean: Any, sd: Any):
+    """(x - mean) / sd, clamped to +-EDGE_CLAMP."""
+    return wp.clamp((x - mean) / sd, type(x)(-EDGE_CLAMP), type(x)(EDGE_CLAMP))
+
+
+@wp.kernel
+def grid_edge_tails(
+    edges: wp.array(dtype=wp.float64),
+    comp: wp.array2d(dtype=wp.float64),
+    axis: int,
+    std: wp.array2d(dtype=wp.float64),
+    tail: wp.array2d(dtype=wp.float64),
+):
+    """Component c's standardised edge j on ``axis`` (0: x, 1: y) and its tail Q(|edge|)
+    (launched on (components, edges))."""
+    c, j = wp.tid()
+    a = standardised(edges[j], comp[c, G_MX + axis], comp[c, G_SX + axis])
+    std[c, j] = a
+    tail[c, j] = normal_sf(wp.abs(a))
 
 
 @wp.kernel
@@ -628,48 +786,116 @@ def grid_cells(
     x_edges: wp.array(dtype=Any),
     y_edges: wp.array(dtype=Any),
     row0: int,
+    row1: int,
+    tile_rows: int,
+    tile_cols: int,
+    slot0: int,
     comp: wp.array2d(dtype=Any),
     n_comp: int,
     bvn_rule: wp.array2d(dtype=Any),
+    nodes: wp.array3d(dtype=Any),
+    col_std: wp.array2d(dtype=Any),
+    col_tail: wp.array2d(dtype=Any),
+    below: wp.array3d(dtype=Any),
+    acc: wp.array2d(dtype=Any),
     density: wp.array2d(dtype=Any),
     prob: wp.array2d(dtype=Any),
 ):
-    """Row ``row0 + tid``: the mixture's density at each cell centre and the exact probability
-    of each rectangle [x_edges[j], x_edges[j+1]] x [y_edges[i], y_edges[i+1]],
+    """A tile of cells, ``tile_rows`` x ``tile_cols`` from row ``row0`` (tiles numbered across
+    first; rows stop at ``row1``): the mixture's density at each cell centre and the exact
+    probability of each rectangle [x_edges[j], x_edges[j+1]] x [y_edges[i], y_edges[i+1]],
 
-        P_ij = sum_c w_c [U(a0, b0) - U(a1, b0) - U(a0, b1) + U(a1, b1)],
+        P_ij = sum_c w_c [V(n_x, n_y) - V(f_x, n_y) - V(n_x, f_y) + V(f_x, f_y)],
 
-    U = :func:`bvn_upper` at the component's standardised (and reflected, see
-    :func:`bvn_rectangle`) edges a = (x - mu_x) / sd_x, b = (y - mu_y) / sd_y.
+    V the tail orthants (:func:`tail_orthant`) at the cell's corners, n and f the edges near
+    to and far from the component's mean on each axis, as :func:`bvn_rectangle` takes them.
 
-    ``x_edges``, ``y_edges``, ``comp`` and ``bvn_rule`` are float64 in every overload: the four
-    orthant terms cancel (see the module docstring), so the arithmetic is float64 and only the
-    stores convert to the dtype of ``density`` and ``prob`` (one rounding in the float32
-    overload)."""
-    i = row0 + wp.tid()
-    ya = y_edges[i]
-    yb = y_edges[i + 1]
-    yc = type(ya)(0.5) * (ya + yb)
-    for j in range(x_edges.shape[0] - 1):
-        xa = x_edges[j]
-        xb = x_edges[j + 1]
-        xc = type(ya)(0.5) * (xa + xb)
-        dens = type(ya)(0.0)
-        p = type(ya)(0.0)
+    Shared corners: a corner's tail orthant depends on the corner alone, not on the cell, so
+    the tile walks its rows from south to north, evaluates each corner once per component and
+    keeps the row of corners below in ``below[slot]`` (``slot0 + tid``; ``acc[slot]``
+    collects a row of cells over the components). A cell whose rectangle holds the component's
+    mean coordinate on an axis (edges of both signs: its four corners' orthants face different
+    ways) is evaluated by :func:`bvn_rectangle` itself: at most one row and one column of cells
+    a component. So every cell is the same expression on the same numbers as the per-cell form
+    (the module docstring): the same value with one orthant a component per cell (plus one row
+    a tile) instead of four.
+
+    ``x_edges``, ``y_edges``, ``comp``, ``bvn_rule``, ``nodes``, ``col_std`` (component c's
+    standardised column edges, clamped), ``col_tail`` (their Q(|a|)) and the scratch arrays are
+    float64 in every overload: the four orthant terms cancel, so the arithmetic is float64 and
+    only the stores convert to the dtype of ``density`` and ``prob``."""
+    t = wp.tid()
+    nx = x_edges.shape[0] - 1
+    n_tiles_x = (nx + tile_cols - 1) // tile_cols
+    tile_y = t // n_tiles_x
+    j0 = (t - tile_y * n_tiles_x) * tile_cols
+    j1 = wp.min(nx, j0 + tile_cols)
+    i0 = row0 + tile_y * tile_rows
+    i1 = wp.min(row1, i0 + tile_rows)
+    slot = slot0 + t
+    y_first = y_edges[i0]
+    zero = type(y_first)(0.0)
+    for c in range(n_comp):
+        b = standardised(y_edges[i0], comp[c, G_MY], comp[c, G_SY])
+        qb = normal_sf(wp.abs(b))
+        for j in range(j0, j1 + 1):
+            below[slot, c, j - j0] = tail_orthant(col_std[c, j], col_tail[c, j], b, qb, c, nodes)
+    for i in range(i0 + 1, i1 + 1):
+        for j in range(j0, j1):
+            acc[slot, j - j0] = zero
         for c in range(n_comp):
-            dx = xc - comp[c, G_MX]
-            dy = yc - comp[c, G_MY]
-            u1 = comp[c, G_B11] * dx
-            u2 = comp[c, G_B21] * dx + comp[c, G_B22] * dy
-            dens += comp[c, G_NORM] * wp.exp(type(ya)(-0.5) * (u1 * u1 + u2 * u2))
-            sx = comp[c, G_SX]
-            sy = comp[c, G_SY]
-            p += comp[c, G_W] * bvn_rectangle(
-                (xa - comp[c, G_MX]) / sx, (xb - comp[c, G_MX]) / sx,
-                (ya - comp[c, G_MY]) / sy, (yb - comp[c, G_MY]) / sy, comp[c, G_R], bvn_rule,
-            )
-        density[i, j] = density.dtype(dens)
-        prob[i, j] = prob.dtype(p)
+            w = comp[c, G_W]
+            r = comp[c, G_R]
+            b0 = standardised(y_edges[i - 1], comp[c, G_MY], comp[c, G_SY])
+            b1 = standardised(y_edges[i], comp[c, G_MY], comp[c, G_SY])
+            qb = normal_sf(wp.abs(b1))
+            row_holds_mean = b0 < zero and b1 >= zero
+            left = tail_orthant(col_std[c, j0], col_tail[c, j0], b1, qb, c, nodes)
+            below_left = below[slot, c, 0]
+            below[slot, c, 0] = left
+            for j in range(j0 + 1, j1 + 1):
+                a0 = col_std[c, j - 1]
+                a1 = col_std[c, j]
+                v = tail_orthant(a1, col_tail[c, j], b1, qb, c, nodes)
+                below_right = below[slot, c, j - j0]
+                cell = zero
+                if row_holds_mean or (a0 < zero and a1 >= zero):
+                    cell = bvn_rectangle(a0, a1, b0, b1, r, bvn_rule)
+                else:
+                    # near and far corners on each axis, in bvn_rectangle's order
+                    nn = below_left
+                    fn = below_right
+                    nf = left
+                    ff = v
+                    if a0 < zero:
+                        nn = below_right
+                        fn = below_left
+                        nf = v
+                        ff = left
+                    if b0 < zero:
+                        tn = nn
+                        tf = fn
+                        nn = nf
+                        fn = ff
+                        nf = tn
+                        ff = tf
+                    cell = nn - fn - nf + ff
+                acc[slot, j - 1 - j0] += w * cell
+                below[slot, c, j - j0] = v
+                below_left = below_right
+                left = v
+        yc = type(zero)(0.5) * (y_edges[i - 1] + y_edges[i])
+        for j in range(j0, j1):
+            xc = type(zero)(0.5) * (x_edges[j] + x_edges[j + 1])
+            dens = zero
+            for c in range(n_comp):
+                dx = xc - comp[c, G_MX]
+                dy = yc - comp[c, G_MY]
+                u1 = comp[c, G_B11] * dx
+                u2 = comp[c, G_B21] * dx + comp[c, G_B22] * dy
+                dens += comp[c, G_NORM] * wp.exp(type(zero)(-0.5) * (u1 * u1 + u2 * u2))
+            density[i - 1, j] = density.dtype(dens)
+            prob[i - 1, j] = prob.dtype(acc[slot, j - j0])
 
 
 @wp.kernel
@@ -720,8 +946,10 @@ def _register_overloads():
         overload_on_use(frustum_cells, scalar,
                         {**cells, "tau_lo": vec, "tau_hi": vec, "depth_lo": scalar, "depth_hi": scalar})
         # float64 geometry and arithmetic in both overloads (cancellation, see grid_cells)
+        cube64 = wp.array3d(dtype=wp.float64)
         overload_on_use(grid_cells, scalar, {"x_edges": vec64, "y_edges": vec64, "comp": mat64, "bvn_rule": mat64,
-                                             "density": mat, "prob": mat})
+                                             "nodes": cube64, "col_std": mat64, "col_tail": mat64, "below": cube64,
+                                             "acc": mat64, "density": mat, "prob": mat})
         overload_on_use(rectangles, scalar, {"lims": mat64, "bvn_rule": mat64, "out": vec})
         overload_on_use(special_functions, scalar, {"xs": vec, "gl": mat, "out": mat})
 

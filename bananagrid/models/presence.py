@@ -616,6 +616,9 @@ def _bvn_rule() -> np.ndarray:
     return out
 
 
+#: Side of a GPU thread's tile of grid cells (:func:`grid_probabilities`).
+_GPU_TILE = 8
+
 #: Absolute error bound of one rectangle probability by inclusion and exclusion of four BVNU
 #: orthant values: each is accurate to about 1e-15 absolute (Genz, "Numerical computation of
 #: rectangular bivariate and trivariate normal and t probabilities", Stat. Comput. 14 (2004)),
@@ -714,19 +717,44 @@ def grid_probabilities(mixture: GaussianMixture, grid: Grid, *, dtype=np.float64
                      w / (2.0 * math.pi * chol[0, 0] * chol[1, 1])])
     # inputs are float64 for either dtype: float32 edges alone would cost ulp(x) / dx of a
     # cell's width, and the orthant differences cancel (see kernels.presence.grid_cells)
-    comp = ctx.array(np.array(rows, dtype=np.float64), dtype=np.float64)
+    f64 = np.float64
+    comp = ctx.array(np.array(rows, dtype=f64), dtype=f64)
+    n_comp = len(rows)
     x0, x1, y0, y1 = grid.extent
-    xe = ctx.array(x0 + grid.dx * np.arange(grid.nx + 1), dtype=np.float64)
-    ye = ctx.array(y0 + grid.dy * np.arange(grid.ny + 1), dtype=np.float64)
-    rule = ctx.array(_bvn_rule(), dtype=np.float64)
+    xe = ctx.array(x0 + grid.dx * np.arange(grid.nx + 1), dtype=f64)
+    ye = ctx.array(y0 + grid.dy * np.arange(grid.ny + 1), dtype=f64)
+    rule = ctx.array(_bvn_rule(), dtype=f64)
     density = ctx.zeros(grid.shape)
     prob = ctx.zeros(grid.shape)
     ctx.load(kp.grid_cells)
+    # what every corner of a component shares: the correlation's Gauss-Legendre nodes, and each
+    # column edge standardised with its normal tail
+    nodes = ctx.zeros((n_comp, kp.BVN_SCALARS + 1, 20), dtype=f64)
+    ctx.launch(kp.bvn_node_table, dim=(n_comp, 20), inputs=[comp, rule, nodes])
+    col_std = ctx.empty((n_comp, grid.nx + 1), dtype=f64)
+    col_tail = ctx.empty((n_comp, grid.nx + 1), dtype=f64)
+    ctx.launch(kp.grid_edge_tails, dim=(n_comp, grid.nx + 1), inputs=[xe, comp, 0, col_std, col_tail])
+    if ctx.cpu:
+        # a band is one tile as wide as the grid: one extra row of corners a band
+        bands = ctx.bands(grid.ny, 4)
+        tiles = [(r0, r1, r1 - r0, grid.nx, k, 1) for k, (r0, r1) in enumerate(bands)]
+        width = grid.nx
+    else:
+        # small tiles for the GPU's threads: (GPU_TILE + 1)^2 corners for GPU_TILE^2 cells
+        width = min(_GPU_TILE, grid.nx)
+        n_tiles = -(-grid.ny // _GPU_TILE) * -(-grid.nx // width)
+        tiles = [(0, grid.ny, _GPU_TILE, width, 0, n_tiles)]
+    slots = sum(tile[5] for tile in tiles)
+    below = ctx.empty((slots, n_comp, width + 1), dtype=f64)
+    acc = ctx.empty((slots, width), dtype=f64)
+    by_start = {tile[0]: tile for tile in tiles}
 
     def launch(r0, r1):
-        ctx.launch(kp.grid_cells, dim=r1 - r0, inputs=[xe, ye, r0, comp, len(rows), rule, density, prob])
+        _, row1, tile_rows, tile_cols, slot0, dim = by_start[r0]
+        ctx.launch(kp.grid_cells, dim=dim, inputs=[xe, ye, r0, row1, tile_rows, tile_cols, slot0, comp, n_comp, rule,
+                                                   nodes, col_std, col_tail, below, acc, density, prob])
 
-    ctx.run_bands(launch, ctx.bands(grid.ny, 4))
+    ctx.run_bands(launch, [tile[:2] for tile in tiles])
     p = clip_rounding(ctx.numpy(prob), "grid_probabilities")
     return GridPresence(
         density=density.numpy(), probability=p, grid=grid, mass=float(np.sum(p, dtype=np.float64)),
