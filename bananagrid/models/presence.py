@@ -677,6 +677,13 @@ def grid_probabilities(mixture: GaussianMixture, grid: Grid, *, dtype=np.float64
     absolute), with each axis reflected so that the orthants are tail values. A 3-D mixture
     is taken by its (x, y) marginal.
 
+    Neighbouring cells share their corners: a corner's tail orthant (the quadrant facing away
+    from the component's mean) is evaluated once per component and serves its four cells, and
+    the cells holding a mean's coordinate on an axis keep orthants of their own (see
+    :mod:`bananagrid.kernels.presence`). Each cell is the per-cell form's value bit for bit,
+    within 1e-9 relative or 1e-15 absolute (tested against an independent oracle), at about one
+    bivariate normal evaluation a component and cell instead of four.
+
     Parameters
     ----------
     mixture : GaussianMixture
