@@ -619,6 +619,17 @@ def _bvn_rule() -> np.ndarray:
 #: Side of a GPU thread's tile of grid cells (:func:`grid_probabilities`).
 _GPU_TILE = 8
 
+
+def _grid_tiles(grid: Grid, bands, side: int | None = None) -> list[tuple[int, int, int, int, int, int]]:
+    """Launches of :func:`bananagrid.kernels.presence.grid_cells`: ``(row0, row1, tile_rows,
+    tile_cols, slot0, threads)`` each. On the CPU (``bands``) a band is one tile as wide as the
+    grid (one extra row of corners a band); on a GPU (``side``) one launch of ``side`` x ``side``
+    tiles, (side + 1)^2 corners for side^2 cells, one thread each."""
+    if side is None:
+        return [(r0, r1, r1 - r0, grid.nx, k, 1) for k, (r0, r1) in enumerate(bands)]
+    width = min(side, grid.nx)
+    return [(0, grid.ny, side, width, 0, -(-grid.ny // side) * -(-grid.nx // width))]
+
 #: Absolute error bound of one rectangle probability by inclusion and exclusion of four BVNU
 #: orthant values: each is accurate to about 1e-15 absolute (Genz, "Numerical computation of
 #: rectangular bivariate and trivariate normal and t probabilities", Stat. Comput. 14 (2004)),
@@ -741,16 +752,8 @@ def grid_probabilities(mixture: GaussianMixture, grid: Grid, *, dtype=np.float64
     col_std = ctx.empty((n_comp, grid.nx + 1), dtype=f64)
     col_tail = ctx.empty((n_comp, grid.nx + 1), dtype=f64)
     ctx.launch(kp.grid_edge_tails, dim=(n_comp, grid.nx + 1), inputs=[xe, comp, 0, col_std, col_tail])
-    if ctx.cpu:
-        # a band is one tile as wide as the grid: one extra row of corners a band
-        bands = ctx.bands(grid.ny, 4)
-        tiles = [(r0, r1, r1 - r0, grid.nx, k, 1) for k, (r0, r1) in enumerate(bands)]
-        width = grid.nx
-    else:
-        # small tiles for the GPU's threads: (GPU_TILE + 1)^2 corners for GPU_TILE^2 cells
-        width = min(_GPU_TILE, grid.nx)
-        n_tiles = -(-grid.ny // _GPU_TILE) * -(-grid.nx // width)
-        tiles = [(0, grid.ny, _GPU_TILE, width, 0, n_tiles)]
+    tiles = _grid_tiles(grid, ctx.bands(grid.ny, 4)) if ctx.cpu else _grid_tiles(grid, None, _GPU_TILE)
+    width = tiles[0][3]
     slots = sum(tile[5] for tile in tiles)
     below = ctx.empty((slots, n_comp, width + 1), dtype=f64)
     acc = ctx.empty((slots, width), dtype=f64)

@@ -179,6 +179,20 @@ def test_shared_corners_are_the_per_cell_form_bit_for_bit(monkeypatch, first, se
         assert not bad.any(), (threads, np.argwhere(bad)[:3], got[bad][:3], want[bad][:3])
 
 
+@pytest.mark.parametrize("side", [1, 3, 8])
+def test_gpu_tiles_are_the_per_cell_form_bit_for_bit(monkeypatch, side):
+    """The GPU's layout (one launch of small square tiles, each thread its own row of corners
+    below) run on the CPU: tiles of 1, 3 and 8 cells a side, partial tiles at the grid's
+    edges, bit for bit the per-cell form (as the bands are)."""
+    mixture = bg.GaussianMixture(weights=[0.6, 0.4], means=[[0.3, -0.2], [-1.1, 0.9]],
+                                 covs=[[[0.4, 0.3], [0.3, 0.5]], [[0.2, -0.19], [-0.19, 0.2]]])
+    grid = bg.Grid(origin=(-2.0, -1.5), dx=0.21, dy=0.17, nx=19, ny=17)
+    want = _per_cell(mixture, grid, monkeypatch)
+    tiles = presence._grid_tiles
+    monkeypatch.setattr(presence, "_grid_tiles", lambda grid, bands, _=None: tiles(grid, None, side))
+    assert np.array_equal(bg.grid_probabilities(mixture, grid).probability, want)
+
+
 def test_bench_grid_is_the_per_cell_form_bit_for_bit(monkeypatch):
     """The bench's 8-component mixture (bananagrid bench's presence-grid row) on its room at
     256 x 256 cells, and the room of test_presence with a rho = 0.98 desk: bit for bit."""
