@@ -672,6 +672,8 @@ EDGE_CLAMP = 1.0e30
 (BVN_SN, BVN_W, BVN_RS, BVN_RS1, BVN_RS2) = range(5)
 (BVN_KIND, BVN_N, BVN_ASR, BVN_ASS, BVN_A) = range(5)
 BVN_SCALARS = 5
+#: Columns of ``bvn_nodes``: the most Gauss-Legendre nodes of :func:`bvn_upper`'s rules.
+BVN_NODES = 20
 #: BVN_KIND: the correlation is 0 (product of tails), |r| < 0.925 (Drezner-Wesolowsky in
 #: asin r), |r| >= 0.925 (Genz's expansion about r = +-1).
 (BVN_PRODUCT, BVN_ASIN, BVN_NEAR_ONE) = range(3)
@@ -683,12 +685,12 @@ def bvn_node_table(
     bvn_rule: wp.array2d(dtype=wp.float64),
     nodes: wp.array3d(dtype=wp.float64),
 ):
-    """The nodes of :func:`bvn_upper` that depend on a component's correlation only, node ``i``
-    of component ``c`` (launched on (components, 20)), with the same expressions as
+    """The nodes of :func:`bvn_upper` that depend on a component's correlation only: node ``i``
+    of component ``c`` (launched on (components, BVN_NODES)), by the same expressions as
     :func:`bvn_upper` for the component's own r (Drezner-Wesolowsky's sin(asin(r) (x_i + 1) / 2);
-    Genz's x_i^2 and sqrt(1 - x_i^2) near |r| = 1), so that :func:`tail_orthant` evaluates the
-    same numbers per corner that :func:`bvn_upper` evaluates per call. A reflected orthant has
-    correlation -r: sin and asin are odd, so its nodes are these negated, bit for bit."""
+    Genz's x_i^2 and sqrt(1 - x_i^2) near |r| = 1), so that :func:`tail_orthant` evaluates per
+    corner the numbers :func:`bvn_upper` evaluates per call. A reflected orthant's correlation is
+    -r: sin and asin are odd, so its nodes are these negated, bit for bit."""
     c, i = wp.tid()
     zero = wp.float64(0.0)
     one = wp.float64(1.0)

@@ -630,6 +630,7 @@ def _grid_tiles(grid: Grid, bands, side: int | None = None) -> list[tuple[int, i
     width = min(side, grid.nx)
     return [(0, grid.ny, side, width, 0, -(-grid.ny // side) * -(-grid.nx // width))]
 
+
 #: Absolute error bound of one rectangle probability by inclusion and exclusion of four BVNU
 #: orthant values: each is accurate to about 1e-15 absolute (Genz, "Numerical computation of
 #: rectangular bivariate and trivariate normal and t probabilities", Stat. Comput. 14 (2004)),
@@ -747,8 +748,8 @@ def grid_probabilities(mixture: GaussianMixture, grid: Grid, *, dtype=np.float64
     ctx.load(kp.grid_cells)
     # what every corner of a component shares: the correlation's Gauss-Legendre nodes, and each
     # column edge standardised with its normal tail
-    nodes = ctx.zeros((n_comp, kp.BVN_SCALARS + 1, 20), dtype=f64)
-    ctx.launch(kp.bvn_node_table, dim=(n_comp, 20), inputs=[comp, rule, nodes])
+    nodes = ctx.zeros((n_comp, kp.BVN_SCALARS + 1, kp.BVN_NODES), dtype=f64)
+    ctx.launch(kp.bvn_node_table, dim=(n_comp, kp.BVN_NODES), inputs=[comp, rule, nodes])
     col_std = ctx.empty((n_comp, grid.nx + 1), dtype=f64)
     col_tail = ctx.empty((n_comp, grid.nx + 1), dtype=f64)
     ctx.launch(kp.grid_edge_tails, dim=(n_comp, grid.nx + 1), inputs=[xe, comp, 0, col_std, col_tail])
