@@ -41,11 +41,10 @@ def earlier_evidence(track: bool):
 
 
 def simulate(model, evidence, n, seed):
-    """(the undetected draws' positions at the map's time, all draws' positions there): each
-    draw kept with probability the product of its searches' 1 - POD and the bearings'
-    likelihood where its path was at their times; a track's exposure by the trapezoidal rule on
-    121 times over its span (0.005 s apart: the searcher moves 5 m, the paths pass it at
-    some 50 m or more)."""
+    """The draws' positions at the map's time (n, 2), and each evidence's factor on each draw
+    (n, K): a search's 1 - POD and the bearings' likelihood where the draw's path was at their
+    times; a track's exp(-exposure), the exposure by the trapezoidal rule on 121 times over its
+    span (0.005 s apart: the searcher moves 5 m, the paths pass it at some 50 m or more)."""
     rng = np.random.default_rng(seed)
     point_times = sorted({e.time_span[0] for e in evidence if not isinstance(e, bg.TrackSearch)})
     fine = []
@@ -53,15 +52,14 @@ def simulate(model, evidence, n, seed):
         if isinstance(e, bg.TrackSearch):
             fine = np.linspace(e.time_span[0], e.time_span[1], 121)
     all_times = np.concatenate([[model.t], point_times, fine])
-    keep = np.ones(n)
+    factors = np.ones((n, len(evidence)))
     out = np.empty((n, 2))
     chunk = 20_000
     for start in range(0, n, chunk):
         m = min(chunk, n - start)
         paths = model.sample_paths(m, all_times, rng)
         out[start:start + m] = paths[:, 0]
-        w = np.ones(m)
-        for e in evidence:
+        for k, e in enumerate(evidence):
             if isinstance(e, bg.TrackSearch):
                 pts = paths[:, 1 + len(point_times):]
                 sx = np.interp(fine, e.track[:, 2], e.track[:, 0])
@@ -70,13 +68,11 @@ def simulate(model, evidence, n, seed):
                 v = speed[np.clip(np.searchsorted(e.track[:, 2], fine, side="right") - 1, 0, len(speed) - 1)]
                 r = np.hypot(pts[..., 0] - sx, pts[..., 1] - sy)
                 rate = e.sweep_width**2 * v / (8.0 * math.pi * r**3)
-                w = w * np.exp(-np.trapezoid(rate, fine, axis=1))
+                factors[start:start + m, k] = np.exp(-np.trapezoid(rate, fine, axis=1))
             else:
                 p = paths[:, 1 + point_times.index(e.time_span[0])]
-                w = w * e.likelihood(p[:, 0], p[:, 1])
-        keep[start:start + m] = w
-    kept = rng.uniform(size=n) < keep
-    return out[kept], out
+                factors[start:start + m, k] = e.likelihood(p[:, 0], p[:, 1])
+    return out, factors
 
 
 CASES = {
@@ -89,19 +85,29 @@ CASES = {
 @pytest.mark.parametrize("name", list(CASES))
 def test_carried_posterior_matches_simulation_of_the_paths(name):
     """Chi-square over the cells at alpha 1e-3; the normaliser (kept / drawn on the grid), the
-    mass of the cells east of x = 0 and of the cells within 300 m of the second search's
-    polygon's centre line at the map's time, and each search's POS within 4 binomial SDs."""
+    mass of the cells east of x = 0, POS and each search's own POS (given the bearings) within 4
+    binomial SDs."""
     model, track = CASES[name]
     evidence = earlier_evidence(track)
     post = bg.posterior(model, GRID, evidence, subdivisions=6)
-    kept, drawn = simulate(model, evidence, DRAWS, seed=20261127)
-    counts = grid_counts(kept, GRID)
+    positions, factors = simulate(model, evidence, DRAWS, seed=20261127)
+    rng = np.random.default_rng(7)
+    # each draw detected by each search with its POD, kept by the reports with their likelihood
+    searches = [k for k, e in enumerate(evidence) if e.kind == "search"]
+    reports = [k for k, e in enumerate(evidence) if e.kind != "search"]
+    found = rng.uniform(size=(DRAWS, len(searches))) >= factors[:, searches]
+    reported = np.all(rng.uniform(size=(DRAWS, len(reports))) < factors[:, reports], axis=1)
     x0, x1, y0, y1 = GRID.extent
-    on_grid = ((drawn[:, 0] >= x0) & (drawn[:, 0] < x1) & (drawn[:, 1] >= y0) & (drawn[:, 1] < y1)).sum()
+    on_grid = (positions[:, 0] >= x0) & (positions[:, 0] < x1) & (positions[:, 1] >= y0) & (positions[:, 1] < y1)
+    kept = on_grid & reported & ~found.any(axis=1)
+    counts = grid_counts(positions[kept], GRID)
     assert chi_square_p(counts, post.values) > ALPHA
-    assert binomial_within(int(counts.sum()), int(on_grid), post.normaliser)
-    east = GRID.x[None, :] > 0.0
-    east = np.broadcast_to(east, GRID.shape)
+    assert binomial_within(int(kept.sum()), int(on_grid.sum()), post.normaliser)
+    east = np.broadcast_to(GRID.x[None, :] > 0.0, GRID.shape)
     assert binomial_within(int(counts[east].sum()), int(counts.sum()), float(post.values[east].sum()))
-    assert 0.0 < post.pos < 1.0
-    assert post.provenance["carried"]["evidence"]
+    # POS given the reports: of the draws the reports keep, those some search (each search) finds
+    given = on_grid & reported
+    assert binomial_within(int((given & found.any(axis=1)).sum()), int(given.sum()), post.pos)
+    for j in range(len(searches)):
+        assert binomial_within(int((given & found[:, j]).sum()), int(given.sum()), post.search_pos[j])
+    assert post.provenance["carried"]["evidence"] == [f"evidence[{k}]" for k in range(len(evidence))]
