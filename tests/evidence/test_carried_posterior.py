@@ -86,7 +86,7 @@ CASES = {
 def test_carried_posterior_matches_simulation_of_the_paths(name):
     """Chi-square over the cells at alpha 1e-3; the normaliser (kept / drawn on the grid), the
     mass of the cells east of x = 0, POS and each search's own POS (given the bearings) within 4
-    binomial SDs."""
+    binomial SDs; the POD map against the detected share of each busy cell's draws."""
     model, track = CASES[name]
     evidence = earlier_evidence(track)
     post = bg.posterior(model, GRID, evidence, subdivisions=6)
@@ -111,6 +111,19 @@ def test_carried_posterior_matches_simulation_of_the_paths(name):
     for j in range(len(searches)):
         assert binomial_within(int((given & found[:, j]).sum()), int(given.sum()), post.search_pos[j])
     assert post.provenance["carried"]["evidence"] == [f"evidence[{k}]" for k in range(len(evidence))]
+    # the cumulative POD map: of the draws that end in a cell, the share some search finds (cells
+    # with 3000 draws or more; 4 binomial SDs, plus the sub-cell rule's stated 1.7 % of a cell)
+    ix = np.floor((positions[on_grid, 0] - x0) / GRID.dx).astype(int)
+    iy = np.floor((positions[on_grid, 1] - y0) / GRID.dy).astype(int)
+    drawn = np.zeros(GRID.shape)
+    hit = np.zeros(GRID.shape)
+    np.add.at(drawn, (iy, ix), 1.0)
+    np.add.at(hit, (iy, ix), found[on_grid].any(axis=1).astype(float))
+    busy = drawn >= 3000
+    assert busy.sum() > 20
+    share = hit[busy] / drawn[busy]
+    sd = np.sqrt(post.pod[busy] * (1.0 - post.pod[busy]) / drawn[busy])
+    assert np.all(np.abs(share - post.pod[busy]) <= 4.0 * sd + 0.017 * post.pod[busy] + 1e-12)
 
 
 def test_polar_lattice_carried_posterior_matches_simulation():

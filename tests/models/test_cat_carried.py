@@ -233,3 +233,41 @@ def test_sample_paths_bad_times(times, message):
     with pytest.raises(bg.BananagridError, match=message) as caught:
         bg.CAT(**FIG1).sample_paths(10, times, np.random.default_rng(0))
     assert "\n" not in str(caught.value)
+
+
+class _ScalarScan:
+    """A CPU context that tells the model it is not on the CPU, so that it binds the scalar
+    scan (the GPU path's kernel) instead of the lanes."""
+
+    def __init__(self, ctx):
+        self._ctx = ctx
+        self.device = "not-cpu"
+
+    def __getattr__(self, name):
+        return getattr(self._ctx, name)
+
+
+def test_scalar_scan_equals_the_lanes():
+    """The carried kernel of the scalar scan (``kernels/cat.py``, used on a GPU) and of the lanes
+    (``kernels/cat_lanes.py``, the CPU's) give the same channels bit for bit (float64 and
+    float32), with heading noise too: the lanes only flag the node intervals, the roots and
+    their weights are the same functions."""
+    from bananagrid.engine.carried import evidence_struct
+    from bananagrid.engine.points import PointsExtent
+    from bananagrid.engine.warp_runtime import WarpContext
+
+    for model in (bg.CAT(**FIG1), bg.CAT(**FIG1, sigma_heading=0.03)):
+        evidence = point_evidence(model, 60.0, 4.0, 7.0)
+        p = pack(evidence, model.t)
+        points = model.sample(300, np.random.default_rng(6))
+        for dtype in (np.float64, np.float32):
+            lanes = evaluate_carried(model, points[:, 0], points[:, 1], p, dtype=dtype)
+            ctx = WarpContext(dtype, "cpu", 1)
+            binding = model.bind_carried(_ScalarScan(ctx), PointsExtent(points[:, 0], points[:, 1]), p)
+            assert "cat_lanes" not in binding.kernel_name
+            ctx.load(binding.kernels.points)
+            out = ctx.zeros((len(points), p.channels.shape[0]))
+            ctx.launch(binding.kernels.points, dim=len(points), inputs=[
+                ctx.array(points[:, 0]), ctx.array(points[:, 1]), 0, binding.params, evidence_struct(ctx, p),
+                ctx.zeros((len(points), p.factors)), out])
+            np.testing.assert_array_equal(ctx.numpy(out).T, lanes)
