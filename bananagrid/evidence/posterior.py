@@ -49,9 +49,12 @@ map's time (and land, always) multiplies them as above. Which rule serves which 
   (``boundary_mass`` is None). The rule is first order at those curves: measured on Figure 1's
   CAT with two earlier area searches and bearings (100 m cells), 8 sub-cells differ from 24
   by at most 3.0e-4 of a cell's probability (1.7 % of that cell's), 7.9e-4 summed over the
-  grid, and POS by 2.7e-5; 4 sub-cells by 6.6e-4 (5.4 %) and 2.1e-3. A model's own exact rule
-  for carried cells (``carried_cell_plan``, the CAT's lines exact in the acceleration) takes
-  over where it has one;
+  grid, and POS by 2.7e-5; 4 sub-cells by 6.6e-4 (5.4 %) and 2.1e-3;
+* a carrying model with its own rule for the carried cells (``carried_cell_plan(grid, pack)``:
+  each channel's mass in each cell, e.g. the CAT's lines exact in the acceleration): each
+  combination's cell mean is the same-time factors' mean (the rule above, without the earlier
+  evidence) times the cell's carried share, channel / prior channel: exact where the same-time
+  factors are constant on the cell (every cell, without same-time evidence);
 * a carrying model on a polar lattice: the polar sub-cell rule above with the carried channels
   at the sub-cell centres;
 * a model without paths (the polar banana) refuses earlier evidence in one line naming the CAT;
@@ -71,6 +74,7 @@ from ..domains.grid import Grid
 from ..domains.polar_lattice import PolarLattice
 from ..engine.carried import carries, evaluate_carried
 from ..engine.rasterise import rasterise
+from ..engine.warp_runtime import WarpContext
 from ..models.presence import grid_probabilities
 from ..results import PolarRaster, Raster
 from ..validate import BananagridError, positive_int
@@ -208,20 +212,35 @@ def posterior(prior, grid, evidence=(), *, subdivisions: int = SUBDIVISIONS, thr
             cut |= factor.varying
     groups = ((varying & cut & (cells > 0.0), n, True), (varying & ~cut & (cells > 0.0), max(1, n // 2), True),
               (varying & ~(cells > 0.0), 1, False))
+    plan = None
     if carried is not None:
+        plan = carried.cell_plan(grid)
         # the carried weight varies on every cell with prior mass: each by the sub-cell rule on
-        # the carried density's channels (module docstring); cells without mass as before
-        groups = ((cells > 0.0, n, True), (varying & ~(cells > 0.0), 1, False))
+        # the carried density's channels (module docstring); cells without mass as before.
+        # With the model's own carried cells, the same-time factors' means as without evidence
+        # before t, times each cell's carried share below
+        if plan is None:
+            groups = ((cells > 0.0, n, True), (varying & ~(cells > 0.0), 1, False))
     for mask, subdivide, weighted in groups:
         rows, cols = np.nonzero(mask)
         if rows.size:
             found = _varying_means(prior, factors, combos, x_edges, y_edges, rows, cols, subdivide, weighted,
-                                   carried if weighted else None)
+                                   carried if weighted and plan is None else None)
             for key in combos:
                 means[key][rows, cols] = found[key]
     bound = None if carried is not None else _boundary_mass(factors, cells, varying)
     if carried is not None:
-        provenance = {**provenance, "carried": carried.notes(n)}
+        notes = carried.notes(n)
+        if plan is not None:
+            channel_cells, plan_notes = plan.run(WarpContext(np.float64, "cpu", threads))
+            channel_cells = np.asarray(channel_cells, dtype=float)
+            with np.errstate(divide="ignore", invalid="ignore"):
+                share = channel_cells / channel_cells[carried.prior_channel]
+            share = np.where(channel_cells[carried.prior_channel] > 0.0, share, 1.0)
+            for key in combos:
+                means[key] = means[key] * share[carried.index(key)]
+            notes = {**notes, "cell_rule": plan.method, **plan_notes}
+        provenance = {**provenance, "carried": notes}
     return _finish(Posterior, dict(grid=grid, frame=frame), cells, means, evidence, provenance, bound, n)
 
 
@@ -245,6 +264,12 @@ class _Carried:
 
     def index(self, key) -> int:
         return self.pack.channel(self.channel[key])
+
+    def cell_plan(self, grid):
+        """The model's own rule for the carried channels' cell masses (``carried_cell_plan``),
+        or None."""
+        own = getattr(self.prior, "carried_cell_plan", None)
+        return own(grid, self.pack) if callable(own) else None
 
     def notes(self, n) -> dict:
         return {"evidence": list(self.pack.factor_keys), "time_nodes": self.pack.nodes,

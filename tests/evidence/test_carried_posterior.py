@@ -144,3 +144,36 @@ def test_polar_lattice_carried_posterior_matches_simulation():
     b = np.arctan2(positions[:, 0], positions[:, 1])
     on = (r < 3400.0) & (np.abs(b) < math.pi / 2)
     assert binomial_within(int((kept & on).sum()), int(on.sum()), post.normaliser)
+
+
+class _OwnCells(bg.CAT):
+    """A CAT whose carried cells are its own: each channel's density at the cell centre times the
+    cell's area (a stand-in for an exact rule, to show the posterior takes it)."""
+
+    def carried_cell_plan(self, grid, pack):
+        from bananagrid.engine.carried import evaluate_carried
+        from bananagrid.protocol import CellPlan
+
+        def run(ctx):
+            xx, yy = np.meshgrid(grid.x, grid.y)
+            return evaluate_carried(self, xx, yy, pack) * grid.cell_area, {"own": True}
+
+        return CellPlan(seconds=1.0, run=run, method="centre times area")
+
+
+def test_a_models_own_carried_cells_take_over():
+    """With ``carried_cell_plan`` the posterior's cells are the prior's cells times each cell's
+    carried share (channel / prior channel of the plan), times the same-time factors' means:
+    here against that formula from the channels at the cell centres, to 1e-12."""
+    from bananagrid.engine.carried import evaluate_carried
+
+    model = _OwnCells(**FIG1)
+    evidence = earlier_evidence(False)
+    post = bg.posterior(model, GRID, evidence)
+    assert post.provenance["carried"]["cell_rule"] == "centre times area" and post.provenance["carried"]["own"]
+    xx, yy = np.meshgrid(GRID.x, GRID.y)
+    p = bg.evidence.packing.pack(evidence, model.t)
+    channels = evaluate_carried(model, xx, yy, p)
+    share = np.where(channels[0] > 0, channels[p.channel("all")] / np.where(channels[0] > 0, channels[0], 1.0), 1.0)
+    q = post.prior * share
+    np.testing.assert_allclose(post.values, q / q.sum(), rtol=1e-12, atol=1e-300)
