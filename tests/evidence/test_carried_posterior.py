@@ -46,7 +46,10 @@ def simulate(model, evidence, n, seed):
     times; a track's exp(-exposure), the exposure by the trapezoidal rule on 121 times over its
     span (0.005 s apart: the searcher moves 5 m, the paths pass it at some 50 m or more)."""
     rng = np.random.default_rng(seed)
-    point_times = sorted({e.time_span[0] for e in evidence if not isinstance(e, bg.TrackSearch)})
+    def when(e):  # land holds at every time: the map's
+        return model.t if e.time_span is None else e.time_span[0]
+
+    point_times = sorted({when(e) for e in evidence if not isinstance(e, bg.TrackSearch)})
     fine = []
     for e in evidence:
         if isinstance(e, bg.TrackSearch):
@@ -70,13 +73,18 @@ def simulate(model, evidence, n, seed):
                 rate = e.sweep_width**2 * v / (8.0 * math.pi * r**3)
                 factors[start:start + m, k] = np.exp(-np.trapezoid(rate, fine, axis=1))
             else:
-                p = paths[:, 1 + point_times.index(e.time_span[0])]
+                p = paths[:, 1 + point_times.index(when(e))]
                 factors[start:start + m, k] = e.likelihood(p[:, 0], p[:, 1])
     return out, factors
 
 
+#: Evidence at the map's own time beside the earlier: an area search and land.
+NOW = [bg.AreaSearch([(-700.0, 2300.0), (0.0, 2250.0), (100.0, 2900.0), (-600.0, 3000.0)], t=FIG1["t"], pod=0.5),
+       bg.Exclusion([(300.0, 2900.0), (1500.0, 2700.0), (1500.0, 3300.0), (300.0, 3300.0)])]
+
 CASES = {
     "cat_searches_bearings": (bg.CAT(**FIG1), False),
+    "cat_earlier_and_now": (bg.CAT(**FIG1), None),
     "cat_heading_searches_bearings": (bg.CAT(**FIG1, sigma_heading=0.04), False),
     "cat_track": (bg.CAT(**FIG1), True),
 }
@@ -88,13 +96,13 @@ def test_carried_posterior_matches_simulation_of_the_paths(name):
     mass of the cells east of x = 0, POS and each search's own POS (given the bearings) within 4
     binomial SDs; the POD map against the detected share of each busy cell's draws."""
     model, track = CASES[name]
-    evidence = earlier_evidence(track)
+    evidence = earlier_evidence(track) if track is not None else [*earlier_evidence(False), *NOW]
     post = bg.posterior(model, GRID, evidence, subdivisions=6)
     positions, factors = simulate(model, evidence, DRAWS, seed=20261127)
     rng = np.random.default_rng(7)
     # each draw detected by each search with its POD, kept by the reports with their likelihood
     searches = [k for k, e in enumerate(evidence) if e.kind == "search"]
-    reports = [k for k, e in enumerate(evidence) if e.kind != "search"]
+    reports = [k for k, e in enumerate(evidence) if e.kind != "search"]  # land too
     found = rng.uniform(size=(DRAWS, len(searches))) >= factors[:, searches]
     reported = np.all(rng.uniform(size=(DRAWS, len(reports))) < factors[:, reports], axis=1)
     x0, x1, y0, y1 = GRID.extent
@@ -110,7 +118,8 @@ def test_carried_posterior_matches_simulation_of_the_paths(name):
     assert binomial_within(int((given & found.any(axis=1)).sum()), int(given.sum()), post.pos)
     for j in range(len(searches)):
         assert binomial_within(int((given & found[:, j]).sum()), int(given.sum()), post.search_pos[j])
-    assert post.provenance["carried"]["evidence"] == [f"evidence[{k}]" for k in range(len(evidence))]
+    assert post.provenance["carried"]["evidence"] == [f"evidence[{k}]" for k, e in enumerate(evidence)
+                                                      if e.time_span is not None and e.time_span[1] < model.t]
     # the cumulative POD map: of the draws that end in a cell, the share some search finds (cells
     # with 3000 draws or more; 4 binomial SDs, plus the sub-cell rule's stated 1.7 % of a cell)
     ix = np.floor((positions[on_grid, 0] - x0) / GRID.dx).astype(int)
