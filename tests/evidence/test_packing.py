@@ -75,3 +75,14 @@ def test_keys_name_the_evidence():
         pack([bg.AreaSearch(SQUARE, t=6.0, pod=0.5)], 5.0, keys=["scene.evidence[3]"])
     with pytest.raises(bg.BananagridError, match=r"^keys: 2 names for 1 pieces of evidence"):
         pack([bg.AreaSearch(SQUARE, t=1.0, pod=0.5)], 5.0, keys=["a", "b"])
+
+
+def test_area_panels():
+    """More panels over an interval: more nodes, the same total weight; a count that is not a
+    positive integer refused in one line."""
+    e = bg.AreaSearch(SQUARE, t=(1.0, 3.0), coverage=1.0)
+    p = pack([e], 5.0, area_panels=40)
+    assert p.nodes == 40 * PANEL_NODES and math.isclose(p.q.sum(), 2.0, rel_tol=1e-14)
+    with pytest.raises(bg.BananagridError, match=r"^area_panels = 0") as caught:
+        pack([e], 5.0, area_panels=0)
+    assert "\n" not in str(caught.value)
