@@ -1,5 +1,5 @@
 """Independent references for the CAT cell probabilities with earlier evidence inside
-(tests/models/test_cat_carried.py).
+(tests/models/test_cat_carried_cells.py).
 
 A path is fixed by (a, omega): its position at any time s is eq. (1) of the polar-banana paper
 (``cat_position``, NumPy). For one turn rate the paths at the map's time t form a line in
