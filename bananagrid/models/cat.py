@@ -665,6 +665,20 @@ class CAT(MotionModel):
             return super().cell_plan(domain, region)
         return grid_cell_plan(self, domain)
 
+    def carried_cell_plan(self, domain, pack: EvidencePack) -> CellPlan | None:
+        """The channels' cell masses with the pack's earlier evidence inside, exact in the
+        acceleration (:mod:`bananagrid.models.cat_carried`; the hook of
+        :class:`~bananagrid.protocol.CarryingModel`): ``run`` returns float64 ``(C, ny, nx)``,
+        channel c's unnormalised weighted probability of each cell. For searches at one time
+        each on a grid, without heading noise; None otherwise (the sub-cell rule on
+        :meth:`bind_carried`'s densities serves)."""
+        if self.sigma_heading > 0.0 or not isinstance(domain, Grid):
+            return None
+        polygons = cat_carried.polygons_of_pack(pack)
+        if polygons is None:
+            return None
+        return grid_cell_plan(self, domain, polygons)
+
     def density_bound(self, x0: float, x1: float, y0: float, y1: float) -> float:
         """A proved bound of the density the grid kernel computes, in float32 or float64, at any
         point of the world rectangle [x0, x1] x [y0, y1]; 0.0 where it computes exact zeros

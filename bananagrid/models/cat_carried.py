@@ -30,10 +30,11 @@ import numpy as np
 
 from ..domains.grid import Grid
 from ..kernels import cat_cells
-from ..protocol import KernelContext
+from ..kernels import evidence as evidence_kernels
+from ..protocol import EvidencePack, KernelContext
 from ..validate import BananagridError
 
-__all__ = ["EarlierPolygons", "grid_cell_channels", "CELL_METHOD"]
+__all__ = ["EarlierPolygons", "grid_cell_channels", "polygons_of_pack", "CELL_METHOD"]
 
 #: Provenance line of the rule.
 CELL_METHOD = "exact in the acceleration, Gauss-Legendre between corner passes over the turn rate"
@@ -135,8 +136,14 @@ def grid_cell_channels(ctx: KernelContext, model, grid: Grid, edges: np.ndarray,
     """The CAT cell probabilities of ``grid`` over the turn-rate intervals ``edges``
     (:func:`bananagrid.models.cat.cell_turn_edges`), float64 ``(channels, ny, nx)``: one
     channel (the plain cell probabilities) without ``polygons``, else one per mask, each cell
-    the integral over its paths of the product of the factors of the mask's polygons."""
-    ev = _earlier(ctx, model, grid, edges, polygons)
+    the integral over its paths of the product of the factors of the mask's polygons (channels
+    with the same mask are computed once)."""
+    unique = None
+    if polygons is not None:
+        masks = list(dict.fromkeys(polygons.masks))
+        unique = EarlierPolygons(vertices=polygons.vertices, times=polygons.times, miss=polygons.miss,
+                                 masks=tuple(masks))
+    ev = _earlier(ctx, model, grid, edges, unique)
     out = ctx.zeros((ev.channels, grid.ny, grid.nx), dtype=np.float64)
     x0, _, y0, _ = grid.extent
     f64 = np.float64
@@ -151,4 +158,34 @@ def grid_cell_channels(ctx: KernelContext, model, grid: Grid, edges: np.ndarray,
         ])
 
     ctx.run_bands(launch, ctx.bands(grid.ny, 4))
-    return ctx.numpy(out)
+    values = ctx.numpy(out)
+    if unique is None:
+        return values
+    return values[[masks.index(m) for m in polygons.masks]]
+
+
+def polygons_of_pack(pack: EvidencePack) -> EarlierPolygons | None:
+    """The pack's factors as :class:`EarlierPolygons` where each is a search at one time (one
+    polygon node, ``q`` = 1: log(1 - POD) inside), with the pack's channels as bit masks of
+    them; None where any factor is another kind (an interval, a raster, a track, a report: the
+    caller takes the density's sub-cell rule then)."""
+    factors = pack.factors if pack.nodes else 0
+    if factors > cat_cells.MAX_POLYGONS:
+        return None
+    node_of = {}
+    for j in range(pack.nodes):
+        kind, factor, _, _ = (int(v) for v in pack.ints[j])
+        if kind != evidence_kernels.KIND_POLYGON or pack.q[j] != 1.0 or factor in node_of:
+            return None
+        node_of[factor] = j
+    if sorted(node_of) != list(range(factors)):
+        return None
+    vertices, times, miss = [], [], []
+    for k in range(factors):
+        j = node_of[k]
+        _, _, offset, count = (int(v) for v in pack.ints[j])
+        vertices.append(pack.edges[offset:offset + count, :2])
+        times.append(float(pack.time[j]))
+        miss.append(math.exp(float(pack.data[j, 0])))  # log(1 - POD); exp(-inf) = 0: land or POD 1
+    masks = tuple(int(sum(1 << k for k in range(factors) if row[k])) for row in np.asarray(pack.channels))
+    return EarlierPolygons(vertices=vertices, times=times, miss=miss, masks=masks)

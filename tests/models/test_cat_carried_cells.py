@@ -20,6 +20,7 @@ from scipy import stats
 import bananagrid as bg
 from bananagrid.domains.pose import Pose
 from bananagrid.engine.warp_runtime import WarpContext
+from bananagrid.evidence.packing import pack
 from bananagrid.models.cat import cat_position, grid_cell_plan
 from bananagrid.models.cat_carried import EarlierPolygons
 
@@ -274,6 +275,43 @@ def test_carried_cells_over_the_domain(case):
             continue  # the corners: the cross of five cells holds the path and its neighbours
         want = carried_oracle.carried_cell(model, box, polygons, every)
         assert abs(got[i, j] - want) <= RTOL * want + ATOL, (model, polygons, box, got[i, j], want)
+
+
+# --- the hook: a pack of evidence -------------------------------------------------------------------
+
+
+def test_the_hook_takes_a_pack():
+    """``CAT.carried_cell_plan(grid, pack)`` gives each of the pack's channels (prior, all,
+    searches, others, each search): the polygons' channels by bit masks, 1 - POD = exp of the
+    pack's log(1 - POD) (equal to a few ulps); the prior channel is the plain rule within its
+    error (its lines are split where the searches' are)."""
+    model = bg.CAT(**FIG1)
+    grid = bg.Grid.from_bounds((-1500.0, 1500.0), (1500.0, 3300.0), 100.0)
+    searches = [bg.AreaSearch(SEARCH_A, t=5.0, pod=0.7), bg.AreaSearch(SEARCH_B, t=3.0, coverage=-math.log(0.5))]
+    p = pack(searches, model.t)
+    got, notes = model.carried_cell_plan(grid, p).run(WarpContext(np.float64, "cpu", None))
+    masks = {"prior": 0, "all": 3, "searches": 3, "others": 0, "search:evidence[0]": 1, "search:evidence[1]": 2}
+    want = channels(model, grid, FIG1_POLYGONS, tuple(masks[name] for name in p.channel_names))
+    assert got.shape == (len(p.channel_names), grid.ny, grid.nx)
+    # 1e-14: 1 - POD through log and exp, a few ulps of each factor
+    assert np.allclose(got, want, rtol=1e-14, atol=0.0)
+    prior = plain(model, grid)
+    assert np.all(np.abs(got[p.channel("prior")] - prior) <= RTOL * prior + ATOL)
+    assert notes["cell_method"]
+
+
+@pytest.mark.parametrize("case", ["interval", "report", "heading", "lattice"])
+def test_the_hook_declines_what_it_does_not_take(case):
+    """Searches over an interval, reports, heading noise and polar lattices: None (the
+    density's sub-cell rule serves them)."""
+    model = bg.CAT(**FIG1, sigma_heading=0.02 if case == "heading" else 0.0)
+    grid = bg.Grid.from_bounds((-1500.0, 1500.0), (1500.0, 3300.0), 100.0)
+    evidence = {
+        "interval": [bg.AreaSearch(SEARCH_A, t=(4.0, 5.0), pod=0.7)],
+        "report": [bg.AreaSearch(SEARCH_A, t=5.0, pod=0.7), bg.PositionReport((0.0, 1400.0), t=5.0, sigma=200.0)],
+    }.get(case, [bg.AreaSearch(SEARCH_A, t=5.0, pod=0.7)])
+    domain = bg.PolarLattice(ranges=(0.0, 3000.0), range_step=100.0, bearings=(-1.0, 1.0), bearing_step=0.1) if case == "lattice" else grid
+    assert model.carried_cell_plan(domain, pack(evidence, model.t)) is None
 
 
 # --- bad input ----------------------------------------------------------------------------------------
