@@ -252,14 +252,14 @@ def add_channels(ev: Earlier, inside: int, value: wp.float64, i: int, j: int, ou
 
 
 @wp.func
-def weighted_share(ev: Earlier, active: int, k: int, s: wp.float64, lo: wp.float64, hi: wp.float64,
+def weighted_share(ev: Earlier, active: int, base: int, k: int, s: wp.float64, lo: wp.float64, hi: wp.float64,
                    scale: wp.float64, i: int, j: int, out: wp.array3d(dtype=wp.float64)):
     """Add ``scale`` times the weighted normal mass of the line's piece [lo, hi] of z (in the
     cell) to every channel: the earlier lines' crossings with the polygons (``active``'s bits;
-    the others are wholly outside) cut [lo, hi] into pieces of constant weight, each adding
-    its weight times Phi(z_hi) - Phi(z_lo), exactly. The pieces are taken in order by finding
-    the least crossing above the last (no sort, no buffer)."""
-    inside = int(0)
+    of the others, ``base``'s hold the whole window, the rest miss it) cut [lo, hi] into pieces
+    of constant weight, each adding its weight times Phi(z_hi) - Phi(z_lo), exactly. The pieces
+    are taken in order by finding the least crossing above the last (no sort, no buffer)."""
+    inside = base
     inner = int(0)
     for p in range(ev.count):
         if (active >> p) & 1 == 1:
@@ -314,6 +314,43 @@ def patch_active(ev: Earlier, k: int, s0: wp.float64, s1: wp.float64, z0: wp.flo
 
 
 @wp.func
+def patch_state(ev: Earlier, near: int, k: int, s0: wp.float64, s1: wp.float64, z0: wp.float64, z1: wp.float64):
+    """Sort the polygons of ``near`` against the earlier points of the lines s in [s0, s1], z in
+    [z0, z1] (inside the box of the patch's four corners, as :func:`patch_active`): those an
+    edge's box meets (``cut``: the weight may change across the patch), and of the others, those
+    that hold the patch (``inside``: no edge comes near it, so one corner tells)."""
+    cut = int(0)
+    inside = int(0)
+    for p in range(ev.count):
+        if (near >> p) & 1 == 1:
+            ax, ay, aqx, aqy = earlier_line(ev, p, k, s0)
+            bx, by, bqx, bqy = earlier_line(ev, p, k, s1)
+            x_lo = wp.min(wp.min(ax + z0 * aqx, ax + z1 * aqx), wp.min(bx + z0 * bqx, bx + z1 * bqx))
+            x_hi = wp.max(wp.max(ax + z0 * aqx, ax + z1 * aqx), wp.max(bx + z0 * bqx, bx + z1 * bqx))
+            y_lo = wp.min(wp.min(ay + z0 * aqy, ay + z1 * aqy), wp.min(by + z0 * bqy, by + z1 * bqy))
+            y_hi = wp.max(wp.max(ay + z0 * aqy, ay + z1 * aqy), wp.max(by + z0 * bqy, by + z1 * bqy))
+            box = ev.boxes[p]
+            if x_hi >= box[0] and x_lo <= box[1] and y_hi >= box[2] and y_lo <= box[3]:
+                hit = bool(False)
+                v0 = ev.starts[p]
+                v1 = ev.starts[p + 1]
+                for v in range(v0, v1):
+                    w = v + 1
+                    if w == v1:
+                        w = v0
+                    a = ev.verts[v]
+                    b = ev.verts[w]
+                    if (wp.max(a[0], b[0]) >= x_lo and wp.min(a[0], b[0]) <= x_hi and wp.max(a[1], b[1]) >= y_lo
+                            and wp.min(a[1], b[1]) <= y_hi):
+                        hit = True
+                if hit:
+                    cut = cut | (1 << p)
+                else:
+                    inside = inside | (point_in_polygon(ev, p, ax + z0 * aqx, ay + z0 * aqy) << p)
+    return cut, inside
+
+
+@wp.func
 def window_signature(ev: Earlier, active: int, k: int, s: wp.float64, gx: wp.float64, gy: wp.float64,
                      sx: wp.float64, sy: wp.float64, dgx: wp.float64, dgy: wp.float64, dsx: wp.float64,
                      dsy: wp.float64, i: int, j: int):
@@ -332,7 +369,7 @@ def window_signature(ev: Earlier, active: int, k: int, s: wp.float64, gx: wp.flo
 
 
 @wp.func
-def weighted_gauss(ev: Earlier, active: int, k: int, a: wp.float64, b: wp.float64, gx: wp.float64, gy: wp.float64,
+def weighted_gauss(ev: Earlier, active: int, base: int, k: int, a: wp.float64, b: wp.float64, gx: wp.float64, gy: wp.float64,
                    sx: wp.float64, sy: wp.float64, dgx: wp.float64, dgy: wp.float64, dsx: wp.float64,
                    dsy: wp.float64, i: int, j: int, omega0: wp.float64, h: wp.float64, sigma_omega: wp.float64,
                    out: wp.array3d(dtype=wp.float64)):
@@ -347,11 +384,11 @@ def weighted_gauss(ev: Earlier, active: int, k: int, a: wp.float64, b: wp.float6
             if n != 1:
                 w = wp.float64(GAUSS_SIDE_WEIGHT)
             scale = w * half * normal_pdf(omega0 + s * h, wp.float64(0.0), sigma_omega) * h
-            weighted_share(ev, active, k, s, lo, hi, scale, i, j, out)
+            weighted_share(ev, active, base, k, s, lo, hi, scale, i, j, out)
 
 
 @wp.func
-def weighted_piece(ev: Earlier, active: int, k: int, a: wp.float64, b: wp.float64, gx: wp.float64, gy: wp.float64,
+def weighted_piece(ev: Earlier, active: int, base: int, k: int, a: wp.float64, b: wp.float64, gx: wp.float64, gy: wp.float64,
                    sx: wp.float64, sy: wp.float64, dgx: wp.float64, dgy: wp.float64, dsx: wp.float64,
                    dsy: wp.float64, i: int, j: int, omega0: wp.float64, h: wp.float64, sigma_omega: wp.float64,
                    out: wp.array3d(dtype=wp.float64)):
@@ -386,20 +423,37 @@ def weighted_piece(ev: Earlier, active: int, k: int, a: wp.float64, b: wp.float6
                     lo_s = m
                 else:
                     hi_s = m
-            weighted_gauss(ev, active, k, s0, hi_s, gx, gy, sx, sy, dgx, dgy, dsx, dsy, i, j, omega0, h,
+            weighted_gauss(ev, active, base, k, s0, hi_s, gx, gy, sx, sy, dgx, dgy, dsx, dsy, i, j, omega0, h,
                            sigma_omega, out)
             s0 = hi_s
             left = window_signature(ev, active, k, s0, gx, gy, sx, sy, dgx, dgy, dsx, dsy, i, j)
-        weighted_gauss(ev, active, k, s0, s1, gx, gy, sx, sy, dgx, dgy, dsx, dsy, i, j, omega0, h, sigma_omega, out)
+        weighted_gauss(ev, active, base, k, s0, s1, gx, gy, sx, sy, dgx, dgy, dsx, dsy, i, j, omega0, h, sigma_omega, out)
         if s1 >= b:
             break
         s0 = s1
 
 
 @wp.func
+def gauss_nodes(gx: wp.float64, gy: wp.float64, sx: wp.float64, sy: wp.float64, dgx: wp.float64, dgy: wp.float64,
+                dsx: wp.float64, dsy: wp.float64, i: int, j: int, omega0: wp.float64, h: wp.float64,
+                sigma_omega: wp.float64, mid: wp.float64, half: wp.float64, total: wp.float64):
+    """``total`` plus, node by node, the 3-point Gauss-Legendre terms of the lines' shares of
+    cell (i, j) over s in [mid - half, mid + half] (the plain rule's sub-piece)."""
+    for n in range(3):
+        s = mid + wp.float64(float(n - 1)) * wp.float64(GAUSS_NODE) * half
+        lo, hi = cell_clip(gx + s * dgx, gy + s * dgy, sx + s * dsx, sy + s * dsy, i, j)
+        if lo < hi:
+            w = wp.float64(GAUSS_CENTRE_WEIGHT)
+            if n != 1:
+                w = wp.float64(GAUSS_SIDE_WEIGHT)
+            total += w * half * normal_pdf(omega0 + s * h, wp.float64(0.0), sigma_omega) * h * normal_interval(lo, hi)
+    return total
+
+
+@wp.func
 def ribbon_cell(gx: wp.float64, gy: wp.float64, sx: wp.float64, sy: wp.float64, dgx: wp.float64, dgy: wp.float64,
                 dsx: wp.float64, dsy: wp.float64, i: int, j: int, omega0: wp.float64, h: wp.float64,
-                sigma_omega: wp.float64, k: int, ev: Earlier, out: wp.array3d(dtype=wp.float64)):
+                sigma_omega: wp.float64, k: int, ev: Earlier, near: int, out: wp.array3d(dtype=wp.float64)):
     """Add the mass of the turn rates omega0 + s h, s in [0, 1], in cell (i, j) to every
     channel of ``out``: the integral over s of g(omega) h [Phi(z_out(s)) - Phi(z_in(s))], the
     line of each s interpolated linearly between the interval's edge lines (point g + s dg,
@@ -414,14 +468,17 @@ def ribbon_cell(gx: wp.float64, gy: wp.float64, sx: wp.float64, sy: wp.float64, 
     nothing between the passes of that side's two corners.
 
     Earlier evidence: on a sub-piece whose earlier points (s in the sub-piece, z in its window,
-    a hull since z_in and z_out are monotone there) miss every polygon's box the weight is 1 and
-    the sums are the plain rule's, term for term (without evidence the result is the plain
-    rule's bit for bit). Otherwise :func:`weighted_piece`."""
+    a hull since z_in and z_out are monotone there) miss the box of every polygon of ``near``
+    (those the interval's earlier lines reach at all) the weight is 1 and the sums are the
+    plain rule's, term for term (without evidence the result is the plain rule's bit for bit).
+    Where no edge's box meets it either, the polygons that hold it give constant factors
+    (:func:`patch_state`). Otherwise :func:`weighted_piece`."""
     fi = wp.float64(float(i))
     fj = wp.float64(float(j))
     one = wp.float64(1.0)
-    node = wp.float64(GAUSS_NODE)
     total = wp.float64(0.0)
+    held = int(0)  # the polygons holding the sub-pieces summed in held_total
+    held_total = wp.float64(0.0)
     s0 = wp.float64(0.0)
     for _ in range(9):  # at most 8 corner passes in (0, 1)
         s1 = corner_roots(gx, gy, sx, sy, dgx, dgy, dsx, dsy, fi, fj, s0, one)
@@ -435,31 +492,42 @@ def ribbon_cell(gx: wp.float64, gy: wp.float64, sx: wp.float64, sy: wp.float64, 
         moved = wp.max(wp.abs(lo1 - lo0), wp.abs(hi1 - hi0))
         pieces = wp.clamp(int(wp.ceil(moved / wp.float64(Z_PIECE))), 1, MAX_PIECES)
         half = wp.float64(0.5) * (s1 - s0) / wp.float64(float(pieces))
+        # the polygons that the whole stretch's earlier points meet an edge of, and those that
+        # hold them all (z_in, z_out are monotone over the stretch: its ends give the hull)
+        stretch_cut = int(0)
+        stretch_inside = int(0)
+        if near != 0 and (lo0 < hi0 or lo1 < hi1):
+            stretch_cut, stretch_inside = patch_state(ev, near, k, s0, s1, wp.min(lo0, lo1), wp.max(hi0, hi1))
         for p in range(pieces):
             mid = s0 + (wp.float64(2.0) * wp.float64(float(p)) + one) * half
-            active = int(0)
-            if ev.count > 0:
+            cut = int(0)
+            inside = stretch_inside
+            if stretch_cut != 0:
                 a = mid - half
                 b = mid + half
                 lo_a, hi_a = cell_clip(gx + a * dgx, gy + a * dgy, sx + a * dsx, sy + a * dsy, i, j)
                 lo_b, hi_b = cell_clip(gx + b * dgx, gy + b * dgy, sx + b * dsx, sy + b * dsy, i, j)
                 if lo_a < hi_a or lo_b < hi_b:
-                    active = patch_active(ev, k, a, b, wp.min(lo_a, lo_b), wp.max(hi_a, hi_b))
-                if active != 0:
-                    weighted_piece(ev, active, k, a, b, gx, gy, sx, sy, dgx, dgy, dsx, dsy, i, j, omega0, h,
+                    cut, held = patch_state(ev, stretch_cut, k, a, b, wp.min(lo_a, lo_b), wp.max(hi_a, hi_b))
+                    inside = inside | held
+                if cut != 0:
+                    weighted_piece(ev, cut, inside, k, a, b, gx, gy, sx, sy, dgx, dgy, dsx, dsy, i, j, omega0, h,
                                    sigma_omega, out)
-            if active == 0:
-                for n in range(3):
-                    s = mid + wp.float64(float(n - 1)) * node * half
-                    lo, hi = cell_clip(gx + s * dgx, gy + s * dgy, sx + s * dsx, sy + s * dsy, i, j)
-                    if lo < hi:
-                        w = wp.float64(GAUSS_CENTRE_WEIGHT)
-                        if n != 1:
-                            w = wp.float64(GAUSS_SIDE_WEIGHT)
-                        total += w * half * normal_pdf(omega0 + s * h, wp.float64(0.0), sigma_omega) * h * normal_interval(lo, hi)
+            if cut == 0 and inside == 0:
+                total = gauss_nodes(gx, gy, sx, sy, dgx, dgy, dsx, dsy, i, j, omega0, h, sigma_omega, mid, half, total)
+            elif cut == 0:  # inside some polygons throughout: their constant factors
+                if inside != held:
+                    if held != 0:
+                        add_channels(ev, held, held_total, i, j, out)
+                    held = inside
+                    held_total = wp.float64(0.0)
+                held_total = gauss_nodes(gx, gy, sx, sy, dgx, dgy, dsx, dsy, i, j, omega0, h, sigma_omega, mid, half,
+                                         held_total)
         if s1 >= one:
             break
         s0 = s1
+    if held != 0:
+        add_channels(ev, held, held_total, i, j, out)
     for c in range(ev.channels):  # outside every polygon: weight 1 in every channel
         out[c, j, i] += total
 
@@ -467,7 +535,7 @@ def ribbon_cell(gx: wp.float64, gy: wp.float64, sx: wp.float64, sy: wp.float64, 
 @wp.func
 def walk_edge(gx: wp.float64, gy: wp.float64, sx: wp.float64, sy: wp.float64, dgx: wp.float64, dgy: wp.float64,
               dsx: wp.float64, dsy: wp.float64, edge: wp.float64, row0: int, row1: int, nx: int,
-              omega0: wp.float64, h: wp.float64, sigma_omega: wp.float64, k: int, ev: Earlier,
+              omega0: wp.float64, h: wp.float64, sigma_omega: wp.float64, k: int, ev: Earlier, near: int,
               out: wp.array3d(dtype=wp.float64)):
     """Walk the interval's edge line s = ``edge`` (0 or 1) through the band's cells in order
     (Amanatides-Woo) and add the ribbon's mass to each cell it owns: a cell belongs to the walk
@@ -498,7 +566,7 @@ def walk_edge(gx: wp.float64, gy: wp.float64, sx: wp.float64, sy: wp.float64, dg
         z_next = wp.max(z, wp.min(hi, wp.min(zi, zj)))
         a_lo, a_hi = cell_clip(gx, gy, sx, sy, i, j)
         if (a_lo < a_hi) == (edge == wp.float64(0.0)):
-            ribbon_cell(gx, gy, sx, sy, dgx, dgy, dsx, dsy, i, j, omega0, h, sigma_omega, k, ev, out)
+            ribbon_cell(gx, gy, sx, sy, dgx, dgy, dsx, dsy, i, j, omega0, h, sigma_omega, k, ev, near, out)
         z = z_next
         if z >= hi:
             return
@@ -562,5 +630,9 @@ def cat_cells(
     dgy = gy1 - gy
     dsx = sx1 - sx
     dsy = sy1 - sy
-    walk_edge(gx, gy, sx, sy, dgx, dgy, dsx, dsy, wp.float64(0.0), row0, row1, nx, omega0, h, sigma_omega, k, ev, out)
-    walk_edge(gx, gy, sx, sy, dgx, dgy, dsx, dsy, wp.float64(1.0), row0, row1, nx, omega0, h, sigma_omega, k, ev, out)
+    # the polygons that the interval's earlier lines reach at all (|z| <= Z_MAX)
+    near = patch_active(ev, k, wp.float64(0.0), wp.float64(1.0), wp.float64(-Z_MAX), wp.float64(Z_MAX))
+    walk_edge(gx, gy, sx, sy, dgx, dgy, dsx, dsy, wp.float64(0.0), row0, row1, nx, omega0, h, sigma_omega, k, ev, near,
+              out)
+    walk_edge(gx, gy, sx, sy, dgx, dgy, dsx, dsy, wp.float64(1.0), row0, row1, nx, omega0, h, sigma_omega, k, ev, near,
+              out)
