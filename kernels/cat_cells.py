@@ -21,6 +21,18 @@ in omega is not: a line running along a cell side leaves the cell over a tiny ch
 Crossings are computed from the lines alone, not accumulated, so no step drifts and the
 result does not depend on the bands. Always float64: a cell's share is a difference of two
 normal tails.
+
+Earlier evidence (:class:`Earlier`): a polygon at an earlier time s (an area searched then,
+1 - POD inside; land, 0) weighs each path by where it was at s. For one omega the paths' points
+at s form the line of omega at s, affine in the same z, so the polygon's edges cut the cell's
+window [z_in, z_out] into pieces of constant weight, and the line's weighted share is the sum of
+each piece's weight times its normal mass: exact in z (``weighted_share``). The earlier lines
+are interpolated across the interval like the lines at t (``earlier_line``). Over omega the
+share has kinks where an earlier line passes a polygon vertex and where a crossing enters or
+leaves the window: breaks of the Gauss rule (``weighted_piece``). Sub-pieces whose earlier
+points no polygon edge comes near take the plain terms times constant factors, so the evidence
+costs only where it cuts, and without evidence the sums are the plain rule's bit for bit.
+One pass fills several channels: channel c weighs by the polygons of the bit mask ``masks[c]``.
 """
 
 

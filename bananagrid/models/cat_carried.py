@@ -19,6 +19,19 @@ the cell's window [z_in, z_out].
 Several polygons combine as independent looks (the product of their factors), and one pass
 gives several channels, each the map weighted by a chosen subset of the polygons (bit masks):
 the prior (no polygon), each search alone, all of them.
+
+Error: as the plain rule's, 5e-5 of a cell's probability plus 1e-12 (tested against an
+independent oracle over the CAT domain, folds included, and at the cells the polygons cut
+hardest; measured at most 2.4e-6): the pieces in z are exact and every kink in omega is a
+break; what remains is the linear interpolation of the lines across each turn-rate interval, at
+t and at the earlier times alike (at time s its distance from the exact lines, in SDs along
+the line, is about (s / t)^2 of the tolerance held at t). Without polygons the result is the
+plain rule's bit for bit.
+
+Searches at one time (and land at one time) only: a search over an interval, a raster, a track
+or a report is a factor that varies smoothly along the line, not taken here
+(:func:`polygons_of_pack` returns None for such a pack, and the posterior takes the density's
+sub-cell rule).
 """
 
 from __future__ import annotations
