@@ -411,10 +411,10 @@ def weighted_piece(ev: Earlier, active: int, base: int, k: int, a: wp.float64, b
     window's crossing count changes; found by bisection, WINDOW_BISECTIONS halvings), so that
     Gauss-Legendre integrates a smooth function on every part."""
     s0 = a
-    for _ in range(MAX_EVENTS):
+    for event in range(MAX_EVENTS):
         s1 = b
         for p in range(ev.count):
-            if (active >> p) & 1 == 1:
+            if (active >> p) & 1 == 1 and event < MAX_EVENTS - 1:  # the last round takes the rest whole
                 l0 = ev.lines[p, k]
                 l1 = ev.lines[p, k + 1]
                 for v in range(ev.starts[p], ev.starts[p + 1]):
