@@ -108,6 +108,11 @@ CASES = {
                       [([(-200.0, 400.0), (700.0, 300.0), (800.0, 1300.0), (350.0, 700.0), (-100.0, 1200.0)], 4.0,
                         0.0)],
                       (-2500.0, 2500.0, -2500.0, 2500.0), 80.0),
+    # a small round search of 40 vertices (many vertex passes in one sub-piece of the rule)
+    "fig1-round": (bg.CAT(**FIG1),
+                   [([(40.0 * math.sin(2.0 * math.pi * k / 40), 1390.0 + 40.0 * math.cos(2.0 * math.pi * k / 40))
+                      for k in range(40)], 5.0, 0.2)],
+                   (-1000.0, 1000.0, 2000.0, 3200.0), 100.0),
     # the slow ship, a search at 40 s where it stops and turns back (a non-convex polygon)
     "ship-nonconvex": (bg.CAT(**caustics.SHIP),
                        [([(-40.0, 150.0), (40.0, 150.0), (40.0, 400.0), (0.0, 300.0), (-40.0, 400.0)], 40.0, 0.1)],
