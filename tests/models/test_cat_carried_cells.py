@@ -19,6 +19,7 @@ from scipy import stats
 
 import bananagrid as bg
 from bananagrid.domains.pose import Pose
+from bananagrid.engine.carried import evaluate_carried
 from bananagrid.engine.warp_runtime import WarpContext
 from bananagrid.evidence.packing import pack
 from bananagrid.models.cat import cat_position, grid_cell_plan
@@ -303,6 +304,38 @@ def test_the_hook_takes_a_pack():
     prior = plain(model, grid)
     assert np.all(np.abs(got[p.channel("prior")] - prior) <= RTOL * prior + ATOL)
     assert notes["cell_method"]
+
+
+def test_the_cells_agree_with_the_carried_densities():
+    """The same weighted map by the other road: the carried density at points (each root of
+    the CAT scan weighted by the shared helpers at its earlier positions,
+    ``engine.carried.evaluate_carried``) averaged over 16 x 16 sub-cells of the heaviest cells.
+    Where every sub-cell centre has the same weight, each channel's ratio to the prior is that
+    weight within the cell rule's error; where a search's edge (carried to t) cuts the cell,
+    within the midpoint rule's error on a step, a few sub-cells' share of the jump."""
+    model = bg.CAT(**FIG1)
+    grid = bg.Grid.from_bounds((-1500.0, 1500.0), (1500.0, 3300.0), 100.0)
+    p = pack([bg.AreaSearch(SEARCH_A, t=5.0, pod=0.7), bg.AreaSearch(SEARCH_B, t=3.0, pod=0.5)], model.t)
+    got, _ = model.carried_cell_plan(grid, p).run(WarpContext(np.float64, "cpu", None))
+    prior, every = p.channel("prior"), p.channel("all")
+    x0, _, y0, _ = grid.extent
+    u = (np.arange(16) + 0.5) / 16
+    kinds = set()
+    for f in np.argsort(got[every], axis=None)[::-1][:12]:
+        i, j = divmod(int(f), grid.nx)
+        xs, ys = np.meshgrid(x0 + (j + u) * grid.dx, y0 + (i + u) * grid.dy)
+        dens = evaluate_carried(model, xs.ravel(), ys.ravel(), p)
+        weights = dens[every] / dens[prior]
+        want = float(np.sum(dens[every]) / np.sum(dens[prior]))
+        ratio = got[every, i, j] / got[prior, i, j]
+        if np.ptp(weights) < 1e-12:
+            kinds.add("constant")
+            assert abs(ratio - want) <= RTOL * want, (i, j, ratio, want)
+        else:
+            kinds.add("cut")
+            # a step of at most 1 - 0.3 x 0.5 across the cell, resolved to a row of 16 sub-cells
+            assert abs(ratio - want) <= 0.85 / 16, (i, j, ratio, want)
+    assert kinds == {"constant", "cut"}
 
 
 @pytest.mark.parametrize("case", ["interval", "report", "heading", "lattice"])
