@@ -32,6 +32,7 @@ from ..domains.pose import Pose
 from ..kernels import butterly as kernels
 from ..kernels import evidence as evidence_kernels
 from ..domains.grid import Grid
+from ..domains.polar_lattice import PolarLattice
 from ..engine.carried import evaluate_carried
 from ..engine.quadrature import GAUSS_TOL, MAX_ORDER, gauss_error, unit_rule
 from ..protocol import CellPlan, EvidencePack, Extent, KernelBinding, KernelContext, SceneKey, SceneSchema
@@ -758,6 +759,12 @@ class Butterly(Model):
         inverse-cube tracks, rasters) are evaluated at every node, on panels narrowed to their
         angular scale (the factor's length scale over V_i (t - s)), down to
         CARRIED_NARROWEST of a panel. ``t`` of the pack must be the model's.
+
+        As on a grid (:meth:`kernel_parameters` with ``floors``), a point whose prior bound is
+        below CELL_FLOOR = 1e-13 of the density's maximum is 0 in every channel (weights are at
+        most one) and a speed below SPEED_FLOOR of it is left out: inside and beyond the rings,
+        where the course integrand is spread over the whole circle, every search's crossings
+        would cut it into hundreds of pieces for a density of 1e-100.
         """
         if not math.isclose(pack.t, self.t, rel_tol=1e-12, abs_tol=0.0):
             raise BananagridError(f"t = {pack.t!r}: the evidence was packed for a map at t = {pack.t!r}, "
@@ -765,7 +772,7 @@ class Butterly(Model):
         rule = _carried_rule(KERNEL_TOL[np.dtype(ctx.dtype)][0])
         polygon = np.flatnonzero(pack.ints[:, 0] == evidence_kernels.KIND_POLYGON).astype(np.int32)
         smooth = np.flatnonzero(pack.ints[:, 0] != evidence_kernels.KIND_POLYGON).astype(np.int32)
-        params = ctx.struct(kernels.BUTTERLY_CARRIED, params=ctx.array(self.kernel_parameters(ctx.dtype)),
+        params = ctx.struct(kernels.BUTTERLY_CARRIED, params=ctx.array(self.kernel_parameters(ctx.dtype, floors=True)),
                             n_speeds=self.n_speed_nodes, rule=ctx.array(rule), t=ctx.scalar(self.t),
                             polygon_nodes=ctx.array(polygon, dtype=np.int32),
                             smooth_nodes=ctx.array(smooth, dtype=np.int32))
@@ -786,10 +793,14 @@ class Butterly(Model):
         kink where a course's circle touches an edge (the set of courses that reach the polygon
         changes in length like sqrt of the distance), and jumps for a polygon at the map's own
         time: there the rule's error is that of a Gauss rule on a kink or a step, O(h^2) or
-        O(h) of the sub-cell's mass; the posterior's boundary bound covers the map's own time,
-        and tests/evidence/test_butterly_cells.py measures the rest against a rule 4x finer.
-        None on other domains (the posterior's sub-cell rule on the carried densities).
+        O(h) of the sub-cell's mass (measured against cells halved in each direction: 1e-6 of
+        the channel's mass per cell at most on polar sectors holding a point-time search's
+        kinks, tests/evidence/test_butterly_cells.py). On a
+        :class:`~bananagrid.PolarLattice` the same rule in (range, bearing); None on other
+        domains (the posterior's sub-cell rule on the carried densities).
         """
+        if isinstance(domain, PolarLattice):
+            return self._carried_polar_plan(domain, pack, float(tol))
         if not isinstance(domain, Grid):
             return None
         tol = float(tol)
@@ -823,6 +834,53 @@ class Butterly(Model):
 
         seconds = float(len(keep) * per_cell) * CARRIED_SECONDS_PER_NODE * self.n_speed_nodes
         return CellPlan(seconds=seconds, run=run, method=method)
+
+    def _carried_polar_plan(self, lattice: PolarLattice, pack: EvidencePack, tol: float) -> CellPlan:
+        """:meth:`carried_cell_plan` on a polar lattice: each cell by the tensor Gauss-Legendre
+        rule in (range, bearing) with the area element r, sub-intervals no longer than sigma_min
+        radially and, as arcs at the cell's outer range, along the bearing (``tol`` as on a
+        grid); cells whose prior bound (on a box holding the sector) is negligible are 0."""
+        scale = self.sigma_min
+        re, be = lattice.range_edges, lattice.bearing_edges
+        nr, nb = lattice.shape
+        db = float(np.max(np.diff(be)))
+        # a box holding each sector: 17 points along each arc, widened by the arc's largest
+        # distance from its chords between them (r (1 - cos(db / 32)))
+        u = np.linspace(0.0, 1.0, 17)
+        r_grid = np.stack((np.broadcast_to(re[:-1, None, None], (nr, nb, 17)), np.broadcast_to(re[1:, None, None],
+                                                                                                (nr, nb, 17))))
+        b_grid = be[None, None, :-1, None] + np.diff(be)[None, None, :, None] * u
+        x, y = lattice.to_world(r_grid, b_grid)
+        pad = re[1:, None] * (1.0 - math.cos(db / 32.0))
+        bound = self.density_bounds(x.min(axis=(0, 3)) - pad, x.max(axis=(0, 3)) + pad, y.min(axis=(0, 3)) - pad,
+                                    y.max(axis=(0, 3)) + pad)
+        keep = bound >= CELL_FLOOR * self.peak_lower_bound()
+        rows = np.flatnonzero(keep.any(axis=1))
+        plans = {}
+        nodes = 0
+        for i in rows:
+            mr, nr_, _ = _axis_rule(re[i + 1] - re[i], scale, tol)
+            mb, nb_, _ = _axis_rule(re[i + 1] * db, scale, tol)
+            plans[i] = (unit_rule(mr, nr_), unit_rule(mb, nb_))
+            nodes += int(keep[i].sum()) * mr * nr_ * mb * nb_
+        method = ("carried density by tensor Gauss-Legendre in (range, bearing), sub-intervals <= sigma_min = "
+                  f"{scale:.6g} m (as arcs at the outer range)")
+
+        def run(ctx):
+            cells = np.zeros((pack.channels.shape[0], nr, nb))
+            for i, ((ur, wr), (ub, wb)) in plans.items():
+                cols = np.flatnonzero(keep[i])
+                r = re[i] + (re[i + 1] - re[i]) * ur  # (kr,)
+                b = be[cols, None] + np.diff(be)[cols, None] * ub[None, :]  # (cols, kb)
+                x, y = lattice.to_world(r[None, :, None], b[:, None, :])  # (cols, kr, kb)
+                values = evaluate_carried(self, x, y, pack, dtype=ctx.dtype, device=ctx.device, threads=ctx.threads)
+                w = (wr * r * (re[i + 1] - re[i]))[:, None] * wb[None, :]  # (kr, kb) without db
+                cells[:, i, cols] = np.einsum("cnrb,rb->cn", values.astype(float), w) * np.diff(be)[cols]
+            return cells, {"cell_method": method, "cells_computed": int(keep.sum()),
+                           "accuracy": {"claim": "per sub-cell and axis for a normal feature as wide as sigma_min, "
+                                                 "where the weight is smooth on the cell", "target": tol}}
+
+        return CellPlan(seconds=float(nodes) * CARRIED_SECONDS_PER_NODE * self.n_speed_nodes, run=run, method=method)
 
     def density_bounds(self, x0, x1, y0, y1) -> np.ndarray:
         """:meth:`density_bound` on arrays of rectangles (broadcast)."""
