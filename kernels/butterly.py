@@ -63,6 +63,11 @@ faster:
   two nodes' exponents is linear on the tile).
 * Otherwise each cell walks from its peak as above, Newton starting from the root of the
   neighbouring cell (the speeds are the outer loop).
+
+Carried evidence (the section at the end, ``CARRIED_POINTS``): evidence at earlier times weighs
+each course's path inside the same integral, through the shared helpers of
+``kernels/evidence.py``. Carried maps take the point path (a walk per point and speed, not the
+tiles: a tile's matrix product has no place for a weight per node and cell).
 """
 
 from typing import Any
@@ -70,7 +75,7 @@ from typing import Any
 import warp as wp
 
 from . import evidence as ek
-from .generate import ARRAY, SCALAR, SCALARS, Params, carried_points_kernel, density_kernels, overload_on_use
+from .generate import ARRAY, ARRAY2D, SCALAR, SCALARS, Params, carried_points_kernel, density_kernels, overload_on_use
 
 # No adjoints: nothing differentiates these kernels, and the backward kernels Warp would
 # generate for every launch kernel are most of a module's code (the CAT module's CUDA build:
@@ -981,7 +986,7 @@ def window_breaks(x: Any, y: Any, r: Any, p: Any, active: Any, n_active: int, sx
                         dd = d + type(x)(float(wrap - 1)) * two_pi
                         if dd > lo and dd < hi:
                             buf, who, count = insert_break(buf, who, count, dd, k)
-    return buf, who, count
+    return segment_breaks(x, y, r, p, ev, sx, sy, lo, hi, buf, who, count)
 
 
 @wp.func
@@ -1075,15 +1080,131 @@ def polygon_weights(ev: Any, p: Any, active: Any, n_active: int, cached: Any, lw
 
 
 @wp.func
+def segment_radius(p: Any, t_s: Any, r: Any):
+    """R(s) = r (t - s) / t for a segment's end time s."""
+    if p.t <= type(r)(0.0):
+        return type(r)(0.0)
+    return r * ((p.t - t_s) / p.t)
+
+
+@wp.func
+def inside_length(ev: Any, first: int, count: int, orient: Any, ax: Any, ay: Any, bx: Any, by: Any):
+    """The fraction of the segment from (ax, ay) to (bx, by) inside the polygon of edges
+    [first, first + count) (``orient`` +1 counter-clockwise, -1 clockwise): the winding number
+    (0 or 1 in a simple polygon) at the start plus, at each crossing u of an edge, its change
+    +-1 (entering where the segment crosses the edge from its outer side) times the rest of the
+    segment 1 - u. No sorting: the sum of the steps' tails is the integral of the indicator."""
+    zero = type(ax)(0.0)
+    one = type(ax)(1.0)
+    total = zero
+    if ek.polygon_contains(ev.edges, first, count, ax, ay):
+        total = one
+    dx = bx - ax
+    dy = by - ay
+    for e in range(first, first + count):
+        px = ev.edges[e, 0]
+        py = ev.edges[e, 1]
+        qx = ev.edges[e, 2] - px
+        qy = ev.edges[e, 3] - py
+        denom = dx * qy - dy * qx  # cross(d, edge)
+        if denom != zero:
+            wx = px - ax
+            wy = py - ay
+            u = (wx * qy - wy * qx) / denom  # along the segment
+            v = (wx * dy - wy * dx) / denom  # along the edge
+            if u > zero and u < one and v >= zero and v < one:
+                step = orient
+                if denom > zero:
+                    step = -orient  # crossing the edge from its left (inner) side: leaving
+                total = total + step * (one - u)
+    return wp.min(wp.max(total, zero), one)
+
+
+@wp.func
+def add_segments(ev: Any, p: Any, x: Any, y: Any, ex: Any, ey: Any, r: Any, lw: wp.array(dtype=Any)):
+    """Set the log-weights of the area searches over intervals taken exactly: the path's
+    straight segment over (t0, t1) spends the fraction f of the interval inside the polygon,
+    and the factor's log-weight is rate (t1 - t0) f (rate = -C / (t1 - t0), the pack's)."""
+    zero = type(x)(0.0)
+    for k in range(p.segments.shape[0]):
+        f = p.segment_ints[k, 0]
+        r0 = segment_radius(p, p.segments[k, 0], r)
+        r1 = segment_radius(p, p.segments[k, 1], r)
+        first = p.segment_ints[k, 1]
+        count = p.segment_ints[k, 2]
+        frac = zero
+        if r0 > r1:
+            frac = inside_length(ev, first, count, p.segments[k, 3], x - r0 * ex, y - r0 * ey, x - r1 * ex, y - r1 * ey)
+        elif ek.polygon_contains(ev.edges, first, count, x - r0 * ex, y - r0 * ey):
+            frac = type(x)(1.0)
+        value = zero
+        if frac > zero:
+            value = p.segments[k, 2] * (p.segments[k, 1] - p.segments[k, 0]) * frac
+        lw[f] = value
+
+
+@wp.func
+def segment_breaks(x: Any, y: Any, r: Any, p: Any, ev: Any, sx: Any, sy: Any, lo: Any, hi: Any, buf: Any, who: Any,
+                   count: int):
+    """Add to the window the courses where a search-over-an-interval's weight is not smooth:
+    where an end of the path's segment crosses an edge (the circles R(t0), R(t1)) and where the
+    segment passes a vertex (its direction from x, at a distance between R(t1) and R(t0))."""
+    two_pi = type(x)(TWO_PI)
+    zero = type(x)(0.0)
+    for k in range(p.segments.shape[0]):
+        first = p.segment_ints[k, 1]
+        n_edges = p.segment_ints[k, 2]
+        r_far = segment_radius(p, p.segments[k, 0], r)
+        r_near = segment_radius(p, p.segments[k, 1], r)
+        for end in range(2):
+            radius = r_far
+            if end == 1:
+                radius = r_near
+            if radius > zero:
+                for e in range(first, first + n_edges):
+                    ax = ev.edges[e, 0]
+                    ay = ev.edges[e, 1]
+                    bx = ev.edges[e, 2]
+                    by = ev.edges[e, 3]
+                    hits, u1, u2 = circle_edge_crossings(x, y, radius, ax, ay, bx, by)
+                    for h in range(hits):
+                        u = u1
+                        if h == 1:
+                            u = u2
+                        ex = (x - (ax + u * (bx - ax))) / radius
+                        ey = (y - (ay + u * (by - ay))) / radius
+                        d = wp.atan2(sx * ey - sy * ex, sx * ex + sy * ey)
+                        for wrap in range(3):
+                            dd = d + type(x)(float(wrap - 1)) * two_pi
+                            if dd > lo and dd < hi:
+                                buf, who, count = insert_break(buf, who, count, dd, -1)
+        for e in range(first, first + n_edges):
+            vx = x - ev.edges[e, 0]
+            vy = y - ev.edges[e, 1]
+            dist = wp.sqrt(vx * vx + vy * vy)
+            if dist > zero and dist >= r_near and dist <= r_far:
+                ex = vx / dist
+                ey = vy / dist
+                d = wp.atan2(sx * ey - sy * ex, sx * ex + sy * ey)
+                for wrap in range(3):
+                    dd = d + type(x)(float(wrap - 1)) * two_pi
+                    if dd > lo and dd < hi:
+                        buf, who, count = insert_break(buf, who, count, dd, -1)
+    return buf, who, count
+
+
+@wp.func
 def add_smooth(ev: Any, p: Any, x: Any, y: Any, ex: Any, ey: Any, r: Any, lw: wp.array(dtype=Any)):
     """Set the smooth factors' log-weights for the path through (x, y) with direction e (their
-    factors zeroed first; the polygons' are left as they are)."""
+    factors zeroed first; the polygons' are left as they are), the searches over intervals'
+    included (:func:`add_segments`)."""
     for k in range(p.smooth_nodes.shape[0]):
         lw[ev.ints[p.smooth_nodes[k], 1]] = type(x)(0.0)
     for k in range(p.smooth_nodes.shape[0]):
         j = p.smooth_nodes[k]
         radius = node_radius(ev, j, r, p.t)
         ek.evidence_node(ev, j, x - radius * ex, y - radius * ey, lw)
+    add_segments(ev, p, x, y, ex, ey, r, lw)
 
 
 @wp.func
@@ -1099,7 +1220,7 @@ def carried_arc(
     own trapezoid sum over it (``trapezoid``, relative to exp(E*)) times its weight."""
     zero = type(x)(0.0)
     half = type(x)(0.5)
-    smooth = p.smooth_nodes.shape[0]
+    smooth = p.smooth_nodes.shape[0] + p.segments.shape[0]
     rule = p.rule
     sx = cx * q1x - cy * q1y  # the peak's direction e(c*) in the world
     sy = cx * q1y + cy * q1x
@@ -1108,7 +1229,7 @@ def carried_arc(
     a = lo
     while a < hi:
         buf, who, count = window_breaks(x, y, r, p, active, n_active, sx, sy, a, hi, ev)
-        if count == 0 and a == lo:
+        if count == 0 and a == lo and p.segments.shape[0] == 0:
             # no break: the polygons' weight is constant on the arc
             e_mid, mx, my = course_node(cx, cy, q1x, q1y, c1, c2, p11, p12, p22, half * (lo + hi))
             ek.evidence_reset(ev, lw)
@@ -1155,6 +1276,8 @@ def carried_arc(
                         rebuild = int(0)
                         for q in range(applied, piece):
                             k = int(who[q])
+                            if k < 0:  # a search over an interval's break: its weight is per node
+                                continue
                             new = polygon_contribution(ev, p, active, n_active, k, x, y, mx, my, r)
                             if wp.isfinite(new) and wp.isfinite(cached[k]):
                                 f = ev.ints[polygon_node(p, active, n_active, k), 1]
@@ -1285,7 +1408,10 @@ def butterly_carried(x: Any, y: Any, p: Any, ev: Any, lw: wp.array(dtype=Any), o
 
 
 #: The carried kernels' parameters: the density's array and speed count, the course rule
-#: (RULE_SIZE values), the map's time t, and the pack's polygon nodes and other (smooth) nodes.
+#: (RULE_SIZE values), the map's time t, the pack's polygon nodes and other (smooth) nodes, and
+#: the area searches over intervals taken exactly (``segments`` rows t0, t1, rate, orientation;
+#: ``segment_ints`` rows factor, first edge, edge count, in the pack's edges).
 BUTTERLY_CARRIED = Params("ButterlyCarriedParams", __name__, params=ARRAY, n_speeds=int, rule=ARRAY, t=SCALAR,
-                          polygon_nodes=wp.array(dtype=wp.int32), smooth_nodes=wp.array(dtype=wp.int32))
+                          polygon_nodes=wp.array(dtype=wp.int32), smooth_nodes=wp.array(dtype=wp.int32),
+                          segments=ARRAY2D, segment_ints=wp.array2d(dtype=wp.int32))
 CARRIED_POINTS = carried_points_kernel(butterly_carried, BUTTERLY_CARRIED, ek.EVIDENCE, "butterly")

@@ -14,6 +14,12 @@ are integrated by a composite Gauss-Legendre rule whose nodes become the discret
 (see :data:`SPEED_PANEL_SIGMAS`). The phi-integral is computed by the Warp kernel
 ``kernels/butterly.py`` (method in its docstring); :mod:`bananagrid.models._butterly_series`
 holds the Bessel series (3.8) as a second method.
+
+Evidence at earlier times is carried exactly through the paths: for the course c and speed V_i
+the path through the map point x is at x - V_i (t - s) e(c) at time s, so the evidence is a
+weight inside the course integral (:meth:`Butterly.bind_carried`, the engine's carried hook;
+cell probabilities by :meth:`Butterly.carried_cell_plan`), and :meth:`Butterly.sample_paths`
+draws whole paths of the generative story for Monte Carlo.
 """
 
 from __future__ import annotations
@@ -103,6 +109,53 @@ SMOOTH_SPACING = 0.8
 #: submarine case, Intel Xeon, float64, one core; the upper end near the searches' edges).
 CELL_CHUNK = 2**18
 CARRIED_SECONDS_PER_NODE = 10e-6
+
+
+def _interval_searches(pack: EvidencePack) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The pack's area searches over intervals, to be taken exactly: a Butterly path is straight,
+    so the time it spends in the polygon over (t0, t1) is the length of its segment inside over
+    its speed (no time rule). A factor qualifies when its nodes are all one polygon's with one
+    rate and are exactly a composite Gauss-Legendre rule over some (t0, t1) (P equal panels of n
+    nodes, the pack's rule for an interval: (t0, t1) recovered from the weights' sum and the
+    first node for each n that divides the count, and every node checked); others keep their
+    nodes.
+
+    Returns (segments (S, 4): t0, t1, rate, orientation; ints (S, 3): factor, first edge, edge
+    count; a mask of the pack's nodes they replace)."""
+    kind, factor = pack.ints[:, 0], pack.ints[:, 1]
+    rows, ints = [], []
+    exact = np.zeros(pack.nodes, dtype=bool)
+    for f in range(pack.factors):
+        nodes = np.flatnonzero(factor == f)
+        if nodes.size < 2 or np.any(kind[nodes] != evidence_kernels.KIND_POLYGON):
+            continue
+        first, count = int(pack.ints[nodes[0], 2]), int(pack.ints[nodes[0], 3])
+        if np.any(pack.ints[nodes, 2] != first) or np.any(pack.data[nodes, 0] != pack.data[nodes[0], 0]):
+            continue
+        span = float(np.sum(pack.q[nodes]))
+        times = np.sort(pack.time[nodes])
+        found = None
+        for n in range(1, 17):
+            if nodes.size % n:
+                continue
+            panels = nodes.size // n
+            x, _ = np.polynomial.legendre.leggauss(n)
+            t0 = float(times[0]) - 0.5 * span / panels * (1.0 + x[0])
+            edges = np.linspace(t0, t0 + span, panels + 1)
+            expected = np.sort((0.5 * (edges[1:] + edges[:-1])[:, None] + 0.5 * np.diff(edges)[:, None] * x).ravel())
+            if span > 0.0 and np.allclose(times, expected, rtol=0.0, atol=1e-9 * span):
+                found = t0
+                break
+        if found is None:
+            continue
+        e = pack.edges[first:first + count]
+        orient = 1.0 if np.sum(e[:, 0] * e[:, 3] - e[:, 2] * e[:, 1]) > 0.0 else -1.0
+        rows.append((found, found + span, float(pack.data[nodes[0], 0]), orient))
+        ints.append((f, first, count))
+        exact[nodes] = True
+    if not rows:
+        return np.zeros((0, 4)), np.zeros((0, 3), dtype=np.int32), exact
+    return np.asarray(rows, dtype=float), np.asarray(ints, dtype=np.int32), exact
 
 
 @functools.lru_cache(maxsize=4)
@@ -770,12 +823,15 @@ class Butterly(Model):
             raise BananagridError(f"t = {pack.t!r}: the evidence was packed for a map at t = {pack.t!r}, "
                                   f"the model's t is {self.t!r}")
         rule = _carried_rule(KERNEL_TOL[np.dtype(ctx.dtype)][0])
-        polygon = np.flatnonzero(pack.ints[:, 0] == evidence_kernels.KIND_POLYGON).astype(np.int32)
-        smooth = np.flatnonzero(pack.ints[:, 0] != evidence_kernels.KIND_POLYGON).astype(np.int32)
+        segments, segment_ints, exact = _interval_searches(pack)
+        kind = pack.ints[:, 0]
+        polygon = np.flatnonzero((kind == evidence_kernels.KIND_POLYGON) & ~exact).astype(np.int32)
+        smooth = np.flatnonzero(kind != evidence_kernels.KIND_POLYGON).astype(np.int32)
         params = ctx.struct(kernels.BUTTERLY_CARRIED, params=ctx.array(self.kernel_parameters(ctx.dtype, floors=True)),
                             n_speeds=self.n_speed_nodes, rule=ctx.array(rule), t=ctx.scalar(self.t),
                             polygon_nodes=ctx.array(polygon, dtype=np.int32),
-                            smooth_nodes=ctx.array(smooth, dtype=np.int32))
+                            smooth_nodes=ctx.array(smooth, dtype=np.int32), segments=ctx.array(segments),
+                            segment_ints=ctx.array(segment_ints, dtype=np.int32))
         return KernelBinding(_CarriedKernels(kernels.CARRIED_POINTS), params,
                              {"speed_nodes": self.n_speed_nodes, "carried": "course pieces between polygon crossings"})
 

@@ -15,7 +15,7 @@ from hypothesis import strategies as st
 import bananagrid as bg
 from bananagrid import BananagridError
 from bananagrid.engine.carried import evaluate_carried
-from bananagrid.evidence.packing import AREA_PANELS, PANEL_NODES, pack
+from bananagrid.evidence.packing import AREA_PANELS, pack
 from butterly_carry_oracle import carried_density
 
 #: The kernel's course rule (Gauss-Legendre panels of 1.6 of the integrand's narrowest width,
@@ -60,14 +60,15 @@ def points(model, n=6, seed_=1):
 
 @pytest.mark.parametrize("name", list(CASES))
 def test_carried_density_matches_the_oracle(name):
-    """Every channel's "all" weighting against the oracle; an interval search with the oracle
-    taking the pack's own Gauss-Legendre rule in time (the course integral is what is tested
-    here; the time rule's error is the pack's, tested in test_evidence.py)."""
+    """The "all" channel against the oracle; an area search over an interval exactly (the time
+    a straight path spends inside: Butterly's kernel takes the path's segment, not the pack's
+    time nodes)."""
     model = butterly()
     evidence = CASES[name]
-    p = points(model)
+    p = points(model, 8)
     got = evaluate_carried(model, p[:, 0], p[:, 1], pack(evidence, model.t))
-    want = carried_density(model, evidence, p[:, 0], p[:, 1], rule=(AREA_PANELS, PANEL_NODES))
+    assert np.any(got[1] < 0.99 * got[0])  # the evidence weighs these points' paths
+    want = carried_density(model, evidence, p[:, 0], p[:, 1])
     np.testing.assert_allclose(got[1], want, rtol=RTOL, atol=0.0)
 
 
@@ -96,17 +97,25 @@ def test_channels_combine_their_factors():
     np.testing.assert_array_equal(got[pk.channel("searches")], got[pk.channel("all")])
 
 
-def test_interval_search_within_the_time_rule_bound():
-    """Against the exact fraction of the interval a straight path spends inside: the pack's
-    Gauss-Legendre rule in time errs by at most C 0.35 / AREA_PANELS per crossing of an edge
-    (a path crosses the barrier's two long edges at most), so the weight is within a factor
-    exp(+-2 C 0.35 / AREA_PANELS) of the exact one."""
+def test_interval_search_of_another_rule_keeps_its_nodes():
+    """A polygon factor whose nodes are not one composite Gauss-Legendre rule over an interval
+    (here: a search at one time and the same polygon's nodes hand-built unevenly) is taken node
+    by node, as the pack states it: against the oracle given the pack's own time rule."""
     model = butterly()
     p = points(model, 6, 5)
-    got = evaluate_carried(model, p[:, 0], p[:, 1], pack([BARRIER], model.t))[1]
+    pk = pack([BARRIER], model.t)
+    uneven = dict(pk.__dict__)
+    times = pk.time.copy()
+    times[0] = times[0] + 1e-3 * (times[1] - times[0])
+    times.setflags(write=False)
+    uneven["time"] = times
+    odd = type(pk)(**uneven)
+    got = evaluate_carried(model, p[:, 0], p[:, 1], odd)[1]
     exact = carried_density(model, [BARRIER], p[:, 0], p[:, 1])
+    # the pack's rule errs by at most C 0.35 / AREA_PANELS per crossing of an edge (two at most)
     bound = math.expm1(2 * 1.5 * 0.35 / AREA_PANELS)
     assert np.all(np.abs(got - exact) <= bound * exact)
+    assert not np.allclose(got, exact, rtol=1e-9, atol=0.0)  # node by node: not the exact rule
 
 
 POLYGONS = st.lists(st.tuples(st.floats(0.2, 1.0), st.floats(-0.2, 0.2)), min_size=3, max_size=7)
