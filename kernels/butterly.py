@@ -1121,6 +1121,57 @@ def inside_length(ev: Any, first: int, count: int, orient: Any, ax: Any, ay: Any
 
 
 @wp.func
+def segment_reaches(p: Any, k: int, x: Any, y: Any, r: Any):
+    """Whether the annulus R(t1) <= |P - x| <= R(t0) swept by search k's path segments (any
+    course) meets the search polygon's box: else the segment is never inside."""
+    zero = type(x)(0.0)
+    r_far = segment_radius(p, p.segments[k, 0], r)
+    r_near = segment_radius(p, p.segments[k, 1], r)
+    near_x = wp.max(wp.max(p.segments[k, 4] - x, zero), x - p.segments[k, 5])
+    near_y = wp.max(wp.max(p.segments[k, 6] - y, zero), y - p.segments[k, 7])
+    far_x = wp.max(wp.abs(p.segments[k, 4] - x), wp.abs(x - p.segments[k, 5]))
+    far_y = wp.max(wp.abs(p.segments[k, 6] - y), wp.abs(y - p.segments[k, 7]))
+    return near_x * near_x + near_y * near_y <= r_far * r_far and far_x * far_x + far_y * far_y >= r_near * r_near
+
+
+@wp.func
+def reaching_segments(p: Any, x: Any, y: Any, r: Any, sx: Any, sy: Any, lo: Any, hi: Any):
+    """How many searches over intervals a path of a course in theta* + (lo, hi) can be inside:
+    the sector of the annulus R(t1) <= |P - x| <= R(t0) in those directions (from the peak's
+    direction (sx, sy)) lies in the box of its four corners widened by R(t0) (1 - cos((hi - lo)
+    / 2)) (the arc's bulge); it must meet the polygon's box (an arc of pi or more: the annulus's
+    test, :func:`segment_reaches`)."""
+    count = int(0)
+    zero = type(x)(0.0)
+    half = type(x)(0.5)
+    cl = wp.cos(lo)
+    sl = wp.sin(lo)
+    ch = wp.cos(hi)
+    sh = wp.sin(hi)
+    # e(theta* + d) = the peak's direction turned by d
+    lx = sx * cl - sy * sl
+    ly = sx * sl + sy * cl
+    hx = sx * ch - sy * sh
+    hy = sx * sh + sy * ch
+    wide = hi - lo >= type(x)(PI)
+    bulge = type(x)(1.0) - wp.cos(half * (hi - lo))
+    for k in range(p.segments.shape[0]):
+        if segment_reaches(p, k, x, y, r):
+            if wide:
+                count = count + 1
+            else:
+                r0 = segment_radius(p, p.segments[k, 0], r)
+                r1 = segment_radius(p, p.segments[k, 1], r)
+                x0 = wp.min(wp.min(x - r0 * lx, x - r1 * lx), wp.min(x - r0 * hx, x - r1 * hx)) - r0 * bulge
+                x1 = wp.max(wp.max(x - r0 * lx, x - r1 * lx), wp.max(x - r0 * hx, x - r1 * hx)) + r0 * bulge
+                y0 = wp.min(wp.min(y - r0 * ly, y - r1 * ly), wp.min(y - r0 * hy, y - r1 * hy)) - r0 * bulge
+                y1 = wp.max(wp.max(y - r0 * ly, y - r1 * ly), wp.max(y - r0 * hy, y - r1 * hy)) + r0 * bulge
+                if x1 >= p.segments[k, 4] and x0 <= p.segments[k, 5] and y1 >= p.segments[k, 6] and y0 <= p.segments[k, 7]:
+                    count = count + 1
+    return count
+
+
+@wp.func
 def add_segments(ev: Any, p: Any, x: Any, y: Any, ex: Any, ey: Any, r: Any, lw: wp.array(dtype=Any)):
     """Set the log-weights of the area searches over intervals taken exactly: the path's
     straight segment over (t0, t1) spends the fraction f of the interval inside the polygon,
@@ -1133,7 +1184,9 @@ def add_segments(ev: Any, p: Any, x: Any, y: Any, ex: Any, ey: Any, r: Any, lw: 
         first = p.segment_ints[k, 1]
         count = p.segment_ints[k, 2]
         frac = zero
-        if r0 > r1:
+        if not segment_reaches(p, k, x, y, r):
+            frac = zero
+        elif r0 > r1:
             frac = inside_length(ev, first, count, p.segments[k, 3], x - r0 * ex, y - r0 * ey, x - r1 * ex, y - r1 * ey)
         elif ek.polygon_contains(ev.edges, first, count, x - r0 * ex, y - r0 * ey):
             frac = type(x)(1.0)
@@ -1156,6 +1209,8 @@ def segment_breaks(x: Any, y: Any, r: Any, p: Any, ev: Any, sx: Any, sy: Any, lo
         n_edges = p.segment_ints[k, 2]
         r_far = segment_radius(p, p.segments[k, 0], r)
         r_near = segment_radius(p, p.segments[k, 1], r)
+        if not segment_reaches(p, k, x, y, r):
+            n_edges = 0  # never inside: no break
         for end in range(2):
             radius = r_far
             if end == 1:
@@ -1220,16 +1275,17 @@ def carried_arc(
     own trapezoid sum over it (``trapezoid``, relative to exp(E*)) times its weight."""
     zero = type(x)(0.0)
     half = type(x)(0.5)
-    smooth = p.smooth_nodes.shape[0] + p.segments.shape[0]
     rule = p.rule
     sx = cx * q1x - cy * q1y  # the peak's direction e(c*) in the world
     sy = cx * q1y + cy * q1x
+    reach = reaching_segments(p, x, y, r, sx, sy, lo, hi)
+    smooth = p.smooth_nodes.shape[0] + reach
     cached = wp.vector(length=ACTIVE, dtype=type(x))
     n_visit = visits(p, n_active)
     a = lo
     while a < hi:
         buf, who, count = window_breaks(x, y, r, p, active, n_active, sx, sy, a, hi, ev)
-        if count == 0 and a == lo and p.segments.shape[0] == 0:
+        if count == 0 and a == lo:
             # no break: the polygons' weight is constant on the arc
             e_mid, mx, my = course_node(cx, cy, q1x, q1y, c1, c2, p11, p12, p22, half * (lo + hi))
             ek.evidence_reset(ev, lw)
@@ -1409,7 +1465,8 @@ def butterly_carried(x: Any, y: Any, p: Any, ev: Any, lw: wp.array(dtype=Any), o
 
 #: The carried kernels' parameters: the density's array and speed count, the course rule
 #: (RULE_SIZE values), the map's time t, the pack's polygon nodes and other (smooth) nodes, and
-#: the area searches over intervals taken exactly (``segments`` rows t0, t1, rate, orientation;
+#: the area searches over intervals taken exactly (``segments`` rows t0, t1, rate, orientation,
+#: then the polygon's box x0, x1, y0, y1;
 #: ``segment_ints`` rows factor, first edge, edge count, in the pack's edges).
 BUTTERLY_CARRIED = Params("ButterlyCarriedParams", __name__, params=ARRAY, n_speeds=int, rule=ARRAY, t=SCALAR,
                           polygon_nodes=wp.array(dtype=wp.int32), smooth_nodes=wp.array(dtype=wp.int32),

@@ -120,8 +120,8 @@ def _interval_searches(pack: EvidencePack) -> tuple[np.ndarray, np.ndarray, np.n
     first node for each n that divides the count, and every node checked); others keep their
     nodes.
 
-    Returns (segments (S, 4): t0, t1, rate, orientation; ints (S, 3): factor, first edge, edge
-    count; a mask of the pack's nodes they replace)."""
+    Returns (segments (S, 8): t0, t1, rate, orientation, the polygon's box x0, x1, y0, y1;
+    ints (S, 3): factor, first edge, edge count; a mask of the pack's nodes they replace)."""
     kind, factor = pack.ints[:, 0], pack.ints[:, 1]
     rows, ints = [], []
     exact = np.zeros(pack.nodes, dtype=bool)
@@ -150,11 +150,11 @@ def _interval_searches(pack: EvidencePack) -> tuple[np.ndarray, np.ndarray, np.n
             continue
         e = pack.edges[first:first + count]
         orient = 1.0 if np.sum(e[:, 0] * e[:, 3] - e[:, 2] * e[:, 1]) > 0.0 else -1.0
-        rows.append((found, found + span, float(pack.data[nodes[0], 0]), orient))
+        rows.append((found, found + span, float(pack.data[nodes[0], 0]), orient, *pack.data[nodes[0], 1:5]))
         ints.append((f, first, count))
         exact[nodes] = True
     if not rows:
-        return np.zeros((0, 4)), np.zeros((0, 3), dtype=np.int32), exact
+        return np.zeros((0, 8)), np.zeros((0, 3), dtype=np.int32), exact
     return np.asarray(rows, dtype=float), np.asarray(ints, dtype=np.int32), exact
 
 
