@@ -810,7 +810,11 @@ KERNELS = density_kernels(butterly_world, BUTTERLY, "butterly", grid=butterly_gr
 # integrated by Gauss-Legendre on panels no wider than ``rule[PANEL]`` trapezoid spacings
 # (``carried_arc``): exact for polygons but for the rule's error on the smooth exp(E). Smooth
 # factors (reports, bearings, inverse-cube tracks, rasters) are evaluated at every node, on
-# panels narrowed to their own angular scale (``smooth_panel``).
+# panels narrowed to their own angular scale (``smooth_spacing``). An area search over an
+# interval (t0, t1) is taken exactly (``add_segments``): the path over it is the segment from
+# X(t0) to X(t1), the time inside is its length inside the polygon over the speed, smooth in
+# theta between the courses where an end crosses an edge or the segment passes a vertex
+# (``segment_breaks``).
 
 #: Gauss-Legendre nodes per panel; the rule array holds the nodes on [-1, 1], their weights,
 #: then the panel width in trapezoid spacings (PANEL) and the narrowest panel for smooth factors

@@ -811,7 +811,14 @@ class Butterly(Model):
         ``engine.quadrature.gauss_error(8, 1.6)``). Smooth factors (reports, bearings,
         inverse-cube tracks, rasters) are evaluated at every node, on panels narrowed to their
         angular scale (the factor's length scale over V_i (t - s)), down to
-        CARRIED_NARROWEST of a panel. ``t`` of the pack must be the model's.
+        CARRIED_NARROWEST of a panel; an arc that no polygon cuts takes the density's own
+        trapezoid rule (the weight at its nodes, spacing narrowed likewise). An area search over
+        an interval (t0, t1) is exact: the path over it is a straight segment, whose length
+        inside the polygon over its speed is the time spent inside (coverage C spread evenly:
+        log-weight -C x that fraction of the interval); its breaks are the courses where an end
+        of the segment crosses an edge or the segment passes a vertex (the pack's time nodes
+        for it are recognised and replaced, :func:`_interval_searches`). ``t`` of the pack
+        must be the model's.
 
         As on a grid (:meth:`kernel_parameters` with ``floors``), a point whose prior bound is
         below CELL_FLOOR = 1e-13 of the density's maximum is 0 in every channel (weights are at

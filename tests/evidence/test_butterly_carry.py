@@ -122,21 +122,24 @@ POLYGONS = st.lists(st.tuples(st.floats(0.2, 1.0), st.floats(-0.2, 0.2)), min_si
 
 
 @seed(20261127)
-@settings(max_examples=12, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@settings(max_examples=20, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(shape=POLYGONS, centre=st.tuples(st.floats(-3000, 3000), st.floats(-3000, 3000)),
        size=st.floats(500.0, 4000.0), when=st.floats(0.0, 1.0), pod=st.floats(0.0, 1.0),
        speed=st.floats(0.5, 12.0), kappa=st.sampled_from([0.0, 0.5, 4.0]), rho=st.floats(-0.9, 0.9),
-       report_t=st.floats(0.0, 1.0))
-def test_sweep_against_the_oracle(shape, centre, size, when, pod, speed, kappa, rho, report_t):
-    """Star-shaped polygons (vertices at sorted angles, random radii), search times over the
-    whole span, PODs, speeds (r / sigma_min up to ~90), von Mises concentrations and
-    correlations, with a position report: every point within RTOL of the oracle."""
+       report_t=st.floats(0.0, 1.0), length=st.sampled_from([0.0, 0.05, 0.4]))
+def test_sweep_against_the_oracle(shape, centre, size, when, pod, speed, kappa, rho, report_t, length):
+    """Star-shaped polygons (vertices at sorted angles, random radii: not convex), searches at
+    one time or over intervals of 5 % and 40 % of the map's time, anywhere in the span, PODs,
+    speeds (r / sigma_min up to ~90), von Mises concentrations and correlations, with a
+    position report: every point within RTOL of the oracle (intervals exactly)."""
     k = len(shape)
     angles = np.sort(2 * math.pi * (np.arange(k) / k + np.array([d for _, d in shape]) / k))
     radii = np.array([a for a, _ in shape]) * size
     vertices = np.column_stack((centre[0] + radii * np.cos(angles), centre[1] + radii * np.sin(angles)))
     model = butterly(rho=rho, speeds=(speed,), weights=(1.0,), kappa=kappa)
-    evidence = [bg.AreaSearch(vertices, t=when * model.t, pod=pod),
+    start = when * (1.0 - length) * model.t
+    span = start if length == 0.0 else (start, start + length * model.t)
+    evidence = [bg.AreaSearch(vertices, t=span, pod=pod),
                 bg.PositionReport((centre[0], centre[1] + 500.0), t=report_t * model.t, sigma=3000.0)]
     p = points(model, 3, 7)
     got = evaluate_carried(model, p[:, 0], p[:, 1], pack(evidence, model.t))[1]
