@@ -64,7 +64,7 @@ faster:
 * Otherwise each cell walks from its peak as above, Newton starting from the root of the
   neighbouring cell (the speeds are the outer loop).
 
-Carried evidence (the section at the end, ``CARRIED_POINTS``): evidence at earlier times weighs
+Carried evidence (the section at the end, ``CARRIED_KERNELS``): evidence at earlier times weighs
 each course's path inside the same integral, through the shared helpers of
 ``kernels/evidence.py``. Carried maps take the point path (a walk per point and speed, not the
 tiles: a tile's matrix product has no place for a weight per node and cell).
@@ -1475,4 +1475,4 @@ def butterly_carried(x: Any, y: Any, p: Any, ev: Any, lw: wp.array(dtype=Any), o
 BUTTERLY_CARRIED = Params("ButterlyCarriedParams", __name__, params=ARRAY, n_speeds=int, rule=ARRAY, t=SCALAR,
                           polygon_nodes=wp.array(dtype=wp.int32), smooth_nodes=wp.array(dtype=wp.int32),
                           segments=ARRAY2D, segment_ints=wp.array2d(dtype=wp.int32))
-CARRIED_POINTS = carried_points_kernel(butterly_carried, BUTTERLY_CARRIED, ek.EVIDENCE, "butterly")
+CARRIED_KERNELS = carried_points_kernel(butterly_carried, BUTTERLY_CARRIED, ek.EVIDENCE, "butterly")

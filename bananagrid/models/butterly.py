@@ -196,14 +196,6 @@ def _axis_rule(width: float, scale: float, tol: float) -> tuple[int, int, float]
     return m, MAX_ORDER, err
 
 
-@dataclass(frozen=True)
-class _CarriedKernels:
-    """What a carried binding's ``kernels`` holds for the engine: the carried points kernel."""
-
-    points: object
-    name: str = "butterly.butterly_carried_points"
-
-
 #: Relative tolerance of the kernel's trapezoid rule (its node count, see kernels/butterly.py),
 #: the relative size below which the walk drops a node, and Newton's tolerance, per precision.
 KERNEL_TOL = {np.dtype(np.float64): (1e-12, 1e-15, 1e-8), np.dtype(np.float32): (1e-7, 1e-8, 1e-4)}
@@ -839,7 +831,7 @@ class Butterly(Model):
                             polygon_nodes=ctx.array(polygon, dtype=np.int32),
                             smooth_nodes=ctx.array(smooth, dtype=np.int32), segments=ctx.array(segments),
                             segment_ints=ctx.array(segment_ints, dtype=np.int32))
-        return KernelBinding(_CarriedKernels(kernels.CARRIED_POINTS), params,
+        return KernelBinding(kernels.CARRIED_KERNELS, params,
                              {"speed_nodes": self.n_speed_nodes, "carried": "course pieces between polygon crossings"})
 
     def carried_cell_plan(self, domain, pack: EvidencePack, *, tol: float = GAUSS_TOL) -> CellPlan | None:
