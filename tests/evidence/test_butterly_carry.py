@@ -15,7 +15,7 @@ from hypothesis import strategies as st
 import bananagrid as bg
 from bananagrid import BananagridError
 from bananagrid.engine.carried import evaluate_carried
-from bananagrid.evidence.packing import AREA_PANELS, pack
+from bananagrid.evidence.packing import pack
 from butterly_carry_oracle import carried_density
 
 #: The kernel's course rule (Gauss-Legendre panels of 1.6 of the integrand's narrowest width,
@@ -97,13 +97,15 @@ def test_channels_combine_their_factors():
     np.testing.assert_array_equal(got[pk.channel("searches")], got[pk.channel("all")])
 
 
-def test_interval_search_of_another_rule_keeps_its_nodes():
+@pytest.mark.parametrize("panels", [16, 40])
+def test_interval_search_of_another_rule_keeps_its_nodes(panels):
     """A polygon factor whose nodes are not one composite Gauss-Legendre rule over an interval
-    (here: a search at one time and the same polygon's nodes hand-built unevenly) is taken node
-    by node, as the pack states it: against the oracle given the pack's own time rule."""
+    (the pack's nodes, one moved) is taken node by node, as the pack states it: within the time
+    rule's bound of the exact weight. With 40 panels (160 nodes, more than ACTIVE) every polygon
+    node is visited at every piece."""
     model = butterly()
     p = points(model, 6, 5)
-    pk = pack([BARRIER], model.t)
+    pk = pack([BARRIER], model.t, area_panels=panels)
     uneven = dict(pk.__dict__)
     times = pk.time.copy()
     times[0] = times[0] + 1e-3 * (times[1] - times[0])
@@ -112,8 +114,8 @@ def test_interval_search_of_another_rule_keeps_its_nodes():
     odd = type(pk)(**uneven)
     got = evaluate_carried(model, p[:, 0], p[:, 1], odd)[1]
     exact = carried_density(model, [BARRIER], p[:, 0], p[:, 1])
-    # the pack's rule errs by at most C 0.35 / AREA_PANELS per crossing of an edge (two at most)
-    bound = math.expm1(2 * 1.5 * 0.35 / AREA_PANELS)
+    # the pack's rule errs by at most C 0.35 / panels per crossing of an edge (two at most)
+    bound = math.expm1(2 * 1.5 * 0.35 / panels)
     assert np.all(np.abs(got - exact) <= bound * exact)
     assert not np.allclose(got, exact, rtol=1e-9, atol=0.0)  # node by node: not the exact rule
 
