@@ -816,9 +816,8 @@ KERNELS = density_kernels(butterly_world, BUTTERLY, "butterly", grid=butterly_gr
 # theta between the courses where an end crosses an edge or the segment passes a vertex
 # (``segment_breaks``).
 
-#: Gauss-Legendre nodes per panel; the rule array holds the nodes on [-1, 1], their weights,
-#: then the panel width in trapezoid spacings (PANEL) and the narrowest panel for smooth factors
-#: as a fraction of it (NARROWEST).
+#: Gauss-Legendre nodes per panel (the rule array, ``models.butterly._carried_rule``: each
+#: order's nodes on [-1, 1] and weights, then the constants below).
 GAUSS_NODES = 8
 #: Lower orders for pieces narrow enough (a crossing-dense arc is cut into many): where each
 #: order's nodes and weights start in the rule array, after the panels' 8-point rule.
@@ -1274,7 +1273,8 @@ def carried_arc(
 ):
     """Add to each channel the integral over theta* + (lo, hi) of exp(E + log_scale) times the
     path's weight: pieces between the polygons' course breaks (a window of BREAKS at a time),
-    Gauss-Legendre on panels no wider than ``panel``. Without smooth factors the weight is
+    Gauss-Legendre on panels no wider than rule[PANEL] ``spacing`` (a piece narrow enough by
+    a 4-, 3- or 2-point rule: rule[LIMIT4], ...). Without smooth factors the weight is
     constant on a piece: one weight per piece, and an arc without breaks takes the density's
     own trapezoid sum over it (``trapezoid``, relative to exp(E*)) times its weight."""
     zero = type(x)(0.0)
