@@ -226,6 +226,7 @@ def test_shown_commands_run(workdir):
 
 def check_front_page(ns):
     assert f"{ns['r'].mass:.10f}" == "0.9999999934"
+    assert f"{ns['post'].pos:.8f}" == "0.39999930"
 
 
 def check_home(ns):
@@ -261,6 +262,7 @@ def check_dask(ns):
 def check_evidence(ns):
     assert (round(ns["post"].pos, 3), [round(p, 3) for p in ns["post"].search_pos]) == (0.494, [0.424, 0.082])
     assert round(ns["plan"].pos, 3) == 0.826
+    assert (round(ns["carried"].pos, 3), [round(p, 3) for p in ns["carried"].search_pos]) == (0.647, [0.4, 0.247])
 
 
 def check_planning(ns):
