@@ -1,0 +1,287 @@
+"""Search plans over several periods for a moving target (Brown 1980; Washburn).
+
+A target moves along a path x(t) drawn from a motion model (a CAT or a Butterly prior); a search
+spends effort E_k in period k, at the time t_k, with t_1 < ... < t_K. Spread over the grid's
+cells as coverages e_k (m^2 swept per m^2), period k detects a target in cell c with probability
+b(e_k(c)), independently of the other periods, so the probability of success of the plan is
+
+    POS(e_1, ..., e_K) = 1 - E[ prod_k (1 - b(e_k(x(t_k)))) ],
+
+the expectation over the target's paths (a path outside the grid at t_k is not searched then).
+
+**Brown's forward-and-backward iteration.** Hold every period but k fixed. A path's chance of
+escaping them is its weight w_k(path) = prod_{j != k} (1 - b(e_j(x(t_j)))): earlier periods
+carried forward to t_k, later ones carried backward (a path is fixed by its parameters, so its
+later positions are as exact as its earlier ones). With g_k(c) = E[w_k 1{x(t_k) in c}], the map
+at t_k of the target that the other periods miss (unnormalised), and m_k = E[w_k],
+
+    POS = (1 - m_k) + sum_c g_k(c) b(e_k(c)),
+
+so the best e_k given the others is the single-period optimum (:func:`~bananagrid.planning.
+allocation.allocate`) on g_k with the effort E_k. The iteration sweeps k = 1..K, replacing each
+period's coverage by that optimum, until a sweep raises the POS by less than ``tol``
+(Brown 1980, "Optimal search for a moving target in discrete time and space", Oper. Res. 28;
+Washburn, *Search and Detection*, 5th ed., sec. 9.3).
+
+**Never decreasing.** Each update maximises the POS over e_k with the others held, and the
+coverage it replaces is one of the candidates, so the POS after the update is at least the POS
+before it: the history is non-decreasing (an update whose optimum does not beat the coverage it
+would replace, by rounding, keeps that coverage). For the exponential law the POS is a concave
+function of (e_1, ..., e_K) (1 - E[exp(-sum_k e_k(x(t_k)))], an expectation of concave
+functions), so the iteration converges to the global optimum for the given efforts (Brown 1980,
+Theorem 2); for another concave law it reaches a plan that no single period's change improves.
+
+**What the maps are.** The planner asks one function for "period k's map given the other
+periods' POD rasters" (:class:`PeriodMaps`). :class:`SampledPaths` answers it from positions of
+sample paths at the plan's times (the paths' cells, each path weighted by the others' 1 - POD):
+the particle form of the iteration, exact for the sample, and the Monte Carlo oracle of the tests.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Callable, Protocol, Sequence
+
+import numpy as np
+
+from ..domains.grid import Grid
+from ..results import Raster
+from ..validate import BananagridError, positive, positive_int, show
+from .allocation import Allocation, optimal_coverage
+from .detection import DetectionLaw, detection_law
+
+__all__ = ["PeriodPlan", "PeriodMaps", "SampledPaths", "iterate_periods", "TOL", "MAX_ITERATIONS"]
+
+#: Default convergence: a sweep over the periods that raises the total POS by less than this
+#: stops the iteration (the POS is a probability; 1e-9 is far below any planning decision and
+#: well above the rounding of sums over 10^6 cells, some 1e-13).
+TOL = 1e-9
+#: Default cap on sweeps over the periods (Brown's iteration converges linearly; the plans of
+#: the tests and the bench converge in 3 to 30 sweeps).
+MAX_ITERATIONS = 200
+
+
+class PeriodMaps(Protocol):
+    """What the iteration asks for: period k's map given the other periods' searches.
+
+    Calling it with the period ``k`` and ``pods`` (one array of the grid's shape per period, the
+    POD b(e_j(c)) of each cell, or None for a period not searched) returns ``(cells, surviving)``:
+    ``cells`` the unnormalised map g_k of cell probabilities at t_k of the target's paths, each
+    weighted by prod_{j != k} (1 - POD_j at the path's cell at t_j) (a path off the grid at t_j
+    is not searched then), and ``surviving`` m_k, the expectation of that weight over every path
+    (those off the grid at t_k too).
+    """
+
+    def __call__(self, k: int, pods: Sequence[np.ndarray | None]) -> tuple[np.ndarray, float]: ...
+
+
+@dataclass(frozen=True)
+class PeriodPlan:
+    """A search plan over several periods for a moving target.
+
+    Attributes
+    ----------
+    times : tuple of float
+        The periods' times t_1 < ... < t_K, s.
+    efforts : tuple of float
+        Effort E_k of each period, m^2 (sweep width times track length).
+    allocations : tuple of Allocation
+        Each period's coverage: the optimal allocation of E_k on the map at t_k of the target
+        the other periods miss (its ``cells``, unnormalised). An allocation's own ``pos`` is
+        the probability that period k finds a target the others miss.
+    pos : float
+        Total probability of success: that some period detects the target.
+    period_pos : tuple of float
+        Probability that the target is first detected in period k (missed by the earlier
+        periods); they sum to ``pos``.
+    history : tuple of float
+        Total POS after each update of one period's coverage, in order (K per sweep):
+        non-decreasing.
+    sweeps : int
+        Sweeps over the periods made.
+    converged : bool
+        Whether the last sweep raised the POS by less than ``tol`` (False: ``max_iterations``
+        was reached first).
+    tol : float
+    law : DetectionLaw
+    """
+
+    times: tuple
+    efforts: tuple
+    allocations: tuple
+    pos: float
+    period_pos: tuple
+    history: tuple
+    sweeps: int
+    converged: bool
+    tol: float
+    law: DetectionLaw
+    provenance: dict = field(default_factory=dict, repr=False)
+
+    @property
+    def coverage(self) -> list:
+        """Each period's coverage (effort per m^2): ``allocations[k].effort``."""
+        return [a.effort for a in self.allocations]
+
+
+def iterate_periods(period_maps: PeriodMaps, grid: Grid, efforts: Sequence[float], law="exponential", *,
+                    tol: float = TOL, max_iterations: int = MAX_ITERATIONS, times: Sequence[float] | None = None,
+                    provenance: dict | None = None) -> PeriodPlan:
+    """Brown's forward-and-backward iteration on any source of the periods' maps.
+
+    Parameters
+    ----------
+    period_maps : PeriodMaps
+        Period k's map given the other periods' POD rasters (:class:`SampledPaths`, or the
+        model's exact carried maps in :func:`plan_periods`).
+    grid : Grid
+        The grid of the maps.
+    efforts : sequence of float
+        E_k > 0 per period, m^2.
+    law : str or DetectionLaw, default "exponential"
+    tol : float, default :data:`TOL`
+        Stop when a sweep over the periods raises the total POS by less than ``tol``.
+    max_iterations : int, default :data:`MAX_ITERATIONS`
+        Most sweeps.
+    times : sequence of float, optional
+        The periods' times, for the plan's record (default 0, 1, ...).
+
+    Returns
+    -------
+    PeriodPlan
+    """
+    law = detection_law(law)
+    efforts = tuple(_effort(f"efforts[{k}]", z) for k, z in enumerate(efforts))
+    if not efforts:
+        raise BananagridError("efforts = []: expected one effort per period, at least one period")
+    tol = positive("tol", tol)
+    if not math.isfinite(tol):
+        raise BananagridError(f"tol = {tol!r}: expected a positive finite change of POS")
+    max_iterations = positive_int("max_iterations", max_iterations)
+    n_periods = len(efforts)
+    pods: list[np.ndarray | None] = [None] * n_periods
+    coverage: list[np.ndarray | None] = [None] * n_periods
+    maps: list[np.ndarray | None] = [None] * n_periods
+    history: list[float] = []
+    sweep_pos = [0.0]
+    converged = False
+    sweeps = 0
+    while sweeps < max_iterations and not converged:
+        for k in range(n_periods):
+            cells, surviving = period_maps(k, pods)
+            cells = np.asarray(cells, dtype=np.float64)
+            if np.any(cells > 0.0):
+                new, _, gain = optimal_coverage(cells, grid.cell_area, efforts[k], law)
+            else:  # nothing left to find on the grid at t_k: the effort buys nothing there
+                new, gain = np.zeros(cells.shape), 0.0
+            if coverage[k] is not None:
+                # the coverage held is a candidate too: an optimum that rounding puts below it
+                # would lower the POS, so keep the coverage held
+                held = float(np.sum(cells * pods[k]))
+                if held >= gain:
+                    new, gain = coverage[k], held
+            coverage[k], maps[k] = new, cells
+            pods[k] = np.asarray(law.pod(new), dtype=np.float64)
+            history.append((1.0 - float(surviving)) + gain)
+        sweeps += 1
+        sweep_pos.append(history[-1])
+        converged = sweeps > 1 and sweep_pos[-1] - sweep_pos[-2] < tol
+    # first detections: period k's map weighted by the earlier periods only
+    period_pos = []
+    for k in range(n_periods):
+        earlier, _ = period_maps(k, [pods[j] if j < k else None for j in range(n_periods)])
+        period_pos.append(float(np.sum(np.asarray(earlier, dtype=np.float64) * pods[k])))
+    times = tuple(float(t) for t in times) if times is not None else tuple(float(k) for k in range(n_periods))
+    allocations = tuple(_allocation(grid, maps[k], coverage[k], pods[k], efforts[k], law, times[k])
+                        for k in range(n_periods))
+    info = {"law": law.name, "tol": tol, "sweeps": sweeps, "converged": converged, "pos": history[-1],
+            "times_s": list(times), "efforts_m2": list(efforts), **(provenance or {})}
+    return PeriodPlan(times=times, efforts=efforts, allocations=allocations, pos=history[-1],
+                      period_pos=tuple(period_pos), history=tuple(history), sweeps=sweeps, converged=converged,
+                      tol=tol, law=law, provenance={"period_plan": info})
+
+
+def _allocation(grid: Grid, cells, coverage, pod, effort, law, t) -> Allocation:
+    area = grid.cell_area
+    raster = Raster(values=coverage, grid=grid, mass=float(np.sum(coverage * area)), quantity="effort",
+                    provenance={"allocation": {"law": law.name, "effort_m2": effort, "t": t}})
+    return Allocation(effort=raster, cell_effort=coverage * area, pod=pod, pos=float(np.sum(cells * pod)),
+                      marginal_gain=_marginal_gain(cells, coverage, area, law), total_effort=effort, law=law,
+                      cells=cells, areas=np.asarray(area))
+
+
+def _marginal_gain(cells, coverage, area, law) -> float:
+    """lambda = d_c b'(e_c) on the cells with effort (equal on all of them at the optimum)."""
+    active = coverage > 0.0
+    if not active.any():
+        return 0.0
+    return float(np.max(cells[active] / area * law.dpod(coverage[active])))
+
+
+def _effort(name: str, value) -> float:
+    try:
+        z = float(value)
+    except (TypeError, ValueError):
+        raise BananagridError(f"{name} = {show(value)}: expected a positive finite effort in m^2 "
+                              "(sweep width times track length)") from None
+    if not (math.isfinite(z) and z > 0.0):
+        raise BananagridError(f"{name} = {z!r}: expected a positive finite effort in m^2 "
+                              "(sweep width times track length)")
+    return z
+
+
+class SampledPaths:
+    """Period maps from sample paths: the target's positions at the plan's times.
+
+    Parameters
+    ----------
+    positions : array_like, shape (n, K, 2)
+        World positions (x east, y north, m) of n paths at the K periods' times, equally
+        likely (draws of the model's generative story, or particles of a drift model).
+    grid : Grid
+
+    Notes
+    -----
+    g_k(c) = (1 / n) sum over the paths in cell c at t_k of prod_{j != k} (1 - POD_j(cell of the
+    path at t_j)), and m_k the mean weight: the iteration on the sample is exact for it (its POS
+    is the sample mean of each path's detection probability).
+    """
+
+    def __init__(self, positions, grid: Grid):
+        p = np.asarray(positions, dtype=np.float64)
+        if p.ndim != 3 or p.shape[2] != 2 or p.shape[0] < 1:
+            raise BananagridError(f"positions: shape {p.shape}; expected (n, K, 2) world positions of n >= 1 paths")
+        if not np.isfinite(p).all():
+            raise BananagridError("positions: not all finite")
+        self.grid, self.n, self.periods = grid, p.shape[0], p.shape[1]
+        col = np.floor((p[..., 0] - grid.origin[0]) / grid.dx)
+        row = np.floor((p[..., 1] - grid.origin[1]) / grid.dy)
+        on = (col >= 0) & (col < grid.nx) & (row >= 0) & (row < grid.ny)
+        #: flat cell index of each path at each period, -1 off the grid
+        self.cells = np.where(on, row * grid.nx + col, -1).astype(np.int64)
+
+    def weights(self, pods: Sequence[np.ndarray | None], skip: int | None = None) -> np.ndarray:
+        """Each path's probability of escaping the periods' searches (all but ``skip``)."""
+        w = np.full(self.n, 1.0 / self.n)
+        for j, pod in enumerate(pods):
+            if j == skip or pod is None:
+                continue
+            idx = self.cells[:, j]
+            on = idx >= 0
+            w[on] *= 1.0 - np.ravel(pod)[idx[on]]
+        return w
+
+    def __call__(self, k: int, pods: Sequence[np.ndarray | None]) -> tuple[np.ndarray, float]:
+        """Period k's map of the paths the other periods miss, and their total weight."""
+        if len(pods) != self.periods:
+            raise BananagridError(f"pods: {len(pods)} periods; the paths have positions at {self.periods}")
+        w = self.weights(pods, skip=k)
+        idx = self.cells[:, k]
+        on = idx >= 0
+        cells = np.bincount(idx[on], weights=w[on], minlength=self.grid.nx * self.grid.ny)
+        return cells.reshape(self.grid.shape), float(np.sum(w))
+
+    def pos(self, pods: Sequence[np.ndarray | None]) -> float:
+        """The sample's POS of the plan with these POD rasters: 1 - mean escape probability."""
+        return 1.0 - float(np.sum(self.weights(pods)))
