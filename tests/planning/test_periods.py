@@ -14,7 +14,7 @@ from hypothesis import strategies as st
 
 import bananagrid as bg
 from bananagrid.planning.periods import SampledPaths, iterate_periods
-from tests.support.path_oracle import butterly_paths, cat_paths, detection_probability
+from path_oracle import butterly_paths, cat_paths, detection_probability
 
 GRID = bg.Grid.from_bounds(x=(-3000.0, 3000.0), y=(-3000.0, 3000.0), step=200.0)
 
