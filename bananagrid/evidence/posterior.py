@@ -47,7 +47,7 @@ from ..results import PolarRaster, Raster
 from ..validate import BananagridError, positive_int
 from .geometry import distance_to_track
 from .reports import BearingReport, Exclusion, PositionReport
-from .searches import AreaSearch, TrackSearch
+from .searches import AreaSearch, RasterSearch, TrackSearch
 
 __all__ = ["posterior", "Posterior", "PolarPosterior", "MIN_NORMALISER", "SUBDIVISIONS", "EVIDENCE_TYPES"]
 
@@ -61,7 +61,7 @@ POINT_CHUNK = 2**18
 #: Registry kinds whose map is an approximation without a path per parameter: earlier evidence
 #: cannot be carried to the map's time through them, with the exact model to use instead.
 NO_PATHS = {"polar": "bg.CAT (exact, a path per (a, omega))"}
-EVIDENCE_TYPES = (AreaSearch, TrackSearch, PositionReport, BearingReport, Exclusion)
+EVIDENCE_TYPES = (AreaSearch, TrackSearch, RasterSearch, PositionReport, BearingReport, Exclusion)
 
 
 @dataclass(frozen=True, repr=False)
