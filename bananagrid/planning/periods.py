@@ -40,18 +40,23 @@ the particle form of the iteration, exact for the sample, and the Monte Carlo or
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Callable, Protocol, Sequence
 
 import numpy as np
 
 from ..domains.grid import Grid
+from ..engine.carried import carries, evaluate_carried
+from ..engine.rasterise import rasterise
+from ..evidence.packing import pack
+from ..evidence.posterior import NO_PATHS
+from ..evidence.searches import RasterSearch
 from ..results import Raster
-from ..validate import BananagridError, positive, positive_int, show
+from ..validate import BananagridError, positive_int, show
 from .allocation import Allocation, optimal_coverage
-from .detection import DetectionLaw, detection_law
+from .detection import EXPONENTIAL, DetectionLaw, detection_law
 
-__all__ = ["PeriodPlan", "PeriodMaps", "SampledPaths", "iterate_periods", "TOL", "MAX_ITERATIONS"]
+__all__ = ["PeriodPlan", "PeriodMaps", "SampledPaths", "iterate_periods", "log_miss", "CarriedMaps", "plan_periods", "TOL", "MAX_ITERATIONS"]
 
 #: Default convergence: a sweep over the periods that raises the total POS by less than this
 #: stops the iteration (the POS is a probability; 1e-9 is far below any planning decision and
@@ -60,20 +65,25 @@ TOL = 1e-9
 #: Default cap on sweeps over the periods (Brown's iteration converges linearly; the plans of
 #: the tests and the bench converge in 3 to 30 sweeps).
 MAX_ITERATIONS = 200
+#: Sub-cells per side of the rule for a period's cell means of the other periods' weight.
+SUBDIVISIONS = 4
+#: Points per call of the carried kernels (bounds the arrays' memory: C channels x 8 bytes each).
+CARRIED_POINTS = 2**20
 
 
 class PeriodMaps(Protocol):
     """What the iteration asks for: period k's map given the other periods' searches.
 
-    Calling it with the period ``k`` and ``pods`` (one array of the grid's shape per period, the
-    POD b(e_j(c)) of each cell, or None for a period not searched) returns ``(cells, surviving)``:
-    ``cells`` the unnormalised map g_k of cell probabilities at t_k of the target's paths, each
-    weighted by prod_{j != k} (1 - POD_j at the path's cell at t_j) (a path off the grid at t_j
-    is not searched then), and ``surviving`` m_k, the expectation of that weight over every path
-    (those off the grid at t_k too).
+    Calling it with the period ``k`` and ``misses`` (one array of the grid's shape per period,
+    ln(1 - POD_j) of each cell: -e_j for random search, exactly; -inf where the POD is 1; or
+    None for a period not searched) returns ``(cells, surviving)``: ``cells`` the unnormalised
+    map g_k of cell probabilities at t_k of the target's paths, each weighted by
+    prod_{j != k} (1 - POD_j at the path's cell at t_j) (a path off the grid at t_j is not
+    searched then), and ``surviving`` m_k, the expectation of that weight over every path (those
+    off the grid at t_k too).
     """
 
-    def __call__(self, k: int, pods: Sequence[np.ndarray | None]) -> tuple[np.ndarray, float]: ...
+    def __call__(self, k: int, misses: Sequence[np.ndarray | None]) -> tuple[np.ndarray, float]: ...
 
 
 @dataclass(frozen=True)
@@ -151,16 +161,13 @@ def iterate_periods(period_maps: PeriodMaps, grid: Grid, efforts: Sequence[float
     -------
     PeriodPlan
     """
-    law = detection_law(law)
+    law, tol, max_iterations = _settings(law, tol, max_iterations)
     efforts = tuple(_effort(f"efforts[{k}]", z) for k, z in enumerate(efforts))
     if not efforts:
         raise BananagridError("efforts = []: expected one effort per period, at least one period")
-    tol = positive("tol", tol)
-    if not math.isfinite(tol):
-        raise BananagridError(f"tol = {tol!r}: expected a positive finite change of POS")
-    max_iterations = positive_int("max_iterations", max_iterations)
     n_periods = len(efforts)
     pods: list[np.ndarray | None] = [None] * n_periods
+    misses: list[np.ndarray | None] = [None] * n_periods
     coverage: list[np.ndarray | None] = [None] * n_periods
     maps: list[np.ndarray | None] = [None] * n_periods
     history: list[float] = []
@@ -169,7 +176,7 @@ def iterate_periods(period_maps: PeriodMaps, grid: Grid, efforts: Sequence[float
     sweeps = 0
     while sweeps < max_iterations and not converged:
         for k in range(n_periods):
-            cells, surviving = period_maps(k, pods)
+            cells, surviving = period_maps(k, misses)
             cells = np.asarray(cells, dtype=np.float64)
             if np.any(cells > 0.0):
                 new, _, gain = optimal_coverage(cells, grid.cell_area, efforts[k], law)
@@ -183,6 +190,7 @@ def iterate_periods(period_maps: PeriodMaps, grid: Grid, efforts: Sequence[float
                     new, gain = coverage[k], held
             coverage[k], maps[k] = new, cells
             pods[k] = np.asarray(law.pod(new), dtype=np.float64)
+            misses[k] = log_miss(law, new)
             history.append((1.0 - float(surviving)) + gain)
         sweeps += 1
         sweep_pos.append(history[-1])
@@ -190,7 +198,7 @@ def iterate_periods(period_maps: PeriodMaps, grid: Grid, efforts: Sequence[float
     # first detections: period k's map weighted by the earlier periods only
     period_pos = []
     for k in range(n_periods):
-        earlier, _ = period_maps(k, [pods[j] if j < k else None for j in range(n_periods)])
+        earlier, _ = period_maps(k, [misses[j] if j < k else None for j in range(n_periods)])
         period_pos.append(float(np.sum(np.asarray(earlier, dtype=np.float64) * pods[k])))
     times = tuple(float(t) for t in times) if times is not None else tuple(float(k) for k in range(n_periods))
     allocations = tuple(_allocation(grid, maps[k], coverage[k], pods[k], efforts[k], law, times[k])
@@ -200,6 +208,27 @@ def iterate_periods(period_maps: PeriodMaps, grid: Grid, efforts: Sequence[float
     return PeriodPlan(times=times, efforts=efforts, allocations=allocations, pos=history[-1],
                       period_pos=tuple(period_pos), history=tuple(history), sweeps=sweeps, converged=converged,
                       tol=tol, law=law, provenance={"period_plan": info})
+
+
+def _settings(law, tol, max_iterations) -> tuple[DetectionLaw, float, int]:
+    law = detection_law(law)
+    try:
+        tol = float(tol)
+    except (TypeError, ValueError):
+        raise BananagridError(f"tol = {show(tol)}: expected a positive finite change of POS") from None
+    if not (math.isfinite(tol) and tol > 0.0):
+        raise BananagridError(f"tol = {tol!r}: expected a positive finite change of POS")
+    return law, tol, positive_int("max_iterations", max_iterations)
+
+
+def log_miss(law: DetectionLaw, coverage: np.ndarray) -> np.ndarray:
+    """ln(1 - b(e)) of each cell's coverage: -e for random search (exact at any coverage), else
+    log1p(-b(e)) (-inf where b rounds to 1)."""
+    coverage = np.asarray(coverage, dtype=np.float64)
+    if law is EXPONENTIAL:
+        return -coverage
+    with np.errstate(divide="ignore"):
+        return np.log1p(-np.asarray(law.pod(coverage), dtype=np.float64))
 
 
 def _allocation(grid: Grid, cells, coverage, pod, effort, law, t) -> Allocation:
@@ -261,27 +290,200 @@ class SampledPaths:
         #: flat cell index of each path at each period, -1 off the grid
         self.cells = np.where(on, row * grid.nx + col, -1).astype(np.int64)
 
-    def weights(self, pods: Sequence[np.ndarray | None], skip: int | None = None) -> np.ndarray:
-        """Each path's probability of escaping the periods' searches (all but ``skip``)."""
-        w = np.full(self.n, 1.0 / self.n)
-        for j, pod in enumerate(pods):
-            if j == skip or pod is None:
+    def weights(self, misses: Sequence[np.ndarray | None], skip: int | None = None) -> np.ndarray:
+        """Each path's probability (times 1 / n) of escaping the periods' searches (all but
+        ``skip``), from their ln(1 - POD) rasters."""
+        lw = np.zeros(self.n)
+        for j, miss in enumerate(misses):
+            if j == skip or miss is None:
                 continue
             idx = self.cells[:, j]
             on = idx >= 0
-            w[on] *= 1.0 - np.ravel(pod)[idx[on]]
-        return w
+            lw[on] += np.ravel(miss)[idx[on]]
+        return np.exp(lw) / self.n
 
-    def __call__(self, k: int, pods: Sequence[np.ndarray | None]) -> tuple[np.ndarray, float]:
+    def __call__(self, k: int, misses: Sequence[np.ndarray | None]) -> tuple[np.ndarray, float]:
         """Period k's map of the paths the other periods miss, and their total weight."""
-        if len(pods) != self.periods:
-            raise BananagridError(f"pods: {len(pods)} periods; the paths have positions at {self.periods}")
-        w = self.weights(pods, skip=k)
+        if len(misses) != self.periods:
+            raise BananagridError(f"misses: {len(misses)} periods; the paths have positions at {self.periods}")
+        w = self.weights(misses, skip=k)
         idx = self.cells[:, k]
         on = idx >= 0
         cells = np.bincount(idx[on], weights=w[on], minlength=self.grid.nx * self.grid.ny)
         return cells.reshape(self.grid.shape), float(np.sum(w))
 
-    def pos(self, pods: Sequence[np.ndarray | None]) -> float:
-        """The sample's POS of the plan with these POD rasters: 1 - mean escape probability."""
-        return 1.0 - float(np.sum(self.weights(pods)))
+    def pos(self, misses: Sequence[np.ndarray | None]) -> float:
+        """The sample's POS of a plan with these ln(1 - POD) rasters: 1 - mean escape probability."""
+        return 1.0 - float(np.sum(self.weights(misses)))
+
+
+class CarriedMaps:
+    """Period maps from the model's own kernels: the map at t_k of the paths the other periods'
+    searches miss, each period's coverage a :class:`~bananagrid.RasterSearch` at its time, carried
+    along the paths through each point by the kernels (earlier periods forward, later ones
+    backward: a path is fixed by its parameters, so its position at a later time is as exact as
+    at an earlier one).
+
+    Parameters
+    ----------
+    prior : CAT or Butterly
+    grid : Grid
+    times : sequence of float
+        The periods' times (increasing).
+    subdivisions : int
+        Sub-cells per side of the rule for the weight's cell means.
+    threads : int, optional
+
+    Notes
+    -----
+    Cell c's mass at t_k is g_k(c) = P_c f_c: P_c the prior's cell probability at t_k (the
+    model's own cell rule) and f_c the density-weighted mean over the cell of the paths' weight
+    prod_{j != k} (1 - POD_j(x(t_j))), on n x n sub-cell centres (the posterior's rule,
+    :mod:`bananagrid.evidence.posterior`). The weight of the paths through a point jumps where
+    their position at t_j crosses a cell edge of period j's raster, so f_c is first order in the
+    sub-cell size there. m_k is sum_c g_k(c) plus the prior's mass off the grid at t_k (paths
+    outside it counted as missed by the other periods: an upper bound on m_k, so the plan's POS
+    is never above the truth by more than rounding and below it by at most that mass).
+    """
+
+    def __init__(self, prior, grid: Grid, times, *, subdivisions: int = SUBDIVISIONS, threads=None):
+        self.grid, self.times, self.threads = grid, tuple(times), threads
+        self.models = [_at_time(prior, t, k) for k, t in enumerate(self.times)]
+        self.n = positive_int("subdivisions", subdivisions)
+        self.prior = [np.asarray(rasterise(m, grid, quantity="probability", threads=threads).values, dtype=np.float64)
+                      for m in self.models]
+        self.off_grid = [max(0.0, 1.0 - math.fsum(p.ravel())) for p in self.prior]
+
+    def __call__(self, k: int, misses: Sequence[np.ndarray | None]) -> tuple[np.ndarray, float]:
+        """Period k's map of the paths the other periods miss (cell probabilities, unnormalised)
+        and their total probability."""
+        evidence = [_raster_search(self.grid, self.times[j], miss) for j, miss in enumerate(misses)
+                    if j != k and miss is not None]
+        cells = self.prior[k]
+        if not evidence:
+            return cells, float(np.sum(cells)) + self.off_grid[k]
+        # packed at the last period's time (every search is at or before it), then placed at
+        # t_k: the kernels place each node at its own time along the path, before t_k or after
+        carried = replace(pack(evidence, max(self.times)), t=self.times[k])
+        mean = self._cell_means(k, carried)
+        g = cells * mean
+        return g, float(np.sum(g)) + self.off_grid[k]
+
+    def _cell_means(self, k: int, carried) -> np.ndarray:
+        """f_c on the cells with prior mass (1 elsewhere: their g is 0 whatever it is)."""
+        grid, n = self.grid, self.n
+        rows, cols = np.nonzero(self.prior[k] > 0.0)
+        out = np.ones(grid.shape)
+        u = (np.arange(n) + 0.5) / n
+        all_, prior_ = carried.channel("all"), carried.channel("prior")
+        per_chunk = max(1, CARRIED_POINTS // (n * n))
+        for start in range(0, rows.size, per_chunk):
+            r, c = rows[start:start + per_chunk], cols[start:start + per_chunk]
+            x = grid.origin[0] + grid.dx * (c[:, None, None] + u[None, None, :])
+            y = grid.origin[1] + grid.dy * (r[:, None, None] + u[None, :, None])
+            x, y = np.broadcast_arrays(x, y)
+            values = evaluate_carried(self.models[k], x.reshape(len(r), -1), y.reshape(len(r), -1), carried,
+                                      threads=self.threads)
+            weighted, density = values[all_].sum(axis=1), values[prior_].sum(axis=1)
+            # a cell whose density vanishes at every sub-cell centre (mass between them): the
+            # plain mean of the weight is unknown there, and 1 (unsearched) keeps m_k an upper bound
+            out[r, c] = np.where(density > 0.0, weighted / np.where(density > 0.0, density, 1.0), 1.0)
+        return out
+
+
+def _raster_search(grid: Grid, t: float, miss: np.ndarray) -> RasterSearch:
+    if np.isfinite(miss).all():
+        return RasterSearch(grid=grid, t=t, coverage=-miss)
+    return RasterSearch(grid=grid, t=t, pod=-np.expm1(miss))
+
+
+def _at_time(prior, t: float, k: int):
+    """The prior's model at time t (its position law then)."""
+    try:
+        return replace(prior, t=t)
+    except BananagridError as err:
+        raise BananagridError(f"times[{k}] = {t!r}: {type(prior).__name__} refuses it as its time ({err})") from None
+
+
+def plan_periods(prior, grid: Grid, times, efforts, law="exponential", *, tol: float = TOL,
+                 max_iterations: int = MAX_ITERATIONS, subdivisions: int = SUBDIVISIONS, threads=None) -> PeriodPlan:
+    """A search plan over several periods for a moving target: effort E_k at time t_k spread to
+    maximise the probability that some period detects the target (Brown's iteration, module
+    docstring), each period's map computed by the model's kernels given the other periods'
+    searches.
+
+    Parameters
+    ----------
+    prior : CAT or Butterly
+        The target's motion model; its own ``t`` is replaced by each period's time.
+    grid : Grid
+        Where the periods search; it should hold the target at every t_k (the mass it misses is
+        reported as ``provenance["period_plan"]["off_grid"]``; module docstring).
+    times : sequence of float
+        t_1 < ... < t_K, s since the last fix (each a time the model accepts).
+    efforts : sequence of float
+        E_k > 0 per period, m^2 (sweep width times track length).
+    law : str or DetectionLaw, default "exponential"
+        The detection law of every period (the iteration reaches the global optimum for the
+        exponential law; for another, a plan no single period's change improves).
+    tol : float, default :data:`TOL`
+        Stop when a sweep over the periods raises the total POS by less than ``tol``.
+    max_iterations : int, default :data:`MAX_ITERATIONS`
+        Most sweeps over the periods.
+    subdivisions : int, default 4
+        Sub-cells per side for the weight's cell means (:class:`CarriedMaps`).
+    threads : int, optional
+        CPU threads of the kernels.
+
+    Returns
+    -------
+    PeriodPlan
+
+    Raises
+    ------
+    BananagridError
+        One line naming the argument: a prior without paths (the polar banana: use bg.CAT) or
+        whose kernels do not carry evidence, times not finite or not increasing, efforts not
+        positive and finite or not one per time, a grid that is not a Grid.
+    """
+    kind = getattr(prior, "kind", None)
+    if kind in NO_PATHS:
+        raise BananagridError(f"prior = {type(prior).__name__}: an approximation with no path per parameter, so "
+                              f"the periods' searches cannot be carried between their times; use {NO_PATHS[kind]}")
+    if not carries(prior) or not hasattr(prior, "t"):
+        raise BananagridError(f"prior = {type(prior).__name__}: plans over periods need a motion model whose kernels "
+                              "carry evidence along its paths (bg.CAT, bg.Butterly)")
+    if not isinstance(grid, Grid):
+        raise BananagridError(f"grid = {grid!r}: expected a bananagrid Grid")
+    times = _times(times)
+    try:
+        efforts = list(efforts)
+    except TypeError:
+        raise BananagridError(f"efforts = {show(efforts)}: expected one effort (m^2) per period") from None
+    if len(efforts) != len(times):
+        raise BananagridError(f"efforts: {len(efforts)} values for {len(times)} times; expected one effort (m^2) "
+                              "per period")
+    for k, z in enumerate(efforts):
+        _effort(f"efforts[{k}]", z)
+    _settings(law, tol, max_iterations)
+    maps = CarriedMaps(prior, grid, times, subdivisions=subdivisions, threads=threads)
+    plan = iterate_periods(maps, grid, efforts, law, tol=tol, max_iterations=max_iterations, times=times,
+                           provenance={"model": type(prior).__name__, "off_grid": list(maps.off_grid),
+                                       "subdivisions": maps.n})
+    return plan
+
+
+def _times(times) -> tuple:
+    try:
+        values = [float(t) for t in times]
+    except (TypeError, ValueError):
+        raise BananagridError(f"times = {show(times)}: expected an increasing list of times (s)") from None
+    if not values:
+        raise BananagridError("times = []: expected at least one period's time (s)")
+    for k, t in enumerate(values):
+        if not math.isfinite(t):
+            raise BananagridError(f"times[{k}] = {t!r}: expected a finite time (s)")
+        if k and not t > values[k - 1]:
+            raise BananagridError(f"times[{k}] = {t!r}: not after times[{k - 1}] = {values[k - 1]!r}; the periods' "
+                                  "times must increase")
+    return tuple(values)

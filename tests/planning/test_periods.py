@@ -13,7 +13,7 @@ from hypothesis import HealthCheck, given, seed, settings
 from hypothesis import strategies as st
 
 import bananagrid as bg
-from bananagrid.planning.periods import SampledPaths, iterate_periods
+from bananagrid.planning.periods import SampledPaths, iterate_periods, log_miss
 from path_oracle import butterly_paths, cat_paths, detection_probability
 
 GRID = bg.Grid.from_bounds(x=(-3000.0, 3000.0), y=(-3000.0, 3000.0), step=200.0)
@@ -77,12 +77,12 @@ def test_sweep_history_never_decreases_and_each_period_is_optimal_given_the_othe
     history = np.asarray(plan.history)
     # rounding of sums over 900 cells: some 1e-16 each; 1e-13 is far above it and far below a step
     assert np.all(np.diff(history) >= -1e-13)
-    pods = [a.pod for a in plan.allocations]
-    assert plan.pos == pytest.approx(paths.pos(pods), abs=1e-13)
+    misses = [log_miss(plan.law, a.effort.values) for a in plan.allocations]
+    assert plan.pos == pytest.approx(paths.pos(misses), abs=1e-13)
     assert math.fsum(plan.period_pos) == pytest.approx(plan.pos, abs=1e-13)
     if plan.converged:
         for j in range(k):
-            cells, surviving = paths(j, pods)
+            cells, surviving = paths(j, misses)
             if not cells.sum() > 0.0:  # the others catch every path (an erf law's POD rounds to 1)
                 continue
             best = bg.allocate(bg.Raster(values=cells, grid=GRID, mass=float(cells.sum()), quantity="probability"),
