@@ -69,7 +69,8 @@ from typing import Any
 
 import warp as wp
 
-from .generate import ARRAY, SCALARS, Params, density_kernels, overload_on_use
+from . import evidence as ek
+from .generate import ARRAY, SCALAR, SCALARS, Params, carried_points_kernel, density_kernels, overload_on_use
 
 # No adjoints: nothing differentiates these kernels, and the backward kernels Warp would
 # generate for every launch kernel are most of a module's code (the CAT module's CUDA build:
@@ -96,6 +97,7 @@ REANCHOR = 64
 #: Newton iterations of the secular equations (they converge in a handful).
 MAX_NEWTON = 60
 TWO_PI = 6.283185307179586
+PI = 3.141592653589793
 #: Side of the grid kernel's tiles (cells); a CPU thread takes a strip of TILE rows.
 TILE = 32
 #: vec4 per node and axis in a tile's factor tables.
@@ -781,3 +783,335 @@ for _scalar in SCALARS:
         "quads": wp.array2d(dtype=wp.types.vector(4, _scalar)), "out": wp.array2d(dtype=_scalar)})
 KERNELS = density_kernels(butterly_world, BUTTERLY, "butterly", grid=butterly_grid, tile_rows=TILE,
                           scratch_width=SCRATCH, quad_width=QUAD_SCRATCH)
+
+
+
+
+# ---------------------------------------------------------------------------------------------
+# Carried evidence: the course integral with each path's weight inside
+# ---------------------------------------------------------------------------------------------
+#
+# For the course c (theta = pi/2 - c - beta in the eigen frame, e(c) = cos theta q1 +
+# sin theta q2) and the speed of range r = V t, the path through the map point x at t is at
+# X(s) = x - r (t - s) / t e(c) at time s: on the circle of radius R(s) = r (t - s) / t about x.
+# Evidence at s is a weight W(theta) on the course (``kernels/evidence.py``: the shared
+# helpers), and the speed's carried density is
+#
+#     w_i P_i^W(x) = w_i coef int exp(E(theta)) W(theta) dtheta.
+#
+# A polygon's factor at s is constant in theta except where the circle R(s) crosses one of its
+# edges, so the support of exp(E) (the arcs that the density's walk finds, beyond which every
+# term is below ``stop`` of the peak) is cut at every such crossing, and each piece is
+# integrated by Gauss-Legendre on panels no wider than ``rule[PANEL]`` trapezoid spacings
+# (``carried_arc``): exact for polygons but for the rule's error on the smooth exp(E). Smooth
+# factors (reports, bearings, inverse-cube tracks, rasters) are evaluated at every node, on
+# panels narrowed to their own angular scale (``smooth_panel``).
+
+#: Gauss-Legendre nodes per panel; the rule array holds the nodes on [-1, 1], their weights,
+#: then the panel width in trapezoid spacings (PANEL) and the narrowest panel for smooth factors
+#: as a fraction of it (NARROWEST).
+GAUSS_NODES = 8
+PANEL = 2 * GAUSS_NODES
+NARROWEST = 2 * GAUSS_NODES + 1
+RULE_SIZE = 2 * GAUSS_NODES + 2
+#: Course breaks held at once: a window of the smallest, and the next window after them.
+BREAKS = 32
+
+
+@wp.func
+def circle_edge_crossings(cx: Any, cy: Any, radius: Any, ax: Any, ay: Any, bx: Any, by: Any):
+    """Where the circle of ``radius`` about (cx, cy) crosses the segment from (ax, ay) to
+    (bx, by): (count, u1, u2), 0 <= u < 1 the crossings' fractions along the segment (a tangent
+    point counts once). |A - C + u D|^2 = R^2 is a quadratic in u, solved in the form without
+    cancellation (q = -(b + sign(b) sqrt(disc)), roots q / a and c / q)."""
+    zero = type(cx)(0.0)
+    one = type(cx)(1.0)
+    dx = bx - ax
+    dy = by - ay
+    fx = ax - cx
+    fy = ay - cy
+    a2 = dx * dx + dy * dy
+    b2 = fx * dx + fy * dy
+    c2 = (fx - radius) * (fx + radius) + fy * fy
+    disc = b2 * b2 - a2 * c2
+    count = int(0)
+    u1 = zero
+    u2 = zero
+    if a2 <= zero or disc < zero or radius <= zero:
+        return count, u1, u2
+    root = wp.sqrt(disc)
+    q = -(b2 + root)
+    if b2 < zero:
+        q = root - b2
+    r1 = q / a2
+    if r1 >= zero and r1 < one:
+        u1 = r1
+        count = 1
+    if q != zero:
+        r2 = c2 / q
+        if r2 >= zero and r2 < one and (count == 0 or r2 != r1):
+            if count == 0:
+                u1 = r2
+            else:
+                u2 = r2
+            count = count + 1
+    return count, u1, u2
+
+
+@wp.func
+def insert_break(buf: Any, count: int, value: Any):
+    """Insert ``value`` into the sorted ``buf[:count]``, keeping the BREAKS smallest: (buf, count)."""
+    if count == BREAKS:
+        if value >= buf[BREAKS - 1]:
+            return buf, count
+        count = count - 1
+    k = count
+    while k > 0 and buf[k - 1] > value:
+        buf[k] = buf[k - 1]
+        k = k - 1
+    buf[k] = value
+    return buf, count + 1
+
+
+@wp.func
+def node_radius(ev: Any, j: int, r: Any, t: Any):
+    """R(s_j) = r (t - s_j) / t: the distance from the map point to the path at node j's time."""
+    if t <= type(r)(0.0):
+        return type(r)(0.0)
+    return r * ((t - ek.evidence_time(ev, j)) / t)
+
+
+@wp.func
+def window_breaks(x: Any, y: Any, r: Any, t: Any, sx: Any, sy: Any, lo: Any, hi: Any, ev: Any):
+    """The smallest BREAKS offsets in (lo, hi) (from the peak's direction (sx, sy)) of the
+    courses whose path crosses a polygon's edge at a polygon node's time: (buf, count)."""
+    buf = wp.vector(length=BREAKS, dtype=type(x))
+    count = int(0)
+    two_pi = type(x)(TWO_PI)
+    zero = type(x)(0.0)
+    for j in range(ek.evidence_nodes(ev)):
+        if ev.ints[j, 0] == ek.KIND_POLYGON:
+            radius = node_radius(ev, j, r, t)
+            # the circle misses the polygon's box: no crossing
+            near_x = wp.max(wp.max(ev.data[j, 1] - x, zero), x - ev.data[j, 2])
+            near_y = wp.max(wp.max(ev.data[j, 3] - y, zero), y - ev.data[j, 4])
+            far_x = wp.max(wp.abs(ev.data[j, 1] - x), wp.abs(x - ev.data[j, 2]))
+            far_y = wp.max(wp.abs(ev.data[j, 3] - y), wp.abs(y - ev.data[j, 4]))
+            if radius > zero and near_x * near_x + near_y * near_y <= radius * radius and far_x * far_x + far_y * far_y >= radius * radius:
+                first = ev.ints[j, 2]
+                for e in range(first, first + ev.ints[j, 3]):
+                    ax = ev.edges[e, 0]
+                    ay = ev.edges[e, 1]
+                    bx = ev.edges[e, 2]
+                    by = ev.edges[e, 3]
+                    hits, u1, u2 = circle_edge_crossings(x, y, radius, ax, ay, bx, by)
+                    for h in range(hits):
+                        u = u1
+                        if h == 1:
+                            u = u2
+                        ex = (x - (ax + u * (bx - ax))) / radius
+                        ey = (y - (ay + u * (by - ay))) / radius
+                        d = wp.atan2(sx * ey - sy * ex, sx * ex + sy * ey)
+                        for wrap in range(3):
+                            dd = d + type(x)(float(wrap - 1)) * two_pi
+                            if dd > lo and dd < hi:
+                                buf, count = insert_break(buf, count, dd)
+    return buf, count
+
+
+@wp.func
+def smooth_panel(x: Any, y: Any, r: Any, t: Any, panel: Any, narrowest: Any, ev: Any):
+    """The widest panel (radians of course) for the smooth factors: at most ``panel``, at most
+    each smooth node's length scale over its radius R(s_j), at least ``narrowest``. Scales: a
+    report's smallest SD (>= 1 / sqrt(trace P)); a bearing's sigma times the least distance from
+    the sensor to the circle; an inverse-cube rate's quarter distance from the searcher to the
+    circle; a raster's cell."""
+    zero = type(x)(0.0)
+    out = panel
+    for j in range(ek.evidence_nodes(ev)):
+        kind = ev.ints[j, 0]
+        radius = node_radius(ev, j, r, t)
+        if kind != ek.KIND_POLYGON and radius > zero:
+            scale = zero
+            if kind == ek.KIND_NORMAL:
+                scale = type(x)(1.0) / wp.sqrt(ev.data[j, 2] + ev.data[j, 4])
+            elif kind == ek.KIND_RASTER:
+                scale = wp.min(ev.data[j, 2], ev.data[j, 3])
+            else:
+                dx = x - ev.data[j, 0]
+                dy = y - ev.data[j, 1]
+                gap = wp.abs(wp.sqrt(dx * dx + dy * dy) - radius)
+                if kind == ek.KIND_BEARING:
+                    scale = gap / ev.data[j, 3]
+                else:
+                    scale = type(x)(0.25) * gap
+            out = wp.min(out, scale / radius)
+    return wp.max(out, narrowest)
+
+
+@wp.func
+def course_node(cx: Any, cy: Any, q1x: Any, q1y: Any, c1: Any, c2: Any, p11: Any, p12: Any, p22: Any, d: Any):
+    """At theta = theta* + d: (E - E*, e(c) in the world)."""
+    half = type(d)(0.5)
+    sd = wp.sin(half * d)
+    u = type(d)(-2.0) * sd * sd  # cos d - 1 without cancellation
+    v = wp.sin(d)
+    cd = type(d)(1.0) + u
+    e = u * (c1 - half * p11 * u) - half * p22 * v * v + v * (c2 - p12 * u)
+    ct = cx * cd - cy * v  # cos and sin of theta
+    st = cy * cd + cx * v
+    return e, ct * q1x - st * q1y, ct * q1y + st * q1x
+
+
+@wp.func
+def add_nodes(ev: Any, x: Any, y: Any, ex: Any, ey: Any, r: Any, t: Any, polygons: int, lw: wp.array(dtype=Any)):
+    """Add the contributions of the polygon nodes (``polygons`` = 1) or of the others (0) for
+    the path through (x, y) with direction e; the others' factors are zeroed first."""
+    n = ek.evidence_nodes(ev)
+    if polygons == 0:
+        for j in range(n):
+            if ev.ints[j, 0] != ek.KIND_POLYGON:
+                lw[ev.ints[j, 1]] = type(x)(0.0)
+    for j in range(n):
+        if (ev.ints[j, 0] == ek.KIND_POLYGON) == (polygons == 1):
+            radius = node_radius(ev, j, r, t)
+            ek.evidence_node(ev, j, x - radius * ex, y - radius * ey, lw)
+
+
+@wp.func
+def carried_arc(
+    x: Any, y: Any, r: Any, t: Any, cx: Any, cy: Any, q1x: Any, q1y: Any, c1: Any, c2: Any, p11: Any, p12: Any,
+    p22: Any, lo: Any, hi: Any, panel: Any, smooth: int, log_scale: Any, rule: wp.array(dtype=Any), ev: Any,
+    lw: wp.array(dtype=Any), out: wp.array(dtype=Any),
+):
+    """Add to each channel the integral over theta* + (lo, hi) of exp(E + log_scale) times the
+    path's weight: pieces between the polygons' course breaks (a window of BREAKS at a time),
+    Gauss-Legendre on panels no wider than ``panel``. Without smooth factors (``smooth`` = 0)
+    the weight is constant on a piece: one weight per piece."""
+    zero = type(x)(0.0)
+    half = type(x)(0.5)
+    sx = cx * q1x - cy * q1y  # the peak's direction e(c*) in the world
+    sy = cx * q1y + cy * q1x
+    a = lo
+    while a < hi:
+        buf, count = window_breaks(x, y, r, t, sx, sy, a, hi, ev)
+        end = hi
+        if count == BREAKS:
+            end = buf[BREAKS - 1]
+        for piece in range(count + 1):
+            b = end
+            if piece < count:
+                b = buf[piece]
+            if b > a:
+                m = int(wp.ceil((b - a) / panel))
+                h = (b - a) / type(x)(m)
+                e_mid, mx, my = course_node(cx, cy, q1x, q1y, c1, c2, p11, p12, p22, half * (a + b))
+                ek.evidence_reset(ev, lw)
+                add_nodes(ev, x, y, mx, my, r, t, 1, lw)
+                total = zero
+                for k in range(m):
+                    mid = a + (type(x)(k) + half) * h
+                    for g in range(GAUSS_NODES):
+                        e, ex, ey = course_node(cx, cy, q1x, q1y, c1, c2, p11, p12, p22, mid + half * h * rule[g])
+                        term = half * h * rule[GAUSS_NODES + g] * wp.exp(e + log_scale)
+                        if smooth == 0:
+                            total = total + term
+                        else:
+                            add_nodes(ev, x, y, ex, ey, r, t, 0, lw)
+                            ek.evidence_add(ev, lw, term, out)
+                if smooth == 0:
+                    ek.evidence_add(ev, lw, total, out)
+            a = b
+        if count < BREAKS:
+            a = hi
+
+
+@wp.func
+def carried_speed(
+    x: Any, y: Any, z1: Any, z2: Any, params: wp.array(dtype=Any), base: int, t: Any, rule: wp.array(dtype=Any),
+    smooth: int, ev: Any, lw: wp.array(dtype=Any), out: wp.array(dtype=Any),
+):
+    """Add the speed's carried density w_i P_i^W at (x, y) (whitened z) to each channel: the
+    arcs of the density's walk (:func:`speed_density`: the peak's, and the second peak's where
+    it matters), each by :func:`carried_arc`."""
+    zero = type(z1)(0.0)
+    pi = type(z1)(PI)
+    rho1 = params[base + RHO1]
+    rho2 = params[base + RHO2]
+    four_f = params[base + FOUR_F]
+    kappa = params[KAPPA]
+    c0 = params[COS_THETA0]
+    s0 = params[SIN_THETA0]
+    stop = params[STOP]
+    q1x = params[Q1_X]
+    q1y = params[Q1_Y]
+    r = rho1 / params[INV_SQRT_S1]
+    a = rho1 * z1 + kappa * c0
+    b = rho2 * z2 + kappa * s0
+    n = node_count(wp.sqrt(a * a + b * b) + four_f, params[LOG_TOL])
+    delta = type(z1)(TWO_PI) / type(z1)(n)
+    panel = rule[PANEL] * delta
+    if smooth == 1:
+        panel = smooth_panel(x, y, r, t, panel, panel * rule[NARROWEST], ev)
+    cx, cy, mu = global_peak(a, b, four_f, params[NEWTON_TOL], zero)
+    e1, c1, c2, p11, p12, p22 = anchor_exponent(z1, z2, rho1, rho2, kappa, c0, s0, cx, cy)
+    log_scale = params[base + LOG_COEF] + e1
+    if log_scale < params[LOG_TINY]:
+        return
+    unused, p1, m1 = walk(c1, c2, p11, p12, p22, delta, stop, n - 1, n - 1, n - 1)
+    lo = -type(z1)(m1) * delta
+    hi = type(z1)(p1) * delta
+    if p1 + m1 + 1 >= n:
+        lo = -pi
+        hi = pi
+    carried_arc(x, y, r, t, cx, cy, q1x, q1y, c1, c2, p11, p12, p22, lo, hi, panel, smooth, log_scale, rule, ev, lw, out)
+    found, x2, y2 = second_peak(a, b, four_f, params[NEWTON_TOL], params[LOG_STOP])
+    if found == 1 and p1 + m1 + 1 < n:
+        offset = wp.atan2(cx * y2 - cy * x2, cx * x2 + cy * y2)
+        j2 = int(wp.round(offset / delta))
+        if j2 < 0:
+            j2 = j2 + n
+        if j2 > p1 and j2 < n - m1:
+            angle = type(z1)(j2) * delta
+            cj = wp.cos(angle)
+            sj = wp.sin(angle)
+            e2, d1, d2, q11, q12, q22 = anchor_exponent(z1, z2, rho1, rho2, kappa, c0, s0, cx * cj - cy * sj,
+                                                        cy * cj + cx * sj)
+            if wp.exp(e2 - e1) >= stop:
+                lim_plus = n - m1 - 1 - j2
+                lim_minus = j2 - p1 - 1
+                extra, p2, m2 = walk(d1, d2, q11, q12, q22, delta, stop, lim_plus, lim_minus, lim_plus + lim_minus)
+                carried_arc(x, y, r, t, cx, cy, q1x, q1y, c1, c2, p11, p12, p22, type(z1)(j2 - m2) * delta,
+                            type(z1)(j2 + p2) * delta, panel, smooth, log_scale, rule, ev, lw, out)
+
+
+@wp.func
+def butterly_carried(x: Any, y: Any, p: Any, ev: Any, lw: wp.array(dtype=Any), out: wp.array(dtype=Any)):
+    """Add the carried density per m^2 at the world point (x, y) to each channel of ``out``: the
+    sum over speeds of :func:`carried_speed`, a speed skipped where its bound is below
+    LOG_SPEED_FLOOR (and the point where every speed's is below LOG_CELL_FLOOR): weights are at
+    most one, so the prior's bound bounds every channel."""
+    params = p.params
+    z1, z2 = whiten(x, y, params)
+    z_norm = wp.sqrt(z1 * z1 + z2 * z2)
+    smooth = int(0)
+    for j in range(ek.evidence_nodes(ev)):
+        if ev.ints[j, 0] != ek.KIND_POLYGON:
+            smooth = 1
+    cell_floor = params[LOG_CELL_FLOOR] - wp.log(type(x)(float(p.n_speeds)))
+    keep = int(0)
+    for i in range(p.n_speeds):
+        if log_bound(z1, z2, z_norm, params, HEAD + PER_SPEED * i) >= cell_floor:
+            keep = 1
+    if keep == 0:
+        return
+    for i in range(p.n_speeds):
+        base = HEAD + PER_SPEED * i
+        if log_bound(z1, z2, z_norm, params, base) >= params[LOG_SPEED_FLOOR]:
+            carried_speed(x, y, z1, z2, params, base, p.t, p.rule, smooth, ev, lw, out)
+
+
+#: The carried kernels' parameters: the density's array and speed count, the course rule
+#: (RULE_SIZE values) and the map's time t.
+BUTTERLY_CARRIED = Params("ButterlyCarriedParams", __name__, params=ARRAY, n_speeds=int, rule=ARRAY, t=SCALAR)
+CARRIED_POINTS = carried_points_kernel(butterly_carried, BUTTERLY_CARRIED, ek.EVIDENCE, "butterly")

@@ -260,7 +260,15 @@ def density_kernels(density, params: Params, name: str, *, lanes: bool = False, 
                           tile_rows, scratch_width, quad_width)
 
 
-def carried_points_kernel(carried, params: Params, evidence: Params, name: str):
+@dataclass(frozen=True)
+class CarriedKernels:
+    """A family's carried points kernel (:func:`carried_points_kernel`), as a binding's ``kernels``."""
+
+    name: str
+    points: Any
+
+
+def carried_points_kernel(carried, params: Params, evidence: Params, name: str) -> CarriedKernels:
     """The carried points kernel of a family (``bananagrid.protocol.CarryingModel``):
     ``NAME_carried_points(xs, ys, start, p, ev, lw, out)`` over a chunk of points from ``start``,
     each point's channels zeroed, then ``carried(x, y, p, ev, lw[k], out[k])`` (a ``@wp.func``
@@ -280,4 +288,4 @@ def carried_points_kernel(carried, params: Params, evidence: Params, name: str):
         vec, mat = wp.array(dtype=scalar), wp.array2d(dtype=scalar)
         overload_on_use(kernel, scalar, {"xs": vec, "ys": vec, "p": params.of(scalar), "ev": evidence.of(scalar),
                                          "lw": mat, "out": mat})
-    return kernel
+    return CarriedKernels(f"{carried.module.name.rsplit('.', 1)[-1]}.{kernel.key}", kernel)
