@@ -29,6 +29,7 @@ from scipy import special, stats
 
 from ..domains.pose import Pose
 from ..kernels import butterly as kernels
+from ..kernels import evidence as evidence_kernels
 from ..protocol import EvidencePack, Extent, KernelBinding, KernelContext, SceneKey, SceneSchema
 from ..validate import BananagridError, BananagridWarning, covariance, finite, non_negative, point, positive, real_array, show
 from ._butterly_series import series_density
@@ -86,6 +87,10 @@ SECONDS_PER_SPEED_NODE = 0.1e-6
 #: the narrowest panel smooth factors may ask for, as a fraction of one.
 CARRIED_PANEL = 2.0
 CARRIED_NARROWEST = 1.0 / 16.0
+#: A smooth factor's course spacing, as a fraction of its angular scale (its length scale over
+#: the radius V (t - s)): the fraction the density's own spacing is of its narrowest width
+#: (2 pi / sqrt(2 L), L = ln(1e12) + ln(4 pi): 0.81).
+SMOOTH_SPACING = 0.8
 
 
 @dataclass(frozen=True)
@@ -709,9 +714,13 @@ class Butterly(Model):
             raise BananagridError(f"t = {pack.t!r}: the evidence was packed for a map at t = {pack.t!r}, "
                                   f"the model's t is {self.t!r}")
         x, w = np.polynomial.legendre.leggauss(kernels.GAUSS_NODES)
-        rule = np.concatenate((x, w, [CARRIED_PANEL, CARRIED_NARROWEST]))
+        rule = np.concatenate((x, w, [CARRIED_PANEL, CARRIED_NARROWEST, SMOOTH_SPACING]))
+        polygon = np.flatnonzero(pack.ints[:, 0] == evidence_kernels.KIND_POLYGON).astype(np.int32)
+        smooth = np.flatnonzero(pack.ints[:, 0] != evidence_kernels.KIND_POLYGON).astype(np.int32)
         params = ctx.struct(kernels.BUTTERLY_CARRIED, params=ctx.array(self.kernel_parameters(ctx.dtype)),
-                            n_speeds=self.n_speed_nodes, rule=ctx.array(rule), t=ctx.scalar(self.t))
+                            n_speeds=self.n_speed_nodes, rule=ctx.array(rule), t=ctx.scalar(self.t),
+                            polygon_nodes=ctx.array(polygon, dtype=np.int32),
+                            smooth_nodes=ctx.array(smooth, dtype=np.int32))
         return KernelBinding(_CarriedKernels(kernels.CARRIED_POINTS), params,
                              {"speed_nodes": self.n_speed_nodes, "carried": "course pieces between polygon crossings"})
 
