@@ -63,6 +63,11 @@ faster:
   two nodes' exponents is linear on the tile).
 * Otherwise each cell walks from its peak as above, Newton starting from the root of the
   neighbouring cell (the speeds are the outer loop).
+
+Carried evidence (the section at the end, ``CARRIED_KERNELS``): evidence at earlier times weighs
+each course's path inside the same integral, through the shared helpers of
+``kernels/evidence.py``. Carried maps take the point path (a walk per point and speed, not the
+tiles: a tile's matrix product has no place for a weight per node and cell).
 """
 
 from typing import Any
@@ -70,7 +75,7 @@ from typing import Any
 import warp as wp
 
 from . import evidence as ek
-from .generate import ARRAY, SCALAR, SCALARS, Params, carried_points_kernel, density_kernels, overload_on_use
+from .generate import ARRAY, ARRAY2D, SCALAR, SCALARS, Params, carried_points_kernel, density_kernels, overload_on_use
 
 # No adjoints: nothing differentiates these kernels, and the backward kernels Warp would
 # generate for every launch kernel are most of a module's code (the CAT module's CUDA build:
@@ -805,16 +810,33 @@ KERNELS = density_kernels(butterly_world, BUTTERLY, "butterly", grid=butterly_gr
 # integrated by Gauss-Legendre on panels no wider than ``rule[PANEL]`` trapezoid spacings
 # (``carried_arc``): exact for polygons but for the rule's error on the smooth exp(E). Smooth
 # factors (reports, bearings, inverse-cube tracks, rasters) are evaluated at every node, on
-# panels narrowed to their own angular scale (``smooth_panel``).
+# panels narrowed to their own angular scale (``smooth_spacing``). An area search over an
+# interval (t0, t1) is taken exactly (``add_segments``): the path over it is the segment from
+# X(t0) to X(t1), the time inside is its length inside the polygon over the speed, smooth in
+# theta between the courses where an end crosses an edge or the segment passes a vertex
+# (``segment_breaks``).
 
-#: Gauss-Legendre nodes per panel; the rule array holds the nodes on [-1, 1], their weights,
-#: then the panel width in trapezoid spacings (PANEL) and the narrowest panel for smooth factors
-#: as a fraction of it (NARROWEST).
+#: Gauss-Legendre nodes per panel (the rule array, ``models.butterly._carried_rule``: each
+#: order's nodes on [-1, 1] and weights, then the constants below).
 GAUSS_NODES = 8
-PANEL = 2 * GAUSS_NODES
-NARROWEST = 2 * GAUSS_NODES + 1
-SPACING = 2 * GAUSS_NODES + 2
-RULE_SIZE = 2 * GAUSS_NODES + 3
+#: Lower orders for pieces narrow enough (a crossing-dense arc is cut into many): where each
+#: order's nodes and weights start in the rule array, after the panels' 8-point rule.
+ORDERS = (8, 4, 3, 2)
+RULE_AT = {8: 0, 4: 16, 3: 24, 2: 30}
+AT4 = 16
+AT3 = 24
+AT2 = 30
+#: After the rules: the panel width in spacings, the narrowest spacing for smooth factors (a
+#: fraction of the density's), a smooth factor's spacing as a fraction of its angular scale, and
+#: the widest piece (in spacings) that the 4-, 3- and 2-point rules integrate as well as the
+#: panels' 8-point rule.
+PANEL = 34
+NARROWEST = 35
+SPACING = 36
+LIMIT4 = 37
+LIMIT3 = 38
+LIMIT2 = 39
+RULE_SIZE = 40
 #: Course breaks held at once: a window of the smallest, and the next window after them.
 BREAKS = 32
 #: Polygon nodes whose circle can meet their polygon, listed per point and speed, with their
@@ -967,7 +989,7 @@ def window_breaks(x: Any, y: Any, r: Any, p: Any, active: Any, n_active: int, sx
                         dd = d + type(x)(float(wrap - 1)) * two_pi
                         if dd > lo and dd < hi:
                             buf, who, count = insert_break(buf, who, count, dd, k)
-    return buf, who, count
+    return segment_breaks(x, y, r, p, ev, sx, sy, lo, hi, buf, who, count)
 
 
 @wp.func
@@ -1061,15 +1083,186 @@ def polygon_weights(ev: Any, p: Any, active: Any, n_active: int, cached: Any, lw
 
 
 @wp.func
+def segment_radius(p: Any, t_s: Any, r: Any):
+    """R(s) = r (t - s) / t for a segment's end time s."""
+    if p.t <= type(r)(0.0):
+        return type(r)(0.0)
+    return r * ((p.t - t_s) / p.t)
+
+
+@wp.func
+def inside_length(ev: Any, first: int, count: int, orient: Any, ax: Any, ay: Any, bx: Any, by: Any):
+    """The fraction of the segment from (ax, ay) to (bx, by) inside the polygon of edges
+    [first, first + count) (``orient`` +1 counter-clockwise, -1 clockwise): the winding number
+    (0 or 1 in a simple polygon) at the start plus, at each crossing u of an edge, its change
+    +-1 (entering where the segment crosses the edge from its outer side) times the rest of the
+    segment 1 - u. No sorting: the sum of the steps' tails is the integral of the indicator."""
+    zero = type(ax)(0.0)
+    one = type(ax)(1.0)
+    total = zero
+    if ek.polygon_contains(ev.edges, first, count, ax, ay):
+        total = one
+    dx = bx - ax
+    dy = by - ay
+    for e in range(first, first + count):
+        px = ev.edges[e, 0]
+        py = ev.edges[e, 1]
+        qx = ev.edges[e, 2] - px
+        qy = ev.edges[e, 3] - py
+        denom = dx * qy - dy * qx  # cross(d, edge)
+        if denom != zero:
+            wx = px - ax
+            wy = py - ay
+            u = (wx * qy - wy * qx) / denom  # along the segment
+            v = (wx * dy - wy * dx) / denom  # along the edge
+            if u > zero and u < one and v >= zero and v < one:
+                step = orient
+                if denom > zero:
+                    step = -orient  # crossing the edge from its left (inner) side: leaving
+                total = total + step * (one - u)
+    return wp.min(wp.max(total, zero), one)
+
+
+@wp.func
+def segment_reaches(p: Any, k: int, x: Any, y: Any, r: Any):
+    """Whether the annulus R(t1) <= |P - x| <= R(t0) swept by search k's path segments (any
+    course) meets the search polygon's box: else the segment is never inside."""
+    zero = type(x)(0.0)
+    r_far = segment_radius(p, p.segments[k, 0], r)
+    r_near = segment_radius(p, p.segments[k, 1], r)
+    near_x = wp.max(wp.max(p.segments[k, 4] - x, zero), x - p.segments[k, 5])
+    near_y = wp.max(wp.max(p.segments[k, 6] - y, zero), y - p.segments[k, 7])
+    far_x = wp.max(wp.abs(p.segments[k, 4] - x), wp.abs(x - p.segments[k, 5]))
+    far_y = wp.max(wp.abs(p.segments[k, 6] - y), wp.abs(y - p.segments[k, 7]))
+    return near_x * near_x + near_y * near_y <= r_far * r_far and far_x * far_x + far_y * far_y >= r_near * r_near
+
+
+@wp.func
+def reaching_segments(p: Any, x: Any, y: Any, r: Any, sx: Any, sy: Any, lo: Any, hi: Any):
+    """How many searches over intervals a path of a course in theta* + (lo, hi) can be inside:
+    the sector of the annulus R(t1) <= |P - x| <= R(t0) in those directions (from the peak's
+    direction (sx, sy)) lies in the box of its four corners widened by R(t0) (1 - cos((hi - lo)
+    / 2)) (the arc's bulge); it must meet the polygon's box (an arc of pi or more: the annulus's
+    test, :func:`segment_reaches`)."""
+    count = int(0)
+    zero = type(x)(0.0)
+    half = type(x)(0.5)
+    cl = wp.cos(lo)
+    sl = wp.sin(lo)
+    ch = wp.cos(hi)
+    sh = wp.sin(hi)
+    # e(theta* + d) = the peak's direction turned by d
+    lx = sx * cl - sy * sl
+    ly = sx * sl + sy * cl
+    hx = sx * ch - sy * sh
+    hy = sx * sh + sy * ch
+    wide = hi - lo >= type(x)(PI)
+    bulge = type(x)(1.0) - wp.cos(half * (hi - lo))
+    for k in range(p.segments.shape[0]):
+        if segment_reaches(p, k, x, y, r):
+            if wide:
+                count = count + 1
+            else:
+                r0 = segment_radius(p, p.segments[k, 0], r)
+                r1 = segment_radius(p, p.segments[k, 1], r)
+                x0 = wp.min(wp.min(x - r0 * lx, x - r1 * lx), wp.min(x - r0 * hx, x - r1 * hx)) - r0 * bulge
+                x1 = wp.max(wp.max(x - r0 * lx, x - r1 * lx), wp.max(x - r0 * hx, x - r1 * hx)) + r0 * bulge
+                y0 = wp.min(wp.min(y - r0 * ly, y - r1 * ly), wp.min(y - r0 * hy, y - r1 * hy)) - r0 * bulge
+                y1 = wp.max(wp.max(y - r0 * ly, y - r1 * ly), wp.max(y - r0 * hy, y - r1 * hy)) + r0 * bulge
+                if x1 >= p.segments[k, 4] and x0 <= p.segments[k, 5] and y1 >= p.segments[k, 6] and y0 <= p.segments[k, 7]:
+                    count = count + 1
+    return count
+
+
+@wp.func
+def add_segments(ev: Any, p: Any, x: Any, y: Any, ex: Any, ey: Any, r: Any, lw: wp.array(dtype=Any)):
+    """Set the log-weights of the area searches over intervals taken exactly: the path's
+    straight segment over (t0, t1) spends the fraction f of the interval inside the polygon,
+    and the factor's log-weight is rate (t1 - t0) f (rate = -C / (t1 - t0), the pack's)."""
+    zero = type(x)(0.0)
+    for k in range(p.segments.shape[0]):
+        f = p.segment_ints[k, 0]
+        r0 = segment_radius(p, p.segments[k, 0], r)
+        r1 = segment_radius(p, p.segments[k, 1], r)
+        first = p.segment_ints[k, 1]
+        count = p.segment_ints[k, 2]
+        frac = zero
+        if not segment_reaches(p, k, x, y, r):
+            frac = zero
+        elif r0 > r1:
+            frac = inside_length(ev, first, count, p.segments[k, 3], x - r0 * ex, y - r0 * ey, x - r1 * ex, y - r1 * ey)
+        elif ek.polygon_contains(ev.edges, first, count, x - r0 * ex, y - r0 * ey):
+            frac = type(x)(1.0)
+        value = zero
+        if frac > zero:
+            value = p.segments[k, 2] * (p.segments[k, 1] - p.segments[k, 0]) * frac
+        lw[f] = value
+
+
+@wp.func
+def segment_breaks(x: Any, y: Any, r: Any, p: Any, ev: Any, sx: Any, sy: Any, lo: Any, hi: Any, buf: Any, who: Any,
+                   count: int):
+    """Add to the window the courses where a search-over-an-interval's weight is not smooth:
+    where an end of the path's segment crosses an edge (the circles R(t0), R(t1)) and where the
+    segment passes a vertex (its direction from x, at a distance between R(t1) and R(t0))."""
+    two_pi = type(x)(TWO_PI)
+    zero = type(x)(0.0)
+    for k in range(p.segments.shape[0]):
+        first = p.segment_ints[k, 1]
+        n_edges = p.segment_ints[k, 2]
+        r_far = segment_radius(p, p.segments[k, 0], r)
+        r_near = segment_radius(p, p.segments[k, 1], r)
+        if not segment_reaches(p, k, x, y, r):
+            n_edges = 0  # never inside: no break
+        for end in range(2):
+            radius = r_far
+            if end == 1:
+                radius = r_near
+            if radius > zero:
+                for e in range(first, first + n_edges):
+                    ax = ev.edges[e, 0]
+                    ay = ev.edges[e, 1]
+                    bx = ev.edges[e, 2]
+                    by = ev.edges[e, 3]
+                    hits, u1, u2 = circle_edge_crossings(x, y, radius, ax, ay, bx, by)
+                    for h in range(hits):
+                        u = u1
+                        if h == 1:
+                            u = u2
+                        ex = (x - (ax + u * (bx - ax))) / radius
+                        ey = (y - (ay + u * (by - ay))) / radius
+                        d = wp.atan2(sx * ey - sy * ex, sx * ex + sy * ey)
+                        for wrap in range(3):
+                            dd = d + type(x)(float(wrap - 1)) * two_pi
+                            if dd > lo and dd < hi:
+                                buf, who, count = insert_break(buf, who, count, dd, -1)
+        for e in range(first, first + n_edges):
+            vx = x - ev.edges[e, 0]
+            vy = y - ev.edges[e, 1]
+            dist = wp.sqrt(vx * vx + vy * vy)
+            if dist > zero and dist >= r_near and dist <= r_far:
+                ex = vx / dist
+                ey = vy / dist
+                d = wp.atan2(sx * ey - sy * ex, sx * ex + sy * ey)
+                for wrap in range(3):
+                    dd = d + type(x)(float(wrap - 1)) * two_pi
+                    if dd > lo and dd < hi:
+                        buf, who, count = insert_break(buf, who, count, dd, -1)
+    return buf, who, count
+
+
+@wp.func
 def add_smooth(ev: Any, p: Any, x: Any, y: Any, ex: Any, ey: Any, r: Any, lw: wp.array(dtype=Any)):
     """Set the smooth factors' log-weights for the path through (x, y) with direction e (their
-    factors zeroed first; the polygons' are left as they are)."""
+    factors zeroed first; the polygons' are left as they are), the searches over intervals'
+    included (:func:`add_segments`)."""
     for k in range(p.smooth_nodes.shape[0]):
         lw[ev.ints[p.smooth_nodes[k], 1]] = type(x)(0.0)
     for k in range(p.smooth_nodes.shape[0]):
         j = p.smooth_nodes[k]
         radius = node_radius(ev, j, r, p.t)
         ek.evidence_node(ev, j, x - radius * ex, y - radius * ey, lw)
+    add_segments(ev, p, x, y, ex, ey, r, lw)
 
 
 @wp.func
@@ -1080,15 +1273,17 @@ def carried_arc(
 ):
     """Add to each channel the integral over theta* + (lo, hi) of exp(E + log_scale) times the
     path's weight: pieces between the polygons' course breaks (a window of BREAKS at a time),
-    Gauss-Legendre on panels no wider than ``panel``. Without smooth factors the weight is
+    Gauss-Legendre on panels no wider than rule[PANEL] ``spacing`` (a piece narrow enough by
+    a 4-, 3- or 2-point rule: rule[LIMIT4], ...). Without smooth factors the weight is
     constant on a piece: one weight per piece, and an arc without breaks takes the density's
     own trapezoid sum over it (``trapezoid``, relative to exp(E*)) times its weight."""
     zero = type(x)(0.0)
     half = type(x)(0.5)
-    smooth = p.smooth_nodes.shape[0]
     rule = p.rule
     sx = cx * q1x - cy * q1y  # the peak's direction e(c*) in the world
     sy = cx * q1y + cy * q1x
+    reach = reaching_segments(p, x, y, r, sx, sy, lo, hi)
+    smooth = p.smooth_nodes.shape[0] + reach
     cached = wp.vector(length=ACTIVE, dtype=type(x))
     n_visit = visits(p, n_active)
     a = lo
@@ -1133,20 +1328,46 @@ def carried_arc(
                     if fresh == 1:
                         for k in range(n_visit):
                             cached[k] = polygon_contribution(ev, p, active, n_active, k, x, y, mx, my, r)
+                        polygon_weights(ev, p, active, n_active, cached, lw)
                     else:
-                        # only the nodes whose crossings lie between the last piece and this one
+                        # only the nodes whose crossings lie between the last piece and this
+                        # one change: their factors' log-weights move by the difference (all
+                        # of them again where a contribution is infinite: POD = 1)
+                        rebuild = int(0)
                         for q in range(applied, piece):
                             k = int(who[q])
-                            cached[k] = polygon_contribution(ev, p, active, n_active, k, x, y, mx, my, r)
-                    polygon_weights(ev, p, active, n_active, cached, lw)
+                            if k < 0:  # a search over an interval's break: its weight is per node
+                                continue
+                            new = polygon_contribution(ev, p, active, n_active, k, x, y, mx, my, r)
+                            if wp.isfinite(new) and wp.isfinite(cached[k]):
+                                f = ev.ints[polygon_node(p, active, n_active, k), 1]
+                                lw[f] = lw[f] + (new - cached[k])
+                            else:
+                                rebuild = 1
+                            cached[k] = new
+                        if rebuild == 1:
+                            polygon_weights(ev, p, active, n_active, cached, lw)
                 fresh = int(0)
                 applied = piece
+                # the order: a narrow piece in one panel of 4, 3 or 2 nodes, else panels of 8
+                width = (b - a) / spacing
+                order = int(GAUSS_NODES)
+                at = int(0)
+                if width <= rule[LIMIT2]:
+                    order = 2
+                    at = AT2
+                elif width <= rule[LIMIT3]:
+                    order = 3
+                    at = AT3
+                elif width <= rule[LIMIT4]:
+                    order = 4
+                    at = AT4
                 total = zero
                 for k in range(m):
                     mid = a + (type(x)(k) + half) * h
-                    for g in range(GAUSS_NODES):
-                        e, ex, ey = course_node(cx, cy, q1x, q1y, c1, c2, p11, p12, p22, mid + half * h * rule[g])
-                        term = half * h * rule[GAUSS_NODES + g] * wp.exp(e + log_scale)
+                    for g in range(order):
+                        e, ex, ey = course_node(cx, cy, q1x, q1y, c1, c2, p11, p12, p22, mid + half * h * rule[at + g])
+                        term = half * h * rule[at + order + g] * wp.exp(e + log_scale)
                         if smooth == 0:
                             total = total + term
                         else:
@@ -1247,7 +1468,11 @@ def butterly_carried(x: Any, y: Any, p: Any, ev: Any, lw: wp.array(dtype=Any), o
 
 
 #: The carried kernels' parameters: the density's array and speed count, the course rule
-#: (RULE_SIZE values), the map's time t, and the pack's polygon nodes and other (smooth) nodes.
+#: (RULE_SIZE values), the map's time t, the pack's polygon nodes and other (smooth) nodes, and
+#: the area searches over intervals taken exactly (``segments`` rows t0, t1, rate, orientation,
+#: then the polygon's box x0, x1, y0, y1;
+#: ``segment_ints`` rows factor, first edge, edge count, in the pack's edges).
 BUTTERLY_CARRIED = Params("ButterlyCarriedParams", __name__, params=ARRAY, n_speeds=int, rule=ARRAY, t=SCALAR,
-                          polygon_nodes=wp.array(dtype=wp.int32), smooth_nodes=wp.array(dtype=wp.int32))
-CARRIED_POINTS = carried_points_kernel(butterly_carried, BUTTERLY_CARRIED, ek.EVIDENCE, "butterly")
+                          polygon_nodes=wp.array(dtype=wp.int32), smooth_nodes=wp.array(dtype=wp.int32),
+                          segments=ARRAY2D, segment_ints=wp.array2d(dtype=wp.int32))
+CARRIED_KERNELS = carried_points_kernel(butterly_carried, BUTTERLY_CARRIED, ek.EVIDENCE, "butterly")

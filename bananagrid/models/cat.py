@@ -125,17 +125,28 @@ def cat_position(v0, t, a, omega) -> np.ndarray:
     """Local CAT position of eq. (1) for arrays of accelerations and turn rates, shape (n, 2).
 
     Written with u = omega t as  v0 t (A, B) + a t^2 (C, D)  (see ``kernels.common.cat_basis``);
-    C and D use their series below |u| = 1e-2, where the closed forms cancel.
+    A = 2 sin^2(u / 2) / u without cancellation; below |u| = 1e-2 every function is its series
+    (three terms: the next is below 1e-16 of the first), where C's and D's closed forms cancel.
     """
     u = np.asarray(omega, dtype=float) * t
     a = np.asarray(a, dtype=float)
-    half = 0.5 * u
-    A = np.sin(half) * np.sinc(half / np.pi)  # np.sinc is normalised: sinc(x/pi) = sin(x)/x
-    B = np.sinc(u / np.pi)
+    u, a = np.broadcast_arrays(u, a)
     small = np.abs(u) < 1e-2
-    us = np.where(small, 1.0, u)  # avoid 0/0 in the branch that is not used
-    C = np.where(small, u / 3 - u**3 / 30 + u**5 / 840, (np.sin(us) - us * np.cos(us)) / us**2)
-    D = np.where(small, 0.5 - u**2 / 8 + u**4 / 144, (np.cos(us) + us * np.sin(us) - 1) / us**2)
+    us = np.where(small, 1.0, u)  # no 0/0 in the closed forms that the series replace
+    inv = 1.0 / us
+    sin_u, cos_u = np.sin(us), np.cos(us)
+    sin_half = np.sin(0.5 * us)
+    A = 2.0 * sin_half * sin_half * inv  # (1 - cos u) / u
+    B = sin_u * inv
+    C = (sin_u - us * cos_u) * inv * inv
+    D = (cos_u + us * sin_u - 1.0) * inv * inv
+    if small.any():
+        v = u[small]
+        v2 = v * v
+        A[small] = v * (0.5 - v2 / 24 + v2 * v2 / 720)
+        B[small] = 1.0 - v2 / 6 + v2 * v2 / 120
+        C[small] = v / 3 - v * v2 / 30 + v * v2 * v2 / 840
+        D[small] = 0.5 - v2 / 8 + v2 * v2 / 144
     return np.column_stack((v0 * t * A + a * t * t * C, v0 * t * B + a * t * t * D))
 
 
@@ -739,7 +750,7 @@ class CAT(MotionModel):
         times = np.atleast_1d(np.asarray(times, dtype=float))
         if times.ndim != 1 or times.size == 0 or not np.isfinite(times).all() or (times < 0.0).any():
             raise BananagridError(f"times = {times.tolist()!r}: expected finite times >= 0 (s since the last fix)")
-        n, rng = check_n(n, self.sample_bytes * len(times)), check_rng(rng)
+        n, rng = check_n(n, self.sample_bytes + 16.0 * len(times)), check_rng(rng)  # + the positions
         a = rng.normal(0.0, self.sigma_a, n)
         omega = rng.normal(0.0, self.sigma_omega, n)
         theta0 = rng.normal(0.0, self.sigma_heading, n) if self.sigma_heading > 0.0 else None

@@ -13,7 +13,8 @@ PositionReport, BearingReport) at its time. An area search over an interval (t0,
 coverage C (``miss`` = exp(-C)) is taken as random search spread evenly over the interval: the
 path's hazard is C times the fraction of the interval it spends inside the polygon, computed
 exactly for a straight path as the length of the segment X([t0, t1]) inside the polygon over its
-length (``segment_fraction_inside``).
+length (``segment_fraction_inside``), or, with ``rule``, by a composite Gauss-Legendre rule in
+time (the pack's: what the kernels integrate over courses).
 
 [0, 2 pi] is cut at every course where a path crosses an edge at a search's time (the circle of
 radius V (t - s) about x against each edge), where a search interval's segment passes a vertex,
@@ -89,14 +90,31 @@ def _circle_courses(x, radius, vertices):
     return out
 
 
-def weight(model, evidence, x, r, c):
-    """W(c) of the paths through x with range r at the map's time (array c)."""
+def time_rule(t0: float, t1: float, panels: int, points: int) -> tuple[np.ndarray, np.ndarray]:
+    """Composite Gauss-Legendre nodes and weights over [t0, t1] (``panels`` of ``points``)."""
+    x, w = np.polynomial.legendre.leggauss(points)
+    edges = np.linspace(t0, t1, panels + 1)
+    half, mid = 0.5 * np.diff(edges), 0.5 * (edges[1:] + edges[:-1])
+    return (mid[:, None] + half[:, None] * x).ravel(), (half[:, None] * w).ravel()
+
+
+def weight(model, evidence, x, r, c, rule=None):
+    """W(c) of the paths through x with range r at the map's time (array c). With ``rule`` =
+    (panels, points) an area search over an interval takes the fraction of it spent inside by
+    that Gauss-Legendre rule in time instead of exactly."""
     t = model.t
     e = np.stack((np.sin(c), np.cos(c)), axis=-1)
     w = np.ones(np.shape(c))
     for ev in evidence:
         t0, t1 = ev.time_span
-        if t0 == t1:
+        if t0 < t1 and rule is not None:
+            nodes, q = time_rule(t0, t1, *rule)
+            radius = r * (t - nodes) / t  # (N,)
+            px = x[0] - radius * e[..., 0, None]
+            py = x[1] - radius * e[..., 1, None]
+            hazard = np.sum(q * ev.region.contains(px, py), axis=-1)
+            w = w * np.exp(math.log(ev.miss) * hazard / (t1 - t0))
+        elif t0 == t1:
             pos = x - (r * (t - t0) / t) * e
             w = w * ev.likelihood(pos[..., 0], pos[..., 1])
         else:  # an area search over (t0, t1): coverage spread evenly over the interval
@@ -108,7 +126,7 @@ def weight(model, evidence, x, r, c):
     return w
 
 
-def breakpoints(model, evidence, x, r):
+def breakpoints(model, evidence, x, r, rule=None):
     """Courses where W jumps or kinks for the range r."""
     t = model.t
     out = []
@@ -117,9 +135,10 @@ def breakpoints(model, evidence, x, r):
         if region is None:
             continue
         t0, t1 = ev.time_span
-        for s in {t0, t1}:
+        times = {t0, t1} if rule is None or t0 == t1 else set(time_rule(t0, t1, *rule)[0].tolist())
+        for s in times:
             out += _circle_courses(x, r * (t - s) / t, region.vertices)
-        if t1 > t0:  # the segment passes a vertex
+        if t1 > t0 and rule is None:  # the segment passes a vertex
             for p in region.vertices:
                 d = x - p
                 dist = math.hypot(*d)
@@ -128,8 +147,8 @@ def breakpoints(model, evidence, x, r):
     return out
 
 
-def carried_density(model, evidence, x, y, *, epsrel=1e-12) -> np.ndarray:
-    """The carried (unnormalised) density at points (x, y), float64."""
+def carried_density(model, evidence, x, y, *, epsrel=1e-12, rule=None) -> np.ndarray:
+    """The carried (unnormalised) density at points (x, y), float64 (``rule``: see :func:`weight`)."""
     x, y = np.atleast_1d(np.asarray(x, dtype=float)), np.atleast_1d(np.asarray(y, dtype=float))
     v, wv = model.speed_nodes
     cov = np.asarray(model.cov, dtype=float)
@@ -160,11 +179,11 @@ def carried_density(model, evidence, x, y, *, epsrel=1e-12) -> np.ndarray:
             keep = lg > top - 60.0
             keep = keep | np.roll(keep, 1) | np.roll(keep, -1)
             knots = set(grid[keep].tolist()[:: max(1, 20)] + [0.0, 2 * math.pi])
-            knots.update(b for b in breakpoints(model, evidence, point, r))
+            knots.update(b for b in breakpoints(model, evidence, point, r, rule))
             knots = np.array(sorted(knots))
 
             def f(c):
-                return math.exp(float(log_g(c)) - top) * float(weight(model, evidence, point, r, np.array(c)))
+                return math.exp(float(log_g(c)) - top) * float(weight(model, evidence, point, r, np.array(c), rule))
 
             total = 0.0
             for a, b in zip(knots[:-1], knots[1:]):
