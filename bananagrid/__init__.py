@@ -31,6 +31,7 @@ from .models.registry import MODEL_KINDS, ModelKind
 from .planning.allocation import Allocation, allocate
 from .planning.detection import DetectionLaw, detection_law
 from .planning.figures import plot_allocation
+from .planning.periods import PeriodPlan, plan_periods
 from .planning.rectangles import SearchPlan, SearchRectangle, search_rectangles
 from .planning.regions import RegionPlan, SearchRegion, search_regions
 from .protocol import DensityModel
@@ -60,7 +61,7 @@ __all__ = [
     "Posterior", "PolarPosterior",
     # where to look next
     "allocate", "Allocation", "DetectionLaw", "detection_law", "search_rectangles", "SearchPlan", "SearchRectangle",
-    "search_regions", "RegionPlan", "SearchRegion", "plot_allocation",
+    "search_regions", "RegionPlan", "SearchRegion", "plot_allocation", "plan_periods", "PeriodPlan",
     # scenes
     "load_scene", "parse_scene", "run_scene",
     # inputs from the field: tracks, last fixes and bearings from CSV, GPX, NMEA/AIS and GeoJSON

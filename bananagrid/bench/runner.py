@@ -26,6 +26,7 @@ import platform
 import subprocess
 import sys
 import time
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -44,6 +45,7 @@ from ..models.containment import containment
 from ..models.presence import GaussianMixture, cell_probabilities, grid_probabilities
 from ..models.registry import MODEL_KINDS
 from ..planning.allocation import allocate
+from ..planning.periods import plan_periods
 from ..protocol import DensityModel
 from ..results import Raster
 from ..validate import BananagridError
@@ -310,11 +312,47 @@ class _AllocateJob:
         return time.perf_counter() - start
 
 
+class _PeriodPlanJob:
+    """``plan-periods``: a 3-period moving-target plan (``bg.plan_periods``, random search) for
+    the submarine of ``scenes/submarine.toml`` (Butterly: start SD 2 km x 0.5 km, rho 0.5; 5, 10
+    or 15 kn on any course) over that scene's square of +-230 km, at 2, 3 and 4 h, 5,000 km^2 of
+    effort each (a 5 km sweep width over 1,000 km of track), to a tolerance of 1e-5 of POS per
+    sweep. The grid is the scene's extent at 3,200 m cells (144 x 144), not its 400 m: each
+    sweep carries three maps through the course integral on up to 144 sub-cells of every cell the
+    other periods' searches reach, some 20 minutes per plan at 400 m on two cores. Baseline: the
+    three periods' own single-period plans (each map's cell probabilities and ``allocate``), what
+    planning the periods apart costs."""
+
+    dtypes = (np.float64,)
+    TIMES = (7200.0, 10800.0, 14400.0)
+    EFFORTS = (5e9, 5e9, 5e9)
+    STEP = 3200.0
+    TOL = 1e-5
+
+    def __init__(self):
+        knot = 1852.0 / 3600.0
+        sx, sy, rho = 2000.0, 500.0, 0.5
+        self.model = MODEL_KINDS["butterly"].build(dict(
+            mean=(0.0, 0.0), cov=[[sx * sx, rho * sx * sy], [rho * sx * sy, sy * sy]],
+            speeds=[5.0 * knot, 10.0 * knot, 15.0 * knot], weights=[0.2, 0.5, 0.3], t=self.TIMES[0]))
+        self.grid = Grid.from_bounds(x=(-230000.0, 230000.0), y=(-230000.0, 230000.0), step=self.STEP)
+        self.cells = self.grid.nx * self.grid.ny
+
+    def work(self, dtype, threads, device="cpu"):
+        self.plan = plan_periods(self.model, self.grid, self.TIMES, self.EFFORTS, tol=self.TOL, threads=threads)
+
+    def baseline(self, stride: int, repeat: int) -> float:
+        def own_plans():
+            for t, z in zip(self.TIMES, self.EFFORTS):
+                allocate(rasterise(replace(self.model, t=t), self.grid, quantity="probability"), z)
+        return _best_of(repeat, own_plans)
+
+
 #: Kernels timed on work other than one grid.
 JOBS = {
     "presence-plane": _PresenceJob, "presence-frustum": _PresenceFrustumJob, "presence-grid": _PresenceGridJob,
     "polar-batch": _BatchJob, "cat-cells": _CatCellJob, "butterly-cells": _ButterlyCellJob,
-    "allocate": _AllocateJob,
+    "allocate": _AllocateJob, "plan-periods": _PeriodPlanJob,
 }
 
 #: Every row of the bench, in order: a grid row's model factory, or None for a job.
