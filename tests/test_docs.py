@@ -269,6 +269,7 @@ def check_planning(ns):
     assert (round(ns["plan"].pos, 3), list(ns["plan"].pos_curve([1e6, 4e6]).round(3))) == (0.814, [0.64, 0.933])
     assert (round(ns["flown"].pos, 3), [r.legs for r in ns["flown"].rectangles]) == (0.758, [3, 3, 3])
     assert round(ns["bands"].pos, 3) == 0.812
+    assert (round(ns["periods"].pos, 3), [round(p, 3) for p in ns["periods"].period_pos]) == (0.77, [0.664, 0.106])
 
 
 def check_api(ns):
