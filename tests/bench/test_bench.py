@@ -1,7 +1,10 @@
 """``bananagrid bench`` runs and writes its records (timings themselves are never asserted)."""
 
+import dataclasses
 import json
 import math
+
+import numpy as np
 
 import pytest
 
@@ -210,3 +213,24 @@ def test_bench_times_small_calls(tmp_path, capsys, monkeypatch):
     assert "small calls, float64, per call" in text and "framing costs" in text
     assert bench.main(["--small", "--device", "cuda"]) == 2
     assert "the small-call rows run on the CPU" in capsys.readouterr().err
+
+
+def test_bench_times_a_plan_over_periods(tmp_path, monkeypatch):
+    """The plan-periods row on the submarine's square at 92 km cells (5 x 5), its start 20 times
+    wider (the Butterly cell rule's sub-cells scale with the start's SD) and to a loose tolerance:
+    the row's own takes minutes. One float64 record, its baseline the periods' own plans."""
+    monkeypatch.setattr(bench._PeriodPlanJob, "STEP", 92000.0)
+    monkeypatch.setattr(bench._PeriodPlanJob, "TOL", 1e-3)
+    build = bench._PeriodPlanJob.__init__
+
+    def wider(job):
+        build(job)
+        job.model = dataclasses.replace(job.model, cov=400.0 * np.asarray(job.model.cov))
+
+    monkeypatch.setattr(bench._PeriodPlanJob, "__init__", wider)
+    out = tmp_path / "bench.json"
+    argv = ["--kernels", "plan-periods", "--repeat", "1", "--threads", "1", "--no-memory", "--json", str(out)]
+    assert bench.main(argv) == 0
+    (record,) = json.loads(out.read_text())["records"]
+    assert record["kernel"] == "plan-periods" and record["dtype"] == "float64" and record["cells"] == 25
+    assert record["seconds"] > 0 and record["baseline_seconds"] > 0
