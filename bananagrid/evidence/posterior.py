@@ -49,7 +49,7 @@ from .geometry import distance_to_track
 from .reports import BearingReport, Exclusion, PositionReport
 from .searches import AreaSearch, TrackSearch
 
-__all__ = ["posterior", "Posterior", "PolarPosterior", "MIN_NORMALISER", "SUBDIVISIONS", "EVIDENCE_TYPES"]
+__all__ = ["posterior", "cell_means", "finish_cells", "CellMeans", "Posterior", "PolarPosterior", "MIN_NORMALISER", "SUBDIVISIONS", "EVIDENCE_TYPES"]
 
 #: Below this the evidence contradicts the prior: the searches would have found the target almost
 #: surely, or a report lies where the prior holds no mass (the map would be rounding noise).
@@ -152,6 +152,61 @@ def posterior(prior, grid, evidence=(), *, subdivisions: int = SUBDIVISIONS, thr
     evidence = _checked_evidence(prior, evidence)
     if isinstance(grid, PolarLattice):
         return _polar_posterior(prior, grid, evidence, n, threads)
+    return finish_cells(_grid_cell_means(prior, grid, evidence, n, threads))
+
+
+@dataclass(frozen=True)
+class CellMeans:
+    """The cell-by-cell half of a posterior on a grid (:func:`cell_means`): every array is the
+    cells' own (a cell's values depend on that cell alone), so a grid's blocks give the whole
+    grid's cells; :func:`finish_cells` is the reduction (the normaliser, POS, the map).
+
+    Attributes
+    ----------
+    grid : Grid
+    frame : GeoFrame or None
+    cells : ndarray (ny, nx)
+        The prior's cell probabilities P_c.
+    means : dict
+        f_c of each combination of the evidence (``"all"``, ``"searches"``, ``"others"``,
+        ``("search", k)`` for the k-th evidence, a search): the density-weighted cell mean of
+        its likelihood.
+    evidence : list
+    provenance : dict
+        The prior's.
+    boundary_mass : float or None
+        The bound of the module docstring over these cells (None where a smooth factor varies).
+    subdivisions : int
+    """
+
+    grid: Grid
+    frame: object
+    cells: np.ndarray
+    means: dict
+    evidence: list
+    provenance: dict
+    boundary_mass: float | None
+    subdivisions: int
+
+
+def cell_means(prior, grid, evidence=(), *, subdivisions: int = SUBDIVISIONS, threads=None) -> CellMeans:
+    """The cells' half of :func:`posterior` on a :class:`Grid` (arguments as there, checked the
+    same way), before any sum over the grid: ``posterior(prior, grid, evidence)`` is
+    ``finish_cells(cell_means(prior, grid, evidence))``."""
+    n = positive_int("subdivisions", subdivisions)
+    evidence = _checked_evidence(prior, evidence)
+    return _grid_cell_means(prior, grid, evidence, n, threads)
+
+
+def finish_cells(parts: CellMeans) -> Posterior:
+    """The posterior of :func:`cell_means`' cells: the normaliser, POS, each search's POS, the
+    POD map and the cells' posterior probabilities (raises where the evidence contradicts the
+    prior, as :func:`posterior`)."""
+    return _finish(Posterior, dict(grid=parts.grid, frame=parts.frame), parts.cells, parts.means, parts.evidence,
+                   parts.provenance, parts.boundary_mass, parts.subdivisions)
+
+
+def _grid_cell_means(prior, grid, evidence, n, threads) -> CellMeans:
     if not isinstance(grid, Grid):
         raise BananagridError(f"grid = {grid!r}: expected a bananagrid Grid or PolarLattice")
     cells, provenance, frame = _grid_prior(prior, grid, threads)
@@ -181,7 +236,7 @@ def posterior(prior, grid, evidence=(), *, subdivisions: int = SUBDIVISIONS, thr
             for key in combos:
                 means[key][rows, cols] = found[key]
     bound = _boundary_mass(factors, cells, varying)
-    return _finish(Posterior, dict(grid=grid, frame=frame), cells, means, evidence, provenance, bound, n)
+    return CellMeans(grid, frame, cells, means, evidence, provenance, bound, n)
 
 
 def _combos(evidence) -> dict:
