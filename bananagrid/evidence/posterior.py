@@ -41,7 +41,7 @@ import numpy as np
 
 from ..domains.grid import Grid
 from ..domains.polar_lattice import PolarLattice
-from ..engine.rasterise import rasterise
+from ..engine.rasterise import MIN_MASS, rasterise
 from ..models.presence import grid_probabilities
 from ..results import PolarRaster, Raster
 from ..validate import BananagridError, positive_int
@@ -189,13 +189,16 @@ class CellMeans:
     subdivisions: int
 
 
-def cell_means(prior, grid, evidence=(), *, subdivisions: int = SUBDIVISIONS, threads=None) -> CellMeans:
+def cell_means(prior, grid, evidence=(), *, subdivisions: int = SUBDIVISIONS, threads=None,
+               min_mass: float = MIN_MASS) -> CellMeans:
     """The cells' half of :func:`posterior` on a :class:`Grid` (arguments as there, checked the
     same way), before any sum over the grid: ``posterior(prior, grid, evidence)`` is
-    ``finish_cells(cell_means(prior, grid, evidence))``."""
+    ``finish_cells(cell_means(prior, grid, evidence))``. ``min_mass``: as for
+    :func:`~bananagrid.rasterise` (0 for a block of a larger grid, which the whole grid's
+    capture concerns, not the block's)."""
     n = positive_int("subdivisions", subdivisions)
     evidence = _checked_evidence(prior, evidence)
-    return _grid_cell_means(prior, grid, evidence, n, threads)
+    return _grid_cell_means(prior, grid, evidence, n, threads, min_mass)
 
 
 def finish_cells(parts: CellMeans) -> Posterior:
@@ -206,10 +209,10 @@ def finish_cells(parts: CellMeans) -> Posterior:
                    parts.provenance, parts.boundary_mass, parts.subdivisions)
 
 
-def _grid_cell_means(prior, grid, evidence, n, threads) -> CellMeans:
+def _grid_cell_means(prior, grid, evidence, n, threads, min_mass=MIN_MASS) -> CellMeans:
     if not isinstance(grid, Grid):
         raise BananagridError(f"grid = {grid!r}: expected a bananagrid Grid or PolarLattice")
-    cells, provenance, frame = _grid_prior(prior, grid, threads)
+    cells, provenance, frame = _grid_prior(prior, grid, threads, min_mass)
     ny, nx = grid.shape
     x_edges = grid.origin[0] + grid.dx * np.arange(nx + 1)
     y_edges = grid.origin[1] + grid.dy * np.arange(ny + 1)
@@ -317,7 +320,7 @@ def _checked_evidence(prior, evidence) -> list:
     return evidence
 
 
-def _grid_prior(prior, grid: Grid, threads):
+def _grid_prior(prior, grid: Grid, threads, min_mass=MIN_MASS):
     """The prior's cell probabilities on ``grid``, its provenance and frame."""
     kind = getattr(prior, "kind", None)
     if not callable(getattr(prior, "bind", None)) and kind == "mixture":  # a presence law: its exact rectangles
@@ -325,7 +328,7 @@ def _grid_prior(prior, grid: Grid, threads):
         return np.asarray(presence.probability, dtype=float), dict(presence.provenance), None
     if not callable(getattr(prior, "bind", None)) and kind == "uniform":
         return _uniform_cells(prior, grid), {"model": type(prior).__name__, **prior.parameters()}, None
-    raster = rasterise(prior, grid, quantity="probability", threads=threads)
+    raster = rasterise(prior, grid, quantity="probability", threads=threads, min_mass=min_mass)
     return np.asarray(raster.values, dtype=float), dict(raster.provenance), raster.frame
 
 

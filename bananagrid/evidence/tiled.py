@@ -1,0 +1,288 @@
+"""Posteriors over grids too large for memory: the cells block by block on Dask, then one
+reduction.
+
+A posterior's cells are each their own: the prior's cell probability P_c and each combination's
+cell mean f_c of the evidence's likelihood (:func:`~bananagrid.evidence.posterior.cell_means`;
+the sub-cell rule, and the kernels' carried channels for evidence before the map's time) depend
+on that cell alone. Only the normaliser is global. So :func:`posterior_tiles` makes each block
+of ``chunks`` cells one Dask task that runs ``cell_means`` on the block's cells (the same rules,
+on the block as a grid of its own), and the posterior is assembled from those arrays:
+
+* the sums (one pass over the blocks, each summed in float64, then the blocks' sums):
+  S_P = sum P_c, S_all = sum P_c f_all, S_others = sum P_c f_others, S_k = sum P_c f_(search k);
+  normaliser = S_all / S_P, POS = 1 - S_all / S_others, each search's POS 1 - S_k / S_others,
+  the formulas of :func:`~bananagrid.evidence.posterior.finish_cells`, with its refusal of a
+  normaliser below :data:`~bananagrid.evidence.posterior.MIN_NORMALISER`;
+* the posterior map, P_c f_all / S_all, block by block once S_all is known (a second pass: the
+  normaliser is global);
+* the POD map, 1 - f_searches: each cell's own, no sum.
+
+:meth:`TiledPosterior.compute` gathers the cells into memory and finishes them with
+``finish_cells``: the result is ``bg.posterior(prior, grid, evidence)`` to the rounding of the
+prior's cell rules on a block's own grid (a block's cell edges are the grid's to an ulp).
+:meth:`TiledPosterior.to_zarr` writes the prior, the posterior and the POD map to a Zarr store
+block by block, whole or not at all (:func:`bananagrid.geo.zarr_store.write_zarr`).
+
+Every block is computed: a block where the prior is negligible still has a POD map (the
+searches' own), which skipping would lose. The POD map is :attr:`TiledPosterior.pod` (lazy);
+a store holds the prior and the posterior.
+"""
+
+from __future__ import annotations
+
+import math
+import uuid
+import warnings
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..domains.grid import Grid
+from ..engine.tiles import DEFAULT_CHUNK, check_chunks
+from ..geo.libraries import CLUSTER_EXTRA, CLUSTER_PURPOSE, require
+from ..atomic import OutputWriteError
+from ..engine.rasterise import MIN_MASS
+from ..geo.zarr_store import STORE, check_store_target, compute_with_progress, write_zarr
+from ..results import TiledRaster
+from ..validate import BananagridError, BananagridWarning
+from .posterior import MIN_NORMALISER, SUBDIVISIONS, CellMeans, Posterior, cell_means, finish_cells
+
+__all__ = ["posterior_tiles", "TiledPosterior", "block_cells", "channel_names"]
+
+
+def channel_names(evidence) -> list:
+    """The channels of a tiled posterior's cells, in order: ``"prior"`` (P_c), then the cell
+    means f_c of ``"all"``, ``"searches"``, ``"others"`` and ``("search", k)`` for each search
+    (k its index in ``evidence``)."""
+    return ["prior", "all", "searches", "others", *[("search", k) for k, e in enumerate(evidence) if e.kind == "search"]]
+
+
+def _block_grid(grid: Grid, rows, cols) -> Grid:
+    """Rows ``rows[0]:rows[1]`` and columns ``cols[0]:cols[1]`` of ``grid`` as a grid of their own."""
+    return Grid(origin=(grid.origin[0] + cols[0] * grid.dx, grid.origin[1] + rows[0] * grid.dy), dx=grid.dx,
+                dy=grid.dy, nx=cols[1] - cols[0], ny=rows[1] - rows[0])
+
+
+def block_cells(prior, grid: Grid, evidence, subdivisions: int, rows, cols) -> tuple[np.ndarray, float | None]:
+    """One block's channels (:func:`channel_names`), shape ``(C, rows, columns)`` float64, and its
+    boundary mass (None where a smooth factor varies): ``cell_means`` on the block's cells, on
+    one thread (Dask runs the blocks in parallel)."""
+    parts = cell_means(prior, _block_grid(grid, rows, cols), evidence, subdivisions=subdivisions, threads=1,
+                       min_mass=0.0)
+    names = channel_names(evidence)
+    out = np.empty((len(names), rows[1] - rows[0], cols[1] - cols[0]))
+    out[0] = parts.cells
+    for c, key in enumerate(names[1:], start=1):
+        out[c] = parts.means[key]
+    return out, parts.boundary_mass
+
+
+def _channels_of(pair):
+    return pair[0]
+
+
+def _bound_of(pair):
+    return pair[1]
+
+
+def _total_bound(bounds):
+    return None if any(b is None for b in bounds) else float(math.fsum(bounds))
+
+
+def _edges(n: int, chunk: int) -> list[tuple[int, int]]:
+    return [(a, min(a + chunk, n)) for a in range(0, n, chunk)]
+
+
+@dataclass(frozen=True)
+class TiledPosterior:
+    """A posterior on a grid, lazily, in blocks computed by Dask (:func:`posterior_tiles`).
+
+    Attributes
+    ----------
+    channels : dask.array.Array, shape (C, ny, nx), float64
+        Each cell's prior probability and cell means (:func:`channel_names`), in blocks of
+        ``(C, *chunks)``.
+    boundary : dask Delayed
+        The boundary mass summed over the blocks (None where a smooth factor varies).
+    grid : Grid
+    chunks : (int, int)
+    evidence : list
+    prior : model
+    subdivisions : int
+    provenance : dict
+        The prior's, with the chunks and the blocks.
+    frame : GeoFrame or None
+    min_mass : float
+        The whole grid's capture below which :meth:`numbers` and :meth:`compute` warn.
+    """
+
+    channels: object
+    boundary: object
+    grid: Grid
+    chunks: tuple
+    evidence: list
+    prior: object
+    subdivisions: int
+    provenance: dict = field(default_factory=dict)
+    frame: object = None
+    min_mass: float = MIN_MASS
+
+    @property
+    def names(self) -> list:
+        return channel_names(self.evidence)
+
+    def _channel(self, key):
+        return self.channels[self.names.index(key)]
+
+    @property
+    def pod(self):
+        """The cumulative POD map, 1 - f_searches: lazy, each cell's own."""
+        return 1.0 - self._channel("searches")
+
+    @property
+    def unnormalised(self):
+        """P_c f_all, each cell's posterior mass before the normaliser: lazy."""
+        return self._channel("prior") * self._channel("all")
+
+    def lazy_sums(self):
+        """S_P, S_all, S_others and each search's S_k (module docstring), lazily: each block
+        summed in float64, then the blocks' sums."""
+        prior = self._channel("prior")
+        keys = ["all", "others", *[key for key in self.names if isinstance(key, tuple)]]
+        return [prior.sum(dtype=np.float64)] + [(prior * self._channel(key)).sum(dtype=np.float64) for key in keys]
+
+    def numbers(self, *, progress: bool = False) -> dict:
+        """The posterior's global numbers, from one pass over the blocks: ``prior_mass`` (S_P),
+        ``mass`` (S_all), ``normaliser``, ``pos``, ``search_pos`` and ``boundary_mass``.
+
+        Raises
+        ------
+        BananagridError
+            The prior holds no mass on the grid, or the evidence contradicts it (normaliser
+            below :data:`~bananagrid.evidence.posterior.MIN_NORMALISER`), as ``bg.posterior``.
+        """
+        *sums, bound = compute_with_progress(*self.lazy_sums(), self.boundary, progress=progress)
+        prior_mass, q_sum, given, *search_sums = (float(s) for s in sums)
+        self._covered(prior_mass)
+        # finish_cells' formulas on the blocks' sums (its own refusals, in its words)
+        if not prior_mass > 0.0:
+            raise BananagridError("grid: the prior holds no mass on it; the posterior needs the prior's support")
+        normaliser = q_sum / prior_mass
+        if not normaliser >= MIN_NORMALISER:
+            raise BananagridError(
+                f"evidence: the probability of the evidence under the prior is {normaliser:.3g}, below "
+                f"{MIN_NORMALISER:g}; the evidence contradicts the prior (the searches would almost surely have found "
+                "the target, or a report lies where the prior holds no mass); check the evidence's places and times")
+        return {"prior_mass": prior_mass, "mass": q_sum, "normaliser": normaliser, "pos": 1.0 - q_sum / given,
+                "search_pos": [1.0 - s / given for s in search_sums], "boundary_mass": bound}
+
+    def _covered(self, prior_mass: float) -> None:
+        """The whole grid's warning of ``bg.posterior`` (its prior's ``rasterise``) where it
+        captures less than ``min_mass`` of a probability density (the blocks' own are off)."""
+        if getattr(self.prior, "integrates_to_one", False) and prior_mass < self.min_mass:
+            warnings.warn(
+                f"posterior_tiles: the grid captured {prior_mass:.3g} of {type(self.prior).__name__}'s probability "
+                f"(below {self.min_mass:g}): it misses part of the target; move or enlarge it, or check the "
+                "parameters' units (min_mass=0 switches this off)", BananagridWarning, stacklevel=3)
+
+    def compute(self) -> Posterior:
+        """The whole posterior in memory (at most :data:`~bananagrid.domains.grid.MAX_CELLS`
+        cells): the blocks' cells gathered and finished by ``finish_cells``, as ``bg.posterior``
+        finishes the whole grid's."""
+        self.grid.check_in_memory()
+        channels, bound = compute_with_progress(self.channels, self.boundary)
+        channels = np.asarray(channels)
+        self._covered(float(np.sum(channels[0])))
+        means = {key: channels[c] for c, key in enumerate(self.names) if c > 0}
+        return finish_cells(CellMeans(self.grid, self.frame, channels[0], means,
+                                      list(self.evidence), dict(self.provenance), bound, self.subdivisions))
+
+    def to_zarr(self, path, *, t: float | None = None, title: str = "", progress: bool = False):
+        """Write the layers ``prior`` and ``posterior`` to the Zarr store ``path``, block by block,
+        whole or not at all (:func:`bananagrid.geo.zarr_store.write_zarr`): each cell's
+        probability as ``LAYER_probability`` (the posterior's summing to one) and, as the
+        layer's density, that probability over the cell's area (the cell's mean density); the
+        global numbers (:meth:`numbers`) in the provenance. Two passes over the blocks: the
+        sums, then the maps (the normaliser is global). Returns the path."""
+        final = check_store_target(path)  # before any computing
+        try:
+            numbers = self.numbers(progress=progress)
+        except BananagridError:
+            raise
+        except Exception as exc:  # as write_zarr words a failure while computing: nothing was written
+            reason = (str(exc) or type(exc).__name__).splitlines()[0]
+            raise OutputWriteError(f"{final}: cannot write the {STORE} ({type(exc).__name__}: {reason})") from None
+        t = float(getattr(self.prior, "t", 0.0) or 0.0) if t is None else t
+        info = {**self.provenance, "posterior": dict(numbers, subdivisions=self.subdivisions,
+                                                      evidence=[e.describe() for e in self.evidence])}
+        skipped = np.zeros((len(self.channels.chunks[1]), len(self.channels.chunks[2])), dtype=bool)
+
+        def layer(values, quantity, what):
+            return TiledRaster(values=values, grid=self.grid, chunks=self.chunks, skipped=skipped, floor=-math.inf,
+                               provenance=dict(info, quantity=quantity, values=what), frame=self.frame,
+                               quantity=quantity)
+
+        area = self.grid.cell_area
+        cells = {name: values for name, values in (("prior", self._channel("prior")),
+                                                    ("posterior", self.unnormalised / numbers["mass"]))}
+        panels = [(name, t, layer(values / area, "density", "cell probability / cell area: the cell's mean density"))
+                  for name, values in cells.items()]
+        probabilities = {(name, t): layer(values, "probability", "cell probability") for name, values in cells.items()}
+        return write_zarr(final, panels, self.frame, title=title, progress=progress, cells=probabilities)
+
+    def __repr__(self) -> str:
+        g = self.grid
+        blocks = len(self.channels.chunks[1]) * len(self.channels.chunks[2])
+        return (f"TiledPosterior({g.nx} x {g.ny} cells in {blocks} blocks of {self.chunks[0]} x {self.chunks[1]}, "
+                f"{len(self.evidence)} evidence, model {type(self.prior).__name__})")
+
+
+def posterior_tiles(prior, grid: Grid, evidence=(), chunks=DEFAULT_CHUNK, *, subdivisions: int = SUBDIVISIONS,
+                    min_mass: float = MIN_MASS) -> TiledPosterior:
+    """The posterior of ``prior`` on ``grid`` after ``evidence`` (as :func:`bananagrid.posterior`),
+    lazily, in blocks of ``chunks`` cells on Dask (the ``cluster`` extra).
+
+    Parameters
+    ----------
+    prior, evidence, subdivisions
+        As for :func:`bananagrid.posterior`, checked the same way before anything runs.
+    grid : Grid
+    chunks : int or (int, int), default 1024
+        Block shape ``(rows, columns)``: any (each cell's rule is its own).
+    min_mass : float, default 0.99
+        As for :func:`bananagrid.rasterise`, of the whole grid (warned when the sums are
+        computed).
+
+    Returns
+    -------
+    TiledPosterior
+    """
+    da = require("dask.array", CLUSTER_PURPOSE, CLUSTER_EXTRA)
+    dask = require("dask", CLUSTER_PURPOSE, CLUSTER_EXTRA)
+    if not isinstance(grid, Grid):
+        raise BananagridError(f"grid = {grid!r}: expected a bananagrid.Grid")
+    cy, cx = check_chunks(chunks, grid)
+    # every check of bg.posterior, now, on the grid's first cell (cheap: one cell's rules)
+    if isinstance(min_mass, bool) or not isinstance(min_mass, (int, float)) or not 0.0 <= min_mass <= 1.0:
+        raise BananagridError(f"min_mass = {min_mass!r}: must be a number in [0, 1] (0 switches the warning off)")
+    first = cell_means(prior, _block_grid(grid, (0, 1), (0, 1)), evidence, subdivisions=subdivisions, threads=1,
+                       min_mass=0.0)
+    evidence, n = first.evidence, first.subdivisions
+    names = channel_names(evidence)
+    token = uuid.uuid4().hex[:8]
+    rows_of, cols_of = _edges(grid.ny, cy), _edges(grid.nx, cx)
+    blocks, bounds = [], []
+    for rows in rows_of:
+        line = []
+        for cols in cols_of:
+            pair = dask.delayed(block_cells, pure=True)(prior, grid, evidence, n, rows, cols,
+                                                        dask_key_name=f"bananagrid-posterior-{token}-{rows[0]}-{cols[0]}")
+            shape = (len(names), rows[1] - rows[0], cols[1] - cols[0])
+            line.append(da.from_delayed(dask.delayed(_channels_of)(pair), shape=shape, dtype=np.float64))
+            bounds.append(dask.delayed(_bound_of)(pair))
+        blocks.append(line)
+    channels = da.block(blocks)
+    provenance = {**first.provenance, "chunks": [cy, cx], "tiles": len(rows_of) * len(cols_of)}
+    return TiledPosterior(channels=channels, boundary=dask.delayed(_total_bound)(bounds), grid=grid, chunks=(cy, cx),
+                          evidence=list(evidence), prior=prior, subdivisions=n, provenance=provenance,
+                          frame=first.frame, min_mass=float(min_mass))
