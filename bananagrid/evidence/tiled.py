@@ -47,7 +47,8 @@ from ..results import TiledRaster
 from ..validate import BananagridError, BananagridWarning
 from .posterior import MIN_NORMALISER, SUBDIVISIONS, CellMeans, Posterior, cell_means, finish_cells
 
-__all__ = ["posterior_tiles", "TiledPosterior", "block_cells", "channel_names"]
+__all__ = ["posterior_tiles", "TiledPosterior", "block_cells", "channel_names", "posterior_numbers", "check_normaliser",
+           "block_grid"]
 
 
 def channel_names(evidence) -> list:
@@ -57,7 +58,32 @@ def channel_names(evidence) -> list:
     return ["prior", "all", "searches", "others", *[("search", k) for k, e in enumerate(evidence) if e.kind == "search"]]
 
 
-def _block_grid(grid: Grid, rows, cols) -> Grid:
+def posterior_numbers(prior_mass: float, q_sum: float, given: float, search_sums) -> dict:
+    """A posterior's global numbers from its sums (module docstring; the formulas of
+    :func:`~bananagrid.evidence.posterior.finish_cells`): ``prior_mass`` S_P, ``mass`` S_all,
+    ``normaliser`` S_all / S_P, ``pos`` 1 - S_all / S_others and ``search_pos`` 1 - S_k /
+    S_others (NaN where S_P or S_others is 0: no prior mass, no POS)."""
+    with np.errstate(divide="ignore", invalid="ignore"):
+        normaliser = float(np.float64(q_sum) / prior_mass)
+        pos = float(1.0 - np.float64(q_sum) / given)
+        search_pos = [float(1.0 - np.float64(s) / given) for s in search_sums]
+    return {"prior_mass": prior_mass, "mass": q_sum, "normaliser": normaliser, "pos": pos, "search_pos": search_pos}
+
+
+def check_normaliser(numbers: dict) -> None:
+    """:func:`~bananagrid.evidence.posterior.finish_cells`' refusals, in its words: no prior
+    mass on the grid, or evidence that contradicts the prior (normaliser below
+    :data:`~bananagrid.evidence.posterior.MIN_NORMALISER`)."""
+    if not numbers["prior_mass"] > 0.0:
+        raise BananagridError("grid: the prior holds no mass on it; the posterior needs the prior's support")
+    if not numbers["normaliser"] >= MIN_NORMALISER:
+        raise BananagridError(
+            f"evidence: the probability of the evidence under the prior is {numbers['normaliser']:.3g}, below "
+            f"{MIN_NORMALISER:g}; the evidence contradicts the prior (the searches would almost surely have found "
+            "the target, or a report lies where the prior holds no mass); check the evidence's places and times")
+
+
+def block_grid(grid: Grid, rows, cols) -> Grid:
     """Rows ``rows[0]:rows[1]`` and columns ``cols[0]:cols[1]`` of ``grid`` as a grid of their own."""
     return Grid(origin=(grid.origin[0] + cols[0] * grid.dx, grid.origin[1] + rows[0] * grid.dy), dx=grid.dx,
                 dy=grid.dy, nx=cols[1] - cols[0], ny=rows[1] - rows[0])
@@ -67,7 +93,7 @@ def block_cells(prior, grid: Grid, evidence, subdivisions: int, rows, cols) -> t
     """One block's channels (:func:`channel_names`), shape ``(C, rows, columns)`` float64, and its
     boundary mass (None where a smooth factor varies): ``cell_means`` on the block's cells, on
     one thread (Dask runs the blocks in parallel)."""
-    parts = cell_means(prior, _block_grid(grid, rows, cols), evidence, subdivisions=subdivisions, threads=1,
+    parts = cell_means(prior, block_grid(grid, rows, cols), evidence, subdivisions=subdivisions, threads=1,
                        min_mass=0.0)
     names = channel_names(evidence)
     out = np.empty((len(names), rows[1] - rows[0], cols[1] - cols[0]))
@@ -164,17 +190,9 @@ class TiledPosterior:
         *sums, bound = compute_with_progress(*self.lazy_sums(), self.boundary, progress=progress)
         prior_mass, q_sum, given, *search_sums = (float(s) for s in sums)
         self._covered(prior_mass)
-        # finish_cells' formulas on the blocks' sums (its own refusals, in its words)
-        if not prior_mass > 0.0:
-            raise BananagridError("grid: the prior holds no mass on it; the posterior needs the prior's support")
-        normaliser = q_sum / prior_mass
-        if not normaliser >= MIN_NORMALISER:
-            raise BananagridError(
-                f"evidence: the probability of the evidence under the prior is {normaliser:.3g}, below "
-                f"{MIN_NORMALISER:g}; the evidence contradicts the prior (the searches would almost surely have found "
-                "the target, or a report lies where the prior holds no mass); check the evidence's places and times")
-        return {"prior_mass": prior_mass, "mass": q_sum, "normaliser": normaliser, "pos": 1.0 - q_sum / given,
-                "search_pos": [1.0 - s / given for s in search_sums], "boundary_mass": bound}
+        found = posterior_numbers(prior_mass, q_sum, given, search_sums)
+        check_normaliser(found)
+        return {**found, "boundary_mass": bound}
 
     def _covered(self, prior_mass: float) -> None:
         """The whole grid's warning of ``bg.posterior`` (its prior's ``rasterise``) where it
@@ -265,7 +283,7 @@ def posterior_tiles(prior, grid: Grid, evidence=(), chunks=DEFAULT_CHUNK, *, sub
     # every check of bg.posterior, now, on the grid's first cell (cheap: one cell's rules)
     if isinstance(min_mass, bool) or not isinstance(min_mass, (int, float)) or not 0.0 <= min_mass <= 1.0:
         raise BananagridError(f"min_mass = {min_mass!r}: must be a number in [0, 1] (0 switches the warning off)")
-    first = cell_means(prior, _block_grid(grid, (0, 1), (0, 1)), evidence, subdivisions=subdivisions, threads=1,
+    first = cell_means(prior, block_grid(grid, (0, 1), (0, 1)), evidence, subdivisions=subdivisions, threads=1,
                        min_mass=0.0)
     evidence, n = first.evidence, first.subdivisions
     names = channel_names(evidence)
