@@ -23,6 +23,7 @@ from hypothesis import strategies as st
 import bananagrid as bg
 from bananagrid.evidence import tiled
 from bananagrid.evidence.tiled import posterior_tiles
+from cases import FIG1
 from evidence_cases import PRIORS, cutting_evidence
 
 #: Module docstring: rounding of the cells' rules on a block's own edges, and of the sums.
@@ -87,7 +88,7 @@ def test_a_tiled_posterior_is_the_whole_grids(name):
 
 
 @seed(20261127)
-@settings(max_examples=12, deadline=None, database=None, suppress_health_check=list(HealthCheck))
+@settings(max_examples=8, deadline=None, database=None, suppress_health_check=list(HealthCheck))
 @given(rows=st.integers(1, 40), cols=st.integers(1, 40), shift=st.floats(-0.45, 0.45), pod=st.floats(0.05, 1.0),
        corner=st.tuples(st.floats(-0.9, 0.5), st.floats(-0.9, 0.5)))
 def test_any_blocks_give_the_whole_grids_posterior(rows, cols, shift, pod, corner):
@@ -192,3 +193,34 @@ def test_the_whole_grid_warns_once_where_it_misses_the_target():
     with dask.config.set(scheduler="threads"), pytest.warns(bg.BananagridWarning) as caught:
         tiles.numbers()
     assert len(caught) == 1 and "posterior_tiles: the grid captured 0.5" in str(caught[0].message)
+
+
+#: A CAT with heading noise tabulates its density over each grid's extent (a block's own table,
+#: not the whole grid's), to a relative interpolation error of at most
+#: models._cat_heading.TARGET_ERROR (1e-6) each: the two maps agree within twice that.
+HEADING_TOL = 2e-6
+
+
+@pytest.mark.parametrize("heading, step, chunks, tol", [(0.0, 200.0, CHUNKS, TOL), (0.1, 600.0, (3, 4), HEADING_TOL)])
+def test_evidence_carried_from_earlier_times_tiles_too(heading, step, chunks, tol):
+    """A CAT (with and without heading noise) after two area searches at 4 s and 7 s, bearings at
+    6 s (carried along the paths in the kernels) and a search at the map's time: the blocks'
+    cells (each block's own carried channels) finished together equal bg.posterior."""
+    from test_carried_posterior import earlier_evidence
+
+    prior = bg.CAT(**FIG1, sigma_heading=heading)
+    grid = bg.Grid.from_bounds(x=(-2400.0, 2400.0), y=(0.0, 3300.0), step=step)
+    evidence = [*earlier_evidence(track=False),
+                bg.AreaSearch([(-600.0, 2400.0), (600.0, 2400.0), (600.0, 3200.0), (-600.0, 3200.0)], t=10.0, pod=0.5)]
+    ref = bg.posterior(prior, grid, evidence)
+    assert "carried" in ref.provenance
+    with dask.config.set(scheduler="threads"):
+        tiles = posterior_tiles(prior, grid, evidence, chunks=chunks)
+        got = tiles.compute()
+        numbers = tiles.numbers()
+    peak = float(np.max(ref.values))
+    assert np.max(np.abs(got.values - ref.values)) <= tol * peak
+    assert np.max(np.abs(got.pod - ref.pod)) <= tol
+    for value, expected in ((got.pos, ref.pos), (numbers["pos"], ref.pos), (numbers["normaliser"], ref.normaliser)):
+        assert value == pytest.approx(expected, abs=tol)
+    assert np.allclose(numbers["search_pos"], ref.search_pos, rtol=0.0, atol=tol)
