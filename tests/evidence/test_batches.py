@@ -100,3 +100,15 @@ def test_bad_input_is_one_line_naming_it(call, message):
     with pytest.raises(bg.BananagridError) as err:
         call(models)
     assert message in str(err.value) and "\n" not in str(err.value)
+
+
+def test_hypotheses_carry_earlier_evidence():
+    """CAT hypotheses in two headings after a search at 4 s and a report at 6 s, carried along
+    their paths by the kernels: each one's posterior, POS and normaliser are bg.posterior's."""
+    grid = bg.Grid.from_bounds(x=(-3000.0, 3000.0), y=(-200.0, 3400.0), step=300.0)
+    models = [bg.CAT(**FIG1, pose=bg.Pose(origin=(0.0, 0.0), heading=h)) for h in (0.0, 0.15)]
+    evidence = [bg.AreaSearch([(-400.0, 900.0), (150.0, 950.0), (250.0, 1400.0), (-300.0, 1350.0)], t=4.0, pod=0.8),
+                bg.PositionReport((300.0, 1700.0), t=6.0, sigma=400.0)]
+    batch = posterior_batch(models, evidence, grids=[grid, grid], threads=2)
+    assert np.all(batch.search_pos[:, 0] > 0.05)  # the search reached both
+    _check_each(batch, models, evidence)
