@@ -121,10 +121,11 @@ def posterior_rows(names, step: float, threads: int, repeat: int, evidence: str 
         times = ", ".join(f"{s.time_span[0]:g}" for s in searches)
         log(f"{name}: {type(prior).__name__} on {grid.nx} x {grid.ny} cells, map at t = {prior.t:g} s, two area "
             f"searches at t = {times} s ({evidence} evidence), float64")
-        result = posterior(prior, grid, searches, threads=1)  # warm-up: kernels loaded, errors raised here
+        check_rows([name], step, evidence)  # warm-up: every kernel loaded (and errors raised) on a few cells
+        found = {}
         for n in sorted({1, threads}):
             best = _alternated(repeat, {
-                "posterior": lambda: posterior(prior, grid, searches, threads=n),
+                "posterior": lambda: found.update(result=posterior(prior, grid, searches, threads=n)),
                 "prior": lambda: rasterise(prior, grid, quantity="probability", threads=n),
                 "density": lambda: rasterise(prior, grid, threads=n),
             })
@@ -134,7 +135,7 @@ def posterior_rows(names, step: float, threads: int, repeat: int, evidence: str 
                 "seconds": best["posterior"], "prior_seconds": best["prior"], "density_seconds": best["density"],
                 "ratio_to_prior": best["posterior"] / best["prior"],
                 "ratio_to_density": best["posterior"] / best["density"], "target": TARGETS[name],
-                "pos": result.pos, "search_pos": list(result.search_pos),
+                "pos": found["result"].pos, "search_pos": list(found["result"].search_pos),
             }
             records.append(record)
             log(posterior_line(record))
