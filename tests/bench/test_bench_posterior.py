@@ -21,14 +21,15 @@ def small_submarine(monkeypatch):
     monkeypatch.setitem(rows.ROWS, "butterly-posterior", row)
 
 
-@pytest.mark.parametrize("evidence", ["same"])
-def test_posterior_rows_time_the_posterior_against_its_prior(evidence, small_submarine, tmp_path, capsys):
+@pytest.mark.parametrize("names, evidence", [(["cat-posterior", "butterly-posterior"], "same"),
+                                             (["cat-posterior"], "earlier")])
+def test_posterior_rows_time_the_posterior_against_its_prior(names, evidence, small_submarine, tmp_path, capsys):
     out = tmp_path / "bench.json"
-    argv = ["--kernels", "cat-posterior,butterly-posterior", "--evidence", evidence, "--step", "200",
+    argv = ["--kernels", ",".join(names), "--evidence", evidence, "--step", "200",
             "--repeat", "1", "--threads", "1", "--no-memory", "--json", str(out)]
     assert bench.main(argv) == 0
     records = json.loads(out.read_text())["posterior"]
-    assert [(r["kernel"], r["threads"]) for r in records] == [("cat-posterior", 1), ("butterly-posterior", 1)]
+    assert [(r["kernel"], r["threads"]) for r in records] == [(name, 1) for name in names]
     for r in records:
         prior, grid, searches = rows.posterior_case(r["kernel"], 200.0, evidence)
         assert r["cells"] == grid.nx * grid.ny and r["evidence"] == evidence
