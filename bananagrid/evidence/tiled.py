@@ -26,9 +26,15 @@ A model whose kernels depend on the grid's extent (the CAT with heading noise ta
 density over each grid) gives a block its own table: the tiled map then agrees with the whole
 grid's within that table's interpolation error (1e-6 relative), not to rounding.
 
-Every block is computed: a block where the prior is negligible still has a POD map (the
-searches' own), which skipping would lose. The POD map is :attr:`TiledPosterior.pod` (lazy; a
-store does not hold it: the dataset's layers are densities, and a POD is not one).
+**Only the support costs** (``skip=True``): a block where the prior proves its density at most
+its floor (:meth:`~bananagrid.protocol.DensityModel.density_bound` over the block's cells, at most
+:meth:`~bananagrid.protocol.DensityModel.density_floor`, 1e-13 of the peak) runs no prior cell
+rule: its prior cells are taken as 0 (each holds at most the floor times the cell's area), so its
+posterior is 0, and its POD map is what ``cell_means`` gives cells without prior mass, the area
+mean over each cell of the same-time searches' product (a search before the map's time reaches
+such a cell along no path: factor 1). A block that no same-time search's polygon (or corridor)
+reaches is a constant (POD 0) that holds no memory. The POD map is :attr:`TiledPosterior.pod`
+(lazy; a store does not hold it: the dataset's layers are densities, and a POD is not one).
 """
 
 from __future__ import annotations
@@ -48,17 +54,24 @@ from ..geo.libraries import CLUSTER_EXTRA, CLUSTER_PURPOSE, require
 from ..geo.zarr_store import STORE, check_store_target, compute_with_progress, write_zarr
 from ..results import TiledRaster
 from ..validate import BananagridError, BananagridWarning
+from ..domains.region import Region
+from ..models.presence import UniformPresence
 from .posterior import MIN_NORMALISER, SUBDIVISIONS, CellMeans, Posterior, cell_means, finish_cells
+from .searches import AreaSearch, TrackSearch
 
-__all__ = ["posterior_tiles", "TiledPosterior", "block_cells", "channel_names", "posterior_numbers", "check_normaliser",
-           "block_grid"]
+__all__ = ["posterior_tiles", "TiledPosterior", "block_cells", "empty_block", "channel_names", "posterior_numbers",
+           "check_normaliser", "block_grid"]
 
 
 def channel_names(evidence) -> list:
     """The channels of a tiled posterior's cells, in order: ``"prior"`` (P_c), then the cell
     means f_c of ``"all"``, ``"searches"``, ``"others"`` and ``("search", k)`` for each search
-    (k its index in ``evidence``)."""
-    return ["prior", "all", "searches", "others", *[("search", k) for k, e in enumerate(evidence) if e.kind == "search"]]
+    (k its index in ``evidence``), and ``"boundary"``: the block's boundary mass in its first
+    cell (NaN where a smooth factor varies, so that it has none), 0 in the others (so that the
+    blocks' sums are the sums of one array: no second collection, whose tasks Dask would
+    compute again)."""
+    return ["prior", "all", "searches", "others", *[("search", k) for k, e in enumerate(evidence) if e.kind == "search"],
+            "boundary"]
 
 
 def posterior_numbers(prior_mass: float, q_sum: float, given: float, search_sums) -> dict:
@@ -92,30 +105,54 @@ def block_grid(grid: Grid, rows, cols) -> Grid:
                 dy=grid.dy, nx=cols[1] - cols[0], ny=rows[1] - rows[0])
 
 
-def block_cells(prior, grid: Grid, evidence, subdivisions: int, rows, cols) -> tuple[np.ndarray, float | None]:
-    """One block's channels (:func:`channel_names`), shape ``(C, rows, columns)`` float64, and its
-    boundary mass (None where a smooth factor varies): ``cell_means`` on the block's cells, on
-    one thread (Dask runs the blocks in parallel)."""
+def block_cells(prior, grid: Grid, evidence, subdivisions: int, rows, cols) -> np.ndarray:
+    """One block's channels (:func:`channel_names`), shape ``(C, rows, columns)`` float64:
+    ``cell_means`` on the block's cells, on one thread (Dask runs the blocks in parallel)."""
     parts = cell_means(prior, block_grid(grid, rows, cols), evidence, subdivisions=subdivisions, threads=1,
                        min_mass=0.0)
     names = channel_names(evidence)
     out = np.empty((len(names), rows[1] - rows[0], cols[1] - cols[0]))
     out[0] = parts.cells
-    for c, key in enumerate(names[1:], start=1):
+    for c, key in enumerate(names[1:-1], start=1):
         out[c] = parts.means[key]
-    return out, parts.boundary_mass
+    out[-1] = 0.0
+    out[-1, 0, 0] = math.nan if parts.boundary_mass is None else parts.boundary_mass
+    return out
 
 
-def _channels_of(pair):
-    return pair[0]
+def empty_block(grid: Grid, searches, subdivisions: int, rows, cols, names) -> np.ndarray:
+    """A skipped block's channels (module docstring): prior 0, the searches' mean for the POD map
+    (the means of the other combinations weigh a prior of 0: left at 1), boundary mass 0."""
+    shape = (len(names), rows[1] - rows[0], cols[1] - cols[0])
+    block = block_grid(grid, rows, cols)
+    x0, x1, y0, y1 = block.extent
+    reach = [e for e in searches if _may_reach(e, (x0, x1, y0, y1))]
+    constant = np.ones(len(names))
+    constant[0] = constant[-1] = 0.0
+    if not reach:  # POD 0 on every cell: one value per channel seen as the block
+        return np.broadcast_to(constant[:, None, None], shape)
+    # the rules of cell_means for cells without prior mass, under a law with no mass on the block
+    nowhere = UniformPresence(Region(x=(x1 + 1.0, x1 + 2.0), y=(y1 + 1.0, y1 + 2.0)))
+    parts = cell_means(nowhere, block, reach, subdivisions=subdivisions, threads=1, min_mass=0.0)
+    out = np.repeat(constant[:, None, None], shape[1] * shape[2], axis=1).reshape(shape)
+    out[names.index("searches")] = parts.means["searches"]
+    return out
 
 
-def _bound_of(pair):
-    return pair[1]
+def _may_reach(search, box) -> bool:
+    """Whether ``search`` may detect anywhere in ``box``: an area search's polygon or a definite
+    track's corridor whose bounding box meets it (others, smooth everywhere: True)."""
+    x0, x1, y0, y1 = box
+    if isinstance(search, AreaSearch):
+        (a, b), (c, d) = search.polygon.min(axis=0), search.polygon.max(axis=0)
+    elif isinstance(search, TrackSearch) and search.law == "definite":
+        w = 0.5 * search.sweep_width
+        (a, b), (c, d) = search.track[:, :2].min(axis=0) - w, search.track[:, :2].max(axis=0) + w
+    else:
+        return True
+    return not (c < x0 or a > x1 or d < y0 or b > y1)
 
 
-def _total_bound(bounds):
-    return None if any(b is None for b in bounds) else float(math.fsum(bounds))
 
 
 def _edges(n: int, chunk: int) -> list[tuple[int, int]]:
@@ -131,8 +168,6 @@ class TiledPosterior:
     channels : dask.array.Array, shape (C, ny, nx), float64
         Each cell's prior probability and cell means (:func:`channel_names`), in blocks of
         ``(C, *chunks)``.
-    boundary : dask Delayed
-        The boundary mass summed over the blocks (None where a smooth factor varies).
     grid : Grid
     chunks : (int, int)
     evidence : list
@@ -143,10 +178,11 @@ class TiledPosterior:
     frame : GeoFrame or None
     min_mass : float
         The whole grid's capture below which :meth:`numbers` and :meth:`compute` warn.
+    skipped : ndarray of bool (blocks in y, blocks in x)
+        Blocks where the prior was proved negligible (taken as 0; module docstring).
     """
 
     channels: object
-    boundary: object
     grid: Grid
     chunks: tuple
     evidence: list
@@ -155,6 +191,7 @@ class TiledPosterior:
     provenance: dict = field(default_factory=dict)
     frame: object = None
     min_mass: float = MIN_MASS
+    skipped: np.ndarray | None = None
 
     @property
     def names(self) -> list:
@@ -174,11 +211,24 @@ class TiledPosterior:
         return self._channel("prior") * self._channel("all")
 
     def lazy_sums(self):
-        """S_P, S_all, S_others and each search's S_k (module docstring), lazily: each block
-        summed in float64, then the blocks' sums."""
-        prior = self._channel("prior")
+        """S_P, S_all, S_others, each search's S_k (module docstring) and the boundary mass,
+        lazily: each computed block summed in float64, then the blocks' sums (a skipped block's
+        prior is 0: no task)."""
+        da = require("dask.array", CLUSTER_PURPOSE, CLUSTER_EXTRA)
         keys = ["all", "others", *[key for key in self.names if isinstance(key, tuple)]]
-        return [prior.sum(dtype=np.float64)] + [(prior * self._channel(key)).sum(dtype=np.float64) for key in keys]
+        index = [self.names.index(key) for key in keys]
+        skipped = self.skipped if self.skipped is not None else np.zeros(self.channels.numblocks[1:], dtype=bool)
+        per_block = []
+        for i, j in zip(*np.nonzero(~skipped)):
+            block = self.channels.blocks[0, i, j]
+            prior = block[0]
+            per_block.append(da.stack([prior.sum(dtype=np.float64)]
+                                      + [(prior * block[c]).sum(dtype=np.float64) for c in index]
+                                      + [block[-1].sum(dtype=np.float64)]))
+        if not per_block:
+            return [da.zeros((), dtype=np.float64)] * (2 + len(keys))
+        total = da.stack(per_block).sum(axis=0)
+        return [total[k] for k in range(2 + len(keys))]
 
     def numbers(self, *, progress: bool = False) -> dict:
         """The posterior's global numbers, from one pass over the blocks: ``prior_mass`` (S_P),
@@ -190,12 +240,12 @@ class TiledPosterior:
             The prior holds no mass on the grid, or the evidence contradicts it (normaliser
             below :data:`~bananagrid.evidence.posterior.MIN_NORMALISER`), as ``bg.posterior``.
         """
-        *sums, bound = compute_with_progress(*self.lazy_sums(), self.boundary, progress=progress)
-        prior_mass, q_sum, given, *search_sums = (float(s) for s in sums)
+        *sums, bound = (float(v) for v in compute_with_progress(*self.lazy_sums(), progress=progress))
+        prior_mass, q_sum, given, *search_sums = sums
         self._covered(prior_mass)
         found = posterior_numbers(prior_mass, q_sum, given, search_sums)
         check_normaliser(found)
-        return {**found, "boundary_mass": bound}
+        return {**found, "boundary_mass": None if math.isnan(bound) else bound}
 
     def _covered(self, prior_mass: float) -> None:
         """The whole grid's warning of ``bg.posterior`` (its prior's ``rasterise``) where it
@@ -211,10 +261,11 @@ class TiledPosterior:
         cells): the blocks' cells gathered and finished by ``finish_cells``, as ``bg.posterior``
         finishes the whole grid's."""
         self.grid.check_in_memory()
-        channels, bound = compute_with_progress(self.channels, self.boundary)
-        channels = np.asarray(channels)
+        channels = np.asarray(compute_with_progress(self.channels)[0])
+        bound = float(np.sum(channels[-1]))
+        bound = None if math.isnan(bound) else bound
         self._covered(float(np.sum(channels[0])))
-        means = {key: channels[c] for c, key in enumerate(self.names) if c > 0}
+        means = {key: channels[c] for c, key in enumerate(self.names) if 0 < c < len(self.names) - 1}
         return finish_cells(CellMeans(self.grid, self.frame, channels[0], means,
                                       list(self.evidence), dict(self.provenance), bound, self.subdivisions))
 
@@ -236,7 +287,7 @@ class TiledPosterior:
         t = float(getattr(self.prior, "t", 0.0) or 0.0) if t is None else t
         info = {**self.provenance, "posterior": dict(numbers, subdivisions=self.subdivisions,
                                                       evidence=[e.describe() for e in self.evidence])}
-        skipped = np.zeros((len(self.channels.chunks[1]), len(self.channels.chunks[2])), dtype=bool)
+        skipped = self.skipped if self.skipped is not None else np.zeros(self.channels.numblocks[1:], dtype=bool)
 
         def layer(values, quantity, what):
             return TiledRaster(values=values, grid=self.grid, chunks=self.chunks, skipped=skipped, floor=-math.inf,
@@ -259,7 +310,7 @@ class TiledPosterior:
 
 
 def posterior_tiles(prior, grid: Grid, evidence=(), chunks=DEFAULT_CHUNK, *, subdivisions: int = SUBDIVISIONS,
-                    min_mass: float = MIN_MASS) -> TiledPosterior:
+                    min_mass: float = MIN_MASS, skip: bool = True) -> TiledPosterior:
     """The posterior of ``prior`` on ``grid`` after ``evidence`` (as :func:`bananagrid.posterior`),
     lazily, in blocks of ``chunks`` cells on Dask (the ``cluster`` extra).
 
@@ -273,6 +324,9 @@ def posterior_tiles(prior, grid: Grid, evidence=(), chunks=DEFAULT_CHUNK, *, sub
     min_mass : float, default 0.99
         As for :func:`bananagrid.rasterise`, of the whole grid (warned when the sums are
         computed).
+    skip : bool, default True
+        Take the prior as 0 on the blocks where it proves its density at most its floor, with
+        no prior cell rule run there (module docstring); False computes every block.
 
     Returns
     -------
@@ -292,18 +346,30 @@ def posterior_tiles(prior, grid: Grid, evidence=(), chunks=DEFAULT_CHUNK, *, sub
     names = channel_names(evidence)
     token = uuid.uuid4().hex[:8]
     rows_of, cols_of = _edges(grid.ny, cy), _edges(grid.nx, cx)
-    blocks, bounds = [], []
-    for rows in rows_of:
+    floor = prior.density_floor() if skip and callable(getattr(prior, "density_floor", None)) else -math.inf
+    skipped = np.zeros((len(rows_of), len(cols_of)), dtype=bool)
+    t_map = getattr(prior, "t", None)
+    same = [e for e in evidence if e.kind == "search"
+            and (t_map is None or e.time_span is None or e.time_span[1] >= t_map)]
+    blocks = []
+    for i, rows in enumerate(rows_of):
         line = []
-        for cols in cols_of:
-            pair = dask.delayed(block_cells, pure=True)(prior, grid, evidence, n, rows, cols,
-                                                        dask_key_name=f"bananagrid-posterior-{token}-{rows[0]}-{cols[0]}")
+        for j, cols in enumerate(cols_of):
+            if floor > -math.inf:  # over the block's whole cells, edges included
+                x0, x1, y0, y1 = block_grid(grid, rows, cols).extent
+                skipped[i, j] = prior.density_bound(x0, x1, y0, y1) <= floor
+            name = f"bananagrid-posterior-{token}-{rows[0]}-{cols[0]}"
+            if skipped[i, j]:
+                task = dask.delayed(empty_block, pure=True)(grid, same, n, rows, cols, names, dask_key_name=name)
+            else:
+                task = dask.delayed(block_cells, pure=True)(prior, grid, evidence, n, rows, cols, dask_key_name=name)
             shape = (len(names), rows[1] - rows[0], cols[1] - cols[0])
-            line.append(da.from_delayed(dask.delayed(_channels_of)(pair), shape=shape, dtype=np.float64))
-            bounds.append(dask.delayed(_bound_of)(pair))
+            line.append(da.from_delayed(task, shape=shape, dtype=np.float64))
         blocks.append(line)
     channels = da.block(blocks)
-    provenance = {**first.provenance, "chunks": [cy, cx], "tiles": len(rows_of) * len(cols_of)}
-    return TiledPosterior(channels=channels, boundary=dask.delayed(_total_bound)(bounds), grid=grid, chunks=(cy, cx),
+    provenance = {**first.provenance, "chunks": [cy, cx], "tiles": int(skipped.size),
+                  "tiles_skipped": int(skipped.sum()), "zero_at_or_below": floor * grid.cell_area if skip else None}
+    return TiledPosterior(channels=channels, grid=grid, chunks=(cy, cx),
+                          skipped=skipped,
                           evidence=list(evidence), prior=prior, subdivisions=n, provenance=provenance,
                           frame=first.frame, min_mass=float(min_mass))

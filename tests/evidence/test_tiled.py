@@ -1,6 +1,7 @@
 """Posteriors over tiled grids (bananagrid.evidence.tiled): the blocks' cells finished together
-equal ``bg.posterior`` on the whole grid, the global numbers from the blocks' sums equal its
-numbers, and a store is written whole or not at all.
+equal ``bg.posterior`` on the whole grid (every block computed: ``skip=False``), the global
+numbers from the blocks' sums equal its numbers, blocks where the prior is negligible cost no
+prior rule and keep the searches' POD map, and a store is written whole or not at all.
 
 Tolerance: a block's cells are computed on the block as a grid of its own, whose cell edges are
 the whole grid's to an ulp (origin + k dx on each), so the prior's cell rules there agree to
@@ -71,7 +72,7 @@ def test_a_tiled_posterior_is_the_whole_grids(name):
     grid = _coarse(grid)
     evidence = _evidence(name)
     ref = bg.posterior(prior, grid, evidence)
-    tiles = posterior_tiles(prior, grid, evidence, chunks=CHUNKS)
+    tiles = posterior_tiles(prior, grid, evidence, chunks=CHUNKS, skip=False)
     assert tiles.channels.chunks[1][0] == CHUNKS[0] and tiles.channels.chunks[2][0] == CHUNKS[1]
     with dask.config.set(scheduler="threads"):
         got = tiles.compute()
@@ -103,7 +104,7 @@ def test_any_blocks_give_the_whole_grids_posterior(rows, cols, shift, pod, corne
     evidence = [bg.AreaSearch(box, t=prior.t, pod=pod)]
     ref = bg.posterior(prior, grid, evidence)
     with dask.config.set(scheduler="threads"):
-        got = posterior_tiles(prior, grid, evidence, chunks=(rows, cols)).compute()
+        got = posterior_tiles(prior, grid, evidence, chunks=(rows, cols), skip=False).compute()
     _assert_same(got, ref)
 
 
@@ -116,7 +117,7 @@ def test_the_store_holds_the_posterior_whole_or_not_at_all(tmp_path, monkeypatch
     ref = bg.posterior(prior, grid, evidence)
     path = tmp_path / "post.zarr"
     with dask.config.set(scheduler="threads"):
-        posterior_tiles(prior, grid, evidence, chunks=(16, 16)).to_zarr(path)
+        posterior_tiles(prior, grid, evidence, chunks=(16, 16), skip=False).to_zarr(path)
     with xr.open_zarr(path) as store:
         assert np.max(np.abs(store["posterior_probability"].values[0] - ref.values)) <= TOL * ref.values.max()
         assert np.max(np.abs(store["prior_probability"].values[0] - ref.prior)) <= TOL * ref.prior.max()
@@ -179,7 +180,7 @@ def test_blocks_run_in_worker_processes():
     grid, evidence = _coarse(grid, 3), _evidence("butterly")
     ref = bg.posterior(prior, grid, evidence)
     with dask.config.set(scheduler="processes", num_workers=2):
-        got = posterior_tiles(prior, grid, evidence, chunks=(12, 12)).compute()
+        got = posterior_tiles(prior, grid, evidence, chunks=(12, 12), skip=False).compute()
     _assert_same(got, ref)
 
 
@@ -215,7 +216,7 @@ def test_evidence_carried_from_earlier_times_tiles_too(heading, step, chunks, to
     ref = bg.posterior(prior, grid, evidence)
     assert "carried" in ref.provenance
     with dask.config.set(scheduler="threads"):
-        tiles = posterior_tiles(prior, grid, evidence, chunks=chunks)
+        tiles = posterior_tiles(prior, grid, evidence, chunks=chunks, skip=False)
         got = tiles.compute()
         numbers = tiles.numbers()
     peak = float(np.max(ref.values))
@@ -224,3 +225,45 @@ def test_evidence_carried_from_earlier_times_tiles_too(heading, step, chunks, to
     for value, expected in ((got.pos, ref.pos), (numbers["pos"], ref.pos), (numbers["normaliser"], ref.normaliser)):
         assert value == pytest.approx(expected, abs=tol)
     assert np.allclose(numbers["search_pos"], ref.search_pos, rtol=0.0, atol=tol)
+
+
+def test_blocks_where_the_prior_is_negligible_are_skipped_but_keep_the_pod_map():
+    """The CAT on a grid four times its frame, a search at the map's time over the banana's tip
+    and one far out where the prior is negligible: the far blocks run no prior rule (prior 0,
+    map 0); the map and the numbers equal bg.posterior's (the skipped cells hold at most the
+    floor times a cell's area: 1e-13 of the peak cell at most, within TOL); the POD map on the
+    skipped blocks is the search's exact area share of each cell (shapely's intersection, an
+    independent oracle), elsewhere bg.posterior's."""
+    import shapely
+
+    prior = PRIORS["cat"][0]
+    grid = bg.Grid.from_bounds(x=(-12000.0, 12000.0), y=(-6000.0, 12000.0), step=300.0)
+    tip = [(-600.0, 2400.0), (600.0, 2450.0), (650.0, 3300.0), (-550.0, 3200.0)]
+    far = [(-9000.0, 7000.0), (-4100.0, 7400.0), (-4400.0, 10100.0), (-8800.0, 9800.0)]
+    evidence = [bg.AreaSearch(tip, t=prior.t, pod=0.7), bg.AreaSearch(far, t=prior.t, pod=0.6)]
+    ref = bg.posterior(prior, grid, evidence, )
+    calls = []
+    real = tiled.block_cells
+    tiles_mod_block = lambda *a: calls.append(a[4:6]) or real(*a)  # noqa: E731
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(tiled, "block_cells", tiles_mod_block)
+        tiles = posterior_tiles(prior, grid, evidence, chunks=(10, 10))
+        with dask.config.set(scheduler="threads"):
+            got = tiles.compute()
+            numbers = tiles.numbers()
+    assert 0 < tiles.skipped.sum() < tiles.skipped.size and len(calls) == 2 * int((~tiles.skipped).sum())
+    peak = float(np.max(ref.values))
+    assert np.max(np.abs(got.values - ref.values)) <= TOL * peak
+    assert numbers["pos"] == pytest.approx(ref.pos, abs=TOL)
+    assert np.allclose(numbers["search_pos"], ref.search_pos, rtol=0.0, atol=TOL)
+    skipped = np.kron(tiles.skipped, np.ones((10, 10), dtype=bool))[:grid.ny, :grid.nx]
+    assert np.all(got.prior[skipped] == 0.0) and ref.prior[skipped].max() <= TOL * ref.prior.max()
+    assert np.max(np.abs(got.pod - ref.pod)[~skipped]) <= TOL
+    far_polygon = shapely.Polygon(far)
+    xe, ye = grid.origin[0] + grid.dx * np.arange(grid.nx + 1), grid.origin[1] + grid.dy * np.arange(grid.ny + 1)
+    i, j = np.nonzero(skipped)
+    share = np.array([far_polygon.intersection(shapely.box(xe[b], ye[a], xe[b + 1], ye[a + 1])).area
+                      for a, b in zip(i, j)]) / grid.cell_area
+    # the exact share's rounding: 1e-12 of a cell (shapely and the package's clip sum differently)
+    assert np.max(np.abs(got.pod[i, j] - 0.6 * share)) <= 1e-12
+    assert share.max() == 1.0 and 0.0 < share[share < 1.0].max()  # whole and cut cells among them
