@@ -305,8 +305,9 @@ class TiledPosterior:
     def __repr__(self) -> str:
         g = self.grid
         blocks = len(self.channels.chunks[1]) * len(self.channels.chunks[2])
+        skipped = 0 if self.skipped is None else int(self.skipped.sum())
         return (f"TiledPosterior({g.nx} x {g.ny} cells in {blocks} blocks of {self.chunks[0]} x {self.chunks[1]}, "
-                f"{len(self.evidence)} evidence, model {type(self.prior).__name__})")
+                f"{skipped} skipped, {len(self.evidence)} evidence, model {type(self.prior).__name__})")
 
 
 def posterior_tiles(prior, grid: Grid, evidence=(), chunks=DEFAULT_CHUNK, *, subdivisions: int = SUBDIVISIONS,
