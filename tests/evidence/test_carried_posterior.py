@@ -42,29 +42,34 @@ def earlier_evidence(track: bool):
 
 def simulate(model, evidence, n, seed):
     """The draws' positions at the map's time (n, 2), and each evidence's factor on each draw
-    (n, K): a search's 1 - POD and the bearings' likelihood where the draw's path was at their
-    times; a track's exp(-exposure), the exposure by the trapezoidal rule on 121 times over its
-    span (0.005 s apart: the searcher moves 5 m, the paths pass it at some 50 m or more)."""
+    (n, K), from the draw's path (``sample_paths``): a search's 1 - POD and a report's
+    likelihood where the path was at their times (land: at the map's); a search over an
+    interval, exp(int log(1 - POD(x(s))) ds / span), and a track's exp(-exposure), by the
+    trapezoidal rule on fine times over their spans (a track: 121 times, 0.005 s apart, the
+    searcher moving 5 m while the paths pass it at some 50 m or more; an interval: 41 times,
+    its error at a crossing of an edge, like the pack's, of either sign)."""
     rng = np.random.default_rng(seed)
-    def when(e):  # land holds at every time: the map's
-        return model.t if e.time_span is None else e.time_span[0]
-
-    point_times = sorted({when(e) for e in evidence if not isinstance(e, bg.TrackSearch)})
-    fine = []
+    times, slices = [model.t], []
     for e in evidence:
+        span = (model.t, model.t) if e.time_span is None else e.time_span  # land: the map's time
         if isinstance(e, bg.TrackSearch):
-            fine = np.linspace(e.time_span[0], e.time_span[1], 121)
-    all_times = np.concatenate([[model.t], point_times, fine])
+            fine = np.linspace(*span, 121)
+        elif span[1] > span[0]:
+            fine = np.linspace(*span, 41)
+        else:
+            fine = np.array([span[0]])
+        slices.append((slice(len(times), len(times) + len(fine)), fine))
+        times.extend(fine)
     factors = np.ones((n, len(evidence)))
     out = np.empty((n, 2))
     chunk = 20_000
     for start in range(0, n, chunk):
         m = min(chunk, n - start)
-        paths = model.sample_paths(m, all_times, rng)
+        paths = model.sample_paths(m, times, rng)
         out[start:start + m] = paths[:, 0]
-        for k, e in enumerate(evidence):
+        for k, (e, (where, fine)) in enumerate(zip(evidence, slices)):
+            pts = paths[:, where]
             if isinstance(e, bg.TrackSearch):
-                pts = paths[:, 1 + len(point_times):]
                 sx = np.interp(fine, e.track[:, 2], e.track[:, 0])
                 sy = np.interp(fine, e.track[:, 2], e.track[:, 1])
                 speed = np.hypot(np.diff(e.track[:, 0]), np.diff(e.track[:, 1])) / np.diff(e.track[:, 2])
@@ -72,9 +77,12 @@ def simulate(model, evidence, n, seed):
                 r = np.hypot(pts[..., 0] - sx, pts[..., 1] - sy)
                 rate = e.sweep_width**2 * v / (8.0 * math.pi * r**3)
                 factors[start:start + m, k] = np.exp(-np.trapezoid(rate, fine, axis=1))
+            elif len(fine) > 1:
+                with np.errstate(divide="ignore"):
+                    log_miss = np.log(e.likelihood(pts[..., 0], pts[..., 1]))
+                factors[start:start + m, k] = np.exp(np.trapezoid(log_miss, fine, axis=1) / (fine[-1] - fine[0]))
             else:
-                p = paths[:, 1 + point_times.index(when(e))]
-                factors[start:start + m, k] = e.likelihood(p[:, 0], p[:, 1])
+                factors[start:start + m, k] = e.likelihood(pts[:, 0, 0], pts[:, 0, 1])
     return out, factors
 
 
@@ -82,9 +90,17 @@ def simulate(model, evidence, n, seed):
 NOW = [bg.AreaSearch([(-700.0, 2300.0), (0.0, 2250.0), (100.0, 2900.0), (-600.0, 3000.0)], t=FIG1["t"], pod=0.5),
        bg.Exclusion([(300.0, 2900.0), (1500.0, 2700.0), (1500.0, 3300.0), (300.0, 3300.0)])]
 
+#: Searches over periods (a planner's): an area searched from 3 s to 5 s (coverage 1.2 spread
+#: over it) and a raster of PODs searched from 5.5 s to 6.5 s.
+PERIODS = [bg.AreaSearch([(-300.0, 700.0), (100.0, 700.0), (100.0, 1500.0), (-300.0, 1500.0)], t=(3.0, 5.0),
+                         coverage=1.2),
+           bg.RasterSearch(bg.Grid.from_bounds(x=(-400.0, 400.0), y=(1400.0, 2000.0), step=200.0), t=(5.5, 6.5),
+                           pod=[[0.9, 0.3, 0.6, 0.1], [0.2, 0.8, 0.4, 0.7], [0.5, 0.1, 0.95, 0.3]])]
+
 CASES = {
     "cat_searches_bearings": (bg.CAT(**FIG1), False),
     "cat_earlier_and_now": (bg.CAT(**FIG1), None),
+    "cat_periods": (bg.CAT(**FIG1), "periods"),
     "cat_heading_searches_bearings": (bg.CAT(**FIG1, sigma_heading=0.04), False),
     "cat_track": (bg.CAT(**FIG1), True),
 }
@@ -96,7 +112,7 @@ def test_carried_posterior_matches_simulation_of_the_paths(name):
     mass of the cells east of x = 0, POS and each search's own POS (given the bearings) within 4
     binomial SDs; the POD map against the detected share of each busy cell's draws."""
     model, track = CASES[name]
-    evidence = earlier_evidence(track) if track is not None else [*earlier_evidence(False), *NOW]
+    evidence = {None: [*earlier_evidence(False), *NOW], "periods": PERIODS}.get(track) or earlier_evidence(track)
     post = bg.posterior(model, GRID, evidence, subdivisions=6)
     positions, factors = simulate(model, evidence, DRAWS, seed=20261127)
     rng = np.random.default_rng(7)
