@@ -14,10 +14,17 @@ are integrated by a composite Gauss-Legendre rule whose nodes become the discret
 (see :data:`SPEED_PANEL_SIGMAS`). The phi-integral is computed by the Warp kernel
 ``kernels/butterly.py`` (method in its docstring); :mod:`bananagrid.models._butterly_series`
 holds the Bessel series (3.8) as a second method.
+
+Evidence at earlier times is carried exactly through the paths: for the course c and speed V_i
+the path through the map point x is at x - V_i (t - s) e(c) at time s, so the evidence is a
+weight inside the course integral (:meth:`Butterly.bind_carried`, the engine's carried hook;
+cell probabilities by :meth:`Butterly.carried_cell_plan`), and :meth:`Butterly.sample_paths`
+draws whole paths of the generative story for Monte Carlo.
 """
 
 from __future__ import annotations
 
+import functools
 import math
 import warnings
 from collections.abc import Mapping
@@ -29,7 +36,12 @@ from scipy import special, stats
 
 from ..domains.pose import Pose
 from ..kernels import butterly as kernels
-from ..protocol import Extent, KernelBinding, KernelContext, SceneKey, SceneSchema
+from ..kernels import evidence as evidence_kernels
+from ..domains.grid import Grid
+from ..domains.polar_lattice import PolarLattice
+from ..engine.carried import evaluate_carried
+from ..engine.quadrature import GAUSS_TOL, MAX_ORDER, gauss_error, unit_rule
+from ..protocol import CellPlan, EvidencePack, Extent, KernelBinding, KernelContext, SceneKey, SceneSchema
 from ..validate import BananagridError, BananagridWarning, covariance, finite, non_negative, point, positive, real_array, show
 from ._butterly_series import series_density
 from .base import RANGE_SDS, Model, check_n, check_rng
@@ -80,6 +92,109 @@ SPEED_FLOOR = 1e-22
 #: per speed node with 624 nodes (a normal speed law: the tiles drop the negligible ones).
 SECONDS_PER_CELL = 0.5e-6
 SECONDS_PER_SPEED_NODE = 0.1e-6
+
+#: Carried maps (:meth:`Butterly.bind_carried`): the course pieces' Gauss-Legendre panels, in
+#: trapezoid spacings of the density's rule (0.81 of the integrand's narrowest width each), and
+#: the narrowest panel smooth factors may ask for, as a fraction of one.
+CARRIED_PANEL = 2.0
+CARRIED_NARROWEST = 1.0 / 16.0
+#: A smooth factor's course spacing, as a fraction of its angular scale (its length scale over
+#: the radius V (t - s)): the fraction the density's own spacing is of its narrowest width
+#: (2 pi / sqrt(2 L), L = ln(1e12) + ln(4 pi): 0.81).
+SMOOTH_SPACING = 0.8
+
+
+#: Carried cell probabilities: points per evaluation (bounds the node arrays' memory), and the
+#: work estimate per node and speed (measured: 2-60 us per point for three speeds on the
+#: submarine case, Intel Xeon, float64, one core; the upper end near the searches' edges).
+CELL_CHUNK = 2**18
+CARRIED_SECONDS_PER_NODE = 10e-6
+
+
+def _interval_searches(pack: EvidencePack) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The pack's area searches over intervals, to be taken exactly: a Butterly path is straight,
+    so the time it spends in the polygon over (t0, t1) is the length of its segment inside over
+    its speed (no time rule). A factor qualifies when its nodes are all one polygon's with one
+    rate and are exactly a composite Gauss-Legendre rule over some (t0, t1) (P equal panels of n
+    nodes, the pack's rule for an interval: (t0, t1) recovered from the weights' sum and the
+    first node for each n that divides the count, and every node checked); others keep their
+    nodes.
+
+    Returns (segments (S, 8): t0, t1, rate, orientation, the polygon's box x0, x1, y0, y1;
+    ints (S, 3): factor, first edge, edge count; a mask of the pack's nodes they replace)."""
+    kind, factor = pack.ints[:, 0], pack.ints[:, 1]
+    rows, ints = [], []
+    exact = np.zeros(pack.nodes, dtype=bool)
+    for f in range(pack.factors):
+        nodes = np.flatnonzero(factor == f)
+        if nodes.size < 2 or np.any(kind[nodes] != evidence_kernels.KIND_POLYGON):
+            continue
+        first, count = int(pack.ints[nodes[0], 2]), int(pack.ints[nodes[0], 3])
+        if np.any(pack.ints[nodes, 2] != first) or np.any(pack.data[nodes, 0] != pack.data[nodes[0], 0]):
+            continue
+        span = float(np.sum(pack.q[nodes]))
+        times = np.sort(pack.time[nodes])
+        found = None
+        for n in range(1, 17):
+            if nodes.size % n:
+                continue
+            panels = nodes.size // n
+            x, _ = np.polynomial.legendre.leggauss(n)
+            t0 = float(times[0]) - 0.5 * span / panels * (1.0 + x[0])
+            edges = np.linspace(t0, t0 + span, panels + 1)
+            expected = np.sort((0.5 * (edges[1:] + edges[:-1])[:, None] + 0.5 * np.diff(edges)[:, None] * x).ravel())
+            if span > 0.0 and np.allclose(times, expected, rtol=0.0, atol=1e-9 * span):
+                found = t0
+                break
+        if found is None:
+            continue
+        e = pack.edges[first:first + count]
+        orient = 1.0 if np.sum(e[:, 0] * e[:, 3] - e[:, 2] * e[:, 1]) > 0.0 else -1.0
+        rows.append((found, found + span, float(pack.data[nodes[0], 0]), orient, *pack.data[nodes[0], 1:5]))
+        ints.append((f, first, count))
+        exact[nodes] = True
+    if not rows:
+        return np.zeros((0, 8)), np.zeros((0, 3), dtype=np.int32), exact
+    return np.asarray(rows, dtype=float), np.asarray(ints, dtype=np.int32), exact
+
+
+@functools.lru_cache(maxsize=4)
+def _carried_rule(tol: float) -> np.ndarray:
+    """The carried kernels' course rule array (layout in kernels/butterly.py): Gauss-Legendre
+    rules of each order, the panel, the smooth factors' spacings, and the widest piece (in
+    spacings) each lower order integrates within the 8-point panel's error bound for a normal
+    profile (:func:`~bananagrid.engine.quadrature.gauss_error`). A spacing is at most
+    2 pi / sqrt(2 L) of the integrand's narrowest width (L = ln(1 / tol) + ln(4 pi), the
+    density's node count)."""
+    k = kernels
+    rule = np.zeros(k.RULE_SIZE)
+    for n in k.ORDERS:
+        x, w = np.polynomial.legendre.leggauss(n)
+        rule[k.RULE_AT[n]:k.RULE_AT[n] + 2 * n] = np.concatenate((x, w))
+    width = 2.0 * math.pi / math.sqrt(2.0 * (math.log(1.0 / tol) + math.log(4.0 * math.pi)))
+    target = gauss_error(k.GAUSS_NODES, CARRIED_PANEL * width)
+    limits = []
+    for n in (4, 3, 2):
+        q = np.linspace(1e-4, CARRIED_PANEL, 20000)
+        ok = q[[gauss_error(n, v * width) <= target for v in q]]
+        limits.append(float(ok.max()) if ok.size else 0.0)
+    rule[[k.PANEL, k.NARROWEST, k.SPACING, k.LIMIT4, k.LIMIT3, k.LIMIT2]] = [
+        CARRIED_PANEL, CARRIED_NARROWEST, SMOOTH_SPACING, *limits]
+    rule.setflags(write=False)
+    return rule
+
+
+def _axis_rule(width: float, scale: float, tol: float) -> tuple[int, int, float]:
+    """(m, n, error): m equal sub-intervals of at most ``scale`` with the fewest Gauss-Legendre
+    nodes n <= MAX_ORDER whose error bound for a normal feature of SD ``scale`` is <= ``tol``."""
+    m = max(1, math.ceil(width / scale * (1.0 - 1e-12)))
+    q = width / (m * scale)
+    for n in range(1, MAX_ORDER + 1):
+        err = gauss_error(n, q)
+        if err <= tol:
+            return m, n, err
+    return m, MAX_ORDER, err
+
 
 #: Relative tolerance of the kernel's trapezoid rule (its node count, see kernels/butterly.py),
 #: the relative size below which the walk drops a node, and Newton's tolerance, per precision.
@@ -672,6 +787,171 @@ class Butterly(Model):
             notes["zero_below"] = CELL_FLOOR * self.peak_lower_bound()
         return KernelBinding(kernels.KERNELS, params, notes)
 
+    def bind_carried(self, ctx: KernelContext, extent: Extent, pack: EvidencePack) -> KernelBinding:
+        """The carried points kernel (:class:`~bananagrid.protocol.CarryingModel`): each course
+        node's path weighted by the packed evidence, inside the course integral.
+
+        For the course c and speed V_i the path through the map point x is at x - V_i (t - s)
+        e(c) at time s, so the weight needs no integral over the start. Rule
+        (``kernels/butterly.py``, the carried section): the arcs of courses where the speed's
+        integrand exceeds 1e-15 of its peak (the density's own walk) are cut at every course
+        whose path crosses a polygon's edge at a polygon node's time (the circle of radius V_i
+        (t - s) about x against each edge: the polygons' weights are constant between), and
+        each piece is integrated by CARRIED_GAUSS_NODES-point Gauss-Legendre on panels of at
+        most CARRIED_PANEL trapezoid spacings (about 1.6 of the integrand's narrowest width
+        1 / sqrt(A): relative error below 1e-13 per panel for a normal profile,
+        ``engine.quadrature.gauss_error(8, 1.6)``). Smooth factors (reports, bearings,
+        inverse-cube tracks, rasters) are evaluated at every node, on panels narrowed to their
+        angular scale (the factor's length scale over V_i (t - s)), down to
+        CARRIED_NARROWEST of a panel; an arc that no polygon cuts takes the density's own
+        trapezoid rule (the weight at its nodes, spacing narrowed likewise). An area search over
+        an interval (t0, t1) is exact: the path over it is a straight segment, whose length
+        inside the polygon over its speed is the time spent inside (coverage C spread evenly:
+        log-weight -C x that fraction of the interval); its breaks are the courses where an end
+        of the segment crosses an edge or the segment passes a vertex (the pack's time nodes
+        for it are recognised and replaced, :func:`_interval_searches`). ``t`` of the pack
+        must be the model's.
+
+        As on a grid (:meth:`kernel_parameters` with ``floors``), a point whose prior bound is
+        below CELL_FLOOR = 1e-13 of the density's maximum is 0 in every channel (weights are at
+        most one) and a speed below SPEED_FLOOR of it is left out: inside and beyond the rings,
+        where the course integrand is spread over the whole circle, every search's crossings
+        would cut it into hundreds of pieces for a density of 1e-100.
+        """
+        if not math.isclose(pack.t, self.t, rel_tol=1e-12, abs_tol=0.0):
+            raise BananagridError(f"t = {pack.t!r}: the evidence was packed for a map at t = {pack.t!r}, "
+                                  f"the model's t is {self.t!r}")
+        rule = _carried_rule(KERNEL_TOL[np.dtype(ctx.dtype)][0])
+        segments, segment_ints, exact = _interval_searches(pack)
+        kind = pack.ints[:, 0]
+        polygon = np.flatnonzero((kind == evidence_kernels.KIND_POLYGON) & ~exact).astype(np.int32)
+        smooth = np.flatnonzero(kind != evidence_kernels.KIND_POLYGON).astype(np.int32)
+        params = ctx.struct(kernels.BUTTERLY_CARRIED, params=ctx.array(self.kernel_parameters(ctx.dtype, floors=True)),
+                            n_speeds=self.n_speed_nodes, rule=ctx.array(rule), t=ctx.scalar(self.t),
+                            polygon_nodes=ctx.array(polygon, dtype=np.int32),
+                            smooth_nodes=ctx.array(smooth, dtype=np.int32), segments=ctx.array(segments),
+                            segment_ints=ctx.array(segment_ints, dtype=np.int32))
+        return KernelBinding(kernels.CARRIED_KERNELS, params,
+                             {"speed_nodes": self.n_speed_nodes, "carried": "course pieces between polygon crossings"})
+
+    def carried_cell_plan(self, domain, pack: EvidencePack, *, tol: float = GAUSS_TOL) -> CellPlan | None:
+        """Each channel's carried probability of every cell of a grid
+        (:class:`~bananagrid.protocol.CarryingModel`), unnormalised: shape (C, ny, nx).
+
+        Rule: the prior's (the engine's tensor Gauss-Legendre rule on sub-cells no wider than
+        sigma_min, :func:`~bananagrid.engine.quadrature.gauss_error` at most ``tol`` per
+        sub-cell and axis for a normal feature of SD sigma_min) applied to the carried density
+        (:meth:`bind_carried`) at the nodes. Cells whose prior mass is proved below CELL_FLOOR of
+        the density's maximum times their area (:meth:`density_bounds`) are 0: weights are at most
+        one. Error: where the weight is smooth over a cell, the rule's (``tol`` per sub-cell and
+        axis). The carried density is continuous in x for a polygon at an earlier time but has a
+        kink where a course's circle touches an edge (the set of courses that reach the polygon
+        changes in length like sqrt of the distance), and jumps for a polygon at the map's own
+        time: there the rule's error is that of a Gauss rule on a kink or a step, O(h^2) or
+        O(h) of the sub-cell's mass (measured against cells halved in each direction: 1e-6 of
+        the channel's mass per cell at most on polar sectors holding a point-time search's
+        kinks, tests/evidence/test_butterly_cells.py). On a
+        :class:`~bananagrid.PolarLattice` the same rule in (range, bearing); None on other
+        domains (the posterior's sub-cell rule on the carried densities).
+        """
+        if isinstance(domain, PolarLattice):
+            return self._carried_polar_plan(domain, pack, float(tol))
+        if not isinstance(domain, Grid):
+            return None
+        tol = float(tol)
+        scale = self.sigma_min
+        (mx, nx_, _), (my, ny_, _) = (_axis_rule(domain.dx, scale, tol), _axis_rule(domain.dy, scale, tol))
+        ux, wx = unit_rule(mx, nx_)
+        uy, wy = unit_rule(my, ny_)
+        x_edges = domain.origin[0] + domain.dx * np.arange(domain.nx + 1)
+        y_edges = domain.origin[1] + domain.dy * np.arange(domain.ny + 1)
+        bound = self.density_bounds(x_edges[None, :-1], x_edges[None, 1:], y_edges[:-1, None], y_edges[1:, None])
+        keep = np.argwhere(bound >= CELL_FLOOR * self.peak_lower_bound())
+        per_cell = len(ux) * len(uy)
+        method = (f"carried density by tensor Gauss-Legendre: {mx} x {my} sub-cells of {nx_} x {ny_} nodes per cell "
+                  f"(sub-cells <= sigma_min = {scale:.6g} m)")
+
+        def run(ctx):
+            cells = np.zeros((pack.channels.shape[0], domain.ny, domain.nx))
+            weights = np.outer(wy, wx).ravel() * (domain.dx * domain.dy)
+            chunk = max(1, CELL_CHUNK // per_cell)
+            for c0 in range(0, len(keep), chunk):
+                block = keep[c0:c0 + chunk]
+                xs = x_edges[block[:, 1], None] + domain.dx * ux[None, :]
+                ys = y_edges[block[:, 0], None] + domain.dy * uy[None, :]
+                px = np.broadcast_to(xs[:, None, :], (len(block), len(uy), len(ux))).ravel()
+                py = np.broadcast_to(ys[:, :, None], (len(block), len(uy), len(ux))).ravel()
+                values = evaluate_carried(self, px, py, pack, dtype=ctx.dtype, device=ctx.device, threads=ctx.threads)
+                cells[:, block[:, 0], block[:, 1]] = values.reshape(-1, len(block), per_cell).astype(float) @ weights
+            return cells, {"cell_method": method, "cells_computed": int(len(keep)),
+                           "accuracy": {"claim": "per sub-cell and axis for a normal feature as wide as sigma_min, "
+                                                 "where the weight is smooth on the cell", "target": tol}}
+
+        seconds = float(len(keep) * per_cell) * CARRIED_SECONDS_PER_NODE * self.n_speed_nodes
+        return CellPlan(seconds=seconds, run=run, method=method)
+
+    def _carried_polar_plan(self, lattice: PolarLattice, pack: EvidencePack, tol: float) -> CellPlan:
+        """:meth:`carried_cell_plan` on a polar lattice: each cell by the tensor Gauss-Legendre
+        rule in (range, bearing) with the area element r, sub-intervals no longer than sigma_min
+        radially and, as arcs at the cell's outer range, along the bearing (``tol`` as on a
+        grid); cells whose prior bound (on a box holding the sector) is negligible are 0."""
+        scale = self.sigma_min
+        re, be = lattice.range_edges, lattice.bearing_edges
+        nr, nb = lattice.shape
+        db = float(np.max(np.diff(be)))
+        # a box holding each sector: 17 points along each arc, widened by the arc's largest
+        # distance from its chords between them (r (1 - cos(db / 32)))
+        u = np.linspace(0.0, 1.0, 17)
+        r_grid = np.stack((np.broadcast_to(re[:-1, None, None], (nr, nb, 17)), np.broadcast_to(re[1:, None, None],
+                                                                                                (nr, nb, 17))))
+        b_grid = be[None, None, :-1, None] + np.diff(be)[None, None, :, None] * u
+        x, y = lattice.to_world(r_grid, b_grid)
+        pad = re[1:, None] * (1.0 - math.cos(db / 32.0))
+        bound = self.density_bounds(x.min(axis=(0, 3)) - pad, x.max(axis=(0, 3)) + pad, y.min(axis=(0, 3)) - pad,
+                                    y.max(axis=(0, 3)) + pad)
+        keep = bound >= CELL_FLOOR * self.peak_lower_bound()
+        rows = np.flatnonzero(keep.any(axis=1))
+        plans = {}
+        nodes = 0
+        for i in rows:
+            mr, nr_, _ = _axis_rule(re[i + 1] - re[i], scale, tol)
+            mb, nb_, _ = _axis_rule(re[i + 1] * db, scale, tol)
+            plans[i] = (unit_rule(mr, nr_), unit_rule(mb, nb_))
+            nodes += int(keep[i].sum()) * mr * nr_ * mb * nb_
+        method = ("carried density by tensor Gauss-Legendre in (range, bearing), sub-intervals <= sigma_min = "
+                  f"{scale:.6g} m (as arcs at the outer range)")
+
+        def run(ctx):
+            cells = np.zeros((pack.channels.shape[0], nr, nb))
+            for i, ((ur, wr), (ub, wb)) in plans.items():
+                cols = np.flatnonzero(keep[i])
+                r = re[i] + (re[i + 1] - re[i]) * ur  # (kr,)
+                b = be[cols, None] + np.diff(be)[cols, None] * ub[None, :]  # (cols, kb)
+                x, y = lattice.to_world(r[None, :, None], b[:, None, :])  # (cols, kr, kb)
+                values = evaluate_carried(self, x, y, pack, dtype=ctx.dtype, device=ctx.device, threads=ctx.threads)
+                w = (wr * r * (re[i + 1] - re[i]))[:, None] * wb[None, :]  # (kr, kb) without db
+                cells[:, i, cols] = np.einsum("cnrb,rb->cn", values.astype(float), w) * np.diff(be)[cols]
+            return cells, {"cell_method": method, "cells_computed": int(keep.sum()),
+                           "accuracy": {"claim": "per sub-cell and axis for a normal feature as wide as sigma_min, "
+                                                 "where the weight is smooth on the cell", "target": tol}}
+
+        return CellPlan(seconds=float(nodes) * CARRIED_SECONDS_PER_NODE * self.n_speed_nodes, run=run, method=method)
+
+    def density_bounds(self, x0, x1, y0, y1) -> np.ndarray:
+        """:meth:`density_bound` on arrays of rectangles (broadcast)."""
+        x0, x1, y0, y1 = np.broadcast_arrays(*(np.asarray(v, dtype=float) for v in (x0, x1, y0, y1)))
+        mx, my = self.mean
+        pad = 2.0 ** -22 * (np.maximum(np.abs(x0), np.abs(x1)) + np.maximum(np.abs(y0), np.abs(y1)) + abs(mx) + abs(my))
+        x0, x1, y0, y1 = x0 - pad, x1 + pad, y0 - pad, y1 + pad
+        near = np.hypot(np.maximum(np.maximum(x0 - mx, 0.0), mx - x1), np.maximum(np.maximum(y0 - my, 0.0), my - y1))
+        far = np.hypot(np.maximum(np.abs(x0 - mx), np.abs(x1 - mx)), np.maximum(np.abs(y0 - my), np.abs(y1 - my)))
+        s1, s2, _ = self.axes
+        total = np.zeros(near.shape)
+        for r, w in zip(self.ranges, self._nodes[1]):
+            d = np.maximum(np.maximum(near - r, r - far), 0.0)
+            total += w * np.exp(-0.5 * d * d / s2)
+        return 2.0 * total / (2.0 * math.pi * math.sqrt(s1) * math.sqrt(s2))
+
     def density_bound(self, x0: float, x1: float, y0: float, y1: float) -> float:
         """A proved upper bound of the density on the rectangle [x0, x1] x [y0, y1].
 
@@ -799,6 +1079,41 @@ class Butterly(Model):
         law, then U = X + V t (sin c, cos c). Continuous speed laws are sampled exactly (not
         through their quadrature nodes)."""
         n, rng = check_n(n), check_rng(rng)
+        start, v, c = self._draw(n, rng)
+        r = v * self.t
+        return start + np.column_stack((r * np.sin(c), r * np.cos(c)))
+
+    def sample_paths(self, n: int, times, rng) -> np.ndarray:
+        """Positions of ``n`` draws of the generative story at each of ``times``.
+
+        Each draw is a start X ~ N(mean, cov), a speed V and a course c (drawn as :meth:`sample`
+        draws them, in the same order: with the same generator state, ``sample_paths(n, [t],
+        rng)[:, 0]`` is ``sample(n, rng)``), and its position at time s is X + V s (sin c, cos c).
+
+        Parameters
+        ----------
+        n : int
+            Number of draws.
+        times : array_like, shape (m,)
+            Times s >= 0, s since the last fix (the model's clock), finite; any order.
+        rng : numpy.random.Generator or int
+
+        Returns
+        -------
+        ndarray, shape (n, m, 2)
+            World positions (x, y), m.
+        """
+        times = _vector("times", times)
+        bad = np.flatnonzero(times < 0)
+        if bad.size:
+            raise BananagridError(f"times[{bad[0]}] = {float(times[bad[0]])!r}: must be >= 0 (s since the last fix)")
+        n, rng = check_n(n, self.sample_bytes * times.size), check_rng(rng)
+        start, v, c = self._draw(n, rng)
+        e = np.column_stack((np.sin(c), np.cos(c)))
+        return start[:, None, :] + (v[:, None] * times[None, :])[:, :, None] * e[:, None, :]
+
+    def _draw(self, n: int, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(start (n, 2), speed (n,), course (n,)) of ``n`` draws of the generative story."""
         start = rng.multivariate_normal(self.mean, self.cov, size=n, method="cholesky")
         if isinstance(self.speeds, np.ndarray):
             v = self._nodes[0][rng.choice(self._nodes[0].size, size=n, p=self._nodes[1])]
@@ -808,5 +1123,4 @@ class Butterly(Model):
             c = rng.vonmises(self.course_mean, self.course_kappa, n)
         else:
             c = rng.uniform(0.0, 2.0 * math.pi, n)
-        r = v * self.t
-        return start + np.column_stack((r * np.sin(c), r * np.cos(c)))
+        return start, v, c
