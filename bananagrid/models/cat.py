@@ -16,6 +16,7 @@ from ..kernels import cat as kernels
 from ..kernels import cat_lanes
 from ..kernels.common import LANES32, LANES64
 from ..kernels import cat_cells
+from . import cat_carried
 from ..protocol import CellPlan, EvidencePack, Extent, KernelBinding, KernelContext, SceneSchema
 from ..validate import BananagridError, positive
 from ._cat_heading import (
@@ -92,6 +93,10 @@ SECONDS_PER_LINE_CELL = 400e-9
 SECONDS_PER_LINE = 1e-6
 #: Most turn-rate intervals of the cell probabilities (512 MiB of edges).
 MAX_CELL_NODES = 2**26
+#: Work of the cell probabilities with earlier polygons, as a multiple of the plain rule's: an
+#: allowance for the work check, twice the cost measured on the Figure 1 grid with two searches
+#: (1.5x; the weighted terms cost only in the cells the polygons' edges reach).
+CARRIED_WORK_FACTOR = 3.0
 
 
 def line_speed(model: "CAT") -> float:
@@ -470,6 +475,43 @@ def _rotate(local: np.ndarray, theta0: np.ndarray) -> np.ndarray:
     return np.column_stack((x * c + y * s, -x * s + y * c))
 
 
+def grid_cell_plan(model: "CAT", grid: Grid, polygons: cat_carried.EarlierPolygons | None = None) -> CellPlan:
+    """The exact-in-acceleration cell plan of :meth:`CAT.cell_plan` on ``grid`` (no heading
+    noise); with ``polygons`` (:class:`~bananagrid.models.cat_carried.EarlierPolygons`: area
+    searches and land at earlier times) its ``run`` returns the channels ``(channels, ny, nx)``,
+    each path weighted by the factors of the channel's polygons (:mod:`.cat_carried`)."""
+    if model.sigma_heading > 0.0:
+        raise BananagridError("sigma_heading > 0: the CAT cell rule exact in the acceleration is for the model "
+                              "without heading noise")
+    if polygons is not None and polygons.count and float(np.max(polygons.times)) > model.t:
+        raise BananagridError(f"evidence times {polygons.times.tolist()!r}: after the map's t = {model.t!r} s; "
+                              "only earlier evidence is carried")
+    edges = cell_turn_edges(model, min(grid.dx, grid.dy))
+    intervals = len(edges) - 1
+    if intervals > MAX_CELL_NODES:
+        raise BananagridError(
+            f"{grid.nx} x {grid.ny} cells of {grid.dx:g} x {grid.dy:g} m: the CAT cell probabilities "
+            f"need {intervals:,} turn-rate intervals (more than {MAX_CELL_NODES:,}) at cells this small "
+            f"for sigma_omega t = {model.sigma_omega * model.t:.3g} rad; use larger cells"
+        )
+    walked = 2.0 * min(grid.nx + grid.ny, 2.0 * cat_cells.Z_MAX * model.sigma_a * model.t**2
+                       * math.sqrt(2.0) / min(grid.dx, grid.dy) + 2.0)
+    seconds = intervals * (SECONDS_PER_LINE + walked * SECONDS_PER_LINE_CELL)
+    if polygons is not None and polygons.count:
+        seconds *= CARRIED_WORK_FACTOR
+
+    def run(ctx: KernelContext):
+        notes = {
+            "cell_method": cat_carried.CELL_METHOD,
+            "turn_rate_intervals": intervals,
+            "truncated_mass": model.truncated_mass,
+        }
+        channels = cat_carried.grid_cell_channels(ctx, model, grid, edges, polygons)
+        return (channels[0] if polygons is None else channels), notes
+
+    return CellPlan(seconds=seconds, run=run, method="CAT lines exact in the acceleration")
+
+
 @modelclass
 class CAT(MotionModel):
     """Constant, unknown acceleration and turn rate (Gade et al.; eq. (1) of the polar-banana paper).
@@ -622,42 +664,21 @@ class CAT(MotionModel):
         """
         if self.sigma_heading > 0.0 or not isinstance(domain, Grid):
             return super().cell_plan(domain, region)
-        grid = domain
-        edges = cell_turn_edges(self, min(grid.dx, grid.dy))
-        intervals = len(edges) - 1
-        if intervals > MAX_CELL_NODES:
-            raise BananagridError(
-                f"{grid.nx} x {grid.ny} cells of {grid.dx:g} x {grid.dy:g} m: the CAT cell probabilities "
-                f"need {intervals:,} turn-rate intervals (more than {MAX_CELL_NODES:,}) at cells this small "
-                f"for sigma_omega t = {self.sigma_omega * self.t:.3g} rad; use larger cells"
-            )
-        walked = 2.0 * min(grid.nx + grid.ny, 2.0 * cat_cells.Z_MAX * self.sigma_a * self.t**2
-                           * math.sqrt(2.0) / min(grid.dx, grid.dy) + 2.0)
-        seconds = intervals * (SECONDS_PER_LINE + walked * SECONDS_PER_LINE_CELL)
+        return grid_cell_plan(self, domain)
 
-        def run(ctx: KernelContext):
-            out = ctx.zeros(grid.shape, dtype=np.float64)
-            x0, _, y0, _ = grid.extent
-            f64 = np.float64
-            head = [ctx.array(edges, dtype=f64), f64(self.sigma_omega)]
-            scalars = [f64(self.v0), f64(self.t), f64(self.sigma_a)]
-            pose = ctx.array(self.pose.as_array(), dtype=f64)
-            ctx.load(cat_cells.cat_cells)
-
-            def launch(r0, r1):
-                ctx.launch(cat_cells.cat_cells, dim=intervals, inputs=[
-                    *head, r0, r1, *scalars, pose, f64(x0), f64(y0), f64(grid.dx), f64(grid.dy), grid.nx, out,
-                ])
-
-            ctx.run_bands(launch, ctx.bands(grid.ny, 4))
-            notes = {
-                "cell_method": "exact in the acceleration, Gauss-Legendre between corner passes over the turn rate",
-                "turn_rate_intervals": intervals,
-                "truncated_mass": self.truncated_mass,
-            }
-            return ctx.numpy(out), notes
-
-        return CellPlan(seconds=seconds, run=run, method="CAT lines exact in the acceleration")
+    def carried_cell_plan(self, domain, pack: EvidencePack) -> CellPlan | None:
+        """The channels' cell masses with the pack's earlier evidence inside, exact in the
+        acceleration (:mod:`bananagrid.models.cat_carried`; the hook of
+        :class:`~bananagrid.protocol.CarryingModel`): ``run`` returns float64 ``(C, ny, nx)``,
+        channel c's unnormalised weighted probability of each cell. For searches at one time
+        each on a grid, without heading noise; None otherwise (the sub-cell rule on
+        :meth:`bind_carried`'s densities serves)."""
+        if self.sigma_heading > 0.0 or not isinstance(domain, Grid):
+            return None
+        polygons = cat_carried.polygons_of_pack(pack)
+        if polygons is None:
+            return None
+        return grid_cell_plan(self, domain, polygons)
 
     def density_bound(self, x0: float, x1: float, y0: float, y1: float) -> float:
         """A proved bound of the density the grid kernel computes, in float32 or float64, at any
