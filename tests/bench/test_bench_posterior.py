@@ -21,9 +21,9 @@ def small_submarine(monkeypatch):
     monkeypatch.setitem(rows.ROWS, "butterly-posterior", row)
 
 
-@pytest.mark.parametrize("names, evidence", [(["cat-posterior", "butterly-posterior"], "same"),
-                                             (["cat-posterior"], "earlier")])
-def test_posterior_rows_time_the_posterior_against_its_prior(names, evidence, small_submarine, tmp_path, capsys):
+@pytest.mark.parametrize("evidence", ["same", "earlier"])
+def test_posterior_rows_time_the_posterior_against_its_prior(evidence, small_submarine, tmp_path, capsys):
+    names = ["cat-posterior", "butterly-posterior"]
     out = tmp_path / "bench.json"
     argv = ["--kernels", ",".join(names), "--evidence", evidence, "--step", "200",
             "--repeat", "1", "--threads", "1", "--no-memory", "--json", str(out)]
