@@ -51,6 +51,7 @@ from ..results import Raster
 from ..validate import BananagridError
 from ..engine.cluster import check_memory_limit
 from . import baselines, cluster, peers
+from .posterior import EVIDENCE, ROWS as POSTERIOR_ROWS, check_rows, posterior_rows
 
 #: Figure 1 of the polar-banana paper.
 FIG1 = dict(v0=280.0, t=10.0, sigma_a=5.0 / 3.0, sigma_omega=math.pi / 54.0)
@@ -355,8 +356,10 @@ JOBS = {
     "allocate": _AllocateJob, "plan-periods": _PeriodPlanJob,
 }
 
-#: Every row of the bench, in order: a grid row's model factory, or None for a job.
-KERNELS = {**{name: functools.partial(grid_model, name) for name in GRID_ROWS}, **dict.fromkeys(JOBS)}
+#: Every row of the bench, in order: a grid row's model factory, or None for a job or a posterior
+#: row (:mod:`bananagrid.bench.posterior`).
+KERNELS = {**{name: functools.partial(grid_model, name) for name in GRID_ROWS}, **dict.fromkeys(JOBS),
+           **dict.fromkeys(POSTERIOR_ROWS)}
 
 #: Geometries in the containment timing.
 CONTAINMENT_GEOMETRIES = 1_000_000
@@ -429,6 +432,8 @@ def run(kernels, step: float, threads: int, repeat: int, stride: int, log=print,
     for name in kernels:
         if name in JOBS:
             records += _run_job(name, threads, repeat, stride, log, device)
+            continue
+        if name in POSTERIOR_ROWS:  # timed by posterior_rows, after the kernel rows
             continue
         model = grid_model(name)
         grid = _grid_for(name, step)
@@ -668,6 +673,9 @@ def _parser() -> argparse.ArgumentParser:
                         f"is installed: {peers.PEERS_EXTRA})")
     p.add_argument("--no-memory", action="store_true", help=f"skip the peak-memory probe ({MEMORY_SIDE} x {MEMORY_SIDE} float32)")
     p.add_argument("--json", metavar="FILE", help="also write the records as JSON to FILE")
+    p.add_argument("--evidence", choices=EVIDENCE, default="earlier",
+                   help="the posterior rows' two searches: at earlier times, carried to the map's time through the "
+                        "model's paths (default), or at the map's own time")
     p.add_argument("--device", default="cpu",
                    help="Warp device of the kernel rows: cpu (default) or cuda. On cuda each row runs once per dtype "
                         "(results copied back to the host included), its first call (building or loading the kernel "
@@ -740,6 +748,11 @@ def main(argv: list[str] | None = None) -> int:
             check_target(args.json, "JSON records")  # a directory, a link or a pipe there is refused
         except BananagridError as exc:
             problems.append(f"--json {args.json}: {exc}")
+    if not problems:
+        try:
+            check_rows([name for name in kernels if name in POSTERIOR_ROWS], args.step, args.evidence)
+        except BananagridError as exc:
+            problems.append(f"--evidence {args.evidence}: {exc}")
     if problems:
         print(f"bananagrid: error: {problems[0]}", file=sys.stderr)
         return 2
@@ -753,10 +766,18 @@ def main(argv: list[str] | None = None) -> int:
               "(cat-heading, polar-heading: the plain CAT's and the improved polar's, as they have no NumPy twin)"
               + (f", CAT and Butterly on every {args.baseline_stride}th row, scaled" if args.baseline_stride > 1 else ""))
     records = []
-    if kernels:
+    kernel_rows = [name for name in kernels if name not in POSTERIOR_ROWS]
+    if kernel_rows:
         print(HEADER)
-        records = run(kernels, args.step, args.threads, args.repeat, args.baseline_stride, device=args.device)
+        records = run(kernel_rows, args.step, args.threads, args.repeat, args.baseline_stride, device=args.device)
+    posterior_names = [name for name in kernels if name in POSTERIOR_ROWS]
+    if posterior_names:
+        if gpu:
+            print(f"posterior rows: on the CPU (--device {args.device} applies to the kernel rows)")
+        result_posterior = posterior_rows(posterior_names, args.step, args.threads, args.repeat, args.evidence)
     result = {"machine": machine(), "device": device, "step": args.step, "records": records}
+    if posterior_names:
+        result["posterior"] = result_posterior
     if args.small:
         result["small_calls"] = small_calls(args.threads, args.repeat)
     if args.cluster:
@@ -771,7 +792,7 @@ def main(argv: list[str] | None = None) -> int:
                   and not GRID_ROWS[name][1].get("sigma_heading")]  # the peers compute (8) and (11) only
     if polar_rows and not args.no_peers and not gpu:
         result["peers"] = peer_table(polar_rows, args.step, args.repeat)
-    for name in kernels:
+    for name in kernel_rows:
         one = {r["dtype"]: r for r in records if r["kernel"] == name and r["threads"] == 1}
         many = {r["dtype"]: r for r in records if r["kernel"] == name and r["threads"] == args.threads}
         if args.threads > 1 and not gpu:

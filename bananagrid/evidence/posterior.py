@@ -73,7 +73,7 @@ import numpy as np
 from ..domains.grid import Grid
 from ..domains.polar_lattice import PolarLattice
 from ..engine.carried import carries, evaluate_carried
-from ..engine.rasterise import rasterise
+from ..engine.rasterise import MIN_MASS, rasterise
 from ..engine.warp_runtime import WarpContext
 from ..models.presence import grid_probabilities
 from ..results import PolarRaster, Raster
@@ -83,7 +83,8 @@ from .packing import pack as pack_evidence
 from .reports import BearingReport, Exclusion, PositionReport
 from .searches import AreaSearch, RasterSearch, TrackSearch
 
-__all__ = ["posterior", "Posterior", "PolarPosterior", "MIN_NORMALISER", "SUBDIVISIONS", "EVIDENCE_TYPES"]
+__all__ = ["posterior", "cell_means", "finish_cells", "CellMeans", "Posterior", "PolarPosterior", "MIN_NORMALISER",
+           "SUBDIVISIONS", "EVIDENCE_TYPES"]
 
 #: Below this the evidence contradicts the prior: the searches would have found the target almost
 #: surely, or a report lies where the prior holds no mass (the map would be rounding noise).
@@ -189,9 +190,69 @@ def posterior(prior, grid, evidence=(), *, subdivisions: int = SUBDIVISIONS, thr
     carried = _Carried(prior, evidence, earlier, threads) if earlier else None
     if isinstance(grid, PolarLattice):
         return _polar_posterior(prior, grid, evidence, n, threads, carried)
+    return finish_cells(_grid_cell_means(prior, grid, evidence, n, threads, carried))
+
+
+@dataclass(frozen=True)
+class CellMeans:
+    """The cell-by-cell half of a posterior on a grid (:func:`cell_means`): every array is the
+    cells' own (a cell's values depend on that cell alone), so a grid's blocks give the whole
+    grid's cells; :func:`finish_cells` is the reduction (the normaliser, POS, the map).
+
+    Attributes
+    ----------
+    grid : Grid
+    frame : GeoFrame or None
+    cells : ndarray (ny, nx)
+        The prior's cell probabilities P_c.
+    means : dict
+        f_c of each combination of the evidence (``"all"``, ``"searches"``, ``"others"``,
+        ``("search", k)`` for the k-th evidence, a search): the density-weighted cell mean of
+        its likelihood.
+    evidence : list
+    provenance : dict
+        The prior's.
+    boundary_mass : float or None
+        The bound of the module docstring over these cells (None where a smooth factor varies).
+    subdivisions : int
+    """
+
+    grid: Grid
+    frame: object
+    cells: np.ndarray
+    means: dict
+    evidence: list
+    provenance: dict
+    boundary_mass: float | None
+    subdivisions: int
+
+
+def cell_means(prior, grid, evidence=(), *, subdivisions: int = SUBDIVISIONS, threads=None,
+               min_mass: float = MIN_MASS) -> CellMeans:
+    """The cells' half of :func:`posterior` on a :class:`Grid` (arguments as there, checked the
+    same way), before any sum over the grid: ``posterior(prior, grid, evidence)`` is
+    ``finish_cells(cell_means(prior, grid, evidence))``. ``min_mass``: as for
+    :func:`~bananagrid.rasterise` (0 for a block of a larger grid, which the whole grid's
+    capture concerns, not the block's)."""
+    n = positive_int("subdivisions", subdivisions)
+    evidence, earlier = _checked_evidence(prior, evidence)
+    carried = _Carried(prior, evidence, earlier, threads) if earlier else None
+    return _grid_cell_means(prior, grid, evidence, n, threads, carried, min_mass)
+
+
+def finish_cells(parts: CellMeans) -> Posterior:
+    """The posterior of :func:`cell_means`' cells: the normaliser, POS, each search's POS, the
+    POD map and the cells' posterior probabilities (raises where the evidence contradicts the
+    prior, as :func:`posterior`)."""
+    return _finish(Posterior, dict(grid=parts.grid, frame=parts.frame), parts.cells, parts.means, parts.evidence,
+                   parts.provenance, parts.boundary_mass, parts.subdivisions)
+
+
+def _grid_cell_means(prior, grid, evidence, n, threads, carried=None, min_mass=MIN_MASS) -> CellMeans:
+    earlier = set() if carried is None else carried.earlier
     if not isinstance(grid, Grid):
         raise BananagridError(f"grid = {grid!r}: expected a bananagrid Grid or PolarLattice")
-    cells, provenance, frame = _grid_prior(prior, grid, threads)
+    cells, provenance, frame = _grid_prior(prior, grid, threads, min_mass)
     ny, nx = grid.shape
     x_edges = grid.origin[0] + grid.dx * np.arange(nx + 1)
     y_edges = grid.origin[1] + grid.dy * np.arange(ny + 1)
@@ -241,7 +302,7 @@ def posterior(prior, grid, evidence=(), *, subdivisions: int = SUBDIVISIONS, thr
                 means[key] = means[key] * share[carried.index(key)]
             notes = {**notes, "cell_rule": plan.method, **plan_notes}
         provenance = {**provenance, "carried": notes}
-    return _finish(Posterior, dict(grid=grid, frame=frame), cells, means, evidence, provenance, bound, n)
+    return CellMeans(grid, frame, cells, means, evidence, provenance, bound, n)
 
 
 class _Carried:
@@ -367,7 +428,7 @@ def _checked_evidence(prior, evidence) -> list:
     return evidence, earlier
 
 
-def _grid_prior(prior, grid: Grid, threads):
+def _grid_prior(prior, grid: Grid, threads, min_mass=MIN_MASS):
     """The prior's cell probabilities on ``grid``, its provenance and frame."""
     kind = getattr(prior, "kind", None)
     if not callable(getattr(prior, "bind", None)) and kind == "mixture":  # a presence law: its exact rectangles
@@ -375,7 +436,7 @@ def _grid_prior(prior, grid: Grid, threads):
         return np.asarray(presence.probability, dtype=float), dict(presence.provenance), None
     if not callable(getattr(prior, "bind", None)) and kind == "uniform":
         return _uniform_cells(prior, grid), {"model": type(prior).__name__, **prior.parameters()}, None
-    raster = rasterise(prior, grid, quantity="probability", threads=threads)
+    raster = rasterise(prior, grid, quantity="probability", threads=threads, min_mass=min_mass)
     return np.asarray(raster.values, dtype=float), dict(raster.provenance), raster.frame
 
 
