@@ -142,7 +142,7 @@ def log_posterior(rec: rr.RecordingStream, layer: str, post, values: dict, specs
 
 
 def evidence_view(layers: Sequence[str], extent: tuple | None = None, entity: str = EVIDENCE_ENTITY) -> rrb.Tabs:
-    """The evidence's panel: per layer, its prior and posterior side by side (the searches,
+    """The evidence's panel: per layer, its prior above its posterior (the searches,
     tracks, reports and land over both), then the POD map, the POS over time and the summary."""
     root = entity_path(entity)
     bounds = None
@@ -153,7 +153,7 @@ def evidence_view(layers: Sequence[str], extent: tuple | None = None, entity: st
     tabs = []
     for layer in layers:
         base = f"/{root}/{entity_path(layer)}"
-        tabs.append(rrb.Horizontal(
+        tabs.append(rrb.Vertical(
             rrb.Spatial2DView(origin="/", contents=[f"{base}/prior", marks], name=f"{layer} · prior (cell probability)",
                               visual_bounds=bounds),
             rrb.Spatial2DView(origin="/", contents=[f"{base}/posterior", marks],

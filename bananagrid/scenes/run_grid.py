@@ -367,21 +367,22 @@ def _blueprint(scene: Scene, frames: dict, plan_frame: tuple | None = None, *,
         several_times=scene.times is not None and len(scene.times) > 1,
         frames=frames,
         map_view=_with_plan(None if scene.geo is None else map_view(scene.geo, scene.grid.extent, models), scene,
-                            plan_frame),
+                            plan_frame, list(frames.values())),
         colours=colours,
         mass_top=mass_top,
         timeline=UTC if scene.geo is not None and scene.geo.time is not None else ELAPSED,
+        follow=bool(scene.evidence),
     )
 
 
-def _with_plan(geographic, scene: Scene, plan_frame: tuple | None):
+def _with_plan(geographic, scene: Scene, plan_frame: tuple | None, layer_frames: list | None = None):
     """The panel after the layers' maps: the evidence's (prior and posterior side by side,
     :func:`~bananagrid.recording.evidence.evidence_view`), the plan's
     (:func:`~bananagrid.recording.plan.plan_view`) and the geographic map, as tabs in that
     order (each where the scene has it)."""
     panels = []
     if scene.evidence:
-        panels.append(evidence_view([layer.name for layer in scene.layers], _evidence_frame(scene)))
+        panels.append(evidence_view([layer.name for layer in scene.layers], _evidence_frame(scene, layer_frames)))
     if scene.plan is not None:
         panels.append(plan_view(plan_frame, rectangles=scene.plan.rectangles > 0, bands=scene.plan.bands > 0))
     if geographic is not None:
@@ -392,14 +393,17 @@ def _with_plan(geographic, scene: Scene, plan_frame: tuple | None):
         (bool(scene.evidence), scene.plan is not None, geographic is not None)) if wanted))
 
 
-def _evidence_frame(scene: Scene, margin: float = 0.1) -> tuple[float, float, float, float] | None:
-    """Where the evidence's views open: the grid, widened to hold the evidence's shapes and tracks."""
-    x0, x1, y0, y1 = scene.grid.extent
+def _evidence_frame(scene: Scene, layer_frames: list | None = None,
+                    margin: float = 0.1) -> tuple[float, float, float, float] | None:
+    """Where the evidence's views open: the layers' maps' frames (else the grid), widened to
+    hold the evidence's shapes and tracks (within the grid: land or a track may reach far beyond)."""
+    x0, x1, y0, y1 = union_extent(layer_frames) if layer_frames else scene.grid.extent
+    gx0, gx1, gy0, gy1 = scene.grid.extent
     xs, ys = [x0, x1], [y0, y1]
     for spec in scene.evidence:
         for shape in (*spec.shapes, *(() if spec.track is None else (spec.track[:, :2],))):
-            xs += [float(shape[:, 0].min()), float(shape[:, 0].max())]
-            ys += [float(shape[:, 1].min()), float(shape[:, 1].max())]
+            xs += [max(gx0, float(shape[:, 0].min())), min(gx1, float(shape[:, 0].max()))]
+            ys += [max(gy0, float(shape[:, 1].min())), min(gy1, float(shape[:, 1].max()))]
     pad = margin * max(max(xs) - min(xs), max(ys) - min(ys))
     return (min(xs) - pad, max(xs) + pad, min(ys) - pad, max(ys) + pad)
 
