@@ -356,16 +356,21 @@ def _track_points(path: str, where: str, value, geo) -> np.ndarray:
 
 
 def _made(path: str, renamed: dict, build):
-    """``build()``, its one-line refusal restated with the scene's key (``renamed``: the
-    constructor's argument -> the key that set it) under ``path``."""
+    """``build()``, its one-line refusal restated with the scene's keys (``renamed``: the
+    constructor's arguments -> the keys that set them, replaced where the message names them
+    before its first colon) under ``path``."""
     try:
         return build()
     except BananagridError as exc:
-        message = str(exc)
-        head = re.match(r"(\w+)", message)
-        if head and head.group(1) in renamed:
-            message = renamed[head.group(1)] + message[len(head.group(1)):]
-            raise SceneKeyError(f"{path}.{message}") from None
-        if head and head.group(1) in ("t", "pod", "coverage", "sigma", "cov", "sweep_width", "law", "track"):
+        head, sep, rest = str(exc).partition(": ")
+        key = re.match(r"\w+", head)
+        head = re.sub(r"\b\w+\b", lambda m: renamed.get(m.group(0), m.group(0)), head.split(" = ")[0]) \
+            + head[len(head.split(" = ")[0]):]
+        message = head + sep + rest
+        if key and (key.group(0) in renamed or key.group(0) in _OWN_KEYS):
             raise SceneKeyError(f"{path}.{message}") from None
         raise SceneKeyError(f"{path}: {message}") from None
+
+
+#: Arguments of the evidence constructors that are scene keys of the same name.
+_OWN_KEYS = ("t", "pod", "coverage", "sigma", "cov", "sweep_width", "law", "track", "position", "sensors")
