@@ -51,7 +51,7 @@ from ..version import __version__
 from .load import Layer, Scene
 from .run_outputs import NPZ, RUN_ONLY_PROVENANCE, write_exports
 from .run_evidence import (
-    EVIDENCE_BYTES_PER_CELL, EVIDENCE_KEPT_BYTES_PER_CELL, evidence_paths, record_evidence_marks, record_posterior, scene_posterior,
+    evidence_bytes_per_cell, evidence_paths, record_evidence_marks, record_posterior, scene_posterior,
     write_evidence_geojson,
 )
 from .run_plan import ScenePlan, plan_label, plan_paths, plan_scene, record_plan, write_plan_geojson
@@ -264,7 +264,7 @@ def check_run_memory(scene: Scene, *, exports: bool = False, limit: float | None
     per_cell = (RUN_BYTES_PER_CELL + (EXPORT_BYTES_PER_MAP_CELL * kept if exports else 0)
                 + (PROBABILITY_BYTES_PER_CELL if scene.cell_probabilities else 0)
                 + (PLAN_BYTES_PER_CELL if scene.plan is not None else 0)
-                + (EVIDENCE_BYTES_PER_CELL + EVIDENCE_KEPT_BYTES_PER_CELL * len(scene.jobs()) if scene.evidence else 0))
+                + evidence_bytes_per_cell(scene))
     return check_memory(cells, per_cell, f"{scene.source}: a grid of {scene.grid.nx} x {scene.grid.ny} = {cells:,} cells",
                         limit=limit, option="--max-memory GB")
 
