@@ -23,6 +23,7 @@ from ..geo.frame import iso_utc
 from ..geo.geojson import area_features, line_lonlat, polygons_lonlat
 from ..geo.libraries import require
 from ..recording.evidence import evidence_values, log_evidence_marks, log_posterior
+from ..recording.geomap import log_map_evidence
 from ..recording.timeline import set_times
 from ..validate import BananagridError
 from .evidence import job_evidence
@@ -111,8 +112,14 @@ def scene_posterior(scene: Scene, layer: Layer, t: float, model=None, *, threads
 
 
 def record_evidence_marks(rec, scene: Scene) -> None:
-    """The evidence's geometry, each at its time on the elapsed (and UTC) timelines."""
-    log_evidence_marks(rec, scene.evidence, lambda seconds: set_times(rec, seconds, scene.geo), scene.grid.extent)
+    """The evidence's geometry, each at its time on the elapsed (and UTC) timelines; in a
+    geographic scene on each layer's map too."""
+    def at(seconds: float) -> None:
+        set_times(rec, seconds, scene.geo)
+
+    log_evidence_marks(rec, scene.evidence, at, scene.grid.extent)
+    if scene.geo is not None:
+        log_map_evidence(rec, [layer.name for layer in scene.layers], scene.evidence, scene.geo, at)
 
 
 def record_posterior(rec, scene: Scene, found: ScenePosterior) -> None:
