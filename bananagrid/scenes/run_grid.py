@@ -151,7 +151,9 @@ class GridRun:
 
     def _plan_step(self, rec, rows: list[dict]) -> None:
         scene = self.scene
-        self.plan = plan_scene(scene, threads=self.threads)
+        # after evidence, the plan searches the posterior: where the target is given nothing found so far
+        found = next((p.posterior for p in self.posteriors if (p.layer, p.t) == (scene.plan.layer, scene.plan.t)), None)
+        self.plan = plan_scene(scene, threads=self.threads, posterior=found)
         record_plan(rec, scene, self.plan)
         for row in rows:
             if row["layer"] == scene.plan.layer and row["t"] == scene.plan.t:

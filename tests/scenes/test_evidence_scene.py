@@ -7,7 +7,11 @@ from __future__ import annotations
 
 import json
 import math
+import subprocess
+import sys
 from datetime import datetime, timedelta, timezone
+
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -159,8 +163,11 @@ def test_the_files_hold_the_posteriors_bg_posterior_gives(ran, direct):
                 dict(zip(["box", "patrol"], direct["cat", 900.0].search_pos)), abs=tol)
 
 
-def test_the_evidence_geojson(ran, direct):
+def test_the_recording_verifies_and_the_evidence_geojson(ran, direct):
     out, _ = ran
+    verify = subprocess.run([str(Path(sys.executable).parent / "rerun"), "rrd", "verify", str(out / "ev_ship.rrd")],
+                            capture_output=True, text=True, timeout=120)
+    assert verify.returncode == 0, verify.stderr
     collection = json.loads((out / "ev_ship-evidence.geojson").read_text())
     features = collection["features"]
     evidence = {f["properties"]["evidence"]: f for f in features if "evidence" in f["properties"]}
@@ -221,6 +228,19 @@ def test_the_printed_summary_and_the_files_named(tmp_path, capsys):
     assert "ev_ship: posterior of cat at t = 600 s after land: POS 0.0000" in captured.out
     for name in ("ev_ship-evidence.geojson", "ev_ship-posterior.tif", "ev_ship-pod.tif"):
         assert f"wrote {tmp_path / 'o' / name}" in captured.out
+
+
+def test_a_plan_after_evidence_searches_the_posterior(tmp_path, direct):
+    """A scene's [plan] after evidence allocates its effort on the layer's posterior at the
+    plan's time: where the target is given that nothing was found so far."""
+    _write(tmp_path, SCENE + EVIDENCE + "[plan]\neffort_km2 = 8.0\nsweep_width = 500.0\nbands = 2\n")
+    rows = run_scene(bg.load_scene(tmp_path / "ev_ship.toml"), tmp_path)
+    (row,) = [r for r in rows if "plan" in r]
+    want = bg.allocate(direct["cat", 900.0], 8.0e6)
+    # 1e-12: the same solver on the same posterior (equal to the direct call's to 1e-12, above)
+    assert row["plan"]["pos"] == pytest.approx(want.pos, abs=1e-12)
+    assert row["plan"]["map_mass"] == pytest.approx(1.0, abs=1e-12)  # the posterior, normalised over the grid
+    assert row["plan"]["bands_pos"] == pytest.approx(bg.search_regions(want, 2, sweep_width=500.0).pos, abs=1e-12)
 
 
 def test_the_evidence_files_are_planned_with_the_run(tmp_path):
