@@ -16,8 +16,8 @@ from .engine.batch import pdf_batch, rasterise_batch
 from .engine.batch_shards import pdf_batch_shards, rasterise_batch_shards
 from .engine.cluster import dask_client
 from .engine.rasterise import rasterise
-from .evidence import (AreaSearch, BearingReport, Exclusion, PolarPosterior, PositionReport, Posterior, TrackSearch,
-                       posterior)
+from .evidence import (AreaSearch, BearingReport, Exclusion, PolarPosterior, PositionReport, Posterior, RasterSearch,
+                       TrackSearch, posterior)
 from .geo.frame import GeoFrame
 from .geo.inputs import Bearings, Fix, Track, read_bearings, read_fix, read_track
 from .models.base import Model
@@ -56,8 +56,8 @@ __all__ = [
     "radial_moments", "radial_density", "RadialMoments", "RadialDensity", "compare", "Comparison",
     "bearing_to", "containment", "containment_radius",
     # evidence on the map
-    "AreaSearch", "TrackSearch", "PositionReport", "BearingReport", "Exclusion", "posterior", "Posterior",
-    "PolarPosterior",
+    "AreaSearch", "TrackSearch", "RasterSearch", "PositionReport", "BearingReport", "Exclusion", "posterior",
+    "Posterior", "PolarPosterior",
     # where to look next
     "allocate", "Allocation", "DetectionLaw", "detection_law", "search_rectangles", "SearchPlan", "SearchRectangle",
     "search_regions", "RegionPlan", "SearchRegion", "plot_allocation",

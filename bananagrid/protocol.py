@@ -31,7 +31,8 @@ import numpy as np
 from .domains.pose import Pose
 
 __all__ = [
-    "DensityModel", "PresenceModel", "BatchModel", "KernelBinding", "CellPlan", "KernelContext", "Extent", "SceneKey", "SceneSchema",
+    "DensityModel", "PresenceModel", "BatchModel", "CarryingModel", "EvidencePack", "KernelBinding", "CellPlan",
+    "KernelContext", "Extent", "SceneKey", "SceneSchema",
     "KEY_TYPES",
     "LATLON",
 ]
@@ -469,3 +470,91 @@ class PresenceModel(Protocol):
         names this law; ``path``: its key path) on ``lattice``, the scene's room ``room`` (a
         :class:`~bananagrid.Region` or None): how the law's scene is written, so that the
         parser names no kind. Raises :class:`~bananagrid.BananagridError` naming the key."""
+
+
+@dataclass(frozen=True, eq=False)
+class EvidencePack:
+    """Evidence at times before a map's, as the flat arrays the kernels read (built and
+    validated by :func:`bananagrid.evidence.packing.pack`; what each column means:
+    ``bananagrid/kernels/evidence.py``). Float arrays are float64 here; the engine casts them
+    to the kernels' dtype (:func:`bananagrid.engine.carried.evidence_struct`).
+
+    Attributes
+    ----------
+    t : float
+        The map's time (s since the last fix); every node is at or before it.
+    time, q : ndarray (N,)
+        Node times (sorted) and quadrature weights.
+    data : ndarray (N, DATA_COLUMNS)
+        Each node's numbers (its kind's: polygon value and box, report mean and precision, ...).
+    ints : ndarray (N, INT_COLUMNS), int32
+        Each node's kind, factor, offset and count.
+    edges : ndarray (E, 4)
+        Polygon edges (x0, y0, x1, y1), world metres (at least one row).
+    raster : ndarray (R,)
+        Raster values (at least one).
+    channels : ndarray (C, F), int32
+        1 where factor k is in channel c (the channels' weights multiply their factors').
+    channel_names : tuple of str
+        ``"prior"`` (no factor), ``"all"``, ``"searches"``, ``"others"`` (reports),
+        ``"search:K"`` (search K with the reports), K as in ``factor_keys``.
+    factor_keys : tuple of str
+        The evidence each factor comes from (``"evidence[K]"``), in factor order.
+    factor_kinds : tuple of str
+        ``"search"`` or ``"report"`` for each factor.
+    """
+
+    t: float
+    time: np.ndarray
+    q: np.ndarray
+    data: np.ndarray
+    ints: np.ndarray
+    edges: np.ndarray
+    raster: np.ndarray
+    channels: np.ndarray
+    channel_names: tuple
+    factor_keys: tuple
+    factor_kinds: tuple
+
+    @property
+    def nodes(self) -> int:
+        return len(self.time)
+
+    @property
+    def factors(self) -> int:
+        return self.channels.shape[1]
+
+    def channel(self, name: str) -> int:
+        """Index of the channel ``name``."""
+        return self.channel_names.index(name)
+
+
+@runtime_checkable
+class CarryingModel(Protocol):
+    """A model whose kernels carry earlier evidence along its paths (CAT, Butterly): the hook
+    by which :func:`bananagrid.posterior` gets maps weighted by evidence at times before the
+    model's ``t``.
+
+    The engine (:func:`bananagrid.engine.carried.evaluate_carried`) calls :meth:`bind_carried`
+    and launches the binding's ``kernels.points`` as
+
+        ``points(xs, ys, start, p, ev, lw, out)`` over a chunk of points from ``start``:
+        ``p`` the binding's params, ``ev`` the pack's struct (``kernels/evidence.py``'s
+        ``EVIDENCE``), ``lw`` a scratch array (points, max(F, 1)) of the factors' log-weights,
+        ``out`` (points, C) the channels, zeroed by the kernel for each of its points before it
+        adds, per path through the point, density(path) x weight_c(path) with
+        ``evidence_reset`` / ``evidence_node`` / ``evidence_add`` (``kernels/evidence.py``).
+
+    So a family writes one ``@wp.kernel`` of that signature (its own paths, the shared weight
+    helpers; :func:`bananagrid.kernels.generate.carried_points_kernel` writes it around a
+    ``@wp.func carried(x, y, p, ev, lw, out)``) and overloads it for both scalars.
+
+    Optional: ``carried_cell_plan(domain, pack) -> CellPlan | None``, a model's own rule for the
+    cells' channel masses (the CAT's lines exact in the acceleration, Butterly's cells):
+    ``run(ctx)`` returns ``(cells, notes)``, cells float64 of shape ``(C, ny, nx)`` (channel c's
+    weighted probability of each cell, unnormalised). :func:`bananagrid.posterior` uses it where
+    a model has it (None: the sub-cell rule on :meth:`bind_carried`'s densities).
+    """
+
+    def bind_carried(self, ctx: KernelContext, extent: Extent, pack: EvidencePack) -> KernelBinding:
+        """The carried points kernel (above) and its parameters, for points within ``extent``."""

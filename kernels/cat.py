@@ -20,8 +20,11 @@ from typing import Any
 
 import warp as wp
 
-from .common import cat_basis, normal_pdf, world_to_local
-from .generate import ARRAY2D, SCALAR, SCALARS, VEC4, Params, density_kernels, overload_on_use
+from .common import cat_basis, local_to_world, normal_pdf, world_to_local
+from .evidence import EVIDENCE, evidence_add, evidence_node, evidence_nodes, evidence_reset, evidence_time
+from .generate import (
+    ARRAY, ARRAY2D, SCALAR, SCALARS, VEC4, Params, carried_points_kernel, density_kernels, overload_on_use,
+)
 
 #: Table columns: omega; the coefficients of F = hx*y - hy*x - c and of
 #: dF/domega = dhx*y - dhy*x - dc; and of the acceleration of the line through P,
@@ -137,12 +140,70 @@ def hermite_minimum(f0: Any, g0: Any, f1: Any, g1: Any, width: Any):
     return lowest
 
 
+#: A root's path under evidence (``cat_carry_root``): the pack's struct, the pose that places the
+#: path in the world (the model's, turned by a heading node), and the weight of that heading node.
+CAT_CARRY = Params("CatCarry", __name__, ev=lambda scalar: EVIDENCE.of(scalar), pose=VEC4, scale=SCALAR)
+
+
+@wp.func
+def cat_path_position(a: Any, omega: Any, v0: Any, s: Any):
+    """Local position at time s of the CAT path with acceleration a and turn rate omega, eq. (1)
+    with u = omega s: v0 s (A, B) + a s^2 (C, D) (``common.cat_basis``)."""
+    a_fn, b_fn, c_fn, d_fn, dc_fn, dd_fn = cat_basis(omega * s)
+    s2 = s * s
+    return v0 * s * a_fn + a * s2 * c_fn, v0 * s * b_fn + a * s2 * d_fn
+
+
+@wp.func
+def cat_carry_path(carry: Any, a: Any, omega: Any, v0: Any, density: Any, lw: wp.array(dtype=Any),
+                   out: wp.array(dtype=Any)):
+    """Add the path (a, omega)'s density times its evidence weights (``kernels/evidence.py``) to
+    ``out``, scaled by the heading node's weight; positions at the pack's node times (reused
+    while a time repeats: the nodes are sorted)."""
+    ev = carry.ev
+    evidence_reset(ev, lw)
+    zero = type(a)(0.0)
+    px = zero
+    py = zero
+    s_prev = zero
+    for j in range(evidence_nodes(ev)):
+        s = evidence_time(ev, j)
+        if j == 0 or s != s_prev:
+            lx, ly = cat_path_position(a, omega, v0, s)
+            px, py = local_to_world(lx, ly, carry.pose)
+            s_prev = s
+        evidence_node(ev, j, px, py, lw)
+    evidence_add(ev, lw, carry.scale * density, out)
+
+
+@wp.func
+def cat_carry_root(carry: int, a: Any, omega: Any, v0: Any, density: Any, lw: wp.array(dtype=Any),
+                   out: wp.array(dtype=Any)):
+    """No evidence (the plain kernels): nothing to add."""
+    return
+
+
+@wp.func
+def cat_carry_root(carry: CAT_CARRY.of(wp.float64), a: wp.float64, omega: wp.float64, v0: wp.float64,  # noqa: F811
+                   density: wp.float64, lw: wp.array(dtype=wp.float64), out: wp.array(dtype=wp.float64)):
+    cat_carry_path(carry, a, omega, v0, density, lw, out)
+
+
+@wp.func
+def cat_carry_root(carry: CAT_CARRY.of(wp.float32), a: wp.float32, omega: wp.float32, v0: wp.float32,  # noqa: F811
+                   density: wp.float32, lw: wp.array(dtype=wp.float32), out: wp.array(dtype=wp.float32)):
+    cat_carry_path(carry, a, omega, v0, density, lw, out)
+
+
 @wp.func
 def cat_root_density(
     x: Any, y: Any, lo: Any, hi: Any, f_lo: Any, g_lo: Any, f_hi: Any, g_hi: Any,
     v0: Any, t: Any, sigma_a: Any, sigma_omega: Any, tol: Any, noise_g: Any,
+    carry: Any, lw: wp.array(dtype=Any), out: wp.array(dtype=Any),
 ):
-    """g(a) g(omega) / |det J| at the root of F in [lo, hi] (F(lo), F(hi) of opposite sign).
+    """g(a) g(omega) / |det J| at the root of F in [lo, hi] (F(lo), F(hi) of opposite sign);
+    ``cat_carry_root`` adds the root's path, weighted by the evidence, to ``out`` (a no-op for
+    the plain kernels, whose ``carry`` is the integer 0).
 
     Newton from the Hermite estimate, kept inside the bracket (bisection when it leaves it);
     the density is taken from the last evaluation, whose omega is within ``tol`` of the root.
@@ -173,7 +234,9 @@ def cat_root_density(
             break
         w = w_new
         f, df, acc = cat_eval(x, y, w, v0, t)
-    return normal_pdf(acc, zero, sigma_a) * normal_pdf(w, zero, sigma_omega) / wp.max(wp.abs(df), noise_g)
+    density = normal_pdf(acc, zero, sigma_a) * normal_pdf(w, zero, sigma_omega) / wp.max(wp.abs(df), noise_g)
+    cat_carry_root(carry, acc, w, v0, density, lw, out)
+    return density
 
 
 @wp.func
@@ -224,7 +287,7 @@ def cat_negligible(table: wp.array2d(dtype=Any), k: int, x: Any, y: Any, a_cut: 
 def cat_interval(
     x: Any, y: Any, lo: Any, hi: Any, f_lo: Any, g_lo: Any, f_hi: Any, g_hi: Any,
     v0: Any, t: Any, sigma_a: Any, sigma_omega: Any, tol: Any, r: Any, noise_f: Any, noise_g: Any,
-    last: bool,
+    last: bool, carry: Any, lw: wp.array(dtype=Any), out: wp.array(dtype=Any),
 ):
     """The density of the roots of F in [lo, hi] (F, dF/domega given at both ends), and whether
     the bounds below settled them (``last``: settle them anyway, by the fold search).
@@ -266,7 +329,9 @@ def cat_interval(
             type(x)(0.125) * m3w2 + noise_g
         )
         if monotone or wp.abs(g_hi - g_lo) > curvature or last:
-            density = cat_root_density(x, y, lo, hi, f_lo, g_lo, f_hi, g_hi, v0, t, sigma_a, sigma_omega, tol, noise_g)
+            density = cat_root_density(
+                x, y, lo, hi, f_lo, g_lo, f_hi, g_hi, v0, t, sigma_a, sigma_omega, tol, noise_g, carry, lw, out
+            )
             return density, True
         return zero, False
     chord = t2 * (r * type(x)(0.25) + v0 * t / type(x)(12.0)) * du2 * type(x)(0.125) + noise_f
@@ -287,8 +352,10 @@ def cat_interval(
         w_min, f_min, g_min = cat_fold_minimum(x, y, lo, hi, g_lo, g_hi, v0, t, tol)
         if (f_min >= zero) != (f_hi >= zero):
             density = cat_root_density(
-                x, y, lo, w_min, f_lo, g_lo, f_min, g_min, v0, t, sigma_a, sigma_omega, tol, noise_g
-            ) + cat_root_density(x, y, w_min, hi, f_min, g_min, f_hi, g_hi, v0, t, sigma_a, sigma_omega, tol, noise_g)
+                x, y, lo, w_min, f_lo, g_lo, f_min, g_min, v0, t, sigma_a, sigma_omega, tol, noise_g, carry, lw, out
+            ) + cat_root_density(
+                x, y, w_min, hi, f_min, g_min, f_hi, g_hi, v0, t, sigma_a, sigma_omega, tol, noise_g, carry, lw, out
+            )
     return density, True
 
 
@@ -306,6 +373,7 @@ def cat_part_end(x: Any, y: Any, lo: Any, hi: Any, f_hi: Any, g_hi: Any, i: int,
 def cat_split(
     x: Any, y: Any, lo: Any, hi: Any, f_lo: Any, g_lo: Any, f_hi: Any, g_hi: Any,
     v0: Any, t: Any, sigma_a: Any, sigma_omega: Any, tol: Any, r: Any, noise_f: Any, noise_g: Any,
+    carry: Any, lw: wp.array(dtype=Any), out: wp.array(dtype=Any),
 ):
     """The roots of an interval ``cat_interval`` left undecided: split it into SPLIT parts, and
     each part it still cannot settle into SPLIT more (the last level settles them)."""
@@ -316,7 +384,7 @@ def cat_split(
     for i in range(SPLIT):
         b, f_b, g_b = cat_part_end(x, y, lo, hi, f_hi, g_hi, i, v0, t)
         part, settled = cat_interval(
-            x, y, a, b, f_a, g_a, f_b, g_b, v0, t, sigma_a, sigma_omega, tol, r, noise_f, noise_g, False
+            x, y, a, b, f_a, g_a, f_b, g_b, v0, t, sigma_a, sigma_omega, tol, r, noise_f, noise_g, False, carry, lw, out
         )
         if settled:
             density += part
@@ -327,7 +395,8 @@ def cat_split(
             for j in range(SPLIT):
                 e, f_e, g_e = cat_part_end(x, y, a, b, f_b, g_b, j, v0, t)
                 piece, done = cat_interval(
-                    x, y, c, e, f_c, g_c, f_e, g_e, v0, t, sigma_a, sigma_omega, tol, r, noise_f, noise_g, True
+                    x, y, c, e, f_c, g_c, f_e, g_e, v0, t, sigma_a, sigma_omega, tol, r, noise_f, noise_g, True,
+                    carry, lw, out,
                 )
                 density += piece
                 c = e
@@ -356,7 +425,7 @@ def cat_scan_noise(x: Any, y: Any, v0: Any, t: Any, eps: Any):
 @wp.func
 def cat_node_interval(
     x: Any, y: Any, table: wp.array2d(dtype=Any), k: int, v0: Any, t: Any, sigma_a: Any, sigma_omega: Any,
-    tol: Any, r: Any, noise_f: Any, noise_g: Any,
+    tol: Any, r: Any, noise_f: Any, noise_g: Any, carry: Any, lw: wp.array(dtype=Any), out: wp.array(dtype=Any),
 ):
     """The density of the roots in the node interval [k - 1, k] that the scan's cheap test
     flagged (0 where both ends' accelerations are beyond PRUNE_SIGMAS on one side): settled by
@@ -371,10 +440,13 @@ def cat_node_interval(
     g_k = table[k, 4] * y - table[k, 5] * x - table[k, 6]
     part, settled = cat_interval(
         x, y, w_prev, w_k, f_prev, g_prev, f_k, g_k, v0, t, sigma_a, sigma_omega, tol, r, noise_f, noise_g, False,
+        carry, lw, out,
     )
     if settled:
         return part
-    return cat_split(x, y, w_prev, w_k, f_prev, g_prev, f_k, g_k, v0, t, sigma_a, sigma_omega, tol, r, noise_f, noise_g)
+    return cat_split(
+        x, y, w_prev, w_k, f_prev, g_prev, f_k, g_k, v0, t, sigma_a, sigma_omega, tol, r, noise_f, noise_g, carry, lw, out
+    )
 
 
 @wp.func
@@ -388,8 +460,12 @@ def cat_density_local(
     sigma_omega: Any,
     tol: Any,
     eps: Any,
+    carry: Any,
+    lw: wp.array(dtype=Any),
+    out: wp.array(dtype=Any),
 ):
-    """Exact CAT density at a point of the local frame: scan the table, refine every root.
+    """Exact CAT density at a point of the local frame: scan the table, refine every root
+    (each root's path weighted into ``out`` by ``cat_carry_root`` where ``carry`` is evidence).
 
     Intervals with a sign change, and those whose smaller |F| at an end is within the chord
     bound of zero (``cat_interval``), are examined (``cat_node_interval``); the rest cannot hold
@@ -409,7 +485,9 @@ def cat_density_local(
         if (f_k >= zero) != (f_prev >= zero) or wp.min(wp.abs(f_prev), wp.abs(f_k)) <= (
             chord_coef * width * width + noise_f
         ):
-            density += cat_node_interval(x, y, table, k, v0, t, sigma_a, sigma_omega, tol, r, noise_f, noise_g)
+            density += cat_node_interval(
+                x, y, table, k, v0, t, sigma_a, sigma_omega, tol, r, noise_f, noise_g, carry, lw, out
+            )
         w_prev = w_k
         f_prev = f_k
     return density
@@ -440,7 +518,10 @@ def cat_density(x: Any, y: Any, p: Any):
     """Density per m^2 at the world point (x, y): the launch kernels' maths (``p.eps``: the
     dtype's machine epsilon, for the rounding allowance)."""
     lx, ly = world_to_local(x, y, p.pose)
-    return cat_density_local(lx, ly, p.table, p.v0, p.t, p.sigma_a, p.sigma_omega, p.tol, p.eps)
+    # no evidence: the integer 0 selects the no-op ``cat_carry_root``; a table row stands in
+    # for the unused scratch and channel rows
+    return cat_density_local(lx, ly, p.table, p.v0, p.t, p.sigma_a, p.sigma_omega, p.tol, p.eps, int(0), p.table[0],
+                             p.table[0])
 
 
 #: The parameters: the scan table (``cat_table``), the model's, its pose, Newton's tolerance.
@@ -450,3 +531,26 @@ KERNELS = density_kernels(cat_density, CAT, "cat")
 for _scalar in SCALARS:
     overload_on_use(cat_table, _scalar, {"omegas": wp.array(dtype=_scalar), "v0": _scalar, "t": _scalar,
                             "table": wp.array2d(dtype=_scalar)})
+
+
+
+@wp.func
+def cat_carried(x: Any, y: Any, p: Any, ev: Any, lw: wp.array(dtype=Any), out: wp.array(dtype=Any)):
+    """Each channel of the density at the world point (x, y) weighted by the evidence along each
+    root's path (``bananagrid.protocol.CarryingModel``): summed over the heading nodes
+    ``p.poses`` (the model's pose turned by theta_0; one node of weight 1 without heading noise)
+    with weights ``p.weights``."""
+    carry = p.carry
+    carry.ev = ev
+    for i in range(p.weights.shape[0]):
+        carry.pose = p.poses[i]
+        carry.scale = p.weights[i]
+        lx, ly = world_to_local(x, y, carry.pose)
+        cat_density_local(lx, ly, p.table, p.v0, p.t, p.sigma_a, p.sigma_omega, p.tol, p.eps, carry, lw, out)
+
+
+#: The carried kernel's parameters: the scan's, the carry struct (its ``ev`` set by the kernel)
+#: and the heading nodes (poses and weights).
+CAT_CARRIED = Params("CatCarriedParams", __name__, **CAT.fields, carry=lambda scalar: CAT_CARRY.of(scalar),
+                     poses=lambda scalar: wp.array(dtype=wp.types.vector(4, scalar)), weights=ARRAY)
+CARRIED_POINTS = carried_points_kernel(cat_carried, CAT_CARRIED, EVIDENCE, "cat")

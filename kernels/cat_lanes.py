@@ -18,8 +18,9 @@ from typing import Any
 import numpy as np
 import warp as wp
 
-from .cat import CAT, SPLIT, cat_node_interval, cat_scan_noise
-from .generate import Params, density_kernels
+from .cat import CAT, CAT_CARRIED, SPLIT, cat_node_interval, cat_scan_noise
+from .evidence import EVIDENCE
+from .generate import Params, carried_points_kernel, density_kernels
 from .common import LANES32, LANES64, lanes32, lanes64, world_to_local
 from .lanes import cat_scan_group
 
@@ -69,8 +70,12 @@ def cat_density_lanes(
     sigma_omega: Any,
     tol: Any,
     eps: Any,
+    carry: Any,
+    lw: wp.array(dtype=Any),
+    out: wp.array(dtype=Any),
 ):
-    """``cat.cat_density_local`` with its scan over nodes in lanes (``groups``: :func:`node_groups`)."""
+    """``cat.cat_density_local`` with its scan over nodes in lanes (``groups``: :func:`node_groups`);
+    ``carry``, ``lw``, ``out`` as there (the integer 0 and any rows: no evidence)."""
     density = type(x)(0.0)
     r, noise_f, noise_g, chord_coef = cat_scan_noise(x, y, v0, t, eps)
     n = table.shape[0]
@@ -82,7 +87,7 @@ def cat_density_lanes(
             for j in range(width):
                 if ((flags >> j) & 1) != 0:
                     density += cat_node_interval(x, y, table, k + j, v0, t, sigma_a, sigma_omega, tol, r, noise_f,
-                                                 noise_g)
+                                                 noise_g, carry, lw, out)
     return density
 
 
@@ -90,7 +95,8 @@ def cat_density_lanes(
 def cat_density_world_lanes(x: Any, y: Any, p: Any):
     """Density per m^2 at the world point (x, y), the scan in lanes: the launch kernels' maths."""
     lx, ly = world_to_local(x, y, p.pose)
-    return cat_density_lanes(lx, ly, p.table, p.groups, p.v0, p.t, p.sigma_a, p.sigma_omega, p.tol, p.eps)
+    return cat_density_lanes(lx, ly, p.table, p.groups, p.v0, p.t, p.sigma_a, p.sigma_omega, p.tol, p.eps, int(0),
+                             p.table[0], p.table[0])
 
 
 #: The scalar kernels' parameters and the node groups (:func:`node_groups`).
@@ -98,3 +104,23 @@ CAT_LANES = Params("CatLaneParams", __name__, **CAT.fields,
                    groups=lambda scalar: wp.array2d(dtype=lanes64 if scalar == wp.float64 else lanes32))
 # one cell per thread, the nodes in lanes: the generated scalar kernels
 KERNELS = density_kernels(cat_density_world_lanes, CAT_LANES, "cat", suffix="_lanes")
+
+
+
+@wp.func
+def cat_carried_lanes(x: Any, y: Any, p: Any, ev: Any, lw: wp.array(dtype=Any), out: wp.array(dtype=Any)):
+    """``cat.cat_carried`` with the scan over nodes in lanes."""
+    carry = p.carry
+    carry.ev = ev
+    for i in range(p.weights.shape[0]):
+        carry.pose = p.poses[i]
+        carry.scale = p.weights[i]
+        lx, ly = world_to_local(x, y, carry.pose)
+        cat_density_lanes(lx, ly, p.table, p.groups, p.v0, p.t, p.sigma_a, p.sigma_omega, p.tol, p.eps, carry, lw,
+                          out)
+
+
+#: The carried kernel's parameters with the node groups.
+CAT_CARRIED_LANES = Params("CatCarriedLaneParams", __name__, **CAT_CARRIED.fields,
+                           groups=lambda scalar: wp.array2d(dtype=lanes64 if scalar == wp.float64 else lanes32))
+CARRIED_POINTS = carried_points_kernel(cat_carried_lanes, CAT_CARRIED_LANES, EVIDENCE, "cat")

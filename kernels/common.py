@@ -315,6 +315,12 @@ def world_to_local(x: Any, y: Any, pose: Any):
     return dx * pose[2] - dy * pose[3], dx * pose[3] + dy * pose[2]
 
 
+@wp.func
+def local_to_world(x: Any, y: Any, pose: Any):
+    """A model's local frame to world (east, north): the inverse of :func:`world_to_local`."""
+    return pose[0] + x * pose[2] + y * pose[3], pose[1] - x * pose[3] + y * pose[2]
+
+
 # --- normal tails ----------------------------------------------------------------------------
 
 #: 1 / sqrt(2)

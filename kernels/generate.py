@@ -258,3 +258,34 @@ def density_kernels(density, params: Params, name: str, *, lanes: bool = False, 
     short = module.name.rsplit(".", 1)[-1]
     return DensityKernels(f"{short}.{grid.key}", params, grid, points, batch_grid, batch_points, bands_per_thread,
                           tile_rows, scratch_width, quad_width)
+
+
+@dataclass(frozen=True)
+class CarriedKernels:
+    """A family's carried points kernel (:func:`carried_points_kernel`), as a binding's ``kernels``."""
+
+    name: str
+    points: Any
+
+
+def carried_points_kernel(carried, params: Params, evidence: Params, name: str) -> CarriedKernels:
+    """The carried points kernel of a family (``bananagrid.protocol.CarryingModel``):
+    ``NAME_carried_points(xs, ys, start, p, ev, lw, out)`` over a chunk of points from ``start``,
+    each point's channels zeroed, then ``carried(x, y, p, ev, lw[k], out[k])`` (a ``@wp.func``
+    that adds each path's density times its channel weights, ``kernels/evidence.py``). Overloads
+    for both scalars are registered on first use; ``evidence`` is ``kernels.evidence.EVIDENCE``."""
+
+    def points_kernel(xs: wp.array(dtype=Any), ys: wp.array(dtype=Any), start: int, p: Any, ev: Any,
+                      lw: wp.array2d(dtype=Any), out: wp.array2d(dtype=Any)):
+        k = start + wp.tid()
+        x = xs[k]
+        for c in range(out.shape[1]):
+            out[k, c] = type(x)(0.0)
+        carried(x, ys[k], p, ev, lw[k], out[k])
+
+    kernel = wp.kernel(points_kernel, name=f"{name}_carried_points", module=carried.module)
+    for scalar in SCALARS:
+        vec, mat = wp.array(dtype=scalar), wp.array2d(dtype=scalar)
+        overload_on_use(kernel, scalar, {"xs": vec, "ys": vec, "p": params.of(scalar), "ev": evidence.of(scalar),
+                                         "lw": mat, "out": mat})
+    return CarriedKernels(f"{carried.module.name.rsplit('.', 1)[-1]}.{kernel.key}", kernel)

@@ -2,8 +2,9 @@
 likelihood factors of the target's position, and the posterior map they give.
 
 Modules: :mod:`~bananagrid.evidence.geometry` (polygons against cells, tracks against points),
-:mod:`~bananagrid.evidence.searches` (``AreaSearch``, ``TrackSearch`` and the lateral-range
-laws), :mod:`~bananagrid.evidence.reports` (``PositionReport``, ``BearingReport``,
+:mod:`~bananagrid.evidence.searches` (``AreaSearch``, ``TrackSearch``, ``RasterSearch`` and the
+lateral-range laws), :mod:`~bananagrid.evidence.packing` (earlier evidence as the kernels' time
+nodes and channels), :mod:`~bananagrid.evidence.reports` (``PositionReport``, ``BearingReport``,
 ``Exclusion``), :mod:`~bananagrid.evidence.posterior` (``posterior`` at the map's own time).
 
 Carrying earlier evidence forward (the plan for the kernels; not built yet)
@@ -42,7 +43,7 @@ path's position at t1, x1 = x(t1), and the map at t is the kernels' own integral
 
 from .posterior import PolarPosterior, Posterior, posterior
 from .reports import BearingReport, Exclusion, PositionReport
-from .searches import AreaSearch, TrackSearch, lateral_range
+from .searches import AreaSearch, RasterSearch, TrackSearch, lateral_range
 
-__all__ = ["AreaSearch", "TrackSearch", "lateral_range", "PositionReport", "BearingReport", "Exclusion",
+__all__ = ["AreaSearch", "TrackSearch", "RasterSearch", "lateral_range", "PositionReport", "BearingReport", "Exclusion",
            "posterior", "Posterior", "PolarPosterior"]

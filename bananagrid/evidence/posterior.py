@@ -41,13 +41,15 @@ import numpy as np
 
 from ..domains.grid import Grid
 from ..domains.polar_lattice import PolarLattice
+from ..engine.carried import carries, evaluate_carried
 from ..engine.rasterise import rasterise
 from ..models.presence import grid_probabilities
 from ..results import PolarRaster, Raster
 from ..validate import BananagridError, positive_int
 from .geometry import distance_to_track
+from .packing import pack as pack_evidence
 from .reports import BearingReport, Exclusion, PositionReport
-from .searches import AreaSearch, TrackSearch
+from .searches import AreaSearch, RasterSearch, TrackSearch
 
 __all__ = ["posterior", "Posterior", "PolarPosterior", "MIN_NORMALISER", "SUBDIVISIONS", "EVIDENCE_TYPES"]
 
@@ -61,7 +63,7 @@ POINT_CHUNK = 2**18
 #: Registry kinds whose map is an approximation without a path per parameter: earlier evidence
 #: cannot be carried to the map's time through them, with the exact model to use instead.
 NO_PATHS = {"polar": "bg.CAT (exact, a path per (a, omega))"}
-EVIDENCE_TYPES = (AreaSearch, TrackSearch, PositionReport, BearingReport, Exclusion)
+EVIDENCE_TYPES = (AreaSearch, TrackSearch, RasterSearch, PositionReport, BearingReport, Exclusion)
 
 
 @dataclass(frozen=True, repr=False)
@@ -149,16 +151,18 @@ def posterior(prior, grid, evidence=(), *, subdivisions: int = SUBDIVISIONS, thr
         (normaliser below :data:`MIN_NORMALISER`).
     """
     n = positive_int("subdivisions", subdivisions)
-    evidence = _checked_evidence(prior, evidence)
+    evidence, earlier = _checked_evidence(prior, evidence)
+    carried = _Carried(prior, evidence, earlier, threads) if earlier else None
     if isinstance(grid, PolarLattice):
-        return _polar_posterior(prior, grid, evidence, n, threads)
+        return _polar_posterior(prior, grid, evidence, n, threads, carried)
     if not isinstance(grid, Grid):
         raise BananagridError(f"grid = {grid!r}: expected a bananagrid Grid or PolarLattice")
     cells, provenance, frame = _grid_prior(prior, grid, threads)
     ny, nx = grid.shape
     x_edges = grid.origin[0] + grid.dx * np.arange(nx + 1)
     y_edges = grid.origin[1] + grid.dy * np.arange(ny + 1)
-    factors = [_GridFactor(e, grid, x_edges, y_edges) for e in evidence]
+    factors = [_CarriedFactor(grid.shape) if k in earlier else _GridFactor(e, grid, x_edges, y_edges)
+               for k, e in enumerate(evidence)]
     varying = np.zeros((ny, nx), dtype=bool)
     for factor in factors:
         varying |= factor.varying
@@ -174,14 +178,56 @@ def posterior(prior, grid, evidence=(), *, subdivisions: int = SUBDIVISIONS, thr
             cut |= factor.varying
     groups = ((varying & cut & (cells > 0.0), n, True), (varying & ~cut & (cells > 0.0), max(1, n // 2), True),
               (varying & ~(cells > 0.0), 1, False))
+    if carried is not None:
+        # the carried weight varies on every cell with prior mass: each by the sub-cell rule on
+        # the carried density's channels (module docstring); cells without mass as before
+        groups = ((cells > 0.0, n, True), (varying & ~(cells > 0.0), 1, False))
     for mask, subdivide, weighted in groups:
         rows, cols = np.nonzero(mask)
         if rows.size:
-            found = _varying_means(prior, factors, combos, x_edges, y_edges, rows, cols, subdivide, weighted)
+            found = _varying_means(prior, factors, combos, x_edges, y_edges, rows, cols, subdivide, weighted,
+                                   carried if weighted else None)
             for key in combos:
                 means[key][rows, cols] = found[key]
-    bound = _boundary_mass(factors, cells, varying)
+    bound = None if carried is not None else _boundary_mass(factors, cells, varying)
+    if carried is not None:
+        provenance = {**provenance, "carried": carried.notes(n)}
     return _finish(Posterior, dict(grid=grid, frame=frame), cells, means, evidence, provenance, bound, n)
+
+
+class _Carried:
+    """The evidence before the prior's time, packed, and which of the pack's channels serves
+    each combination of :func:`_combos` (the same-time factors multiply it)."""
+
+    def __init__(self, prior, evidence, earlier, threads):
+        keys = [f"evidence[{k}]" for k in earlier]
+        self.pack = pack_evidence([evidence[k] for k in earlier], prior.t, keys=keys)
+        self.prior, self.threads, self.earlier = prior, threads, set(earlier)
+        self.channel = {"all": "all", "searches": "searches", "others": "others"}
+        for k, e in enumerate(evidence):
+            if e.kind == "search":
+                self.channel[("search", k)] = f"search:evidence[{k}]" if k in earlier else "others"
+        self.prior_channel = self.pack.channel("prior")
+
+    def channels(self, x, y) -> np.ndarray:
+        """Every channel at the points (x, y): shape (C, *x.shape)."""
+        return evaluate_carried(self.prior, x, y, self.pack, threads=self.threads)
+
+    def index(self, key) -> int:
+        return self.pack.channel(self.channel[key])
+
+    def notes(self, n) -> dict:
+        return {"evidence": list(self.pack.factor_keys), "time_nodes": self.pack.nodes,
+                "cell_rule": f"carried density's channels at the midpoints of {n} x {n} sub-cells"}
+
+
+class _CarriedFactor:
+    """A factor carried by the kernels: 1 in the same-time products."""
+
+    def __init__(self, shape):
+        self.constant = np.ones(shape)
+        self.varying = np.zeros(shape, dtype=bool)
+        self.regions, self.low, self.indicator = None, 1.0, True
 
 
 def _combos(evidence) -> dict:
@@ -238,6 +284,7 @@ def _checked_evidence(prior, evidence) -> list:
     except TypeError:
         raise BananagridError(f"evidence = {evidence!r}: expected a list of bananagrid evidence") from None
     t_map = getattr(prior, "t", None)
+    earlier = []
     for k, e in enumerate(evidence):
         if not isinstance(e, EVIDENCE_TYPES):
             raise BananagridError(f"evidence[{k}] = {e!r}: expected one of "
@@ -251,6 +298,9 @@ def _checked_evidence(prior, evidence) -> list:
                                   "be later than the map it updates")
         if t1 < t_map:
             kind = getattr(prior, "kind", None)
+            if carries(prior):
+                earlier.append(k)
+                continue
             if kind in NO_PATHS:
                 raise BananagridError(
                     f"evidence[{k}].t = {t1!r}: earlier than the map's time t = {t_map!r}; {type(prior).__name__} is "
@@ -259,7 +309,7 @@ def _checked_evidence(prior, evidence) -> list:
             raise BananagridError(
                 f"evidence[{k}].t = {t1!r}: earlier than the map's time t = {t_map!r}; carrying earlier evidence "
                 f"through {type(prior).__name__}'s paths is not yet available: give evidence at t")
-    return evidence
+    return evidence, earlier
 
 
 def _grid_prior(prior, grid: Grid, threads):
@@ -334,11 +384,13 @@ class _GridFactor:
         return self.e.likelihood(0.5 * (x0 + x1), 0.5 * (y0 + y1))
 
 
-def _varying_means(prior, factors, combos, x_edges, y_edges, rows, cols, n, weighted: bool) -> dict:
+def _varying_means(prior, factors, combos, x_edges, y_edges, rows, cols, n, weighted: bool, carried=None) -> dict:
     """Means over each cell (``rows``, ``cols``) on n x n sub-cells of each combination's
     product of factors (:func:`_combos`): weighted by the prior's density at the sub-cell
     centres (``weighted``), else by area (cells without prior mass, for the POD map). A factor
-    is evaluated on the sub-cells of the cells it varies on; elsewhere it is its constant."""
+    is evaluated on the sub-cells of the cells it varies on; elsewhere it is its constant.
+    With ``carried`` (a :class:`_Carried`) the combination's carried channel at the sub-cell
+    centres weighs its same-time product, over the sum of the prior channel there."""
     k_cells = rows.size
     dx = x_edges[1] - x_edges[0]
     dy = y_edges[1] - y_edges[0]
@@ -358,7 +410,12 @@ def _varying_means(prior, factors, combos, x_edges, y_edges, rows, cols, n, weig
         x1 = np.broadcast_to(sx1[:, None, :], (len(r), n, n)).reshape(shape)
         y0 = np.broadcast_to(sy[:, :, None], (len(r), n, n)).reshape(shape)
         y1 = np.broadcast_to(sy1[:, :, None], (len(r), n, n)).reshape(shape)
-        weights = _weights(prior, 0.5 * (x0 + x1), 0.5 * (y0 + y1)) if weighted else np.ones(shape)
+        channels = None
+        if carried is not None:
+            channels = carried.channels(0.5 * (x0 + x1), 0.5 * (y0 + y1))
+            weights, bad = _checked_weights(channels[carried.prior_channel])
+        else:
+            weights = _weights(prior, 0.5 * (x0 + x1), 0.5 * (y0 + y1)) if weighted else np.ones(shape)
         values = []
         for f in factors:
             m = np.repeat(f.constant[r, c][:, None], n * n, axis=1)
@@ -367,7 +424,14 @@ def _varying_means(prior, factors, combos, x_edges, y_edges, rows, cols, n, weig
                 m[here] = f.sub_means(x0[here], x1[here], y0[here], y1[here])
             values.append(m)
         for key, members in combos.items():
-            out[key][sl] = _weighted(weights, _product([values[k] for k in members], shape))
+            same = _product([values[k] for k in members], shape)
+            if channels is None:
+                out[key][sl] = _weighted(weights, same)
+            else:
+                # a row with no positive prior channel (mass between the centres): the same-time
+                # factors' area mean, the carried weight taken as 1 there
+                part = np.where(bad[:, None], same, channels[carried.index(key)] * same)
+                out[key][sl] = np.sum(part, axis=1) / np.sum(weights, axis=1)
     return out
 
 
@@ -376,9 +440,13 @@ def _weights(prior, x, y) -> np.ndarray:
     weight (a cell whose mass sits between the centres, or on an infinite caustic) gets equal
     weights, so that its mean is the plain area mean."""
     w = np.asarray(prior.pdf(x.ravel(), y.ravel()), dtype=float).reshape(x.shape)
+    return _checked_weights(w)[0]
+
+
+def _checked_weights(w):
+    """``w`` with each row that has no finite positive weight set to ones, and those rows."""
     bad = ~np.isfinite(w).all(axis=1) | ~(np.sum(np.where(np.isfinite(w), w, 0.0), axis=1) > 0.0)
-    w = np.where(bad[:, None], 1.0, w)
-    return w
+    return np.where(bad[:, None], 1.0, w), bad
 
 
 def _weighted(weights, values) -> np.ndarray:
@@ -399,9 +467,11 @@ def _boundary_mass(factors, cells, varying) -> float | None:
     return float(np.sum(np.where(varying, cells * (high - low), 0.0)))
 
 
-def _polar_posterior(prior, lattice: PolarLattice, evidence, n, threads):
+def _polar_posterior(prior, lattice: PolarLattice, evidence, n, threads, carried=None):
     """On a polar lattice: every cell by the rule of n x n sub-cells in (range, bearing), each
-    weighted by its exact area times the density at its centre, each factor at the centre."""
+    weighted by its exact area times the density at its centre, each factor at the centre
+    (with ``carried``: each combination's carried channel at the centre, the same-time
+    factors' product, over the prior channel's sum)."""
     presence = not callable(getattr(prior, "bind", None)) and getattr(prior, "kind", None) in ("mixture", "uniform")
     if presence:  # a presence law has no polar kernels: its cells by the sub-cell rule below
         xc, yc = lattice.world_centres
@@ -425,7 +495,14 @@ def _polar_posterior(prior, lattice: PolarLattice, evidence, n, threads):
     # the density where the prior has mass (elsewhere the posterior is 0: area weights, for the POD map)
     has_mass = np.repeat(np.repeat(cells > 0.0, n, axis=0), n, axis=1)
     w = np.zeros(x.shape)
-    w[has_mass] = np.asarray(prior.pdf(x[has_mass], y[has_mass]), dtype=float)
+    channels = None
+    if carried is not None:
+        channels = np.zeros((carried.pack.channels.shape[0], *x.shape))
+        channels[:, has_mass] = carried.channels(x[has_mass], y[has_mass])
+        channels = np.where(np.isfinite(channels), channels, 0.0) * area
+        w[has_mass] = channels[carried.prior_channel][has_mass] / area[has_mass]
+    else:
+        w[has_mass] = np.asarray(prior.pdf(x[has_mass], y[has_mass]), dtype=float)
     w = np.where(np.isfinite(w), w, 0.0) * area
 
     def cell_sum(a):
@@ -435,11 +512,18 @@ def _polar_posterior(prior, lattice: PolarLattice, evidence, n, threads):
     if presence:
         cells = w_cell  # the midpoint rule's cell probabilities: O((h / n)^2) of each cell's mass
     empty = ~(w_cell > 0.0)
-    w = np.where(np.repeat(np.repeat(empty, n, axis=0), n, axis=1), area, w)  # no weight: the area mean
+    empty_sub = np.repeat(np.repeat(empty, n, axis=0), n, axis=1)
+    w = np.where(empty_sub, area, w)  # no weight: the area mean
     w_cell = cell_sum(w)
-    values = [e.likelihood(x, y) for e in evidence]
-    means = {key: cell_sum(w * _product([values[k] for k in members], x.shape)) / w_cell
-             for key, members in _combos(evidence).items()}
+    earlier = set() if carried is None else carried.earlier
+    values = [np.ones(x.shape) if k in earlier else e.likelihood(x, y) for k, e in enumerate(evidence)]
+    means = {}
+    for key, members in _combos(evidence).items():
+        weighted = w if channels is None else np.where(empty_sub, w, channels[carried.index(key)])
+        means[key] = cell_sum(weighted * _product([values[k] for k in members], x.shape)) / w_cell
     where = dict(lattice=lattice, frame=raster.frame, density=raster.density)
-    result = _finish(PolarPosterior, where, cells, means, evidence, dict(raster.provenance), None, n)
+    provenance = dict(raster.provenance)
+    if carried is not None:
+        provenance["carried"] = carried.notes(n)
+    result = _finish(PolarPosterior, where, cells, means, evidence, provenance, None, n)
     return replace(result, density=np.asarray(raster.density, dtype=float) * means["all"] / result.normaliser)

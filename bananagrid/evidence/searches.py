@@ -13,10 +13,11 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ..domains.grid import Grid
 from ..validate import BananagridError, finite, positive, real_array, timed_track
 from .geometry import Polygon, distance_to_track, polygons_from, segment_inverse_cube
 
-__all__ = ["AreaSearch", "TrackSearch", "LAWS", "lateral_range", "search_time"]
+__all__ = ["AreaSearch", "TrackSearch", "RasterSearch", "LAWS", "lateral_range", "search_time"]
 
 #: The lateral-range laws of :class:`TrackSearch`.
 LAWS = ("inverse_cube", "definite")
@@ -232,3 +233,94 @@ class TrackSearch:
         """Plain data for provenance."""
         return {"kind": "track_search", "t": list(self.time_span), "sweep_width_m": self.sweep_width,
                 "law": self.law, "points": len(self.track)}
+
+
+@dataclass(frozen=True)
+class RasterSearch:
+    """A search given cell by cell on a grid, at time ``t`` (or over ``t = (t0, t1)``), that found
+    nothing: a planner's effort of one period as a raster of POD values (or of coverage
+    factors). A target in cell (i, j) is missed with probability 1 - ``pod[i, j]`` (exp(-C) from
+    a coverage); outside the grid the search saw nothing (likelihood 1).
+
+    Parameters
+    ----------
+    grid : Grid
+        The raster's cells (``values[i, j]`` belongs to the cell centred at (x[j], y[i]), rows
+        from south to north). A point on the edge between two cells belongs to the cell east of
+        it (north of it); points on the grid's east or north edge are outside.
+    t : float or (float, float)
+        When, s since the last fix. Over an interval the coverage is spread uniformly over it:
+        a target path is missed with probability exp(-int C(x(s)) ds / (t1 - t0)) (random
+        search, Koopman), C = -log(1 - POD) where POD is given.
+    pod : array_like (ny, nx), optional
+        POD of each cell, in [0, 1].
+    coverage : array_like (ny, nx), optional
+        Coverage factor C >= 0 of each cell. Give ``pod`` or ``coverage``, not both.
+    """
+
+    grid: Grid
+    t: tuple[float, float]
+    pod: np.ndarray | None = None
+    coverage: np.ndarray | None = None
+    log_miss: np.ndarray = field(init=False, repr=False, compare=False)
+
+    kind = "search"
+
+    def __post_init__(self):
+        if not isinstance(self.grid, Grid):
+            raise BananagridError(f"grid = {self.grid!r}: expected a bananagrid Grid")
+        object.__setattr__(self, "t", search_time("t", self.t))
+        if (self.pod is None) == (self.coverage is None):
+            raise BananagridError("pod, coverage: give exactly one of them (a raster of POD values or of coverage "
+                                  "factors)")
+        name = "pod" if self.pod is not None else "coverage"
+        values = real_array(name, self.pod if self.pod is not None else self.coverage, "a raster of numbers")
+        if values.shape != self.grid.shape:
+            raise BananagridError(f"{name}: shape {values.shape}; expected the grid's (ny, nx) = {self.grid.shape}")
+        if not np.isfinite(values).all():
+            i, j = np.argwhere(~np.isfinite(values))[0]
+            raise BananagridError(f"{name}[{i}, {j}] = {values[i, j]!r}: must be finite")
+        if name == "pod":
+            bad = (values < 0.0) | (values > 1.0)
+            if bad.any():
+                i, j = np.argwhere(bad)[0]
+                raise BananagridError(f"pod[{i}, {j}] = {values[i, j]!r}: must be in [0, 1]")
+            with np.errstate(divide="ignore"):
+                log_miss = np.log1p(-values)
+        else:
+            bad = values < 0.0
+            if bad.any():
+                i, j = np.argwhere(bad)[0]
+                raise BananagridError(f"coverage[{i}, {j}] = {values[i, j]!r}: must be >= 0 (effort per unit area)")
+            log_miss = -values
+        values = values.copy()
+        values.setflags(write=False)
+        log_miss.setflags(write=False)
+        object.__setattr__(self, name, values)
+        object.__setattr__(self, "log_miss", log_miss)
+
+    @property
+    def time_span(self) -> tuple[float, float]:
+        return self.t
+
+    def cells(self, x, y) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Row, column and whether on the raster, for each point (broadcast ``x``, ``y``)."""
+        x, y = np.broadcast_arrays(np.asarray(x, dtype=float), np.asarray(y, dtype=float))
+        g = self.grid
+        fx = (x - g.origin[0]) / g.dx
+        fy = (y - g.origin[1]) / g.dy
+        on = (fx >= 0.0) & (fy >= 0.0) & (fx < g.nx) & (fy < g.ny)
+        col = np.clip(np.floor(np.where(on, fx, 0.0)).astype(np.int64), 0, g.nx - 1)
+        row = np.clip(np.floor(np.where(on, fy, 0.0)).astype(np.int64), 0, g.ny - 1)
+        return row, col, on
+
+    def likelihood(self, x, y) -> np.ndarray:
+        """1 - POD of the cell holding each point (1 off the raster)."""
+        row, col, on = self.cells(x, y)
+        return np.where(on, np.exp(self.log_miss[row, col]), 1.0)
+
+    def describe(self) -> dict:
+        """Plain data for provenance."""
+        values = self.pod if self.pod is not None else self.coverage
+        return {"kind": "raster_search", "t": list(self.t), "grid": self.grid.describe(),
+                "given": "pod" if self.pod is not None else "coverage", "largest": float(values.max())}

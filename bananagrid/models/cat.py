@@ -16,11 +16,11 @@ from ..kernels import cat as kernels
 from ..kernels import cat_lanes
 from ..kernels.common import LANES32, LANES64
 from ..kernels import cat_cells
-from ..protocol import CellPlan, Extent, KernelBinding, KernelContext, SceneSchema
+from ..protocol import CellPlan, EvidencePack, Extent, KernelBinding, KernelContext, SceneSchema
 from ..validate import BananagridError, positive
 from ._cat_heading import (
-    clear_heading_tables, first_table_nodes, heading_table, interpolation_bound, ray_densities, table_binding,
-    table_spacing_limits,
+    clear_heading_tables, first_table_nodes, heading_nodes, heading_table, interpolation_bound, ray_densities,
+    table_binding, table_spacing_limits,
 )
 from .base import check_n, check_rng
 from .motion import MotionModel, motion_param, pose_arguments
@@ -125,17 +125,28 @@ def cat_position(v0, t, a, omega) -> np.ndarray:
     """Local CAT position of eq. (1) for arrays of accelerations and turn rates, shape (n, 2).
 
     Written with u = omega t as  v0 t (A, B) + a t^2 (C, D)  (see ``kernels.common.cat_basis``);
-    C and D use their series below |u| = 1e-2, where the closed forms cancel.
+    A = 2 sin^2(u / 2) / u without cancellation; below |u| = 1e-2 every function is its series
+    (three terms: the next is below 1e-16 of the first), where C's and D's closed forms cancel.
     """
     u = np.asarray(omega, dtype=float) * t
     a = np.asarray(a, dtype=float)
-    half = 0.5 * u
-    A = np.sin(half) * np.sinc(half / np.pi)  # np.sinc is normalised: sinc(x/pi) = sin(x)/x
-    B = np.sinc(u / np.pi)
+    u, a = np.broadcast_arrays(u, a)
     small = np.abs(u) < 1e-2
-    us = np.where(small, 1.0, u)  # avoid 0/0 in the branch that is not used
-    C = np.where(small, u / 3 - u**3 / 30 + u**5 / 840, (np.sin(us) - us * np.cos(us)) / us**2)
-    D = np.where(small, 0.5 - u**2 / 8 + u**4 / 144, (np.cos(us) + us * np.sin(us) - 1) / us**2)
+    us = np.where(small, 1.0, u)  # no 0/0 in the closed forms that the series replace
+    inv = 1.0 / us
+    sin_u, cos_u = np.sin(us), np.cos(us)
+    sin_half = np.sin(0.5 * us)
+    A = 2.0 * sin_half * sin_half * inv  # (1 - cos u) / u
+    B = sin_u * inv
+    C = (sin_u - us * cos_u) * inv * inv
+    D = (cos_u + us * sin_u - 1.0) * inv * inv
+    if small.any():
+        v = u[small]
+        v2 = v * v
+        A[small] = v * (0.5 - v2 / 24 + v2 * v2 / 720)
+        B[small] = 1.0 - v2 / 6 + v2 * v2 / 120
+        C[small] = v / 3 - v * v2 / 30 + v * v2 * v2 / 840
+        D[small] = 0.5 - v2 / 8 + v2 * v2 / 144
     return np.column_stack((v0 * t * A + a * t * t * C, v0 * t * B + a * t * t * D))
 
 
@@ -550,6 +561,32 @@ class CAT(MotionModel):
             return KernelBinding(cat_lanes.KERNELS, ctx.struct(cat_lanes.CAT_LANES, **params, groups=groups), notes)
         return KernelBinding(kernels.KERNELS, ctx.struct(kernels.CAT, **params), notes)
 
+    def bind_carried(self, ctx: KernelContext, extent: Extent, pack: EvidencePack) -> KernelBinding:
+        """The carried points kernel (``kernels/cat.py``'s ``cat_carried``; the scan in lanes on
+        the CPU): each root (a, omega) of a point is a path, placed at the pack's node times by
+        eq. (1) with the same pose, and weighted by the evidence there
+        (:class:`~bananagrid.protocol.CarryingModel`). With heading noise the heading error
+        theta_0 turns the path: a sum over the nodes of :func:`heading_nodes` of the turned
+        model's weighted roots (not the heading table: the evidence is fixed in the world)."""
+        table = scan_table(self, ctx)
+        tol = 8.0 * np.finfo(ctx.dtype).eps * self.k_sigma * self.sigma_omega
+        pose = self.pose.as_array()
+        thetas, weights = heading_nodes(self)
+        heading = self.pose.heading + thetas
+        poses = np.column_stack([np.full(len(thetas), pose[0]), np.full(len(thetas), pose[1]), np.cos(heading),
+                                 np.sin(heading)])
+        params = dict(table=table, v0=self.v0, t=self.t, sigma_a=self.sigma_a, sigma_omega=self.sigma_omega, pose=pose,
+                      tol=tol, eps=np.finfo(ctx.dtype).eps, carry=ctx.struct(kernels.CAT_CARRY, pose=pose, scale=1.0),
+                      poses=ctx.array(poses, dtype=ctx.vector(4)), weights=ctx.array(weights))
+        notes = {"scan_nodes": table.shape[0], "k_sigma": self.k_sigma, "truncated_mass": self.truncated_mass,
+                 "heading_nodes": len(thetas), "evidence_nodes": pack.nodes}
+        if ctx.device == "cpu":
+            lanes = LANES64 if ctx.dtype == np.float64 else LANES32
+            groups = ctx.array(cat_lanes.node_groups(table.numpy(), lanes), dtype=ctx.vector(lanes))
+            return KernelBinding(cat_lanes.CARRIED_POINTS, ctx.struct(cat_lanes.CAT_CARRIED_LANES, **params,
+                                                                      groups=groups), notes)
+        return KernelBinding(kernels.CARRIED_POINTS, ctx.struct(kernels.CAT_CARRIED, **params), notes)
+
     def work_estimate(self, cells: int, extent: Extent) -> float:
         """Seconds of one core: ``cells (SECONDS_PER_CELL + nodes SECONDS_PER_NODE)`` for the
         scan; with heading noise the heading table's nodes (:func:`first_table_nodes`, the
@@ -698,6 +735,30 @@ class CAT(MotionModel):
         if self.sigma_heading > 0.0:
             local = _rotate(local, rng.normal(0.0, self.sigma_heading, n))
         return self.pose.to_world(local)
+
+    def sample_paths(self, n: int, times, rng) -> np.ndarray:
+        """World positions of ``n`` draws at each of ``times`` (s since the last fix), shape
+        ``(n, len(times), 2)``: the generative story of :meth:`sample` (a, omega and the heading
+        error drawn once per draw, in that order), each draw's path placed at every time by
+        eq. (1); ``sample_paths(n, [t], rng)[:, 0]`` equals ``sample(n, rng)`` for the same seed.
+
+        Raises
+        ------
+        BananagridError
+            Times that are not finite or negative; ``n`` or ``rng`` as :meth:`sample`.
+        """
+        times = np.atleast_1d(np.asarray(times, dtype=float))
+        if times.ndim != 1 or times.size == 0 or not np.isfinite(times).all() or (times < 0.0).any():
+            raise BananagridError(f"times = {times.tolist()!r}: expected finite times >= 0 (s since the last fix)")
+        n, rng = check_n(n, self.sample_bytes + 16.0 * len(times)), check_rng(rng)  # + the positions
+        a = rng.normal(0.0, self.sigma_a, n)
+        omega = rng.normal(0.0, self.sigma_omega, n)
+        theta0 = rng.normal(0.0, self.sigma_heading, n) if self.sigma_heading > 0.0 else None
+        out = np.empty((n, len(times), 2))
+        for k, s in enumerate(times):
+            local = cat_position(self.v0, s, a, omega)
+            out[:, k] = self.pose.to_world(local if theta0 is None else _rotate(local, theta0))
+        return out
 
     def ray_values(self, pose: Pose, radii: np.ndarray, angles: np.ndarray, *, threads=None) -> np.ndarray:
         """p(r, theta) along rays; from the model's own pose with heading noise, exactly by the

@@ -236,9 +236,15 @@ REFUSED = [
     ("polar banana, earlier", POLAR, [bg.AreaSearch(POLYGON, t=5.0, pod=0.5)],
      r"^evidence\[0\]\.t = 5\.0: earlier than the map's time t = 10\.0; PolarBanana is an approximation with no "
      r"path per parameter.*use bg\.CAT"),
-    ("CAT, earlier", CAT, [bg.TrackSearch([(0, 0, 1.0), (100, 0, 2.0)], sweep_width=10.0)],
-     r"^evidence\[0\]\.t = 2\.0: earlier than the map's time t = 10\.0; carrying earlier evidence through CAT's paths "
-     r"is not yet available"),
+    ("CAT, earlier definite-range track", CAT,
+     [bg.TrackSearch([(0, 0, 1.0), (100, 0, 2.0)], sweep_width=10.0, law="definite")],
+     r"^evidence\[0\]\.law = 'definite': a definite-range track earlier than the map cannot be carried yet"),
+    ("CAT, earlier contradiction", CAT,
+     [bg.AreaSearch([(-4000.0, -1000.0), (4000.0, -1000.0), (4000.0, 4000.0), (-4000.0, 4000.0)], t=4.0, pod=1.0)],
+     r"^evidence: the probability of the evidence under the prior is 0, below 1e-12; the evidence contradicts the prior"),
+    ("CAT, earlier contradicting report", CAT,
+     [bg.AreaSearch(POLYGON, t=(5.0, 6.0), pod=0.5), bg.PositionReport((0.0, -3000.0), t=5.0, sigma=20.0)],
+     r"^evidence: the probability of the evidence under the prior is .*below 1e-12"),
     ("Butterly, earlier", BUTTERLY, [bg.PositionReport((0, 0), t=100.0, sigma=10.0)],
      r"carrying earlier evidence through Butterly's paths is not yet available"),
     ("after the map", CAT, [bg.AreaSearch(POLYGON, t=10.0, pod=0.5), bg.AreaSearch(POLYGON, t=(11.0, 12.0), pod=0.5)],

@@ -1,0 +1,220 @@
+"""Evidence at times before a map's, packed into the flat arrays the kernels read
+(:class:`~bananagrid.protocol.EvidencePack`; each column: ``bananagrid/kernels/evidence.py``).
+
+Each piece of evidence is one *factor*; each factor is a list of *time nodes* at which the
+model's kernel places the target's path and adds the node's contribution to the factor's
+log-weight:
+
+* an :class:`~bananagrid.AreaSearch` at one time: one node, log(1 - POD) inside the polygon;
+  over an interval (t0, t1): the coverage C (-log(1 - POD) when POD is given) spread uniformly
+  over it, -C / (t1 - t0) inside, integrated by composite Gauss-Legendre (``AREA_PANELS``
+  panels of ``PANEL_NODES`` nodes). The path's fraction of the interval inside the polygon is an
+  integral of a step function: its error is at most the largest node weight per crossing of the
+  polygon's edge, 0.35 / AREA_PANELS of the interval (the 4-node rule's largest weight is
+  0.652 of a half panel), a bound on the error of C x fraction of C x 0.35 / AREA_PANELS per
+  crossing;
+* a :class:`RasterSearch`: as an area search, cell by cell;
+* a :class:`~bananagrid.TrackSearch` with the inverse-cube law: on each leg the detection rate
+  gamma = W^2 v / (8 pi r^3), v the leg's speed, r the range from the searcher (at its position
+  at that time, straight between track points) to the path (``TrackSearch`` states the law and
+  its sources), integrated over the leg's time by composite Gauss-Legendre with panels in which
+  the searcher moves at most W / 4 (the range's scale where detection is neither sure nor
+  negligible), ``PANEL_NODES`` nodes each. Measured: the exposure's absolute error is below
+  5e-5 (2.3e-5 at most over 300 random paths) for paths whose closest approach to the
+  searcher exceeds W / 4, at target speeds up to a third of the searcher's
+  (tests/kernels/test_evidence.py); it grows closer in (3e-3 at W / 8, where the path is
+  missed with probability exp(-4 / pi) or less);
+* a :class:`~bananagrid.PositionReport`: one node, the normal log-likelihood;
+* a :class:`~bananagrid.BearingReport`: one node per bearing, same time and factor.
+
+Refused, one line each naming ``evidence[K]``: evidence after the map's time, land (an
+:class:`~bananagrid.Exclusion` holds at every time: the posterior applies it at the map's own
+time), a definite-range track (its detection of a moving target depends on the closest approach
+of the relative path, not carried yet), and more nodes than ``MAX_NODES``.
+
+The channels (``EvidencePack.channel_names``): ``prior`` (no factor: the model's own density),
+``all``, ``searches``, ``others`` (the reports) and ``search:K`` for each search K (that search
+with the reports): what POS, each search's POS and the POD map need.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from ..kernels import evidence as ek
+from ..protocol import EvidencePack
+from ..validate import BananagridError, finite
+from .reports import BearingReport, Exclusion, PositionReport
+from .searches import AreaSearch, RasterSearch, TrackSearch
+
+__all__ = ["pack", "AREA_PANELS", "PANEL_NODES", "MAX_NODES", "CARRIED_TYPES"]
+
+#: Gauss-Legendre nodes per panel of an interval.
+PANEL_NODES = 4
+#: Panels of an area (or raster) search over an interval.
+AREA_PANELS = 16
+#: Most time nodes in a pack (each costs a path position and a contribution per path).
+MAX_NODES = 4096
+#: What a pack carries.
+CARRIED_TYPES = (AreaSearch, RasterSearch, TrackSearch, PositionReport, BearingReport)
+
+
+def _gauss_legendre(t0: float, t1: float, panels: int) -> tuple[np.ndarray, np.ndarray]:
+    """Composite Gauss-Legendre nodes and weights over [t0, t1]: ``panels`` equal panels of
+    PANEL_NODES nodes."""
+    x, w = np.polynomial.legendre.leggauss(PANEL_NODES)
+    edges = np.linspace(t0, t1, panels + 1)
+    half = 0.5 * np.diff(edges)
+    mid = 0.5 * (edges[1:] + edges[:-1])
+    return (mid[:, None] + half[:, None] * x[None, :]).ravel(), (half[:, None] * w[None, :]).ravel()
+
+
+class _Builder:
+    def __init__(self):
+        self.time, self.q, self.data, self.ints = [], [], [], []
+        self.edges, self.raster = [], []
+
+    def node(self, t, q, kind, factor, data=(), offset=0, count=0):
+        row = np.zeros(ek.DATA_COLUMNS)
+        row[: len(data)] = data
+        self.time.append(float(t))
+        self.q.append(float(q))
+        self.data.append(row)
+        self.ints.append((kind, factor, offset, count))
+
+    def polygon(self, vertices) -> tuple[int, int, tuple]:
+        v = np.asarray(vertices, dtype=float)
+        offset = len(self.edges)
+        self.edges.extend(np.column_stack((v, np.roll(v, -1, axis=0))))
+        box = (v[:, 0].min(), v[:, 0].max(), v[:, 1].min(), v[:, 1].max())
+        return offset, len(v), box
+
+    def add_raster(self, values) -> int:
+        offset = len(self.raster)
+        self.raster.extend(np.asarray(values, dtype=float).ravel())
+        return offset
+
+
+def pack(evidence, t_map: float, *, keys=None) -> EvidencePack:
+    """The evidence at times before ``t_map`` (s since the last fix) as a pack.
+
+    Parameters
+    ----------
+    evidence : sequence
+        :class:`AreaSearch`, :class:`RasterSearch`, :class:`TrackSearch` (inverse cube),
+        :class:`PositionReport`, :class:`BearingReport`, each ending at or before ``t_map``.
+    t_map : float
+        The map's time.
+    keys : sequence of str, optional
+        How errors and channels name each evidence (default ``evidence[K]``, K its index).
+
+    Returns
+    -------
+    EvidencePack
+
+    Raises
+    ------
+    BananagridError
+        Evidence of another type, after ``t_map``, land, a definite-range track, or more than
+        :data:`MAX_NODES` nodes in all; the message names the evidence's key.
+    """
+    t_map = finite("t", t_map)
+    try:
+        evidence = list(evidence)
+    except TypeError:
+        raise BananagridError(f"evidence = {evidence!r}: expected a list of bananagrid evidence") from None
+    keys = [f"evidence[{k}]" for k in range(len(evidence))] if keys is None else [str(k) for k in keys]
+    if len(keys) != len(evidence):
+        raise BananagridError(f"keys: {len(keys)} names for {len(evidence)} pieces of evidence")
+    b = _Builder()
+    kinds = []
+    for factor, (key, e) in enumerate(zip(keys, evidence)):
+        if isinstance(e, Exclusion):
+            raise BananagridError(f"{key}: land holds at every time; it is applied at the map's own time, not carried")
+        if not isinstance(e, CARRIED_TYPES):
+            raise BananagridError(f"{key} = {e!r}: expected one of "
+                                  f"{', '.join('bg.' + c.__name__ for c in CARRIED_TYPES)}")
+        t0, t1 = e.time_span
+        if t1 > t_map:
+            raise BananagridError(f"{key}.t = {t1!r}: after the map's time t = {t_map!r}; only evidence up to the "
+                                  "map's time can be carried to it")
+        kinds.append(e.kind)
+        if isinstance(e, AreaSearch):
+            offset, count, box = b.polygon(e.region.vertices)
+            if t0 == t1:
+                b.node(t0, 1.0, ek.KIND_POLYGON, factor, (_log_miss(e.miss), *box), offset, count)
+            else:
+                rate = -_coverage(e.miss) / (t1 - t0)
+                for s, q in zip(*_gauss_legendre(t0, t1, AREA_PANELS)):
+                    b.node(s, q, ek.KIND_POLYGON, factor, (rate, *box), offset, count)
+        elif isinstance(e, RasterSearch):
+            g = e.grid
+            if t0 == t1:
+                offset = b.add_raster(e.log_miss)
+                b.node(t0, 1.0, ek.KIND_RASTER, factor, (g.origin[0], g.origin[1], g.dx, g.dy, g.ny), offset, g.nx)
+            else:
+                with np.errstate(invalid="ignore"):
+                    offset = b.add_raster(e.log_miss / (t1 - t0))  # -C / (t1 - t0); -inf where POD = 1
+                for s, q in zip(*_gauss_legendre(t0, t1, AREA_PANELS)):
+                    b.node(s, q, ek.KIND_RASTER, factor, (g.origin[0], g.origin[1], g.dx, g.dy, g.ny), offset, g.nx)
+        elif isinstance(e, TrackSearch):
+            if e.law != "inverse_cube":
+                raise BananagridError(
+                    f"{key}.law = {e.law!r}: a definite-range track earlier than the map cannot be carried yet (its "
+                    "detection of a moving target depends on the closest approach); use law = 'inverse_cube'")
+            w = e.sweep_width
+            for (ax, ay, ta), (bx, by, tb) in zip(e.track[:-1], e.track[1:]):
+                length = math.hypot(bx - ax, by - ay)
+                coef = w * w * (length / (tb - ta)) / (8.0 * math.pi)
+                panels = max(2, math.ceil(length / (0.25 * w)))
+                if panels * PANEL_NODES > MAX_NODES:
+                    raise BananagridError(
+                        f"{key}.sweep_width = {w!r}: a leg of {length:.6g} m needs {panels * PANEL_NODES} time nodes "
+                        f"(panels of W / 4), above {MAX_NODES}; split the track or widen the sweep")
+                for s, q in zip(*_gauss_legendre(ta, tb, panels)):
+                    f = (s - ta) / (tb - ta)
+                    b.node(s, q, ek.KIND_INVERSE_CUBE, factor, (ax + f * (bx - ax), ay + f * (by - ay), coef))
+        elif isinstance(e, PositionReport):
+            p = e.precision
+            b.node(e.t, 1.0, ek.KIND_NORMAL, factor, (*e.position, p[0, 0], p[0, 1], p[1, 1]))
+        else:  # BearingReport
+            for sensor, bearing, sigma in zip(e.fix.sensors, e.fix.bearings, e.fix.sigmas):
+                b.node(e.t, 1.0, ek.KIND_BEARING, factor, (sensor[0], sensor[1], bearing, 1.0 / sigma))
+        if len(b.time) > MAX_NODES:
+            raise BananagridError(f"{key}: the evidence needs {len(b.time)} time nodes in all, above {MAX_NODES}")
+    return _finish(b, t_map, keys, kinds)
+
+
+def _log_miss(miss: float) -> float:
+    return math.log(miss) if miss > 0.0 else -math.inf
+
+
+def _coverage(miss: float) -> float:
+    return -math.log(miss) if miss > 0.0 else math.inf
+
+
+def _finish(b: _Builder, t_map: float, keys, kinds) -> EvidencePack:
+    n_factors = len(keys)
+    order = np.argsort(np.asarray(b.time, dtype=float), kind="stable")
+    arrays = {
+        "time": np.asarray(b.time, dtype=float).reshape(-1)[order],
+        "q": np.asarray(b.q, dtype=float).reshape(-1)[order],
+        "data": np.asarray(b.data, dtype=float).reshape(-1, ek.DATA_COLUMNS)[order],
+        "ints": np.asarray(b.ints, dtype=np.int32).reshape(-1, ek.INT_COLUMNS)[order],
+        "edges": np.asarray(b.edges, dtype=float).reshape(-1, 4) if b.edges else np.zeros((1, 4)),
+        "raster": np.asarray(b.raster, dtype=float) if b.raster else np.zeros(1),
+    }
+    searches = [k for k in range(n_factors) if kinds[k] == "search"]
+    others = [k for k in range(n_factors) if kinds[k] != "search"]
+    names = ["prior", "all", "searches", "others"] + [f"search:{keys[k]}" for k in searches]
+    members = [[], list(range(n_factors)), searches, others] + [[k, *others] for k in searches]
+    channels = np.zeros((len(names), max(n_factors, 1)), dtype=np.int32)
+    for c, m in enumerate(members):
+        channels[c, m] = 1
+    arrays["channels"] = channels if n_factors else channels[:, :0].copy()
+    for a in arrays.values():
+        a.setflags(write=False)
+    return EvidencePack(t=t_map, channel_names=tuple(names), factor_keys=tuple(keys),
+                        factor_kinds=tuple("search" if k == "search" else "report" for k in kinds), **arrays)

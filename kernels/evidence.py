@@ -1,0 +1,215 @@
+"""Evidence weights of one target path, for every model whose kernels carry earlier evidence:
+the one shared implementation (CAT roots, Butterly course nodes and the CAT cell rule call it).
+
+A path is fixed by the map point and the parameters a model's kernel already sums or
+integrates over (CAT: a root (a, omega); Butterly: a course node and speed). Evidence at
+earlier times is a weight on that path. The evidence arrives packed
+(``bananagrid.evidence.packing.pack``) as *time nodes*: node j has a time s_j, the factor k_j
+(one per piece of evidence) it belongs to, a quadrature weight q_j, a kind and its data. The
+factor's log-weight is
+
+    lw_k = sum over its nodes j of q_j c_j(x_j),   x_j the path's world position at s_j,
+
+with c_j (``KIND_*``):
+
+* ``KIND_POLYGON``: ``data[0]`` inside the polygon (``edges[off : off + count]``, even-odd
+  rule, bounding box ``data[1:5]`` = x0, x1, y0, y1), else 0. A search at one time: data[0] =
+  log(1 - POD), q = 1. A search over (t0, t1) with coverage C spread over it (random search,
+  POD of a path = 1 - exp(-C * fraction of the interval spent inside)): data[0] = -C / (t1 - t0)
+  and Gauss-Legendre nodes q_j over (t0, t1).
+* ``KIND_RASTER``: the value of the raster cell holding x_j (``raster[off + i nx + j]``; row i
+  from ``data[1]`` = y0 north by ``data[3]`` = dy, column j from ``data[0]`` = x0 east by
+  ``data[2]`` = dx, ``ints`` count = nx, ``data[4]`` = ny), 0 outside the raster; the values are
+  log(1 - POD) (one time) or -C / (t1 - t0) (an interval, Gauss-Legendre nodes).
+* ``KIND_NORMAL``: -d^T P d / 2, d = x_j - (data[0], data[1]), P = [[data[2], data[3]],
+  [data[3], data[4]]]: a position report with a normal error (q = 1).
+* ``KIND_BEARING``: -(wrap(beta - data[2]) data[3])^2 / 2, beta the bearing (clockwise from
+  north) from the sensor (data[0], data[1]) to x_j, data[3] = 1 / sigma: one bearing of a
+  :class:`~bananagrid.BearingReport` (one node per sensor, same factor, q = 1).
+* ``KIND_INVERSE_CUBE``: -gamma(r), r = |x_j - (data[0], data[1])| the range to the searcher at
+  s_j, gamma(r) = data[2] / r^3 with data[2] = W^2 v / (8 pi), v the leg's speed: Koopman's
+  inverse-cube detection rate (``bananagrid.evidence.searches.TrackSearch`` states it and its
+  sources), Gauss-Legendre nodes q_j over the leg's time span; r = 0 gives -inf (detected).
+
+The path's weight for a *channel* c is exp(sum over factors k in c of lw_k); the pack lists the
+channels as a 0/1 mask ``channels[c, k]`` (e.g. the prior: no factor; all evidence; the
+searches; the reports; each search with the reports). A model's kernel returns, per map point,
+each channel's weighted density: sum over paths of density(path) x weight_c(path).
+
+How a model's kernel uses it (one path; ``lw`` a scratch row of the factors, ``out`` the
+point's row of channels, zeroed by the launch kernel)::
+
+    evidence_reset(ev, lw)
+    for j in range(evidence_nodes(ev)):
+        s = evidence_time(ev, j)
+        # the model's own path at s, world metres (positions may be reused while s repeats:
+        # the pack sorts its nodes by time)
+        px, py = ...
+        evidence_node(ev, j, px, py, lw)
+    evidence_add(ev, lw, density_of_path, out)
+
+Every function is generic over float32 and float64 (the :class:`Evidence` struct of the
+kernel's scalar, ``EVIDENCE.of(scalar)``). The engine builds the struct from a pack
+(``bananagrid.engine.carried.evidence_struct``).
+"""
+
+from typing import Any
+
+import warp as wp
+
+from .generate import ARRAY, ARRAY2D, SCALARS, Params, overload_on_use
+
+wp.set_module_options({"enable_backward": False})
+
+#: Node kinds (``ints[j, 0]``).
+KIND_POLYGON = 0
+KIND_RASTER = 1
+KIND_NORMAL = 2
+KIND_BEARING = 3
+KIND_INVERSE_CUBE = 4
+#: Columns of ``data`` and of ``ints`` (kind, factor, offset, count).
+DATA_COLUMNS = 6
+INT_COLUMNS = 4
+
+#: The packed evidence: node times, quadrature weights, data and ints per node; polygon edges
+#: (x0, y0, x1, y1); raster values; the channel mask (channels x factors).
+EVIDENCE = Params(
+    "Evidence", __name__, time=ARRAY, q=ARRAY, data=ARRAY2D, ints=wp.array2d(dtype=wp.int32), edges=ARRAY2D,
+    raster=ARRAY, channels=wp.array2d(dtype=wp.int32),
+)
+
+
+@wp.func
+def evidence_nodes(ev: Any):
+    """Number of time nodes."""
+    return ev.time.shape[0]
+
+
+@wp.func
+def evidence_channels(ev: Any):
+    """Number of channels."""
+    return ev.channels.shape[0]
+
+
+@wp.func
+def evidence_time(ev: Any, j: int):
+    """Time s_j of node j (s since the last fix)."""
+    return ev.time[j]
+
+
+@wp.func
+def evidence_reset(ev: Any, lw: wp.array(dtype=Any)):
+    """Zero the factors' log-weights of one path."""
+    for k in range(ev.channels.shape[1]):
+        lw[k] = type(lw[k])(0.0)
+
+
+@wp.func
+def polygon_contains(edges: wp.array2d(dtype=Any), offset: int, count: int, px: Any, py: Any):
+    """Whether (px, py) is inside the polygon ``edges[offset : offset + count]`` (even-odd rule,
+    as ``bananagrid.evidence.geometry.Polygon.contains``)."""
+    inside = bool(False)
+    for e in range(offset, offset + count):
+        ax = edges[e, 0]
+        ay = edges[e, 1]
+        bx = edges[e, 2]
+        by = edges[e, 3]
+        if (ay > py) != (by > py):
+            cross = ax + (py - ay) * (bx - ax) / (by - ay)
+            if px < cross:
+                inside = not inside
+    return inside
+
+
+@wp.func
+def wrap_angle(a: Any):
+    """a wrapped to [-pi, pi)."""
+    two_pi = type(a)(6.283185307179586)
+    half = type(a)(3.141592653589793)
+    return a - two_pi * wp.floor((a + half) / two_pi)
+
+
+@wp.func
+def evidence_contribution(ev: Any, j: int, px: Any, py: Any):
+    """c_j at the world point (px, py) (module docstring), before the quadrature weight."""
+    kind = ev.ints[j, 0]
+    zero = type(px)(0.0)
+    half = type(px)(0.5)
+    if kind == KIND_POLYGON:
+        if px < ev.data[j, 1] or px > ev.data[j, 2] or py < ev.data[j, 3] or py > ev.data[j, 4]:
+            return zero
+        if polygon_contains(ev.edges, ev.ints[j, 2], ev.ints[j, 3], px, py):
+            return ev.data[j, 0]
+        return zero
+    if kind == KIND_RASTER:
+        fx = (px - ev.data[j, 0]) / ev.data[j, 2]
+        fy = (py - ev.data[j, 1]) / ev.data[j, 3]
+        nx = ev.ints[j, 3]
+        if fx < zero or fy < zero or fx >= type(px)(float(nx)) or fy >= ev.data[j, 4]:
+            return zero
+        col = wp.min(int(fx), nx - 1)
+        row = wp.min(int(fy), int(ev.data[j, 4]) - 1)
+        return ev.raster[ev.ints[j, 2] + row * nx + col]
+    if kind == KIND_NORMAL:
+        dx = px - ev.data[j, 0]
+        dy = py - ev.data[j, 1]
+        return -half * (ev.data[j, 2] * dx * dx + type(px)(2.0) * ev.data[j, 3] * dx * dy + ev.data[j, 4] * dy * dy)
+    if kind == KIND_BEARING:
+        beta = wp.atan2(px - ev.data[j, 0], py - ev.data[j, 1])
+        z = wrap_angle(beta - ev.data[j, 2]) * ev.data[j, 3]
+        return -half * z * z
+    if kind == KIND_INVERSE_CUBE:
+        dx = px - ev.data[j, 0]
+        dy = py - ev.data[j, 1]
+        r2 = dx * dx + dy * dy
+        return -ev.data[j, 2] / (r2 * wp.sqrt(r2))
+    return zero
+
+
+@wp.func
+def evidence_node(ev: Any, j: int, px: Any, py: Any, lw: wp.array(dtype=Any)):
+    """Add node j's contribution q_j c_j(x_j) to its factor's log-weight, the path at the world
+    point (px, py) at s_j. A zero contribution adds nothing (q_j is never multiplied by an
+    infinite rate there)."""
+    c = evidence_contribution(ev, j, px, py)
+    if c != type(px)(0.0):
+        k = ev.ints[j, 1]
+        lw[k] = lw[k] + ev.q[j] * c
+
+
+@wp.func
+def evidence_weight(ev: Any, lw: wp.array(dtype=Any), c: int):
+    """The path's weight in channel c: exp(sum of the log-weights of the channel's factors)."""
+    total = type(lw[0])(0.0)
+    for k in range(ev.channels.shape[1]):
+        if ev.channels[c, k] != 0:
+            total += lw[k]
+    return wp.exp(total)
+
+
+@wp.func
+def evidence_add(ev: Any, lw: wp.array(dtype=Any), density: Any, out: wp.array(dtype=Any)):
+    """Add the path's density times its weight in each channel to ``out`` (one row per point)."""
+    for c in range(ev.channels.shape[0]):
+        out[c] = out[c] + density * evidence_weight(ev, lw, c)
+
+
+@wp.kernel
+def evidence_paths(ev: Any, positions: wp.array3d(dtype=Any), density: wp.array(dtype=Any),
+                   lw: wp.array2d(dtype=Any), out: wp.array2d(dtype=Any)):
+    """Weights of given paths (``positions[i, j]``: path i's world position at node j, with
+    ``density[i]``): each path's channel values in ``out[i]``. Used to check the helpers and to
+    weigh paths a model computes on the host."""
+    i = wp.tid()
+    evidence_reset(ev, lw[i])
+    for j in range(ev.time.shape[0]):
+        evidence_node(ev, j, positions[i, j, 0], positions[i, j, 1], lw[i])
+    for c in range(ev.channels.shape[0]):
+        out[i, c] = type(density[i])(0.0)
+    evidence_add(ev, lw[i], density[i], out[i])
+
+
+for _scalar in SCALARS:
+    overload_on_use(evidence_paths, _scalar, {
+        "ev": EVIDENCE.of(_scalar), "positions": wp.array3d(dtype=_scalar), "density": wp.array(dtype=_scalar),
+        "lw": wp.array2d(dtype=_scalar), "out": wp.array2d(dtype=_scalar)})
