@@ -69,7 +69,8 @@ from typing import Any
 
 import warp as wp
 
-from .generate import ARRAY, SCALARS, Params, density_kernels, overload_on_use
+from . import evidence as ek
+from .generate import ARRAY, SCALAR, SCALARS, Params, carried_points_kernel, density_kernels, overload_on_use
 
 # No adjoints: nothing differentiates these kernels, and the backward kernels Warp would
 # generate for every launch kernel are most of a module's code (the CAT module's CUDA build:
@@ -96,6 +97,7 @@ REANCHOR = 64
 #: Newton iterations of the secular equations (they converge in a handful).
 MAX_NEWTON = 60
 TWO_PI = 6.283185307179586
+PI = 3.141592653589793
 #: Side of the grid kernel's tiles (cells); a CPU thread takes a strip of TILE rows.
 TILE = 32
 #: vec4 per node and axis in a tile's factor tables.
@@ -781,3 +783,471 @@ for _scalar in SCALARS:
         "quads": wp.array2d(dtype=wp.types.vector(4, _scalar)), "out": wp.array2d(dtype=_scalar)})
 KERNELS = density_kernels(butterly_world, BUTTERLY, "butterly", grid=butterly_grid, tile_rows=TILE,
                           scratch_width=SCRATCH, quad_width=QUAD_SCRATCH)
+
+
+
+
+# ---------------------------------------------------------------------------------------------
+# Carried evidence: the course integral with each path's weight inside
+# ---------------------------------------------------------------------------------------------
+#
+# For the course c (theta = pi/2 - c - beta in the eigen frame, e(c) = cos theta q1 +
+# sin theta q2) and the speed of range r = V t, the path through the map point x at t is at
+# X(s) = x - r (t - s) / t e(c) at time s: on the circle of radius R(s) = r (t - s) / t about x.
+# Evidence at s is a weight W(theta) on the course (``kernels/evidence.py``: the shared
+# helpers), and the speed's carried density is
+#
+#     w_i P_i^W(x) = w_i coef int exp(E(theta)) W(theta) dtheta.
+#
+# A polygon's factor at s is constant in theta except where the circle R(s) crosses one of its
+# edges, so the support of exp(E) (the arcs that the density's walk finds, beyond which every
+# term is below ``stop`` of the peak) is cut at every such crossing, and each piece is
+# integrated by Gauss-Legendre on panels no wider than ``rule[PANEL]`` trapezoid spacings
+# (``carried_arc``): exact for polygons but for the rule's error on the smooth exp(E). Smooth
+# factors (reports, bearings, inverse-cube tracks, rasters) are evaluated at every node, on
+# panels narrowed to their own angular scale (``smooth_panel``).
+
+#: Gauss-Legendre nodes per panel; the rule array holds the nodes on [-1, 1], their weights,
+#: then the panel width in trapezoid spacings (PANEL) and the narrowest panel for smooth factors
+#: as a fraction of it (NARROWEST).
+GAUSS_NODES = 8
+PANEL = 2 * GAUSS_NODES
+NARROWEST = 2 * GAUSS_NODES + 1
+SPACING = 2 * GAUSS_NODES + 2
+RULE_SIZE = 2 * GAUSS_NODES + 3
+#: Course breaks held at once: a window of the smallest, and the next window after them.
+BREAKS = 32
+#: Polygon nodes whose circle can meet their polygon, listed per point and speed, with their
+#: contributions kept across the pieces of an arc (a break changes one node's); more than this
+#: many: every polygon node is visited at every piece.
+ACTIVE = 128
+
+
+@wp.func
+def circle_edge_crossings(cx: Any, cy: Any, radius: Any, ax: Any, ay: Any, bx: Any, by: Any):
+    """Where the circle of ``radius`` about (cx, cy) crosses the segment from (ax, ay) to
+    (bx, by): (count, u1, u2), 0 <= u < 1 the crossings' fractions along the segment (a tangent
+    point counts once). |A - C + u D|^2 = R^2 is a quadratic in u, solved in the form without
+    cancellation (q = -(b + sign(b) sqrt(disc)), roots q / a and c / q)."""
+    zero = type(cx)(0.0)
+    one = type(cx)(1.0)
+    dx = bx - ax
+    dy = by - ay
+    fx = ax - cx
+    fy = ay - cy
+    a2 = dx * dx + dy * dy
+    b2 = fx * dx + fy * dy
+    c2 = (fx - radius) * (fx + radius) + fy * fy
+    disc = b2 * b2 - a2 * c2
+    count = int(0)
+    u1 = zero
+    u2 = zero
+    if a2 <= zero or disc < zero or radius <= zero:
+        return count, u1, u2
+    root = wp.sqrt(disc)
+    q = -(b2 + root)
+    if b2 < zero:
+        q = root - b2
+    r1 = q / a2
+    if r1 >= zero and r1 < one:
+        u1 = r1
+        count = 1
+    if q != zero:
+        r2 = c2 / q
+        if r2 >= zero and r2 < one and (count == 0 or r2 != r1):
+            if count == 0:
+                u1 = r2
+            else:
+                u2 = r2
+            count = count + 1
+    return count, u1, u2
+
+
+@wp.func
+def insert_break(buf: Any, who: Any, count: int, value: Any, node: int):
+    """Insert ``value`` (made by the active node ``node``) into the sorted ``buf[:count]``
+    (``who`` alongside), keeping the BREAKS smallest: (buf, who, count)."""
+    if count == BREAKS:
+        if value >= buf[BREAKS - 1]:
+            return buf, who, count
+        count = count - 1
+    k = count
+    while k > 0 and buf[k - 1] > value:
+        buf[k] = buf[k - 1]
+        who[k] = who[k - 1]
+        k = k - 1
+    buf[k] = value
+    who[k] = wp.int32(node)
+    return buf, who, count + 1
+
+
+@wp.func
+def node_radius(ev: Any, j: int, r: Any, t: Any):
+    """R(s_j) = r (t - s_j) / t: the distance from the map point to the path at node j's time."""
+    if t <= type(r)(0.0):
+        return type(r)(0.0)
+    return r * ((t - ek.evidence_time(ev, j)) / t)
+
+
+@wp.func
+def circle_meets_box(ev: Any, j: int, x: Any, y: Any, radius: Any):
+    """Whether the circle of ``radius`` about (x, y) meets polygon node j's bounding box (else
+    the node's path points are all outside its polygon, and none crosses an edge)."""
+    zero = type(x)(0.0)
+    near_x = wp.max(wp.max(ev.data[j, 1] - x, zero), x - ev.data[j, 2])
+    near_y = wp.max(wp.max(ev.data[j, 3] - y, zero), y - ev.data[j, 4])
+    far_x = wp.max(wp.abs(ev.data[j, 1] - x), wp.abs(x - ev.data[j, 2]))
+    far_y = wp.max(wp.abs(ev.data[j, 3] - y), wp.abs(y - ev.data[j, 4]))
+    r2 = radius * radius
+    return radius > zero and near_x * near_x + near_y * near_y <= r2 and far_x * far_x + far_y * far_y >= r2
+
+
+@wp.func
+def active_polygons(ev: Any, p: Any, x: Any, y: Any, r: Any):
+    """The polygon nodes whose circle meets their box for the range r: (list, count), count -1
+    when more than ACTIVE (then every polygon node is taken)."""
+    active = wp.vector(length=ACTIVE, dtype=wp.int32)
+    count = int(0)
+    for k in range(p.polygon_nodes.shape[0]):
+        j = p.polygon_nodes[k]
+        if count >= 0 and circle_meets_box(ev, j, x, y, node_radius(ev, j, r, p.t)):
+            if count == ACTIVE:
+                count = -1
+            else:
+                active[count] = wp.int32(j)
+                count = count + 1
+    return active, count
+
+
+@wp.func
+def polygon_node(p: Any, active: Any, count: int, k: int):
+    """The k-th polygon node to visit: from the active list, or every polygon node (count -1)."""
+    if count < 0:
+        return p.polygon_nodes[k]
+    return int(active[k])
+
+
+@wp.func
+def visits(p: Any, count: int):
+    """How many polygon nodes to visit."""
+    if count < 0:
+        return p.polygon_nodes.shape[0]
+    return count
+
+
+@wp.func
+def window_breaks(x: Any, y: Any, r: Any, p: Any, active: Any, n_active: int, sx: Any, sy: Any, lo: Any, hi: Any,
+                  ev: Any):
+    """The smallest BREAKS offsets in (lo, hi) (from the peak's direction (sx, sy)) of the
+    courses whose path crosses a polygon's edge at a polygon node's time: (buf, who, count),
+    who[b] the visit index k (:func:`polygon_node`) of the node that makes break b."""
+    buf = wp.vector(length=BREAKS, dtype=type(x))
+    who = wp.vector(length=BREAKS, dtype=wp.int32)
+    count = int(0)
+    two_pi = type(x)(TWO_PI)
+    for k in range(visits(p, n_active)):
+        j = polygon_node(p, active, n_active, k)
+        radius = node_radius(ev, j, r, p.t)
+        if circle_meets_box(ev, j, x, y, radius):
+            first = ev.ints[j, 2]
+            for e in range(first, first + ev.ints[j, 3]):
+                ax = ev.edges[e, 0]
+                ay = ev.edges[e, 1]
+                bx = ev.edges[e, 2]
+                by = ev.edges[e, 3]
+                hits, u1, u2 = circle_edge_crossings(x, y, radius, ax, ay, bx, by)
+                for h in range(hits):
+                    u = u1
+                    if h == 1:
+                        u = u2
+                    ex = (x - (ax + u * (bx - ax))) / radius
+                    ey = (y - (ay + u * (by - ay))) / radius
+                    d = wp.atan2(sx * ey - sy * ex, sx * ex + sy * ey)
+                    for wrap in range(3):
+                        dd = d + type(x)(float(wrap - 1)) * two_pi
+                        if dd > lo and dd < hi:
+                            buf, who, count = insert_break(buf, who, count, dd, k)
+    return buf, who, count
+
+
+@wp.func
+def smooth_spacing(x: Any, y: Any, r: Any, p: Any, delta: Any, ev: Any):
+    """The course spacing (radians) that resolves the smooth factors as ``delta`` resolves the
+    density: at most ``delta``, at most SMOOTH_SPACING times each smooth node's length scale over
+    its radius R(s_j) (``delta`` is that fraction of the density's narrowest width), at least
+    ``rule[NARROWEST]`` of ``delta``. Length scales: a report's smallest SD (>= 1 / sqrt(trace
+    P)); a bearing's sigma times the least distance from the sensor to the circle; an
+    inverse-cube rate's quarter distance from the searcher to the circle; a raster's cell."""
+    zero = type(x)(0.0)
+    out = delta
+    for k in range(p.smooth_nodes.shape[0]):
+        j = p.smooth_nodes[k]
+        kind = ev.ints[j, 0]
+        radius = node_radius(ev, j, r, p.t)
+        if radius > zero:
+            scale = zero
+            if kind == ek.KIND_NORMAL:
+                scale = type(x)(1.0) / wp.sqrt(ev.data[j, 2] + ev.data[j, 4])
+            elif kind == ek.KIND_RASTER:
+                scale = wp.min(ev.data[j, 2], ev.data[j, 3])
+            else:
+                dx = x - ev.data[j, 0]
+                dy = y - ev.data[j, 1]
+                gap = wp.abs(wp.sqrt(dx * dx + dy * dy) - radius)
+                if kind == ek.KIND_BEARING:
+                    scale = gap / ev.data[j, 3]
+                else:
+                    scale = type(x)(0.25) * gap
+            out = wp.min(out, p.rule[SPACING] * scale / radius)
+    return wp.max(out, delta * p.rule[NARROWEST])
+
+
+@wp.func
+def smooth_trapezoid(
+    x: Any, y: Any, r: Any, cx: Any, cy: Any, q1x: Any, q1y: Any, c1: Any, c2: Any, p11: Any, p12: Any, p22: Any,
+    lo: Any, hi: Any, h: Any, log_scale: Any, p: Any, ev: Any, lw: wp.array(dtype=Any), out: wp.array(dtype=Any),
+):
+    """Add to each channel the trapezoid rule of spacing h (nodes theta* + k h) over (lo, hi)
+    of exp(E + log_scale) times the path's weight, the polygons' log-weights already in ``lw``
+    (constant on the arc): for an arc without polygon breaks, where the integrand falls below
+    ``stop`` of its peak at both ends (or spans the circle), and the weight is smooth and
+    periodic in the course."""
+    k0 = int(wp.ceil(lo / h))
+    k1 = int(wp.floor(hi / h))
+    if hi - lo >= type(x)(TWO_PI) * (type(x)(1.0) - type(x)(1.0e-12)):
+        k1 = k0 + int(wp.round((hi - lo) / h)) - 1  # the whole circle: each node once
+    for k in range(k0, k1 + 1):
+        e, ex, ey = course_node(cx, cy, q1x, q1y, c1, c2, p11, p12, p22, type(x)(k) * h)
+        add_smooth(ev, p, x, y, ex, ey, r, lw)
+        ek.evidence_add(ev, lw, h * wp.exp(e + log_scale), out)
+
+
+@wp.func
+def course_node(cx: Any, cy: Any, q1x: Any, q1y: Any, c1: Any, c2: Any, p11: Any, p12: Any, p22: Any, d: Any):
+    """At theta = theta* + d: (E - E*, e(c) in the world)."""
+    half = type(d)(0.5)
+    sd = wp.sin(half * d)
+    u = type(d)(-2.0) * sd * sd  # cos d - 1 without cancellation
+    v = wp.sin(d)
+    cd = type(d)(1.0) + u
+    e = u * (c1 - half * p11 * u) - half * p22 * v * v + v * (c2 - p12 * u)
+    ct = cx * cd - cy * v  # cos and sin of theta
+    st = cy * cd + cx * v
+    return e, ct * q1x - st * q1y, ct * q1y + st * q1x
+
+
+@wp.func
+def polygon_contribution(ev: Any, p: Any, active: Any, n_active: int, k: int, x: Any, y: Any, ex: Any, ey: Any,
+                         r: Any):
+    """q_j c_j of the k-th polygon node to visit for the path through (x, y) with direction e
+    (``kernels/evidence.py``'s contribution: the polygon's value inside, else 0)."""
+    j = polygon_node(p, active, n_active, k)
+    radius = node_radius(ev, j, r, p.t)
+    c = ek.evidence_contribution(ev, j, x - radius * ex, y - radius * ey)
+    if c == type(x)(0.0):
+        return c
+    return ev.q[j] * c
+
+
+@wp.func
+def polygon_weights(ev: Any, p: Any, active: Any, n_active: int, cached: Any, lw: wp.array(dtype=Any)):
+    """The factors' log-weights from the polygon nodes' contributions ``cached`` (one per
+    visited node; the smooth factors' are zeroed, set at each node later)."""
+    ek.evidence_reset(ev, lw)
+    for k in range(visits(p, n_active)):
+        if cached[k] != type(cached[k])(0.0):
+            f = ev.ints[polygon_node(p, active, n_active, k), 1]
+            lw[f] = lw[f] + cached[k]
+
+
+@wp.func
+def add_smooth(ev: Any, p: Any, x: Any, y: Any, ex: Any, ey: Any, r: Any, lw: wp.array(dtype=Any)):
+    """Set the smooth factors' log-weights for the path through (x, y) with direction e (their
+    factors zeroed first; the polygons' are left as they are)."""
+    for k in range(p.smooth_nodes.shape[0]):
+        lw[ev.ints[p.smooth_nodes[k], 1]] = type(x)(0.0)
+    for k in range(p.smooth_nodes.shape[0]):
+        j = p.smooth_nodes[k]
+        radius = node_radius(ev, j, r, p.t)
+        ek.evidence_node(ev, j, x - radius * ex, y - radius * ey, lw)
+
+
+@wp.func
+def carried_arc(
+    x: Any, y: Any, r: Any, cx: Any, cy: Any, q1x: Any, q1y: Any, c1: Any, c2: Any, p11: Any, p12: Any,
+    p22: Any, lo: Any, hi: Any, spacing: Any, log_scale: Any, trapezoid: Any, p: Any, active: Any, n_active: int,
+    ev: Any, lw: wp.array(dtype=Any), out: wp.array(dtype=Any),
+):
+    """Add to each channel the integral over theta* + (lo, hi) of exp(E + log_scale) times the
+    path's weight: pieces between the polygons' course breaks (a window of BREAKS at a time),
+    Gauss-Legendre on panels no wider than ``panel``. Without smooth factors the weight is
+    constant on a piece: one weight per piece, and an arc without breaks takes the density's
+    own trapezoid sum over it (``trapezoid``, relative to exp(E*)) times its weight."""
+    zero = type(x)(0.0)
+    half = type(x)(0.5)
+    smooth = p.smooth_nodes.shape[0]
+    rule = p.rule
+    sx = cx * q1x - cy * q1y  # the peak's direction e(c*) in the world
+    sy = cx * q1y + cy * q1x
+    cached = wp.vector(length=ACTIVE, dtype=type(x))
+    n_visit = visits(p, n_active)
+    a = lo
+    while a < hi:
+        buf, who, count = window_breaks(x, y, r, p, active, n_active, sx, sy, a, hi, ev)
+        if count == 0 and a == lo:
+            # no break: the polygons' weight is constant on the arc
+            e_mid, mx, my = course_node(cx, cy, q1x, q1y, c1, c2, p11, p12, p22, half * (lo + hi))
+            ek.evidence_reset(ev, lw)
+            for k in range(n_visit):
+                j = polygon_node(p, active, n_active, k)
+                radius = node_radius(ev, j, r, p.t)
+                ek.evidence_node(ev, j, x - radius * mx, y - radius * my, lw)
+            if smooth == 0:
+                ek.evidence_add(ev, lw, trapezoid * wp.exp(log_scale), out)
+            else:
+                smooth_trapezoid(x, y, r, cx, cy, q1x, q1y, c1, c2, p11, p12, p22, lo, hi, spacing, log_scale, p, ev,
+                                 lw, out)
+            return
+        panel = p.rule[PANEL] * spacing
+        end = hi
+        if count == BREAKS:
+            end = buf[BREAKS - 1]
+        fresh = int(1)  # every contribution to evaluate (a window's first piece: breaks beyond the
+        # last window may have been dropped at its edge)
+        applied = int(0)  # breaks of this window whose node is evaluated
+        for piece in range(count + 1):
+            b = end
+            if piece < count:
+                b = buf[piece]
+            if b > a:
+                m = int(wp.ceil((b - a) / panel))
+                h = (b - a) / type(x)(m)
+                e_mid, mx, my = course_node(cx, cy, q1x, q1y, c1, c2, p11, p12, p22, half * (a + b))
+                if n_active < 0:
+                    ek.evidence_reset(ev, lw)
+                    for k in range(n_visit):
+                        j = polygon_node(p, active, n_active, k)
+                        radius = node_radius(ev, j, r, p.t)
+                        ek.evidence_node(ev, j, x - radius * mx, y - radius * my, lw)
+                else:
+                    if fresh == 1:
+                        for k in range(n_visit):
+                            cached[k] = polygon_contribution(ev, p, active, n_active, k, x, y, mx, my, r)
+                    else:
+                        # only the nodes whose crossings lie between the last piece and this one
+                        for q in range(applied, piece):
+                            k = int(who[q])
+                            cached[k] = polygon_contribution(ev, p, active, n_active, k, x, y, mx, my, r)
+                    polygon_weights(ev, p, active, n_active, cached, lw)
+                fresh = int(0)
+                applied = piece
+                total = zero
+                for k in range(m):
+                    mid = a + (type(x)(k) + half) * h
+                    for g in range(GAUSS_NODES):
+                        e, ex, ey = course_node(cx, cy, q1x, q1y, c1, c2, p11, p12, p22, mid + half * h * rule[g])
+                        term = half * h * rule[GAUSS_NODES + g] * wp.exp(e + log_scale)
+                        if smooth == 0:
+                            total = total + term
+                        else:
+                            add_smooth(ev, p, x, y, ex, ey, r, lw)
+                            ek.evidence_add(ev, lw, term, out)
+                if smooth == 0:
+                    ek.evidence_add(ev, lw, total, out)
+                a = b
+        if count < BREAKS:
+            a = hi
+        else:
+            a = end
+
+
+@wp.func
+def carried_speed(
+    x: Any, y: Any, z1: Any, z2: Any, p: Any, base: int, ev: Any, lw: wp.array(dtype=Any), out: wp.array(dtype=Any),
+):
+    """Add the speed's carried density w_i P_i^W at (x, y) (whitened z) to each channel: the
+    arcs of the density's walk (:func:`speed_density`: the peak's, and the second peak's where
+    it matters), each by :func:`carried_arc`."""
+    params = p.params
+    zero = type(z1)(0.0)
+    pi = type(z1)(PI)
+    rho1 = params[base + RHO1]
+    rho2 = params[base + RHO2]
+    four_f = params[base + FOUR_F]
+    kappa = params[KAPPA]
+    c0 = params[COS_THETA0]
+    s0 = params[SIN_THETA0]
+    stop = params[STOP]
+    q1x = params[Q1_X]
+    q1y = params[Q1_Y]
+    r = rho1 / params[INV_SQRT_S1]
+    a = rho1 * z1 + kappa * c0
+    b = rho2 * z2 + kappa * s0
+    n = node_count(wp.sqrt(a * a + b * b) + four_f, params[LOG_TOL])
+    delta = type(z1)(TWO_PI) / type(z1)(n)
+    spacing = delta
+    if p.smooth_nodes.shape[0] > 0:
+        spacing = smooth_spacing(x, y, r, p, delta, ev)
+        spacing = delta / type(z1)(float(int(wp.ceil(delta / spacing))))  # delta a multiple of it
+    cx, cy, mu = global_peak(a, b, four_f, params[NEWTON_TOL], zero)
+    e1, c1, c2, p11, p12, p22 = anchor_exponent(z1, z2, rho1, rho2, kappa, c0, s0, cx, cy)
+    log_scale = params[base + LOG_COEF] + e1
+    if log_scale < params[LOG_TINY]:
+        return
+    active, n_active = active_polygons(ev, p, x, y, r)
+    trapezoid, p1, m1 = walk(c1, c2, p11, p12, p22, delta, stop, n - 1, n - 1, n - 1)
+    lo = -type(z1)(m1) * delta
+    hi = type(z1)(p1) * delta
+    if p1 + m1 + 1 >= n:
+        lo = -pi
+        hi = pi
+    carried_arc(x, y, r, cx, cy, q1x, q1y, c1, c2, p11, p12, p22, lo, hi, spacing, log_scale, delta * trapezoid, p,
+                active, n_active, ev, lw, out)
+    found, x2, y2 = second_peak(a, b, four_f, params[NEWTON_TOL], params[LOG_STOP])
+    if found == 1 and p1 + m1 + 1 < n:
+        offset = wp.atan2(cx * y2 - cy * x2, cx * x2 + cy * y2)
+        j2 = int(wp.round(offset / delta))
+        if j2 < 0:
+            j2 = j2 + n
+        if j2 > p1 and j2 < n - m1:
+            angle = type(z1)(j2) * delta
+            cj = wp.cos(angle)
+            sj = wp.sin(angle)
+            e2, d1, d2, q11, q12, q22 = anchor_exponent(z1, z2, rho1, rho2, kappa, c0, s0, cx * cj - cy * sj,
+                                                        cy * cj + cx * sj)
+            if wp.exp(e2 - e1) >= stop:
+                lim_plus = n - m1 - 1 - j2
+                lim_minus = j2 - p1 - 1
+                extra, p2, m2 = walk(d1, d2, q11, q12, q22, delta, stop, lim_plus, lim_minus, lim_plus + lim_minus)
+                carried_arc(x, y, r, cx, cy, q1x, q1y, c1, c2, p11, p12, p22, type(z1)(j2 - m2) * delta,
+                            type(z1)(j2 + p2) * delta, spacing, log_scale, delta * wp.exp(e2 - e1) * extra, p, active,
+                            n_active, ev, lw, out)
+
+
+@wp.func
+def butterly_carried(x: Any, y: Any, p: Any, ev: Any, lw: wp.array(dtype=Any), out: wp.array(dtype=Any)):
+    """Add the carried density per m^2 at the world point (x, y) to each channel of ``out``: the
+    sum over speeds of :func:`carried_speed`, a speed skipped where its bound is below
+    LOG_SPEED_FLOOR (and the point where every speed's is below LOG_CELL_FLOOR): weights are at
+    most one, so the prior's bound bounds every channel."""
+    params = p.params
+    z1, z2 = whiten(x, y, params)
+    z_norm = wp.sqrt(z1 * z1 + z2 * z2)
+    cell_floor = params[LOG_CELL_FLOOR] - wp.log(type(x)(float(p.n_speeds)))
+    keep = int(0)
+    for i in range(p.n_speeds):
+        if log_bound(z1, z2, z_norm, params, HEAD + PER_SPEED * i) >= cell_floor:
+            keep = 1
+    if keep == 0:
+        return
+    for i in range(p.n_speeds):
+        base = HEAD + PER_SPEED * i
+        if log_bound(z1, z2, z_norm, params, base) >= params[LOG_SPEED_FLOOR]:
+            carried_speed(x, y, z1, z2, p, base, ev, lw, out)
+
+
+#: The carried kernels' parameters: the density's array and speed count, the course rule
+#: (RULE_SIZE values), the map's time t, and the pack's polygon nodes and other (smooth) nodes.
+BUTTERLY_CARRIED = Params("ButterlyCarriedParams", __name__, params=ARRAY, n_speeds=int, rule=ARRAY, t=SCALAR,
+                          polygon_nodes=wp.array(dtype=wp.int32), smooth_nodes=wp.array(dtype=wp.int32))
+CARRIED_POINTS = carried_points_kernel(butterly_carried, BUTTERLY_CARRIED, ek.EVIDENCE, "butterly")
