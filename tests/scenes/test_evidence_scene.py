@@ -441,3 +441,36 @@ def test_every_time_is_on_the_timeline_or_refused_naming_the_key(t, t1, utc):
         assert not ok
         return
     assert ok and scene.evidence[0].span == (s0, s1)
+
+
+# --- the bundled story scenes: earlier evidence carried through the model's paths ----------------
+
+SCENES = Path(__file__).resolve().parents[2] / "scenes"
+
+
+def test_fast_contact_carries_the_box_and_the_patrol_as_bg_posterior_does(tmp_path):
+    """scenes/fast_contact.toml at 400 m cells: each map is ``bg.posterior`` with the evidence
+    built here (the box at 5 min carried to 10 min, the patrol's track), and the box's POS is the
+    same whichever map it is carried to: a property of the paths, not of the map's time."""
+    scene = bg.load_scene(SCENES / "fast_contact.toml").with_step(400.0)
+    rows = run_scene(scene, tmp_path, npz=True)
+    model = bg.CAT(v0=20.0, t=600.0, sigma_a=0.005, sigma_omega=math.radians(0.05), pose=bg.Pose(origin=(0.0, 0.0), heading=math.radians(45.0)))
+    box = bg.AreaSearch([[3300.0, 4500.0], [4500.0, 3300.0], [5500.0, 4300.0], [4300.0, 5500.0]], t=300.0, pod=0.7)
+    patrol = bg.TrackSearch([[11000.0, 3000.0, 330.0], [3000.0, 11000.0, 570.0]], sweep_width=1500.0)
+    late = bg.posterior(model, scene.grid, [box, patrol])
+    early = bg.posterior(bg.CAT(v0=20.0, t=300.0, sigma_a=0.005, sigma_omega=math.radians(0.05),
+                                pose=bg.Pose(origin=(0.0, 0.0), heading=math.radians(45.0))), scene.grid, [box])
+    with np.load(tmp_path / "fast_contact.npz", allow_pickle=False) as arrays:
+        # 1e-12: the same kernels on the same grid; only the threads' order of summing may differ
+        np.testing.assert_allclose(arrays["contact__t600__posterior"], late.values, rtol=0, atol=1e-12)
+        np.testing.assert_allclose(arrays["contact__t300__posterior"], early.values, rtol=0, atol=1e-12)
+    by_t = {row["t"]: row["evidence"] for row in rows}
+    assert by_t[600.0]["search_pos"] == pytest.approx(list(late.search_pos), abs=1e-12)
+    assert by_t[600.0]["pos"] == pytest.approx(late.pos, abs=1e-12)
+    assert math.isnan(by_t[300.0]["search_pos"][1])  # the patrol began after 5 min
+    # the box's POS at 5 min (its own time: prior x likelihood) and carried to 10 min: two
+    # discretisations of one probability, measured apart by 2.8e-4 at 400 m cells, 1.1e-4 at
+    # 200 m and 4.4e-5 at 100 m (both tend to 0.49512)
+    assert abs(by_t[300.0]["search_pos"][0] - by_t[600.0]["search_pos"][0]) < 1e-3
+    # the story: the searches found nothing where the contact most likely was
+    assert by_t[600.0]["pos"] > 0.5 and by_t[300.0]["pos"] > 0.4
