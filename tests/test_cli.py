@@ -246,6 +246,8 @@ def test_scene_runs_end_to_end(path, quick_runs):
         masses = info["entities"][f"/layers/{layer.name}/mass"]["scalars"]
         assert len(masses) == len(scene.times or (1,))
     times = scene.times or sorted({t for _, t in scene.jobs()})
+    # and a scene's evidence, each drawn from its own time on (land at every time)
+    times = sorted({*times, *(e.span[0] for e in scene.evidence if e.span is not None)})
     assert info["timelines"]["elapsed"]["values"] == pytest.approx(list(times))
     assert sorted(p.name for p in quick_runs[scene.name].iterdir()) == [f"{scene.name}.npz", f"{scene.name}.rrd"]
 
