@@ -811,10 +811,24 @@ KERNELS = density_kernels(butterly_world, BUTTERLY, "butterly", grid=butterly_gr
 #: then the panel width in trapezoid spacings (PANEL) and the narrowest panel for smooth factors
 #: as a fraction of it (NARROWEST).
 GAUSS_NODES = 8
-PANEL = 2 * GAUSS_NODES
-NARROWEST = 2 * GAUSS_NODES + 1
-SPACING = 2 * GAUSS_NODES + 2
-RULE_SIZE = 2 * GAUSS_NODES + 3
+#: Lower orders for pieces narrow enough (a crossing-dense arc is cut into many): where each
+#: order's nodes and weights start in the rule array, after the panels' 8-point rule.
+ORDERS = (8, 4, 3, 2)
+RULE_AT = {8: 0, 4: 16, 3: 24, 2: 30}
+AT4 = 16
+AT3 = 24
+AT2 = 30
+#: After the rules: the panel width in spacings, the narrowest spacing for smooth factors (a
+#: fraction of the density's), a smooth factor's spacing as a fraction of its angular scale, and
+#: the widest piece (in spacings) that the 4-, 3- and 2-point rules integrate as well as the
+#: panels' 8-point rule.
+PANEL = 34
+NARROWEST = 35
+SPACING = 36
+LIMIT4 = 37
+LIMIT3 = 38
+LIMIT2 = 39
+RULE_SIZE = 40
 #: Course breaks held at once: a window of the smallest, and the next window after them.
 BREAKS = 32
 #: Polygon nodes whose circle can meet their polygon, listed per point and speed, with their
@@ -1133,20 +1147,44 @@ def carried_arc(
                     if fresh == 1:
                         for k in range(n_visit):
                             cached[k] = polygon_contribution(ev, p, active, n_active, k, x, y, mx, my, r)
+                        polygon_weights(ev, p, active, n_active, cached, lw)
                     else:
-                        # only the nodes whose crossings lie between the last piece and this one
+                        # only the nodes whose crossings lie between the last piece and this
+                        # one change: their factors' log-weights move by the difference (all
+                        # of them again where a contribution is infinite: POD = 1)
+                        rebuild = int(0)
                         for q in range(applied, piece):
                             k = int(who[q])
-                            cached[k] = polygon_contribution(ev, p, active, n_active, k, x, y, mx, my, r)
-                    polygon_weights(ev, p, active, n_active, cached, lw)
+                            new = polygon_contribution(ev, p, active, n_active, k, x, y, mx, my, r)
+                            if wp.isfinite(new) and wp.isfinite(cached[k]):
+                                f = ev.ints[polygon_node(p, active, n_active, k), 1]
+                                lw[f] = lw[f] + (new - cached[k])
+                            else:
+                                rebuild = 1
+                            cached[k] = new
+                        if rebuild == 1:
+                            polygon_weights(ev, p, active, n_active, cached, lw)
                 fresh = int(0)
                 applied = piece
+                # the order: a narrow piece in one panel of 4, 3 or 2 nodes, else panels of 8
+                width = (b - a) / spacing
+                order = int(GAUSS_NODES)
+                at = int(0)
+                if width <= rule[LIMIT2]:
+                    order = 2
+                    at = AT2
+                elif width <= rule[LIMIT3]:
+                    order = 3
+                    at = AT3
+                elif width <= rule[LIMIT4]:
+                    order = 4
+                    at = AT4
                 total = zero
                 for k in range(m):
                     mid = a + (type(x)(k) + half) * h
-                    for g in range(GAUSS_NODES):
-                        e, ex, ey = course_node(cx, cy, q1x, q1y, c1, c2, p11, p12, p22, mid + half * h * rule[g])
-                        term = half * h * rule[GAUSS_NODES + g] * wp.exp(e + log_scale)
+                    for g in range(order):
+                        e, ex, ey = course_node(cx, cy, q1x, q1y, c1, c2, p11, p12, p22, mid + half * h * rule[at + g])
+                        term = half * h * rule[at + order + g] * wp.exp(e + log_scale)
                         if smooth == 0:
                             total = total + term
                         else:

@@ -18,6 +18,7 @@ holds the Bessel series (3.8) as a second method.
 
 from __future__ import annotations
 
+import functools
 import math
 import warnings
 from collections.abc import Mapping
@@ -30,7 +31,10 @@ from scipy import special, stats
 from ..domains.pose import Pose
 from ..kernels import butterly as kernels
 from ..kernels import evidence as evidence_kernels
-from ..protocol import EvidencePack, Extent, KernelBinding, KernelContext, SceneKey, SceneSchema
+from ..domains.grid import Grid
+from ..engine.carried import evaluate_carried
+from ..engine.quadrature import GAUSS_TOL, MAX_ORDER, gauss_error, unit_rule
+from ..protocol import CellPlan, EvidencePack, Extent, KernelBinding, KernelContext, SceneKey, SceneSchema
 from ..validate import BananagridError, BananagridWarning, covariance, finite, non_negative, point, positive, real_array, show
 from ._butterly_series import series_density
 from .base import RANGE_SDS, Model, check_n, check_rng
@@ -91,6 +95,51 @@ CARRIED_NARROWEST = 1.0 / 16.0
 #: the radius V (t - s)): the fraction the density's own spacing is of its narrowest width
 #: (2 pi / sqrt(2 L), L = ln(1e12) + ln(4 pi): 0.81).
 SMOOTH_SPACING = 0.8
+
+
+#: Carried cell probabilities: points per evaluation (bounds the node arrays' memory), and the
+#: work estimate per node and speed (measured: 2-60 us per point for three speeds on the
+#: submarine case, Intel Xeon, float64, one core; the upper end near the searches' edges).
+CELL_CHUNK = 2**18
+CARRIED_SECONDS_PER_NODE = 10e-6
+
+
+@functools.lru_cache(maxsize=4)
+def _carried_rule(tol: float) -> np.ndarray:
+    """The carried kernels' course rule array (layout in kernels/butterly.py): Gauss-Legendre
+    rules of each order, the panel, the smooth factors' spacings, and the widest piece (in
+    spacings) each lower order integrates within the 8-point panel's error bound for a normal
+    profile (:func:`~bananagrid.engine.quadrature.gauss_error`). A spacing is at most
+    2 pi / sqrt(2 L) of the integrand's narrowest width (L = ln(1 / tol) + ln(4 pi), the
+    density's node count)."""
+    k = kernels
+    rule = np.zeros(k.RULE_SIZE)
+    for n in k.ORDERS:
+        x, w = np.polynomial.legendre.leggauss(n)
+        rule[k.RULE_AT[n]:k.RULE_AT[n] + 2 * n] = np.concatenate((x, w))
+    width = 2.0 * math.pi / math.sqrt(2.0 * (math.log(1.0 / tol) + math.log(4.0 * math.pi)))
+    target = gauss_error(k.GAUSS_NODES, CARRIED_PANEL * width)
+    limits = []
+    for n in (4, 3, 2):
+        q = np.linspace(1e-4, CARRIED_PANEL, 20000)
+        ok = q[[gauss_error(n, v * width) <= target for v in q]]
+        limits.append(float(ok.max()) if ok.size else 0.0)
+    rule[[k.PANEL, k.NARROWEST, k.SPACING, k.LIMIT4, k.LIMIT3, k.LIMIT2]] = [
+        CARRIED_PANEL, CARRIED_NARROWEST, SMOOTH_SPACING, *limits]
+    rule.setflags(write=False)
+    return rule
+
+
+def _axis_rule(width: float, scale: float, tol: float) -> tuple[int, int, float]:
+    """(m, n, error): m equal sub-intervals of at most ``scale`` with the fewest Gauss-Legendre
+    nodes n <= MAX_ORDER whose error bound for a normal feature of SD ``scale`` is <= ``tol``."""
+    m = max(1, math.ceil(width / scale * (1.0 - 1e-12)))
+    q = width / (m * scale)
+    for n in range(1, MAX_ORDER + 1):
+        err = gauss_error(n, q)
+        if err <= tol:
+            return m, n, err
+    return m, MAX_ORDER, err
 
 
 @dataclass(frozen=True)
@@ -713,8 +762,7 @@ class Butterly(Model):
         if not math.isclose(pack.t, self.t, rel_tol=1e-12, abs_tol=0.0):
             raise BananagridError(f"t = {pack.t!r}: the evidence was packed for a map at t = {pack.t!r}, "
                                   f"the model's t is {self.t!r}")
-        x, w = np.polynomial.legendre.leggauss(kernels.GAUSS_NODES)
-        rule = np.concatenate((x, w, [CARRIED_PANEL, CARRIED_NARROWEST, SMOOTH_SPACING]))
+        rule = _carried_rule(KERNEL_TOL[np.dtype(ctx.dtype)][0])
         polygon = np.flatnonzero(pack.ints[:, 0] == evidence_kernels.KIND_POLYGON).astype(np.int32)
         smooth = np.flatnonzero(pack.ints[:, 0] != evidence_kernels.KIND_POLYGON).astype(np.int32)
         params = ctx.struct(kernels.BUTTERLY_CARRIED, params=ctx.array(self.kernel_parameters(ctx.dtype)),
@@ -723,6 +771,73 @@ class Butterly(Model):
                             smooth_nodes=ctx.array(smooth, dtype=np.int32))
         return KernelBinding(_CarriedKernels(kernels.CARRIED_POINTS), params,
                              {"speed_nodes": self.n_speed_nodes, "carried": "course pieces between polygon crossings"})
+
+    def carried_cell_plan(self, domain, pack: EvidencePack, *, tol: float = GAUSS_TOL) -> CellPlan | None:
+        """Each channel's carried probability of every cell of a grid
+        (:class:`~bananagrid.protocol.CarryingModel`), unnormalised: shape (C, ny, nx).
+
+        Rule: the prior's (the engine's tensor Gauss-Legendre rule on sub-cells no wider than
+        sigma_min, :func:`~bananagrid.engine.quadrature.gauss_error` at most ``tol`` per
+        sub-cell and axis for a normal feature of SD sigma_min) applied to the carried density
+        (:meth:`bind_carried`) at the nodes. Cells whose prior mass is proved below CELL_FLOOR of
+        the density's maximum times their area (:meth:`density_bounds`) are 0: weights are at most
+        one. Error: where the weight is smooth over a cell, the rule's (``tol`` per sub-cell and
+        axis). The carried density is continuous in x for a polygon at an earlier time but has a
+        kink where a course's circle touches an edge (the set of courses that reach the polygon
+        changes in length like sqrt of the distance), and jumps for a polygon at the map's own
+        time: there the rule's error is that of a Gauss rule on a kink or a step, O(h^2) or
+        O(h) of the sub-cell's mass; the posterior's boundary bound covers the map's own time,
+        and tests/evidence/test_butterly_cells.py measures the rest against a rule 4x finer.
+        None on other domains (the posterior's sub-cell rule on the carried densities).
+        """
+        if not isinstance(domain, Grid):
+            return None
+        tol = float(tol)
+        scale = self.sigma_min
+        (mx, nx_, _), (my, ny_, _) = (_axis_rule(domain.dx, scale, tol), _axis_rule(domain.dy, scale, tol))
+        ux, wx = unit_rule(mx, nx_)
+        uy, wy = unit_rule(my, ny_)
+        x_edges = domain.origin[0] + domain.dx * np.arange(domain.nx + 1)
+        y_edges = domain.origin[1] + domain.dy * np.arange(domain.ny + 1)
+        bound = self.density_bounds(x_edges[None, :-1], x_edges[None, 1:], y_edges[:-1, None], y_edges[1:, None])
+        keep = np.argwhere(bound >= CELL_FLOOR * self.peak_lower_bound())
+        per_cell = len(ux) * len(uy)
+        method = (f"carried density by tensor Gauss-Legendre: {mx} x {my} sub-cells of {nx_} x {ny_} nodes per cell "
+                  f"(sub-cells <= sigma_min = {scale:.6g} m)")
+
+        def run(ctx):
+            cells = np.zeros((pack.channels.shape[0], domain.ny, domain.nx))
+            weights = np.outer(wy, wx).ravel() * (domain.dx * domain.dy)
+            chunk = max(1, CELL_CHUNK // per_cell)
+            for c0 in range(0, len(keep), chunk):
+                block = keep[c0:c0 + chunk]
+                xs = x_edges[block[:, 1], None] + domain.dx * ux[None, :]
+                ys = y_edges[block[:, 0], None] + domain.dy * uy[None, :]
+                px = np.broadcast_to(xs[:, None, :], (len(block), len(uy), len(ux))).ravel()
+                py = np.broadcast_to(ys[:, :, None], (len(block), len(uy), len(ux))).ravel()
+                values = evaluate_carried(self, px, py, pack, dtype=ctx.dtype, device=ctx.device, threads=ctx.threads)
+                cells[:, block[:, 0], block[:, 1]] = values.reshape(-1, len(block), per_cell).astype(float) @ weights
+            return cells, {"cell_method": method, "cells_computed": int(len(keep)),
+                           "accuracy": {"claim": "per sub-cell and axis for a normal feature as wide as sigma_min, "
+                                                 "where the weight is smooth on the cell", "target": tol}}
+
+        seconds = float(len(keep) * per_cell) * CARRIED_SECONDS_PER_NODE * self.n_speed_nodes
+        return CellPlan(seconds=seconds, run=run, method=method)
+
+    def density_bounds(self, x0, x1, y0, y1) -> np.ndarray:
+        """:meth:`density_bound` on arrays of rectangles (broadcast)."""
+        x0, x1, y0, y1 = np.broadcast_arrays(*(np.asarray(v, dtype=float) for v in (x0, x1, y0, y1)))
+        mx, my = self.mean
+        pad = 2.0 ** -22 * (np.maximum(np.abs(x0), np.abs(x1)) + np.maximum(np.abs(y0), np.abs(y1)) + abs(mx) + abs(my))
+        x0, x1, y0, y1 = x0 - pad, x1 + pad, y0 - pad, y1 + pad
+        near = np.hypot(np.maximum(np.maximum(x0 - mx, 0.0), mx - x1), np.maximum(np.maximum(y0 - my, 0.0), my - y1))
+        far = np.hypot(np.maximum(np.abs(x0 - mx), np.abs(x1 - mx)), np.maximum(np.abs(y0 - my), np.abs(y1 - my)))
+        s1, s2, _ = self.axes
+        total = np.zeros(near.shape)
+        for r, w in zip(self.ranges, self._nodes[1]):
+            d = np.maximum(np.maximum(near - r, r - far), 0.0)
+            total += w * np.exp(-0.5 * d * d / s2)
+        return 2.0 * total / (2.0 * math.pi * math.sqrt(s1) * math.sqrt(s2))
 
     def density_bound(self, x0: float, x1: float, y0: float, y1: float) -> float:
         """A proved upper bound of the density on the rectangle [x0, x1] x [y0, y1].
