@@ -769,7 +769,7 @@ class Butterly(Model):
                             n_speeds=self.n_speed_nodes, rule=ctx.array(rule), t=ctx.scalar(self.t),
                             polygon_nodes=ctx.array(polygon, dtype=np.int32),
                             smooth_nodes=ctx.array(smooth, dtype=np.int32))
-        return KernelBinding(_CarriedKernels(kernels.CARRIED_POINTS), params,
+        return KernelBinding(kernels.CARRIED_POINTS, params,
                              {"speed_nodes": self.n_speed_nodes, "carried": "course pieces between polygon crossings"})
 
     def carried_cell_plan(self, domain, pack: EvidencePack, *, tol: float = GAUSS_TOL) -> CellPlan | None:
