@@ -7,9 +7,10 @@ Under ``evidence`` (north up, world metres):
   it appears when it happened): an area searched (its outline), a searcher's track (a line with a
   point at each timed position), a reported position, bearing stations with their bearing lines;
   land (an exclusion) is static;
-- ``evidence/LAYER/prior`` and ``evidence/LAYER/posterior``: the layer's cell probabilities
-  before and after the evidence that began by the map's time, one colour range for both (the
-  larger peak), so that they compare colour for colour side by side;
+- ``evidence/LAYER/prior`` and ``evidence/LAYER/posterior``: log10 of the layer's cell
+  probabilities before and after the evidence that began by the map's time (the prior
+  normalised over the grid, as the posterior is), one colour range for both (:data:`LOG_DECADES`
+  below the larger peak), so that they compare colour for colour;
 - ``evidence/LAYER/pod``: the cumulative probability of detection of each cell (0 to 1);
 - ``evidence/LAYER/pos`` and ``evidence/LAYER/search_pos/NAME``: the POS of the searches together
   and of each search alone, as scalars at each map time (POS over time);
@@ -31,7 +32,7 @@ from .entities import entity_path, strict
 from .images import image_from_values, log_north_up, pixel_to_world
 
 __all__ = ["EVIDENCE_ENTITY", "MARKS", "evidence_values", "evidence_markdown", "log_evidence_marks",
-           "log_posterior", "evidence_view", "BEARING_LINE_M"]
+           "log_posterior", "evidence_view", "BEARING_LINE_M", "LOG_DECADES"]
 
 #: Where a scene's evidence is recorded.
 EVIDENCE_ENTITY = "evidence"
@@ -43,6 +44,9 @@ REPORT_COLOUR = (0, 220, 255)
 LAND_COLOUR = (160, 160, 160)
 #: How far each bearing line is drawn from its station, in units of the grid's larger side.
 BEARING_LINE_M = 1.5
+#: Decades of cell probability the prior and posterior images show below the larger peak: the
+#: holes a search punches in the tails stay visible beside the peak.
+LOG_DECADES = 6.0
 
 
 def evidence_values(post, used: Sequence, specs: Sequence, *, layer: str = "", t: float = 0.0) -> dict:
@@ -74,8 +78,8 @@ def evidence_markdown(values: dict, specs: Sequence) -> str:
                                                    else f"{spec.span[0]:g} to {spec.span[1]:g}")
         share = f"{pos[spec.name]:.4f}" if spec.search and taken else ("" if taken else "later")
         out.append(f"| {spec.name} | {spec.kind.replace('_', ' ')} | {when} | {share} |")
-    out += ["", "**Reading the maps.** Prior and posterior are the layer's cell probabilities before and after the "
-            "evidence that began by this time, in one colour range; the POD map is the probability that the "
+    out += ["", "**Reading the maps.** Prior and posterior are log10 of the layer's cell probabilities before and "
+            f"after the evidence that began by this time, in one colour range ({LOG_DECADES:g} decades); the POD map is the probability that the "
             "searches would have detected a target in each cell. Searched areas and tracks are orange, reports "
             f"cyan, land grey, each drawn from its own time on. North is up; \"{HOVER_NOTE}\"."]
     return "\n".join(out) + "\n"
@@ -123,14 +127,17 @@ def log_posterior(rec: rr.RecordingStream, layer: str, post, values: dict, specs
     """A layer's prior, posterior, POD map and POS at the recording's current time (see the module)."""
     root = f"{entity_path(entity)}/{entity_path(layer)}"
     prior = np.asarray(post.prior, dtype=np.float64)
-    values_post = np.asarray(post.values, dtype=np.float64)
     prior_p = prior / np.sum(prior)  # normalised, as the posterior: the two compare cell for cell
-    top = float(max(prior_p.max(), values_post.max()))
+    maps = {"prior": prior_p, "posterior": np.asarray(post.values, dtype=np.float64)}
+    top = math.log10(max(float(m.max()) for m in maps.values()))
+    floor = top - LOG_DECADES
     where = pixel_to_world(post)
     with strict():
-        for name, image in (("prior", prior_p), ("posterior", values_post)):
-            rec.log(f"{root}/{name}", rr.DepthImage(image_from_values(image), meter=1.0, colormap=colormap,
-                                                     depth_range=(0.0, top if top > 0.0 else 1.0)), where)
+        for name, image in maps.items():
+            with np.errstate(divide="ignore"):
+                logs = np.where(image > 10.0**floor, np.log10(np.maximum(image, 1e-300)), floor)
+            rec.log(f"{root}/{name}", rr.DepthImage(image_from_values(logs), meter=1.0, colormap=colormap,
+                                                     depth_range=(floor, top)), where)
         rec.log(f"{root}/pod", rr.DepthImage(image_from_values(post.pod), meter=1.0, colormap="inferno",
                                              depth_range=(0.0, 1.0)), where)
         rec.log(f"{root}/pos", rr.Scalars([values["pos"]]))
@@ -154,10 +161,10 @@ def evidence_view(layers: Sequence[str], extent: tuple | None = None, entity: st
     for layer in layers:
         base = f"/{root}/{entity_path(layer)}"
         tabs.append(rrb.Vertical(
-            rrb.Spatial2DView(origin="/", contents=[f"{base}/prior", marks], name=f"{layer} · prior (cell probability)",
+            rrb.Spatial2DView(origin="/", contents=[f"{base}/prior", marks], name=f"{layer} · prior (log10 cell probability)",
                               visual_bounds=bounds),
             rrb.Spatial2DView(origin="/", contents=[f"{base}/posterior", marks],
-                              name=f"{layer} · posterior after the evidence · {HOVER_NOTE}", visual_bounds=bounds),
+                              name=f"{layer} · posterior after the evidence (log10 cell probability) · {HOVER_NOTE}", visual_bounds=bounds),
             name=f"{layer} · prior and posterior"))
     for layer in layers:
         base = f"/{root}/{entity_path(layer)}"
