@@ -16,6 +16,7 @@ from ..kernels import evidence as evidence_kernels
 from ..protocol import EvidencePack
 from ..validate import BananagridError
 from .points import PointsExtent, check_model
+from .precision import working_dtype
 from .warp_runtime import WarpContext
 
 __all__ = ["evaluate_carried", "evidence_struct", "weigh_paths", "carries", "CARRIED_CHUNK"]
@@ -43,7 +44,9 @@ def evidence_struct(ctx, pack: EvidencePack):
 def evaluate_carried(model, x, y, pack: EvidencePack, *, dtype=np.float64, device: str = "cpu", threads=None,
                      extent=None) -> np.ndarray:
     """Each channel of ``pack`` of ``model``'s density at world points, weighted by the
-    evidence along the paths through each point: shape ``(C, *broadcast shape)``, per m^2.
+    evidence along the paths through each point: shape ``(C, *broadcast shape)``, per m^2
+    (float32 asked: computed in float64 where float32 coordinates cannot resolve the model,
+    as :func:`~bananagrid.engine.points.evaluate_points` does).
 
     Raises
     ------
@@ -60,10 +63,15 @@ def evaluate_carried(model, x, y, pack: EvidencePack, *, dtype=np.float64, devic
     if not (np.isfinite(bx).all() and np.isfinite(by).all()):
         raise BananagridError("x, y: points must be finite (NaN or inf given)")
     ctx = WarpContext(dtype, device, threads)
+    asked = ctx.dtype
     channels = pack.channels.shape[0]
     if bx.size == 0:
-        return np.zeros((channels, *bx.shape), dtype=ctx.dtype)
+        return np.zeros((channels, *bx.shape), dtype=asked)
     extent = extent if extent is not None else PointsExtent(bx, by)
+    if asked == np.float32:  # as evaluate_points: float64 where float32 coordinates cannot resolve the model
+        working = working_dtype(model, asked, extent.radii((0.0, 0.0))[1])
+        if working != asked:
+            ctx = WarpContext(working, device, threads)
     binding = model.bind_carried(ctx, extent, pack)
     ev = evidence_struct(ctx, pack)
     kernel = binding.kernels.points
@@ -80,7 +88,7 @@ def evaluate_carried(model, x, y, pack: EvidencePack, *, dtype=np.float64, devic
     chunks = [(a, min(n, a + size)) for a in range(0, n, size)] if ctx.cpu else [(0, n)]
     ctx.run_bands(launch_chunk, chunks)
     values = ctx.numpy(out)
-    return np.ascontiguousarray(values.T).reshape(channels, *bx.shape)
+    return np.ascontiguousarray(values.T, dtype=asked).reshape(channels, *bx.shape)
 
 
 def weigh_paths(pack: EvidencePack, positions, density, *, dtype=np.float64, device: str = "cpu") -> np.ndarray:

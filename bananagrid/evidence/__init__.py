@@ -34,11 +34,14 @@ path's position at t1, x1 = x(t1), and the map at t is the kernels' own integral
   Gauss-Legendre over the leg's time overlap with the path), an area search's coverage spread
   over its interval (the fraction of the interval the path spends inside times C), or its POD
   where the path is at the interval's end (a point-time search).
-* What the kernels receive: polygons as flat edge arrays (x0, y0, x1, y1) with an offset and a
-  time span, POD (or coverage) per polygon; tracks as leg arrays (x0, y0, t0, x1, y1, t1) with W
-  and a law code; reports as (x, y, precision, t); bearings as (sensor x, y, bearing,
-  1 / sigma, t); land as polygons without time. ``posterior`` then takes earlier evidence for
-  CAT and Butterly; the polar banana keeps its refusal (no path per parameter).
+* What the kernels receive (:func:`~bananagrid.evidence.packing.pack`, an
+  :class:`~bananagrid.protocol.EvidencePack`): time nodes, each with its factor, quadrature
+  weight, kind and data (polygons as flat edge arrays, rasters, reports, bearings, the searcher's
+  position and rate coefficient on a track's leg), and the channels (which factors each weight
+  multiplies); the shared helpers in ``kernels/evidence.py`` add one path's contributions. Land
+  holds at every time and is applied at the map's time, not carried. ``posterior`` takes earlier
+  evidence for models that carry it (the CAT now, through ``bind_carried``); the polar banana
+  keeps its refusal (no path per parameter).
 """
 
 from .posterior import PolarPosterior, Posterior, posterior

@@ -45,7 +45,7 @@ import numpy as np
 
 from ..kernels import evidence as ek
 from ..protocol import EvidencePack
-from ..validate import BananagridError, finite
+from ..validate import BananagridError, finite, positive_int
 from .reports import BearingReport, Exclusion, PositionReport
 from .searches import AreaSearch, RasterSearch, TrackSearch
 
@@ -97,7 +97,7 @@ class _Builder:
         return offset
 
 
-def pack(evidence, t_map: float, *, keys=None) -> EvidencePack:
+def pack(evidence, t_map: float, *, keys=None, area_panels: int = AREA_PANELS) -> EvidencePack:
     """The evidence at times before ``t_map`` (s since the last fix) as a pack.
 
     Parameters
@@ -109,6 +109,10 @@ def pack(evidence, t_map: float, *, keys=None) -> EvidencePack:
         The map's time.
     keys : sequence of str, optional
         How errors and channels name each evidence (default ``evidence[K]``, K its index).
+    area_panels : int, default AREA_PANELS
+        Gauss-Legendre panels of an area or raster search over an interval (its error per
+        crossing of an edge: C x 0.35 / area_panels in the exponent; the cost: PANEL_NODES
+        nodes a panel, each a position and a look-up per path).
 
     Returns
     -------
@@ -121,6 +125,7 @@ def pack(evidence, t_map: float, *, keys=None) -> EvidencePack:
         :data:`MAX_NODES` nodes in all; the message names the evidence's key.
     """
     t_map = finite("t", t_map)
+    area_panels = positive_int("area_panels", area_panels)
     try:
         evidence = list(evidence)
     except TypeError:
@@ -147,7 +152,7 @@ def pack(evidence, t_map: float, *, keys=None) -> EvidencePack:
                 b.node(t0, 1.0, ek.KIND_POLYGON, factor, (_log_miss(e.miss), *box), offset, count)
             else:
                 rate = -_coverage(e.miss) / (t1 - t0)
-                for s, q in zip(*_gauss_legendre(t0, t1, AREA_PANELS)):
+                for s, q in zip(*_gauss_legendre(t0, t1, area_panels)):
                     b.node(s, q, ek.KIND_POLYGON, factor, (rate, *box), offset, count)
         elif isinstance(e, RasterSearch):
             g = e.grid
@@ -157,7 +162,7 @@ def pack(evidence, t_map: float, *, keys=None) -> EvidencePack:
             else:
                 with np.errstate(invalid="ignore"):
                     offset = b.add_raster(e.log_miss / (t1 - t0))  # -C / (t1 - t0); -inf where POD = 1
-                for s, q in zip(*_gauss_legendre(t0, t1, AREA_PANELS)):
+                for s, q in zip(*_gauss_legendre(t0, t1, area_panels)):
                     b.node(s, q, ek.KIND_RASTER, factor, (g.origin[0], g.origin[1], g.dx, g.dy, g.ny), offset, g.nx)
         elif isinstance(e, TrackSearch):
             if e.law != "inverse_cube":

@@ -263,6 +263,7 @@ class RasterSearch:
     pod: np.ndarray | None = None
     coverage: np.ndarray | None = None
     log_miss: np.ndarray = field(init=False, repr=False, compare=False)
+    miss: np.ndarray = field(init=False, repr=False, compare=False)
 
     kind = "search"
 
@@ -279,25 +280,28 @@ class RasterSearch:
             raise BananagridError(f"{name}: shape {values.shape}; expected the grid's (ny, nx) = {self.grid.shape}")
         if not np.isfinite(values).all():
             i, j = np.argwhere(~np.isfinite(values))[0]
-            raise BananagridError(f"{name}[{i}, {j}] = {values[i, j]!r}: must be finite")
+            raise BananagridError(f"{name}[{i}, {j}] = {float(values[i, j])!r}: must be finite")
         if name == "pod":
             bad = (values < 0.0) | (values > 1.0)
             if bad.any():
                 i, j = np.argwhere(bad)[0]
-                raise BananagridError(f"pod[{i}, {j}] = {values[i, j]!r}: must be in [0, 1]")
+                raise BananagridError(f"pod[{i}, {j}] = {float(values[i, j])!r}: must be in [0, 1]")
             with np.errstate(divide="ignore"):
                 log_miss = np.log1p(-values)
+            miss = 1.0 - values
         else:
             bad = values < 0.0
             if bad.any():
                 i, j = np.argwhere(bad)[0]
-                raise BananagridError(f"coverage[{i}, {j}] = {values[i, j]!r}: must be >= 0 (effort per unit area)")
+                raise BananagridError(f"coverage[{i}, {j}] = {float(values[i, j])!r}: must be >= 0 (effort per unit area)")
             log_miss = -values
+            miss = np.exp(-values)
         values = values.copy()
-        values.setflags(write=False)
-        log_miss.setflags(write=False)
+        for a in (values, log_miss, miss):
+            a.setflags(write=False)
         object.__setattr__(self, name, values)
         object.__setattr__(self, "log_miss", log_miss)
+        object.__setattr__(self, "miss", miss)
 
     @property
     def time_span(self) -> tuple[float, float]:
@@ -317,7 +321,7 @@ class RasterSearch:
     def likelihood(self, x, y) -> np.ndarray:
         """1 - POD of the cell holding each point (1 off the raster)."""
         row, col, on = self.cells(x, y)
-        return np.where(on, np.exp(self.log_miss[row, col]), 1.0)
+        return np.where(on, self.miss[row, col], 1.0)
 
     def describe(self) -> dict:
         """Plain data for provenance."""

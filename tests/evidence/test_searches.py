@@ -105,6 +105,21 @@ def test_coverage_is_random_search(coverage):
 
 SQUARE = [(0.0, 0.0), (10.0, 0.0), (10.0, 10.0), (0.0, 10.0)]
 TRACK = [(0.0, 0.0, 0.0), (100.0, 0.0, 10.0)]
+RASTER_GRID = bg.Grid(origin=(-10.0, 5.0), dx=10.0, dy=20.0, nx=3, ny=2)
+
+
+def test_a_raster_search_misses_with_its_cells_pod():
+    """1 - POD of the cell holding a point (the cell east / north of an edge between cells),
+    exp(-C) from a coverage exactly, 1 off the raster (its east and north edges are off)."""
+    pod = np.array([[0.1, 0.2, 0.3], [0.4, 1.0, 0.0]])
+    search = bg.RasterSearch(RASTER_GRID, t=(1.0, 2.0), pod=pod)
+    x = np.array([-5.0, 0.0, 15.0, 5.0, -10.0, 20.0, -10.1, 5.0, 0.0])
+    y = np.array([10.0, 10.0, 30.0, 25.0, 5.0, 10.0, 10.0, 45.0, 4.99])
+    want = [0.9, 0.8, 1.0, 0.0, 0.9, 1.0, 1.0, 1.0, 1.0]
+    np.testing.assert_array_equal(search.likelihood(x, y), want)
+    covered = bg.RasterSearch(RASTER_GRID, t=1.0, coverage=[[0.0, 1.0, 2.0], [3.0, 4.0, 5.0]])
+    assert float(covered.likelihood(15.0, 30.0)) == math.exp(-5.0)
+    assert search.time_span == (1.0, 2.0) and search.describe()["kind"] == "raster_search"
 
 #: (what, constructor, the message's part). Every message is one line naming the argument.
 BAD = [
@@ -143,6 +158,19 @@ BAD = [
     ("track waits", lambda: bg.TrackSearch([(0, 0, 0.0), (0, 0, 1.0)], sweep_width=1.0), r"repeats the position"),
     ("track before the fix", lambda: bg.TrackSearch([(0, 0, -1.0), (1, 0, 1.0)], sweep_width=1.0), r"must be >= 0"),
     ("unknown law", lambda: bg.TrackSearch(TRACK, sweep_width=1.0, law="square"), r"law = 'square': expected one of"),
+    ("raster without a grid", lambda: bg.RasterSearch("grid", t=1.0, pod=[[0.5]]), r"grid = 'grid': expected a bananagrid Grid"),
+    ("raster of the wrong shape", lambda: bg.RasterSearch(RASTER_GRID, t=1.0, pod=[[0.5, 0.5]]),
+     r"pod: shape \(1, 2\); expected the grid's \(ny, nx\) = \(2, 3\)"),
+    ("raster pod above 1", lambda: bg.RasterSearch(RASTER_GRID, t=1.0, pod=[[0.5, 0.5, 0.5], [0.5, 1.2, 0.5]]),
+     r"pod\[1, 1\] = 1\.2: must be in \[0, 1\]"),
+    ("raster pod NaN", lambda: bg.RasterSearch(RASTER_GRID, t=1.0, pod=[[0.5, 0.5, math.nan], [0.5, 0.5, 0.5]]),
+     r"pod\[0, 2\] = nan: must be finite"),
+    ("raster coverage < 0", lambda: bg.RasterSearch(RASTER_GRID, t=1.0, coverage=[[1.0, 1.0, 1.0], [1.0, 1.0, -2.0]]),
+     r"coverage\[1, 2\] = -2\.0: must be >= 0"),
+    ("raster pod and coverage", lambda: bg.RasterSearch(RASTER_GRID, t=1.0, pod=np.zeros((2, 3)), coverage=np.ones((2, 3))),
+     r"give exactly one"),
+    ("raster time backwards", lambda: bg.RasterSearch(RASTER_GRID, t=(3.0, 2.0), pod=np.zeros((2, 3))),
+     r"t = \(3\.0, 2\.0\): the search ends before it starts"),
 ]
 
 

@@ -209,10 +209,12 @@ def _scan_grid(k, sig_s, step):
 
 
 def cat_density(x, y, v0, t, sigma_a, sigma_w, k=8.0, *, scan_step=0.01, chunk=6000,
-                return_nroots=False):
+                return_nroots=False, weight=None):
     """Exact CAT density p(x, y) [m^-2] (float64), summing over all roots with |w| <= k sigma_w.
 
     x, y broadcast together; any shape.  Correct across folds (several roots) and at w = 0.
+    ``weight(index, a, w)``, if given, multiplies each root's term: the flat indices of the
+    points, and each root's acceleration and turn rate (arrays): a weight on the path.
     """
     x, y = np.broadcast_arrays(np.asarray(x, dtype=float), np.asarray(y, dtype=float))
     shape = x.shape
@@ -278,6 +280,8 @@ def cat_density(x, y, v0, t, sigma_a, sigma_w, k=8.0, *, scan_step=0.01, chunk=6
         s = _refine(xr, yr, lo, hi, flo, fhi)
         alpha, det = _alpha_det(xr, yr, s)
         dens = norm_const * np.exp(-0.5 * ((s / sig_s) ** 2 + (alpha / sig_al) ** 2)) / np.abs(det)
+        if weight is not None:
+            dens = dens * weight(i0 + pi_, alpha * v0 / t, s / t)
         out[i0:i0 + chunk] = np.bincount(pi_, weights=dens, minlength=xs.size)
         nroots[i0:i0 + chunk] = np.bincount(pi_, minlength=xs.size)
     if return_nroots:

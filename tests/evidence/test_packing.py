@@ -1,0 +1,88 @@
+"""Packing evidence for the kernels: the nodes and channels a pack holds (times sorted, the
+quadrature weights of an interval summing to its length, each bearing a node of one factor,
+the channels' factors), and every refusal in one line naming the evidence's key."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+import bananagrid as bg
+from bananagrid.evidence.packing import AREA_PANELS, MAX_NODES, PANEL_NODES, pack
+from bananagrid.kernels import evidence as ek
+
+SQUARE = [(0.0, 0.0), (100.0, 0.0), (100.0, 100.0), (0.0, 100.0)]
+FIX = bg.BearingFix(sensors=[(-500.0, 0.0), (500.0, 0.0), (0.0, -600.0)], bearings=[0.8, -0.8, 0.1],
+                    sigmas=[0.05, 0.05, 0.1])
+
+
+def test_nodes_and_channels():
+    evidence = [bg.AreaSearch(SQUARE, t=(1.0, 3.0), coverage=2.0), bg.BearingReport(FIX, t=0.5),
+                bg.TrackSearch([(0.0, -50.0, 0.5), (200.0, -50.0, 4.0)], sweep_width=60.0),
+                bg.PositionReport((5.0, 5.0), t=4.5, sigma=10.0), bg.AreaSearch(SQUARE, t=2.0, pod=1.0)]
+    p = pack(evidence, 5.0)
+    assert np.all(np.diff(p.time) >= 0.0) and p.time[-1] <= 5.0
+    factor = p.ints[:, 1]
+    # the interval: AREA_PANELS x PANEL_NODES nodes whose weights sum to its length, rate -C / span
+    area = factor == 0
+    assert area.sum() == AREA_PANELS * PANEL_NODES
+    assert math.isclose(p.q[area].sum(), 2.0, rel_tol=1e-14)
+    assert np.all(p.data[area, 0] == -1.0) and np.all(p.ints[area, 0] == ek.KIND_POLYGON)
+    # the bearings: one node per sensor, one factor, one time
+    bearing = factor == 1
+    assert bearing.sum() == 3 and np.all(p.time[bearing] == 0.5) and np.all(p.ints[bearing, 0] == ek.KIND_BEARING)
+    # the track: panels of W / 4 of the searcher's travel (200 m: 14 panels), weights sum to the leg's time
+    track = factor == 2
+    assert track.sum() == math.ceil(200.0 / 15.0) * PANEL_NODES
+    assert math.isclose(p.q[track].sum(), 3.5, rel_tol=1e-14)
+    assert np.allclose(p.data[track, 2], 60.0**2 * (200.0 / 3.5) / (8.0 * math.pi), rtol=1e-15)
+    # POD 1 at one time: log(1 - POD) = -inf
+    assert p.data[factor == 4, 0][0] == -math.inf
+    assert p.channel_names == ("prior", "all", "searches", "others", "search:evidence[0]", "search:evidence[2]",
+                               "search:evidence[4]")
+    want = [[0, 0, 0, 0, 0], [1, 1, 1, 1, 1], [1, 0, 1, 0, 1], [0, 1, 0, 1, 0], [1, 1, 0, 1, 0], [0, 1, 1, 1, 0],
+            [0, 1, 0, 1, 1]]
+    np.testing.assert_array_equal(p.channels, want)
+    assert p.factor_kinds == ("search", "report", "search", "report", "search")
+    with pytest.raises(ValueError):
+        p.time[0] = 1.0  # read-only
+
+
+LAND = bg.Exclusion(SQUARE)
+REFUSED = [
+    ("after the map", [bg.AreaSearch(SQUARE, t=(4.0, 6.0), pod=0.5)],
+     r"^evidence\[0\]\.t = 6\.0: after the map's time t = 5\.0"),
+    ("land", [bg.AreaSearch(SQUARE, t=1.0, pod=0.5), LAND], r"^evidence\[1\]: land holds at every time"),
+    ("definite", [bg.TrackSearch([(0, 0, 1.0), (100, 0, 2.0)], sweep_width=10.0, law="definite")],
+     r"^evidence\[0\]\.law = 'definite': a definite-range track earlier than the map cannot be carried yet"),
+    ("not evidence", [SQUARE], r"^evidence\[0\] = .*expected one of bg\.AreaSearch"),
+    ("too many nodes", [bg.TrackSearch([(0, 0, 1.0), (1e6, 0, 2.0)], sweep_width=10.0)],
+     rf"^evidence\[0\]\.sweep_width = 10\.0: a leg of 1e\+06 m needs 1600000 time nodes .*above {MAX_NODES}"),
+]
+
+
+@pytest.mark.parametrize("what, evidence, message", REFUSED, ids=[r[0] for r in REFUSED])
+def test_refused_in_one_line(what, evidence, message):
+    with pytest.raises(bg.BananagridError, match=message) as caught:
+        pack(evidence, 5.0)
+    assert "\n" not in str(caught.value)
+
+
+def test_keys_name_the_evidence():
+    with pytest.raises(bg.BananagridError, match=r"^scene\.evidence\[3\]\.t = 6\.0: after"):
+        pack([bg.AreaSearch(SQUARE, t=6.0, pod=0.5)], 5.0, keys=["scene.evidence[3]"])
+    with pytest.raises(bg.BananagridError, match=r"^keys: 2 names for 1 pieces of evidence"):
+        pack([bg.AreaSearch(SQUARE, t=1.0, pod=0.5)], 5.0, keys=["a", "b"])
+
+
+def test_area_panels():
+    """More panels over an interval: more nodes, the same total weight; a count that is not a
+    positive integer refused in one line."""
+    e = bg.AreaSearch(SQUARE, t=(1.0, 3.0), coverage=1.0)
+    p = pack([e], 5.0, area_panels=40)
+    assert p.nodes == 40 * PANEL_NODES and math.isclose(p.q.sum(), 2.0, rel_tol=1e-14)
+    with pytest.raises(bg.BananagridError, match=r"^area_panels = 0") as caught:
+        pack([e], 5.0, area_panels=0)
+    assert "\n" not in str(caught.value)
