@@ -32,7 +32,7 @@ from .entities import entity_path, strict
 from .images import image_from_values, log_north_up, pixel_to_world
 
 __all__ = ["EVIDENCE_ENTITY", "MARKS", "evidence_values", "evidence_markdown", "log_evidence_marks",
-           "log_posterior", "evidence_view", "BEARING_LINE_M", "LOG_DECADES"]
+           "log_posterior", "evidence_view", "LOG_DECADES"]
 
 #: Where a scene's evidence is recorded.
 EVIDENCE_ENTITY = "evidence"
@@ -42,8 +42,6 @@ MARKS = "marks"
 SEARCH_COLOUR = (255, 140, 0)
 REPORT_COLOUR = (0, 220, 255)
 LAND_COLOUR = (160, 160, 160)
-#: How far each bearing line is drawn from its station, in units of the grid's larger side.
-BEARING_LINE_M = 1.5
 #: Decades of cell probability the prior and posterior images show below the larger peak: the
 #: holes a search punches in the tails stay visible beside the peak.
 LOG_DECADES = 6.0
@@ -87,10 +85,10 @@ def evidence_markdown(values: dict, specs: Sequence) -> str:
 
 def log_evidence_marks(rec: rr.RecordingStream, specs: Sequence, set_time, extent, entity: str = EVIDENCE_ENTITY) -> None:
     """Each evidence's geometry under ``entity/marks/NAME`` at its time (``set_time(seconds)``
-    puts the recording there; land is static); ``extent`` (x0, x1, y0, y1) sizes the bearing lines."""
+    puts the recording there; land is static); ``extent`` (x0, x1, y0, y1: the grid) sizes the
+    bearing lines: each runs from its station to the distance of the grid's farthest corner."""
     root = entity_path(entity)
     log_north_up(rec, root)
-    reach = BEARING_LINE_M * max(extent[1] - extent[0], extent[3] - extent[2])
     with strict():
         for spec in specs:
             path = f"{root}/{MARKS}/{spec.name}"
@@ -115,8 +113,10 @@ def log_evidence_marks(rec: rr.RecordingStream, specs: Sequence, set_time, exten
                                           labels=[label] + [""] * (len(spec.points) - 1), show_labels=True,
                                           draw_order=42.0))
                 fix = getattr(spec.evidence, "fix", None)
-                if fix is not None:  # each station's bearing as a line
-                    lines = [np.array([s, s + reach * np.array([math.sin(b), math.cos(b)])])
+                if fix is not None:  # each station's bearing as a line, to the grid's far side
+                    corners = np.array([[x, y] for x in extent[:2] for y in extent[2:]])
+                    lines = [np.array([s, s + float(np.max(np.hypot(*(corners - s).T)))
+                                       * np.array([math.sin(b), math.cos(b)])])
                              for s, b in zip(np.asarray(fix.sensors), np.asarray(fix.bearings))]
                     rec.log(f"{path}/bearings", rr.LineStrips2D(lines, colors=[REPORT_COLOUR],
                                                                 radii=rr.Radius.ui_points(1.0), draw_order=39.0))
