@@ -10,7 +10,9 @@ declared in :data:`EVIDENCE_TABLE` (``docs/scenes.md`` is generated from it). Ev
 one line ``evidence[k].KEY = value: what is allowed``.
 
 A map at time t takes the evidence that began by then (``t0 <= t``): a scene's earlier maps
-are not updated by later evidence, and evidence after the scene's last map is refused.
+are not updated by later evidence, and evidence after the scene's last map is refused, as is a
+search over an interval that holds a map's time inside it (the map would take it whole, effort
+after its time included: split it there).
 """
 
 from __future__ import annotations
@@ -130,7 +132,7 @@ def parse_evidence(value, timeline, geo, directory: Path) -> tuple[EvidenceSpec,
     specs = []
     names: set[str] = set()
     for k, table in enumerate(value):
-        spec = _one(k, table, max(timeline), geo, directory)
+        spec = _one(k, table, timeline, geo, directory)
         if spec.name in names:
             raise SceneKeyError(f"evidence[{k}].name = {show(spec.name)}: another [[evidence]] has this name")
         names.add(spec.name)
@@ -143,7 +145,7 @@ def job_evidence(specs, t: float) -> list[EvidenceSpec]:
     return [s for s in specs if s.span is None or s.span[0] <= t]
 
 
-def _one(k: int, table: dict, last: float, geo, directory: Path) -> EvidenceSpec:
+def _one(k: int, table: dict, timeline, geo, directory: Path) -> EvidenceSpec:
     path = f"evidence[{k}]"
     kind = table.get("kind")
     if not isinstance(kind, str) or kind not in EVIDENCE_KINDS:
@@ -160,11 +162,15 @@ def _one(k: int, table: dict, last: float, geo, directory: Path) -> EvidenceSpec
     spec = build(path, table, geo, directory)
     evidence, shapes, track, points, used = spec
     span = evidence.time_span
+    key = used.get("track" if kind == "track_search" else "t", "t")
+    last = max(timeline)
     if span is not None and span[1] > last:
-        where = "track" if kind == "track_search" else "t"
-        raise SceneKeyError(f"{path}.{used.get(where, where)} = {show(table.get(used.get(where, where)))}: ends at "
-                            f"{span[1]:g} s, after the scene's last time {last:g} s; evidence must not be later than "
-                            "the maps it updates")
+        raise SceneKeyError(f"{path}.{key} = {show(table.get(key))}: ends at {span[1]:g} s, after the scene's last "
+                            f"time {last:g} s; evidence must not be later than the maps it updates")
+    inside = [t for t in timeline if span is not None and span[0] < t < span[1]]
+    if inside:  # a map takes a search whole: part of it would be after the map's time
+        raise SceneKeyError(f"{path}.{key} = {show(table.get(key))}: spans the map time {inside[0]:g} s of the "
+                            "timeline, and a map takes a search whole; split it there (one table before, one after)")
     return EvidenceSpec(index=k, name=name, kind=kind, evidence=evidence, span=span, shapes=tuple(shapes),
                         track=track, points=points)
 

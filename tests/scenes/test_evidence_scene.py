@@ -369,6 +369,22 @@ def test_bad_evidence_keys_are_one_line(body, message):
     assert "\n" not in text and text.startswith("s.toml: ") and message in text
 
 
+@pytest.mark.parametrize("body, message", [
+    ('kind = "area_search"\npolygon = [[0, 0], [1, 0], [0, 1]]\nt = [500.0, 700.0]\npod = 0.5',
+     "evidence[0].t = [500.0, 700.0]: spans the map time 600 s of the timeline"),
+    ('kind = "track_search"\ntrack = [[0, 0, 550.0], [100, 0, 650.0], [200, 0, 660.0]]\nsweep_width = 50',
+     "evidence[0].track = [[0, 0, 550.0], [100, 0, 650.0], [200, 0, 660.0]]: spans the map time 600 s"),
+])
+def test_a_search_across_a_map_time_is_refused(body, message):
+    """A map takes a search whole: one that goes on past a map's time is split by the planner."""
+    with pytest.raises(bg.BananagridError) as raised:
+        parse_scene(SCENE + "[[evidence]]\n" + body + "\n", source="s")
+    assert message in str(raised.value) and "\n" not in str(raised.value)
+    # ending at the map's time, or starting at it, is taken
+    parse_scene(SCENE + '[[evidence]]\nkind = "area_search"\npolygon = [[0, 0], [1, 0], [0, 1]]\npod = 0.5\n'
+                "t = [500.0, 600.0]\n", source="s")
+
+
 def test_two_pieces_of_evidence_of_one_name_are_refused():
     body = '[[evidence]]\nkind = "exclusion"\nname = "a"\npolygon = [[0, 0], [1, 0], [0, 1]]\n'
     with pytest.raises(bg.BananagridError, match=r'evidence\[1\].name = "a": another \[\[evidence\]\] has this name'):
@@ -433,7 +449,8 @@ def test_every_time_is_on_the_timeline_or_refused_naming_the_key(t, t1, utc):
     value = a if t1 is None else f"[{a}, {b}]"
     text = SCENE + ('[[evidence]]\nkind = "area_search"\npolygon = [[0, 0], [100, 0], [0, 100]]\npod = 0.5\n'
                     f"t = {value}\n")
-    ok = all(math.isfinite(v) and v >= 0.0 for v in (s0, s1)) and s0 <= s1 <= last
+    ok = (all(math.isfinite(v) and v >= 0.0 for v in (s0, s1)) and s0 <= s1 <= last
+          and not any(s0 < t_map < s1 for t_map in (600.0, 900.0)))
     try:
         scene = parse_scene(text, source="s")
     except bg.BananagridError as exc:
