@@ -9,6 +9,7 @@ from __future__ import annotations
 import argparse
 import contextlib
 import json
+import math
 import os
 import sys
 import threading
@@ -49,6 +50,7 @@ from .scenes.pictures import (
     write_picture,
 )
 from .scenes.run_tiled import check_tiled, format_tiled_summary, run_scene_tiled, tiled_maps
+from .scenes.run_evidence import evidence_paths
 from .scenes.run_plan import plan_paths
 from .scenes.run import (RUN_ONLY_PROVENANCE, check_exports, check_run_memory, check_run_work, compute, export_paths,
                          plan_outputs, run_scene)
@@ -338,8 +340,10 @@ def _run(args: argparse.Namespace) -> int:
         written.append(args.out / f"{scene.name}.rrd")
         if args.npz:
             written.append(args.out / f"{scene.name}.npz")
-        written += export_paths(scene.name, args.out, **exports, cell_probabilities=scene.cell_probabilities).values()
+        written += export_paths(scene.name, args.out, **exports, cell_probabilities=scene.cell_probabilities,
+                                evidence=bool(scene.evidence)).values()
         written += plan_paths(scene, args.out, geojson=args.geojson)
+        written += evidence_paths(scene, args.out, geojson=args.geojson)
     print(format_summary(rows))
     print()
     for path in written:
@@ -648,7 +652,26 @@ def format_summary(rows: list[dict]) -> str:
         ).rstrip()
 
     plans = [format_plan(row["scene"], row["plan"]) for row in rows if row.get("plan")]
-    return "\n".join([line(header), line(["-" * w for w in widths]), *map(line, body), *plans])
+    found = format_evidence(rows)
+    return "\n".join([line(header), line(["-" * w for w in widths]), *map(line, body), *found, *plans])
+
+
+def format_evidence(rows: list[dict]) -> list[str]:
+    """Each map's posterior (:func:`bananagrid.recording.evidence.evidence_values`) in one line:
+    the searches' POS together and each search's own, and the probability of the evidence."""
+    lines = []
+    for row in rows:
+        found = row.get("evidence")
+        if not found:
+            continue
+        if not lines:
+            lines.append("")
+        own = ", ".join(f"{name} {pos:.4f}" for name, pos in zip(found["searches"], found["search_pos"])
+                        if math.isfinite(pos))
+        lines.append(f"{row['scene']}: posterior of {found['layer']} at t = {found['t']:g} s after "
+                     f"{', '.join(found['evidence']) or 'no evidence yet'}: POS {found['pos']:.4f}"
+                     + (f" (alone: {own})" if own else "") + f", probability of the evidence {found['normaliser']:.4g}")
+    return lines
 
 
 def format_plan(scene: str, plan: dict) -> str:

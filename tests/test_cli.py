@@ -32,7 +32,7 @@ QUICK_STEP = {
     "bearing_coastal": 100.0, "bearing_poor_crossing": 400.0, "bearing_three_stations": 100.0,
     "figure8": 100.0, "ship_heading": 20.0,
     "submarine": 4000.0, "rice_isotropic": 20.0, "slow_contact": 200.0,
-    "geo_ship": 200.0, "geo_bearing": 200.0,
+    "geo_ship": 200.0, "geo_bearing": 200.0, "fast_contact": 400.0,
 }
 #: Presence scenes ([array]) have no grid: --step does not apply (it is ignored with a warning),
 #: so they run at their own 1-degree lattices (about a second each) and get no --step here.
@@ -246,6 +246,8 @@ def test_scene_runs_end_to_end(path, quick_runs):
         masses = info["entities"][f"/layers/{layer.name}/mass"]["scalars"]
         assert len(masses) == len(scene.times or (1,))
     times = scene.times or sorted({t for _, t in scene.jobs()})
+    # and a scene's evidence, each drawn from its own time on (land at every time)
+    times = sorted({*times, *(e.span[0] for e in scene.evidence if e.span is not None)})
     assert info["timelines"]["elapsed"]["values"] == pytest.approx(list(times))
     assert sorted(p.name for p in quick_runs[scene.name].iterdir()) == [f"{scene.name}.npz", f"{scene.name}.rrd"]
 

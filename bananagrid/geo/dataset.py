@@ -90,7 +90,8 @@ def time_units(frame) -> str:
     return f"seconds since {iso_utc(frame.time)}"
 
 
-def raster_dataset(panels: Sequence, frame=None, *, title: str = "", source: str = "", cells=None, coverage=None):
+def raster_dataset(panels: Sequence, frame=None, *, title: str = "", source: str = "", cells=None, coverage=None,
+                   posteriors=None):
     """A scene's maps as one CF-1.10 :class:`xarray.Dataset`.
 
     Parameters
@@ -113,6 +114,13 @@ def raster_dataset(panels: Sequence, frame=None, *, title: str = "", source: str
     coverage : (str, float, Raster), optional
         ``(layer_name, t, effort)``: a search plan's coverage on the same grid (m^2 swept per
         m^2, ``bg.allocate(...).effort``), written as the variable :data:`COVERAGE_VARIABLE`.
+    posteriors : mapping of (str, float) to Posterior, optional
+        ``bg.posterior`` results by ``(layer_name, t)``, at every time of the layers that have
+        them (as ``cells``): each such layer gets ``LAYER_posterior`` (the posterior cell
+        probabilities, units 1) and ``LAYER_pod`` (the cumulative POD of each cell) beside its
+        density, ``LAYER_pos`` (the searches' POS at each time) and ``LAYER_search_pos`` (each
+        search's own POS, on the dimension ``search`` of the searches' names; NaN before a
+        search began), with the evidence described in the attribute ``bananagrid_evidence``.
 
     Returns
     -------
@@ -130,6 +138,7 @@ def raster_dataset(panels: Sequence, frame=None, *, title: str = "", source: str
     xr = require("xarray", NETCDF_PURPOSE)
     checked = check_panels(panels)
     probabilities = check_cells(cells, checked)
+    found = check_cells(posteriors, checked, "posteriors")
     frame = frame_of(checked, frame)
     grid = checked[0].raster.grid
     layers: dict[str, list] = {}
@@ -150,6 +159,9 @@ def raster_dataset(panels: Sequence, frame=None, *, title: str = "", source: str
         derived = {"mass": f"{var}_mass", "normalised": f"{var}_normalised"}
         if (layer, series[0].t) in probabilities:
             derived["probability"] = f"{var}_probability"
+        if (layer, series[0].t) in found:
+            derived.update(posterior=f"{var}_posterior", pod=f"{var}_pod", pos=f"{var}_pos",
+                           search_pos=f"{var}_search_pos")
         if not shared:
             derived.update(time=f"time_{var}", elapsed=f"elapsed_{var}")
         for name in derived.values():
@@ -164,6 +176,9 @@ def raster_dataset(panels: Sequence, frame=None, *, title: str = "", source: str
         if "probability" in derived:
             data_vars[derived["probability"]] = _probability_variable(
                 xr, layer, [probabilities[layer, p.t] for p in series], data_vars[var])
+        if "posterior" in derived:
+            data_vars.update(_posterior_variables(xr, layer, [found[layer, p.t] for p in series], data_vars[var],
+                                                  derived, tdim, coords))
         data_vars[derived["mass"]] = xr.Variable(
             (tdim,), _stack([getattr(p.raster, "lazy_mass", None) if _lazy(p.raster.values) else float(p.raster.mass)
                              for p in series]),
@@ -184,6 +199,45 @@ def raster_dataset(panels: Sequence, frame=None, *, title: str = "", source: str
         + ("Layers share the time dimension." if shared else "Each layer has its own time dimension (their times differ).")
     )
     return xr.Dataset(data_vars, coords=coords, attrs=attrs)
+
+
+def _posterior_variables(xr, layer: str, posts: list, density, names: dict, tdim: str, coords: dict) -> dict:
+    """A layer's posterior, POD, POS and each search's POS beside its density variable
+    ``density`` (the same dimensions, coordinates and grid mapping), the values as computed."""
+    common = {"units": "1", "bananagrid_layer": layer}
+    if "grid_mapping" in density.attrs:
+        common["grid_mapping"] = density.attrs["grid_mapping"]
+    encoding = {k: v for k, v in density.encoding.items() if k == "coordinates"}
+    evidence = [p.provenance.get("posterior", {}) for p in posts]
+    searches: list[str] = []
+    for p in posts:
+        for name in p.provenance.get("search_names", []):
+            if name not in searches:
+                searches.append(name)
+    table = np.full((len(posts), len(searches)), np.nan)
+    for i, p in enumerate(posts):
+        for name, pos in zip(p.provenance.get("search_names", []), p.search_pos):
+            table[i, searches.index(name)] = pos
+    if "search" not in coords:
+        coords["search"] = xr.Variable(("search",), np.array(searches, dtype=object),
+                                       {"long_name": "name of the search (the scene's [[evidence]] name)"})
+    elif list(coords["search"].values) != searches:
+        raise BananagridError(f"posteriors: layer {layer!r} has other searches than another layer")
+    return {
+        names["posterior"]: xr.Variable(density.dims, _stack([p.values for p in posts]), {
+            **common, "long_name": f"probability that the target is in the cell after the evidence (posterior POC): "
+                                   f"layer {layer}", "cell_methods": "area: sum",
+            "bananagrid_evidence": json.dumps(evidence, default=str)}, encoding=encoding),
+        names["pod"]: xr.Variable(density.dims, _stack([p.pod for p in posts]), {
+            **common, "long_name": f"cumulative probability that the searches would have detected a target in the "
+                                   f"cell (POD): layer {layer}", "cell_methods": "area: mean"}, encoding=encoding),
+        names["pos"]: xr.Variable((tdim,), np.array([p.pos for p in posts]), {
+            **common, "long_name": f"probability that the searches together would have found the target (POS): "
+                                   f"layer {layer}"}),
+        names["search_pos"]: xr.Variable((tdim, "search"), table, {
+            **common, "long_name": f"each search's own probability of success (POS), NaN before it began: "
+                                   f"layer {layer}"}),
+    }
 
 
 #: The NetCDF variable of a search plan's coverage (:func:`raster_dataset`'s ``coverage``).

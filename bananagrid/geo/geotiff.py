@@ -44,13 +44,16 @@ from .frame import iso_utc
 from .libraries import require
 from .panels import PROBABILITY, check_panels, frame_of
 
-__all__ = ["GEOTIFF_PURPOSE", "band_description", "band_tags", "write_geotiff", "QUANTITIES"]
+__all__ = ["GEOTIFF_PURPOSE", "band_description", "band_tags", "write_geotiff", "QUANTITIES", "POD"]
 
 GEOTIFF_PURPOSE = "GeoTIFF export"
+#: The quantity of a map of the searches' probability of detection (a scene's evidence).
+POD = "pod"
 #: Per quantity of the panels' rasters: the bands' data type, unit and what they hold.
 QUANTITIES = {
     "density": ("float32", "m-2", "probability density of the target's position at the cell centre"),
     PROBABILITY: ("float64", "1", "probability that the target is in the cell (probability of containment, POC)"),
+    POD: ("float64", "1", "cumulative probability that the searches would have detected a target in the cell (POD)"),
 }
 
 
@@ -75,6 +78,10 @@ def band_tags(layer: str, t: float, raster, frame) -> dict:
     }
     if utc is not None:
         tags["utc"] = iso_utc(utc)
+    if getattr(raster, "pos", None) is not None:  # a posterior, or its POD map: what the searches would have found
+        tags["pos"] = f"{float(raster.pos)!r}"
+        tags["search_pos"] = json.dumps(dict(zip(raster.provenance.get("search_names", []),
+                                                 map(float, raster.search_pos))))
     return tags
 
 

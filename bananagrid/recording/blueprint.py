@@ -82,6 +82,7 @@ def default_blueprint(
     colours: ColourRange | None = None,
     mass_top: float = 1.0,
     timeline: str = ELAPSED,
+    follow: bool = False,
 ) -> rrb.Blueprint:
     """The default layout: one map per layer (log10 first), beside the summary and the scene.
 
@@ -125,6 +126,10 @@ def default_blueprint(
         :func:`mass_axis` of it (a mass near 1 is then read as near 1, not as a sliver).
     timeline : str
         The time panel's timeline (``elapsed``, or ``utc`` for a geographic scene with a time).
+    follow : bool
+        Show the time panel with its cursor at the last time even when the layers have one time
+        (a scene's evidence is logged at its own, earlier times: the viewer would open there,
+        before the maps).
     """
     layers = [entity_path(e) for e in layer_entities]
     extras = [entity_path(e) for e in extra_images]
@@ -144,7 +149,8 @@ def default_blueprint(
         )
     # "following" puts the cursor at the last time; an explicit panel state, because rerun
     # drops the panel's state chunk with a warning when it is left empty.
-    time_panel = rrb.TimePanel(state="expanded", timeline=timeline, play_state="following") if several_times else None
+    time_panel = (rrb.TimePanel(state="expanded", timeline=timeline, play_state="following")
+                  if several_times or follow else None)
     if not layers:
         return rrb.Blueprint(side, collapse_panels=False)
     frames = {entity_path(e): extent for e, extent in (frames or {}).items()}

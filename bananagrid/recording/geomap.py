@@ -30,7 +30,7 @@ import rerun.blueprint as rrb
 
 from .core import entity_path, strict
 
-__all__ = ["MAP_ENTITY", "AREA_COLOURS", "log_map_marks", "log_map_areas", "map_view", "map_zoom", "level_entity"]
+__all__ = ["log_map_evidence", "EVIDENCE_COLOURS", "MAP_ENTITY", "AREA_COLOURS", "log_map_marks", "log_map_areas", "map_view", "map_zoom", "level_entity"]
 
 MAP_ENTITY = "map"
 #: One colour per probability level, innermost first (readable over OpenStreetMap's pale land
@@ -83,6 +83,37 @@ def log_map_marks(rec: rr.RecordingStream, name: str, model, frame) -> None:
         if "fix" in found:
             rec.log(f"{entity}/fix", rr.GeoPoints(lat_lon=_lat_lon(frame, found["fix"]), colors=FIX_COLOUR,
                                                   radii=rr.Radius.ui_points(6.0)), static=True)
+
+
+#: The evidence on the map: searches orange, reports cyan, land grey (as in the evidence's panel).
+EVIDENCE_COLOURS = {"search": (255, 140, 0), "report": (0, 220, 255), "exclusion": (160, 160, 160)}
+
+
+def log_map_evidence(rec: rr.RecordingStream, names: Sequence[str], specs: Sequence, frame, set_time) -> None:
+    """A scene's evidence (:class:`bananagrid.scenes.evidence.EvidenceSpec`: areas, tracks,
+    reported positions and stations) on each layer's map (``map/NAME/evidence/EVIDENCE``), each
+    at its own time (``set_time(seconds)``), land static; edges straight in the plane are drawn
+    through :data:`LINE_POINTS` points of it."""
+    along = np.linspace(0.0, 1.0, LINE_POINTS)[:, None]
+    with strict():
+        for spec in specs:
+            static = spec.span is None
+            if not static:
+                set_time(spec.span[0])
+            colour = EVIDENCE_COLOURS[getattr(spec.evidence, "kind", "search")]
+            lines = []
+            for ring in (*(np.vstack([s, s[:1]]) for s in spec.shapes),
+                         *(() if spec.track is None else (spec.track[:, :2],))):
+                dense = np.concatenate([a + along * (b - a) for a, b in zip(ring[:-1], ring[1:])])
+                lines += _strips(_lat_lon(frame, dense))
+            for name in names:
+                entity = f"{MAP_ENTITY}/{entity_path(name)}/evidence/{entity_path(spec.name)}"
+                if lines:
+                    rec.log(entity, rr.GeoLineStrings(lat_lon=lines, colors=colour, radii=rr.Radius.ui_points(2.0)),
+                            static=static)
+                if spec.points is not None:
+                    rec.log(entity, rr.GeoPoints(lat_lon=_lat_lon(frame, spec.points), colors=colour,
+                                                 radii=rr.Radius.ui_points(6.0)), static=static)
 
 
 def level_entity(level: float) -> str:

@@ -22,6 +22,7 @@ import numpy as np
 from ..contours import DEFAULT_MASS_LEVELS, cell_regions, mass_regions
 from ..domains.angular_lattice import AngularLattice
 # The readers moved to readback; they stay importable from here for existing callers.
+from .evidence import EVIDENCE_ENTITY
 from .plan import PLAN_ENTITY
 from .readback import (
     IMAGE_BUFFER, IMAGE_FORMAT, RecordedCellMap, decode_image, open_recording, plain_cell,
@@ -30,7 +31,7 @@ from .readback import (
 
 __all__ = [
     "IMAGE_BUFFER", "IMAGE_FORMAT", "cell_map_summaries", "decode_image", "format_inspection", "inspect_recording",
-    "json_ready", "layer_summaries", "open_recording", "plan_summary", "plain_cell", "read_depth_image", "recording_rows",
+    "json_ready", "layer_summaries", "open_recording", "plan_summary", "evidence_summary", "plain_cell", "read_depth_image", "recording_rows",
 ]
 
 _SCALARS = "Scalars:scalars"
@@ -81,7 +82,30 @@ def inspect_recording(path: str | os.PathLike) -> dict:
     plan = plan_summary(info["entities"])
     if plan is not None:
         info["plan"] = plan
+    found = evidence_summary(info["entities"])
+    if found:
+        info["evidence"] = found
     return info
+
+
+def evidence_summary(entities: dict) -> list[dict]:
+    """Each recorded posterior (:mod:`bananagrid.recording.evidence`) from
+    :func:`inspect_recording`'s ``entities``, by layer then time: ``layer``, ``t`` (s), ``pos``,
+    ``normaliser``, ``prior_mass``, ``evidence`` (the names it took) and ``search_pos``
+    (``{name: POS}`` of the searches that had begun); empty without evidence."""
+    out = []
+    for name, entity in entities.items():
+        if not (name.startswith(f"/{EVIDENCE_ENTITY}/") and name.endswith("/values")):
+            continue
+        for row in entity.get("values", []):
+            values = row["values"]
+            searches, pos = _listed(values.get("searches")), _listed(values.get("search_pos"))
+            out.append({
+                "layer": values["layer"], "t": values["t"], "pos": values["pos"], "normaliser": values["normaliser"],
+                "prior_mass": values.get("prior_mass"), "evidence": _listed(values.get("evidence")),
+                "search_pos": {s: p for s, p in zip(searches, pos) if p is not None and math.isfinite(p)},
+            })
+    return sorted(out, key=lambda item: (item["layer"], item["t"]))
 
 
 def plan_summary(entities: dict) -> dict | None:
@@ -367,6 +391,13 @@ def format_inspection(info: dict) -> str:
         lines += ["", "where the target is (angular cell maps; cell probabilities p(C | S), not densities)"]
         for item in info["cell_maps"]:
             lines += _cell_map_lines(item)
+    if info.get("evidence"):
+        lines += ["", "after the evidence (the recorded posteriors)"]
+        for item in info["evidence"]:
+            own = ", ".join(f"{name} {pos:.6f}" for name, pos in item["search_pos"].items())
+            lines += [f"  {item['layer']} at t = {item['t']:g} s after {', '.join(item['evidence']) or 'no evidence yet'}",
+                      f"    POS                    {item['pos']:.6f}" + (f" (each alone: {own})" if own else ""),
+                      f"    probability of the evidence {item['normaliser']:.6g}"]
     if info.get("plan"):
         lines += ["", "where to look next (the recorded plan)"] + _plan_lines(info["plan"])
     lines += ["", "timelines"]

@@ -7,6 +7,7 @@ so that it can list them all.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 
 import rerun as rr
@@ -32,7 +33,8 @@ def summary_markdown(title: str, rows: Sequence[dict], warnings: Sequence[str]) 
         One per layer and time with ``layer``, ``t`` (s), ``mass`` (raw captured mass),
         ``peak`` (m^-2), ``peak_x``, ``peak_y`` (m) and ``regions`` (list of
         :class:`~bananagrid.contours.MassRegion`); ``mass_from`` where the mass is not the
-        density's midpoint sum (e.g. ``"the cell probabilities"``).
+        density's midpoint sum (e.g. ``"the cell probabilities"``); ``evidence`` where the scene
+        has evidence (:func:`bananagrid.recording.evidence.evidence_values`).
     warnings : sequence of str
         One-line warnings of the run (empty: says so).
     """
@@ -50,6 +52,18 @@ def summary_markdown(title: str, rows: Sequence[dict], warnings: Sequence[str]) 
             f"({row['peak_x']:.6g}, {row['peak_y']:.6g})",
         ] + [f"{format_area(r.area)} (holds {r.enclosed:.4f})" if r.reached else "not reached" for r in row["regions"]]
         out.append("| " + " | ".join(cells) + " |")
+    found = [row["evidence"] for row in rows if row.get("evidence")]
+    if found:
+        searches = found[0]["searches"]
+        out += ["", "**After the evidence** (the tab `evidence`: each map's prior above its posterior, the POD map, "
+                "POS over time): the probability that the searches so far would have found the target (POS), "
+                "together and each alone (– before it began).", "",
+                "| layer | t [s] | evidence | POS | " + " | ".join(f"{name} POS" for name in searches) + " |",
+                "|" + "---|" * (4 + len(searches))]
+        for item in found:
+            alone = [f"{p:.4f}" if math.isfinite(p) else "–" for p in item["search_pos"]]
+            out.append(f"| {item['layer']} | {item['t']:g} | {', '.join(item['evidence']) or 'none yet'} | "
+                       f"{item['pos']:.4f} | " + " | ".join(alone) + " |")
     out += [
         "",
         "**Reading the maps.** The first tab of each layer is log10 of the density (m^-2), "

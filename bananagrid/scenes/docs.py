@@ -15,15 +15,19 @@ from pathlib import Path
 from ..atomic import atomic_write
 from ..models.registry import MODEL_KINDS, Registry
 from ..protocol import ALIASES, KEY_TYPES, LATLON, SceneKey
+from .evidence import EVIDENCE_TABLE
 from .load import PLAN_TABLE
 
-__all__ = ["model_keys_markdown", "plan_keys_markdown", "replace_section", "BEGIN", "END", "PLAN_BEGIN", "PLAN_END",
-           "main"]
+__all__ = ["model_keys_markdown", "plan_keys_markdown", "evidence_keys_markdown", "replace_section", "BEGIN", "END",
+           "PLAN_BEGIN", "PLAN_END", "EVIDENCE_BEGIN", "EVIDENCE_END", "main"]
 
 BEGIN = "<!-- model keys: generated from the registry by `python -m bananagrid.scenes.docs --write docs/scenes.md` -->"
 END = "<!-- end of the generated model keys -->"
 PLAN_BEGIN = "<!-- plan keys: generated from bananagrid.scenes.load.PLAN_TABLE by `python -m bananagrid.scenes.docs --write docs/scenes.md` -->"
 PLAN_END = "<!-- end of the generated plan keys -->"
+EVIDENCE_BEGIN = ("<!-- evidence keys: generated from bananagrid.scenes.evidence.EVIDENCE_TABLE by "
+                  "`python -m bananagrid.scenes.docs --write docs/scenes.md` -->")
+EVIDENCE_END = "<!-- end of the generated evidence keys -->"
 
 #: Units of an alias: the SI unit with its radians (or m/s) replaced.
 _ALIAS_UNITS = {"deg": ("rad", "deg"), "kn": ("m/s", "kn")}
@@ -79,6 +83,14 @@ def plan_keys_markdown() -> str:
     return "\n".join([PLAN_BEGIN, *lines, PLAN_END])
 
 
+def evidence_keys_markdown() -> str:
+    """The table of the ``[[evidence]]`` keys (:data:`~bananagrid.scenes.evidence.EVIDENCE_TABLE`)."""
+    lines = ["| key | kinds | type | unit | default | allowed |", "|---|---|---|---|---|---|"]
+    lines += [f"| `{key}` | {kinds} | {kind} | {unit} | {default} | {allowed} |"
+              for key, kinds, kind, unit, default, allowed in EVIDENCE_TABLE]
+    return "\n".join([EVIDENCE_BEGIN, *lines, EVIDENCE_END])
+
+
 def replace_section(document: str, section: str, begin: str = BEGIN, end_mark: str = END) -> str:
     """``document`` with the text from ``begin`` to ``end_mark`` (default :data:`BEGIN` to
     :data:`END`) replaced by ``section``."""
@@ -94,13 +106,14 @@ def main(argv: list[str] | None = None) -> int:
     group.add_argument("--check", metavar="FILE", type=Path, help="exit 1 if FILE's generated section is stale")
     group.add_argument("--write", metavar="FILE", type=Path, help="replace FILE's generated section")
     args = parser.parse_args(argv)
-    section, plan = model_keys_markdown(), plan_keys_markdown()
+    section, plan, evidence = model_keys_markdown(), plan_keys_markdown(), evidence_keys_markdown()
     if args.check is None and args.write is None:
-        print(section + "\n\n" + plan)
+        print(section + "\n\n" + plan + "\n\n" + evidence)
         return 0
     path = args.check or args.write
     document = path.read_text()
-    updated = replace_section(replace_section(document, section), plan, PLAN_BEGIN, PLAN_END)
+    updated = replace_section(replace_section(replace_section(document, section), plan, PLAN_BEGIN, PLAN_END),
+                              evidence, EVIDENCE_BEGIN, EVIDENCE_END)
     if args.check is not None:
         if updated != document:
             print(f"{path}: the model or plan keys differ from their declarations; run {parser.prog} --write {path}", file=sys.stderr)

@@ -41,6 +41,7 @@ from ..protocol import DensityModel
 from ..recording.core import MAX_ELAPSED_S, colormaps
 from ..validate import DEGREES_MEANT, BananagridError, BananagridWarning, positive
 from . import keys
+from .evidence import parse_evidence
 from .keys import DTYPES, NAME_PATTERN, SceneKeyError, check_keys, show
 from .presence import LAYER_NAME, array_scene_fields
 
@@ -53,7 +54,7 @@ __all__ = [
 #: Scene keys of every registered model kind of grid layers.
 PARAMETER_KEYS = MappingProxyType({kind: spec.scene.key_names for kind, spec in MODEL_KINDS.on("grid").items()})
 
-TOP_KEYS = ("scene", "grid", "geo", "output", "defaults", "layers", "radial", "plan")
+TOP_KEYS = ("scene", "grid", "geo", "output", "defaults", "layers", "radial", "plan", "evidence")
 GEO_KEYS = ("origin_latlon", "time", "crs", "max_scale_error", "fix_file", "fix_mmsi", "bearings_file")
 #: What a ``[geo] fix_file``'s last fix gives a layer that sets neither the parameter nor its
 #: ``[defaults]``: the motion models' initial heading (its course over ground, true) and speed.
@@ -270,6 +271,10 @@ class Scene:
         Bottom of an array scene's recorded colour scale, log10 of a probability.
     plan : PlanSpec or None
         Where to look next (``[plan]``); None without it.
+    evidence : tuple of EvidenceSpec
+        Searches that found nothing, reports and land (``[[evidence]]``,
+        :mod:`bananagrid.scenes.evidence`); each map takes those that began by its time, and
+        the run computes its posterior (:func:`bananagrid.posterior`).
     """
 
     name: str
@@ -300,6 +305,7 @@ class Scene:
     far: float | None = None
     log10_floor: float = -12.0
     plan: PlanSpec | None = None
+    evidence: tuple = ()
 
     @property
     def gridded(self) -> bool:
@@ -458,6 +464,9 @@ def _build(doc: dict, text: str, source: str, kinds: Registry, tiled: bool = Fal
                             "\"bearing_fix\"); drop the key or add such a layer")
     radial = _radial(doc["radial"], layers) if "radial" in doc else None
     plan = _plan(doc["plan"], layers, times) if "plan" in doc else None
+    timeline = times or tuple(layer.params.get("t", 0.0) for layer in layers)
+    evidence = (parse_evidence(doc["evidence"], timeline, geo, directory or Path.cwd()) if "evidence" in doc
+                else ())
     if geo is not None:  # every UTC time of the scene inside the calendar
         try:
             geo.check_elapsed(times or [layer.params.get("t", 0.0) for layer in layers])
@@ -468,7 +477,7 @@ def _build(doc: dict, text: str, source: str, kinds: Registry, tiled: bool = Fal
     return Scene(
         name=name, title=title, description=description, text=text, source=source,
         domain=grid, bounds=bounds, layers=layers, times=times, radial=radial, warnings=tuple(found), **output,
-        geo=geo, scale_error=scale_error, kinds=scene_kinds, plan=plan,
+        geo=geo, scale_error=scale_error, kinds=scene_kinds, plan=plan, evidence=evidence,
     )
 
 

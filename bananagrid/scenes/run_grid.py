@@ -40,6 +40,7 @@ from ..recording.core import (
 )
 from ..recording.geomap import log_map_areas, log_map_marks, map_view
 from ..recording.layers import layer_views, log_layer, log_scene_extras, log_shared_colours, scene_texts
+from ..recording.evidence import evidence_view
 from ..recording.plan import plan_view
 from ..recording.timeline import ELAPSED, UTC, set_times
 from ..recording.radial import log_radial_curves, radial_groups, radial_views
@@ -49,6 +50,10 @@ from ..validate import BananagridError, BananagridWarning
 from ..version import __version__
 from .load import Layer, Scene
 from .run_outputs import NPZ, RUN_ONLY_PROVENANCE, write_exports
+from .run_evidence import (
+    evidence_bytes_per_cell, evidence_paths, record_evidence_marks, record_posterior, scene_posterior,
+    write_evidence_geojson,
+)
 from .run_plan import ScenePlan, plan_label, plan_paths, plan_scene, record_plan, write_plan_geojson
 
 __all__ = ["GridRun", "compute", "array_key", "check_exports", "check_run_memory", "check_run_work",
@@ -104,6 +109,7 @@ class GridRun:
         self.marked: set[str] = set()  # layers whose landmarks are on the map (static, logged once)
         self.archive = None
         self.plan: ScenePlan | None = None
+        self.posteriors: list = []  # each map's posterior after the scene's evidence (ScenePosterior)
 
     def recording_id(self) -> str:
         """Depends on the scene text and the grid actually used (a step override changes it)."""
@@ -131,9 +137,12 @@ class GridRun:
             plan = self.plan
             write_exports(scene, self.out_dir, self.panels, **self.exports, areas=self.areas, cells=self.cells,
                           marks=self.marks, stage=self.outputs.stage,
-                          coverage=None if plan is None else (scene.plan.layer, scene.plan.t, plan.allocation.effort))
+                          coverage=None if plan is None else (scene.plan.layer, scene.plan.t, plan.allocation.effort),
+                          posteriors=self.posteriors)
             for path in plan_paths(scene, self.out_dir, geojson=self.exports["geojson"]):
                 write_plan_geojson(path, scene, plan, stage=self.outputs.stage)
+            for path in evidence_paths(scene, self.out_dir, geojson=self.exports["geojson"]):
+                write_evidence_geojson(path, scene, self.posteriors, stage=self.outputs.stage)
 
     def extra_steps(self) -> list:
         """``(label, step)`` of the steps after the jobs: the scene's plan, if it has one
@@ -142,7 +151,9 @@ class GridRun:
 
     def _plan_step(self, rec, rows: list[dict]) -> None:
         scene = self.scene
-        self.plan = plan_scene(scene, threads=self.threads)
+        # after evidence, the plan searches the posterior: where the target is given nothing found so far
+        found = next((p.posterior for p in self.posteriors if (p.layer, p.t) == (scene.plan.layer, scene.plan.t)), None)
+        self.plan = plan_scene(scene, threads=self.threads, posterior=found)
         record_plan(rec, scene, self.plan)
         for row in rows:
             if row["layer"] == scene.plan.layer and row["t"] == scene.plan.t:
@@ -183,13 +194,24 @@ class GridRun:
             _log_radial(rec, scene, layer, t, threads)
         if scene.geo is not None:
             self._log_map(rec, layer, t, model, raster)
+        found = None
+        if scene.evidence:
+            if not self.posteriors:  # the evidence's geometry, once, each at its own time
+                record_evidence_marks(rec, scene)
+                set_times(rec, t, scene.geo)
+            found = scene_posterior(scene, layer, t, model, threads=threads)
+            record_posterior(rec, scene, found)
+            self.posteriors.append(found)
         if self.archive is not None:
-            self.archive.add(layer.name, t, raster, cells)
+            self.archive.add(layer.name, t, raster, cells, found)
         if self.panels is not None:
             self.panels.append((layer.name, t, raster))
             if cells is not None:
                 self.cells[layer.name, t] = cells
-        return _row(scene, layer, t, raster, seconds, regions)
+        row = _row(scene, layer, t, raster, seconds, regions)
+        if found is not None:
+            row["evidence"] = found.values
+        return row
 
     def _log_map(self, rec, layer: Layer, t: float, model, raster: Raster) -> None:
         """A geographic scene's marks (once per layer) and search areas at ``t``."""
@@ -243,7 +265,8 @@ def check_run_memory(scene: Scene, *, exports: bool = False, limit: float | None
     kept = len(scene.jobs()) * (2 if scene.cell_probabilities else 1)  # maps kept for the files: densities, cells
     per_cell = (RUN_BYTES_PER_CELL + (EXPORT_BYTES_PER_MAP_CELL * kept if exports else 0)
                 + (PROBABILITY_BYTES_PER_CELL if scene.cell_probabilities else 0)
-                + (PLAN_BYTES_PER_CELL if scene.plan is not None else 0))
+                + (PLAN_BYTES_PER_CELL if scene.plan is not None else 0)
+                + evidence_bytes_per_cell(scene))
     return check_memory(cells, per_cell, f"{scene.source}: a grid of {scene.grid.nx} x {scene.grid.ny} = {cells:,} cells",
                         limit=limit, option="--max-memory GB")
 
@@ -257,6 +280,8 @@ def check_run_work(scene: Scene, *, threads: int | None = None, limit: float | N
     jobs = scene.jobs()
     core_seconds = sum(layer.model(t).work_estimate(cells, extent) for layer, t in jobs)
     if scene.cell_probabilities:
+        core_seconds += sum(probability_work(layer.model(t), scene.grid)[0] for layer, t in jobs)
+    if scene.evidence:  # each map's posterior: its prior's cell probabilities first
         core_seconds += sum(probability_work(layer.model(t), scene.grid)[0] for layer, t in jobs)
     if scene.plan is not None:  # the plan's map: the layer's cell probabilities at its time
         planned = next(layer for layer in scene.layers if layer.name == scene.plan.layer)
@@ -344,20 +369,45 @@ def _blueprint(scene: Scene, frames: dict, plan_frame: tuple | None = None, *,
         several_times=scene.times is not None and len(scene.times) > 1,
         frames=frames,
         map_view=_with_plan(None if scene.geo is None else map_view(scene.geo, scene.grid.extent, models), scene,
-                            plan_frame),
+                            plan_frame, list(frames.values())),
         colours=colours,
         mass_top=mass_top,
         timeline=UTC if scene.geo is not None and scene.geo.time is not None else ELAPSED,
+        follow=bool(scene.evidence),
     )
 
 
-def _with_plan(geographic, scene: Scene, plan_frame: tuple | None):
-    """The panel after the layers' maps: the plan's (:func:`~bananagrid.recording.plan.plan_view`)
-    with the geographic map a tab behind it, or the geographic map alone."""
-    if scene.plan is None:
-        return geographic
-    plan = plan_view(plan_frame, rectangles=scene.plan.rectangles > 0, bands=scene.plan.bands > 0)
-    return plan if geographic is None else rrb.Tabs(plan, geographic, name="plan and map")
+def _with_plan(geographic, scene: Scene, plan_frame: tuple | None, layer_frames: list | None = None):
+    """The panel after the layers' maps: the evidence's (prior and posterior side by side,
+    :func:`~bananagrid.recording.evidence.evidence_view`), the plan's
+    (:func:`~bananagrid.recording.plan.plan_view`) and the geographic map, as tabs in that
+    order (each where the scene has it)."""
+    panels = []
+    if scene.evidence:
+        panels.append(evidence_view([layer.name for layer in scene.layers], _evidence_frame(scene, layer_frames)))
+    if scene.plan is not None:
+        panels.append(plan_view(plan_frame, rectangles=scene.plan.rectangles > 0, bands=scene.plan.bands > 0))
+    if geographic is not None:
+        panels.append(geographic)
+    if len(panels) < 2:
+        return panels[0] if panels else None
+    return rrb.Tabs(*panels, name=" and ".join(("evidence", "plan", "map")[k] for k, wanted in enumerate(
+        (bool(scene.evidence), scene.plan is not None, geographic is not None)) if wanted))
+
+
+def _evidence_frame(scene: Scene, layer_frames: list | None = None,
+                    margin: float = 0.1) -> tuple[float, float, float, float] | None:
+    """Where the evidence's views open: the layers' maps' frames (else the grid), widened to
+    hold the evidence's shapes and tracks (within the grid: land or a track may reach far beyond)."""
+    x0, x1, y0, y1 = union_extent(layer_frames) if layer_frames else scene.grid.extent
+    gx0, gx1, gy0, gy1 = scene.grid.extent
+    xs, ys = [x0, x1], [y0, y1]
+    for spec in scene.evidence:
+        for shape in (*spec.shapes, *(() if spec.track is None else (spec.track[:, :2],))):
+            xs += [max(gx0, float(shape[:, 0].min())), min(gx1, float(shape[:, 0].max()))]
+            ys += [max(gy0, float(shape[:, 1].min())), min(gy1, float(shape[:, 1].max()))]
+    pad = margin * max(max(xs) - min(xs), max(ys) - min(ys))
+    return (min(xs) - pad, max(xs) + pad, min(ys) - pad, max(ys) + pad)
 
 
 def _log_radial(rec, scene: Scene, layer: Layer, t: float, threads) -> None:
@@ -416,9 +466,18 @@ class _Archive:
             self.abandon()
             raise
 
-    def add(self, layer: str, t: float, raster: Raster, cells: Raster | None = None) -> None:
-        """Store ``raster.values`` (and the cell probabilities ``cells``, if computed) under
-        :func:`array_key` and note their provenance."""
+    def add(self, layer: str, t: float, raster: Raster, cells: Raster | None = None, found=None) -> None:
+        """Store ``raster.values`` (and the cell probabilities ``cells``, if computed; and with
+        evidence the posterior and its POD map, ``found``: a
+        :class:`~bananagrid.scenes.run_evidence.ScenePosterior`) under :func:`array_key` and
+        note their provenance."""
+        if found is not None:
+            post = found.posterior
+            for quantity, values in (("posterior", post.values), ("pod", post.pod)):
+                key = array_key(layer, t, quantity)
+                self._write(key, np.asarray(values))
+                self.entries[key] = {"layer": layer, "t": float(t), "quantity": quantity, **found.values,
+                                     "provenance": post.provenance}
         for item in (raster, cells):
             if item is None:
                 continue

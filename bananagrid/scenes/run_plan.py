@@ -4,7 +4,9 @@ allocation of the effort, the rectangles and bands, recorded, summarised and wri
 The map is the layer's cell probabilities on the scene's grid, *not* normalised whatever
 ``output.normalise`` says: the plan's POS is of the whole target distribution (what the grid
 misses counts as not found), the same number as ``bg.allocate(bg.rasterise(model, grid,
-quantity="probability"), effort, law)``.
+quantity="probability"), effort, law)``. A scene with ``[[evidence]]`` plans on the layer's
+posterior at the plan's time instead (``bg.allocate(bg.posterior(model, grid, evidence), ...)``):
+where the target is given that nothing was found so far, its POS conditional on that.
 """
 
 from __future__ import annotations
@@ -72,11 +74,14 @@ def plan_label(scene: Scene) -> str:
     return f"plan {spec.layer} t={spec.t:g} s ({spec.effort / 1e6:g} km^2)"
 
 
-def plan_scene(scene: Scene, *, threads: int | None = None) -> ScenePlan:
-    """Compute ``scene``'s plan (its ``[plan]``: :class:`~bananagrid.scenes.load.PlanSpec`)."""
+def plan_scene(scene: Scene, *, threads: int | None = None, posterior: Raster | None = None) -> ScenePlan:
+    """Compute ``scene``'s plan (its ``[plan]``: :class:`~bananagrid.scenes.load.PlanSpec`);
+    on ``posterior`` where given (a scene with evidence: the plan's layer's posterior at its
+    time, ``bg.posterior``'s cell probabilities given that nothing was found), else on
+    :func:`plan_map`."""
     spec = scene.plan
     start = time.perf_counter()
-    cells = plan_map(scene, threads=threads)
+    cells = plan_map(scene, threads=threads) if posterior is None else posterior
     allocation = allocate(cells, spec.effort, law=spec.law)
     rectangles = search_rectangles(allocation, spec.rectangles, spec.sweep_width) if spec.rectangles else None
     bands = search_regions(allocation, spec.bands, spec.sweep_width) if spec.bands else None

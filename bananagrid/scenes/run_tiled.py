@@ -32,13 +32,17 @@ __all__ = ["run_scene_tiled", "tiled_maps", "check_tiled", "format_tiled_summary
 
 def check_tiled(scene: Scene) -> Scene:
     """Refuse what cannot be tiled: an [array] scene (angular cells, not a grid), a scene that
-    plans a search (a plan needs the cell probabilities of its whole map in memory)."""
+    plans a search (a plan needs the cell probabilities of its whole map in memory), a scene
+    with evidence (each posterior is normalised over its whole map)."""
     if not scene.gridded:
         raise BananagridError(f"{scene.source}: --zarr: an [array] scene's angular cells are not a grid; "
                               "run it without --zarr")
     if scene.plan is not None:
         raise BananagridError(f"{scene.source}: --zarr computes maps in tiles; a [plan] needs its map's cell "
                               "probabilities in memory: run it without --zarr (or drop [plan])")
+    if scene.evidence:
+        raise BananagridError(f"{scene.source}: --zarr computes maps in tiles; a posterior after [[evidence]] is "
+                              "normalised over its whole map, in memory: run it without --zarr (or drop [[evidence]])")
     return scene
 
 

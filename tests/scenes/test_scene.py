@@ -306,7 +306,7 @@ def test_docs_name_every_key_and_the_example_parses():
     from bananagrid.scenes.load import GRID_KEYS, OUTPUT_KEYS, PARAMETER_KEYS, RADIAL_KEYS, SCENE_KEYS, TOP_KEYS
 
     doc = DOC.read_text()
-    assert not [table for table in TOP_KEYS if f"`[{table}" not in doc]
+    assert not [table for table in TOP_KEYS if f"`[{table}" not in doc and f"`[[{table}" not in doc]
     keys = {*SCENE_KEYS, *GRID_KEYS, *OUTPUT_KEYS, *RADIAL_KEYS, "model"}
     keys.update(option for kind in bg.MODEL_KINDS.values() for option in kind.scene.options)
     keys.update(k for kind in PARAMETER_KEYS.values() for k in kind)
