@@ -123,8 +123,11 @@ def grid_block(ctx: WarpContext, binding, grid: Grid, rows: tuple[int, int] | No
             dim = (-(-(r1 - r0) // tile), -(-nx // columns))
             head = [xs, ys, r0, r1, tile, columns, ctx.scalar(grid.dx), ctx.scalar(grid.dy)]
         extra = [scratch, quads, band_of[r0]] if family.scratch_width else []
-        # a small grid again and again (kept centres, a model's kept parameters): replayed
-        (ctx.launch_kept if serial else ctx.launch)(family.grid, dim=dim, inputs=[*head, binding.params, *extra, out])
+        # a small grid again and again (kept centres, a model's kept parameters): replayed, with
+        # the output and any work rows (made for each call) packed afresh
+        fresh = (-1, len(head) + 1, len(head) + 2) if family.scratch_width else (-1,)
+        (ctx.launch_kept if serial else ctx.launch)(family.grid, dim=dim, inputs=[*head, binding.params, *extra, out],
+                                                    fresh=fresh)
         if with_sum and ctx.cpu:  # a CPU launch has finished when it returns
             sums[r0:r1] = row_sums(values[r0:r1])
 

@@ -625,16 +625,18 @@ class PolarBanana(MotionModel):
         |P_mu - v0 t sinc| << s, and the heading blur adds |P_mu'| sigma_bar with
         |sinc'| <= 0.44), and the origin.
 
-        Each curve r(b) is sampled at FRAME_BEARINGS bearings b_k = k delta (k = -K .. K),
-        in blocks of FRAME_BLOCK hypotheses (their arrays stay in cache). Sines and cosines cost
-        more than all the rest (5 ns each here): exp(i k delta) is built from exp(i 2^j delta)
-        by products (at most log2 K + 1 of them, so within about 10 ulps). r(b) is even in b, so
-        the points of +-b_k are (+-r sin b_k, r cos b_k), and at heading h their offsets east,
-        r (cos b_k sin h +- sin b_k cos h), lie within r (cos b_k sin h +- sin b_k |cos h|)
-        (north: r (cos b_k cos h +- sin b_k |sin h|)), sin b_k >= 0: each side of the box is one
-        product of each curve with one of four directions, and its extreme. As rounding is
-        monotone, the least ``x0 + d`` over the points is ``x0 +`` the least ``d`` (framing a
-        thousand hypotheses cost more than rasterising them on 16 x 16 grids)."""
+        The inner curve's point at each bearing lies between the origin and the outer curve's,
+        so the box of the origin and the outer curve holds all three. That curve is sampled at
+        FRAME_BEARINGS bearings b_k = k delta (k = -K .. K), in blocks of FRAME_BLOCK hypotheses
+        (their arrays stay in cache). Sines and cosines cost more than all the rest (5 ns each
+        here): exp(i k delta) is built from exp(i 2^j delta) by products (at most log2 K + 1 of
+        them, so within about 10 ulps). r(b) is even in b, so the points of +-b_k are
+        (+-r sin b_k, r cos b_k), and at heading h their offsets east,
+        r (cos b_k sin h +- sin b_k cos h), are least and greatest at
+        r (cos b_k sin h -+ sin b_k |cos h|) (north: r (cos b_k cos h -+ sin b_k |sin h|)), as
+        r sin b_k >= 0: each side of the box is the extreme of one sum over the bearings. As
+        rounding is monotone, the least ``x0 + d`` over the points is ``x0 +`` the least ``d``
+        (framing a thousand hypotheses cost more than rasterising them on 16 x 16 grids)."""
         n_models = len(models)
         cols = np.fromiter(itertools.chain.from_iterable(
             (m.v0, m.t, m.sigma_a, m.sigma_omega, m.sigma_heading, m.pose.heading, *m.pose.origin) for m in models),
@@ -665,13 +667,12 @@ class PolarBanana(MotionModel):
             mean[:, 0] = 1.0  # sin(b) / b at b = 0
             np.multiply(sin_b[:, 1:], inverse_k / delta[z], out=mean[:, 1:])
             mean *= v0t[z]
-            r = np.empty((len(mean), 2, half + 1))  # the inner and the outer curve
-            np.maximum(0.0, mean - reach[z], out=r[:, 0])
-            np.add(mean, reach[z], out=r[:, 1])
-            for side, (first, second) in enumerate(((cos_b * sin_h[z], sin_b * np.abs(cos_h[z])),
-                                                     (cos_b * cos_h[z], sin_b * np.abs(sin_h[z])))):
-                box[z, 2 * side] = (r * (first - second)[:, None]).min(axis=(1, 2))
-                box[z, 2 * side + 1] = (r * (first + second)[:, None]).max(axis=(1, 2))
+            mean += reach[z]  # the outer curve
+            lx, ly = mean * sin_b, mean * cos_b
+            for side, (across, along) in enumerate(((ly * sin_h[z], lx * np.abs(cos_h[z])),
+                                                     (ly * cos_h[z], lx * np.abs(sin_h[z])))):
+                box[z, 2 * side] = (across - along).min(axis=1)
+                box[z, 2 * side + 1] = (across + along).max(axis=1)
         box[:, ::2] = np.minimum(box[:, ::2], 0.0)  # the origin, r = 0
         box[:, 1::2] = np.maximum(box[:, 1::2], 0.0)
         return box + np.column_stack((ox, ox, oy, oy))

@@ -19,6 +19,8 @@ MODELS = [
                    pose=bg.Pose(origin=(300.0, -200.0), heading=0.4)),
     bg.BearingFix(sensors=[(0.0, 0.0), (4000.0, 0.0)], bearings=[0.6, -0.5], sigmas=[0.01, 0.02]),
     bg.CAT(v0=280.0, t=10.0, sigma_a=5 / 3, sigma_omega=math.pi / 54),
+    # tiles and work rows made for each call (packed afresh in a kept launch)
+    bg.Butterly(mean=(0.0, 500.0), cov=[[1e4, 2e3], [2e3, 2.5e4]], speeds=[1.0, 1.5], weights=[0.5, 0.5], t=600.0),
 ]
 #: Grids of one shape (the launch's dimensions) at different places and steps.
 GRIDS = [bg.Grid(origin=(-1500.0 + 37.0 * k, -100.0 + 53.0 * k), dx=60.0 + k, dy=70.0 - k, nx=50, ny=40)
