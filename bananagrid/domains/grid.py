@@ -82,6 +82,38 @@ class Grid:
             )
 
     @classmethod
+    def many(cls, origins, dx, dy, nx: int, ny: int) -> list["Grid"]:
+        """Grids of one shape: ``Grid(origin=origins[k], dx=dx[k], dy=dy[k], nx=nx, ny=ny)`` for
+        each k, equal field for field, or the first one's error.
+
+        Their checks are taken for every grid at once (a batch frames thousands, and each grid's
+        own checks cost some 5 us): a grid that passes them all is made without running them
+        again; any other (a non-finite or non-positive step, an extent that overflows, cells
+        below the coordinates' resolution, where NumPy's ulp of the largest float, inf, is
+        stricter than ``math.ulp``) is made by ``Grid(...)`` itself, which raises its error."""
+        nx, ny = positive_int("nx", nx), positive_int("ny", ny)
+        origins = np.asarray(origins, dtype=np.float64).reshape(-1, 2)
+        steps = np.column_stack((np.asarray(dx, dtype=np.float64).ravel(), np.asarray(dy, dtype=np.float64).ravel()))
+        with np.errstate(all="ignore"):
+            ok = np.isfinite(origins).all(axis=1) & np.isfinite(steps).all(axis=1) & (steps > 0.0).all(axis=1)
+            extents = steps * np.array([nx, ny], dtype=np.float64)
+            ends = origins + extents
+            ok &= (np.isfinite(extents) & np.isfinite(ends)).all(axis=1)
+            ok &= (steps >= MIN_CELL_ULPS * np.spacing(np.maximum(np.abs(origins), np.abs(ends)))).all(axis=1)
+            area = steps[:, 0] * steps[:, 1]
+            ok &= np.isfinite(area) & (area > 0.0)
+        ok &= nx * ny <= MAX_TILED_CELLS
+        grids, make = [], object.__new__
+        for x, y, u, v, checked in zip(*origins.T.tolist(), *steps.T.tolist(), ok.tolist()):
+            if checked:
+                grid = make(cls)  # the fields as __post_init__ leaves them: floats and ints
+                grid.__dict__.update(origin=(x, y), dx=u, dy=v, nx=nx, ny=ny)
+            else:
+                grid = cls(origin=(x, y), dx=u, dy=v, nx=nx, ny=ny)
+            grids.append(grid)
+        return grids
+
+    @classmethod
     def from_bounds(cls, x, y, step=None, *, dx=None, dy=None) -> "Grid":
         """Grid covering ``x = (x0, x1)`` and ``y = (y0, y1)`` with square cells of ``step``.
 

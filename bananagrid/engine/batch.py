@@ -45,11 +45,12 @@ def grids_in(bounds: np.ndarray, shape: tuple[int, int]) -> list[Grid]:
     """Grids of ``shape`` = (ny, nx) cells over each box ``(x0, x1, y0, y1)`` of ``bounds``:
     each ``Grid.from_bounds(x=(x0, x1), y=(y0, y1), dx=(x1 - x0) / nx, dy=(y1 - y0) / ny)``.
 
-    ``from_bounds``'s checks and cell counts are taken for every box at once: a box they pass,
-    whose counts come out as ``shape`` (the span over the step within ``from_bounds``'s 1e-9 of
-    a whole number), is made as ``Grid(origin=(x0, y0), dx, dy, nx, ny)``, the grid
-    ``from_bounds`` returns, at half its cost (framing a thousand hypotheses cost more than
-    rasterising them); any other box goes through ``from_bounds`` itself and its error."""
+    ``from_bounds``'s checks and cell counts are taken for every box at once: when every box
+    passes them, with counts that come out as ``shape`` (the span over the step within
+    ``from_bounds``'s 1e-9 of a whole number), the grids are those ``from_bounds`` returns,
+    ``Grid(origin=(x0, y0), dx, dy, nx, ny)``, made together by :meth:`Grid.many` (framing a
+    thousand hypotheses cost more than rasterising them); otherwise each box is made in turn,
+    a plain one as that ``Grid`` and any other by ``from_bounds`` itself and its error."""
     ny, nx = shape
     boxes = np.asarray(bounds, dtype=np.float64).reshape(-1, 4)
     x0, x1, y0, y1 = boxes.T
@@ -60,6 +61,8 @@ def grids_in(bounds: np.ndarray, shape: tuple[int, int]) -> list[Grid]:
             count = span / step
             plain &= np.isfinite(step) & (step > 0.0) & np.isfinite(count)
             plain &= (np.round(count) == n) & (np.abs(count - n) <= 1e-9 * np.maximum(1.0, count))
+    if plain.all():
+        return Grid.many(np.column_stack((x0, y0)), dx, dy, nx, ny)
     return [
         Grid(origin=(a, c), dx=u, dy=v, nx=nx, ny=ny) if ok
         else Grid.from_bounds(x=(a, b), y=(c, d), dx=u, dy=v)

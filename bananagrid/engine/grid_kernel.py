@@ -49,6 +49,8 @@ def grid_context(model: DensityModel, grid: Grid, dtype=np.float64, device: str 
     that a tile of it computes exactly what the whole grid computes there."""
     ctx = WarpContext(dtype, device, threads)
     asked, extent = ctx.dtype, GridExtent(grid)
+    if asked != np.float32:  # float64 computes in float64 wherever the grid lies
+        return asked, ctx, extent
     working = working_dtype(model, asked, extent.radii((0.0, 0.0))[1])
     if working != asked:
         ctx = WarpContext(working, device, threads)
@@ -102,7 +104,8 @@ def grid_block(ctx: WarpContext, binding, grid: Grid, rows: tuple[int, int] | No
 
     # whole rows per thread on the CPU, one cell per thread on a GPU
     columns = nx if ctx.cpu else 1
-    if ctx.cpu and ny * nx <= SERIAL_CELLS:
+    serial = ctx.cpu and ny * nx <= SERIAL_CELLS
+    if serial:
         bands = [(0, ny)]  # one launch on this thread; a band from row 0 is aligned to any tile
     else:
         bands = ctx.bands(ny, family.bands_per_thread, align=max(1, family.tile_rows))
@@ -120,7 +123,11 @@ def grid_block(ctx: WarpContext, binding, grid: Grid, rows: tuple[int, int] | No
             dim = (-(-(r1 - r0) // tile), -(-nx // columns))
             head = [xs, ys, r0, r1, tile, columns, ctx.scalar(grid.dx), ctx.scalar(grid.dy)]
         extra = [scratch, quads, band_of[r0]] if family.scratch_width else []
-        ctx.launch(family.grid, dim=dim, inputs=[*head, binding.params, *extra, out])
+        # a small grid again and again (kept centres, a model's kept parameters): replayed, with
+        # the output and any work rows (made for each call) packed afresh
+        fresh = (-1, len(head) + 1, len(head) + 2) if family.scratch_width else (-1,)
+        (ctx.launch_kept if serial else ctx.launch)(family.grid, dim=dim, inputs=[*head, binding.params, *extra, out],
+                                                    fresh=fresh)
         if with_sum and ctx.cpu:  # a CPU launch has finished when it returns
             sums[r0:r1] = row_sums(values[r0:r1])
 
@@ -132,4 +139,4 @@ def grid_block(ctx: WarpContext, binding, grid: Grid, rows: tuple[int, int] | No
         return values
     if not ctx.cpu:
         sums = row_sums(values)
-    return values, math.fsum(sums)
+    return values, math.fsum(sums.tolist())  # Python floats: fsum converts NumPy's one by one

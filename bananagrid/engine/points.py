@@ -112,12 +112,14 @@ def launch_points(ctx: WarpContext, binding: KernelBinding, bx: np.ndarray, by: 
     else:
         out = ctx.zeros(n)
 
-    def launch_chunk(a, b):
-        ctx.launch(binding.kernels.points, dim=b - a, inputs=[xs, ys, a, binding.params, out])
-
     # at least one chunk per thread once there is enough work to share
     size = max(MIN_POINT_CHUNK, min(POINT_CHUNK, -(-n // ctx.threads)))
     chunks = [(a, min(n, a + size)) for a in range(0, n, size)] if ctx.cpu else [(0, n)]
+    # a tracker's few points again and again, with a model's kept parameters: one launch replayed
+    launch = ctx.launch_kept if len(chunks) == 1 else ctx.launch
+
+    def launch_chunk(a, b):
+        launch(binding.kernels.points, dim=b - a, inputs=[xs, ys, a, binding.params, out], fresh=(0, 1, 4))
     ctx.run_bands(launch_chunk, chunks)
     if ctx.cpu:  # a CPU launch has finished when it returns
         return values.reshape(bx.shape)

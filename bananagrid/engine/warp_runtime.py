@@ -122,6 +122,24 @@ def _pool(pid: int, workers: int) -> ThreadPoolExecutor:
     return ThreadPoolExecutor(max_workers=workers, thread_name_prefix=f"bananagrid-bands{workers}")
 
 
+#: Recorded CPU launches kept for :meth:`WarpContext.launch_kept`: a tracker's few grids and
+#: models, each one launch (most recently used last).
+KEPT_LAUNCHES = 32
+_kept: dict = {}
+_kept_lock = threading.Lock()
+
+
+def _input_key(value):
+    """What identifies a kernel input in a kept launch: a number (Python, NumPy or Warp scalar)
+    by its type and value, any other object (an array, a struct) by identity, which the kept
+    launch's own reference to it keeps from being reused."""
+    if isinstance(value, (int, float, np.number)):
+        return type(value), value
+    if wp.types.type_is_scalar(type(value)):  # a Warp scalar: a new object per call
+        return type(value), value.value
+    return id(value)
+
+
 def run_bands(launch_band, bands: list[tuple[int, int]], threads: int) -> None:
     """Call ``launch_band(start, stop)`` for every band; on several threads, the calling one
     among them, each taking the next band when it finishes one (the cost of a band follows the
@@ -294,8 +312,37 @@ class WarpContext:
         finally:
             timer.cancel()
 
-    def launch(self, kernel, *, dim, inputs) -> None:
+    def launch(self, kernel, *, dim, inputs, fresh=None) -> None:
+        """``wp.launch`` on the context's device (``fresh``: ignored, as :meth:`launch_kept` takes it)."""
         self.wp.launch(kernel, dim=dim, inputs=inputs, device=self.device)
+
+    def launch_kept(self, kernel, *, dim, inputs, fresh=(-1,)) -> None:
+        """:meth:`launch`, for a launch repeated with the same inputs but those at the indices
+        ``fresh`` (the output array, new points): on the CPU the launch is recorded once, kept
+        (the last :data:`KEPT_LAUNCHES` of them, with their inputs) and replayed with only the
+        fresh inputs packed again. Warp's launch infers a generic kernel's overload and packs
+        every input each time: 30 us of a 100 x 100 polar map's 160.
+
+        A kept launch is taken out of the cache while it runs, so threads never share one."""
+        if not self.cpu:
+            self.launch(kernel, dim=dim, inputs=inputs)
+            return
+        fresh = {i % len(inputs) for i in fresh}
+        key = (kernel, dim, *(None if i in fresh else _input_key(v) for i, v in enumerate(inputs)))
+        with _kept_lock:
+            cmd = _kept.pop(key, None)
+        if cmd is None:
+            cmd = self.wp.launch(kernel, dim=dim, inputs=inputs, device=self.device, record_cmd=True)
+            if cmd is None:  # nothing to launch (an empty dimension)
+                return
+        else:
+            for i in fresh:
+                cmd.set_param_at_index(i, inputs[i])
+        cmd.launch()
+        with _kept_lock:
+            _kept[key] = cmd
+            while len(_kept) > KEPT_LAUNCHES:
+                del _kept[next(iter(_kept))]
 
     def synchronize(self) -> None:
         self.wp.synchronize_device(self.device)

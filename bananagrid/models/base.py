@@ -174,8 +174,18 @@ class Model:
     def parameters(self) -> dict:
         """Plain-data parameters for provenance and recordings: the class name, then every
         field's entries (a declared parameter's own, :func:`bananagrid.models.params.param`'s
-        ``plain``; else its name and value)."""
-        return plain_parameters(self)
+        ``plain``; else its name and value).
+
+        A model is frozen, so entries that are all plain scalars are made once, kept in the
+        instance and copied for each caller (making them cost 2-6 us of a small grid's call);
+        any others (lists) are made afresh each time, so no caller shares them."""
+        kept = self.__dict__.get("_parameters")
+        if kept is None:
+            kept = plain_parameters(self)
+            if not all(isinstance(v, (str, int, float, type(None))) for v in kept.values()):
+                return kept
+            self.__dict__["_parameters"] = kept
+        return dict(kept)
 
     def pdf(self, x, y, *, dtype=np.float64, device="cpu"):
         """Density per m^2 at world points (broadcast x, y), through the same kernels as rasterise."""

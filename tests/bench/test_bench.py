@@ -209,6 +209,8 @@ def test_bench_times_small_calls(tmp_path, capsys, monkeypatch):
     assert [b["shape"] for b in batches] == [list(s) for s in bench.SMALL_BATCH_SHAPES]
     for b in batches:
         assert b["hypotheses"] == 20 and b["frame_over_launch_wall"] == b["frame_wall_us"] / b["launch_wall_us"]
+        # the microseconds are the seconds times 1e6, each rounded: the ratio within a few ulps
+        assert b["frame_over_launch_cpu"] == pytest.approx(b["frame_cpu_us"] / b["launch_cpu_us"], rel=1e-14)
     text = capsys.readouterr().out
     assert "small calls, float64, per call" in text and "framing costs" in text
     assert bench.main(["--small", "--device", "cuda"]) == 2
