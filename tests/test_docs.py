@@ -83,6 +83,7 @@ NOT_RUN = {
         "a minute of timing (see tests/bench/test_bench.py and tests/bench/test_peers.py)",
     "bananagrid bench --kernels presence-plane --repeat 5": "minutes of SciPy baseline (see tests/bench/test_bench.py)",
     "bananagrid bench --kernels cat-posterior,butterly-posterior": "minutes of timing (tests/bench/test_bench_posterior.py runs the rows on small grids)",
+    "bananagrid bench --small --repeat 7 --no-peers --no-memory": "timing (tests/bench/test_bench.py::test_bench_times_small_calls runs it)",
     "bananagrid bench --kernels plan-periods": "minutes of planning (tests/bench/test_bench.py runs the row on a coarse grid)",
     "bananagrid bench --kernels polar-rough,polar-improved,polar-heading,bearing-exact --step 2 --repeat 15 --no-peers --no-memory":
         "a minute of timing (see tests/bench/test_bench.py)",
