@@ -133,8 +133,8 @@ def cat_position(v0, t, a, omega) -> np.ndarray:
     A = 2 sin^2(u / 2) / u without cancellation; below |u| = 1e-2 every function is its series
     (three terms: the next is below 1e-16 of the first), where C's and D's closed forms cancel.
     """
-    u = np.asarray(omega, dtype=float) * t
-    a = np.asarray(a, dtype=float)
+    u = np.atleast_1d(np.asarray(omega, dtype=float) * t)  # at least 1-D: the series fill in place
+    a = np.atleast_1d(np.asarray(a, dtype=float))
     u, a = np.broadcast_arrays(u, a)
     small = np.abs(u) < 1e-2
     us = np.where(small, 1.0, u)  # no 0/0 in the closed forms that the series replace
