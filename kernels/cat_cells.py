@@ -520,8 +520,9 @@ def ribbon_cell(gx: wp.float64, gy: wp.float64, sx: wp.float64, sy: wp.float64, 
                 lo_a, hi_a = cell_clip(gx + a * dgx, gy + a * dgy, sx + a * dsx, sy + a * dsy, i, j)
                 lo_b, hi_b = cell_clip(gx + b * dgx, gy + b * dgy, sx + b * dsx, sy + b * dsy, i, j)
                 if lo_a < hi_a or lo_b < hi_b:
-                    cut, held = patch_state(ev, stretch_cut, k, a, b, wp.min(lo_a, lo_b), wp.max(hi_a, hi_b))
-                    inside = inside | held
+                    # not ``held``: that names the mask of the pending held_total, still to be added
+                    cut, holds = patch_state(ev, stretch_cut, k, a, b, wp.min(lo_a, lo_b), wp.max(hi_a, hi_b))
+                    inside = inside | holds
                 if cut != 0:
                     weighted_piece(ev, cut, inside, k, a, b, gx, gy, sx, sy, dgx, dgy, dsx, dsy, i, j, omega0, h,
                                    sigma_omega, out)
