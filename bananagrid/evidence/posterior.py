@@ -257,7 +257,8 @@ def _grid_cell_means(prior, grid, evidence, n, threads, carried=None, min_mass=M
     if plan is None:
         cells, provenance, frame = _grid_prior(prior, grid, threads, min_mass)
     else:
-        cells, provenance, frame, channel_cells = _carried_prior(prior, grid, plan, carried, threads, min_mass)
+        cells, provenance, frame, channel_cells, plan_notes = _carried_prior(prior, grid, plan, carried, threads,
+                                                                             min_mass)
     ny, nx = grid.shape
     x_edges = grid.origin[0] + grid.dx * np.arange(nx + 1)
     y_edges = grid.origin[1] + grid.dy * np.arange(ny + 1)
@@ -301,7 +302,7 @@ def _grid_cell_means(prior, grid, evidence, n, threads, carried=None, min_mass=M
             share = np.where(channel_cells[carried.prior_channel] > 0.0, share, 1.0)
             for key in combos:
                 means[key] = means[key] * share[carried.index(key)]
-            notes = {**notes, "cell_rule": plan.method}
+            notes = {**notes, "cell_rule": plan.method, **plan_notes}
         provenance = {**provenance, "carried": notes}
     return CellMeans(grid, frame, cells, means, evidence, provenance, bound, n)
 
@@ -432,7 +433,8 @@ def _checked_evidence(prior, evidence) -> list:
 def _carried_prior(prior, grid: Grid, plan, carried, threads, min_mass=MIN_MASS):
     """The carried channels' cell masses by the model's own rule (one run), and the prior's cell
     probabilities as their prior channel (the same rule, unweighted: the prior is not computed
-    twice), with the provenance :func:`_grid_prior` gives."""
+    twice), with the provenance :func:`_grid_prior` gives, and the plan's notes (for the carried
+    provenance too)."""
     ctx = WarpContext(np.float64, "cpu", threads)
     start = time.perf_counter()
     channel_cells, notes = plan.run(ctx)
@@ -442,7 +444,7 @@ def _carried_prior(prior, grid: Grid, plan, carried, threads, min_mass=MIN_MASS)
     warn_uncovered(prior, float(np.sum(cells)), "grid", min_mass, stacklevel=5)
     provenance = {**prior.parameters(), "quantity": "probability", "dtype": "float64", "device": "cpu",
                   "threads": ctx.launch_threads, "seconds": time.perf_counter() - start, **notes}
-    return cells, provenance, None, channel_cells
+    return cells, provenance, None, channel_cells, notes
 
 
 def _grid_prior(prior, grid: Grid, threads, min_mass=MIN_MASS):
