@@ -31,7 +31,10 @@ are interpolated across the interval like the lines at t (``earlier_line``). Ove
 share has kinks where an earlier line passes a polygon vertex and where a crossing enters or
 leaves the window: breaks of the Gauss rule (``weighted_piece``). Sub-pieces whose earlier
 points no polygon edge comes near take the plain terms times constant factors, so the evidence
-costs only where it cuts, and without evidence the sums are the plain rule's bit for bit.
+costs only where it cuts, and without evidence the sums are the plain rule's bit for bit. On a
+sub-piece that polygons cut, only the channels weighed by one of them take the split rule; the
+others (the prior, the channels of other polygons) take the plain terms times constant factors,
+so the prior channel is always the plain rule's terms, regrouped (equal to float64 rounding).
 One pass fills several channels: channel c weighs by the polygons of the bit mask ``masks[c]``.
 """
 
@@ -264,10 +267,42 @@ def add_channels(ev: Earlier, inside: int, value: wp.float64, i: int, j: int, ou
 
 
 @wp.func
+def add_cut_channels(ev: Earlier, cut: int, inside: int, value: wp.float64, i: int, j: int,
+                     out: wp.array3d(dtype=wp.float64)):
+    """:func:`add_channels` for the channels whose mask meets ``cut`` only (the others take the
+    plain rule's terms for the sub-piece, :func:`add_uncut_channels`)."""
+    for c in range(ev.channels):
+        m = ev.masks[c]
+        if m & cut != 0:
+            m = m & inside
+            w = wp.float64(1.0)
+            for p in range(ev.count):
+                if (m >> p) & 1 == 1:
+                    w = w * ev.miss[p]
+            out[c, j, i] += w * value
+
+
+@wp.func
+def add_uncut_channels(ev: Earlier, cut: int, inside: int, value: wp.float64, i: int, j: int,
+                       out: wp.array3d(dtype=wp.float64)):
+    """:func:`add_channels` for the channels whose mask misses ``cut`` only: their weight is
+    constant over a sub-piece that only ``cut``'s polygons cut (the prior's is 1)."""
+    for c in range(ev.channels):
+        m = ev.masks[c]
+        if m & cut == 0:
+            m = m & inside
+            w = wp.float64(1.0)
+            for p in range(ev.count):
+                if (m >> p) & 1 == 1:
+                    w = w * ev.miss[p]
+            out[c, j, i] += w * value
+
+
+@wp.func
 def weighted_share(ev: Earlier, active: int, base: int, k: int, s: wp.float64, lo: wp.float64, hi: wp.float64,
                    scale: wp.float64, i: int, j: int, out: wp.array3d(dtype=wp.float64)):
     """Add ``scale`` times the weighted normal mass of the line's piece [lo, hi] of z (in the
-    cell) to every channel: the earlier lines' crossings with the polygons (``active``'s bits;
+    cell) to every channel whose mask meets ``active`` (the others: :func:`ribbon_cell`): the earlier lines' crossings with the polygons (``active``'s bits;
     of the others, ``base``'s hold the whole window, the rest miss it) cut [lo, hi] into pieces
     of constant weight, each adding its weight times Phi(z_hi) - Phi(z_lo), exactly. The pieces
     are taken in order by finding the least crossing above the last (no sort, no buffer)."""
@@ -299,7 +334,7 @@ def weighted_share(ev: Earlier, active: int, base: int, k: int, s: wp.float64, l
                                     z_next = zc
                                     toggle = int(0)
                                 toggle = toggle ^ (1 << p)
-        add_channels(ev, inside, scale * normal_interval(z, z_next), i, j, out)
+        add_cut_channels(ev, active, inside, scale * normal_interval(z, z_next), i, j, out)
         if z_next >= hi:
             break
         inside = inside ^ toggle
@@ -405,7 +440,7 @@ def weighted_piece(ev: Earlier, active: int, base: int, k: int, a: wp.float64, b
                    dsy: wp.float64, i: int, j: int, omega0: wp.float64, h: wp.float64, sigma_omega: wp.float64,
                    out: wp.array3d(dtype=wp.float64)):
     """The weighted mass of the lines s in [a, b] (one Gauss sub-piece of the ribbon) in cell
-    (i, j), into every channel. Split first where an earlier line passes a vertex of an
+    (i, j), into every channel whose mask meets ``active``. Split first where an earlier line passes a vertex of an
     active polygon (its crossings appear or vanish there: roots of the quadratics of
     ``corner_roots``), then where a crossing enters or leaves the cell's window of z (the
     window's crossing count changes; found by bisection, WINDOW_BISECTIONS halvings), so that
@@ -484,7 +519,9 @@ def ribbon_cell(gx: wp.float64, gy: wp.float64, sx: wp.float64, sy: wp.float64, 
     (those the interval's earlier lines reach at all) the weight is 1 and the sums are the
     plain rule's, term for term (without evidence the result is the plain rule's bit for bit).
     Where no edge's box meets it either, the polygons that hold it give constant factors
-    (:func:`patch_state`). Otherwise :func:`weighted_piece`."""
+    (:func:`patch_state`). Otherwise :func:`weighted_piece`, for the channels whose mask meets a
+    polygon that cuts the sub-piece; the others (the prior) take the plain terms times their
+    constant factors, so the prior channel is the plain rule's sums, regrouped."""
     fi = wp.float64(float(i))
     fj = wp.float64(float(j))
     one = wp.float64(1.0)
@@ -520,11 +557,17 @@ def ribbon_cell(gx: wp.float64, gy: wp.float64, sx: wp.float64, sy: wp.float64, 
                 lo_a, hi_a = cell_clip(gx + a * dgx, gy + a * dgy, sx + a * dsx, sy + a * dsy, i, j)
                 lo_b, hi_b = cell_clip(gx + b * dgx, gy + b * dgy, sx + b * dsx, sy + b * dsy, i, j)
                 if lo_a < hi_a or lo_b < hi_b:
-                    cut, held = patch_state(ev, stretch_cut, k, a, b, wp.min(lo_a, lo_b), wp.max(hi_a, hi_b))
-                    inside = inside | held
+                    # not ``held``: that names the mask of the pending held_total, still to be added
+                    cut, holds = patch_state(ev, stretch_cut, k, a, b, wp.min(lo_a, lo_b), wp.max(hi_a, hi_b))
+                    inside = inside | holds
                 if cut != 0:
                     weighted_piece(ev, cut, inside, k, a, b, gx, gy, sx, sy, dgx, dgy, dsx, dsy, i, j, omega0, h,
                                    sigma_omega, out)
+                    # the channels no cut polygon weighs (the prior): the plain rule's terms,
+                    # not weighted_piece's finer split (its own quadrature, 1e-12 apart)
+                    plain = gauss_nodes(gx, gy, sx, sy, dgx, dgy, dsx, dsy, i, j, omega0, h, sigma_omega, mid, half,
+                                        wp.float64(0.0))
+                    add_uncut_channels(ev, cut, inside, plain, i, j, out)
             if cut == 0 and inside == 0:
                 total = gauss_nodes(gx, gy, sx, sy, dgx, dgy, dsx, dsy, i, j, omega0, h, sigma_omega, mid, half, total)
             elif cut == 0:  # inside some polygons throughout: their constant factors

@@ -29,7 +29,7 @@ from .polar_cells import rasterise_lattice
 from .warp_runtime import WarpContext
 from .tiles import rasterise_tiles
 
-__all__ = ["rasterise", "QUANTITIES", "MIN_MASS"]
+__all__ = ["rasterise", "warn_uncovered", "QUANTITIES", "MIN_MASS"]
 
 #: Captured mass below which :func:`rasterise` warns that the grid misses part of the target
 #: (the scenes' default ``output.min_mass``).
@@ -144,15 +144,20 @@ def rasterise(model: DensityModel | PresenceModel, grid: Grid | PolarLattice | A
 
 def _covered(model, result, min_mass: float):
     """``result``, after a warning if it captured less than ``min_mass`` of a probability density."""
-    mass = float(result.mass)
+    warn_uncovered(model, float(result.mass), "polar lattice" if isinstance(result, PolarRaster) else "grid",
+                   min_mass, stacklevel=4)
+    return result
+
+
+def warn_uncovered(model, mass: float, where: str, min_mass: float, stacklevel: int = 3) -> None:
+    """Warn if a ``where`` ("grid", "polar lattice") captured less than ``min_mass`` of a
+    probability density's mass."""
     if getattr(model, "integrates_to_one", False) and mass < min_mass:
-        where = "polar lattice" if isinstance(result, PolarRaster) else "grid"
         warnings.warn(
             f"rasterise: the {where} captured {mass:.3g} of {type(model).__name__}'s probability (below "
             f"{min_mass:g}): it misses part of the target; move or enlarge it, or check the parameters' units "
-            "(min_mass=0 switches this off)", BananagridWarning, stacklevel=3,
+            "(min_mass=0 switches this off)", BananagridWarning, stacklevel=stacklevel,
         )
-    return result
 
 
 def _angular_cells(model, lattice: AngularLattice, region, *, dtype, device, threads, chunks) -> CellMap:

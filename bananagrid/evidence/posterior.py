@@ -66,6 +66,7 @@ map's time (and land, always) multiplies them as above. Which rule serves which 
 from __future__ import annotations
 
 import math
+import time
 from dataclasses import dataclass, field, replace
 
 import numpy as np
@@ -73,7 +74,7 @@ import numpy as np
 from ..domains.grid import Grid
 from ..domains.polar_lattice import PolarLattice
 from ..engine.carried import carries, evaluate_carried
-from ..engine.rasterise import MIN_MASS, rasterise
+from ..engine.rasterise import MIN_MASS, rasterise, warn_uncovered
 from ..engine.warp_runtime import WarpContext
 from ..models.presence import grid_probabilities
 from ..results import PolarRaster, Raster
@@ -252,7 +253,12 @@ def _grid_cell_means(prior, grid, evidence, n, threads, carried=None, min_mass=M
     earlier = set() if carried is None else carried.earlier
     if not isinstance(grid, Grid):
         raise BananagridError(f"grid = {grid!r}: expected a bananagrid Grid or PolarLattice")
-    cells, provenance, frame = _grid_prior(prior, grid, threads, min_mass)
+    plan = None if carried is None else carried.cell_plan(grid)
+    if plan is None:
+        cells, provenance, frame = _grid_prior(prior, grid, threads, min_mass)
+    else:
+        cells, provenance, frame, channel_cells, plan_notes = _carried_prior(prior, grid, plan, carried, threads,
+                                                                             min_mass)
     ny, nx = grid.shape
     x_edges = grid.origin[0] + grid.dx * np.arange(nx + 1)
     y_edges = grid.origin[1] + grid.dy * np.arange(ny + 1)
@@ -273,9 +279,7 @@ def _grid_cell_means(prior, grid, evidence, n, threads, carried=None, min_mass=M
             cut |= factor.varying
     groups = ((varying & cut & (cells > 0.0), n, True), (varying & ~cut & (cells > 0.0), max(1, n // 2), True),
               (varying & ~(cells > 0.0), 1, False))
-    plan = None
     if carried is not None:
-        plan = carried.cell_plan(grid)
         # the carried weight varies on every cell with prior mass: each by the sub-cell rule on
         # the carried density's channels (module docstring); cells without mass as before.
         # With the model's own carried cells, the same-time factors' means as without evidence
@@ -293,8 +297,6 @@ def _grid_cell_means(prior, grid, evidence, n, threads, carried=None, min_mass=M
     if carried is not None:
         notes = carried.notes(n)
         if plan is not None:
-            channel_cells, plan_notes = plan.run(WarpContext(np.float64, "cpu", threads))
-            channel_cells = np.asarray(channel_cells, dtype=float)
             with np.errstate(divide="ignore", invalid="ignore"):
                 share = channel_cells / channel_cells[carried.prior_channel]
             share = np.where(channel_cells[carried.prior_channel] > 0.0, share, 1.0)
@@ -426,6 +428,23 @@ def _checked_evidence(prior, evidence) -> list:
                 f"evidence[{k}].t = {t1!r}: earlier than the map's time t = {t_map!r}; carrying earlier evidence "
                 f"through {type(prior).__name__}'s paths is not yet available: give evidence at t")
     return evidence, earlier
+
+
+def _carried_prior(prior, grid: Grid, plan, carried, threads, min_mass=MIN_MASS):
+    """The carried channels' cell masses by the model's own rule (one run), and the prior's cell
+    probabilities as their prior channel (the same rule, unweighted: the prior is not computed
+    twice), with the provenance :func:`_grid_prior` gives, and the plan's notes (for the carried
+    provenance too)."""
+    ctx = WarpContext(np.float64, "cpu", threads)
+    start = time.perf_counter()
+    channel_cells, notes = plan.run(ctx)
+    # every term is a positive weight times a normal mass (rounding may leave a few ulps below 0)
+    channel_cells = np.maximum(np.asarray(channel_cells, dtype=float), 0.0)
+    cells = channel_cells[carried.prior_channel]
+    warn_uncovered(prior, float(np.sum(cells)), "grid", min_mass, stacklevel=5)
+    provenance = {**prior.parameters(), "quantity": "probability", "dtype": "float64", "device": "cpu",
+                  "threads": ctx.launch_threads, "seconds": time.perf_counter() - start, **notes}
+    return cells, provenance, None, channel_cells, notes
 
 
 def _grid_prior(prior, grid: Grid, threads, min_mass=MIN_MASS):

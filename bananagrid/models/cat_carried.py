@@ -26,7 +26,10 @@ hardest; measured at most 2.4e-6): the pieces in z are exact and every kink in o
 break; what remains is the linear interpolation of the lines across each turn-rate interval, at
 t and at the earlier times alike (at time s its distance from the exact lines, in SDs along
 the line, is about (s / t)^2 of the tolerance held at t). Without polygons the result is the
-plain rule's bit for bit.
+plain rule's bit for bit; with them, the prior channel (and each channel over the parts of the
+turn-rate range its own polygons do not cut) takes the plain rule's terms, regrouped: the prior
+channel is the plain rule's cells to float64 rounding, polygons on or along the earlier lines
+included.
 
 Searches at one time (and land at one time) only: a search over an interval, a raster, a track
 or a report is a factor that varies smoothly along the line, not taken here

@@ -22,7 +22,7 @@ from bananagrid.domains.pose import Pose
 from bananagrid.engine.carried import evaluate_carried
 from bananagrid.engine.warp_runtime import WarpContext
 from bananagrid.evidence.packing import pack
-from bananagrid.models.cat import cat_position, grid_cell_plan
+from bananagrid.models.cat import cat_position, cell_turn_edges, grid_cell_plan
 from bananagrid.models.cat_carried import EarlierPolygons
 
 import carried_oracle
@@ -38,6 +38,12 @@ from cases import FIG1, FIG1_BOUNDS
 #: Figure 1 cells the searches cut hardest.
 RTOL = 5e-5
 ATOL = 1e-12
+
+#: The prior channel against the plain rule: its terms are the plain rule's (the sub-pieces that
+#: polygons cut take them too), summed in other groups, so they differ by float64 rounding only
+#: (measured at most 5.5e-16 of the largest cell): 1e-12 of the largest cell, far below a
+#: dropped piece (9.1e-5 of a cell of 1.98e-2 in FIG1_DEGENERATE's first case, once).
+PRIOR_TOL = 1e-12
 
 #: Two searches of the Figure 1 target that found nothing: a quadrilateral at 5 s (POD 0.7)
 #: and a triangle at 3 s (POD 0.5), where its paths then were.
@@ -143,8 +149,8 @@ def test_cells_against_the_oracle(name):
             assert abs(got[c, i, j] - want) <= RTOL * want + ATOL, (name, c, cell, got[c, i, j], want)
     # the weight changes in these cells: the test probes the polygons' edges
     assert np.max(np.abs(got[1] - prior)) > 1e-3 * np.max(prior)
-    # the prior channel is the plain rule within its error (its pieces split where a search's are)
-    assert np.all(np.abs(got[0] - prior) <= RTOL * prior + ATOL)
+    # the prior channel is the plain rule's terms, regrouped (PRIOR_TOL: float64 rounding)
+    assert np.max(np.abs(got[0] - prior)) <= PRIOR_TOL * np.max(prior)
 
 
 def test_the_whole_planes_weighted_mass():
@@ -283,14 +289,167 @@ def test_carried_cells_over_the_domain(case):
         assert abs(got[i, j] - want) <= RTOL * want + ATOL, (model, polygons, box, got[i, j], want)
 
 
+# --- degenerate polygons: edges on the earlier lines, lines through vertices ---------------------
+
+#: A channel of weight 1 computed by the split rule (the polygons with factor 1) against the
+#: plain rule: two Gauss-Legendre quadratures of the same smooth integrand, split at different
+#: turn rates, each well inside the rule's error; measured at most 1.6e-12 of the largest cell
+#: here, so 1e-10, far below a dropped piece (4.6e-3 of the largest cell, as above).
+SPLIT_TOL = 1e-10
+
+
+def plain_cells(model, grid):
+    """The plain rule's cells: ``grid_cell_plan`` without polygons."""
+    values, _ = grid_cell_plan(model, grid).run(WarpContext(np.float64, "cpu", 2))
+    return values
+
+
+def earlier_line(model, omega, time):
+    """World point at z = 0 and step per unit z of the path line of turn rate ``omega`` at
+    ``time`` (eq. (1) through ``cat_position``, turned by the pose)."""
+    ends = model.pose.to_world(cat_position(model.v0, time, np.array([0.0, model.sigma_a]), np.array([omega] * 2)))
+    return ends[0], ends[1] - ends[0]
+
+
+def on_line(model, omega, time, shape, width):
+    """World vertices of ``shape``, given as (u, v): u in SDs of z along the line of ``omega``
+    at ``time``, v in ``width`` metres across it (v = 0: on the line)."""
+    point, step = earlier_line(model, omega, time)
+    normal = np.array([-step[1], step[0]]) / np.hypot(*step)
+    return [tuple(point + u * step + v * width * normal) for u, v in shape]
+
+
+def degenerate_shape(kind, u0, u1, side):
+    """A polygon meeting the line v = 0 degenerately: ``edge`` (an edge on it), ``notch`` (an
+    edge on it, non-convex), ``vertices`` (it passes two vertices, crossing the interior),
+    ``touch`` (it passes one vertex, the polygon on one side)."""
+    um = 0.5 * (u0 + u1)
+    return {
+        "edge": [(u0, 0.0), (u1, 0.0), (u1, side), (u0, side)],
+        "notch": [(u0, 0.0), (u1, 0.0), (u1, side), (um, 0.3 * side), (u0, side)],
+        "vertices": [(u0, 0.0), (um, side), (u1, 0.0), (um, -side)],
+        "touch": [(um, 0.0), (u1, side), (u0, side)],
+    }[kind]
+
+
+def check_degenerate(model, grid, polygons):
+    """The prior channel is the plain rule's cells to PRIOR_TOL of the largest cell; each
+    polygon's channel and every polygon's lie between the prior times the product of their
+    factors and the prior (a weight in [product, 1]; 1e-12: the float64 rounding as above)."""
+    n = len(polygons)
+    every = (1 << n) - 1
+    masks = (0, every, *(1 << p for p in range(n)), every << n)
+    # the same polygons with factor 1: a channel of weight 1 computed by the split rule
+    unit = [(vertices, time, 1.0) for vertices, time, _ in polygons]
+    got = channels(model, grid, polygons + unit, masks, threads=2)
+    want = plain_cells(model, grid)
+    scale = float(want.max())
+    error = float(np.max(np.abs(got[0] - want)))
+    assert error <= PRIOR_TOL * scale, (polygons, error, scale, float(got[0].sum() - want.sum()))
+    split = float(np.max(np.abs(got[-1] - want)))
+    assert split <= SPLIT_TOL * scale, (polygons, split, scale, float(got[-1].sum() - want.sum()))
+    got = got[:-1]
+    masks = masks[:-1]
+    for c, mask in enumerate(masks[1:], start=1):
+        factor = math.prod(polygons[p][2] for p in range(len(polygons)) if (mask >> p) & 1)
+        assert np.all(got[c] <= want + PRIOR_TOL * scale), (mask, float(np.max(got[c] - want)))
+        assert np.all(got[c] >= factor * want - PRIOR_TOL * scale), (mask, float(np.min(got[c] - factor * want)))
+    return got, want
+
+
+#: Figure 1, a search at 6 s whose edge x = 0 lies on the earlier line of omega = 0 (the path
+#: straight ahead; omega = 0 is the middle of a turn-rate interval of the 100 m grid, where the
+#: line at t also runs along the cell side x = 0). A rule that lost the pending total of a
+#: stretch's held sub-pieces left the first's prior channel 2.28e-4 short (cells up to 9.1e-5).
+FIG1_DEGENERATE = {
+    "edge-on-the-line": [(-700.0, 1400.0), (0.0, 1400.0), (0.0, 1900.0), (-700.0, 1900.0)],
+    "edge-on-the-line-north": [(-700.0, 1700.0), (0.0, 1700.0), (0.0, 2200.0), (-700.0, 2200.0)],
+    "edge-on-the-line-east": [(0.0, 1400.0), (700.0, 1400.0), (700.0, 1900.0), (0.0, 1900.0)],
+    "through-two-vertices": [(0.0, 1400.0), (300.0, 1650.0), (0.0, 1900.0), (-300.0, 1650.0)],
+    "touching-a-vertex": [(0.0, 1650.0), (-300.0, 1900.0), (-300.0, 1400.0)],
+}
+
+
+@pytest.mark.parametrize("name", sorted(FIG1_DEGENERATE))
+def test_polygons_on_the_line_straight_ahead(name):
+    """Polygons with an edge on, or vertices on, the line straight ahead at 6 s on the Figure 1 grid: the prior channel is the plain rule's
+    cells (no piece of any line dropped), the channels' weights within [1 - POD, 1], and the
+    search's channel within the stated error of the oracle at the cells on either side of x = 0."""
+    model = bg.CAT(**FIG1)
+    grid = bg.Grid.from_bounds(**FIG1_BOUNDS, step=100.0)
+    polygons = [(FIG1_DEGENERATE[name], 6.0, 0.5)]
+    got, _ = check_degenerate(model, grid, polygons)
+    x0, _, y0, _ = grid.extent
+    j0 = int(round(-x0 / grid.dx))  # the column east of x = 0
+    i = int(np.argmax(got[0][:, j0]))
+    for j in (j0 - 1, j0):
+        cell = (x0 + j * grid.dx, x0 + (j + 1) * grid.dx, y0 + i * grid.dy, y0 + (i + 1) * grid.dy)
+        want = carried_oracle.carried_cell(model, cell, polygons, 1)
+        assert abs(got[1, i, j] - want) <= RTOL * want + ATOL, (name, cell, got[1, i, j], want)
+
+
+@st.composite
+def degenerate_cases(draw):
+    """A CAT (Figure 1, the slow ship, the jet turning 150 deg at one SD), at rest or posed, on
+    a grid holding its paths (aligned with the pose's axes through the origin at rest), and one
+    or two polygons whose edges or vertices lie on the earlier line of one turn rate: an edge
+    of the rule's turn-rate intervals or the middle of one (where the interpolated lines are
+    exactly the model's), at any time in (0, t]."""
+    name = draw(st.sampled_from(["fig1", "ship", "jet-150deg"]))
+    params = {"fig1": FIG1, **caustics.FOLDS}[name]
+    pose = Pose()
+    if draw(st.booleans()):
+        pose = Pose(origin=(draw(st.floats(-500.0, 500.0)), draw(st.floats(-500.0, 500.0))),
+                    heading=draw(st.floats(-math.pi, math.pi)))
+    model = bg.CAT(**params, pose=pose)
+    span = model.k_sigma * model.sigma_omega
+    omegas = np.linspace(-span, span, 2001)
+    ends = np.vstack([model.pose.to_world(cat_position(model.v0, model.t, np.full_like(omegas, z * model.sigma_a),
+                                                       omegas)) for z in (-9.5, 0.0, 9.5)])
+    step = float(np.max(ends.max(axis=0) - ends.min(axis=0))) / 40.0
+    lo = np.floor(ends.min(axis=0) / step - 1.0) * step
+    hi = np.ceil(ends.max(axis=0) / step + 1.0) * step
+    grid = bg.Grid.from_bounds((lo[0], hi[0]), (lo[1], hi[1]), step)
+    edges = cell_turn_edges(model, step)
+    k = int(np.clip(np.searchsorted(edges, draw(st.floats(-2.5, 2.5)) * model.sigma_omega), 0, len(edges) - 2))
+    omega = float(edges[k]) if draw(st.booleans()) else 0.5 * float(edges[k] + edges[k + 1])
+    polygons = []
+    for _ in range(draw(st.integers(1, 2))):
+        time = model.t * draw(st.floats(0.05, 1.0))
+        u0 = draw(st.floats(-4.0, 1.0))
+        shape = degenerate_shape(draw(st.sampled_from(["edge", "notch", "vertices", "touch"])), u0,
+                                 u0 + draw(st.floats(0.5, 6.0)), draw(st.sampled_from([-1.0, 1.0])))
+        # across the line: a fraction to a few times the spread of the turn rates' lines then
+        width = max(model.sigma_omega * model.v0 * time * time, 1e-3 * model.v0 * time)
+        width *= draw(caustics.log_uniform(0.1, 3.0))
+        polygons.append((on_line(model, omega, time, shape, width), time, draw(st.floats(0.0, 1.0))))
+    return model, grid, polygons
+
+
+@seed(20261127)  # a fixed seed, not derandomize (whose examples depend on the checkout's path)
+@settings(max_examples=12, deadline=None, database=None, suppress_health_check=[HealthCheck.too_slow])
+@given(degenerate_cases())
+def test_degenerate_polygons_drop_no_piece(case):
+    """Polygons with edges on an earlier line, or lines through their vertices, at any turn
+    rate and time: the prior channel is the plain rule's cells, every channel's weight within
+    its factors, and the channel of every polygon within the stated error of the oracle at the
+    two cells where its weight changes most (where the polygons' edges, carried to t, run)."""
+    model, grid, polygons = case
+    got, want = check_degenerate(model, grid, polygons)
+    every = (1 << len(polygons)) - 1
+    for i, j, cell in _cut_cells(model, grid, got[1], want, 2):
+        oracle = carried_oracle.carried_cell(model, cell, polygons, every)
+        assert abs(got[1, i, j] - oracle) <= RTOL * oracle + ATOL, (model, polygons, cell, got[1, i, j], oracle)
+
+
 # --- the hook: a pack of evidence -------------------------------------------------------------------
 
 
 def test_the_hook_takes_a_pack():
     """``CAT.carried_cell_plan(grid, pack)`` gives each of the pack's channels (prior, all,
     searches, others, each search): the polygons' channels by bit masks, 1 - POD = exp of the
-    pack's log(1 - POD) (equal to a few ulps); the prior channel is the plain rule within its
-    error (its lines are split where the searches' are)."""
+    pack's log(1 - POD) (equal to a few ulps); the prior channel is the plain rule's cells (the
+    same terms, regrouped)."""
     model = bg.CAT(**FIG1)
     grid = bg.Grid.from_bounds((-1500.0, 1500.0), (1500.0, 3300.0), 100.0)
     searches = [bg.AreaSearch(SEARCH_A, t=5.0, pod=0.7), bg.AreaSearch(SEARCH_B, t=3.0, coverage=-math.log(0.5))]
@@ -302,7 +461,7 @@ def test_the_hook_takes_a_pack():
     # 1e-14: 1 - POD through log and exp, a few ulps of each factor
     assert np.allclose(got, want, rtol=1e-14, atol=0.0)
     prior = plain(model, grid)
-    assert np.all(np.abs(got[p.channel("prior")] - prior) <= RTOL * prior + ATOL)
+    assert np.max(np.abs(got[p.channel("prior")] - prior)) <= PRIOR_TOL * np.max(prior)
     assert notes["cell_method"]
 
 
