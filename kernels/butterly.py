@@ -807,8 +807,8 @@ KERNELS = density_kernels(butterly_world, BUTTERLY, "butterly", grid=butterly_gr
 # A polygon's factor at s is constant in theta except where the circle R(s) crosses one of its
 # edges, so the support of exp(E) (the arcs that the density's walk finds, beyond which every
 # term is below ``stop`` of the peak) is cut at every such crossing, and each piece is
-# integrated by Gauss-Legendre on panels no wider than ``rule[PANEL]`` trapezoid spacings
-# (``carried_arc``): exact for polygons but for the rule's error on the smooth exp(E). Smooth
+# integrated by Gauss-Legendre, its order and panels sized to the piece's width in trapezoid
+# spacings (``carried_arc``, ``ORDERS``): exact for polygons but for the rule's error on the smooth exp(E). Smooth
 # factors (reports, bearings, inverse-cube tracks, rasters) are evaluated at every node, on
 # panels narrowed to their own angular scale (``smooth_spacing``). An area search over an
 # interval (t0, t1) is taken exactly (``add_segments``): the path over it is the segment from
@@ -816,27 +816,25 @@ KERNELS = density_kernels(butterly_world, BUTTERLY, "butterly", grid=butterly_gr
 # theta between the courses where an end crosses an edge or the segment passes a vertex
 # (``segment_breaks``).
 
-#: Gauss-Legendre nodes per panel (the rule array, ``models.butterly._carried_rule``: each
-#: order's nodes on [-1, 1] and weights, then the constants below).
-GAUSS_NODES = 8
-#: Lower orders for pieces narrow enough (a crossing-dense arc is cut into many): where each
-#: order's nodes and weights start in the rule array, after the panels' 8-point rule.
-ORDERS = (8, 4, 3, 2)
-RULE_AT = {8: 0, 4: 16, 3: 24, 2: 30}
-AT4 = 16
-AT3 = 24
-AT2 = 30
-#: After the rules: the panel width in spacings, the narrowest spacing for smooth factors (a
-#: fraction of the density's), a smooth factor's spacing as a fraction of its angular scale, and
-#: the widest piece (in spacings) that the 4-, 3- and 2-point rules integrate as well as the
-#: panels' 8-point rule.
-PANEL = 34
-NARROWEST = 35
-SPACING = 36
-LIMIT4 = 37
-LIMIT3 = 38
-LIMIT2 = 39
-RULE_SIZE = 40
+#: Gauss-Legendre orders of the course pieces, lowest first (the rule array,
+#: ``models.butterly._carried_rule``: each order's nodes on [-1, 1] and weights from
+#: RULE_AT[n], then the constants below). A piece is cut into the fewest equal panels no wider
+#: than the highest order's limit, each panel integrated by the lowest order whose limit (the
+#: widest panel, in spacings, it integrates within the error bound of the 8-point rule on
+#: CARRIED_PANEL spacings) covers it: a wide piece takes 16 nodes per 6.7 spacings (2.4 a
+#: spacing, not 8 per 2), a narrow one 2 to 6.
+ORDERS = (2, 3, 4, 6, 8, 12, 16)
+N_ORDERS = 7
+RULE_AT = {2: 0, 3: 4, 4: 10, 6: 18, 8: 30, 12: 46, 16: 70}
+#: After the rules: each order's n, where its nodes start, and its limit (in spacings); then
+#: the narrowest spacing for smooth factors (a fraction of the density's) and a smooth factor's
+#: spacing as a fraction of its angular scale.
+ORDER_N = 102
+ORDER_AT = ORDER_N + N_ORDERS
+ORDER_LIMIT = ORDER_AT + N_ORDERS
+NARROWEST = ORDER_LIMIT + N_ORDERS
+SPACING = NARROWEST + 1
+RULE_SIZE = SPACING + 1
 #: Course breaks held at once: a window of the smallest, and the next window after them.
 BREAKS = 32
 #: Polygon nodes whose circle can meet their polygon, listed per point and speed, with their
@@ -1273,8 +1271,8 @@ def carried_arc(
 ):
     """Add to each channel the integral over theta* + (lo, hi) of exp(E + log_scale) times the
     path's weight: pieces between the polygons' course breaks (a window of BREAKS at a time),
-    Gauss-Legendre on panels no wider than rule[PANEL] ``spacing`` (a piece narrow enough by
-    a 4-, 3- or 2-point rule: rule[LIMIT4], ...). Without smooth factors the weight is
+    Gauss-Legendre on the fewest equal panels no wider than the 16-point rule's limit in
+    ``spacing``, each by the lowest order whose limit covers it (``ORDERS``). Without smooth factors the weight is
     constant on a piece: one weight per piece, and an arc without breaks takes the density's
     own trapezoid sum over it (``trapezoid``, relative to exp(E*)) times its weight."""
     zero = type(x)(0.0)
@@ -1303,7 +1301,6 @@ def carried_arc(
                 smooth_trapezoid(x, y, r, cx, cy, q1x, q1y, c1, c2, p11, p12, p22, lo, hi, spacing, log_scale, p, ev,
                                  lw, out)
             return
-        panel = p.rule[PANEL] * spacing
         end = hi
         if count == BREAKS:
             end = buf[BREAKS - 1]
@@ -1315,8 +1312,6 @@ def carried_arc(
             if piece < count:
                 b = buf[piece]
             if b > a:
-                m = int(wp.ceil((b - a) / panel))
-                h = (b - a) / type(x)(m)
                 e_mid, mx, my = course_node(cx, cy, q1x, q1y, c1, c2, p11, p12, p22, half * (a + b))
                 if n_active < 0:
                     ek.evidence_reset(ev, lw)
@@ -1349,19 +1344,19 @@ def carried_arc(
                             polygon_weights(ev, p, active, n_active, cached, lw)
                 fresh = int(0)
                 applied = piece
-                # the order: a narrow piece in one panel of 4, 3 or 2 nodes, else panels of 8
+                # the fewest panels no wider than the highest order's limit, each by the lowest
+                # order whose limit covers it
                 width = (b - a) / spacing
-                order = int(GAUSS_NODES)
-                at = int(0)
-                if width <= rule[LIMIT2]:
-                    order = 2
-                    at = AT2
-                elif width <= rule[LIMIT3]:
-                    order = 3
-                    at = AT3
-                elif width <= rule[LIMIT4]:
-                    order = 4
-                    at = AT4
+                m = int(wp.ceil(width / rule[ORDER_LIMIT + N_ORDERS - 1]))
+                if m < 1:
+                    m = 1
+                h = (b - a) / type(x)(m)
+                level = int(N_ORDERS - 1)
+                for i in range(N_ORDERS - 1):
+                    if level == N_ORDERS - 1 and width <= type(x)(m) * rule[ORDER_LIMIT + i]:
+                        level = i
+                order = int(rule[ORDER_N + level])
+                at = int(rule[ORDER_AT + level])
                 total = zero
                 for k in range(m):
                     mid = a + (type(x)(k) + half) * h

@@ -65,6 +65,7 @@ map's time (and land, always) multiplies them as above. Which rule serves which 
 
 from __future__ import annotations
 
+import inspect
 import math
 from dataclasses import dataclass, field, replace
 
@@ -214,7 +215,7 @@ def posterior(prior, grid, evidence=(), *, subdivisions: int = SUBDIVISIONS, thr
               (varying & ~(cells > 0.0), 1, False))
     plan = None
     if carried is not None:
-        plan = carried.cell_plan(grid)
+        plan = carried.cell_plan(grid, cells)
         # the carried weight varies on every cell with prior mass: each by the sub-cell rule on
         # the carried density's channels (module docstring); cells without mass as before.
         # With the model's own carried cells, the same-time factors' means as without evidence
@@ -265,11 +266,16 @@ class _Carried:
     def index(self, key) -> int:
         return self.pack.channel(self.channel[key])
 
-    def cell_plan(self, grid):
+    def cell_plan(self, grid, cells):
         """The model's own rule for the carried channels' cell masses (``carried_cell_plan``),
-        or None."""
+        or None; ``cells`` (the prior's cell probabilities) passed on where the model takes
+        them (``prior_cells``: for the cells no weighted path crosses)."""
         own = getattr(self.prior, "carried_cell_plan", None)
-        return own(grid, self.pack) if callable(own) else None
+        if not callable(own):
+            return None
+        if "prior_cells" in inspect.signature(own).parameters:
+            return own(grid, self.pack, prior_cells=cells)
+        return own(grid, self.pack)
 
     def notes(self, n) -> dict:
         return {"evidence": list(self.pack.factor_keys), "time_nodes": self.pack.nodes,
