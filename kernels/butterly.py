@@ -67,7 +67,8 @@ faster:
 Carried evidence (the section at the end, ``CARRIED_KERNELS``): evidence at earlier times weighs
 each course's path inside the same integral, through the shared helpers of
 ``kernels/evidence.py``. Carried maps take the point path (a walk per point and speed, not the
-tiles: a tile's matrix product has no place for a weight per node and cell).
+tiles: a tile's matrix product has no place for a weight per node and cell); cells that no
+weighted path reaches are left to the tiles (``Butterly.weighted_cells``).
 """
 
 from typing import Any
@@ -1198,6 +1199,41 @@ def add_segments(ev: Any, p: Any, x: Any, y: Any, ex: Any, ey: Any, r: Any, lw: 
 
 
 @wp.func
+def segments_cross(ev: Any, p: Any, x: Any, y: Any, ex: Any, ey: Any, r: Any):
+    """Whether the path of direction e through (x, y) crosses an edge of a search over an
+    interval's polygon inside its segment (the crossings :func:`inside_length` counts). Between
+    two courses that are breaks (:func:`segment_breaks`: an end of the segment on an edge, or
+    the segment through a vertex) the set of edges a segment crosses does not change, so where
+    it crosses none at one course of a piece its fraction inside (0 or 1) is constant on the
+    piece."""
+    zero = type(x)(0.0)
+    one = type(x)(1.0)
+    for k in range(p.segments.shape[0]):
+        if segment_reaches(p, k, x, y, r):
+            r0 = segment_radius(p, p.segments[k, 0], r)
+            r1 = segment_radius(p, p.segments[k, 1], r)
+            ax = x - r0 * ex
+            ay = y - r0 * ey
+            dx = (r0 - r1) * ex
+            dy = (r0 - r1) * ey
+            first = p.segment_ints[k, 1]
+            for e in range(first, first + p.segment_ints[k, 2]):
+                px = ev.edges[e, 0]
+                py = ev.edges[e, 1]
+                qx = ev.edges[e, 2] - px
+                qy = ev.edges[e, 3] - py
+                denom = dx * qy - dy * qx
+                if denom != zero:
+                    wx = px - ax
+                    wy = py - ay
+                    u = (wx * qy - wy * qx) / denom
+                    v = (wx * dy - wy * dx) / denom
+                    if u > zero and u < one and v >= zero and v < one:
+                        return True
+    return False
+
+
+@wp.func
 def segment_breaks(x: Any, y: Any, r: Any, p: Any, ev: Any, sx: Any, sy: Any, lo: Any, hi: Any, buf: Any, who: Any,
                    count: int):
     """Add to the window the courses where a search-over-an-interval's weight is not smooth:
@@ -1295,7 +1331,14 @@ def carried_arc(
                 j = polygon_node(p, active, n_active, k)
                 radius = node_radius(ev, j, r, p.t)
                 ek.evidence_node(ev, j, x - radius * mx, y - radius * my, lw)
-            if smooth == 0:
+            constant = smooth == 0
+            if not constant and p.smooth_nodes.shape[0] == 0:
+                # only searches over intervals weigh the arc: constant where no segment crosses an
+                # edge (their weights are then those at the middle course)
+                if not segments_cross(ev, p, x, y, mx, my, r):
+                    add_segments(ev, p, x, y, mx, my, r, lw)
+                    constant = True
+            if constant:
                 ek.evidence_add(ev, lw, trapezoid * wp.exp(log_scale), out)
             else:
                 smooth_trapezoid(x, y, r, cx, cy, q1x, q1y, c1, c2, p11, p12, p22, lo, hi, spacing, log_scale, p, ev,
@@ -1357,18 +1400,25 @@ def carried_arc(
                         level = i
                 order = int(rule[ORDER_N + level])
                 at = int(rule[ORDER_AT + level])
+                piece_smooth = smooth
+                if smooth > 0 and p.smooth_nodes.shape[0] == 0:
+                    # only searches over intervals: the piece's weight is constant where no
+                    # segment crosses an edge at its middle course (segments_cross)
+                    if not segments_cross(ev, p, x, y, mx, my, r):
+                        add_segments(ev, p, x, y, mx, my, r, lw)
+                        piece_smooth = 0
                 total = zero
                 for k in range(m):
                     mid = a + (type(x)(k) + half) * h
                     for g in range(order):
                         e, ex, ey = course_node(cx, cy, q1x, q1y, c1, c2, p11, p12, p22, mid + half * h * rule[at + g])
                         term = half * h * rule[at + order + g] * wp.exp(e + log_scale)
-                        if smooth == 0:
+                        if piece_smooth == 0:
                             total = total + term
                         else:
                             add_smooth(ev, p, x, y, ex, ey, r, lw)
                             ek.evidence_add(ev, lw, term, out)
-                if smooth == 0:
+                if piece_smooth == 0:
                     ek.evidence_add(ev, lw, total, out)
                 a = b
         if count < BREAKS:
