@@ -1300,6 +1300,32 @@ def add_smooth(ev: Any, p: Any, x: Any, y: Any, ex: Any, ey: Any, r: Any, lw: wp
 
 
 @wp.func
+def gauss_piece(a: Any, b: Any, spacing: Any, cx: Any, cy: Any, q1x: Any, q1y: Any, c1: Any, c2: Any, p11: Any,
+                p12: Any, p22: Any, log_scale: Any, rule: Any):
+    """The integral of exp(E + log_scale) over theta* + (a, b) by the pieces' rule (the fewest
+    equal panels no wider than the highest order's limit, each by the lowest order covering it)."""
+    half = type(a)(0.5)
+    width = (b - a) / spacing
+    m = int(wp.ceil(width / rule[ORDER_LIMIT + N_ORDERS - 1]))
+    if m < 1:
+        m = 1
+    h = (b - a) / type(a)(m)
+    level = int(N_ORDERS - 1)
+    for i in range(N_ORDERS - 1):
+        if level == N_ORDERS - 1 and width <= type(a)(m) * rule[ORDER_LIMIT + i]:
+            level = i
+    order = int(rule[ORDER_N + level])
+    at = int(rule[ORDER_AT + level])
+    total = type(a)(0.0)
+    for k in range(m):
+        mid = a + (type(a)(k) + half) * h
+        for g in range(order):
+            e, ex, ey = course_node(cx, cy, q1x, q1y, c1, c2, p11, p12, p22, mid + half * h * rule[at + g])
+            total = total + half * h * rule[at + order + g] * wp.exp(e + log_scale)
+    return total
+
+
+@wp.func
 def carried_arc(
     x: Any, y: Any, r: Any, cx: Any, cy: Any, q1x: Any, q1y: Any, c1: Any, c2: Any, p11: Any, p12: Any,
     p22: Any, lo: Any, hi: Any, spacing: Any, log_scale: Any, trapezoid: Any, p: Any, active: Any, n_active: int,
@@ -1310,7 +1336,11 @@ def carried_arc(
     Gauss-Legendre on the fewest equal panels no wider than the 16-point rule's limit in
     ``spacing``, each by the lowest order whose limit covers it (``ORDERS``). Without smooth factors the weight is
     constant on a piece: one weight per piece, and an arc without breaks takes the density's
-    own trapezoid sum over it (``trapezoid``, relative to exp(E*)) times its weight."""
+    own trapezoid sum over it (``trapezoid``, relative to exp(E*)) times its weight. With
+    breaks, the piece holding the peak's course, where its weight is constant, takes the
+    trapezoid sum less the other pieces' integrals (where that is at least half the sum, so
+    the trapezoid's error, 1e-12 of the arc, stays within 2e-12 of the piece's; else its own
+    rule): the arc's widest piece costs no nodes."""
     zero = type(x)(0.0)
     half = type(x)(0.5)
     rule = p.rule
@@ -1320,6 +1350,14 @@ def carried_arc(
     smooth = p.smooth_nodes.shape[0] + reach
     cached = wp.vector(length=ACTIVE, dtype=type(x))
     n_visit = visits(p, n_active)
+    # the peak's piece (theta* inside it), where its weight is constant, is not integrated by
+    # its own rule: its integral is the arc's trapezoid sum less the other pieces' (below)
+    use_base = p.smooth_nodes.shape[0] == 0 and ev.channels.shape[1] <= ek.EXP_FACTORS and lo < zero and hi > zero
+    base_lw = wp.vector(length=ek.EXP_FACTORS, dtype=type(x))
+    have_base = int(0)
+    base_a = zero
+    base_b = zero
+    others = zero  # the other pieces' integrals of exp(E + log_scale) (no weight)
     a = lo
     while a < hi:
         buf, who, count = window_breaks(x, y, r, p, active, n_active, sx, sy, a, hi, ev)
@@ -1407,12 +1445,21 @@ def carried_arc(
                     if not segments_cross(ev, p, x, y, mx, my, r):
                         add_segments(ev, p, x, y, mx, my, r, lw)
                         piece_smooth = 0
+                if use_base and piece_smooth == 0 and a <= zero and b > zero:
+                    for f in range(ev.channels.shape[1]):
+                        base_lw[f] = lw[f]
+                    have_base = 1
+                    base_a = a
+                    base_b = b
+                    a = b
+                    continue
                 total = zero
                 for k in range(m):
                     mid = a + (type(x)(k) + half) * h
                     for g in range(order):
                         e, ex, ey = course_node(cx, cy, q1x, q1y, c1, c2, p11, p12, p22, mid + half * h * rule[at + g])
                         term = half * h * rule[at + order + g] * wp.exp(e + log_scale)
+                        others = others + term
                         if piece_smooth == 0:
                             total = total + term
                         else:
@@ -1425,6 +1472,16 @@ def carried_arc(
             a = hi
         else:
             a = end
+    if have_base == 1:
+        whole = trapezoid * wp.exp(log_scale)
+        base = whole - others
+        if base < half * whole:
+            # the peak's piece holds under half the arc: its own rule (the difference's
+            # cancellation would cost more than the trapezoid's 1e-12 of the arc)
+            base = gauss_piece(base_a, base_b, spacing, cx, cy, q1x, q1y, c1, c2, p11, p12, p22, log_scale, rule)
+        for f in range(ev.channels.shape[1]):
+            lw[f] = base_lw[f]
+        ek.evidence_add(ev, lw, base, out)
 
 
 @wp.func
