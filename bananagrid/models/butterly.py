@@ -881,7 +881,10 @@ class Butterly(Model):
         x in the cell and X within rho_i of the mean (beyond, speed i's weighted start density is
         below its floor: rho_i = sqrt(2 S2 (log bound_i - log floor)), S2 the start's largest
         variance) it lies, over a factor's [s0, s1], in a box whose sides are affine in s: the
-        cell is weighted where that box meets the factor's (:func:`_evidence_boxes`). Every
+        cell is weighted where that box meets the factor's (:func:`_evidence_boxes`), the
+        cell is within rho_i of the ring r_i = V_i t about the mean (else speed i is below its
+        floor there), and the annulus r_i (t - s) / t, s in [s0, s1], about the cell meets the
+        factor's box (the path at s is that far from x), all for some speed. Every
         cell is weighted where a factor is not bounded by a box (reports, bearings, tracks)."""
         x_edges, y_edges = np.asarray(x_edges, dtype=float), np.asarray(y_edges, dtype=float)
         shape = (y_edges.size - 1, x_edges.size - 1)
@@ -899,9 +902,19 @@ class Butterly(Model):
         weighted = np.zeros(shape, dtype=bool)
         xlo, xhi = x_edges[None, :-1], x_edges[None, 1:]
         ylo, yhi = y_edges[:-1, None], y_edges[1:, None]
-        for lb in np.unique(log_bound[log_bound > floor]):
+        half = 0.5 * float(np.max(np.hypot(np.diff(x_edges)[None, :], np.diff(y_edges)[:, None])))
+        xc, yc = 0.5 * (xlo + xhi), 0.5 * (ylo + yhi)
+        distance = np.hypot(xc - mx, yc - my)  # from the mean to the cell's centre
+        for lb, r in zip(log_bound, self.ranges):
+            if not lb > floor:
+                continue
             rho = math.sqrt(2.0 * s2 * (lb - floor))
             rho = rho + 1e-9 * (rho + scale)  # margin for the rounding of positions and bounds
+            # the start within rho of the mean and r from a point of the cell: else the speed
+            # is below its floor there
+            ring = np.abs(distance - r) <= rho + half * (1.0 + 1e-9)
+            if not ring.any():
+                continue
             for s0, s1, bx0, bx1, by0, by1 in boxes:
                 a0, a1 = min(max(s0 / self.t, 0.0), 1.0), min(max(s1 / self.t, 0.0), 1.0)
                 reach_x = np.ones(xlo.shape, dtype=bool)
@@ -912,7 +925,14 @@ class Butterly(Model):
                 lo_y = np.minimum(a0 * ylo + (1 - a0) * (my - rho), a1 * ylo + (1 - a1) * (my - rho))
                 hi_y = np.maximum(a0 * yhi + (1 - a0) * (my + rho), a1 * yhi + (1 - a1) * (my + rho))
                 reach_y = (lo_y <= by1) & (hi_y >= by0)
-                weighted |= reach_y & reach_x
+                # and on the circle of radius r (t - s) / t about the point (an annulus about the
+                # cell's centre, widened by its half diagonal) at a time in [s0, s1]
+                near = np.hypot(np.maximum(np.maximum(bx0 - xc, 0.0), xc - bx1),
+                                np.maximum(np.maximum(by0 - yc, 0.0), yc - by1))
+                far = np.hypot(np.maximum(np.abs(bx0 - xc), np.abs(xc - bx1)),
+                               np.maximum(np.abs(by0 - yc), np.abs(yc - by1)))
+                annulus = (near <= r * (1.0 - a0) + half * (1.0 + 1e-9)) & (far >= r * (1.0 - a1) - half * (1.0 + 1e-9))
+                weighted |= reach_y & reach_x & ring & annulus
         return weighted
 
     def carried_cell_plan(self, domain, pack: EvidencePack, *, tol: float = GAUSS_TOL,
