@@ -553,7 +553,8 @@ class CarryingModel(Protocol):
     cells' channel masses (the CAT's lines exact in the acceleration, Butterly's cells):
     ``run(ctx)`` returns ``(cells, notes)``, cells float64 of shape ``(C, ny, nx)`` (channel c's
     weighted probability of each cell, unnormalised). :func:`bananagrid.posterior` uses it where
-    a model has it (None: the sub-cell rule on :meth:`bind_carried`'s densities).
+    a model has it (None: the sub-cell rule on :meth:`bind_carried`'s densities), passing the
+    prior's cell probabilities as ``prior_cells`` where the method takes that keyword.
     """
 
     def bind_carried(self, ctx: KernelContext, extent: Extent, pack: EvidencePack) -> KernelBinding:

@@ -67,7 +67,8 @@ faster:
 Carried evidence (the section at the end, ``CARRIED_KERNELS``): evidence at earlier times weighs
 each course's path inside the same integral, through the shared helpers of
 ``kernels/evidence.py``. Carried maps take the point path (a walk per point and speed, not the
-tiles: a tile's matrix product has no place for a weight per node and cell).
+tiles: a tile's matrix product has no place for a weight per node and cell); cells that no
+weighted path reaches are left to the tiles (``Butterly.weighted_cells``).
 """
 
 from typing import Any
@@ -807,8 +808,8 @@ KERNELS = density_kernels(butterly_world, BUTTERLY, "butterly", grid=butterly_gr
 # A polygon's factor at s is constant in theta except where the circle R(s) crosses one of its
 # edges, so the support of exp(E) (the arcs that the density's walk finds, beyond which every
 # term is below ``stop`` of the peak) is cut at every such crossing, and each piece is
-# integrated by Gauss-Legendre on panels no wider than ``rule[PANEL]`` trapezoid spacings
-# (``carried_arc``): exact for polygons but for the rule's error on the smooth exp(E). Smooth
+# integrated by Gauss-Legendre, its order and panels sized to the piece's width in trapezoid
+# spacings (``carried_arc``, ``ORDERS``): exact for polygons but for the rule's error on the smooth exp(E). Smooth
 # factors (reports, bearings, inverse-cube tracks, rasters) are evaluated at every node, on
 # panels narrowed to their own angular scale (``smooth_spacing``). An area search over an
 # interval (t0, t1) is taken exactly (``add_segments``): the path over it is the segment from
@@ -816,27 +817,25 @@ KERNELS = density_kernels(butterly_world, BUTTERLY, "butterly", grid=butterly_gr
 # theta between the courses where an end crosses an edge or the segment passes a vertex
 # (``segment_breaks``).
 
-#: Gauss-Legendre nodes per panel (the rule array, ``models.butterly._carried_rule``: each
-#: order's nodes on [-1, 1] and weights, then the constants below).
-GAUSS_NODES = 8
-#: Lower orders for pieces narrow enough (a crossing-dense arc is cut into many): where each
-#: order's nodes and weights start in the rule array, after the panels' 8-point rule.
-ORDERS = (8, 4, 3, 2)
-RULE_AT = {8: 0, 4: 16, 3: 24, 2: 30}
-AT4 = 16
-AT3 = 24
-AT2 = 30
-#: After the rules: the panel width in spacings, the narrowest spacing for smooth factors (a
-#: fraction of the density's), a smooth factor's spacing as a fraction of its angular scale, and
-#: the widest piece (in spacings) that the 4-, 3- and 2-point rules integrate as well as the
-#: panels' 8-point rule.
-PANEL = 34
-NARROWEST = 35
-SPACING = 36
-LIMIT4 = 37
-LIMIT3 = 38
-LIMIT2 = 39
-RULE_SIZE = 40
+#: Gauss-Legendre orders of the course pieces, lowest first (the rule array,
+#: ``models.butterly._carried_rule``: each order's nodes on [-1, 1] and weights from
+#: RULE_AT[n], then the constants below). A piece is cut into the fewest equal panels no wider
+#: than the highest order's limit, each panel integrated by the lowest order whose limit (the
+#: widest panel, in spacings, it integrates within the error bound of the 8-point rule on
+#: CARRIED_PANEL spacings) covers it: a wide piece takes 16 nodes per 6.7 spacings (2.4 a
+#: spacing, not 8 per 2), a narrow one 2 to 6.
+ORDERS = (2, 3, 4, 6, 8, 12, 16)
+N_ORDERS = 7
+RULE_AT = {2: 0, 3: 4, 4: 10, 6: 18, 8: 30, 12: 46, 16: 70}
+#: After the rules: each order's n, where its nodes start, and its limit (in spacings); then
+#: the narrowest spacing for smooth factors (a fraction of the density's) and a smooth factor's
+#: spacing as a fraction of its angular scale.
+ORDER_N = 102
+ORDER_AT = ORDER_N + N_ORDERS
+ORDER_LIMIT = ORDER_AT + N_ORDERS
+NARROWEST = ORDER_LIMIT + N_ORDERS
+SPACING = NARROWEST + 1
+RULE_SIZE = SPACING + 1
 #: Course breaks held at once: a window of the smallest, and the next window after them.
 BREAKS = 32
 #: Polygon nodes whose circle can meet their polygon, listed per point and speed, with their
@@ -1200,6 +1199,41 @@ def add_segments(ev: Any, p: Any, x: Any, y: Any, ex: Any, ey: Any, r: Any, lw: 
 
 
 @wp.func
+def segments_cross(ev: Any, p: Any, x: Any, y: Any, ex: Any, ey: Any, r: Any):
+    """Whether the path of direction e through (x, y) crosses an edge of a search over an
+    interval's polygon inside its segment (the crossings :func:`inside_length` counts). Between
+    two courses that are breaks (:func:`segment_breaks`: an end of the segment on an edge, or
+    the segment through a vertex) the set of edges a segment crosses does not change, so where
+    it crosses none at one course of a piece its fraction inside (0 or 1) is constant on the
+    piece."""
+    zero = type(x)(0.0)
+    one = type(x)(1.0)
+    for k in range(p.segments.shape[0]):
+        if segment_reaches(p, k, x, y, r):
+            r0 = segment_radius(p, p.segments[k, 0], r)
+            r1 = segment_radius(p, p.segments[k, 1], r)
+            ax = x - r0 * ex
+            ay = y - r0 * ey
+            dx = (r0 - r1) * ex
+            dy = (r0 - r1) * ey
+            first = p.segment_ints[k, 1]
+            for e in range(first, first + p.segment_ints[k, 2]):
+                px = ev.edges[e, 0]
+                py = ev.edges[e, 1]
+                qx = ev.edges[e, 2] - px
+                qy = ev.edges[e, 3] - py
+                denom = dx * qy - dy * qx
+                if denom != zero:
+                    wx = px - ax
+                    wy = py - ay
+                    u = (wx * qy - wy * qx) / denom
+                    v = (wx * dy - wy * dx) / denom
+                    if u > zero and u < one and v >= zero and v < one:
+                        return True
+    return False
+
+
+@wp.func
 def segment_breaks(x: Any, y: Any, r: Any, p: Any, ev: Any, sx: Any, sy: Any, lo: Any, hi: Any, buf: Any, who: Any,
                    count: int):
     """Add to the window the courses where a search-over-an-interval's weight is not smooth:
@@ -1266,6 +1300,32 @@ def add_smooth(ev: Any, p: Any, x: Any, y: Any, ex: Any, ey: Any, r: Any, lw: wp
 
 
 @wp.func
+def gauss_piece(a: Any, b: Any, spacing: Any, cx: Any, cy: Any, q1x: Any, q1y: Any, c1: Any, c2: Any, p11: Any,
+                p12: Any, p22: Any, log_scale: Any, rule: Any):
+    """The integral of exp(E + log_scale) over theta* + (a, b) by the pieces' rule (the fewest
+    equal panels no wider than the highest order's limit, each by the lowest order covering it)."""
+    half = type(a)(0.5)
+    width = (b - a) / spacing
+    m = int(wp.ceil(width / rule[ORDER_LIMIT + N_ORDERS - 1]))
+    if m < 1:
+        m = 1
+    h = (b - a) / type(a)(m)
+    level = int(N_ORDERS - 1)
+    for i in range(N_ORDERS - 1):
+        if level == N_ORDERS - 1 and width <= type(a)(m) * rule[ORDER_LIMIT + i]:
+            level = i
+    order = int(rule[ORDER_N + level])
+    at = int(rule[ORDER_AT + level])
+    total = type(a)(0.0)
+    for k in range(m):
+        mid = a + (type(a)(k) + half) * h
+        for g in range(order):
+            e, ex, ey = course_node(cx, cy, q1x, q1y, c1, c2, p11, p12, p22, mid + half * h * rule[at + g])
+            total = total + half * h * rule[at + order + g] * wp.exp(e + log_scale)
+    return total
+
+
+@wp.func
 def carried_arc(
     x: Any, y: Any, r: Any, cx: Any, cy: Any, q1x: Any, q1y: Any, c1: Any, c2: Any, p11: Any, p12: Any,
     p22: Any, lo: Any, hi: Any, spacing: Any, log_scale: Any, trapezoid: Any, p: Any, active: Any, n_active: int,
@@ -1273,10 +1333,14 @@ def carried_arc(
 ):
     """Add to each channel the integral over theta* + (lo, hi) of exp(E + log_scale) times the
     path's weight: pieces between the polygons' course breaks (a window of BREAKS at a time),
-    Gauss-Legendre on panels no wider than rule[PANEL] ``spacing`` (a piece narrow enough by
-    a 4-, 3- or 2-point rule: rule[LIMIT4], ...). Without smooth factors the weight is
+    Gauss-Legendre on the fewest equal panels no wider than the 16-point rule's limit in
+    ``spacing``, each by the lowest order whose limit covers it (``ORDERS``). Without smooth factors the weight is
     constant on a piece: one weight per piece, and an arc without breaks takes the density's
-    own trapezoid sum over it (``trapezoid``, relative to exp(E*)) times its weight."""
+    own trapezoid sum over it (``trapezoid``, relative to exp(E*)) times its weight. With
+    breaks, the piece holding the peak's course, where its weight is constant, takes the
+    trapezoid sum less the other pieces' integrals (where that is at least half the sum, so
+    the trapezoid's error, 1e-12 of the arc, stays within 2e-12 of the piece's; else its own
+    rule): the arc's widest piece costs no nodes."""
     zero = type(x)(0.0)
     half = type(x)(0.5)
     rule = p.rule
@@ -1286,6 +1350,14 @@ def carried_arc(
     smooth = p.smooth_nodes.shape[0] + reach
     cached = wp.vector(length=ACTIVE, dtype=type(x))
     n_visit = visits(p, n_active)
+    # the peak's piece (theta* inside it), where its weight is constant, is not integrated by
+    # its own rule: its integral is the arc's trapezoid sum less the other pieces' (below)
+    use_base = p.smooth_nodes.shape[0] == 0 and ev.channels.shape[1] <= ek.EXP_FACTORS and lo < zero and hi > zero
+    base_lw = wp.vector(length=ek.EXP_FACTORS, dtype=type(x))
+    have_base = int(0)
+    base_a = zero
+    base_b = zero
+    others = zero  # the other pieces' integrals of exp(E + log_scale) (no weight)
     a = lo
     while a < hi:
         buf, who, count = window_breaks(x, y, r, p, active, n_active, sx, sy, a, hi, ev)
@@ -1297,13 +1369,19 @@ def carried_arc(
                 j = polygon_node(p, active, n_active, k)
                 radius = node_radius(ev, j, r, p.t)
                 ek.evidence_node(ev, j, x - radius * mx, y - radius * my, lw)
-            if smooth == 0:
+            constant = smooth == 0
+            if not constant and p.smooth_nodes.shape[0] == 0:
+                # only searches over intervals weigh the arc: constant where no segment crosses an
+                # edge (their weights are then those at the middle course)
+                if not segments_cross(ev, p, x, y, mx, my, r):
+                    add_segments(ev, p, x, y, mx, my, r, lw)
+                    constant = True
+            if constant:
                 ek.evidence_add(ev, lw, trapezoid * wp.exp(log_scale), out)
             else:
                 smooth_trapezoid(x, y, r, cx, cy, q1x, q1y, c1, c2, p11, p12, p22, lo, hi, spacing, log_scale, p, ev,
                                  lw, out)
             return
-        panel = p.rule[PANEL] * spacing
         end = hi
         if count == BREAKS:
             end = buf[BREAKS - 1]
@@ -1315,8 +1393,6 @@ def carried_arc(
             if piece < count:
                 b = buf[piece]
             if b > a:
-                m = int(wp.ceil((b - a) / panel))
-                h = (b - a) / type(x)(m)
                 e_mid, mx, my = course_node(cx, cy, q1x, q1y, c1, c2, p11, p12, p22, half * (a + b))
                 if n_active < 0:
                     ek.evidence_reset(ev, lw)
@@ -1349,37 +1425,63 @@ def carried_arc(
                             polygon_weights(ev, p, active, n_active, cached, lw)
                 fresh = int(0)
                 applied = piece
-                # the order: a narrow piece in one panel of 4, 3 or 2 nodes, else panels of 8
+                # the fewest panels no wider than the highest order's limit, each by the lowest
+                # order whose limit covers it
                 width = (b - a) / spacing
-                order = int(GAUSS_NODES)
-                at = int(0)
-                if width <= rule[LIMIT2]:
-                    order = 2
-                    at = AT2
-                elif width <= rule[LIMIT3]:
-                    order = 3
-                    at = AT3
-                elif width <= rule[LIMIT4]:
-                    order = 4
-                    at = AT4
+                m = int(wp.ceil(width / rule[ORDER_LIMIT + N_ORDERS - 1]))
+                if m < 1:
+                    m = 1
+                h = (b - a) / type(x)(m)
+                level = int(N_ORDERS - 1)
+                for i in range(N_ORDERS - 1):
+                    if level == N_ORDERS - 1 and width <= type(x)(m) * rule[ORDER_LIMIT + i]:
+                        level = i
+                order = int(rule[ORDER_N + level])
+                at = int(rule[ORDER_AT + level])
+                piece_smooth = smooth
+                if smooth > 0 and p.smooth_nodes.shape[0] == 0:
+                    # only searches over intervals: the piece's weight is constant where no
+                    # segment crosses an edge at its middle course (segments_cross)
+                    if not segments_cross(ev, p, x, y, mx, my, r):
+                        add_segments(ev, p, x, y, mx, my, r, lw)
+                        piece_smooth = 0
+                if use_base and piece_smooth == 0 and a <= zero and b > zero:
+                    for f in range(ev.channels.shape[1]):
+                        base_lw[f] = lw[f]
+                    have_base = 1
+                    base_a = a
+                    base_b = b
+                    a = b
+                    continue
                 total = zero
                 for k in range(m):
                     mid = a + (type(x)(k) + half) * h
                     for g in range(order):
                         e, ex, ey = course_node(cx, cy, q1x, q1y, c1, c2, p11, p12, p22, mid + half * h * rule[at + g])
                         term = half * h * rule[at + order + g] * wp.exp(e + log_scale)
-                        if smooth == 0:
+                        others = others + term
+                        if piece_smooth == 0:
                             total = total + term
                         else:
                             add_smooth(ev, p, x, y, ex, ey, r, lw)
                             ek.evidence_add(ev, lw, term, out)
-                if smooth == 0:
+                if piece_smooth == 0:
                     ek.evidence_add(ev, lw, total, out)
                 a = b
         if count < BREAKS:
             a = hi
         else:
             a = end
+    if have_base == 1:
+        whole = trapezoid * wp.exp(log_scale)
+        base = whole - others
+        if base < half * whole:
+            # the peak's piece holds under half the arc: its own rule (the difference's
+            # cancellation would cost more than the trapezoid's 1e-12 of the arc)
+            base = gauss_piece(base_a, base_b, spacing, cx, cy, q1x, q1y, c1, c2, p11, p12, p22, log_scale, rule)
+        for f in range(ev.channels.shape[1]):
+            lw[f] = base_lw[f]
+        ek.evidence_add(ev, lw, base, out)
 
 
 @wp.func

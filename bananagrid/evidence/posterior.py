@@ -65,6 +65,7 @@ map's time (and land, always) multiplies them as above. Which rule serves which 
 
 from __future__ import annotations
 
+import inspect
 import math
 import time
 from dataclasses import dataclass, field, replace
@@ -253,12 +254,22 @@ def _grid_cell_means(prior, grid, evidence, n, threads, carried=None, min_mass=M
     earlier = set() if carried is None else carried.earlier
     if not isinstance(grid, Grid):
         raise BananagridError(f"grid = {grid!r}: expected a bananagrid Grid or PolarLattice")
-    plan = None if carried is None else carried.cell_plan(grid)
-    if plan is None:
-        cells, provenance, frame = _grid_prior(prior, grid, threads, min_mass)
-    else:
+    # a model whose carried cells' prior channel is its plain cell rule (the CAT's): one run gives
+    # both; a model that takes the prior's cells instead (for the cells no weighted path reaches:
+    # Butterly's) gets them first
+    plan = None
+    if carried is not None and not carried.takes_prior_cells:
+        plan = carried.cell_plan(grid, None)
+    if plan is not None:
         cells, provenance, frame, channel_cells, plan_notes = _carried_prior(prior, grid, plan, carried, threads,
                                                                              min_mass)
+    else:
+        cells, provenance, frame = _grid_prior(prior, grid, threads, min_mass)
+        if carried is not None:
+            plan = carried.cell_plan(grid, cells)
+            if plan is not None:
+                channel_cells, plan_notes = plan.run(WarpContext(np.float64, "cpu", threads))
+                channel_cells = np.asarray(channel_cells, dtype=float)
     ny, nx = grid.shape
     x_edges = grid.origin[0] + grid.dx * np.arange(nx + 1)
     y_edges = grid.origin[1] + grid.dy * np.arange(ny + 1)
@@ -328,11 +339,22 @@ class _Carried:
     def index(self, key) -> int:
         return self.pack.channel(self.channel[key])
 
-    def cell_plan(self, grid):
+    def cell_plan(self, grid, cells):
         """The model's own rule for the carried channels' cell masses (``carried_cell_plan``),
-        or None."""
+        or None; ``cells`` (the prior's cell probabilities) passed on where the model takes
+        them (``prior_cells``: for the cells no weighted path crosses)."""
         own = getattr(self.prior, "carried_cell_plan", None)
-        return own(grid, self.pack) if callable(own) else None
+        if not callable(own):
+            return None
+        if self.takes_prior_cells:
+            return own(grid, self.pack, prior_cells=cells)
+        return own(grid, self.pack)
+
+    @property
+    def takes_prior_cells(self) -> bool:
+        """Whether the model's ``carried_cell_plan`` takes the prior's cells (``prior_cells``)."""
+        own = getattr(self.prior, "carried_cell_plan", None)
+        return callable(own) and "prior_cells" in inspect.signature(own).parameters
 
     def notes(self, n) -> dict:
         return {"evidence": list(self.pack.factor_keys), "time_nodes": self.pack.nodes,

@@ -40,6 +40,7 @@ from ..kernels import evidence as evidence_kernels
 from ..domains.grid import Grid
 from ..domains.polar_lattice import PolarLattice
 from ..engine.carried import evaluate_carried
+from ..engine.rasterise import rasterise
 from ..engine.quadrature import GAUSS_TOL, MAX_ORDER, gauss_error, unit_rule
 from ..protocol import CellPlan, EvidencePack, Extent, KernelBinding, KernelContext, SceneKey, SceneSchema
 from ..validate import BananagridError, BananagridWarning, covariance, finite, non_negative, point, positive, real_array, show
@@ -97,6 +98,10 @@ SECONDS_PER_SPEED_NODE = 0.1e-6
 #: trapezoid spacings of the density's rule (0.81 of the integrand's narrowest width each), and
 #: the narrowest panel smooth factors may ask for, as a fraction of one.
 CARRIED_PANEL = 2.0
+#: The reference rule: CARRIED_GAUSS_NODES-point Gauss-Legendre on CARRIED_PANEL spacings
+#: (relative error below 1e-13 per panel for a normal profile); every order's panels are sized
+#: to the same error bound (``_carried_rule``).
+CARRIED_GAUSS_NODES = 8
 CARRIED_NARROWEST = 1.0 / 16.0
 #: A smooth factor's course spacing, as a fraction of its angular scale (its length scale over
 #: the radius V (t - s)): the fraction the density's own spacing is of its narrowest width
@@ -158,28 +163,57 @@ def _interval_searches(pack: EvidencePack) -> tuple[np.ndarray, np.ndarray, np.n
     return np.asarray(rows, dtype=float), np.asarray(ints, dtype=np.int32), exact
 
 
+def _evidence_boxes(pack: EvidencePack, segments: np.ndarray, segment_ints: np.ndarray):
+    """Where and when each factor of the pack can weigh a path: a list of (s0, s1, x0, x1, y0,
+    y1), the factor's value 0 (its weight 1) for a path outside the box at every time in
+    [s0, s1]; None where a factor is not bounded so (reports, bearings and tracks weigh every
+    path). A polygon's box at its nodes' times (an area search over an interval taken exactly:
+    its whole (t0, t1)); a raster's extent at its nodes' times."""
+    kind, factor = pack.ints[:, 0], pack.ints[:, 1]
+    exact = {int(f): k for k, f in enumerate(segment_ints[:, 0])}
+    boxes = []
+    for f in range(pack.factors):
+        nodes = np.flatnonzero(factor == f)
+        if f in exact:
+            row = segments[exact[f]]
+            boxes.append((row[0], row[1], *row[4:8]))
+            continue
+        if nodes.size == 0:
+            continue
+        if np.all(kind[nodes] == evidence_kernels.KIND_POLYGON):
+            d = pack.data[nodes]
+            box = (d[:, 1].min(), d[:, 2].max(), d[:, 3].min(), d[:, 4].max())
+        elif np.all(kind[nodes] == evidence_kernels.KIND_RASTER):
+            d, nx = pack.data[nodes], pack.ints[nodes, 3]
+            box = (d[:, 0].min(), (d[:, 0] + d[:, 2] * nx).max(), d[:, 1].min(), (d[:, 1] + d[:, 3] * d[:, 4]).max())
+        else:
+            return None
+        boxes.append((pack.time[nodes].min(), pack.time[nodes].max(), *box))
+    return boxes
+
+
 @functools.lru_cache(maxsize=4)
 def _carried_rule(tol: float) -> np.ndarray:
     """The carried kernels' course rule array (layout in kernels/butterly.py): Gauss-Legendre
-    rules of each order, the panel, the smooth factors' spacings, and the widest piece (in
-    spacings) each lower order integrates within the 8-point panel's error bound for a normal
-    profile (:func:`~bananagrid.engine.quadrature.gauss_error`). A spacing is at most
-    2 pi / sqrt(2 L) of the integrand's narrowest width (L = ln(1 / tol) + ln(4 pi), the
-    density's node count)."""
+    rules of each order, each order's widest panel (in spacings) integrated within the error
+    bound of the CARRIED_GAUSS_NODES-point rule on CARRIED_PANEL spacings for a normal profile
+    (:func:`~bananagrid.engine.quadrature.gauss_error`), and the smooth factors' spacings. A
+    spacing is at most 2 pi / sqrt(2 L) of the integrand's narrowest width (L = ln(1 / tol) +
+    ln(4 pi), the density's node count)."""
     k = kernels
     rule = np.zeros(k.RULE_SIZE)
-    for n in k.ORDERS:
+    width = 2.0 * math.pi / math.sqrt(2.0 * (math.log(1.0 / tol) + math.log(4.0 * math.pi)))
+    target = gauss_error(CARRIED_GAUSS_NODES, CARRIED_PANEL * width)
+    q = np.linspace(1e-3, 4.0 * CARRIED_PANEL * max(k.ORDERS) / CARRIED_GAUSS_NODES, 8000)
+    for i, n in enumerate(k.ORDERS):
         x, w = np.polynomial.legendre.leggauss(n)
         rule[k.RULE_AT[n]:k.RULE_AT[n] + 2 * n] = np.concatenate((x, w))
-    width = 2.0 * math.pi / math.sqrt(2.0 * (math.log(1.0 / tol) + math.log(4.0 * math.pi)))
-    target = gauss_error(k.GAUSS_NODES, CARRIED_PANEL * width)
-    limits = []
-    for n in (4, 3, 2):
-        q = np.linspace(1e-4, CARRIED_PANEL, 20000)
         ok = q[[gauss_error(n, v * width) <= target for v in q]]
-        limits.append(float(ok.max()) if ok.size else 0.0)
-    rule[[k.PANEL, k.NARROWEST, k.SPACING, k.LIMIT4, k.LIMIT3, k.LIMIT2]] = [
-        CARRIED_PANEL, CARRIED_NARROWEST, SMOOTH_SPACING, *limits]
+        limit = float(ok.max()) if ok.size else 0.0
+        if n == CARRIED_GAUSS_NODES:
+            limit = CARRIED_PANEL  # the reference rule's own panel
+        rule[[k.ORDER_N + i, k.ORDER_AT + i, k.ORDER_LIMIT + i]] = n, k.RULE_AT[n], limit
+    rule[[k.NARROWEST, k.SPACING]] = CARRIED_NARROWEST, SMOOTH_SPACING
     rule.setflags(write=False)
     return rule
 
@@ -797,10 +831,12 @@ class Butterly(Model):
         integrand exceeds 1e-15 of its peak (the density's own walk) are cut at every course
         whose path crosses a polygon's edge at a polygon node's time (the circle of radius V_i
         (t - s) about x against each edge: the polygons' weights are constant between), and
-        each piece is integrated by CARRIED_GAUSS_NODES-point Gauss-Legendre on panels of at
-        most CARRIED_PANEL trapezoid spacings (about 1.6 of the integrand's narrowest width
-        1 / sqrt(A): relative error below 1e-13 per panel for a normal profile,
-        ``engine.quadrature.gauss_error(8, 1.6)``). Smooth factors (reports, bearings,
+        each piece is integrated by Gauss-Legendre within the error bound of the
+        CARRIED_GAUSS_NODES-point rule on CARRIED_PANEL trapezoid spacings (about 1.6 of the
+        integrand's narrowest width 1 / sqrt(A): relative error below 1e-13 per panel for a
+        normal profile, ``engine.quadrature.gauss_error(8, 1.6)``): the fewest equal panels no
+        wider than the 16-point rule's limit (6.7 spacings), each by the lowest order (2 to 16)
+        whose limit covers it (``_carried_rule``). Smooth factors (reports, bearings,
         inverse-cube tracks, rasters) are evaluated at every node, on panels narrowed to their
         angular scale (the factor's length scale over V_i (t - s)), down to
         CARRIED_NARROWEST of a panel; an arc that no polygon cuts takes the density's own
@@ -834,7 +870,73 @@ class Butterly(Model):
         return KernelBinding(kernels.CARRIED_KERNELS, params,
                              {"speed_nodes": self.n_speed_nodes, "carried": "course pieces between polygon crossings"})
 
-    def carried_cell_plan(self, domain, pack: EvidencePack, *, tol: float = GAUSS_TOL) -> CellPlan | None:
+    def weighted_cells(self, pack: EvidencePack, x_edges, y_edges) -> np.ndarray:
+        """Which cells of a grid (``x_edges``, ``y_edges``) a path may cross with a weight below 1
+        (shape (ny, nx)): False where every path through the cell is proved to keep the weight 1
+        in every channel, but for courses whose prior contribution is below the carried kernel's
+        speed floor (:meth:`bind_carried`: SPEED_FLOOR of the density's maximum over the number
+        of speeds, per speed).
+
+        The path through x with start X is at X + (s / t)(x - X) at time s (straight), so with
+        x in the cell and X within rho_i of the mean (beyond, speed i's weighted start density is
+        below its floor: rho_i = sqrt(2 S2 (log bound_i - log floor)), S2 the start's largest
+        variance) it lies, over a factor's [s0, s1], in a box whose sides are affine in s: the
+        cell is weighted where that box meets the factor's (:func:`_evidence_boxes`), the
+        cell is within rho_i of the ring r_i = V_i t about the mean (else speed i is below its
+        floor there), and the annulus r_i (t - s) / t, s in [s0, s1], about the cell meets the
+        factor's box (the path at s is that far from x), all for some speed. Every
+        cell is weighted where a factor is not bounded by a box (reports, bearings, tracks)."""
+        x_edges, y_edges = np.asarray(x_edges, dtype=float), np.asarray(y_edges, dtype=float)
+        shape = (y_edges.size - 1, x_edges.size - 1)
+        segments, segment_ints, _ = _interval_searches(pack)
+        boxes = _evidence_boxes(pack, segments, segment_ints)
+        if boxes is None or self.t <= 0.0:
+            return np.ones(shape, dtype=bool)
+        k = kernels
+        params = self.kernel_parameters(np.float64, floors=True)
+        floor = params[k.LOG_SPEED_FLOOR]
+        log_bound = params[k.HEAD + k.LOG_BOUND::k.PER_SPEED]
+        s2 = self.axes[1]
+        mx, my = (float(v) for v in self.mean)
+        scale = float(np.abs(x_edges).max() + np.abs(y_edges).max() + abs(mx) + abs(my))
+        weighted = np.zeros(shape, dtype=bool)
+        xlo, xhi = x_edges[None, :-1], x_edges[None, 1:]
+        ylo, yhi = y_edges[:-1, None], y_edges[1:, None]
+        half = 0.5 * float(np.max(np.hypot(np.diff(x_edges)[None, :], np.diff(y_edges)[:, None])))
+        xc, yc = 0.5 * (xlo + xhi), 0.5 * (ylo + yhi)
+        distance = np.hypot(xc - mx, yc - my)  # from the mean to the cell's centre
+        for lb, r in zip(log_bound, self.ranges):
+            if not lb > floor:
+                continue
+            rho = math.sqrt(2.0 * s2 * (lb - floor))
+            rho = rho + 1e-9 * (rho + scale)  # margin for the rounding of positions and bounds
+            # the start within rho of the mean and r from a point of the cell: else the speed
+            # is below its floor there
+            ring = np.abs(distance - r) <= rho + half * (1.0 + 1e-9)
+            if not ring.any():
+                continue
+            for s0, s1, bx0, bx1, by0, by1 in boxes:
+                a0, a1 = min(max(s0 / self.t, 0.0), 1.0), min(max(s1 / self.t, 0.0), 1.0)
+                reach_x = np.ones(xlo.shape, dtype=bool)
+                reach_y = np.ones(ylo.shape, dtype=bool)
+                lo_x = np.minimum(a0 * xlo + (1 - a0) * (mx - rho), a1 * xlo + (1 - a1) * (mx - rho))
+                hi_x = np.maximum(a0 * xhi + (1 - a0) * (mx + rho), a1 * xhi + (1 - a1) * (mx + rho))
+                reach_x = (lo_x <= bx1) & (hi_x >= bx0)
+                lo_y = np.minimum(a0 * ylo + (1 - a0) * (my - rho), a1 * ylo + (1 - a1) * (my - rho))
+                hi_y = np.maximum(a0 * yhi + (1 - a0) * (my + rho), a1 * yhi + (1 - a1) * (my + rho))
+                reach_y = (lo_y <= by1) & (hi_y >= by0)
+                # and on the circle of radius r (t - s) / t about the point (an annulus about the
+                # cell's centre, widened by its half diagonal) at a time in [s0, s1]
+                near = np.hypot(np.maximum(np.maximum(bx0 - xc, 0.0), xc - bx1),
+                                np.maximum(np.maximum(by0 - yc, 0.0), yc - by1))
+                far = np.hypot(np.maximum(np.abs(bx0 - xc), np.abs(xc - bx1)),
+                               np.maximum(np.abs(by0 - yc), np.abs(yc - by1)))
+                annulus = (near <= r * (1.0 - a0) + half * (1.0 + 1e-9)) & (far >= r * (1.0 - a1) - half * (1.0 + 1e-9))
+                weighted |= reach_y & reach_x & ring & annulus
+        return weighted
+
+    def carried_cell_plan(self, domain, pack: EvidencePack, *, tol: float = GAUSS_TOL,
+                          prior_cells=None) -> CellPlan | None:
         """Each channel's carried probability of every cell of a grid
         (:class:`~bananagrid.protocol.CarryingModel`), unnormalised: shape (C, ny, nx).
 
@@ -850,7 +952,10 @@ class Butterly(Model):
         time: there the rule's error is that of a Gauss rule on a kink or a step, O(h^2) or
         O(h) of the sub-cell's mass (measured against cells halved in each direction: 1e-6 of
         the channel's mass per cell at most on polar sectors holding a point-time search's
-        kinks, tests/evidence/test_butterly_cells.py). On a
+        kinks, tests/evidence/test_butterly_cells.py). Cells that no path with a weight below 1
+        crosses (:meth:`weighted_cells`) take the prior's cell probability in every channel:
+        ``prior_cells`` (the engine's rule, ``rasterise(model, grid, quantity="probability")``,
+        the same tensor rule as above; computed here when not given). On a
         :class:`~bananagrid.PolarLattice` the same rule in (range, bearing); None on other
         domains (the posterior's sub-cell rule on the carried densities).
         """
@@ -866,7 +971,13 @@ class Butterly(Model):
         x_edges = domain.origin[0] + domain.dx * np.arange(domain.nx + 1)
         y_edges = domain.origin[1] + domain.dy * np.arange(domain.ny + 1)
         bound = self.density_bounds(x_edges[None, :-1], x_edges[None, 1:], y_edges[:-1, None], y_edges[1:, None])
-        keep = np.argwhere(bound >= CELL_FLOOR * self.peak_lower_bound())
+        mass = bound >= CELL_FLOOR * self.peak_lower_bound()
+        plain = mass & ~self.weighted_cells(pack, x_edges, y_edges)
+        keep = np.argwhere(mass & ~plain)
+        if prior_cells is not None:
+            prior_cells = np.asarray(prior_cells, dtype=float)
+            if prior_cells.shape != domain.shape:
+                raise BananagridError(f"prior_cells: shape {prior_cells.shape}; expected the grid's {domain.shape}")
         per_cell = len(ux) * len(uy)
         method = (f"carried density by tensor Gauss-Legendre: {mx} x {my} sub-cells of {nx_} x {ny_} nodes per cell "
                   f"(sub-cells <= sigma_min = {scale:.6g} m)")
@@ -883,11 +994,18 @@ class Butterly(Model):
                 py = np.broadcast_to(ys[:, :, None], (len(block), len(uy), len(ux))).ravel()
                 values = evaluate_carried(self, px, py, pack, dtype=ctx.dtype, device=ctx.device, threads=ctx.threads)
                 cells[:, block[:, 0], block[:, 1]] = values.reshape(-1, len(block), per_cell).astype(float) @ weights
-            return cells, {"cell_method": method, "cells_computed": int(len(keep)),
+            if plain.any():
+                own = prior_cells
+                if own is None:
+                    own = np.asarray(rasterise(self, domain, quantity="probability", threads=ctx.threads,
+                                               min_mass=0.0).values, dtype=float)
+                cells[:, plain] = own[plain]
+            return cells, {"cell_method": method, "cells_computed": int(len(keep)), "cells_unweighted": int(plain.sum()),
                            "accuracy": {"claim": "per sub-cell and axis for a normal feature as wide as sigma_min, "
                                                  "where the weight is smooth on the cell", "target": tol}}
 
         seconds = float(len(keep) * per_cell) * CARRIED_SECONDS_PER_NODE * self.n_speed_nodes
+        seconds += float(plain.sum()) * per_cell * SECONDS_PER_CELL
         return CellPlan(seconds=seconds, run=run, method=method)
 
     def _carried_polar_plan(self, lattice: PolarLattice, pack: EvidencePack, tol: float) -> CellPlan:

@@ -149,6 +149,44 @@ def test_sweep_against_the_oracle(shape, centre, size, when, pod, speed, kappa, 
     np.testing.assert_allclose(got, want, rtol=RTOL, atol=1e-300)
 
 
+@seed(20261128)
+@settings(max_examples=5, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(shape=POLYGONS, shift=st.tuples(st.floats(-0.5, 0.5), st.floats(-0.5, 0.5)),
+       size=st.floats(500.0, 4000.0), when=st.floats(0.0, 1.0), coverage=st.floats(0.1, 3.0),
+       speed=st.floats(0.5, 12.0), rho=st.floats(-0.9, 0.9), length=st.sampled_from([0.02, 0.1, 0.4]),
+       second=st.booleans())
+def test_interval_searches_alone_against_the_oracle(shape, shift, size, when, coverage, speed, rho, length, second):
+    """Searches over intervals with no other evidence (the kernel then takes one weight for a
+    course piece, or a whole arc, on which no path segment crosses an edge, and each node's
+    weight elsewhere): star-shaped polygons about the straight path from the mean to the first
+    point (shifted by up to half their size), one or two searches (the second the first's
+    polygon mirrored about that path's line, later), each point's channels within RTOL of the
+    oracle."""
+    model = butterly(rho=rho, speeds=(speed,), weights=(1.0,))
+    p = points(model, 2, 11)
+    start = when * (1.0 - length) * model.t
+    mid = (start + 0.5 * length * model.t) / model.t
+    mean = np.asarray(model.mean)
+    centre = mean + mid * (p[0] - mean) + size * np.asarray(shift)
+    k = len(shape)
+    angles = np.sort(2 * math.pi * (np.arange(k) / k + np.array([d for _, d in shape]) / k))
+    radii = np.array([a for a, _ in shape]) * size
+    vertices = np.column_stack((centre[0] + radii * np.cos(angles), centre[1] + radii * np.sin(angles)))
+    evidence = [bg.AreaSearch(vertices, t=(start, start + length * model.t), coverage=coverage)]
+    late = 0.5 * (start + length * model.t + model.t)
+    second = second and late < model.t
+    if second:
+        evidence.append(bg.AreaSearch(vertices[::-1] * [1.0, -1.0] + [0.0, 2.0 * centre[1]],
+                                      t=(late, min(late + length * model.t, model.t)), coverage=coverage))
+    pk = pack(evidence, model.t)
+    got = evaluate_carried(model, p[:, 0], p[:, 1], pk)
+    want = carried_density(model, evidence, p[:, 0], p[:, 1])
+    np.testing.assert_allclose(got[1], want, rtol=RTOL, atol=1e-300)
+    if second:
+        want = carried_density(model, evidence[:1], p[:, 0], p[:, 1])
+        np.testing.assert_allclose(got[pk.channel("search:evidence[0]")], want, rtol=RTOL, atol=1e-300)
+
+
 def test_float32_within_its_bound():
     """float32 against float64 where the carried density exceeds 1e-6 of its largest value:
     within 1e-4 relative plus 1e-4 of that largest value (the density's float32_rtol, and the

@@ -4,11 +4,17 @@ searches and the report cut the rings)."""
 
 from __future__ import annotations
 
+from unittest import mock
+
 import numpy as np
+from hypothesis import HealthCheck, given, seed, settings
+from hypothesis import strategies as st
 
 import bananagrid as bg
 from bananagrid.engine.warp_runtime import WarpContext
+from bananagrid.engine.carried import evaluate_carried
 from bananagrid.evidence.packing import pack
+from bananagrid.models.butterly import SPEED_FLOOR
 
 MODEL = bg.Butterly(mean=(100.0, -50.0), cov=[[300.0**2, 0.5 * 300 * 150], [0.5 * 300 * 150, 150.0**2]],
                     speeds=[3.0, 6.0], weights=[0.4, 0.6], t=1000.0)
@@ -75,3 +81,64 @@ def test_polar_lattice():
     for c, name in enumerate(pk.channel_names):
         smooth = name in ("prior", "others")  # no polygon: the weight is smooth
         np.testing.assert_allclose(out[c], refined[c], rtol=0.0, atol=(1e-12 if smooth else KINKS) * out[c].sum())
+
+
+@seed(20261127)
+@settings(max_examples=12, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(x0=st.floats(-9000.0, 6000.0), y0=st.one_of(st.floats(-9000.0, -5000.0), st.floats(3000.0, 6000.0)),
+       side=st.floats(300.0, 3000.0),
+       t0=st.floats(0.0, 900.0), span=st.floats(0.0, 300.0), report=st.booleans())
+def test_unweighted_cells_keep_the_prior(x0, y0, side, t0, span, report):
+    """``weighted_cells``' claim, swept over search boxes and times (one time or an interval):
+    boxes north or south of the rings' middle (some cells out of reach), at 9 points of every
+    cell it calls unweighted (with prior mass), every channel of the
+    carried kernel equals the prior channel within the speeds' floor (n_speeds x SPEED_FLOOR /
+    n_speeds of the density's maximum: the mass its bound leaves out, as the kernel's own
+    speed floor does). A report weighs every path: then every cell is weighted."""
+    t1 = min(t0 + span, MODEL.t)
+    evidence = [bg.AreaSearch([(x0, y0), (x0 + side, y0), (x0 + side, y0 + side), (x0, y0 + side)],
+                              t=t0 if t1 == t0 else (t0, t1), pod=0.9)]
+    if report:
+        evidence.append(bg.PositionReport((x0, y0), t=t0, sigma=500.0))
+    pk = pack(evidence, MODEL.t)
+    grid = bg.Grid.from_bounds(x=(-8000.0, 8000.0), y=(-8000.0, 8000.0), step=800.0)
+    xe = grid.origin[0] + grid.dx * np.arange(grid.nx + 1)
+    ye = grid.origin[1] + grid.dy * np.arange(grid.ny + 1)
+    weighted = MODEL.weighted_cells(pk, xe, ye)
+    if report:
+        assert weighted.all()
+        return
+    rows, cols = np.nonzero(~weighted)
+    u = np.array([0.01, 0.5, 0.99])
+    px = (xe[cols, None, None] + grid.dx * u[None, None, :]) + 0.0 * u[None, :, None]
+    py = (ye[rows, None, None] + grid.dy * u[None, :, None]) + 0.0 * u[None, None, :]
+    values = evaluate_carried(MODEL, px.ravel(), py.ravel(), pk)
+    floor = SPEED_FLOOR * MODEL.peak_lower_bound()
+    assert np.max(np.abs(values - values[pk.channel("prior")]), initial=0.0) <= floor
+    # the claim is not empty: some cells beyond the box's reach (the rings span +-6 km)
+    assert (~weighted).sum() > 0
+
+
+def test_unweighted_cells_in_the_plan():
+    """The plan with cells proved unweighted (their every channel the prior's cells, given or
+    computed by ``rasterise``) against the plan that carries every cell: within 1e-9 of the
+    mass (the two prior cell rules' agreement, test_prior_channel_is_the_prior_cell_rule), and
+    the posterior built on either agrees to the same; most of this grid is unweighted."""
+    evidence = [bg.AreaSearch([(2000, 2000), (3000, 2000), (3000, 3000), (2000, 3000)], t=(300.0, 400.0), pod=0.9)]
+    grid = bg.Grid.from_bounds(x=(-7000.0, 7000.0), y=(-7000.0, 7000.0), step=700.0)
+    pk = pack(evidence, MODEL.t)
+    ctx = WarpContext(np.float64, "cpu", None)
+    fast, notes = MODEL.carried_cell_plan(grid, pk).run(ctx)
+    given_prior = bg.rasterise(MODEL, grid, quantity="probability", min_mass=0).values
+    fast_given, _ = MODEL.carried_cell_plan(grid, pk, prior_cells=given_prior).run(ctx)
+    np.testing.assert_array_equal(fast, fast_given)
+    with mock.patch.object(bg.Butterly, "weighted_cells", lambda self, p, x, y: np.ones((y.size - 1, x.size - 1), bool)):
+        slow, slow_notes = MODEL.carried_cell_plan(grid, pk).run(ctx)
+        slow_post = bg.posterior(MODEL, grid, evidence)
+    assert notes["cells_unweighted"] > notes["cells_computed"] > 0
+    assert slow_notes["cells_unweighted"] == 0
+    for c in range(fast.shape[0]):
+        np.testing.assert_allclose(fast[c], slow[c], rtol=0.0, atol=1e-9 * slow[c].sum())
+    post = bg.posterior(MODEL, grid, evidence)
+    np.testing.assert_allclose(post.values, slow_post.values, rtol=0.0, atol=1e-9)
+    assert abs(post.pos - slow_post.pos) <= 1e-9
