@@ -51,6 +51,7 @@ PICTURED = {
     "slow_contact": (40.0, None, ()),
     "geo_ship": (50.0, None, ()),
     "geo_bearing": (50.0, None, ()),
+    "fast_contact": (100.0, 600.0, ()),
 }
 
 #: The gallery's caption of each picture, and the picture's alternative text. A pictured scene
