@@ -941,6 +941,33 @@ def active_polygons(ev: Any, p: Any, x: Any, y: Any, r: Any):
 
 
 @wp.func
+def circle_breaks(edges: Any, first: int, n_edges: int, x: Any, y: Any, radius: Any, sx: Any, sy: Any, lo: Any,
+                  hi: Any, buf: Any, who: Any, count: int, node: int):
+    """Insert into the window (:func:`insert_break`, made by ``node``) the course offsets in
+    (lo, hi), from the peak's direction (sx, sy), where the circle of ``radius`` about (x, y)
+    crosses the edges ``edges[first:first + n_edges]``: (buf, who, count)."""
+    two_pi = type(x)(TWO_PI)
+    for e in range(first, first + n_edges):
+        ax = edges[e, 0]
+        ay = edges[e, 1]
+        bx = edges[e, 2]
+        by = edges[e, 3]
+        hits, u1, u2 = circle_edge_crossings(x, y, radius, ax, ay, bx, by)
+        for h in range(hits):
+            u = u1
+            if h == 1:
+                u = u2
+            ex = (x - (ax + u * (bx - ax))) / radius
+            ey = (y - (ay + u * (by - ay))) / radius
+            d = wp.atan2(sx * ey - sy * ex, sx * ex + sy * ey)
+            for wrap in range(3):
+                dd = d + type(x)(float(wrap - 1)) * two_pi
+                if dd > lo and dd < hi:
+                    buf, who, count = insert_break(buf, who, count, dd, node)
+    return buf, who, count
+
+
+@wp.func
 def polygon_node(p: Any, active: Any, count: int, k: int):
     """The k-th polygon node to visit: from the active list, or every polygon node (count -1)."""
     if count < 0:
@@ -965,29 +992,12 @@ def window_breaks(x: Any, y: Any, r: Any, p: Any, active: Any, n_active: int, sx
     buf = wp.vector(length=BREAKS, dtype=type(x))
     who = wp.vector(length=BREAKS, dtype=wp.int32)
     count = int(0)
-    two_pi = type(x)(TWO_PI)
     for k in range(visits(p, n_active)):
         j = polygon_node(p, active, n_active, k)
         radius = node_radius(ev, j, r, p.t)
         if circle_meets_box(ev, j, x, y, radius):
-            first = ev.ints[j, 2]
-            for e in range(first, first + ev.ints[j, 3]):
-                ax = ev.edges[e, 0]
-                ay = ev.edges[e, 1]
-                bx = ev.edges[e, 2]
-                by = ev.edges[e, 3]
-                hits, u1, u2 = circle_edge_crossings(x, y, radius, ax, ay, bx, by)
-                for h in range(hits):
-                    u = u1
-                    if h == 1:
-                        u = u2
-                    ex = (x - (ax + u * (bx - ax))) / radius
-                    ey = (y - (ay + u * (by - ay))) / radius
-                    d = wp.atan2(sx * ey - sy * ex, sx * ex + sy * ey)
-                    for wrap in range(3):
-                        dd = d + type(x)(float(wrap - 1)) * two_pi
-                        if dd > lo and dd < hi:
-                            buf, who, count = insert_break(buf, who, count, dd, k)
+            buf, who, count = circle_breaks(ev.edges, ev.ints[j, 2], ev.ints[j, 3], x, y, radius, sx, sy, lo, hi,
+                                            buf, who, count, k)
     return segment_breaks(x, y, r, p, ev, sx, sy, lo, hi, buf, who, count)
 
 
@@ -1253,23 +1263,8 @@ def segment_breaks(x: Any, y: Any, r: Any, p: Any, ev: Any, sx: Any, sy: Any, lo
             if end == 1:
                 radius = r_near
             if radius > zero:
-                for e in range(first, first + n_edges):
-                    ax = ev.edges[e, 0]
-                    ay = ev.edges[e, 1]
-                    bx = ev.edges[e, 2]
-                    by = ev.edges[e, 3]
-                    hits, u1, u2 = circle_edge_crossings(x, y, radius, ax, ay, bx, by)
-                    for h in range(hits):
-                        u = u1
-                        if h == 1:
-                            u = u2
-                        ex = (x - (ax + u * (bx - ax))) / radius
-                        ey = (y - (ay + u * (by - ay))) / radius
-                        d = wp.atan2(sx * ey - sy * ex, sx * ex + sy * ey)
-                        for wrap in range(3):
-                            dd = d + type(x)(float(wrap - 1)) * two_pi
-                            if dd > lo and dd < hi:
-                                buf, who, count = insert_break(buf, who, count, dd, -1)
+                buf, who, count = circle_breaks(ev.edges, first, n_edges, x, y, radius, sx, sy, lo, hi, buf, who,
+                                                count, -1)
         for e in range(first, first + n_edges):
             vx = x - ev.edges[e, 0]
             vy = y - ev.edges[e, 1]

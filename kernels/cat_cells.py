@@ -254,16 +254,22 @@ def polygon_state(ev: Earlier, p: int, k: int, s: wp.float64, lo: wp.float64, hi
 
 
 @wp.func
+def mask_weight(ev: Earlier, mask: int):
+    """The weight of a path inside the polygons of the bit mask ``mask``: the product of their
+    factors (1 - POD, 0 on land)."""
+    w = wp.float64(1.0)
+    for p in range(ev.count):
+        if (mask >> p) & 1 == 1:
+            w = w * ev.miss[p]
+    return w
+
+
+@wp.func
 def add_channels(ev: Earlier, inside: int, value: wp.float64, i: int, j: int, out: wp.array3d(dtype=wp.float64)):
     """Add ``value`` times each channel's weight of a path inside the polygons of the bit mask
     ``inside`` to cell (i, j) of every channel."""
     for c in range(ev.channels):
-        m = ev.masks[c] & inside
-        w = wp.float64(1.0)
-        for p in range(ev.count):
-            if (m >> p) & 1 == 1:
-                w = w * ev.miss[p]
-        out[c, j, i] += w * value
+        out[c, j, i] += mask_weight(ev, ev.masks[c] & inside) * value
 
 
 @wp.func
@@ -272,14 +278,8 @@ def add_cut_channels(ev: Earlier, cut: int, inside: int, value: wp.float64, i: i
     """:func:`add_channels` for the channels whose mask meets ``cut`` only (the others take the
     plain rule's terms for the sub-piece, :func:`add_uncut_channels`)."""
     for c in range(ev.channels):
-        m = ev.masks[c]
-        if m & cut != 0:
-            m = m & inside
-            w = wp.float64(1.0)
-            for p in range(ev.count):
-                if (m >> p) & 1 == 1:
-                    w = w * ev.miss[p]
-            out[c, j, i] += w * value
+        if ev.masks[c] & cut != 0:
+            out[c, j, i] += mask_weight(ev, ev.masks[c] & inside) * value
 
 
 @wp.func
@@ -288,14 +288,8 @@ def add_uncut_channels(ev: Earlier, cut: int, inside: int, value: wp.float64, i:
     """:func:`add_channels` for the channels whose mask misses ``cut`` only: their weight is
     constant over a sub-piece that only ``cut``'s polygons cut (the prior's is 1)."""
     for c in range(ev.channels):
-        m = ev.masks[c]
-        if m & cut == 0:
-            m = m & inside
-            w = wp.float64(1.0)
-            for p in range(ev.count):
-                if (m >> p) & 1 == 1:
-                    w = w * ev.miss[p]
-            out[c, j, i] += w * value
+        if ev.masks[c] & cut == 0:
+            out[c, j, i] += mask_weight(ev, ev.masks[c] & inside) * value
 
 
 @wp.func
