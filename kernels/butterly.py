@@ -1295,11 +1295,10 @@ def add_smooth(ev: Any, p: Any, x: Any, y: Any, ex: Any, ey: Any, r: Any, lw: wp
 
 
 @wp.func
-def gauss_piece(a: Any, b: Any, spacing: Any, cx: Any, cy: Any, q1x: Any, q1y: Any, c1: Any, c2: Any, p11: Any,
-                p12: Any, p22: Any, log_scale: Any, rule: Any):
-    """The integral of exp(E + log_scale) over theta* + (a, b) by the pieces' rule (the fewest
-    equal panels no wider than the highest order's limit, each by the lowest order covering it)."""
-    half = type(a)(0.5)
+def panel_rule(a: Any, b: Any, spacing: Any, rule: Any):
+    """The pieces' rule on (a, b): the fewest equal panels no wider than the highest order's
+    limit (in units of ``spacing``), each by the lowest order whose limit covers it:
+    (panels m, panel width h, order, offset of its nodes and weights in ``rule``)."""
     width = (b - a) / spacing
     m = int(wp.ceil(width / rule[ORDER_LIMIT + N_ORDERS - 1]))
     if m < 1:
@@ -1309,8 +1308,16 @@ def gauss_piece(a: Any, b: Any, spacing: Any, cx: Any, cy: Any, q1x: Any, q1y: A
     for i in range(N_ORDERS - 1):
         if level == N_ORDERS - 1 and width <= type(a)(m) * rule[ORDER_LIMIT + i]:
             level = i
-    order = int(rule[ORDER_N + level])
-    at = int(rule[ORDER_AT + level])
+    return m, h, int(rule[ORDER_N + level]), int(rule[ORDER_AT + level])
+
+
+@wp.func
+def gauss_piece(a: Any, b: Any, spacing: Any, cx: Any, cy: Any, q1x: Any, q1y: Any, c1: Any, c2: Any, p11: Any,
+                p12: Any, p22: Any, log_scale: Any, rule: Any):
+    """The integral of exp(E + log_scale) over theta* + (a, b) by the pieces' rule (the fewest
+    equal panels no wider than the highest order's limit, each by the lowest order covering it)."""
+    half = type(a)(0.5)
+    m, h, order, at = panel_rule(a, b, spacing, rule)
     total = type(a)(0.0)
     for k in range(m):
         mid = a + (type(a)(k) + half) * h
@@ -1420,19 +1427,7 @@ def carried_arc(
                             polygon_weights(ev, p, active, n_active, cached, lw)
                 fresh = int(0)
                 applied = piece
-                # the fewest panels no wider than the highest order's limit, each by the lowest
-                # order whose limit covers it
-                width = (b - a) / spacing
-                m = int(wp.ceil(width / rule[ORDER_LIMIT + N_ORDERS - 1]))
-                if m < 1:
-                    m = 1
-                h = (b - a) / type(x)(m)
-                level = int(N_ORDERS - 1)
-                for i in range(N_ORDERS - 1):
-                    if level == N_ORDERS - 1 and width <= type(x)(m) * rule[ORDER_LIMIT + i]:
-                        level = i
-                order = int(rule[ORDER_N + level])
-                at = int(rule[ORDER_AT + level])
+                m, h, order, at = panel_rule(a, b, spacing, rule)
                 piece_smooth = smooth
                 if smooth > 0 and p.smooth_nodes.shape[0] == 0:
                     # only searches over intervals: the piece's weight is constant where no

@@ -336,18 +336,26 @@ def weighted_share(ev: Earlier, active: int, base: int, k: int, s: wp.float64, l
 
 
 @wp.func
+def patch_box(ev: Earlier, p: int, k: int, s0: wp.float64, s1: wp.float64, z0: wp.float64, z1: wp.float64):
+    """The box (x_lo, x_hi, y_lo, y_hi) of the four corners of polygon p's earlier points of the
+    lines s in [s0, s1], z in [z0, z1] (a bilinear patch lies inside their hull)."""
+    ax, ay, aqx, aqy = earlier_line(ev, p, k, s0)
+    bx, by, bqx, bqy = earlier_line(ev, p, k, s1)
+    x_lo = wp.min(wp.min(ax + z0 * aqx, ax + z1 * aqx), wp.min(bx + z0 * bqx, bx + z1 * bqx))
+    x_hi = wp.max(wp.max(ax + z0 * aqx, ax + z1 * aqx), wp.max(bx + z0 * bqx, bx + z1 * bqx))
+    y_lo = wp.min(wp.min(ay + z0 * aqy, ay + z1 * aqy), wp.min(by + z0 * bqy, by + z1 * bqy))
+    y_hi = wp.max(wp.max(ay + z0 * aqy, ay + z1 * aqy), wp.max(by + z0 * bqy, by + z1 * bqy))
+    return x_lo, x_hi, y_lo, y_hi
+
+
+@wp.func
 def patch_active(ev: Earlier, k: int, s0: wp.float64, s1: wp.float64, z0: wp.float64, z1: wp.float64):
     """Bit mask of the polygons whose bounding box meets that of the earlier points of the
     lines s in [s0, s1], z in [z0, z1] (a bilinear patch, inside the hull of its four
     corners); a polygon whose box it misses is outside for all of them."""
     active = int(0)
     for p in range(ev.count):
-        ax, ay, aqx, aqy = earlier_line(ev, p, k, s0)
-        bx, by, bqx, bqy = earlier_line(ev, p, k, s1)
-        x_lo = wp.min(wp.min(ax + z0 * aqx, ax + z1 * aqx), wp.min(bx + z0 * bqx, bx + z1 * bqx))
-        x_hi = wp.max(wp.max(ax + z0 * aqx, ax + z1 * aqx), wp.max(bx + z0 * bqx, bx + z1 * bqx))
-        y_lo = wp.min(wp.min(ay + z0 * aqy, ay + z1 * aqy), wp.min(by + z0 * bqy, by + z1 * bqy))
-        y_hi = wp.max(wp.max(ay + z0 * aqy, ay + z1 * aqy), wp.max(by + z0 * bqy, by + z1 * bqy))
+        x_lo, x_hi, y_lo, y_hi = patch_box(ev, p, k, s0, s1, z0, z1)
         box = ev.boxes[p]
         if x_hi >= box[0] and x_lo <= box[1] and y_hi >= box[2] and y_lo <= box[3]:
             active = active | (1 << p)
@@ -364,12 +372,7 @@ def patch_state(ev: Earlier, near: int, k: int, s0: wp.float64, s1: wp.float64, 
     inside = int(0)
     for p in range(ev.count):
         if (near >> p) & 1 == 1:
-            ax, ay, aqx, aqy = earlier_line(ev, p, k, s0)
-            bx, by, bqx, bqy = earlier_line(ev, p, k, s1)
-            x_lo = wp.min(wp.min(ax + z0 * aqx, ax + z1 * aqx), wp.min(bx + z0 * bqx, bx + z1 * bqx))
-            x_hi = wp.max(wp.max(ax + z0 * aqx, ax + z1 * aqx), wp.max(bx + z0 * bqx, bx + z1 * bqx))
-            y_lo = wp.min(wp.min(ay + z0 * aqy, ay + z1 * aqy), wp.min(by + z0 * bqy, by + z1 * bqy))
-            y_hi = wp.max(wp.max(ay + z0 * aqy, ay + z1 * aqy), wp.max(by + z0 * bqy, by + z1 * bqy))
+            x_lo, x_hi, y_lo, y_hi = patch_box(ev, p, k, s0, s1, z0, z1)
             box = ev.boxes[p]
             if x_hi >= box[0] and x_lo <= box[1] and y_hi >= box[2] and y_lo <= box[3]:
                 hit = bool(False)
@@ -387,6 +390,7 @@ def patch_state(ev: Earlier, near: int, k: int, s0: wp.float64, s1: wp.float64, 
                 if hit:
                     cut = cut | (1 << p)
                 else:
+                    ax, ay, aqx, aqy = earlier_line(ev, p, k, s0)
                     inside = inside | (point_in_polygon(ev, p, ax + z0 * aqx, ay + z0 * aqy) << p)
     return cut, inside
 
