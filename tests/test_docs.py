@@ -230,6 +230,8 @@ def test_shown_commands_run(workdir):
 def check_front_page(ns):
     assert f"{ns['r'].mass:.10f}" == "0.9999999934"
     assert f"{ns['post'].pos:.8f}" == "0.39999930"
+    assert f"{ns['plan'].pos:.3f}" == "0.850"
+    assert (f"{ns['flown'].pos:.3f}", [r.legs for r in ns["flown"].rectangles]) == ("0.815", [2, 3, 5])
 
 
 def check_home(ns):
