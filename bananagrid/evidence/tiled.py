@@ -59,7 +59,7 @@ from ..models.presence import UniformPresence
 from .posterior import MIN_NORMALISER, SUBDIVISIONS, CellMeans, Posterior, cell_means, finish_cells
 from .searches import AreaSearch, TrackSearch
 
-__all__ = ["posterior_tiles", "TiledPosterior", "block_cells", "empty_block", "channel_names", "posterior_numbers",
+__all__ = ["posterior_tiles", "TiledPosterior", "PosteriorMaps", "block_cells", "empty_block", "channel_names", "posterior_numbers",
            "check_normaliser", "block_grid"]
 
 
@@ -240,12 +240,32 @@ class TiledPosterior:
             The prior holds no mass on the grid, or the evidence contradicts it (normaliser
             below :data:`~bananagrid.evidence.posterior.MIN_NORMALISER`), as ``bg.posterior``.
         """
-        *sums, bound = (float(v) for v in compute_with_progress(*self.lazy_sums(), progress=progress))
+        return self.finish_sums(compute_with_progress(*self.lazy_sums(), progress=progress))
+
+    def finish_sums(self, sums) -> dict:
+        """:meth:`numbers` from the computed :meth:`lazy_sums` (several posteriors' sums computed
+        in one pass, then each finished; raises as :meth:`numbers`)."""
+        *sums, bound = (float(v) for v in sums)
         prior_mass, q_sum, given, *search_sums = sums
         self._covered(prior_mass)
         found = posterior_numbers(prior_mass, q_sum, given, search_sums)
         check_normaliser(found)
         return {**found, "boundary_mass": None if math.isnan(bound) else bound}
+
+    def maps(self, numbers: dict | None = None, *, progress: bool = False) -> "PosteriorMaps":
+        """The posterior's maps, lazy, with its global numbers (:meth:`numbers`, computed here
+        unless given): what ``bg.posterior``'s :class:`~bananagrid.evidence.posterior.Posterior`
+        holds, its maps as Dask arrays and its provenance's ``posterior`` entry with the same
+        keys, so that :func:`~bananagrid.geo.dataset.raster_dataset` and
+        :func:`~bananagrid.geo.zarr_store.write_zarr` take it as they take a ``Posterior``."""
+        numbers = self.numbers(progress=progress) if numbers is None else numbers
+        info = {"pos": numbers["pos"], "search_pos": list(numbers["search_pos"]), "normaliser": numbers["normaliser"],
+                "prior_mass": numbers["prior_mass"], "boundary_mass": numbers["boundary_mass"],
+                "subdivisions": self.subdivisions, "evidence": [e.describe() for e in self.evidence]}
+        return PosteriorMaps(values=self.unnormalised / numbers["mass"], pod=self.pod, prior=self._channel("prior"),
+                             grid=self.grid, pos=numbers["pos"], search_pos=tuple(numbers["search_pos"]),
+                             normaliser=numbers["normaliser"], prior_mass=numbers["prior_mass"], mass=numbers["mass"],
+                             provenance={**self.provenance, "posterior": info}, frame=self.frame)
 
     def _covered(self, prior_mass: float) -> None:
         """The whole grid's warning of ``bg.posterior`` (its prior's ``rasterise``) where it
@@ -308,6 +328,51 @@ class TiledPosterior:
         skipped = 0 if self.skipped is None else int(self.skipped.sum())
         return (f"TiledPosterior({g.nx} x {g.ny} cells in {blocks} blocks of {self.chunks[0]} x {self.chunks[1]}, "
                 f"{skipped} skipped, {len(self.evidence)} evidence, model {type(self.prior).__name__})")
+
+
+@dataclass(frozen=True)
+class PosteriorMaps:
+    """A tiled posterior's maps, lazy, with its global numbers (:meth:`TiledPosterior.maps`):
+    the attributes of :class:`~bananagrid.evidence.posterior.Posterior`, the maps Dask arrays in
+    the posterior's blocks.
+
+    Attributes
+    ----------
+    values : dask.array.Array (ny, nx)
+        Posterior cell probabilities (POC), summing to one over the grid.
+    pod : dask.array.Array (ny, nx)
+        The cumulative POD of each cell.
+    prior : dask.array.Array (ny, nx)
+        The prior's cell probabilities P_c.
+    grid : Grid
+    pos, search_pos, normaliser
+        As :class:`~bananagrid.evidence.posterior.Posterior`'s.
+    prior_mass : float
+        The sum of the prior's cells (S_P).
+    mass : float
+        The sum of the unnormalised posterior cells (S_all).
+    provenance : dict
+        The prior's, with the blocks, and ``posterior``: the keys ``bg.posterior`` writes there.
+    frame : GeoFrame or None
+    """
+
+    values: object
+    pod: object
+    prior: object
+    grid: Grid
+    pos: float
+    search_pos: tuple
+    normaliser: float
+    prior_mass: float
+    mass: float
+    provenance: dict = field(default_factory=dict)
+    frame: object = None
+    quantity: str = "probability"
+    normalised: bool = True
+
+    def __repr__(self) -> str:
+        g = self.grid
+        return f"PosteriorMaps({g.nx} x {g.ny} cells, lazy, POS {self.pos:.6g}, normaliser {self.normaliser:.6g})"
 
 
 def posterior_tiles(prior, grid: Grid, evidence=(), chunks=DEFAULT_CHUNK, *, subdivisions: int = SUBDIVISIONS,

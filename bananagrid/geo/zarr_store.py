@@ -34,7 +34,7 @@ from .panels import check_panels
 from .libraries import CLUSTER_EXTRA, CLUSTER_PURPOSE, require
 
 __all__ = ["write_zarr", "write_batch_zarr", "ZARR_FORMAT", "compute_with_progress", "is_bananagrid_store",
-           "check_store_target", "STORE"]
+           "check_store_target", "STORE", "layer_variables"]
 
 #: Zarr format of the stores (v3: its ``fill_value`` is separate from CF's ``_FillValue``, so a
 #: block never written reads as 0 and no zero is read as missing).
@@ -135,7 +135,7 @@ def _current_client():
 
 
 def write_zarr(path: str | os.PathLike, panels: Sequence, frame=None, *, title: str = "", source: str = "",
-               progress: bool = False, stage=None, cells=None) -> Path:
+               progress: bool = False, stage=None, cells=None, posteriors=None) -> Path:
     """Write a scene's maps to the Zarr store ``path`` (a directory), whole or not at all.
 
     Parameters
@@ -157,6 +157,11 @@ def write_zarr(path: str | os.PathLike, panels: Sequence, frame=None, *, title: 
     cells : mapping of (str, float) to Raster, optional
         Cell probabilities by ``(layer, t)`` (rasters in memory), stored as ``LAYER_probability``
         as :func:`~bananagrid.geo.dataset.raster_dataset` puts them in the NetCDF.
+    posteriors : mapping of (str, float) to Posterior, optional
+        Posteriors by ``(layer, t)`` (``bg.posterior``'s, or a tiled posterior's lazy maps,
+        :meth:`bananagrid.evidence.tiled.TiledPosterior.maps`), stored as
+        :func:`~bananagrid.geo.dataset.raster_dataset` puts them in the NetCDF:
+        ``LAYER_posterior``, ``LAYER_pod``, ``LAYER_pos`` and ``LAYER_search_pos``.
 
     Returns
     -------
@@ -173,7 +178,7 @@ def write_zarr(path: str | os.PathLike, panels: Sequence, frame=None, *, title: 
     """
     xr = require("xarray", CLUSTER_PURPOSE, CLUSTER_EXTRA)
     final = check_store_target(path)
-    dataset = raster_dataset(panels, frame, title=title, source=source, cells=cells)
+    dataset = raster_dataset(panels, frame, title=title, source=source, cells=cells, posteriors=posteriors)
     if not isinstance(dataset, xr.Dataset):  # pragma: no cover - raster_dataset always returns one
         raise BananagridError("write_zarr: expected the maps as an xarray.Dataset")
     encoding = {}
@@ -188,12 +193,20 @@ def write_zarr(path: str | os.PathLike, panels: Sequence, frame=None, *, title: 
     return final
 
 
+def layer_variables(dataset) -> dict:
+    """``{layer: variable name}`` of the layers' density variables of a dataset of
+    :func:`~bananagrid.geo.dataset.raster_dataset` (or a store of it): those with a
+    ``bananagrid_layer`` in units of density (a posterior's, POD's and POS's variables name
+    their layer too)."""
+    return {var.attrs["bananagrid_layer"]: name for name, var in dataset.data_vars.items()
+            if "bananagrid_layer" in var.attrs and var.attrs.get("units") == DENSITY_UNITS}
+
+
 def _computed_pieces(dataset, panels: list) -> dict:
     """``{variable: [(block, region), ...]}``: for each layer all of whose maps are tiled, the
     blocks that are not skipped and where each goes, so that a skipped block is not even a task
     (the layer's times in ``raster_dataset``'s order: by ``t``)."""
-    names = {var.attrs["bananagrid_layer"]: name for name, var in dataset.data_vars.items()
-             if "bananagrid_layer" in var.attrs}
+    names = layer_variables(dataset)
     series: dict[str, list] = {}
     for panel in panels:
         series.setdefault(panel.layer, []).append(panel)

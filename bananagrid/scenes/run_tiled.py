@@ -10,40 +10,128 @@ same pass, so a reader divides by it to normalise. With ``output.cell_probabilit
 each cell's probability (POC) is stored beside its layer (``LAYER_probability``), computed in
 the same tiles by the cell rules. No recording is written (a viewer cannot
 hold such grids; ``bananagrid run`` without ``--zarr`` records a scene that fits in memory).
+
+A scene with ``[[evidence]]`` stores each map's posterior beside it, as the NetCDF export of the
+same scene does (:func:`~bananagrid.geo.dataset.raster_dataset`): ``LAYER_posterior`` (the
+posterior cell probabilities, summing to one), ``LAYER_pod`` (each cell's cumulative POD),
+``LAYER_pos`` (the searches' POS at each time), ``LAYER_search_pos`` (each search's own) and the
+evidence's provenance (``bananagrid_evidence``). Each posterior is the in-memory run's
+(:func:`~bananagrid.scenes.run_evidence.scene_posterior`: the layer's model on the scene's grid
+after the evidence that began by the map's time) computed in blocks by
+:func:`~bananagrid.evidence.tiled.posterior_tiles`, in two passes: the sums of every map's
+posterior in one (the normaliser, POS and each search's POS are global; evidence that contradicts
+a prior is refused there, before the store is begun), then the maps, with the priors' densities,
+in the store's. Refused still: an ``[array]`` scene and a ``[plan]`` (one line each).
 """
 
 from __future__ import annotations
 
 import time
-from dataclasses import replace
+from dataclasses import dataclass, replace
 from pathlib import Path
+from types import SimpleNamespace
 
 import numpy as np
 
+from ..atomic import OutputWriteError
+from ..engine.cluster import worker_need
 from ..engine.tiles import rasterise_tiles
+from ..evidence.tiled import TiledPosterior, posterior_tiles
 from ..geo.libraries import CLUSTER_EXTRA, CLUSTER_PURPOSE, require
-from ..geo.zarr_store import check_store_target, write_zarr
+from ..geo.zarr_store import STORE, check_store_target, compute_with_progress, layer_variables, write_zarr
+from ..recording.evidence import evidence_values
 from ..results import TiledRaster
 from ..validate import BananagridError
-from .load import Scene
+from .evidence import job_evidence
+from .load import Layer, Scene
+from .run_evidence import EVIDENCE_BYTES_PER_CELL, EVIDENCE_BYTES_PER_PIECE, ScenePosterior, scene_error, scene_named
 
-__all__ = ["run_scene_tiled", "tiled_maps", "check_tiled", "format_tiled_summary"]
+__all__ = ["run_scene_tiled", "tiled_maps", "check_tiled", "format_tiled_summary", "TiledJob", "tiled_posteriors",
+           "finish_posteriors", "posterior_worker_need"]
 
 
 def check_tiled(scene: Scene) -> Scene:
     """Refuse what cannot be tiled: an [array] scene (angular cells, not a grid), a scene that
-    plans a search (a plan needs the cell probabilities of its whole map in memory), a scene
-    with evidence (each posterior is normalised over its whole map)."""
+    plans a search (a plan needs the cell probabilities of its whole map in memory)."""
     if not scene.gridded:
         raise BananagridError(f"{scene.source}: --zarr: an [array] scene's angular cells are not a grid; "
                               "run it without --zarr")
     if scene.plan is not None:
         raise BananagridError(f"{scene.source}: --zarr computes maps in tiles; a [plan] needs its map's cell "
                               "probabilities in memory: run it without --zarr (or drop [plan])")
-    if scene.evidence:
-        raise BananagridError(f"{scene.source}: --zarr computes maps in tiles; a posterior after [[evidence]] is "
-                              "normalised over its whole map, in memory: run it without --zarr (or drop [[evidence]])")
     return scene
+
+
+@dataclass(frozen=True)
+class TiledJob:
+    """One map's posterior in a tiled run, lazily: the layer, the time, the scene's evidence it
+    takes (that which began by ``t``) and its :class:`~bananagrid.evidence.tiled.TiledPosterior`."""
+
+    layer: Layer
+    t: float
+    used: tuple
+    tiles: TiledPosterior
+
+
+def tiled_posteriors(scene: Scene, chunks) -> list[TiledJob]:
+    """Each map's posterior after the scene's evidence, lazily (none without ``[[evidence]]``),
+    checked now as the in-memory run checks it (``posterior_tiles`` runs every check of
+    ``bg.posterior`` on one cell): what it refuses is one line naming the scene, the layer, the
+    time and the scene's ``evidence[k]``."""
+    if not scene.evidence:
+        return []
+    jobs = []
+    for layer, t in scene.jobs():
+        used = tuple(job_evidence(scene.evidence, t))
+        try:
+            tiles = posterior_tiles(layer.model(t), scene.grid, [s.evidence for s in used], chunks)
+        except BananagridError as exc:
+            raise scene_error(scene, layer, t, used, exc) from None
+        jobs.append(TiledJob(layer, float(t), used, tiles))
+    return jobs
+
+
+def finish_posteriors(scene: Scene, jobs: list[TiledJob], *, progress: bool = False) -> list[ScenePosterior]:
+    """The posteriors' global numbers, every map's sums in one pass over their blocks, and each
+    map's :class:`~bananagrid.scenes.run_evidence.ScenePosterior` holding its lazy maps
+    (:meth:`~bananagrid.evidence.tiled.TiledPosterior.maps`) named as the in-memory run names them.
+
+    Raises
+    ------
+    BananagridError
+        Evidence that contradicts a map's prior, or a grid where the prior holds no mass: one
+        line naming the scene, the layer and the time, as the in-memory run.
+    """
+    if not jobs:
+        return []
+    lazy = [job.tiles.lazy_sums() for job in jobs]
+    computed = iter(compute_with_progress(*[s for sums in lazy for s in sums], progress=progress))
+    found = []
+    for job, sums in zip(jobs, lazy):
+        mine = [next(computed) for _ in sums]
+        try:
+            numbers = job.tiles.finish_sums(mine)
+        except BananagridError as exc:
+            raise scene_error(scene, job.layer, job.t, job.used, exc) from None
+        post = scene_named(scene, job.used, job.tiles.maps(numbers))
+        # evidence_values sums the prior's cells for its prior mass: here the blocks' sum, known
+        summed = SimpleNamespace(pos=post.pos, normaliser=post.normaliser, search_pos=post.search_pos,
+                                 prior=post.prior_mass)
+        values = evidence_values(summed, job.used, scene.evidence, layer=job.layer.name, t=job.t)
+        found.append(ScenePosterior(layer=job.layer.name, t=job.t, posterior=post, used=job.used, values=values))
+    return found
+
+
+def posterior_worker_need(job: TiledJob) -> int:
+    """Bytes a worker needs for one block of ``job``'s posterior: a prior's block
+    (:func:`~bananagrid.engine.cluster.worker_need`), the block's channels twice (computed, then
+    handed on) and the in-memory run's measured bytes per cell of ``bg.posterior``
+    (:data:`~bananagrid.scenes.run_evidence.EVIDENCE_BYTES_PER_CELL` and a share per piece)."""
+    rows, cols = job.tiles.chunks
+    cells = rows * cols
+    channels = len(job.tiles.names)
+    return (worker_need((rows, cols)) + cells * 2 * 8 * channels
+            + cells * (EVIDENCE_BYTES_PER_CELL + EVIDENCE_BYTES_PER_PIECE * len(job.used)))
 
 
 def tiled_maps(scene: Scene, chunks, *, max_seconds: float | None = None,
@@ -63,9 +151,11 @@ def tiled_maps(scene: Scene, chunks, *, max_seconds: float | None = None,
 def run_scene_tiled(scene: Scene, path: Path, chunks, *, progress: bool = False,
                     max_seconds: float | None = None) -> list[dict]:
     """Compute ``scene`` in tiles into the Zarr store ``path``; returns one summary row per map
-    (:func:`format_tiled_summary`), read back from the store. A ``path`` that is not absent, an
-    empty directory or a store of ours is refused before any computing
-    (:func:`~bananagrid.geo.zarr_store.check_store_target`)."""
+    (:func:`format_tiled_summary`), read back from the store; with ``[[evidence]]`` each row's
+    ``evidence`` holds its posterior's numbers
+    (:func:`~bananagrid.recording.evidence.evidence_values`, as the in-memory run's rows). A
+    ``path`` that is not absent, an empty directory or a store of ours is refused before any
+    computing (:func:`~bananagrid.geo.zarr_store.check_store_target`)."""
     xr = require("xarray", CLUSTER_PURPOSE, CLUSTER_EXTRA)
     check_tiled(scene)
     check_store_target(path)
@@ -75,14 +165,21 @@ def run_scene_tiled(scene: Scene, path: Path, chunks, *, progress: bool = False,
     if scene.cell_probabilities:  # each cell's probability beside its density, in the same tiles
         cells = {(layer, t): tiled for layer, t, tiled in tiled_maps(scene, chunks, max_seconds=max_seconds,
                                                                       quantity="probability")}
-    write_zarr(path, panels, scene.geo, title=scene.title, source=scene.source, progress=progress, cells=cells)
+    # the posteriors' sums first (their normalisers are global), then every map in the store's pass
+    try:
+        found = finish_posteriors(scene, tiled_posteriors(scene, chunks), progress=progress)
+    except BananagridError:
+        raise
+    except Exception as exc:  # as write_zarr words a failure while computing (nothing is written yet)
+        reason = (str(exc) or type(exc).__name__).splitlines()[0]
+        raise OutputWriteError(f"{path}: cannot write the {STORE} ({type(exc).__name__}: {reason})") from None
+    write_zarr(path, panels, scene.geo, title=scene.title, source=scene.source, progress=progress, cells=cells,
+               posteriors={(p.layer, p.t): p.posterior for p in found} or None)
     seconds = time.perf_counter() - start
+    evidence = {(p.layer, p.t): p.values for p in found}
     rows = []
     with xr.open_zarr(path) as stored:
-        masses = {}
-        for name, var in stored.data_vars.items():
-            if "bananagrid_layer" in var.attrs:
-                masses[var.attrs["bananagrid_layer"]] = stored[f"{name}_mass"].values
+        masses = {layer: stored[f"{name}_mass"].values for layer, name in layer_variables(stored).items()}
         seen: dict[str, int] = {}
         for layer, t, tiled in panels:
             k = seen.get(layer, 0)
@@ -92,6 +189,8 @@ def run_scene_tiled(scene: Scene, path: Path, chunks, *, progress: bool = False,
                 "tiles": int(tiled.skipped.size), "skipped": int(tiled.skipped.sum()),
                 "computed": int(tiled.provenance["cells_computed"]), "mass": float(masses[layer][k]),
             })
+            if (layer, t) in evidence:  # the posterior's numbers, as the in-memory run's summary rows
+                rows[-1]["evidence"] = evidence[layer, t]
     for row in rows:
         row["seconds"] = seconds / len(rows)  # one pass computes every map: its time, shared
     return rows

@@ -1,0 +1,213 @@
+"""``bananagrid run SCENE --zarr`` on a scene with ``[[evidence]]``: each map's posterior computed
+in the store's tiles (bananagrid.scenes.run_tiled, bananagrid.evidence.tiled.posterior_tiles)
+holds what the NetCDF export of the same scene (in memory, ``bg.posterior``) holds: the same
+variables and attributes, the posterior, POD map, POS and each search's POS equal within
+:data:`TOL`; a geographic scene's store has latitude and longitude; the printed summary gives the
+POS lines of the in-memory run; what the in-memory run refuses is one line here too and leaves no
+store; a store is written whole or not at all.
+
+Tolerance: a block's cells run the same rules on the block as a grid of its own (cell edges the
+whole grid's to an ulp: engine.tiles, within 1e-14 of the largest cell), blocks the prior proves
+below 1e-13 of its peak are taken as 0, and the sums (normaliser, POS) run over the blocks in
+another order than over the whole grid (n eps of a sum of n cells at worst: 5e-13 for the 4,800
+cells here). 1e-12 of the largest cell (maps) and 1e-12 absolute (POS) hold all three with room
+(measured: 2.4e-17 absolute on a posterior whose largest cell is 0.013, POS to 1.1e-16).
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import dask
+import numpy as np
+import pytest
+import xarray as xr
+
+import bananagrid as bg
+from bananagrid import cli
+from bananagrid.cli import main
+from bananagrid.evidence import tiled
+from bananagrid.scenes import run_tiled
+from bananagrid.scenes.run_tiled import run_scene_tiled
+from test_evidence_scene import PLAIN, _write
+
+#: Module docstring: the same rules on a block's own edges, skipped blocks, sums in another order.
+TOL = 1e-12
+
+SCENES = Path(__file__).resolve().parents[2] / "scenes"
+
+#: The scenes exported both ways: ``(path maker, --step, chunks)``. ``ev_ship``: geographic (UTC
+#: times, lat/lon), a CAT and a still Butterly (blocks of 32 x 32 for its kernel's tiles, partial
+#: ones at the north and east edges), an area search, a track, land and a report at the second
+#: time, land alone at the first. ``fast_contact`` (the bundled scene at 400 m cells): a box searched
+#: at 5 min carried through the CAT's paths to 10 min and a patrol's track, blocks of 16 x 24 that do
+#: not divide the grid, blocks far from the banana skipped.
+CASES = {
+    "ev_ship": (lambda where: _write(where), None, (32, 32)),
+    "fast_contact": (lambda where: SCENES / "fast_contact.toml", 400.0, (16, 24)),
+}
+
+
+@pytest.fixture(scope="module", params=list(CASES))
+def exported(request, tmp_path_factory):
+    """The scene exported to NetCDF by the in-memory run (the CLI) and to Zarr in tiles (the
+    synchronous scheduler): the two datasets, the scene and the tiled run's summary rows."""
+    where = tmp_path_factory.mktemp(request.param)
+    make, step, chunks = CASES[request.param]
+    path = make(where)
+    argv = ["run", str(path), "--out", str(where), "--netcdf", "--quiet"]
+    assert main(argv + (["--step", str(step)] if step else [])) == 0
+    scene = bg.load_scene(path, tiled=True)
+    if step:
+        scene = scene.with_step(step, tiled=True)
+    store = where / "tiled.zarr"
+    with dask.config.set(scheduler="synchronous"):
+        rows = run_scene_tiled(scene, store, chunks)
+    with xr.open_dataset(where / f"{scene.name}.nc") as netcdf, xr.open_zarr(store) as zarr:
+        yield netcdf.load(), zarr.load(), scene, rows
+
+
+def _evidence(var) -> list:
+    return json.loads(var.attrs["bananagrid_evidence"])
+
+
+def test_the_store_holds_the_netcdfs_posteriors(exported):
+    netcdf, zarr, scene, _ = exported
+    layers = [layer.name for layer in scene.layers]
+    derived = ("posterior", "pod", "pos", "search_pos")
+    assert set(netcdf.data_vars) == set(zarr.data_vars)  # the same variables, nothing left out
+    assert {f"{layer}_{d}" for layer in layers for d in derived} <= set(zarr.data_vars)
+    assert set(netcdf.coords) == set(zarr.coords)
+    assert list(zarr["search"].values) == list(netcdf["search"].values) == [s.name for s in scene.evidence if s.search]
+    for layer in layers:
+        for d in derived:
+            got, want = zarr[f"{layer}_{d}"], netcdf[f"{layer}_{d}"]
+            assert got.dims == want.dims, (layer, d)
+            # the same attributes; the evidence's provenance holds the global numbers, compared below
+            assert {k: v for k, v in got.attrs.items() if k != "bananagrid_evidence"} == \
+                   {k: v for k, v in want.attrs.items() if k != "bananagrid_evidence"}, (layer, d)
+        post, pod = zarr[f"{layer}_posterior"].values, netcdf[f"{layer}_posterior"].values
+        assert np.max(np.abs(post - pod)) <= TOL * np.max(pod)
+        np.testing.assert_allclose(post.sum(axis=(1, 2)), 1.0, rtol=0, atol=TOL)  # cell probabilities
+        assert np.max(np.abs(zarr[f"{layer}_pod"].values - netcdf[f"{layer}_pod"].values)) <= TOL
+        np.testing.assert_allclose(zarr[f"{layer}_pos"].values, netcdf[f"{layer}_pos"].values, rtol=0, atol=TOL)
+        got, want = zarr[f"{layer}_search_pos"].values, netcdf[f"{layer}_search_pos"].values
+        assert np.array_equal(np.isnan(got), np.isnan(want))  # NaN before a search began
+        np.testing.assert_allclose(got[~np.isnan(got)], want[~np.isnan(want)], rtol=0, atol=TOL)
+        for a, b in zip(_evidence(zarr[f"{layer}_posterior"]), _evidence(netcdf[f"{layer}_posterior"])):
+            assert a.keys() == b.keys() and a["evidence"] == b["evidence"] and a["subdivisions"] == b["subdivisions"]
+            for key in ("pos", "normaliser", "prior_mass"):
+                assert a[key] == pytest.approx(b[key], abs=TOL), key
+            assert a["search_pos"] == pytest.approx(b["search_pos"], abs=TOL)
+            assert (a["boundary_mass"] is None) == (b["boundary_mass"] is None)
+        # the prior as the tiled export writes it: raw densities, the captured mass beside them
+        assert not zarr[f"{layer}_normalised"].values.any() and netcdf[f"{layer}_normalised"].values.all()
+        raw = zarr[layer].values / zarr[f"{layer}_mass"].values[:, None, None]
+        assert np.max(np.abs(raw - netcdf[layer].values)) <= TOL * np.max(netcdf[layer].values)
+
+
+def test_the_coordinates_are_the_netcdfs(exported):
+    """A geographic scene's store has the NetCDF's latitude, longitude, CRS and UTC times."""
+    netcdf, zarr, scene, _ = exported
+    for name in ("x", "y", "elapsed"):
+        np.testing.assert_array_equal(zarr[name].values, netcdf[name].values)
+    assert ("lat" in zarr.coords) == ("lon" in zarr.coords) == (scene.geo is not None)
+    if scene.geo is not None:
+        for name in ("lat", "lon"):
+            np.testing.assert_array_equal(zarr[name].values, netcdf[name].values)
+        np.testing.assert_array_equal(zarr["time"].values, netcdf["time"].values)
+        assert zarr["crs"].attrs["crs_wkt"] == netcdf["crs"].attrs["crs_wkt"]
+        assert zarr[f"{scene.layers[0].name}_posterior"].attrs["grid_mapping"] == "crs"
+
+
+def test_the_summary_rows_carry_the_stores_pos(exported):
+    _, zarr, scene, rows = exported
+    for row in rows:
+        k = list(zarr["elapsed"].values).index(row["t"])
+        found = row["evidence"]
+        assert (found["layer"], found["t"]) == (row["layer"], row["t"])
+        assert found["pos"] == float(zarr[f"{row['layer']}_pos"].values[k])
+        assert found["searches"] == [s.name for s in scene.evidence if s.search]
+
+
+def test_the_cli_prints_the_in_memory_runs_pos_lines(tmp_path, capsys):
+    """``run --zarr`` on a local cluster of worker processes: the posteriors' lines of the summary
+    are the in-memory run's, word for word (POS to 4 digits, the probability of the evidence to 4
+    significant digits: the two agree to 1e-12)."""
+    path = SCENES / "fast_contact.toml"
+    assert main(["run", str(path), "--out", str(tmp_path), "--step", "400", "--quiet"]) == 0
+    memory = [line for line in capsys.readouterr().out.splitlines() if ": posterior of " in line]
+    store = tmp_path / "fast_contact.zarr"
+    assert main(["run", str(path), "--zarr", str(store), "--step", "400", "--chunks", "16", "--workers", "1",
+                 "--memory-limit", "2GiB", "--quiet"]) == 0
+    out = capsys.readouterr().out
+    assert [line for line in out.splitlines() if ": posterior of " in line] == memory and len(memory) == 2
+    assert "cells computed" in out and f"wrote {store}" in out
+
+
+# --- what the in-memory run refuses, and whole or nothing ----------------------------------------
+
+POLAR_EARLIER = PLAIN.replace('model = "cat"', 'model = "polar"\nvariant = "improved"') + (
+    '[[evidence]]\nkind = "area_search"\npolygon = [[0, 0], [100, 0], [0, 100]]\nt = 4.0\npod = 0.5\n')
+#: A search of POD 1 over the whole grid at the map's time: the searches would have found it.
+EVERYWHERE = PLAIN + ('[[evidence]]\nkind = "area_search"\nname = "all"\n'
+                      'polygon = [[-4000, -1000], [4000, -1000], [4000, 4000], [-4000, 4000]]\nt = 10.0\npod = 1.0\n')
+
+
+@pytest.mark.parametrize("text, message", [
+    (POLAR_EARLIER, "layers.cat at t = 10 s: evidence[0].t = 4.0: earlier than the map's time"),
+    (EVERYWHERE, "layers.cat at t = 10 s: evidence: the probability of the evidence under the prior is 0"),
+])
+def test_what_the_in_memory_run_refuses_is_one_line_and_no_store(text, message, tmp_path, capsys):
+    scene = tmp_path / "s.toml"
+    scene.write_text(text)
+    assert main(["run", str(scene), "--out", str(tmp_path), "--quiet"]) == 2
+    memory = capsys.readouterr().err.splitlines()[-1]  # after the coarse grid's warning
+    assert main(["run", str(scene), "--zarr", str(tmp_path / "s.zarr"), "--workers", "1", "--quiet"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and message in err and "Traceback" not in err
+    assert err == memory + "\n"  # the in-memory run's line
+    assert not (tmp_path / "s.zarr").exists()
+
+
+@pytest.mark.parametrize("when", ["sums", "store"])
+def test_a_block_that_fails_leaves_no_store(when, tmp_path, monkeypatch):
+    """A posterior's block fails (a full disk, a worker lost) in the sums' pass or while the store
+    is written: one line naming the store, and no store (nor a temporary one) left."""
+    scene = bg.parse_scene(PLAIN + '[[evidence]]\nkind = "area_search"\npolygon = [[-600, 2400], [600, 2400], '
+                           '[600, 3200], [-600, 3200]]\nt = 10.0\npod = 0.5\n', source="s")
+    real, summed = tiled.block_cells, []
+    finish = run_tiled.finish_posteriors
+
+    def block(*args):
+        if when == "sums" or summed:
+            raise OSError("No space left on device")
+        return real(*args)
+
+    monkeypatch.setattr(tiled, "block_cells", block)
+    monkeypatch.setattr(run_tiled, "finish_posteriors", lambda *a, **k: (finish(*a, **k), summed.append(1))[0])
+    with dask.config.set(scheduler="synchronous"), pytest.raises(bg.BananagridError) as caught:
+        run_scene_tiled(scene, tmp_path / "s.zarr", 8)
+    assert str(caught.value) == f"{tmp_path / 's.zarr'}: cannot write the Zarr store (OSError: No space left on device)"
+    assert bool(summed) == (when == "store") and list(tmp_path.iterdir()) == []
+
+
+def test_a_posteriors_block_needs_more_memory_than_the_maps(tmp_path, capsys, monkeypatch):
+    """A worker's memory limit that holds a block of the map (720 x 1024 cells: 0.52 GB, 0.66 GB
+    over Dask's pause fraction) but not one of the posterior (its channels and cell rules: 0.70 GB,
+    0.88 GB) is refused before any worker starts, naming the limit; the map alone goes on to
+    start its cluster (stopped here)."""
+    def started(**kwargs):
+        raise bg.BananagridError("the cluster starts")
+
+    monkeypatch.setattr(cli, "dask_client", started)
+    evidence = '[[evidence]]\nkind = "area_search"\npolygon = [[0, 0], [100, 0], [0, 100]]\nt = 10.0\npod = 0.5\n'
+    for name, text, message in (("map", PLAIN, "bananagrid: error: the cluster starts"),
+                                ("posterior", PLAIN + evidence, "bananagrid: error: --memory-limit")):
+        (tmp_path / f"{name}.toml").write_text(text)
+        assert main(["run", str(tmp_path / f"{name}.toml"), "--zarr", str(tmp_path / f"{name}.zarr"), "--step", "5",
+                     "--chunks", "1024", "--memory-limit", "800MB", "--quiet"]) == 2
+        err = capsys.readouterr().err
+        assert err.startswith(message) and err.count("\n") == 1, err
+    assert list(tmp_path.glob("*.zarr")) == []
