@@ -63,6 +63,7 @@ from .panels import check_cells, check_panels, frame_of, provenance_json, variab
 __all__ = [
     "CONVENTIONS", "DENSITY_UNITS", "ELAPSED_LONG_NAME", "NETCDF_PURPOSE", "raster_dataset", "polar_dataset",
     "cell_map_dataset", "write_netcdf", "COVERAGE_VARIABLE", "time_units", "read_maps", "check_netcdf", "netcdf_digest", "DIGEST_ATTRIBUTE",
+    "layer_variables",
 ]
 
 CONVENTIONS = "CF-1.10"
@@ -199,6 +200,14 @@ def raster_dataset(panels: Sequence, frame=None, *, title: str = "", source: str
         + ("Layers share the time dimension." if shared else "Each layer has its own time dimension (their times differ).")
     )
     return xr.Dataset(data_vars, coords=coords, attrs=attrs)
+
+
+def layer_variables(dataset) -> dict:
+    """``{layer: variable name}`` of the layers' density variables of a dataset of
+    :func:`raster_dataset` (or a file or store of it): those with a ``bananagrid_layer`` in
+    units of density (a posterior's, POD's and POS's variables name their layer too)."""
+    return {var.attrs["bananagrid_layer"]: name for name, var in dataset.data_vars.items()
+            if "bananagrid_layer" in var.attrs and var.attrs.get("units") == DENSITY_UNITS}
 
 
 def _posterior_variables(xr, layer: str, posts: list, density, names: dict, tdim: str, coords: dict) -> dict:
@@ -680,8 +689,9 @@ def read_maps(path: str | os.PathLike) -> tuple[str, list[dict]]:
             "lat": described["lat"], "lon": described["lon"], "time": described.get("time"), "crs": described["crs_name"],
         }
         maps = []
-        for name, var in ds.data_vars.items():
-            if "bananagrid_layer" not in var.attrs or var.dims[1:] != ("y", "x"):
+        for name in layer_variables(ds).values():
+            var = ds[name]
+            if var.dims[1:] != ("y", "x"):
                 continue
             tdim = var.dims[0]
             elapsed = ds[tdim] if tdim.startswith("elapsed") else ds[tdim.replace("time", "elapsed", 1)]

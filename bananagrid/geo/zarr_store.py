@@ -29,12 +29,12 @@ import numpy as np
 from ..atomic import OutputSet, OutputWriteError
 from ..validate import BananagridError
 from ..version import __version__
-from .dataset import DENSITY_UNITS, raster_dataset
+from .dataset import DENSITY_UNITS, layer_variables, raster_dataset
 from .panels import check_panels
 from .libraries import CLUSTER_EXTRA, CLUSTER_PURPOSE, require
 
 __all__ = ["write_zarr", "write_batch_zarr", "ZARR_FORMAT", "compute_with_progress", "is_bananagrid_store",
-           "check_store_target", "STORE", "layer_variables"]
+           "check_store_target", "STORE"]
 
 #: Zarr format of the stores (v3: its ``fill_value`` is separate from CF's ``_FillValue``, so a
 #: block never written reads as 0 and no zero is read as missing).
@@ -191,15 +191,6 @@ def write_zarr(path: str | os.PathLike, panels: Sequence, frame=None, *, title: 
         encoding[name] = keep
     _write_dataset(dataset, final, encoding, progress, _computed_pieces(dataset, check_panels(panels)), stage=stage)
     return final
-
-
-def layer_variables(dataset) -> dict:
-    """``{layer: variable name}`` of the layers' density variables of a dataset of
-    :func:`~bananagrid.geo.dataset.raster_dataset` (or a store of it): those with a
-    ``bananagrid_layer`` in units of density (a posterior's, POD's and POS's variables name
-    their layer too)."""
-    return {var.attrs["bananagrid_layer"]: name for name, var in dataset.data_vars.items()
-            if "bananagrid_layer" in var.attrs and var.attrs.get("units") == DENSITY_UNITS}
 
 
 def _computed_pieces(dataset, panels: list) -> dict:

@@ -38,7 +38,8 @@ from ..engine.cluster import worker_need
 from ..engine.tiles import rasterise_tiles
 from ..evidence.tiled import TiledPosterior, posterior_tiles
 from ..geo.libraries import CLUSTER_EXTRA, CLUSTER_PURPOSE, require
-from ..geo.zarr_store import STORE, check_store_target, compute_with_progress, layer_variables, write_zarr
+from ..geo.dataset import layer_variables
+from ..geo.zarr_store import STORE, check_store_target, compute_with_progress, write_zarr
 from ..recording.evidence import evidence_values
 from ..results import TiledRaster
 from ..validate import BananagridError

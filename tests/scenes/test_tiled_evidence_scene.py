@@ -28,6 +28,7 @@ import bananagrid as bg
 from bananagrid import cli
 from bananagrid.cli import main
 from bananagrid.evidence import tiled
+from bananagrid.geo.dataset import read_maps
 from bananagrid.scenes import run_tiled
 from bananagrid.scenes.run_tiled import run_scene_tiled
 from test_evidence_scene import PLAIN, _write
@@ -52,7 +53,8 @@ CASES = {
 @pytest.fixture(scope="module", params=list(CASES))
 def exported(request, tmp_path_factory):
     """The scene exported to NetCDF by the in-memory run (the CLI) and to Zarr in tiles (the
-    synchronous scheduler): the two datasets, the scene and the tiled run's summary rows."""
+    synchronous scheduler): the two datasets, the scene, the tiled run's summary rows and the
+    NetCDF file."""
     where = tmp_path_factory.mktemp(request.param)
     make, step, chunks = CASES[request.param]
     path = make(where)
@@ -65,7 +67,7 @@ def exported(request, tmp_path_factory):
     with dask.config.set(scheduler="synchronous"):
         rows = run_scene_tiled(scene, store, chunks)
     with xr.open_dataset(where / f"{scene.name}.nc") as netcdf, xr.open_zarr(store) as zarr:
-        yield netcdf.load(), zarr.load(), scene, rows
+        yield netcdf.load(), zarr.load(), scene, rows, where / f"{scene.name}.nc"
 
 
 def _evidence(var) -> list:
@@ -73,7 +75,7 @@ def _evidence(var) -> list:
 
 
 def test_the_store_holds_the_netcdfs_posteriors(exported):
-    netcdf, zarr, scene, _ = exported
+    netcdf, zarr, scene, *_ = exported
     layers = [layer.name for layer in scene.layers]
     derived = ("posterior", "pod", "pos", "search_pos")
     assert set(netcdf.data_vars) == set(zarr.data_vars)  # the same variables, nothing left out
@@ -109,7 +111,7 @@ def test_the_store_holds_the_netcdfs_posteriors(exported):
 
 def test_the_coordinates_are_the_netcdfs(exported):
     """A geographic scene's store has the NetCDF's latitude, longitude, CRS and UTC times."""
-    netcdf, zarr, scene, _ = exported
+    netcdf, zarr, scene, *_ = exported
     for name in ("x", "y", "elapsed"):
         np.testing.assert_array_equal(zarr[name].values, netcdf[name].values)
     assert ("lat" in zarr.coords) == ("lon" in zarr.coords) == (scene.geo is not None)
@@ -121,8 +123,18 @@ def test_the_coordinates_are_the_netcdfs(exported):
         assert zarr[f"{scene.layers[0].name}_posterior"].attrs["grid_mapping"] == "crs"
 
 
+def test_the_netcdfs_maps_read_back_are_its_layers(exported):
+    """``read_maps`` (``bananagrid plot FILE.nc``) of a file with posteriors: each layer's map at
+    each time, and not the posterior's, POD's or POS's variables (which name their layer too)."""
+    netcdf, _, scene, _, path = exported
+    _, maps = read_maps(path)
+    assert sorted((m["layer"], m["t"]) for m in maps) == sorted((layer.name, t) for layer, t in scene.jobs())
+    for m in maps:
+        np.testing.assert_array_equal(m["values"], netcdf[m["layer"]].sel(elapsed=m["t"]).values)
+
+
 def test_the_summary_rows_carry_the_stores_pos(exported):
-    _, zarr, scene, rows = exported
+    _, zarr, scene, rows, _ = exported
     for row in rows:
         k = list(zarr["elapsed"].values).index(row["t"])
         found = row["evidence"]
