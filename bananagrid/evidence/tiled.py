@@ -322,6 +322,18 @@ class TiledPosterior:
         probabilities = {(name, t): layer(values, "probability", "cell probability") for name, values in cells.items()}
         return write_zarr(final, panels, self.frame, title=title, progress=progress, cells=probabilities)
 
+    def pending_maps(self) -> "PosteriorMaps":
+        """The maps as one pass writes them before its sums are known: ``values`` the cells'
+        posterior mass P_c f_all before the normaliser (to be divided by the sum S_all, which
+        :meth:`maps` holds as ``mass``, once the pass has computed :meth:`lazy_sums`), the POD
+        map as :meth:`maps`; the global numbers NaN, the provenance's ``posterior`` entry empty.
+        Its blocks are computed once when the maps and the sums are computed together."""
+        searches = sum(1 for key in self.names if isinstance(key, tuple))
+        return PosteriorMaps(values=self.unnormalised, pod=self.pod, prior=self._channel("prior"), grid=self.grid,
+                             pos=math.nan, search_pos=(math.nan,) * searches, normaliser=math.nan,
+                             prior_mass=math.nan, mass=math.nan, provenance={**self.provenance, "posterior": {}},
+                             frame=self.frame, normalised=False)
+
     def __repr__(self) -> str:
         g = self.grid
         blocks = len(self.channels.chunks[1]) * len(self.channels.chunks[2])

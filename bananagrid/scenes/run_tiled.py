@@ -18,10 +18,13 @@ posterior cell probabilities, summing to one), ``LAYER_pod`` (each cell's cumula
 evidence's provenance (``bananagrid_evidence``). Each posterior is the in-memory run's
 (:func:`~bananagrid.scenes.run_evidence.scene_posterior`: the layer's model on the scene's grid
 after the evidence that began by the map's time) computed in blocks by
-:func:`~bananagrid.evidence.tiled.posterior_tiles`, in two passes: the sums of every map's
-posterior in one (the normaliser, POS and each search's POS are global; evidence that contradicts
-a prior is refused there, before the store is begun), then the maps, with the priors' densities,
-in the store's. Refused still: an ``[array]`` scene and a ``[plan]`` (one line each).
+:func:`~bananagrid.evidence.tiled.posterior_tiles`. One pass over the blocks computes everything:
+the priors' densities, each posterior's cells before its normaliser (P_c f_all) and POD map, and
+every posterior's float64 sums; the normaliser, POS and each search's POS are global, so once the
+pass is done the stored cells are divided by their sum in place (a read and a write of each
+stored block, no cell rule run again) and the numbers written, before the store is put in place.
+Evidence that contradicts a prior is refused then, in the in-memory run's words, and no store is
+left. Refused still: an ``[array]`` scene and a ``[plan]`` (one line each).
 """
 
 from __future__ import annotations
@@ -33,13 +36,12 @@ from types import SimpleNamespace
 
 import numpy as np
 
-from ..atomic import OutputWriteError
 from ..engine.cluster import worker_need
 from ..engine.tiles import rasterise_tiles
 from ..evidence.tiled import TiledPosterior, posterior_tiles
 from ..geo.libraries import CLUSTER_EXTRA, CLUSTER_PURPOSE, require
-from ..geo.dataset import layer_variables
-from ..geo.zarr_store import STORE, check_store_target, compute_with_progress, write_zarr
+from ..geo.dataset import layer_variables, raster_dataset
+from ..geo.zarr_store import check_store_target, compute_with_progress, scale_stored, write_zarr
 from ..recording.evidence import evidence_values
 from ..results import TiledRaster
 from ..validate import BananagridError
@@ -92,10 +94,12 @@ def tiled_posteriors(scene: Scene, chunks) -> list[TiledJob]:
     return jobs
 
 
-def finish_posteriors(scene: Scene, jobs: list[TiledJob], *, progress: bool = False) -> list[ScenePosterior]:
-    """The posteriors' global numbers, every map's sums in one pass over their blocks, and each
-    map's :class:`~bananagrid.scenes.run_evidence.ScenePosterior` holding its lazy maps
-    (:meth:`~bananagrid.evidence.tiled.TiledPosterior.maps`) named as the in-memory run names them.
+def finish_posteriors(scene: Scene, jobs: list[TiledJob], sums=None, *, progress: bool = False) -> list[ScenePosterior]:
+    """Each map's :class:`~bananagrid.scenes.run_evidence.ScenePosterior` holding its lazy maps
+    (:meth:`~bananagrid.evidence.tiled.TiledPosterior.maps`), named as the in-memory run names
+    them, from the posteriors' sums: ``sums`` the computed
+    :meth:`~bananagrid.evidence.tiled.TiledPosterior.lazy_sums` of every job in turn, or None to
+    compute them here in one pass over their blocks.
 
     Raises
     ------
@@ -105,11 +109,12 @@ def finish_posteriors(scene: Scene, jobs: list[TiledJob], *, progress: bool = Fa
     """
     if not jobs:
         return []
-    lazy = [job.tiles.lazy_sums() for job in jobs]
-    computed = iter(compute_with_progress(*[s for sums in lazy for s in sums], progress=progress))
+    if sums is None:
+        sums = compute_with_progress(*[s for job in jobs for s in job.tiles.lazy_sums()], progress=progress)
+    computed = iter(sums)
     found = []
-    for job, sums in zip(jobs, lazy):
-        mine = [next(computed) for _ in sums]
+    for job in jobs:
+        mine = [next(computed) for _ in job.tiles.lazy_sums()]
         try:
             numbers = job.tiles.finish_sums(mine)
         except BananagridError as exc:
@@ -166,16 +171,20 @@ def run_scene_tiled(scene: Scene, path: Path, chunks, *, progress: bool = False,
     if scene.cell_probabilities:  # each cell's probability beside its density, in the same tiles
         cells = {(layer, t): tiled for layer, t, tiled in tiled_maps(scene, chunks, max_seconds=max_seconds,
                                                                       quantity="probability")}
-    # the posteriors' sums first (their normalisers are global), then every map in the store's pass
-    try:
-        found = finish_posteriors(scene, tiled_posteriors(scene, chunks), progress=progress)
-    except BananagridError:
-        raise
-    except Exception as exc:  # as write_zarr words a failure while computing (nothing is written yet)
-        reason = (str(exc) or type(exc).__name__).splitlines()[0]
-        raise OutputWriteError(f"{path}: cannot write the {STORE} ({type(exc).__name__}: {reason})") from None
+    # one pass computes every block: the priors' densities, each posterior's cells before its
+    # normaliser with its POD map, and the posteriors' sums; then finish() divides the stored cells
+    # by their sums (the normaliser is global) and writes the numbers, before the store is in place
+    jobs = tiled_posteriors(scene, chunks)
+    lazy = [s for job in jobs for s in job.tiles.lazy_sums()]
+    found: list[ScenePosterior] = []
+
+    def finish(group, sums) -> None:
+        found.extend(finish_posteriors(scene, jobs, sums))
+        _store_numbers(group, scene, panels, cells, found, progress)
+
+    pending = {(job.layer.name, job.t): scene_named(scene, job.used, job.tiles.pending_maps()) for job in jobs}
     write_zarr(path, panels, scene.geo, title=scene.title, source=scene.source, progress=progress, cells=cells,
-               posteriors={(p.layer, p.t): p.posterior for p in found} or None)
+               posteriors=pending or None, extra=lazy, finish=finish if jobs else None)
     seconds = time.perf_counter() - start
     evidence = {(p.layer, p.t): p.values for p in found}
     rows = []
@@ -195,6 +204,25 @@ def run_scene_tiled(scene: Scene, path: Path, chunks, *, progress: bool = False,
     for row in rows:
         row["seconds"] = seconds / len(rows)  # one pass computes every map: its time, shared
     return rows
+
+
+def _store_numbers(group, scene: Scene, panels, cells, found: list[ScenePosterior], progress: bool) -> None:
+    """The posteriors' numbers into the temporary store ``group`` once its pass has summed them:
+    each ``LAYER_posterior`` divided by its sums (cell probabilities), and ``LAYER_pos``,
+    ``LAYER_search_pos`` and the evidence's provenance as
+    :func:`~bananagrid.geo.dataset.raster_dataset` puts them in the NetCDF (built again here with
+    the numbers known; nothing in it is computed)."""
+    finished = {(p.layer, p.t): p.posterior for p in found}
+    complete = raster_dataset(panels, scene.geo, title=scene.title, source=scene.source, cells=cells,
+                              posteriors=finished)
+    for layer, var in layer_variables(complete).items():
+        if f"{var}_posterior" not in complete:
+            continue
+        masses = [finished[key].mass for key in sorted((key for key in finished if key[0] == layer), key=lambda k: k[1])]
+        scale_stored(group, f"{var}_posterior", masses, progress=progress)
+        for name in (f"{var}_pos", f"{var}_search_pos"):
+            group[name][...] = complete[name].values
+        group[f"{var}_posterior"].attrs["bananagrid_evidence"] = complete[f"{var}_posterior"].attrs["bananagrid_evidence"]
 
 
 def format_tiled_summary(rows: list[dict]) -> str:
