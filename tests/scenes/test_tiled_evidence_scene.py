@@ -2,7 +2,8 @@
 in the store's tiles (bananagrid.scenes.run_tiled, bananagrid.evidence.tiled.posterior_tiles)
 holds what the NetCDF export of the same scene (in memory, ``bg.posterior``) holds: the same
 variables and attributes, the posterior, POD map, POS and each search's POS equal within
-:data:`TOL`; a geographic scene's store has latitude and longitude; the printed summary gives the
+:data:`TOL` (two scenes, and a sweep over blocks, search times, places, PODs and land); a
+geographic scene's store has latitude and longitude; each posterior block is computed once; the printed summary gives the
 POS lines of the in-memory run; what the in-memory run refuses is one line here too and leaves no
 store; a store is written whole or not at all.
 
@@ -24,6 +25,8 @@ import dask
 import numpy as np
 import pytest
 import xarray as xr
+from hypothesis import HealthCheck, given, seed, settings
+from hypothesis import strategies as st
 
 import bananagrid as bg
 from bananagrid import cli
@@ -31,6 +34,7 @@ from bananagrid.cli import main
 from bananagrid.evidence import tiled
 from bananagrid.geo.dataset import read_maps
 from bananagrid.scenes import run_tiled
+from bananagrid.scenes.run_evidence import scene_posterior
 from bananagrid.scenes.run_tiled import run_scene_tiled
 from test_evidence_scene import PLAIN, _write
 
@@ -161,6 +165,42 @@ def test_the_cli_prints_the_in_memory_runs_pos_lines(tmp_path, capsys):
     out = capsys.readouterr().out
     assert [line for line in out.splitlines() if ": posterior of " in line] == memory and len(memory) == 2
     assert "cells computed" in out and f"wrote {store}" in out
+
+
+#: The Figure 1 CAT (PLAIN: 30 x 18 cells of 200 m) at 4 and 10 s.
+SWEPT = PLAIN.replace("[scene]\n", "[scene]\ntimes = [4.0, 10.0]\n").replace("t = 10.0\n", "")
+
+
+@seed(20261127)
+@settings(max_examples=6, deadline=None, database=None, suppress_health_check=list(HealthCheck))
+@given(rows=st.integers(5, 30), cols=st.integers(5, 45), t=st.floats(0.5, 10.0), pod=st.floats(0.05, 1.0),
+       corner=st.tuples(st.floats(-2500.0, 1500.0), st.floats(0.0, 2500.0)), land=st.booleans())
+def test_any_blocks_and_times_give_the_in_memory_posteriors(rows, cols, t, pod, corner, land, tmp_path_factory):
+    """Any blocks (partial ones at the edges), a search at any time (before a map's time: carried
+    through the CAT's paths; after it: not taken by that map), anywhere, of any POD, with land or
+    not: the store's posterior, POD map, POS and each search's POS are the in-memory run's
+    (``scene_posterior``, what the NetCDF holds) within TOL."""
+    x, y = corner
+    text = SWEPT + (f'[[evidence]]\nkind = "area_search"\nname = "box"\npolygon = [[{x}, {y}], [{x + 1200}, {y}], '
+                    f'[{x + 1200}, {y + 900}], [{x}, {y + 900}]]\nt = {t!r}\npod = {pod!r}\n')
+    if land:
+        text += '[[evidence]]\nkind = "exclusion"\npolygon = [[-3000, -200], [-1000, -200], [-3000, 1500]]\n'
+    scene = bg.parse_scene(text, source="s", tiled=True)
+    store = tmp_path_factory.mktemp("swept") / "s.zarr"
+    with dask.config.set(scheduler="synchronous"):
+        run_scene_tiled(scene, store, (rows, cols))
+    with xr.open_zarr(store) as zarr:
+        for k, (layer, t_map) in enumerate(scene.jobs()):
+            want = scene_posterior(scene, layer, t_map).posterior
+            post = zarr["cat_posterior"].values[k]
+            assert np.max(np.abs(post - want.values)) <= TOL * np.max(want.values)
+            assert np.max(np.abs(zarr["cat_pod"].values[k] - want.pod)) <= TOL
+            assert float(zarr["cat_pos"].values[k]) == pytest.approx(want.pos, abs=TOL)
+            got = zarr["cat_search_pos"].values[k]
+            if t <= t_map:  # the box began by the map's time
+                assert got == pytest.approx(list(want.search_pos), abs=TOL)
+            else:
+                assert np.isnan(got).all() and want.search_pos == ()
 
 
 # --- what the in-memory run refuses, and whole or nothing ----------------------------------------
