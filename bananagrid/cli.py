@@ -375,7 +375,7 @@ def _run_tiled(args: argparse.Namespace, paths: list[Path]) -> int:
     check_tiled(scene)
     max_seconds = None if args.max_seconds is None else work_limit(args.max_seconds)
     panels = tiled_maps(scene, args.chunks, max_seconds=max_seconds)  # every check before a cluster starts
-    posteriors = tiled_posteriors(scene, args.chunks)  # the evidence's checks too
+    posteriors = tiled_posteriors(scene, args.chunks, max_seconds=max_seconds)  # the evidence's checks too
     timeout = _check_cluster(args, panels, [posterior_worker_need(job) for job in posteriors])
     with dask_client(workers=args.workers, memory_limit=args.memory_limit, scheduler=args.scheduler,
                      timeout=timeout) as client:

@@ -37,6 +37,9 @@ from types import SimpleNamespace
 import numpy as np
 
 from ..engine.cluster import worker_need
+from ..engine.grid_cells import probability_work
+from ..engine.warp_runtime import default_threads
+from ..engine.work import check_work
 from ..engine.tiles import rasterise_tiles
 from ..evidence.tiled import TiledPosterior, posterior_tiles
 from ..geo.libraries import CLUSTER_EXTRA, CLUSTER_PURPOSE, require
@@ -76,20 +79,29 @@ class TiledJob:
     tiles: TiledPosterior
 
 
-def tiled_posteriors(scene: Scene, chunks) -> list[TiledJob]:
+def tiled_posteriors(scene: Scene, chunks, *, max_seconds: float | None = None) -> list[TiledJob]:
     """Each map's posterior after the scene's evidence, lazily (none without ``[[evidence]]``),
     checked now as the in-memory run checks it (``posterior_tiles`` runs every check of
     ``bg.posterior`` on one cell): what it refuses is one line naming the scene, the layer, the
-    time and the scene's ``evidence[k]``."""
+    time and the scene's ``evidence[k]``. A posterior whose estimated computing exceeds
+    ``max_seconds`` (default one hour) is refused too: its prior's cell rules on the blocks not
+    skipped, over the machine's cores (what the in-memory run counts for it)."""
     if not scene.evidence:
         return []
     jobs = []
+    cells = scene.grid.nx * scene.grid.ny
     for layer, t in scene.jobs():
         used = tuple(job_evidence(scene.evidence, t))
+        model = layer.model(t)
         try:
-            tiles = posterior_tiles(layer.model(t), scene.grid, [s.evidence for s in used], chunks)
+            tiles = posterior_tiles(model, scene.grid, [s.evidence for s in used], chunks)
         except BananagridError as exc:
             raise scene_error(scene, layer, t, used, exc) from None
+        _, rows, cols = tiles.channels.chunks
+        computed = int(np.outer(rows, cols)[~tiles.skipped].sum())
+        check_work(probability_work(model, scene.grid)[0] * computed / cells, default_threads(),
+                   f"{scene.source}: the posterior of layers.{layer.name} at t = {t:g} s on {computed:,} cells in "
+                   "tiles", limit=max_seconds, option="--max-seconds S")
         jobs.append(TiledJob(layer, float(t), used, tiles))
     return jobs
 
@@ -174,7 +186,7 @@ def run_scene_tiled(scene: Scene, path: Path, chunks, *, progress: bool = False,
     # one pass computes every block: the priors' densities, each posterior's cells before its
     # normaliser with its POD map, and the posteriors' sums; then finish() divides the stored cells
     # by their sums (the normaliser is global) and writes the numbers, before the store is in place
-    jobs = tiled_posteriors(scene, chunks)
+    jobs = tiled_posteriors(scene, chunks, max_seconds=max_seconds)
     lazy = [s for job in jobs for s in job.tiles.lazy_sums()]
     found: list[ScenePosterior] = []
 
