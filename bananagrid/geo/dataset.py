@@ -179,7 +179,7 @@ def raster_dataset(panels: Sequence, frame=None, *, title: str = "", source: str
                 xr, layer, [probabilities[layer, p.t] for p in series], data_vars[var])
         if "posterior" in derived:
             data_vars.update(_posterior_variables(xr, layer, [found[layer, p.t] for p in series], data_vars[var],
-                                                  derived, tdim, coords))
+                                                  derived, tdim, coords, _search_names(found.values())))
         data_vars[derived["mass"]] = xr.Variable(
             (tdim,), _stack([getattr(p.raster, "lazy_mass", None) if _lazy(p.raster.values) else float(p.raster.mass)
                              for p in series]),
@@ -210,19 +210,27 @@ def layer_variables(dataset) -> dict:
             if "bananagrid_layer" in var.attrs and var.attrs.get("units") == DENSITY_UNITS}
 
 
-def _posterior_variables(xr, layer: str, posts: list, density, names: dict, tdim: str, coords: dict) -> dict:
-    """A layer's posterior, POD, POS and each search's POS beside its density variable
-    ``density`` (the same dimensions, coordinates and grid mapping), the values as computed."""
-    common = {"units": "1", "bananagrid_layer": layer}
-    if "grid_mapping" in density.attrs:
-        common["grid_mapping"] = density.attrs["grid_mapping"]
-    encoding = {k: v for k, v in density.encoding.items() if k == "coordinates"}
-    evidence = [p.provenance.get("posterior", {}) for p in posts]
+def _search_names(posts) -> list[str]:
+    """The searches of every posterior, each once, in the order they are first taken: the
+    dimension ``search`` (layers at different times may have taken different searches)."""
     searches: list[str] = []
     for p in posts:
         for name in p.provenance.get("search_names", []):
             if name not in searches:
                 searches.append(name)
+    return searches
+
+
+def _posterior_variables(xr, layer: str, posts: list, density, names: dict, tdim: str, coords: dict,
+                         searches: list[str]) -> dict:
+    """A layer's posterior, POD, POS and each search's POS beside its density variable
+    ``density`` (the same dimensions, coordinates and grid mapping), the values as computed;
+    ``searches``: the dimension ``search`` (:func:`_search_names` of every layer's posteriors)."""
+    common = {"units": "1", "bananagrid_layer": layer}
+    if "grid_mapping" in density.attrs:
+        common["grid_mapping"] = density.attrs["grid_mapping"]
+    encoding = {k: v for k, v in density.encoding.items() if k == "coordinates"}
+    evidence = [p.provenance.get("posterior", {}) for p in posts]
     table = np.full((len(posts), len(searches)), np.nan)
     for i, p in enumerate(posts):
         for name, pos in zip(p.provenance.get("search_names", []), p.search_pos):
@@ -230,8 +238,6 @@ def _posterior_variables(xr, layer: str, posts: list, density, names: dict, tdim
     if "search" not in coords:
         coords["search"] = xr.Variable(("search",), np.array(searches, dtype=object),
                                        {"long_name": "name of the search (the scene's [[evidence]] name)"})
-    elif list(coords["search"].values) != searches:
-        raise BananagridError(f"posteriors: layer {layer!r} has other searches than another layer")
     return {
         names["posterior"]: xr.Variable(density.dims, _stack([p.values for p in posts]), {
             **common, "long_name": f"probability that the target is in the cell after the evidence (posterior POC): "

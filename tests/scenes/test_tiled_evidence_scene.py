@@ -43,6 +43,24 @@ TOL = 1e-12
 
 SCENES = Path(__file__).resolve().parents[2] / "scenes"
 
+#: Two layers at their own times (each its own time dimension) and a search between them, carried
+#: to the later one: the earlier map took no search, the later one took it.
+TWO_TIMES = PLAIN.replace("[layers.cat]", "[layers.early]").replace("t = 10.0\n", "t = 5.0\n") + """
+[layers.late]
+model = "cat"
+v0 = 280.0
+t = 10.0
+sigma_a = 1.6666667
+sigma_omega_deg = 3.3333
+
+[[evidence]]
+kind = "area_search"
+name = "box"
+polygon = [[-900.0, 1600.0], [900.0, 1600.0], [900.0, 2600.0], [-900.0, 2600.0]]
+t = 8.0
+pod = 0.5
+"""
+
 #: The scenes exported both ways: ``(path maker, --step, chunks)``. ``ev_ship``: geographic (UTC
 #: times, lat/lon), a CAT and a still Butterly (blocks of 32 x 32 for its kernel's tiles, partial
 #: ones at the north and east edges), an area search, a track, land and a report at the second
@@ -52,6 +70,7 @@ SCENES = Path(__file__).resolve().parents[2] / "scenes"
 CASES = {
     "ev_ship": (lambda where: _write(where), None, (32, 32)),
     "fast_contact": (lambda where: SCENES / "fast_contact.toml", 400.0, (16, 24)),
+    "two_times": (lambda where: _write(where, TWO_TIMES, "two.toml"), None, (8, 8)),
 }
 
 
@@ -77,6 +96,11 @@ def exported(request, tmp_path_factory):
     with xr.open_dataset(where / f"{scene.name}.nc") as netcdf, xr.open_zarr(store) as zarr:
         yield SimpleNamespace(netcdf=netcdf.load(), zarr=zarr.load(), scene=scene, rows=rows,
                               path=where / f"{scene.name}.nc", chunks=chunks, calls=calls)
+
+
+def _index(scene, layer: str, t: float) -> int:
+    """Where a layer's map at ``t`` lies on its variables' time dimension (by time)."""
+    return sorted(time for other, time in scene.jobs() if other.name == layer).index(t)
 
 
 def _evidence(var) -> list:
@@ -121,13 +145,10 @@ def test_the_store_holds_the_netcdfs_posteriors(exported):
 def test_the_coordinates_are_the_netcdfs(exported):
     """A geographic scene's store has the NetCDF's latitude, longitude, CRS and UTC times."""
     netcdf, zarr, scene = exported.netcdf, exported.zarr, exported.scene
-    for name in ("x", "y", "elapsed"):
-        np.testing.assert_array_equal(zarr[name].values, netcdf[name].values)
+    for name in netcdf.coords:  # x, y, the times, the searches; lat and lon of a geographic scene
+        assert np.array_equal(zarr[name].values, netcdf[name].values), name
     assert ("lat" in zarr.coords) == ("lon" in zarr.coords) == (scene.geo is not None)
     if scene.geo is not None:
-        for name in ("lat", "lon"):
-            np.testing.assert_array_equal(zarr[name].values, netcdf[name].values)
-        np.testing.assert_array_equal(zarr["time"].values, netcdf["time"].values)
         assert zarr["crs"].attrs["crs_wkt"] == netcdf["crs"].attrs["crs_wkt"]
         assert zarr[f"{scene.layers[0].name}_posterior"].attrs["grid_mapping"] == "crs"
 
@@ -139,13 +160,13 @@ def test_the_netcdfs_maps_read_back_are_its_layers(exported):
     _, maps = read_maps(path)
     assert sorted((m["layer"], m["t"]) for m in maps) == sorted((layer.name, t) for layer, t in scene.jobs())
     for m in maps:
-        np.testing.assert_array_equal(m["values"], netcdf[m["layer"]].sel(elapsed=m["t"]).values)
+        np.testing.assert_array_equal(m["values"], netcdf[m["layer"]].values[_index(scene, m["layer"], m["t"])])
 
 
 def test_the_summary_rows_carry_the_stores_pos(exported):
     zarr, scene, rows = exported.zarr, exported.scene, exported.rows
     for row in rows:
-        k = list(zarr["elapsed"].values).index(row["t"])
+        k = _index(scene, row["layer"], row["t"])
         found = row["evidence"]
         assert (found["layer"], found["t"]) == (row["layer"], row["t"])
         assert found["pos"] == float(zarr[f"{row['layer']}_pos"].values[k])
