@@ -21,7 +21,9 @@ on the block as a grid of its own), and the posterior is assembled from those ar
 ``finish_cells``: the result is ``bg.posterior(prior, grid, evidence)`` to the rounding of the
 prior's cell rules on a block's own grid (a block's cell edges are the grid's to an ulp).
 :meth:`TiledPosterior.to_zarr` writes the prior's and the posterior's cell probabilities to a
-Zarr store block by block, whole or not at all (:func:`bananagrid.geo.zarr_store.write_zarr`).
+Zarr store block by block, whole or not at all (:func:`bananagrid.geo.zarr_store.write_zarr`),
+in one pass that computes the cells and the sums together (the stored posterior is divided by
+its sum after it).
 A model whose kernels depend on the grid's extent (the CAT with heading noise tabulates its
 density over each grid) gives a block its own table: the tiled map then agrees with the whole
 grid's within that table's interpolation error (1e-6 relative), not to rounding.
@@ -46,12 +48,12 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..atomic import OutputWriteError
 from ..domains.grid import Grid
 from ..engine.rasterise import MIN_MASS
 from ..engine.tiles import DEFAULT_CHUNK, check_chunks
 from ..geo.libraries import CLUSTER_EXTRA, CLUSTER_PURPOSE, require
-from ..geo.zarr_store import STORE, check_store_target, compute_with_progress, write_zarr
+from ..geo.dataset import raster_dataset
+from ..geo.zarr_store import check_store_target, compute_with_progress, scale_stored, write_zarr
 from ..results import TiledRaster
 from ..validate import BananagridError, BananagridWarning
 from ..domains.region import Region
@@ -294,33 +296,49 @@ class TiledPosterior:
         whole or not at all (:func:`bananagrid.geo.zarr_store.write_zarr`): each cell's
         probability as ``LAYER_probability`` (the posterior's summing to one) and, as the
         layer's density, that probability over the cell's area (the cell's mean density); the
-        global numbers (:meth:`numbers`) in the provenance. Two passes over the blocks: the
-        sums, then the maps (the normaliser is global). Returns the path."""
+        global numbers (:meth:`numbers`) in the provenance. One pass over the blocks computes
+        the cells and the sums together; then the stored posterior is divided by its sum in place
+        (the normaliser is global), before the store is put in place. Returns the path.
+
+        Raises
+        ------
+        BananagridError
+            As :func:`~bananagrid.geo.zarr_store.write_zarr`, and as :meth:`numbers` (evidence
+            that contradicts the prior: no store is left).
+        """
         final = check_store_target(path)  # before any computing
-        try:
-            numbers = self.numbers(progress=progress)
-        except BananagridError:
-            raise
-        except Exception as exc:  # as write_zarr words a failure while computing: nothing was written
-            reason = (str(exc) or type(exc).__name__).splitlines()[0]
-            raise OutputWriteError(f"{final}: cannot write the {STORE} ({type(exc).__name__}: {reason})") from None
         t = float(getattr(self.prior, "t", 0.0) or 0.0) if t is None else t
-        info = {**self.provenance, "posterior": dict(numbers, subdivisions=self.subdivisions,
-                                                      evidence=[e.describe() for e in self.evidence])}
         skipped = self.skipped if self.skipped is not None else np.zeros(self.channels.numblocks[1:], dtype=bool)
-
-        def layer(values, quantity, what):
-            return TiledRaster(values=values, grid=self.grid, chunks=self.chunks, skipped=skipped, floor=-math.inf,
-                               provenance=dict(info, quantity=quantity, values=what), frame=self.frame,
-                               quantity=quantity)
-
         area = self.grid.cell_area
-        cells = {name: values for name, values in (("prior", self._channel("prior")),
-                                                    ("posterior", self.unnormalised / numbers["mass"]))}
-        panels = [(name, t, layer(values / area, "density", "cell probability / cell area: the cell's mean density"))
-                  for name, values in cells.items()]
-        probabilities = {(name, t): layer(values, "probability", "cell probability") for name, values in cells.items()}
-        return write_zarr(final, panels, self.frame, title=title, progress=progress, cells=probabilities)
+
+        def layers(posterior, info):
+            def layer(values, quantity, what):
+                return TiledRaster(values=values, grid=self.grid, chunks=self.chunks, skipped=skipped,
+                                   floor=-math.inf, provenance=dict(info, quantity=quantity, values=what),
+                                   frame=self.frame, quantity=quantity)
+
+            cells = {"prior": self._channel("prior"), "posterior": posterior}
+            panels = [(name, t, layer(values / area, "density", "cell probability / cell area: the cell's mean "
+                                      "density")) for name, values in cells.items()]
+            return panels, {(name, t): layer(values, "probability", "cell probability") for name, values in cells.items()}
+
+        def finish(group, sums) -> None:
+            numbers = self.finish_sums(sums)
+            info = {**self.provenance, "posterior": dict(numbers, subdivisions=self.subdivisions,
+                                                          evidence=[e.describe() for e in self.evidence])}
+            for name in ("posterior", "posterior_probability"):
+                scale_stored(group, name, [numbers["mass"]], progress=progress)
+            group["posterior_mass"][...] = group["posterior_mass"][...] / numbers["mass"]
+            panels, cells = layers(self.unnormalised / numbers["mass"], info)
+            complete = raster_dataset(panels, self.frame, title=title, cells=cells)  # nothing in it is computed
+            for name, var in complete.data_vars.items():
+                if "bananagrid_provenance" in var.attrs:
+                    group[name].attrs["bananagrid_provenance"] = var.attrs["bananagrid_provenance"]
+
+        # the posterior's cells before the normaliser, with the sums, in the store's one pass
+        panels, cells = layers(self.unnormalised, dict(self.provenance))
+        return write_zarr(final, panels, self.frame, title=title, progress=progress, cells=cells,
+                          extra=self.lazy_sums(), finish=finish)
 
     def pending_maps(self) -> "PosteriorMaps":
         """The maps as one pass writes them before its sums are known: ``values`` the cells'
