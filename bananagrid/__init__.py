@@ -18,6 +18,8 @@ from .engine.cluster import dask_client
 from .engine.rasterise import rasterise
 from .evidence import (AreaSearch, BearingReport, Exclusion, PolarPosterior, PositionReport, Posterior, RasterSearch,
                        TrackSearch, posterior)
+from .evidence.batches import BatchPosterior, posterior_batch, posterior_batch_shards
+from .evidence.tiled import TiledPosterior, posterior_tiles
 from .geo.frame import GeoFrame
 from .geo.inputs import Bearings, Fix, Track, read_bearings, read_fix, read_track
 from .models.base import Model
@@ -58,7 +60,9 @@ __all__ = [
     "bearing_to", "containment", "containment_radius",
     # evidence on the map
     "AreaSearch", "TrackSearch", "RasterSearch", "PositionReport", "BearingReport", "Exclusion", "posterior",
-    "Posterior", "PolarPosterior",
+    "Posterior", "PolarPosterior", "posterior_batch", "BatchPosterior",
+    # ... on a Dask cluster
+    "posterior_tiles", "TiledPosterior", "posterior_batch_shards",
     # where to look next
     "allocate", "Allocation", "DetectionLaw", "detection_law", "search_rectangles", "SearchPlan", "SearchRectangle",
     "search_regions", "RegionPlan", "SearchRegion", "plot_allocation", "plan_periods", "PeriodPlan",

@@ -49,7 +49,9 @@ from .scenes.pictures import (
     write_animation,
     write_picture,
 )
-from .scenes.run_tiled import check_tiled, format_tiled_summary, run_scene_tiled, tiled_maps
+from .scenes.run_tiled import (
+    check_tiled, format_tiled_summary, posterior_worker_need, run_scene_tiled, tiled_maps, tiled_posteriors,
+)
 from .scenes.run_evidence import evidence_paths
 from .scenes.run_plan import plan_paths
 from .scenes.run import (RUN_ONLY_PROVENANCE, check_exports, check_run_memory, check_run_work, compute, export_paths,
@@ -163,7 +165,9 @@ def build_parser() -> tuple[argparse.ArgumentParser, dict[str, argparse.Argument
         "With --zarr the scene's maps are computed in tiles by Dask workers and written to one Zarr store, "
         "block by block (the grid may exceed memory: up to 2**38 cells); no .rrd is written. Tiles the "
         "model proves below 1e-13 of its peak are not computed. The maps are raw densities with each "
-        "layer's captured mass beside it (LAYER_mass).",
+        "layer's captured mass beside it (LAYER_mass). A scene's [[evidence]] is taken: each map's posterior "
+        "(LAYER_posterior), POD map (LAYER_pod), POS and each search's POS are computed in tiles too and "
+        "stored as in the NetCDF export (--netcdf). A [plan] needs its map in memory: refused with --zarr.",
     )
     tiles.add_argument("--zarr", metavar="OUT.zarr",
                        help="write the scene's maps to this Zarr store (one scene), read with xarray.open_zarr")
@@ -371,7 +375,8 @@ def _run_tiled(args: argparse.Namespace, paths: list[Path]) -> int:
     check_tiled(scene)
     max_seconds = None if args.max_seconds is None else work_limit(args.max_seconds)
     panels = tiled_maps(scene, args.chunks, max_seconds=max_seconds)  # every check before a cluster starts
-    timeout = _check_cluster(args, panels)
+    posteriors = tiled_posteriors(scene, args.chunks, max_seconds=max_seconds)  # the evidence's checks too
+    timeout = _check_cluster(args, panels, [posterior_worker_need(job) for job in posteriors])
     with dask_client(workers=args.workers, memory_limit=args.memory_limit, scheduler=args.scheduler,
                      timeout=timeout) as client:
         if not args.quiet:
@@ -380,15 +385,16 @@ def _run_tiled(args: argparse.Namespace, paths: list[Path]) -> int:
             print(f"bananagrid: {scene.name}: tiles on {where}" + (f" (dashboard {link})" if link else ""),
                   file=sys.stderr)
         rows = run_scene_tiled(scene, args.zarr, args.chunks, progress=not args.quiet, max_seconds=max_seconds)
-    print(format_tiled_summary(rows))
+    print("\n".join([format_tiled_summary(rows), *format_evidence(rows)]))
     print()
     print(f"wrote {args.zarr}")
     return OK
 
 
-def _check_cluster(args: argparse.Namespace, panels) -> float:
+def _check_cluster(args: argparse.Namespace, panels, posterior_needs=()) -> float:
     """The cluster options of ``run --zarr``, checked before any worker starts or any connection is
-    kept: the scheduler answers as one, or the workers' memory holds a block. Returns the timeout."""
+    kept: the scheduler answers as one, or the workers' memory holds a block (of a map, or of a
+    posterior: ``posterior_needs``, bytes). Returns the timeout."""
     if args.connect_timeout is not None and args.scheduler is None:
         raise BananagridError("--connect-timeout: only with --scheduler")
     timeout = CONNECT_SECONDS if args.connect_timeout is None else positive("--connect-timeout", args.connect_timeout)
@@ -400,6 +406,7 @@ def _check_cluster(args: argparse.Namespace, panels) -> float:
         return timeout
     check_workers(args.workers, name="--workers")
     needs = [(worker_need(t.chunks, t.values.dtype, t.provenance["computed_in"]), t.chunks) for _, _, t in panels]
+    needs += [(need, panels[0][2].chunks) for need in posterior_needs]
     need, (rows, cols) = max(needs, key=lambda pair: pair[0])
     check_memory_limit(args.memory_limit, need=need, name="--memory-limit", what=f"a block of {rows} x {cols} cells")
     return timeout

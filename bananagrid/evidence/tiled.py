@@ -21,7 +21,9 @@ on the block as a grid of its own), and the posterior is assembled from those ar
 ``finish_cells``: the result is ``bg.posterior(prior, grid, evidence)`` to the rounding of the
 prior's cell rules on a block's own grid (a block's cell edges are the grid's to an ulp).
 :meth:`TiledPosterior.to_zarr` writes the prior's and the posterior's cell probabilities to a
-Zarr store block by block, whole or not at all (:func:`bananagrid.geo.zarr_store.write_zarr`).
+Zarr store block by block, whole or not at all (:func:`bananagrid.geo.zarr_store.write_zarr`),
+in one pass that computes the cells and the sums together (the stored posterior is divided by
+its sum after it).
 A model whose kernels depend on the grid's extent (the CAT with heading noise tabulates its
 density over each grid) gives a block its own table: the tiled map then agrees with the whole
 grid's within that table's interpolation error (1e-6 relative), not to rounding.
@@ -46,12 +48,12 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..atomic import OutputWriteError
 from ..domains.grid import Grid
 from ..engine.rasterise import MIN_MASS
 from ..engine.tiles import DEFAULT_CHUNK, check_chunks
 from ..geo.libraries import CLUSTER_EXTRA, CLUSTER_PURPOSE, require
-from ..geo.zarr_store import STORE, check_store_target, compute_with_progress, write_zarr
+from ..geo.dataset import raster_dataset
+from ..geo.zarr_store import check_store_target, compute_with_progress, scale_stored, write_zarr
 from ..results import TiledRaster
 from ..validate import BananagridError, BananagridWarning
 from ..domains.region import Region
@@ -59,7 +61,7 @@ from ..models.presence import UniformPresence
 from .posterior import MIN_NORMALISER, SUBDIVISIONS, CellMeans, Posterior, cell_means, finish_cells
 from .searches import AreaSearch, TrackSearch
 
-__all__ = ["posterior_tiles", "TiledPosterior", "block_cells", "empty_block", "channel_names", "posterior_numbers",
+__all__ = ["posterior_tiles", "TiledPosterior", "PosteriorMaps", "block_cells", "empty_block", "channel_names", "posterior_numbers",
            "check_normaliser", "block_grid"]
 
 
@@ -240,12 +242,32 @@ class TiledPosterior:
             The prior holds no mass on the grid, or the evidence contradicts it (normaliser
             below :data:`~bananagrid.evidence.posterior.MIN_NORMALISER`), as ``bg.posterior``.
         """
-        *sums, bound = (float(v) for v in compute_with_progress(*self.lazy_sums(), progress=progress))
+        return self.finish_sums(compute_with_progress(*self.lazy_sums(), progress=progress))
+
+    def finish_sums(self, sums) -> dict:
+        """:meth:`numbers` from the computed :meth:`lazy_sums` (several posteriors' sums computed
+        in one pass, then each finished; raises as :meth:`numbers`)."""
+        *sums, bound = (float(v) for v in sums)
         prior_mass, q_sum, given, *search_sums = sums
         self._covered(prior_mass)
         found = posterior_numbers(prior_mass, q_sum, given, search_sums)
         check_normaliser(found)
         return {**found, "boundary_mass": None if math.isnan(bound) else bound}
+
+    def maps(self, numbers: dict | None = None, *, progress: bool = False) -> "PosteriorMaps":
+        """The posterior's maps, lazy, with its global numbers (:meth:`numbers`, computed here
+        unless given): what ``bg.posterior``'s :class:`~bananagrid.evidence.posterior.Posterior`
+        holds, its maps as Dask arrays and its provenance's ``posterior`` entry with the same
+        keys, so that :func:`~bananagrid.geo.dataset.raster_dataset` and
+        :func:`~bananagrid.geo.zarr_store.write_zarr` take it as they take a ``Posterior``."""
+        numbers = self.numbers(progress=progress) if numbers is None else numbers
+        info = {"pos": numbers["pos"], "search_pos": list(numbers["search_pos"]), "normaliser": numbers["normaliser"],
+                "prior_mass": numbers["prior_mass"], "boundary_mass": numbers["boundary_mass"],
+                "subdivisions": self.subdivisions, "evidence": [e.describe() for e in self.evidence]}
+        return PosteriorMaps(values=self.unnormalised / numbers["mass"], pod=self.pod, prior=self._channel("prior"),
+                             grid=self.grid, pos=numbers["pos"], search_pos=tuple(numbers["search_pos"]),
+                             normaliser=numbers["normaliser"], prior_mass=numbers["prior_mass"], mass=numbers["mass"],
+                             provenance={**self.provenance, "posterior": info}, frame=self.frame)
 
     def _covered(self, prior_mass: float) -> None:
         """The whole grid's warning of ``bg.posterior`` (its prior's ``rasterise``) where it
@@ -274,33 +296,61 @@ class TiledPosterior:
         whole or not at all (:func:`bananagrid.geo.zarr_store.write_zarr`): each cell's
         probability as ``LAYER_probability`` (the posterior's summing to one) and, as the
         layer's density, that probability over the cell's area (the cell's mean density); the
-        global numbers (:meth:`numbers`) in the provenance. Two passes over the blocks: the
-        sums, then the maps (the normaliser is global). Returns the path."""
+        global numbers (:meth:`numbers`) in the provenance. One pass over the blocks computes
+        the cells and the sums together; then the stored posterior is divided by its sum in place
+        (the normaliser is global), before the store is put in place. Returns the path.
+
+        Raises
+        ------
+        BananagridError
+            As :func:`~bananagrid.geo.zarr_store.write_zarr`, and as :meth:`numbers` (evidence
+            that contradicts the prior: no store is left).
+        """
         final = check_store_target(path)  # before any computing
-        try:
-            numbers = self.numbers(progress=progress)
-        except BananagridError:
-            raise
-        except Exception as exc:  # as write_zarr words a failure while computing: nothing was written
-            reason = (str(exc) or type(exc).__name__).splitlines()[0]
-            raise OutputWriteError(f"{final}: cannot write the {STORE} ({type(exc).__name__}: {reason})") from None
         t = float(getattr(self.prior, "t", 0.0) or 0.0) if t is None else t
-        info = {**self.provenance, "posterior": dict(numbers, subdivisions=self.subdivisions,
-                                                      evidence=[e.describe() for e in self.evidence])}
         skipped = self.skipped if self.skipped is not None else np.zeros(self.channels.numblocks[1:], dtype=bool)
-
-        def layer(values, quantity, what):
-            return TiledRaster(values=values, grid=self.grid, chunks=self.chunks, skipped=skipped, floor=-math.inf,
-                               provenance=dict(info, quantity=quantity, values=what), frame=self.frame,
-                               quantity=quantity)
-
         area = self.grid.cell_area
-        cells = {name: values for name, values in (("prior", self._channel("prior")),
-                                                    ("posterior", self.unnormalised / numbers["mass"]))}
-        panels = [(name, t, layer(values / area, "density", "cell probability / cell area: the cell's mean density"))
-                  for name, values in cells.items()]
-        probabilities = {(name, t): layer(values, "probability", "cell probability") for name, values in cells.items()}
-        return write_zarr(final, panels, self.frame, title=title, progress=progress, cells=probabilities)
+
+        def layers(posterior, info):
+            def layer(values, quantity, what):
+                return TiledRaster(values=values, grid=self.grid, chunks=self.chunks, skipped=skipped,
+                                   floor=-math.inf, provenance=dict(info, quantity=quantity, values=what),
+                                   frame=self.frame, quantity=quantity)
+
+            cells = {"prior": self._channel("prior"), "posterior": posterior}
+            panels = [(name, t, layer(values / area, "density", "cell probability / cell area: the cell's mean "
+                                      "density")) for name, values in cells.items()]
+            return panels, {(name, t): layer(values, "probability", "cell probability") for name, values in cells.items()}
+
+        def finish(group, sums) -> None:
+            numbers = self.finish_sums(sums)
+            info = {**self.provenance, "posterior": dict(numbers, subdivisions=self.subdivisions,
+                                                          evidence=[e.describe() for e in self.evidence])}
+            for name in ("posterior", "posterior_probability"):
+                scale_stored(group, name, [numbers["mass"]], progress=progress)
+            group["posterior_mass"][...] = group["posterior_mass"][...] / numbers["mass"]
+            panels, cells = layers(self.unnormalised / numbers["mass"], info)
+            complete = raster_dataset(panels, self.frame, title=title, cells=cells)  # nothing in it is computed
+            for name, var in complete.data_vars.items():
+                if "bananagrid_provenance" in var.attrs:
+                    group[name].attrs["bananagrid_provenance"] = var.attrs["bananagrid_provenance"]
+
+        # the posterior's cells before the normaliser, with the sums, in the store's one pass
+        panels, cells = layers(self.unnormalised, dict(self.provenance))
+        return write_zarr(final, panels, self.frame, title=title, progress=progress, cells=cells,
+                          extra=self.lazy_sums(), finish=finish)
+
+    def pending_maps(self) -> "PosteriorMaps":
+        """The maps as one pass writes them before its sums are known: ``values`` the cells'
+        posterior mass P_c f_all before the normaliser (to be divided by the sum S_all, which
+        :meth:`maps` holds as ``mass``, once the pass has computed :meth:`lazy_sums`), the POD
+        map as :meth:`maps`; the global numbers NaN, the provenance's ``posterior`` entry empty.
+        Its blocks are computed once when the maps and the sums are computed together."""
+        searches = sum(1 for key in self.names if isinstance(key, tuple))
+        return PosteriorMaps(values=self.unnormalised, pod=self.pod, prior=self._channel("prior"), grid=self.grid,
+                             pos=math.nan, search_pos=(math.nan,) * searches, normaliser=math.nan,
+                             prior_mass=math.nan, mass=math.nan, provenance={**self.provenance, "posterior": {}},
+                             frame=self.frame, normalised=False)
 
     def __repr__(self) -> str:
         g = self.grid
@@ -308,6 +358,51 @@ class TiledPosterior:
         skipped = 0 if self.skipped is None else int(self.skipped.sum())
         return (f"TiledPosterior({g.nx} x {g.ny} cells in {blocks} blocks of {self.chunks[0]} x {self.chunks[1]}, "
                 f"{skipped} skipped, {len(self.evidence)} evidence, model {type(self.prior).__name__})")
+
+
+@dataclass(frozen=True)
+class PosteriorMaps:
+    """A tiled posterior's maps, lazy, with its global numbers (:meth:`TiledPosterior.maps`):
+    the attributes of :class:`~bananagrid.evidence.posterior.Posterior`, the maps Dask arrays in
+    the posterior's blocks.
+
+    Attributes
+    ----------
+    values : dask.array.Array (ny, nx)
+        Posterior cell probabilities (POC), summing to one over the grid.
+    pod : dask.array.Array (ny, nx)
+        The cumulative POD of each cell.
+    prior : dask.array.Array (ny, nx)
+        The prior's cell probabilities P_c.
+    grid : Grid
+    pos, search_pos, normaliser
+        As :class:`~bananagrid.evidence.posterior.Posterior`'s.
+    prior_mass : float
+        The sum of the prior's cells (S_P).
+    mass : float
+        The sum of the unnormalised posterior cells (S_all).
+    provenance : dict
+        The prior's, with the blocks, and ``posterior``: the keys ``bg.posterior`` writes there.
+    frame : GeoFrame or None
+    """
+
+    values: object
+    pod: object
+    prior: object
+    grid: Grid
+    pos: float
+    search_pos: tuple
+    normaliser: float
+    prior_mass: float
+    mass: float
+    provenance: dict = field(default_factory=dict)
+    frame: object = None
+    quantity: str = "probability"
+    normalised: bool = True
+
+    def __repr__(self) -> str:
+        g = self.grid
+        return f"PosteriorMaps({g.nx} x {g.ny} cells, lazy, POS {self.pos:.6g}, normaliser {self.normaliser:.6g})"
 
 
 def posterior_tiles(prior, grid: Grid, evidence=(), chunks=DEFAULT_CHUNK, *, subdivisions: int = SUBDIVISIONS,

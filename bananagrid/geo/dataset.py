@@ -63,6 +63,7 @@ from .panels import check_cells, check_panels, frame_of, provenance_json, variab
 __all__ = [
     "CONVENTIONS", "DENSITY_UNITS", "ELAPSED_LONG_NAME", "NETCDF_PURPOSE", "raster_dataset", "polar_dataset",
     "cell_map_dataset", "write_netcdf", "COVERAGE_VARIABLE", "time_units", "read_maps", "check_netcdf", "netcdf_digest", "DIGEST_ATTRIBUTE",
+    "layer_variables",
 ]
 
 CONVENTIONS = "CF-1.10"
@@ -178,7 +179,7 @@ def raster_dataset(panels: Sequence, frame=None, *, title: str = "", source: str
                 xr, layer, [probabilities[layer, p.t] for p in series], data_vars[var])
         if "posterior" in derived:
             data_vars.update(_posterior_variables(xr, layer, [found[layer, p.t] for p in series], data_vars[var],
-                                                  derived, tdim, coords))
+                                                  derived, tdim, coords, _search_names(found.values())))
         data_vars[derived["mass"]] = xr.Variable(
             (tdim,), _stack([getattr(p.raster, "lazy_mass", None) if _lazy(p.raster.values) else float(p.raster.mass)
                              for p in series]),
@@ -201,19 +202,35 @@ def raster_dataset(panels: Sequence, frame=None, *, title: str = "", source: str
     return xr.Dataset(data_vars, coords=coords, attrs=attrs)
 
 
-def _posterior_variables(xr, layer: str, posts: list, density, names: dict, tdim: str, coords: dict) -> dict:
-    """A layer's posterior, POD, POS and each search's POS beside its density variable
-    ``density`` (the same dimensions, coordinates and grid mapping), the values as computed."""
-    common = {"units": "1", "bananagrid_layer": layer}
-    if "grid_mapping" in density.attrs:
-        common["grid_mapping"] = density.attrs["grid_mapping"]
-    encoding = {k: v for k, v in density.encoding.items() if k == "coordinates"}
-    evidence = [p.provenance.get("posterior", {}) for p in posts]
+def layer_variables(dataset) -> dict:
+    """``{layer: variable name}`` of the layers' density variables of a dataset of
+    :func:`raster_dataset` (or a file or store of it): those with a ``bananagrid_layer`` in
+    units of density (a posterior's, POD's and POS's variables name their layer too)."""
+    return {var.attrs["bananagrid_layer"]: name for name, var in dataset.data_vars.items()
+            if "bananagrid_layer" in var.attrs and var.attrs.get("units") == DENSITY_UNITS}
+
+
+def _search_names(posts) -> list[str]:
+    """The searches of every posterior, each once, in the order they are first taken: the
+    dimension ``search`` (layers at different times may have taken different searches)."""
     searches: list[str] = []
     for p in posts:
         for name in p.provenance.get("search_names", []):
             if name not in searches:
                 searches.append(name)
+    return searches
+
+
+def _posterior_variables(xr, layer: str, posts: list, density, names: dict, tdim: str, coords: dict,
+                         searches: list[str]) -> dict:
+    """A layer's posterior, POD, POS and each search's POS beside its density variable
+    ``density`` (the same dimensions, coordinates and grid mapping), the values as computed;
+    ``searches``: the dimension ``search`` (:func:`_search_names` of every layer's posteriors)."""
+    common = {"units": "1", "bananagrid_layer": layer}
+    if "grid_mapping" in density.attrs:
+        common["grid_mapping"] = density.attrs["grid_mapping"]
+    encoding = {k: v for k, v in density.encoding.items() if k == "coordinates"}
+    evidence = [p.provenance.get("posterior", {}) for p in posts]
     table = np.full((len(posts), len(searches)), np.nan)
     for i, p in enumerate(posts):
         for name, pos in zip(p.provenance.get("search_names", []), p.search_pos):
@@ -221,8 +238,6 @@ def _posterior_variables(xr, layer: str, posts: list, density, names: dict, tdim
     if "search" not in coords:
         coords["search"] = xr.Variable(("search",), np.array(searches, dtype=object),
                                        {"long_name": "name of the search (the scene's [[evidence]] name)"})
-    elif list(coords["search"].values) != searches:
-        raise BananagridError(f"posteriors: layer {layer!r} has other searches than another layer")
     return {
         names["posterior"]: xr.Variable(density.dims, _stack([p.values for p in posts]), {
             **common, "long_name": f"probability that the target is in the cell after the evidence (posterior POC): "
@@ -680,8 +695,9 @@ def read_maps(path: str | os.PathLike) -> tuple[str, list[dict]]:
             "lat": described["lat"], "lon": described["lon"], "time": described.get("time"), "crs": described["crs_name"],
         }
         maps = []
-        for name, var in ds.data_vars.items():
-            if "bananagrid_layer" not in var.attrs or var.dims[1:] != ("y", "x"):
+        for name in layer_variables(ds).values():
+            var = ds[name]
+            if var.dims[1:] != ("y", "x"):
                 continue
             tdim = var.dims[0]
             elapsed = ds[tdim] if tdim.startswith("elapsed") else ds[tdim.replace("time", "elapsed", 1)]

@@ -29,12 +29,12 @@ import numpy as np
 from ..atomic import OutputSet, OutputWriteError
 from ..validate import BananagridError
 from ..version import __version__
-from .dataset import DENSITY_UNITS, raster_dataset
+from .dataset import DENSITY_UNITS, layer_variables, raster_dataset
 from .panels import check_panels
 from .libraries import CLUSTER_EXTRA, CLUSTER_PURPOSE, require
 
 __all__ = ["write_zarr", "write_batch_zarr", "ZARR_FORMAT", "compute_with_progress", "is_bananagrid_store",
-           "check_store_target", "STORE"]
+           "check_store_target", "STORE", "scale_stored"]
 
 #: Zarr format of the stores (v3: its ``fill_value`` is separate from CF's ``_FillValue``, so a
 #: block never written reads as 0 and no zero is read as missing).
@@ -135,7 +135,7 @@ def _current_client():
 
 
 def write_zarr(path: str | os.PathLike, panels: Sequence, frame=None, *, title: str = "", source: str = "",
-               progress: bool = False, stage=None, cells=None) -> Path:
+               progress: bool = False, stage=None, cells=None, posteriors=None, extra=(), finish=None) -> Path:
     """Write a scene's maps to the Zarr store ``path`` (a directory), whole or not at all.
 
     Parameters
@@ -157,6 +157,19 @@ def write_zarr(path: str | os.PathLike, panels: Sequence, frame=None, *, title: 
     cells : mapping of (str, float) to Raster, optional
         Cell probabilities by ``(layer, t)`` (rasters in memory), stored as ``LAYER_probability``
         as :func:`~bananagrid.geo.dataset.raster_dataset` puts them in the NetCDF.
+    posteriors : mapping of (str, float) to Posterior, optional
+        Posteriors by ``(layer, t)`` (``bg.posterior``'s, or a tiled posterior's lazy maps,
+        :meth:`bananagrid.evidence.tiled.TiledPosterior.maps`), stored as
+        :func:`~bananagrid.geo.dataset.raster_dataset` puts them in the NetCDF:
+        ``LAYER_posterior``, ``LAYER_pod``, ``LAYER_pos`` and ``LAYER_search_pos``.
+    extra : sequence of Dask collections, optional
+        Computed in the same pass as the blocks (a posterior's sums, say: its blocks are then
+        computed once) and handed to ``finish``.
+    finish : callable, optional
+        ``finish(group, values)``, called with the open ``zarr.Group`` of the temporary store and
+        the computed ``extra`` once every block is written, before the store is put in place: it
+        completes what needs the pass's results (:func:`scale_stored`, values and attributes);
+        whatever it raises abandons the store. The metadata is consolidated again after it.
 
     Returns
     -------
@@ -173,7 +186,7 @@ def write_zarr(path: str | os.PathLike, panels: Sequence, frame=None, *, title: 
     """
     xr = require("xarray", CLUSTER_PURPOSE, CLUSTER_EXTRA)
     final = check_store_target(path)
-    dataset = raster_dataset(panels, frame, title=title, source=source, cells=cells)
+    dataset = raster_dataset(panels, frame, title=title, source=source, cells=cells, posteriors=posteriors)
     if not isinstance(dataset, xr.Dataset):  # pragma: no cover - raster_dataset always returns one
         raise BananagridError("write_zarr: expected the maps as an xarray.Dataset")
     encoding = {}
@@ -184,16 +197,26 @@ def write_zarr(path: str | os.PathLike, panels: Sequence, frame=None, *, title: 
             keep.update(fill_value=np.zeros((), dtype=var.dtype)[()], chunks=tuple(c[0] for c in var.chunks),
                         compressors=_compressors())
         encoding[name] = keep
-    _write_dataset(dataset, final, encoding, progress, _computed_pieces(dataset, check_panels(panels)), stage=stage)
+    _write_dataset(dataset, final, encoding, progress, _computed_pieces(dataset, check_panels(panels)), stage=stage,
+                   extra=extra, finish=finish)
     return final
+
+
+def scale_stored(group, name: str, divisors, *, progress: bool = False) -> None:
+    """Divide each map ``k`` (the first axis) of the stored variable ``name`` of ``group`` by
+    ``divisors[k]``, block by block in place (a block never written stays unwritten: 0 / d is 0)."""
+    da = require("dask.array", CLUSTER_PURPOSE, CLUSTER_EXTRA)
+    array = group[name]
+    divisors = np.asarray(divisors, dtype=np.float64).reshape((-1,) + (1,) * (array.ndim - 1))
+    scaled = da.from_zarr(array) / divisors
+    compute_with_progress(da.store(scaled, _SkipZeros(array), lock=False, compute=False), progress=progress)
 
 
 def _computed_pieces(dataset, panels: list) -> dict:
     """``{variable: [(block, region), ...]}``: for each layer all of whose maps are tiled, the
     blocks that are not skipped and where each goes, so that a skipped block is not even a task
     (the layer's times in ``raster_dataset``'s order: by ``t``)."""
-    names = {var.attrs["bananagrid_layer"]: name for name, var in dataset.data_vars.items()
-             if "bananagrid_layer" in var.attrs}
+    names = layer_variables(dataset)
     series: dict[str, list] = {}
     for panel in panels:
         series.setdefault(panel.layer, []).append(panel)
@@ -242,18 +265,19 @@ def _compressors() -> tuple:
 
 
 def _write_dataset(dataset, final: Path, encoding: dict, progress: bool, pieces: dict | None = None,
-                   stage=None) -> None:
+                   stage=None, extra=(), finish=None) -> None:
     """Write ``dataset`` to a temporary store beside ``final``, computing its Dask variables in
     one pass, and put it in place when complete (``stage``: a run's, which commits it with its
     other files); on any failure remove it. ``pieces``: variables written only in the given
-    blocks and regions (the rest is Zarr's fill value)."""
+    blocks and regions (the rest is Zarr's fill value); ``extra``, ``finish``: as for
+    :func:`write_zarr`."""
     with OutputSet() as own:
         if stage is None:
             own.add(final, STORE, ours=is_bananagrid_store)
             stage = own.stage
         try:
             with stage(final) as partial:
-                _write_store(dataset, partial, encoding, progress, pieces or {})
+                _write_store(dataset, partial, encoding, progress, pieces or {}, extra, finish)
             own.commit()
         except Exception as exc:
             if isinstance(exc, BananagridError):
@@ -262,8 +286,10 @@ def _write_dataset(dataset, final: Path, encoding: dict, progress: bool, pieces:
             raise OutputWriteError(f"{final}: cannot write the {STORE} ({type(exc).__name__}: {reason})") from None
 
 
-def _write_store(dataset, partial: Path, encoding: dict, progress: bool, pieces: dict) -> None:
-    """The store at ``partial``: its structure first, then the lazy variables in one pass."""
+def _write_store(dataset, partial: Path, encoding: dict, progress: bool, pieces: dict, extra=(),
+                 finish=None) -> None:
+    """The store at ``partial``: its structure first, then the lazy variables (and ``extra``) in
+    one pass, then ``finish``."""
     with warnings.catch_warnings():
         # consolidated metadata (one read opens the store) is zarr-python's extension of v3: it warns
         warnings.filterwarnings("ignore", message=".*[Cc]onsolidated metadata.*")
@@ -286,9 +312,14 @@ def _write_store(dataset, partial: Path, encoding: dict, progress: bool, pieces:
             sources.append(var.data)
             targets.append(_SkipZeros(group[name]))
             regions.append(None)
-    if sources:
-        stored = da.store(sources, targets, regions=regions, lock=False, compute=False)
-        compute_with_progress(stored, progress=progress)
+    collections = [da.store(sources, targets, regions=regions, lock=False, compute=False)] if sources else []
+    extra = list(extra)
+    values = compute_with_progress(*collections, *extra, progress=progress) if collections or extra else ()
+    if finish is not None:
+        finish(group, list(values[len(collections):]))
+        with warnings.catch_warnings():
+            warnings.filterwarnings("ignore", message=".*[Cc]onsolidated metadata.*")
+            zarr.consolidate_metadata(partial, zarr_format=ZARR_FORMAT)  # what finish changed, in the one read
 
 
 class _SkipZeros:

@@ -29,9 +29,9 @@ from ..validate import BananagridError
 from .evidence import job_evidence
 from .load import Layer, Scene
 
-__all__ = ["ScenePosterior", "scene_posterior", "record_evidence_marks", "record_posterior", "evidence_paths",
-           "write_evidence_geojson", "evidence_bytes_per_cell", "EVIDENCE_GEOJSON_SUFFIX", "EVIDENCE_BYTES_PER_CELL",
-           "EVIDENCE_BYTES_PER_PIECE", "EVIDENCE_KEPT_BYTES_PER_CELL"]
+__all__ = ["ScenePosterior", "scene_posterior", "scene_named", "scene_error", "record_evidence_marks",
+           "record_posterior", "evidence_paths", "write_evidence_geojson", "evidence_bytes_per_cell",
+           "EVIDENCE_GEOJSON_SUFFIX", "EVIDENCE_BYTES_PER_CELL", "EVIDENCE_BYTES_PER_PIECE", "EVIDENCE_KEPT_BYTES_PER_CELL"]
 
 #: The evidence's GeoJSON after the scene's name.
 EVIDENCE_GEOJSON_SUFFIX = "-evidence.geojson"
@@ -97,18 +97,30 @@ def scene_posterior(scene: Scene, layer: Layer, t: float, model=None, *, threads
     try:
         post = posterior(model, scene.grid, [s.evidence for s in used], threads=threads)
     except BananagridError as exc:
-        # the call's evidence[k] is the scene's evidence[used[k].index]
-        message = re.sub(r"evidence\[(\d+)\]", lambda m: f"evidence[{used[int(m.group(1))].index}]"
-                         if int(m.group(1)) < len(used) else m.group(0), str(exc))
-        raise BananagridError(f"{scene.source}: layers.{layer.name} at t = {t:g} s: {message}") from None
+        raise scene_error(scene, layer, t, used, exc) from None
+    post = scene_named(scene, used, post)
+    values = evidence_values(post, used, scene.evidence, layer=layer.name, t=t)
+    return ScenePosterior(layer=layer.name, t=float(t), posterior=post, used=used, values=values)
+
+
+def scene_named(scene: Scene, used, post):
+    """``post`` (a ``Posterior``, or a tiled posterior's maps) with the names of the scene's
+    evidence it took (``evidence_names``, ``search_names``: the files name the searches by them)
+    in its provenance, and in a geographic scene the scene's frame."""
     provenance = {**post.provenance, "evidence_names": [s.name for s in used],
                   "search_names": [s.name for s in used if s.search]}
     if scene.geo is not None:
-        post = replace(post, frame=scene.geo, provenance={**provenance, "geo": scene.geo.identity()})
-    else:
-        post = replace(post, provenance=provenance)
-    values = evidence_values(post, used, scene.evidence, layer=layer.name, t=t)
-    return ScenePosterior(layer=layer.name, t=float(t), posterior=post, used=used, values=values)
+        return replace(post, frame=scene.geo, provenance={**provenance, "geo": scene.geo.identity()})
+    return replace(post, provenance=provenance)
+
+
+def scene_error(scene: Scene, layer: Layer, t: float, used, exc: BananagridError) -> BananagridError:
+    """``bg.posterior``'s refusal ``exc`` of a map's evidence ``used`` in the scene's words: one
+    line naming the scene, the layer, the time and the scene's ``evidence[k]`` (the call's
+    ``evidence[k]`` is the scene's ``evidence[used[k].index]``)."""
+    message = re.sub(r"evidence\[(\d+)\]", lambda m: f"evidence[{used[int(m.group(1))].index}]"
+                     if int(m.group(1)) < len(used) else m.group(0), str(exc))
+    return BananagridError(f"{scene.source}: layers.{layer.name} at t = {t:g} s: {message}")
 
 
 def record_evidence_marks(rec, scene: Scene) -> None:

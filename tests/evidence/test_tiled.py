@@ -12,6 +12,7 @@ order than over the whole grid (n cells: n eps of the sum at worst, 1e-13 for th
 
 from __future__ import annotations
 
+import json
 import math
 
 import dask
@@ -141,9 +142,9 @@ def test_the_store_holds_the_posterior_whole_or_not_at_all(tmp_path, monkeypatch
         assert np.max(np.abs(store["posterior_probability"].values[0] - ref.values)) <= TOL * ref.values.max()
 
 
-def test_contradicting_evidence_is_refused_as_by_the_whole_grid():
+def test_contradicting_evidence_is_refused_as_by_the_whole_grid(tmp_path):
     """A search that would surely have found the target: the same one-line refusal from the
-    blocks' sums as from bg.posterior."""
+    blocks' sums as from bg.posterior, and from to_zarr (its one pass done), with no store left."""
     prior, grid, _, _ = PRIORS["cat"]
     grid = _coarse(grid)
     (x0, x1, y0, y1) = grid.extent
@@ -154,6 +155,29 @@ def test_contradicting_evidence_is_refused_as_by_the_whole_grid():
     with dask.config.set(scheduler="threads"), pytest.raises(bg.BananagridError) as blocks:
         tiles.numbers()
     assert str(blocks.value) == str(whole.value)
+    with dask.config.set(scheduler="threads"), pytest.raises(bg.BananagridError) as stored:
+        tiles.to_zarr(tmp_path / "post.zarr")
+    assert str(stored.value) == str(whole.value) and list(tmp_path.iterdir()) == []
+
+
+def test_the_store_is_written_in_one_pass(tmp_path, monkeypatch):
+    """to_zarr computes each block's cells once (the sums in the same pass; the stored posterior
+    divided by its sum after it): the store's posterior sums to one, its captured mass is 1 and
+    its provenance holds numbers() (the same sums, in another pass)."""
+    prior, grid, _, _ = PRIORS["cat"]
+    grid, evidence = _coarse(grid), _evidence("cat")
+    real, calls = tiled.block_cells, []
+    monkeypatch.setattr(tiled, "block_cells", lambda *args: calls.append(args[4:6]) or real(*args))
+    tiles = posterior_tiles(prior, grid, evidence, chunks=CHUNKS)
+    with dask.config.set(scheduler="threads"):
+        tiles.to_zarr(tmp_path / "post.zarr")
+        assert len(calls) == int((~tiles.skipped).sum()) > 0
+        numbers = tiles.numbers()
+    with xr.open_zarr(tmp_path / "post.zarr") as store:
+        assert float(store["posterior_probability"].values.sum()) == pytest.approx(1.0, abs=TOL)
+        assert float(store["posterior_mass"].values[0]) == pytest.approx(1.0, abs=TOL)
+        stored = json.loads(store["posterior"].attrs["bananagrid_provenance"])[0]["posterior"]
+    assert stored["pos"] == numbers["pos"] and stored["normaliser"] == numbers["normaliser"]  # the same sums
 
 
 @pytest.mark.parametrize("what, call, message", [

@@ -417,15 +417,6 @@ def test_earlier_evidence_the_model_cannot_carry_is_one_line_and_leaves_nothing(
     assert not list(tmp_path.glob("*.rrd"))
 
 
-def test_a_tiled_run_refuses_evidence(tmp_path, capsys):
-    scene = tmp_path / "s.toml"
-    scene.write_text(PLAIN + '[[evidence]]\nkind = "exclusion"\npolygon = [[0, 0], [1, 0], [0, 1]]\n')
-    assert main(["run", str(scene), "--zarr", str(tmp_path / "s.zarr")]) == 2
-    err = capsys.readouterr().err
-    assert err.count("\n") == 1 and "a posterior after [[evidence]] is normalised over its whole map" in err
-    assert not (tmp_path / "s.zarr").exists()
-
-
 @seed(20261127)
 @settings(max_examples=60, deadline=None, database=None)
 @given(t=st.one_of(st.floats(allow_nan=True, allow_infinity=True), st.integers(-10, 100)),
