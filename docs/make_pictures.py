@@ -81,7 +81,7 @@ CAPTIONS = {
                     "longitude.", "Two coastal stations west of Bergen"),
     "submarine_barriers": ("The submarine's prior 2.5 h after its fix, before the evidence: two barriers flown north "
                            "and east of the fix found nothing, then two bearing pairs; its recording shows the "
-                           "posteriors beside the prior (In the viewer).",
+                           "posteriors beside the prior ([In the viewer](viewer.md#submarine_barriers)).",
                            "The submarine's prior 2.5 h after its fix"),
 }
 
