@@ -673,15 +673,11 @@ def format_evidence(rows: list[dict]) -> list[str]:
         given = [name for name in found["evidence"] if name not in found["searches"]]
         lines.append(f"{row['scene']}: posterior of {found['layer']} at t = {found['t']:g} s after "
                      f"{', '.join(found['evidence']) or 'no evidence yet'}: POS {found['pos']:.4f}"
-                     + (f" given {_and_list(given)}" if given else "")
+                     + (f" given {', '.join(given)}" if given else "")
                      + (f" (each search alone: {own})" if own else "")
                      + f", probability of the evidence {found['normaliser']:.4g}")
     return lines
 
-
-def _and_list(names: list[str]) -> str:
-    """``a``, ``a and b``, ``a, b and c``."""
-    return names[0] if len(names) == 1 else f"{', '.join(names[:-1])} and {names[-1]}"
 
 
 def format_plan(scene: str, plan: dict) -> str:

@@ -22,6 +22,7 @@ from scipy import stats
 
 import bananagrid as bg
 from bananagrid.cli import format_evidence
+from bananagrid.recording.inspect import format_inspection
 from bananagrid.scenes.run_evidence import scene_posterior
 
 # the vectorised box clipping and the knot of tests/evidence/test_butterly_monte_carlo.py
@@ -208,13 +209,13 @@ def _row(evidence, searches, search_pos, pos, normaliser):
      "east 0.0883), probability of the evidence 0.797"),
     # with reports: POS given them (0 here: the bearings put it where no barrier looked)
     (_row(["north", "east", "b3", "b4"], ["north", "east"], [0.0, 0.0], 0.0, 0.005824),
-     "s: posterior of sub at t = 14400 s after north, east, b3, b4: POS 0.0000 given b3 and b4 (each search "
+     "s: posterior of sub at t = 14400 s after north, east, b3, b4: POS 0.0000 given b3, b4 (each search "
      "alone: north 0.0000, east 0.0000), probability of the evidence 0.005824"),
     # land alone, the scene's search not begun yet
     (_row(["land"], ["box"], [math.nan], 0.0, 0.9),
      "s: posterior of sub at t = 14400 s after land: POS 0.0000 given land, probability of the evidence 0.9"),
     (_row(["box", "land", "E4", "E5"], ["box"], [0.5], 0.5, 0.25),
-     "s: posterior of sub at t = 14400 s after box, land, E4, E5: POS 0.5000 given land, E4 and E5 (each search "
+     "s: posterior of sub at t = 14400 s after box, land, E4, E5: POS 0.5000 given land, E4, E5 (each search "
      "alone: box 0.5000), probability of the evidence 0.25"),
 ], ids=["searches", "reports", "land", "three"])
 def test_the_printed_line_says_what_the_pos_is_given(row, says):
@@ -226,7 +227,22 @@ def test_the_guide_tells_the_header_s_figures():
     the run prints at 4 h (test_the_printed_line_says_what_the_pos_is_given's wording)."""
     for phrase in ("POS is 0.203 (the north one alone 0.121, the east one 0.088)", "falls from 0.50 to 0.42",
                    "rises from 0.20 to 0.25", "course 225 deg, 74 km south-west of the fix at 4 h",
-                   "`POS 0.0000 given bearings_3h and bearings_4h`"):
+                   "`POS 0.0000 given bearings_3h, bearings_4h`"):
         assert phrase in GUIDE, phrase
     for figure in ("0.203", "0.121", "0.088", "0.42 (prior 0.50)", "0.25 (0.20)", "(course 225 deg", "spot 74 km"):
         assert figure in HEADER, figure
+
+
+def test_inspect_says_what_the_pos_is_given():
+    """``bananagrid inspect`` (text) names the reports and land a recorded POS is conditioned on,
+    and none where the map took searches alone."""
+    info = {"path": "s.rrd", "application_id": "bananagrid", "recording_id": "r", "blueprint": True,
+            "timelines": {}, "entities": {},
+            "evidence": [{"layer": "sub", "t": 9000.0, "pos": 0.203, "normaliser": 0.797, "prior_mass": 1.0,
+                          "evidence": ["north", "east"], "search_pos": {"north": 0.121, "east": 0.088}},
+                         {"layer": "sub", "t": 14400.0, "pos": 0.0, "normaliser": 0.0058, "prior_mass": 1.0,
+                          "evidence": ["north", "east", "b3", "b4"], "search_pos": {"north": 0.0, "east": 0.0}}]}
+    text = format_inspection(info).splitlines()
+    assert "    POS                    0.203000 (each search alone: north 0.121000, east 0.088000)" in text
+    assert ("    POS                    0.000000 given b3, b4 (each search alone: north 0.000000, east 0.000000)"
+            in text)
