@@ -679,7 +679,6 @@ def format_evidence(rows: list[dict]) -> list[str]:
     return lines
 
 
-
 def format_plan(scene: str, plan: dict) -> str:
     """A scene's plan (:func:`bananagrid.recording.plan.plan_values`) in a few lines: the
     ideal POS, the effort and marginal gain, and each kind of areas' POS and areas."""
