@@ -33,8 +33,8 @@ SCENE = ROOT / "scenes" / "submarine_barriers.toml"
 #: The header's text (its comment lines, joined): the story the figures below are checked in.
 HEADER = " ".join(line.lstrip("#").strip() for line in SCENE.read_text().split("[scene]")[0].splitlines())
 #: The guide's telling of the same story (its lines joined).
-GUIDE = " ".join((ROOT / "docs" / "guide" / "evidence.md").read_text().split("`scenes/submarine_barriers.toml` tells")[1]
-                 .split("\n\n")[0].split())
+GUIDE = " ".join((ROOT / "docs" / "guide" / "evidence.md").read_text()
+                 .split("`scenes/submarine_barriers.toml` tells")[1].split("\n\n")[0].split())
 #: The cells of tests/test_cli.py's quick run of the scene (coarse cells cost as much as fine
 #: ones: the cell rule's sub-cells follow the start's smallest SD, 0.43 km).
 STEP = 4000.0
@@ -178,7 +178,8 @@ def test_the_header_states_what_the_bearings_say(story):
     left = ~(north | east)
     first, second = story["likelihood"]
     for weights, spread in ((left * first, "4"), (left * first * second, "2")):
-        assert np.sum(weights[story["speed"] == 10.0]) / np.sum(weights) > 1.0 - 1e-6  # "only the 10 kn": 1 - 2e-8 after the first pair
+        # "only the 10 kn": their share is 1 - 2e-8 after the first pair
+        assert np.sum(weights[story["speed"] == 10.0]) / np.sum(weights) > 1.0 - 1e-6
         mean, sd, error = weighted(story["course"], weights)
         stated("(course {} deg", "225", mean, error)
         # the SD's standard error: SD / sqrt(2 ESS), a normal sample's
