@@ -665,7 +665,9 @@ def format_summary(rows: list[dict]) -> str:
 
 def format_evidence(rows: list[dict]) -> list[str]:
     """Each map's posterior (:func:`bananagrid.recording.evidence.evidence_values`) in one line:
-    the searches' POS together and each search's own, and the probability of the evidence."""
+    the searches' POS together, the evidence it is conditioned on (the reports and land the map
+    took: POS is the probability that the searches would have found the target *given* them),
+    each search's own POS, and the probability of the evidence."""
     lines = []
     for row in rows:
         found = row.get("evidence")
@@ -675,9 +677,12 @@ def format_evidence(rows: list[dict]) -> list[str]:
             lines.append("")
         own = ", ".join(f"{name} {pos:.4f}" for name, pos in zip(found["searches"], found["search_pos"])
                         if math.isfinite(pos))
+        given = [name for name in found["evidence"] if name not in found["searches"]]
         lines.append(f"{row['scene']}: posterior of {found['layer']} at t = {found['t']:g} s after "
                      f"{', '.join(found['evidence']) or 'no evidence yet'}: POS {found['pos']:.4f}"
-                     + (f" (alone: {own})" if own else "") + f", probability of the evidence {found['normaliser']:.4g}")
+                     + (f" given {', '.join(given)}" if given else "")
+                     + (f" (each search alone: {own})" if own else "")
+                     + f", probability of the evidence {found['normaliser']:.4g}")
     return lines
 
 

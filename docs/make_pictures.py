@@ -52,6 +52,7 @@ PICTURED = {
     "geo_ship": (50.0, None, ()),
     "geo_bearing": (50.0, None, ()),
     "fast_contact": (100.0, 600.0, ()),
+    "submarine_barriers": (500.0, 9000.0, ()),
 }
 
 #: The gallery's caption of each picture, and the picture's alternative text. A pictured scene
@@ -78,6 +79,10 @@ CAPTIONS = {
                  "Butterly start trusting the course to about 20 deg (local km about the fix).", "A vessel west of Bergen"),
     "geo_bearing": ("Two Norwegian coastal direction-finding stations, 38 and 49 km away, given in latitude and "
                     "longitude.", "Two coastal stations west of Bergen"),
+    "submarine_barriers": ("The submarine's prior 2.5 h after its fix, before the evidence: two barriers flown north "
+                           "and east of the fix found nothing, then two bearing pairs; its recording shows the "
+                           "posteriors beside the prior ([In the viewer](viewer.md#submarine_barriers)).",
+                           "The submarine's prior 2.5 h after its fix"),
 }
 
 GALLERY_HEAD = """# Gallery

@@ -33,6 +33,8 @@ QUICK_STEP = {
     "figure8": 100.0, "ship_heading": 20.0,
     "submarine": 4000.0, "rice_isotropic": 20.0, "slow_contact": 200.0,
     "geo_ship": 200.0, "geo_bearing": 200.0, "fast_contact": 400.0,
+    # about a CPU minute and a half at any step (its cell rule's sub-cells follow the start's SD)
+    "submarine_barriers": 4000.0,
 }
 #: Presence scenes ([array]) have no grid: --step does not apply (it is ignored with a warning),
 #: so they run at their own 1-degree lattices (about a second each) and get no --step here.

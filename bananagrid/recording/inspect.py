@@ -395,8 +395,11 @@ def format_inspection(info: dict) -> str:
         lines += ["", "after the evidence (the recorded posteriors)"]
         for item in info["evidence"]:
             own = ", ".join(f"{name} {pos:.6f}" for name, pos in item["search_pos"].items())
+            # POS is conditioned on the map's reports and land (the evidence that is no search)
+            given = ", ".join(name for name in item["evidence"] if name not in item["search_pos"])
             lines += [f"  {item['layer']} at t = {item['t']:g} s after {', '.join(item['evidence']) or 'no evidence yet'}",
-                      f"    POS                    {item['pos']:.6f}" + (f" (each alone: {own})" if own else ""),
+                      f"    POS                    {item['pos']:.6f}" + (f" given {given}" if given else "")
+                      + (f" (each search alone: {own})" if own else ""),
                       f"    probability of the evidence {item['normaliser']:.6g}"]
     if info.get("plan"):
         lines += ["", "where to look next (the recorded plan)"] + _plan_lines(info["plan"])
