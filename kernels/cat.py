@@ -20,7 +20,8 @@ from typing import Any
 
 import warp as wp
 
-from .common import cat_basis, local_to_world, normal_pdf, world_to_local
+from .common import SERIES_SWITCH, cat_basis, horner10, local_to_world, normal_pdf, series_c_over_u, series_d, series_dc, \
+    series_dd_over_u, sinc_of, world_to_local
 from .evidence import EVIDENCE, evidence_add, evidence_node, evidence_nodes, evidence_reset, evidence_time
 from .generate import (
     ARRAY, ARRAY2D, SCALAR, SCALARS, VEC4, Params, carried_points_kernel, density_kernels, overload_on_use,
@@ -55,12 +56,60 @@ ROUNDING_ULPS = 32.0
 
 
 @wp.func
+def series_ddc_over_u(z: Any):
+    """C''(u) / u as a series in z = u^2: sum_{n>=2} (-1)^(n+1) 2n (2n-1) (2n-2) u^(2n-4) / (2n+1)!
+    (``common.cat_basis``'s C' differentiated term by term)."""
+    return horner10(z, type(z)(-0.2), type(z)(0.023809523809523808), type(z)(-0.000925925925925926), type(z)(1.8037518037518038e-05), type(z)(-2.119793786460453e-07), type(z)(1.6701405590294479e-09), type(z)(-9.44649637460095e-12), type(z)(4.024823016747272e-14), type(z)(-1.3387891687359624e-16), type(z)(3.574189237662752e-19))
+
+
+@wp.func
+def series_ddd(z: Any):
+    """D''(u) as a series in z = u^2: sum_{n>=2} (-1)^(n+1) (2n-1) (2n-2) (2n-3) u^(2n-4) / (2n)!."""
+    return horner10(z, type(z)(-0.25), type(z)(0.08333333333333333), type(z)(-0.005208333333333333), type(z)(0.0001388888888888889), type(z)(-2.066798941798942e-06), type(z)(1.968379944570421e-08), type(z)(-1.3047973117417563e-10), type(z)(6.372636443183181e-13), type(z)(-2.3897386661936928e-15), type(z)(7.099639531175557e-18))
+
+
+@wp.func
+def cat_basis_curved(u: Any):
+    """``common.cat_basis`` (A, B, C, D, C', D' by the same formulas: the same bits) with each
+    sine and cosine taken once, and the second derivatives C'' and D'':
+
+        C'' = (u^3 cos u - 3 u^2 sin u + 6 sin u - 6 u cos u) / u^4,
+        D'' = (6 cos u + 6 u sin u - u^3 sin u - 3 u^2 cos u - 6) / u^4,
+
+    their series below SERIES_SWITCH (``series_ddc_over_u``, ``series_ddd``)."""
+    one = type(u)(1.0)
+    two = type(u)(2.0)
+    half_u = u * type(u)(0.5)
+    sin_half = wp.sin(half_u)
+    s = wp.sin(u)
+    a_fn = sin_half * sinc_of(half_u, sin_half)  # (1 - cos u) / u without cancellation
+    b_fn = sinc_of(u, s)
+    if wp.abs(u) < type(u)(SERIES_SWITCH):
+        z = u * u
+        return (a_fn, b_fn, u * series_c_over_u(z), series_d(z), series_dc(z), u * series_dd_over_u(z),
+                u * series_ddc_over_u(z), series_ddd(z))
+    c = wp.cos(u)
+    u2 = u * u
+    u3 = u2 * u
+    u4 = u2 * u2
+    six = type(u)(6.0)
+    three = type(u)(3.0)
+    c_fn = (s - u * c) / u2
+    d_fn = (c + u * s - one) / u2
+    dc_fn = (u2 * s - two * s + two * u * c) / u3
+    dd_fn = (u2 * c - two * c - two * u * s + two) / u3
+    ddc_fn = (u3 * c - three * u2 * s + six * s - six * u * c) / u4
+    ddd_fn = (six * c + six * u * s - u3 * s - three * u2 * c - six) / u4
+    return a_fn, b_fn, c_fn, d_fn, dc_fn, dd_fn, ddc_fn, ddd_fn
+
+
+@wp.func
 def cat_coefficients(omega: Any, v0: Any, t: Any):
     """The omega-only coefficients of everything a point needs, from one basis evaluation:
     F = hx y - hy x - c, dF/domega = dhx y - dhy x - dc, and the acceleration of the line
     through P, a = h . (P - v0 f) / |h|^2 = ax x + ay y - a0 (exact at a root)."""
     u = omega * t
-    a_fn, b_fn, c_fn, d_fn, dc_fn, dd_fn = cat_basis(u)
+    a_fn, b_fn, c_fn, d_fn, dc_fn, dd_fn, ddc_fn, ddd_fn = cat_basis_curved(u)
     t2 = t * t
     fx = t * a_fn
     fy = t * b_fn
@@ -83,6 +132,34 @@ def cat_eval(x: Any, y: Any, omega: Any, v0: Any, t: Any):
 
 
 @wp.func
+def cat_eval_curved(x: Any, y: Any, omega: Any, v0: Any, t: Any):
+    """F, dF/domega (``cat_eval``'s, the same bits) and d^2F/domega^2 at a local point, and the
+    acceleration a of the line through P (``cat_eval``'s).
+
+    With h'' = t^4 (C'', D''), f' = t^2 (D, -C): h' x f' = -t^5 (C C' + D D') = -h . h', so
+
+        d^2F/domega^2 = h'' x (P - v0 f) - v0 (h' x f' - 2 h . h') = h'' x (P - v0 f) + 3 v0 h . h'.
+    """
+    u = omega * t
+    a_fn, b_fn, c_fn, d_fn, dc_fn, dd_fn, ddc_fn, ddd_fn = cat_basis_curved(u)
+    t2 = t * t
+    fx = t * a_fn
+    fy = t * b_fn
+    hx = t2 * c_fn
+    hy = t2 * d_fn
+    dhx = t2 * t * dc_fn
+    dhy = t2 * t * dd_fn
+    ddhx = t2 * t2 * ddc_fn
+    ddhy = t2 * t2 * ddd_fn
+    h2 = hx * hx + hy * hy
+    c = v0 * (hx * fy - hy * fx)
+    dc = v0 * (dhx * fy - dhy * fx - h2)
+    ddc = v0 * (ddhx * fy - ddhy * fx) - type(x)(3.0) * v0 * (hx * dhx + hy * dhy)
+    acc = hx / h2 * x + hy / h2 * y - v0 * (hx * fx + hy * fy) / h2
+    return hx * y - hy * x - c, dhx * y - dhy * x - dc, ddhx * y - ddhy * x - ddc, acc
+
+
+@wp.func
 def hermite_cubic(f0: Any, g0: Any, f1: Any, g1: Any, width: Any):
     """Coefficients (m0, q, p) of the cubic Hermite interpolant of F on an interval,
     H(s) = f0 + s (m0 + s (q + s p)) for s in [0, 1], from end values f and slopes g."""
@@ -93,28 +170,26 @@ def hermite_cubic(f0: Any, g0: Any, f1: Any, g1: Any, width: Any):
     return m0, q, p
 
 
+#: Newton steps on the Hermite cubic from its chord's root (``hermite_root``). The cubic is
+#: within O(width^4) of F, so its root needs no more digits than that: from the chord's root
+#: (within O(width^2)) three steps leave the cubic's own error far below the interpolation's.
+HERMITE_STEPS = 2
+
+
 @wp.func
 def hermite_root(f0: Any, g0: Any, f1: Any, g1: Any, width: Any):
     """Root in [0, 1] of the Hermite interpolant (f0, f1 of opposite sign): a Newton start for F
-    good to O(width^4)."""
+    good to O(width^4). Newton on the cubic from the chord's root, each step clamped to [0, 1]
+    (a step that would leave it, or a zero slope, stops at the end or stays): branch-free, since
+    a start needs no guarantee (``cat_root_density`` keeps its own bracket)."""
     m0, q, p = hermite_cubic(f0, g0, f1, g1, width)
     zero = type(f0)(0.0)
-    lo = zero
-    hi = type(f0)(1.0)
+    one = type(f0)(1.0)
     s = f0 / (f0 - f1)
-    for _it in range(6):
+    for _it in range(HERMITE_STEPS):
         h = f0 + s * (m0 + s * (q + s * p))
-        if (h >= zero) == (f0 >= zero):
-            lo = s
-        else:
-            hi = s
         dh = m0 + s * (type(f0)(2.0) * q + type(f0)(3.0) * s * p)
-        s_new = (lo + hi) * type(f0)(0.5)
-        if dh != zero:
-            s_newton = s - h / dh
-            if s_newton > lo and s_newton < hi:
-                s_new = s_newton
-        s = s_new
+        s = wp.where(dh != zero, wp.min(wp.max(s - h / dh, zero), one), s)
     return s
 
 
@@ -205,7 +280,8 @@ def cat_root_density(
     ``cat_carry_root`` adds the root's path, weighted by the evidence, to ``out`` (a no-op for
     the plain kernels, whose ``carry`` is the integer 0).
 
-    Newton from the Hermite estimate, kept inside the bracket (bisection when it leaves it);
+    Halley's method (Newton's where Halley's step leaves the bracket) from the Hermite estimate,
+    kept inside the bracket (bisection when both steps leave it);
     the density is taken from the last evaluation, whose omega is within ``tol`` of the root.
     |det J| = |dF/domega| is taken as at least ``noise_g``, its rounding allowance: on a fold
     caustic the density is infinite, and a point whose coordinates round onto it (in float32,
@@ -216,7 +292,7 @@ def cat_root_density(
     b = hi
     fa = f_lo
     w = lo + (hi - lo) * hermite_root(f_lo, g_lo, f_hi, g_hi, hi - lo)
-    f, df, acc = cat_eval(x, y, w, v0, t)
+    f, df, ddf, acc = cat_eval_curved(x, y, w, v0, t)
     for _it in range(MAX_NEWTON):
         if f == zero:
             break
@@ -227,13 +303,26 @@ def cat_root_density(
             b = w
         w_new = (a + b) * type(a)(0.5)
         if df != zero:
-            w_newton = w - f / df
-            if w_newton > a and w_newton < b:
+            # Halley's step (cubic convergence: from the Hermite start one step leaves w within
+            # tol of the root), else Newton's, where either stays inside the bracket; a step of
+            # at most tol ends the search before the bracket test (a step that rounds to
+            # nothing leaves w on the bracket's end, and would fall back to a bisection)
+            step_newton = f / df
+            step_halley = type(a)(2.0) * f * df / (type(a)(2.0) * df * df - f * ddf)
+            w_newton = w - step_newton
+            w_halley = w - step_halley
+            if w_halley > a and w_halley < b:
+                w_new = w_halley
+                if wp.abs(step_halley) <= tol:
+                    break
+            elif w_newton > a and w_newton < b:
                 w_new = w_newton
+            elif wp.abs(step_newton) <= tol or wp.abs(step_halley) <= tol:
+                break
         if wp.abs(w_new - w) <= tol or (b - a) <= tol:
             break
         w = w_new
-        f, df, acc = cat_eval(x, y, w, v0, t)
+        f, df, ddf, acc = cat_eval_curved(x, y, w, v0, t)
     density = normal_pdf(acc, zero, sigma_a) * normal_pdf(w, zero, sigma_omega) / wp.max(wp.abs(df), noise_g)
     cat_carry_root(carry, acc, w, v0, density, lw, out)
     return density
