@@ -20,7 +20,7 @@ import warp as wp
 
 from .cat import CAT, CAT_CARRIED, SPLIT, cat_node_interval, cat_scan_noise
 from .evidence import EVIDENCE
-from .generate import Params, carried_points_kernel, density_kernels
+from .generate import SCALARS, Params, carried_points_kernel, density_kernels, overload_on_use
 from .common import LANES32, LANES64, lanes32, lanes64, world_to_local
 from .lanes import cat_scan_group
 
@@ -102,8 +102,189 @@ def cat_density_world_lanes(x: Any, y: Any, p: Any):
 #: The scalar kernels' parameters and the node groups (:func:`node_groups`).
 CAT_LANES = Params("CatLaneParams", __name__, **CAT.fields,
                    groups=lambda scalar: wp.array2d(dtype=lanes64 if scalar == wp.float64 else lanes32))
-# one cell per thread, the nodes in lanes: the generated scalar kernels
-KERNELS = density_kernels(cat_density_world_lanes, CAT_LANES, "cat", suffix="_lanes")
+
+
+# --- the grid kernel: the scan swept along a row -------------------------------------------------
+
+#: Rounding allowance of the row sweep (:func:`cat_sweep_row`) on F at a cell, in units of the
+#: dtype's epsilon times t^2 (|x| + |y| + |origin| + |local x| + |local y| + v0 t): more than
+#: twice what the scan's F and local coordinates can be off by (see the proof there).
+SWEEP_ULPS = 32.0
+
+
+@wp.func
+def sweep_first(xs: wp.array(dtype=Any), j0: int, j1: int, bound: wp.float64, strict: bool):
+    """The first j in [j0, j1) with xs[j] >= bound (> bound with ``strict``), j1 if none, for xs
+    non-decreasing there: a guess from the row's mean spacing, then a walk to it (a step or two on
+    a uniform grid)."""
+    x_first = wp.float64(xs[j0])
+    x_last = wp.float64(xs[j1 - 1])
+    if bound < x_first or (bound == x_first and not strict):
+        return j0
+    if bound > x_last or (bound == x_last and strict):
+        return j1
+    j = j0
+    if x_last > x_first:
+        j = j0 + int(wp.float64(j1 - 1 - j0) * (bound - x_first) / (x_last - x_first))
+        j = wp.clamp(j, j0, j1 - 1)
+    # xs[j - 1] < bound <= xs[j] (or <, <= with strict) at the answer
+    while j > j0 and (wp.float64(xs[j - 1]) > bound or (wp.float64(xs[j - 1]) == bound and not strict)):
+        j -= 1
+    while j < j1 and (wp.float64(xs[j]) < bound or (wp.float64(xs[j]) == bound and strict)):
+        j += 1
+    return j
+
+
+@wp.func
+def sweep_half_line(alpha: wp.float64, beta: wp.float64, e: wp.float64):
+    """The x with alpha + beta x <= e, as (lo, hi) (+-inf for an open end; lo > hi: none)."""
+    inf = wp.float64(wp.inf)
+    if beta > wp.float64(0.0):
+        return -inf, (e - alpha) / beta
+    if beta < wp.float64(0.0):
+        return (e - alpha) / beta, inf
+    if alpha <= e:
+        return -inf, inf
+    return inf, -inf
+
+
+@wp.func
+def sweep_band(alpha_prev: wp.float64, beta_prev: wp.float64, alpha: wp.float64, beta: wp.float64,
+               e: wp.float64, sign: wp.float64):
+    """The x with sign F_prev(x) <= e and sign F(x) >= -e (F = alpha + beta x): an interval (lo, hi)."""
+    lo1, hi1 = sweep_half_line(sign * alpha_prev, sign * beta_prev, e)
+    lo2, hi2 = sweep_half_line(-sign * alpha, -sign * beta, e)
+    return wp.max(lo1, lo2), wp.min(hi1, hi2)
+
+
+@wp.func
+def sweep_cells(xs: wp.array(dtype=Any), y: Any, row: int, j_begin: int, j_end: int, k: int, p: Any,
+                out: wp.array2d(dtype=Any)):
+    """Add the roots of node interval [k - 1, k] to out[row, j] for j in [j_begin, j_end): at the
+    cells that the scan's cheap test flags (``cat.cat_density_local``'s test, its arithmetic),
+    by ``cat.cat_node_interval``."""
+    zero = type(y)(0.0)
+    for j in range(j_begin, j_end):
+        lx, ly = world_to_local(xs[j], y, p.pose)
+        r, noise_f, noise_g, chord_coef = cat_scan_noise(lx, ly, p.v0, p.t, p.eps)
+        f_prev = p.table[k - 1, 1] * ly - p.table[k - 1, 2] * lx - p.table[k - 1, 3]
+        f_k = p.table[k, 1] * ly - p.table[k, 2] * lx - p.table[k, 3]
+        width = p.table[k, 0] - p.table[k - 1, 0]
+        if (f_k >= zero) != (f_prev >= zero) or wp.min(wp.abs(f_prev), wp.abs(f_k)) <= (
+            chord_coef * width * width + noise_f
+        ):
+            out[row, j] = out[row, j] + cat_node_interval(lx, ly, p.table, k, p.v0, p.t, p.sigma_a, p.sigma_omega,
+                                                          p.tol, r, noise_f, noise_g, int(0), p.table[0], p.table[0])
+
+
+@wp.func
+def cat_sweep_row(xs: wp.array(dtype=Any), y: Any, row: int, j0: int, j1: int, p: Any, out: wp.array2d(dtype=Any)):
+    """out[row, j0 .. j1 - 1] = the density at (xs[j], y), xs non-decreasing there: the scan
+    swept along the row, node interval by node interval, each cell's roots added in node order
+    from 0 (``cat.cat_density_local``'s sum, to the bit).
+
+    Along the row the local point is affine in x, and so is F at a node:
+    F_k(x) = alpha_k + beta_k x with beta_k = hx s - hy c and alpha_k = -ox beta_k +
+    (y - oy) (hx c + hy s) - c_k (pose (ox, oy, c, s); F = hx ly - hy lx - c_k). The scan flags
+    interval k at a cell where its computed F_(k-1), F_k change sign or the smaller |F| is
+    within B = chord_coef width^2 + noise_f (``cat_scan_noise``). The computed F differs from
+    F_k(x) by at most delta: the coefficients |hx|, |hy| <= t^2 / 2 times the local
+    coordinates' rounding (a few ulps of |x| + |y| + |origin|), plus three roundings of terms
+    at most t^2 / 2 (|lx| + |ly|) and |c_k| <= v0 t^3 / 2; SWEEP_ULPS eps t^2 (W + L + v0 t)
+    with W, L the largest |x| + |y| + |origin| and |lx| + |ly| at the row's ends (both convex
+    along it, so largest at an end) is more than twice that. B is largest at an end too (r and
+    |lx| + |ly| convex), so with E = B_max (1 + 1e-6) + delta: a flagged cell has
+    F_(k-1) <= E and F_k >= -E, or F_(k-1) >= -E and F_k <= E (a sign change puts the two
+    values on either side of zero; an end within B of zero satisfies one of the two whatever
+    the other's sign). Each is an intersection of two half-lines of x, an interval (its ends in
+    float64: their rounding is far inside the allowance), and the cells in it are found by a
+    search of the sorted xs. Only they are tested, with the scan's own arithmetic: the flagged
+    set, and so every root and the sum, is the per-cell scan's. The row costs O(nodes) plus the
+    cells near each interval's lines (a few a cell), instead of every node at every cell.
+    """
+    zero = type(y)(0.0)
+    for j in range(j0, j1):
+        out[row, j] = zero
+    if j1 <= j0:
+        return
+    n = p.table.shape[0]
+    # the allowance E's parts at the row's ends
+    lx0, ly0 = world_to_local(xs[j0], y, p.pose)
+    lx1, ly1 = world_to_local(xs[j1 - 1], y, p.pose)
+    r0, noise_f0, noise_g0, chord0 = cat_scan_noise(lx0, ly0, p.v0, p.t, p.eps)
+    r1, noise_f1, noise_g1, chord1 = cat_scan_noise(lx1, ly1, p.v0, p.t, p.eps)
+    chord_max = wp.float64(wp.max(chord0, chord1))
+    noise_max = wp.float64(wp.max(noise_f0, noise_f1))
+    ox = wp.float64(p.pose[0])
+    oy = wp.float64(p.pose[1])
+    cs = wp.float64(p.pose[2])
+    sn = wp.float64(p.pose[3])
+    yy = wp.float64(y)
+    dyo = yy - oy
+    t = wp.float64(p.t)
+    far = wp.max(wp.abs(wp.float64(xs[j0])), wp.abs(wp.float64(xs[j1 - 1]))) + wp.abs(yy) + wp.abs(ox) + wp.abs(oy)
+    local = wp.float64(wp.max(wp.abs(lx0) + wp.abs(ly0), wp.abs(lx1) + wp.abs(ly1)))
+    delta = wp.float64(SWEEP_ULPS) * wp.float64(p.eps) * t * t * (far + local + wp.float64(p.v0) * t)
+    tx = wp.float64(p.table[0, 1])
+    ty = wp.float64(p.table[0, 2])
+    beta_prev = tx * sn - ty * cs
+    alpha_prev = -ox * beta_prev + dyo * (tx * cs + ty * sn) - wp.float64(p.table[0, 3])
+    for k in range(1, n):
+        tx = wp.float64(p.table[k, 1])
+        ty = wp.float64(p.table[k, 2])
+        beta = tx * sn - ty * cs
+        alpha = -ox * beta + dyo * (tx * cs + ty * sn) - wp.float64(p.table[k, 3])
+        width = wp.float64(p.table[k, 0] - p.table[k - 1, 0])
+        e = (chord_max * width * width + noise_max) * wp.float64(1.000001) + delta
+        lo1, hi1 = sweep_band(alpha_prev, beta_prev, alpha, beta, e, wp.float64(1.0))
+        lo2, hi2 = sweep_band(alpha_prev, beta_prev, alpha, beta, e, wp.float64(-1.0))
+        a1 = j1 + 0
+        b1 = j1 + 0
+        if lo1 <= hi1:
+            a1 = sweep_first(xs, j0, j1, lo1, False)
+            b1 = sweep_first(xs, j0, j1, hi1, True)
+        a2 = j1 + 0
+        b2 = j1 + 0
+        if lo2 <= hi2:
+            a2 = sweep_first(xs, j0, j1, lo2, False)
+            b2 = sweep_first(xs, j0, j1, hi2, True)
+        if a1 < b1 and a2 < b2 and a2 <= b1 and a1 <= b2:  # overlapping: one range
+            sweep_cells(xs, y, row, wp.min(a1, a2), wp.max(b1, b2), k, p, out)
+        else:
+            sweep_cells(xs, y, row, a1, b1, k, p, out)
+            sweep_cells(xs, y, row, a2, b2, k, p, out)
+        alpha_prev = alpha
+        beta_prev = beta
+
+
+def _cat_grid_lanes(xs: wp.array(dtype=Any), ys: wp.array(dtype=Any), row0: int, columns: int, p: Any,
+                    out: wp.array2d(dtype=Any)):
+    """The generated grid kernel's layout (``columns`` cells of a row per thread), each row by
+    the sweep (:func:`cat_sweep_row`) where its centres are non-decreasing (a grid's always are),
+    else cell by cell (:func:`cat_density_world_lanes`)."""
+    i, block = wp.tid()
+    row = row0 + i
+    j0 = block * columns
+    j1 = wp.min((block + 1) * columns, xs.shape[0])
+    y = ys[row]
+    unsorted = int(0)
+    for j in range(j0 + 1, j1):
+        if not (xs[j] >= xs[j - 1]):
+            unsorted = 1
+    if unsorted == 0:
+        cat_sweep_row(xs, y, row, j0, j1, p, out)
+    else:
+        for j in range(j0, j1):
+            out[row, j] = cat_density_world_lanes(xs[j], y, p)
+
+
+GRID = wp.kernel(_cat_grid_lanes, name="cat_grid_lanes", module=cat_density_world_lanes.module)
+for _scalar in SCALARS:
+    _vec = wp.array(dtype=_scalar)
+    overload_on_use(GRID, _scalar, {"xs": _vec, "ys": _vec, "p": CAT_LANES.of(_scalar),
+                                    "out": wp.array2d(dtype=_scalar)})
+# the grid by the row sweep, the points one by one with the nodes in lanes
+KERNELS = density_kernels(cat_density_world_lanes, CAT_LANES, "cat", suffix="_lanes", grid=GRID)
 
 
 
