@@ -36,6 +36,9 @@ TABLE_COLUMNS = 10
 #: are skipped when both ends of their node interval are beyond it on the same side.
 PRUNE_SIGMAS = 38.0
 
+#: 1 / (2 pi)
+INV_2PI = 0.15915494309189535
+
 #: Iteration caps; each iteration at least halves the bracket, so float64 converges well before.
 MAX_NEWTON = 100
 MAX_FOLD_SEARCH = 100
@@ -134,7 +137,7 @@ def cat_eval(x: Any, y: Any, omega: Any, v0: Any, t: Any):
 @wp.func
 def cat_eval_curved(x: Any, y: Any, omega: Any, v0: Any, t: Any):
     """F, dF/domega (``cat_eval``'s, the same bits) and d^2F/domega^2 at a local point, and the
-    acceleration a of the line through P (``cat_eval``'s).
+    line's h and f (for ``cat_line_acceleration``).
 
     With h'' = t^4 (C'', D''), f' = t^2 (D, -C): h' x f' = -t^5 (C C' + D D') = -h . h', so
 
@@ -155,8 +158,15 @@ def cat_eval_curved(x: Any, y: Any, omega: Any, v0: Any, t: Any):
     c = v0 * (hx * fy - hy * fx)
     dc = v0 * (dhx * fy - dhy * fx - h2)
     ddc = v0 * (ddhx * fy - ddhy * fx) - type(x)(3.0) * v0 * (hx * dhx + hy * dhy)
-    acc = hx / h2 * x + hy / h2 * y - v0 * (hx * fx + hy * fy) / h2
-    return hx * y - hy * x - c, dhx * y - dhy * x - dc, ddhx * y - ddhy * x - ddc, acc
+    return hx * y - hy * x - c, dhx * y - dhy * x - dc, ddhx * y - ddhy * x - ddc, hx, hy, fx, fy
+
+
+@wp.func
+def cat_line_acceleration(x: Any, y: Any, hx: Any, hy: Any, fx: Any, fy: Any, v0: Any):
+    """The acceleration of the line through P, a = h . (P - v0 f) / |h|^2 (``cat_eval``'s
+    arithmetic), from ``cat_eval_curved``'s h and f: taken once, at the root."""
+    h2 = hx * hx + hy * hy
+    return hx / h2 * x + hy / h2 * y - v0 * (hx * fx + hy * fy) / h2
 
 
 @wp.func
@@ -292,38 +302,38 @@ def cat_root_density(
     b = hi
     fa = f_lo
     w = lo + (hi - lo) * hermite_root(f_lo, g_lo, f_hi, g_hi, hi - lo)
-    f, df, ddf, acc = cat_eval_curved(x, y, w, v0, t)
+    f, df, ddf, hx, hy, fx, fy = cat_eval_curved(x, y, w, v0, t)
+    # selects rather than branches: the bracket's side and the step's kind are coin tosses from
+    # root to root, and a mispredicted branch cost more than the step
     for _it in range(MAX_NEWTON):
-        if f == zero:
-            break
-        if (f > zero) == (fa > zero):
-            a = w
-            fa = f
-        else:
-            b = w
-        w_new = (a + b) * type(a)(0.5)
-        if df != zero:
-            # Halley's step (cubic convergence: from the Hermite start one step leaves w within
-            # tol of the root), else Newton's, where either stays inside the bracket; a step of
-            # at most tol ends the search before the bracket test (a step that rounds to
-            # nothing leaves w on the bracket's end, and would fall back to a bisection)
-            step_newton = f / df
-            step_halley = type(a)(2.0) * f * df / (type(a)(2.0) * df * df - f * ddf)
-            w_newton = w - step_newton
-            w_halley = w - step_halley
-            if w_halley > a and w_halley < b:
-                w_new = w_halley
-                if wp.abs(step_halley) <= tol:
-                    break
-            elif w_newton > a and w_newton < b:
-                w_new = w_newton
-            elif wp.abs(step_newton) <= tol or wp.abs(step_halley) <= tol:
-                break
-        if wp.abs(w_new - w) <= tol or (b - a) <= tol:
+        same = (f > zero) == (fa > zero)
+        a = wp.where(same, w, a)
+        fa = wp.where(same, f, fa)
+        b = wp.where(same, b, w)
+        slope = df != zero
+        # Halley's step (cubic convergence: from the Hermite start one step leaves w within tol
+        # of the root), else Newton's, where either stays inside the bracket, else bisection
+        step_newton = f / df
+        step_halley = type(a)(2.0) * f * df / (type(a)(2.0) * df * df - f * ddf)
+        w_newton = w - step_newton
+        w_halley = w - step_halley
+        halley_in = slope and w_halley > a and w_halley < b
+        newton_in = slope and w_newton > a and w_newton < b
+        w_new = wp.where(halley_in, w_halley, wp.where(newton_in, w_newton, (a + b) * type(a)(0.5)))
+        # a step of at most tol ends the search whether or not it stays inside (one that rounds
+        # to nothing leaves w on the bracket's end, and would fall back to a bisection)
+        small = (halley_in and wp.abs(step_halley) <= tol) or (
+            slope and not halley_in and not newton_in and (wp.abs(step_newton) <= tol or wp.abs(step_halley) <= tol))
+        if f == zero or small or wp.abs(w_new - w) <= tol or (b - a) <= tol:
             break
         w = w_new
-        f, df, ddf, acc = cat_eval_curved(x, y, w, v0, t)
-    density = normal_pdf(acc, zero, sigma_a) * normal_pdf(w, zero, sigma_omega) / wp.max(wp.abs(df), noise_g)
+        f, df, ddf, hx, hy, fx, fy = cat_eval_curved(x, y, w, v0, t)
+    acc = cat_line_acceleration(x, y, hx, hy, fx, fy, v0)
+    za = acc / sigma_a
+    zw = w / sigma_omega
+    # g(a) g(omega) with one exponential
+    density = (type(x)(INV_2PI) / (sigma_a * sigma_omega) * wp.exp(type(x)(-0.5) * (za * za + zw * zw))
+               / wp.max(wp.abs(df), noise_g))
     cat_carry_root(carry, acc, w, v0, density, lw, out)
     return density
 
