@@ -180,26 +180,28 @@ def hermite_cubic(f0: Any, g0: Any, f1: Any, g1: Any, width: Any):
     return m0, q, p
 
 
-#: Newton steps on the Hermite cubic from its chord's root (``hermite_root``). The cubic is
-#: within O(width^4) of F, so its root needs no more digits than that: from the chord's root
-#: (within O(width^2)) three steps leave the cubic's own error far below the interpolation's.
-HERMITE_STEPS = 2
-
-
 @wp.func
 def hermite_root(f0: Any, g0: Any, f1: Any, g1: Any, width: Any):
-    """Root in [0, 1] of the Hermite interpolant (f0, f1 of opposite sign): a Newton start for F
-    good to O(width^4). Newton on the cubic from the chord's root, each step clamped to [0, 1]
-    (a step that would leave it, or a zero slope, stops at the end or stays): branch-free, since
+    """A Newton start for the root in [0, 1] of F (f0, f1 of opposite sign), good to O(width^4)
+    where F is monotone: the inverse cubic Hermite interpolant, s as a cubic in
+    tau = (F - f0) / (f1 - f0) with s(0) = 0, s(1) = 1 and slopes ds/dtau = (f1 - f0) / (g width)
+    at the ends, at F = 0 (tau = the chord's root). No iteration, so no chain of divisions: the
+    cubic's forward root by Newton steps took as long as the two evaluations of F after it. A
+    start outside [0, 1] (F not monotone: a slope near zero or of the wrong sign) is clamped:
     a start needs no guarantee (``cat_root_density`` keeps its own bracket)."""
-    m0, q, p = hermite_cubic(f0, g0, f1, g1, width)
     zero = type(f0)(0.0)
     one = type(f0)(1.0)
-    s = f0 / (f0 - f1)
-    for _it in range(HERMITE_STEPS):
-        h = f0 + s * (m0 + s * (q + s * p))
-        dh = m0 + s * (type(f0)(2.0) * q + type(f0)(3.0) * s * p)
-        s = wp.where(dh != zero, wp.min(wp.max(s - h / dh, zero), one), s)
+    two = type(f0)(2.0)
+    three = type(f0)(3.0)
+    span = f1 - f0
+    tau = -f0 / span
+    d0 = span / (g0 * width)
+    d1 = span / (g1 * width)
+    tau2 = tau * tau
+    tau3 = tau2 * tau
+    s = (tau3 - two * tau2 + tau) * d0 + (three * tau2 - two * tau3) + (tau3 - tau2) * d1
+    # NaN (a zero slope) or out of range: the chord's root, or the end
+    s = wp.where(s >= zero and s <= one, s, wp.where(s > one, one, wp.where(s < zero, zero, tau)))
     return s
 
 
