@@ -283,6 +283,55 @@ def cat_carry_root(carry: CAT_CARRY.of(wp.float32), a: wp.float32, omega: wp.flo
 
 
 @wp.func
+def cat_root_step(w: Any, a: Any, b: Any, fa: Any, f: Any, df: Any, ddf: Any, tol: Any):
+    """One step of ``cat_root_density``'s search from w (F, dF/domega, d^2F/domega^2 there):
+    the bracket [a, b] (F(a) = fa) narrowed by w, the next omega, and whether to stop at w.
+
+    Halley's step (cubic convergence: from the Hermite start one step leaves w within tol of
+    the root), else Newton's, where either stays inside the bracket, else bisection; a step of
+    at most tol stops the search whether or not it stays inside (one that rounds to nothing
+    leaves w on the bracket's end, and would fall back to a bisection). Selects rather than
+    branches: the bracket's side and the step's kind are coin tosses from root to root, and a
+    mispredicted branch cost more than the step."""
+    zero = type(w)(0.0)
+    same = (f > zero) == (fa > zero)
+    a = wp.where(same, w, a)
+    fa = wp.where(same, f, fa)
+    b = wp.where(same, b, w)
+    slope = df != zero
+    step_newton = f / df
+    step_halley = type(w)(2.0) * f * df / (type(w)(2.0) * df * df - f * ddf)
+    w_newton = w - step_newton
+    w_halley = w - step_halley
+    halley_in = slope and w_halley > a and w_halley < b
+    newton_in = slope and w_newton > a and w_newton < b
+    w_new = wp.where(halley_in, w_halley, wp.where(newton_in, w_newton, (a + b) * type(w)(0.5)))
+    small = (halley_in and wp.abs(step_halley) <= tol) or (
+        slope and not halley_in and not newton_in and (wp.abs(step_newton) <= tol or wp.abs(step_halley) <= tol))
+    stop = f == zero or small or wp.abs(w_new - w) <= tol or (b - a) <= tol
+    return a, b, fa, w_new, stop
+
+
+@wp.func
+def cat_root_start(lo: Any, hi: Any, f_lo: Any, g_lo: Any, f_hi: Any, g_hi: Any):
+    """``cat_root_density``'s first omega: the Hermite start (``hermite_root``)."""
+    return lo + (hi - lo) * hermite_root(f_lo, g_lo, f_hi, g_hi, hi - lo)
+
+
+@wp.func
+def cat_root_value(x: Any, y: Any, w: Any, df: Any, hx: Any, hy: Any, fx: Any, fy: Any, v0: Any, sigma_a: Any,
+                   sigma_omega: Any, noise_g: Any):
+    """g(a) g(omega) / max(|dF/domega|, noise_g) at the search's last omega, with one exponential;
+    and the acceleration a there."""
+    acc = cat_line_acceleration(x, y, hx, hy, fx, fy, v0)
+    za = acc / sigma_a
+    zw = w / sigma_omega
+    density = (type(x)(INV_2PI) / (sigma_a * sigma_omega) * wp.exp(type(x)(-0.5) * (za * za + zw * zw))
+               / wp.max(wp.abs(df), noise_g))
+    return density, acc
+
+
+@wp.func
 def cat_root_density(
     x: Any, y: Any, lo: Any, hi: Any, f_lo: Any, g_lo: Any, f_hi: Any, g_hi: Any,
     v0: Any, t: Any, sigma_a: Any, sigma_omega: Any, tol: Any, noise_g: Any,
@@ -293,50 +342,96 @@ def cat_root_density(
     the plain kernels, whose ``carry`` is the integer 0).
 
     Halley's method (Newton's where Halley's step leaves the bracket) from the Hermite estimate,
-    kept inside the bracket (bisection when both steps leave it);
-    the density is taken from the last evaluation, whose omega is within ``tol`` of the root.
+    kept inside the bracket (bisection when both steps leave it; ``cat_root_step``); the
+    density is taken from the last evaluation, whose omega is within ``tol`` of the root.
     |det J| = |dF/domega| is taken as at least ``noise_g``, its rounding allowance: on a fold
     caustic the density is infinite, and a point whose coordinates round onto it (in float32,
     within ~1e-7 v0 t) gets the largest value its arithmetic can resolve, never inf.
+    ``cat_root_group`` computes the same, to the bit, for several roots side by side.
     """
-    zero = type(x)(0.0)
     a = lo
     b = hi
     fa = f_lo
-    w = lo + (hi - lo) * hermite_root(f_lo, g_lo, f_hi, g_hi, hi - lo)
+    w = cat_root_start(lo, hi, f_lo, g_lo, f_hi, g_hi)
     f, df, ddf, hx, hy, fx, fy = cat_eval_curved(x, y, w, v0, t)
-    # selects rather than branches: the bracket's side and the step's kind are coin tosses from
-    # root to root, and a mispredicted branch cost more than the step
     for _it in range(MAX_NEWTON):
-        same = (f > zero) == (fa > zero)
-        a = wp.where(same, w, a)
-        fa = wp.where(same, f, fa)
-        b = wp.where(same, b, w)
-        slope = df != zero
-        # Halley's step (cubic convergence: from the Hermite start one step leaves w within tol
-        # of the root), else Newton's, where either stays inside the bracket, else bisection
-        step_newton = f / df
-        step_halley = type(a)(2.0) * f * df / (type(a)(2.0) * df * df - f * ddf)
-        w_newton = w - step_newton
-        w_halley = w - step_halley
-        halley_in = slope and w_halley > a and w_halley < b
-        newton_in = slope and w_newton > a and w_newton < b
-        w_new = wp.where(halley_in, w_halley, wp.where(newton_in, w_newton, (a + b) * type(a)(0.5)))
-        # a step of at most tol ends the search whether or not it stays inside (one that rounds
-        # to nothing leaves w on the bracket's end, and would fall back to a bisection)
-        small = (halley_in and wp.abs(step_halley) <= tol) or (
-            slope and not halley_in and not newton_in and (wp.abs(step_newton) <= tol or wp.abs(step_halley) <= tol))
-        if f == zero or small or wp.abs(w_new - w) <= tol or (b - a) <= tol:
+        a, b, fa, w_new, stop = cat_root_step(w, a, b, fa, f, df, ddf, tol)
+        if stop:
             break
         w = w_new
         f, df, ddf, hx, hy, fx, fy = cat_eval_curved(x, y, w, v0, t)
-    acc = cat_line_acceleration(x, y, hx, hy, fx, fy, v0)
-    za = acc / sigma_a
-    zw = w / sigma_omega
-    # g(a) g(omega) with one exponential
-    density = (type(x)(INV_2PI) / (sigma_a * sigma_omega) * wp.exp(type(x)(-0.5) * (za * za + zw * zw))
-               / wp.max(wp.abs(df), noise_g))
+    density, acc = cat_root_value(x, y, w, df, hx, hy, fx, fy, v0, sigma_a, sigma_omega, noise_g)
     cat_carry_root(carry, acc, w, v0, density, lw, out)
+    return density
+
+
+#: Roots that ``cat_root_group`` searches side by side: independent chains of divisions and
+#: sines that the core overlaps (one root's search is one long chain of latencies).
+ROOT_GROUP = 4
+
+
+@wp.func
+def cat_root_group(x: Any, y: Any, lo: Any, hi: Any, f_lo: Any, g_lo: Any, f_hi: Any, g_hi: Any, noise_g: Any,
+                   v0: Any, t: Any, sigma_a: Any, sigma_omega: Any, tol: Any):
+    """``cat_root_density`` (without evidence) of ROOT_GROUP roots at once, each argument but the
+    model's a vector of one value per root: each root takes the scalar search's steps
+    (``cat_root_start``, ``cat_eval_curved``, ``cat_root_step``, ``cat_root_value``), so its
+    density has the same bits; the roots' steps interleave (the loops over them are unrolled)."""
+    zero = type(v0)(0.0)
+    w = lo
+    a = lo
+    b = hi
+    fa = f_lo
+    f = lo
+    df = lo
+    ddf = lo
+    hx = lo
+    hy = lo
+    fx = lo
+    fy = lo
+    live = lo
+    density = lo
+    for m in range(ROOT_GROUP):
+        w[m] = cat_root_start(lo[m], hi[m], f_lo[m], g_lo[m], f_hi[m], g_hi[m])
+        live[m] = type(v0)(1.0)
+    for m in range(ROOT_GROUP):
+        f_m, df_m, ddf_m, hx_m, hy_m, fx_m, fy_m = cat_eval_curved(x[m], y[m], w[m], v0, t)
+        f[m] = f_m
+        df[m] = df_m
+        ddf[m] = ddf_m
+        hx[m] = hx_m
+        hy[m] = hy_m
+        fx[m] = fx_m
+        fy[m] = fy_m
+    for _it in range(MAX_NEWTON):
+        running = int(0)
+        for m in range(ROOT_GROUP):
+            if live[m] != zero:
+                a_m, b_m, fa_m, w_new, stop = cat_root_step(w[m], a[m], b[m], fa[m], f[m], df[m], ddf[m], tol)
+                a[m] = a_m
+                b[m] = b_m
+                fa[m] = fa_m
+                if stop:
+                    live[m] = zero
+                else:
+                    w[m] = w_new
+                    running += 1
+        if running == 0:
+            break
+        for m in range(ROOT_GROUP):
+            if live[m] != zero:
+                f_m, df_m, ddf_m, hx_m, hy_m, fx_m, fy_m = cat_eval_curved(x[m], y[m], w[m], v0, t)
+                f[m] = f_m
+                df[m] = df_m
+                ddf[m] = ddf_m
+                hx[m] = hx_m
+                hy[m] = hy_m
+                fx[m] = fx_m
+                fy[m] = fy_m
+    for m in range(ROOT_GROUP):
+        value, acc = cat_root_value(x[m], y[m], w[m], df[m], hx[m], hy[m], fx[m], fy[m], v0, sigma_a, sigma_omega,
+                                    noise_g[m])
+        density[m] = value
     return density
 
 
@@ -385,6 +480,27 @@ def cat_negligible(table: wp.array2d(dtype=Any), k: int, x: Any, y: Any, a_cut: 
 
 
 @wp.func
+def cat_curvature(lo: Any, hi: Any, v0: Any, t: Any, r: Any, noise_g: Any):
+    """``cat_interval``'s M3 w^2 on [lo, hi] and the curvature margin M3 w^2 + 2 noise_g."""
+    du = (hi - lo) * t
+    du2 = du * du
+    t2 = t * t
+    m3w2 = t2 * t * (r * type(r)(0.2) + v0 * t * type(r)(0.05)) * du2  # M3 w^2
+    return m3w2, m3w2 + type(r)(2.0) * noise_g
+
+
+@wp.func
+def cat_one_root(g_lo: Any, g_hi: Any, m3w2: Any, curvature: Any, noise_g: Any):
+    """Whether a sign change of F holds exactly one root (``cat_interval`` (iii)): F' keeps its
+    sign (its ends beyond its chord's deviation M3 w^2 / 8) or F'' does."""
+    zero = type(g_lo)(0.0)
+    monotone = (g_lo > zero) == (g_hi > zero) and wp.min(wp.abs(g_lo), wp.abs(g_hi)) > (
+        type(g_lo)(0.125) * m3w2 + noise_g
+    )
+    return monotone or wp.abs(g_hi - g_lo) > curvature
+
+
+@wp.func
 def cat_interval(
     x: Any, y: Any, lo: Any, hi: Any, f_lo: Any, g_lo: Any, f_hi: Any, g_hi: Any,
     v0: Any, t: Any, sigma_a: Any, sigma_omega: Any, tol: Any, r: Any, noise_f: Any, noise_g: Any,
@@ -423,13 +539,9 @@ def cat_interval(
     du = (hi - lo) * t
     du2 = du * du
     t2 = t * t
-    m3w2 = t2 * t * (r * type(x)(0.2) + v0 * t * type(x)(0.05)) * du2  # M3 w^2
-    curvature = m3w2 + type(x)(2.0) * noise_g
+    m3w2, curvature = cat_curvature(lo, hi, v0, t, r, noise_g)
     if (f_hi >= zero) != (f_lo >= zero):
-        monotone = (g_lo > zero) == (g_hi > zero) and wp.min(wp.abs(g_lo), wp.abs(g_hi)) > (
-            type(x)(0.125) * m3w2 + noise_g
-        )
-        if monotone or wp.abs(g_hi - g_lo) > curvature or last:
+        if cat_one_root(g_lo, g_hi, m3w2, curvature, noise_g) or last:
             density = cat_root_density(
                 x, y, lo, hi, f_lo, g_lo, f_hi, g_hi, v0, t, sigma_a, sigma_omega, tol, noise_g, carry, lw, out
             )

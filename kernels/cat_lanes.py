@@ -18,7 +18,10 @@ from typing import Any
 import numpy as np
 import warp as wp
 
-from .cat import CAT, CAT_CARRIED, SPLIT, cat_node_interval, cat_scan_noise
+from .cat import (
+    CAT, CAT_CARRIED, PRUNE_SIGMAS, ROOT_GROUP, SPLIT, cat_curvature, cat_negligible, cat_node_interval, cat_one_root,
+    cat_root_density, cat_root_group, cat_scan_noise,
+)
 from .evidence import EVIDENCE
 from .generate import SCALARS, Params, carried_points_kernel, density_kernels, overload_on_use
 from .common import LANES32, LANES64, lanes32, lanes64, world_to_local
@@ -162,8 +165,23 @@ def sweep_cells(xs: wp.array(dtype=Any), y: Any, row: int, j_begin: int, j_end: 
                 out: wp.array2d(dtype=Any)):
     """Add the roots of node interval [k - 1, k] to out[row, j] for j in [j_begin, j_end): at the
     cells that the scan's cheap test flags (``cat.cat_density_local``'s test, its arithmetic),
-    by ``cat.cat_node_interval``."""
+    what ``cat.cat_node_interval`` adds there. A single root (a sign change that
+    ``cat.cat_one_root`` settles, the common case) joins a group of ROOT_GROUP searched side by
+    side (``cat.cat_root_group``: the same bits as the scalar search); the rest, and the roots
+    left over at the end, are settled one by one by the scalar functions."""
     zero = type(y)(0.0)
+    q_x = wp.vector(zero, zero, zero, zero)
+    q_y = q_x
+    q_lo = q_x
+    q_hi = q_x
+    q_f_lo = q_x
+    q_g_lo = q_x
+    q_f_hi = q_x
+    q_g_hi = q_x
+    q_noise = q_x
+    q_j = wp.vec4i(0, 0, 0, 0)
+    queued = int(0)
+    a_cut = type(y)(PRUNE_SIGMAS) * p.sigma_a
     for j in range(j_begin, j_end):
         lx, ly = world_to_local(xs[j], y, p.pose)
         r, noise_f, noise_g, chord_coef = cat_scan_noise(lx, ly, p.v0, p.t, p.eps)
@@ -173,8 +191,38 @@ def sweep_cells(xs: wp.array(dtype=Any), y: Any, row: int, j_begin: int, j_end: 
         if (f_k >= zero) != (f_prev >= zero) or wp.min(wp.abs(f_prev), wp.abs(f_k)) <= (
             chord_coef * width * width + noise_f
         ):
-            out[row, j] = out[row, j] + cat_node_interval(lx, ly, p.table, k, p.v0, p.t, p.sigma_a, p.sigma_omega,
-                                                          p.tol, r, noise_f, noise_g, int(0), p.table[0], p.table[0])
+            if not cat_negligible(p.table, k, lx, ly, a_cut):  # else cat_node_interval adds 0
+                w_prev = p.table[k - 1, 0]
+                w_k = p.table[k, 0]
+                g_prev = p.table[k - 1, 4] * ly - p.table[k - 1, 5] * lx - p.table[k - 1, 6]
+                g_k = p.table[k, 4] * ly - p.table[k, 5] * lx - p.table[k, 6]
+                m3w2, curvature = cat_curvature(w_prev, w_k, p.v0, p.t, r, noise_g)
+                if (f_k >= zero) != (f_prev >= zero) and cat_one_root(g_prev, g_k, m3w2, curvature, noise_g):
+                    q_x[queued] = lx
+                    q_y[queued] = ly
+                    q_lo[queued] = w_prev
+                    q_hi[queued] = w_k
+                    q_f_lo[queued] = f_prev
+                    q_g_lo[queued] = g_prev
+                    q_f_hi[queued] = f_k
+                    q_g_hi[queued] = g_k
+                    q_noise[queued] = noise_g
+                    q_j[queued] = j
+                    queued += 1
+                    if queued == ROOT_GROUP:
+                        found = cat_root_group(q_x, q_y, q_lo, q_hi, q_f_lo, q_g_lo, q_f_hi, q_g_hi, q_noise, p.v0,
+                                               p.t, p.sigma_a, p.sigma_omega, p.tol)
+                        for m in range(ROOT_GROUP):
+                            out[row, q_j[m]] = out[row, q_j[m]] + found[m]
+                        queued = 0
+                else:
+                    out[row, j] = out[row, j] + cat_node_interval(
+                        lx, ly, p.table, k, p.v0, p.t, p.sigma_a, p.sigma_omega, p.tol, r, noise_f, noise_g, int(0),
+                        p.table[0], p.table[0])
+    for m in range(queued):
+        out[row, q_j[m]] = out[row, q_j[m]] + cat_root_density(
+            q_x[m], q_y[m], q_lo[m], q_hi[m], q_f_lo[m], q_g_lo[m], q_f_hi[m], q_g_hi[m], p.v0, p.t, p.sigma_a,
+            p.sigma_omega, p.tol, q_noise[m], int(0), p.table[0], p.table[0])
 
 
 @wp.func
