@@ -287,12 +287,15 @@ def cat_root_step(w: Any, a: Any, b: Any, fa: Any, f: Any, df: Any, ddf: Any, to
     """One step of ``cat_root_density``'s search from w (F, dF/domega, d^2F/domega^2 there):
     the bracket [a, b] (F(a) = fa) narrowed by w, the next omega, and whether to stop at w.
 
-    Halley's step (cubic convergence: from the Hermite start one step leaves w within tol of
-    the root), else Newton's, where either stays inside the bracket, else bisection; a step of
-    at most tol stops the search whether or not it stays inside (one that rounds to nothing
-    leaves w on the bracket's end, and would fall back to a bisection). Selects rather than
-    branches: the bracket's side and the step's kind are coin tosses from root to root, and a
-    mispredicted branch cost more than the step."""
+    Halley's step, the Newton step n over 1 - L with L = n F'' / (2 F') (cubic convergence:
+    from the Hermite start one step leaves w within tol of the root), where |L| <= 1/2 (then
+    it lies within 2/3 to 2 Newton steps: near a fold, where F' vanishes, Halley's step shrinks
+    to -2 F' / F'' whatever F is, and would crawl) and it stays inside the bracket; else
+    Newton's, inside the bracket; else bisection. The search stops where F = 0, where the
+    Newton step is at most tol (whether or not it stays inside: one that rounds to nothing
+    leaves w on the bracket's end), where the step taken is at most tol, or where the bracket
+    is. Selects rather than branches: the bracket's side and the step's kind are coin tosses
+    from root to root, and a mispredicted branch cost more than the step."""
     zero = type(w)(0.0)
     same = (f > zero) == (fa > zero)
     a = wp.where(same, w, a)
@@ -300,15 +303,14 @@ def cat_root_step(w: Any, a: Any, b: Any, fa: Any, f: Any, df: Any, ddf: Any, to
     b = wp.where(same, b, w)
     slope = df != zero
     step_newton = f / df
-    step_halley = type(w)(2.0) * f * df / (type(w)(2.0) * df * df - f * ddf)
+    bend = step_newton * ddf / (type(w)(2.0) * df)
     w_newton = w - step_newton
-    w_halley = w - step_halley
-    halley_in = slope and w_halley > a and w_halley < b
+    w_halley = w - step_newton / (type(w)(1.0) - bend)
+    halley_in = slope and wp.abs(bend) <= type(w)(0.5) and w_halley > a and w_halley < b
     newton_in = slope and w_newton > a and w_newton < b
     w_new = wp.where(halley_in, w_halley, wp.where(newton_in, w_newton, (a + b) * type(w)(0.5)))
-    small = (halley_in and wp.abs(step_halley) <= tol) or (
-        slope and not halley_in and not newton_in and (wp.abs(step_newton) <= tol or wp.abs(step_halley) <= tol))
-    stop = f == zero or small or wp.abs(w_new - w) <= tol or (b - a) <= tol
+    stop = (f == zero or (slope and wp.abs(step_newton) <= tol) or wp.abs(w_new - w) <= tol
+            or (b - a) <= tol)
     return a, b, fa, w_new, stop
 
 
