@@ -11,9 +11,13 @@ The density is  sum over roots of  g(a; sigma_a) g(omega; sigma_omega) / |dF/dom
 
 F and dF/domega are affine in P with omega-only coefficients, so a table of those coefficients
 at N nodes (``cat_table``) lets each cell scan for sign changes with a few multiply-adds per
-node. Which node intervals can hold roots, and how many, is decided from proved bounds on F's
-derivatives (``cat_interval``), so that no root, and no root pair where the banana folds over
-itself, is missed: see ``cat_interval`` for the bounds and the proof.
+node (on the CPU a grid row is swept instead: ``kernels/cat_lanes.py``). Which node intervals
+can hold roots, and how many, is decided from proved bounds on F's derivatives
+(``cat_interval``), so that no root, and no root pair where the banana folds over itself, is
+missed: see ``cat_interval`` for the bounds and the proof. Each root is then found by Halley's
+method from the inverse cubic Hermite start, inside its bracket (``cat_root_density``): one
+evaluation of F and its first two derivatives a root where a bound on the third proves the
+Halley point within the tolerance (``cat_root_step``).
 """
 
 from typing import Any
@@ -137,7 +141,7 @@ def cat_eval(x: Any, y: Any, omega: Any, v0: Any, t: Any):
 @wp.func
 def cat_eval_curved(x: Any, y: Any, omega: Any, v0: Any, t: Any):
     """F, dF/domega (``cat_eval``'s, the same bits) and d^2F/domega^2 at a local point, and the
-    line's h and f (for ``cat_line_acceleration``).
+    line's h, f and dh/domega (for ``cat_root_value``).
 
     With h'' = t^4 (C'', D''), f' = t^2 (D, -C): h' x f' = -t^5 (C C' + D D') = -h . h', so
 
@@ -158,7 +162,7 @@ def cat_eval_curved(x: Any, y: Any, omega: Any, v0: Any, t: Any):
     c = v0 * (hx * fy - hy * fx)
     dc = v0 * (dhx * fy - dhy * fx - h2)
     ddc = v0 * (ddhx * fy - ddhy * fx) - type(x)(3.0) * v0 * (hx * dhx + hy * dhy)
-    return hx * y - hy * x - c, dhx * y - dhy * x - dc, ddhx * y - ddhy * x - ddc, hx, hy, fx, fy
+    return hx * y - hy * x - c, dhx * y - dhy * x - dc, ddhx * y - ddhy * x - ddc, hx, hy, fx, fy, dhx, dhy
 
 
 @wp.func
@@ -283,7 +287,7 @@ def cat_carry_root(carry: CAT_CARRY.of(wp.float32), a: wp.float32, omega: wp.flo
 
 
 @wp.func
-def cat_root_step(w: Any, a: Any, b: Any, fa: Any, f: Any, df: Any, ddf: Any, tol: Any):
+def cat_root_step(w: Any, a: Any, b: Any, fa: Any, f: Any, df: Any, ddf: Any, tol: Any, m3: Any):
     """One step of ``cat_root_density``'s search from w (F, dF/domega, d^2F/domega^2 there):
     the bracket [a, b] (F(a) = fa) narrowed by w, the next omega, and whether to stop at w.
 
@@ -294,7 +298,8 @@ def cat_root_step(w: Any, a: Any, b: Any, fa: Any, f: Any, df: Any, ddf: Any, to
     Newton's, inside the bracket; else bisection. The search stops where F = 0, where the
     Newton step is at most tol (whether or not it stays inside: one that rounds to nothing
     leaves w on the bracket's end), where the step taken is at most tol, or where the bracket
-    is. Selects rather than branches: the bracket's side and the step's kind are coin tosses
+    is; or at the Halley point, where a bound on the third derivative (``m3``) proves it within
+    tol of the root (the common case: one evaluation a root). Selects rather than branches: the bracket's side and the step's kind are coin tosses
     from root to root, and a mispredicted branch cost more than the step."""
     zero = type(w)(0.0)
     same = (f > zero) == (fa > zero)
@@ -311,7 +316,21 @@ def cat_root_step(w: Any, a: Any, b: Any, fa: Any, f: Any, df: Any, ddf: Any, to
     w_new = wp.where(halley_in, w_halley, wp.where(newton_in, w_newton, (a + b) * type(w)(0.5)))
     stop = (f == zero or (slope and wp.abs(step_newton) <= tol) or wp.abs(w_new - w) <= tol
             or (b - a) <= tol)
-    return a, b, fa, w_new, stop
+    # The Halley point proved within tol of the root, without evaluating F there: with
+    # e = w_halley - w, q(e) = F + e F' + e^2 F'' / 2 differs from F(w + e) by at most
+    # m3 |e|^3 / 6 (m3 >= |d^3F/domega^3|), and |q'| >= |F'| - |F''| 2|e| =: d > 0 on
+    # |e'| <= 2|e|. So with rho = (|q(e)| + m3 (2|e|)^3 / 6) / d <= |e|, F at w_halley -+ rho
+    # has opposite signs (q moves by at least rho d from q(e) there, more than |q(e)| and the
+    # remainder together): a root lies within rho of w_halley, the bracket's own if that span
+    # is inside the bracket.
+    e = w_halley - w
+    q = f + e * (df + type(w)(0.5) * e * ddf)
+    two_e = type(w)(2.0) * wp.abs(e)
+    d = wp.abs(df) - wp.abs(ddf) * two_e
+    rho = (wp.abs(q) + m3 * two_e * two_e * two_e / type(w)(6.0)) / d
+    proved = (halley_in and not stop and d > zero and rho <= wp.abs(e) and rho <= tol and w_halley - rho > a
+              and w_halley + rho < b)
+    return a, b, fa, w_new, stop or proved, proved
 
 
 @wp.func
@@ -321,16 +340,36 @@ def cat_root_start(lo: Any, hi: Any, f_lo: Any, g_lo: Any, f_hi: Any, g_hi: Any)
 
 
 @wp.func
-def cat_root_value(x: Any, y: Any, w: Any, df: Any, hx: Any, hy: Any, fx: Any, fy: Any, v0: Any, sigma_a: Any,
-                   sigma_omega: Any, noise_g: Any):
-    """g(a) g(omega) / max(|dF/domega|, noise_g) at the search's last omega, with one exponential;
-    and the acceleration a there."""
+def cat_root_value(x: Any, y: Any, w: Any, e: Any, df: Any, ddf: Any, hx: Any, hy: Any, fx: Any, fy: Any, dhx: Any,
+                   dhy: Any, v0: Any, sigma_a: Any, sigma_omega: Any, noise_g: Any):
+    """g(a) g(omega) / max(|dF/domega|, noise_g) at the root omega = w + e, from the values at the
+    search's last evaluation w (e = 0: the search stopped there; else ``cat_root_step``'s proved
+    Halley point): dF/domega + e F'' and a + e da/domega, with
+    da/domega = (h' . (P - v0 f) - 2 a h . h') / |h|^2 (h . f' = 0); their remainders are
+    O(e^2), e within a step of the Hermite start. One exponential. Returns the density, the
+    acceleration and omega."""
     acc = cat_line_acceleration(x, y, hx, hy, fx, fy, v0)
+    slope = df
+    if e != type(x)(0.0):
+        h2 = hx * hx + hy * hy
+        along = dhx * (x - v0 * fx) + dhy * (y - v0 * fy)
+        acc = acc + e * (along - type(x)(2.0) * acc * (hx * dhx + hy * dhy)) / h2
+        slope = df + e * ddf
+    omega = w + e
     za = acc / sigma_a
-    zw = w / sigma_omega
+    zw = omega / sigma_omega
     density = (type(x)(INV_2PI) / (sigma_a * sigma_omega) * wp.exp(type(x)(-0.5) * (za * za + zw * zw))
-               / wp.max(wp.abs(df), noise_g))
-    return density, acc
+               / wp.max(wp.abs(slope), noise_g))
+    return density, acc, omega
+
+
+@wp.func
+def cat_third_bound(x: Any, y: Any, v0: Any, t: Any):
+    """M3 >= |d^3F/domega^3| at the local point (``cat_interval``'s bound, M3 w^2 / w^2):
+    t^5 (r / 5 + v0 t / 20), r = |P|, rounded up by 1 %."""
+    r = wp.sqrt(x * x + y * y)
+    t2 = t * t
+    return t2 * t2 * t * (r * type(x)(0.2) + v0 * t * type(x)(0.05)) * type(x)(1.01)
 
 
 @wp.func
@@ -345,7 +384,8 @@ def cat_root_density(
 
     Halley's method (Newton's where Halley's step leaves the bracket) from the Hermite estimate,
     kept inside the bracket (bisection when both steps leave it; ``cat_root_step``); the
-    density is taken from the last evaluation, whose omega is within ``tol`` of the root.
+    density is taken at an omega within ``tol`` of the root: the last evaluation's, or the
+    Halley point after it that ``cat_root_step`` proves so (``cat_root_value``).
     |det J| = |dF/domega| is taken as at least ``noise_g``, its rounding allowance: on a fold
     caustic the density is infinite, and a point whose coordinates round onto it (in float32,
     within ~1e-7 v0 t) gets the largest value its arithmetic can resolve, never inf.
@@ -354,16 +394,21 @@ def cat_root_density(
     a = lo
     b = hi
     fa = f_lo
+    m3 = cat_third_bound(x, y, v0, t)
+    e = type(x)(0.0)
     w = cat_root_start(lo, hi, f_lo, g_lo, f_hi, g_hi)
-    f, df, ddf, hx, hy, fx, fy = cat_eval_curved(x, y, w, v0, t)
+    f, df, ddf, hx, hy, fx, fy, dhx, dhy = cat_eval_curved(x, y, w, v0, t)
     for _it in range(MAX_NEWTON):
-        a, b, fa, w_new, stop = cat_root_step(w, a, b, fa, f, df, ddf, tol)
+        a, b, fa, w_new, stop, proved = cat_root_step(w, a, b, fa, f, df, ddf, tol, m3)
         if stop:
+            if proved:
+                e = w_new - w
             break
         w = w_new
-        f, df, ddf, hx, hy, fx, fy = cat_eval_curved(x, y, w, v0, t)
-    density, acc = cat_root_value(x, y, w, df, hx, hy, fx, fy, v0, sigma_a, sigma_omega, noise_g)
-    cat_carry_root(carry, acc, w, v0, density, lw, out)
+        f, df, ddf, hx, hy, fx, fy, dhx, dhy = cat_eval_curved(x, y, w, v0, t)
+    density, acc, omega = cat_root_value(x, y, w, e, df, ddf, hx, hy, fx, fy, dhx, dhy, v0, sigma_a, sigma_omega,
+                                         noise_g)
+    cat_carry_root(carry, acc, omega, v0, density, lw, out)
     return density
 
 
@@ -391,13 +436,19 @@ def cat_root_group(x: Any, y: Any, lo: Any, hi: Any, f_lo: Any, g_lo: Any, f_hi:
     hy = lo
     fx = lo
     fy = lo
+    dhx = lo
+    dhy = lo
+    m3 = lo
+    e = lo
     live = lo
     density = lo
     for m in range(ROOT_GROUP):
         w[m] = cat_root_start(lo[m], hi[m], f_lo[m], g_lo[m], f_hi[m], g_hi[m])
         live[m] = type(v0)(1.0)
+        m3[m] = cat_third_bound(x[m], y[m], v0, t)
+        e[m] = zero
     for m in range(ROOT_GROUP):
-        f_m, df_m, ddf_m, hx_m, hy_m, fx_m, fy_m = cat_eval_curved(x[m], y[m], w[m], v0, t)
+        f_m, df_m, ddf_m, hx_m, hy_m, fx_m, fy_m, dhx_m, dhy_m = cat_eval_curved(x[m], y[m], w[m], v0, t)
         f[m] = f_m
         df[m] = df_m
         ddf[m] = ddf_m
@@ -405,16 +456,21 @@ def cat_root_group(x: Any, y: Any, lo: Any, hi: Any, f_lo: Any, g_lo: Any, f_hi:
         hy[m] = hy_m
         fx[m] = fx_m
         fy[m] = fy_m
+        dhx[m] = dhx_m
+        dhy[m] = dhy_m
     for _it in range(MAX_NEWTON):
         running = int(0)
         for m in range(ROOT_GROUP):
             if live[m] != zero:
-                a_m, b_m, fa_m, w_new, stop = cat_root_step(w[m], a[m], b[m], fa[m], f[m], df[m], ddf[m], tol)
+                a_m, b_m, fa_m, w_new, stop, proved = cat_root_step(w[m], a[m], b[m], fa[m], f[m], df[m], ddf[m], tol,
+                                                                     m3[m])
                 a[m] = a_m
                 b[m] = b_m
                 fa[m] = fa_m
                 if stop:
                     live[m] = zero
+                    if proved:
+                        e[m] = w_new - w[m]
                 else:
                     w[m] = w_new
                     running += 1
@@ -422,7 +478,7 @@ def cat_root_group(x: Any, y: Any, lo: Any, hi: Any, f_lo: Any, g_lo: Any, f_hi:
             break
         for m in range(ROOT_GROUP):
             if live[m] != zero:
-                f_m, df_m, ddf_m, hx_m, hy_m, fx_m, fy_m = cat_eval_curved(x[m], y[m], w[m], v0, t)
+                f_m, df_m, ddf_m, hx_m, hy_m, fx_m, fy_m, dhx_m, dhy_m = cat_eval_curved(x[m], y[m], w[m], v0, t)
                 f[m] = f_m
                 df[m] = df_m
                 ddf[m] = ddf_m
@@ -430,9 +486,11 @@ def cat_root_group(x: Any, y: Any, lo: Any, hi: Any, f_lo: Any, g_lo: Any, f_hi:
                 hy[m] = hy_m
                 fx[m] = fx_m
                 fy[m] = fy_m
+                dhx[m] = dhx_m
+                dhy[m] = dhy_m
     for m in range(ROOT_GROUP):
-        value, acc = cat_root_value(x[m], y[m], w[m], df[m], hx[m], hy[m], fx[m], fy[m], v0, sigma_a, sigma_omega,
-                                    noise_g[m])
+        value, acc, omega = cat_root_value(x[m], y[m], w[m], e[m], df[m], ddf[m], hx[m], hy[m], fx[m], fy[m], dhx[m],
+                                           dhy[m], v0, sigma_a, sigma_omega, noise_g[m])
         density[m] = value
     return density
 
