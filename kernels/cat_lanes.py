@@ -1,14 +1,23 @@
-"""The CAT scan in CPU lanes: F at 8 (float64) or 16 (float32) turn-rate nodes at a time.
+"""The CAT scan on the CPU: along grid rows (the grid kernel), and over nodes in lanes (points).
 
 The exact CAT kernel (``kernels/cat.py``) scans every cell's turn-rate nodes for intervals that
 can hold a root: F = hx y - hy x - c at each node, and a cheap test on each interval (a sign
-change, or an end within the chord bound of zero). That scan took about half of the kernel's
-time (0.34 s of 0.73 s on the bench's Figure 1 grid, one core). Here the test runs on a group of
-intervals at once (``lanes.cat_scan_group``: F at the group's nodes and at their predecessors,
-from the table's columns regrouped into vectors by :func:`node_groups`, with the scalar scan's
-arithmetic), and each flagged interval is examined by the scalar kernel's own
-``cat.cat_node_interval``, in node order. The density is therefore the scalar kernel's, bit for
-bit (``tests/kernels/test_lanes.py`` checks it).
+change, or an end within the chord bound of zero); each flagged interval is examined by
+``cat.cat_node_interval``, in node order.
+
+The grid kernel sweeps each row instead (:func:`cat_sweep_row`): along a row F at a node is
+affine in x, so the cells an interval can be flagged at lie in at most two x-intervals, found
+from the row's ends in O(nodes) a row; only those cells are tested, with the scan's own
+arithmetic, and their roots are added in node order from 0. Single roots (the common case) are
+searched ROOT_GROUP at a time (``cat.cat_root_group``: the scalar search's steps, interleaved).
+The density is therefore the scalar kernel's, bit for bit (``tests/kernels/test_cat_sweep.py``
+and ``tests/kernels/test_lanes.py`` check it). On the bench's Figure 1 grid (float64, one core,
+Intel Xeon AVX-512) the per-cell scan took 0.17 s of the kernel's 0.54 s; the sweep and its
+cells' tests take 0.02 s.
+
+The points kernels run the per-cell test on a group of intervals at once
+(``lanes.cat_scan_group``: F at the group's nodes and at their predecessors, from the table's
+columns regrouped into vectors by :func:`node_groups`, with the scalar scan's arithmetic).
 
 CPU only (see ``kernels/lanes.py``); the GPU path uses ``cat.KERNELS``.
 """
@@ -161,14 +170,51 @@ def sweep_band(alpha_prev: wp.float64, beta_prev: wp.float64, alpha: wp.float64,
 
 
 @wp.func
+def sweep_acceleration(table: wp.array2d(dtype=Any), k: int, ox: wp.float64, cs: wp.float64, sn: wp.float64,
+                       dyo: wp.float64):
+    """The acceleration of node k's line along the row, a = ax lx + ay ly - a0 = alpha + beta x
+    (float64): (beta, alpha)."""
+    ax = wp.float64(table[k, 7])
+    ay = wp.float64(table[k, 8])
+    beta = ax * cs + ay * sn
+    return beta, -ox * beta + dyo * (ay * cs - ax * sn) - wp.float64(table[k, 9])
+
+
+@wp.func
+def sweep_pruned(xs: wp.array(dtype=Any), j0: int, j1: int, alpha_prev: wp.float64, beta_prev: wp.float64,
+                 alpha: wp.float64, beta: wp.float64, beyond: wp.float64):
+    """Index ranges (two, as a vec4i of begin, end pairs) of the cells where both nodes'
+    accelerations alpha + beta x are at least ``beyond`` on one side."""
+    lo1, hi1 = sweep_half_line(-alpha_prev, -beta_prev, -beyond)
+    lo2, hi2 = sweep_half_line(-alpha, -beta, -beyond)
+    lo3, hi3 = sweep_half_line(alpha_prev, beta_prev, -beyond)
+    lo4, hi4 = sweep_half_line(alpha, beta, -beyond)
+    out = wp.vec4i(j1, j1, j1, j1)
+    lo = wp.max(lo1, lo2)
+    hi = wp.min(hi1, hi2)
+    if lo <= hi:
+        out[0] = sweep_first(xs, j0, j1, lo, False)
+        out[1] = sweep_first(xs, j0, j1, hi, True)
+    lo = wp.max(lo3, lo4)
+    hi = wp.min(hi3, hi4)
+    if lo <= hi:
+        out[2] = sweep_first(xs, j0, j1, lo, False)
+        out[3] = sweep_first(xs, j0, j1, hi, True)
+    return out
+
+
+@wp.func
 def sweep_cells(xs: wp.array(dtype=Any), y: Any, row: int, j_begin: int, j_end: int, k: int, p: Any,
-                out: wp.array2d(dtype=Any)):
+                skip: wp.vec4i, out: wp.array2d(dtype=Any)):
     """Add the roots of node interval [k - 1, k] to out[row, j] for j in [j_begin, j_end): at the
     cells that the scan's cheap test flags (``cat.cat_density_local``'s test, its arithmetic),
     what ``cat.cat_node_interval`` adds there. A single root (a sign change that
     ``cat.cat_one_root`` settles, the common case) joins a group of ROOT_GROUP searched side by
     side (``cat.cat_root_group``: the same bits as the scalar search); the rest, and the roots
-    left over at the end, are settled one by one by the scalar functions."""
+    left over at the end, are settled one by one by the scalar functions. Cells in the index
+    ranges [skip[0], skip[1]) and [skip[2], skip[3]) are skipped: proved pruned there (both
+    nodes' accelerations beyond PRUNE_SIGMAS sigma_a on one side: ``cat.cat_negligible``, which
+    adds nothing)."""
     zero = type(y)(0.0)
     q_x = wp.vector(zero, zero, zero, zero)
     q_y = q_x
@@ -183,6 +229,8 @@ def sweep_cells(xs: wp.array(dtype=Any), y: Any, row: int, j_begin: int, j_end: 
     queued = int(0)
     a_cut = type(y)(PRUNE_SIGMAS) * p.sigma_a
     for j in range(j_begin, j_end):
+        if (j >= skip[0] and j < skip[1]) or (j >= skip[2] and j < skip[3]):
+            continue
         lx, ly = world_to_local(xs[j], y, p.pose)
         r, noise_f, noise_g, chord_coef = cat_scan_noise(lx, ly, p.v0, p.t, p.eps)
         f_prev = p.table[k - 1, 1] * ly - p.table[k - 1, 2] * lx - p.table[k - 1, 3]
@@ -249,6 +297,11 @@ def cat_sweep_row(xs: wp.array(dtype=Any), y: Any, row: int, j0: int, j1: int, p
     search of the sorted xs. Only they are tested, with the scan's own arithmetic: the flagged
     set, and so every root and the sum, is the per-cell scan's. The row costs O(nodes) plus the
     cells near each interval's lines (a few a cell), instead of every node at every cell.
+
+    Cells where both nodes' accelerations a = ax lx + ay ly - a0 (also affine in x) are beyond
+    PRUNE_SIGMAS sigma_a on one side by more than their rounding allowance (the coefficients are
+    h / |h|^2 and v0 h . f / |h|^2, so delta / (t^2 |h|)) are skipped without a test: the scan's
+    ``cat.cat_negligible`` prunes them, and they add nothing.
     """
     zero = type(y)(0.0)
     for j in range(j0, j1):
@@ -277,11 +330,20 @@ def cat_sweep_row(xs: wp.array(dtype=Any), y: Any, row: int, j0: int, j1: int, p
     ty = wp.float64(p.table[0, 2])
     beta_prev = tx * sn - ty * cs
     alpha_prev = -ox * beta_prev + dyo * (tx * cs + ty * sn) - wp.float64(p.table[0, 3])
+    acc_beta_prev, acc_alpha_prev = sweep_acceleration(p.table, 0, ox, cs, sn, dyo)
+    # the acceleration's rounding allowance, over |h| (its coefficients are h / |h|^2, v0 h.f / |h|^2)
+    acc_delta = delta / (t * t)
+    cut = wp.float64(PRUNE_SIGMAS) * wp.float64(p.sigma_a) * wp.float64(1.000001)
+    h_prev = wp.sqrt(tx * tx + ty * ty)
     for k in range(1, n):
         tx = wp.float64(p.table[k, 1])
         ty = wp.float64(p.table[k, 2])
         beta = tx * sn - ty * cs
         alpha = -ox * beta + dyo * (tx * cs + ty * sn) - wp.float64(p.table[k, 3])
+        acc_beta, acc_alpha = sweep_acceleration(p.table, k, ox, cs, sn, dyo)
+        h_k = wp.sqrt(tx * tx + ty * ty)
+        beyond = cut + acc_delta / wp.min(h_prev, h_k)
+        skip = sweep_pruned(xs, j0, j1, acc_alpha_prev, acc_beta_prev, acc_alpha, acc_beta, beyond)
         width = wp.float64(p.table[k, 0] - p.table[k - 1, 0])
         e = (chord_max * width * width + noise_max) * wp.float64(1.000001) + delta
         lo1, hi1 = sweep_band(alpha_prev, beta_prev, alpha, beta, e, wp.float64(1.0))
@@ -297,12 +359,15 @@ def cat_sweep_row(xs: wp.array(dtype=Any), y: Any, row: int, j0: int, j1: int, p
             a2 = sweep_first(xs, j0, j1, lo2, False)
             b2 = sweep_first(xs, j0, j1, hi2, True)
         if a1 < b1 and a2 < b2 and a2 <= b1 and a1 <= b2:  # overlapping: one range
-            sweep_cells(xs, y, row, wp.min(a1, a2), wp.max(b1, b2), k, p, out)
+            sweep_cells(xs, y, row, wp.min(a1, a2), wp.max(b1, b2), k, p, skip, out)
         else:
-            sweep_cells(xs, y, row, a1, b1, k, p, out)
-            sweep_cells(xs, y, row, a2, b2, k, p, out)
+            sweep_cells(xs, y, row, a1, b1, k, p, skip, out)
+            sweep_cells(xs, y, row, a2, b2, k, p, skip, out)
         alpha_prev = alpha
         beta_prev = beta
+        acc_alpha_prev = acc_alpha
+        acc_beta_prev = acc_beta
+        h_prev = h_k
 
 
 def _cat_grid_lanes(xs: wp.array(dtype=Any), ys: wp.array(dtype=Any), row0: int, columns: int, p: Any,
