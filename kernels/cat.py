@@ -24,8 +24,10 @@ from typing import Any
 
 import warp as wp
 
-from .common import SERIES_SWITCH, cat_basis, horner10, local_to_world, normal_pdf, series_c_over_u, series_d, series_dc, \
-    series_dd_over_u, sinc_of, world_to_local
+from .common import (
+    SERIES_SWITCH, cat_basis, horner10, local_to_world, series_c_over_u, series_d, series_dc, series_dd_over_u,
+    sinc_of, world_to_local,
+)
 from .evidence import EVIDENCE, evidence_add, evidence_node, evidence_nodes, evidence_reset, evidence_time
 from .generate import (
     ARRAY, ARRAY2D, SCALAR, SCALARS, VEC4, Params, carried_points_kernel, density_kernels, overload_on_use,
@@ -297,10 +299,12 @@ def cat_root_step(w: Any, a: Any, b: Any, fa: Any, f: Any, df: Any, ddf: Any, to
     to -2 F' / F'' whatever F is, and would crawl) and it stays inside the bracket; else
     Newton's, inside the bracket; else bisection. The search stops where F = 0, where the
     Newton step is at most tol (whether or not it stays inside: one that rounds to nothing
-    leaves w on the bracket's end), where the step taken is at most tol, or where the bracket
-    is; or at the Halley point, where a bound on the third derivative (``m3``) proves it within
-    tol of the root (the common case: one evaluation a root). Selects rather than branches: the bracket's side and the step's kind are coin tosses
-    from root to root, and a mispredicted branch cost more than the step."""
+    leaves w on the bracket's end), where the step taken or the bracket is at most tol; or at
+    the Halley point, where a bound on the third derivative (``m3``) proves it within
+    tol of the root (the common case: one evaluation a root). Selects rather than branches: the
+    bracket's side and the step's kind are coin tosses from root to root, and a mispredicted
+    branch cost more than the step.
+    """
     zero = type(w)(0.0)
     same = (f > zero) == (fa > zero)
     a = wp.where(same, w, a)
