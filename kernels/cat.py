@@ -78,6 +78,18 @@ def series_ddd(z: Any):
 
 
 @wp.func
+def series_dddc(z: Any):
+    """C'''(u) as a series in z = u^2: sum_{n>=2} (-1)^(n+1) 2n (2n-1) (2n-2) (2n-3) u^(2n-4) / (2n+1)!."""
+    return horner10(z, type(z)(-0.2), type(z)(0.07142857142857142), type(z)(-0.004629629629629629), type(z)(0.00012626262626262626), type(z)(-1.907814407814408e-06), type(z)(1.8371546149323926e-08), type(z)(-1.2280445286981235e-10), type(z)(6.037234525120908e-13), type(z)(-2.275941586851136e-15), type(z)(6.7909595515592285e-18))
+
+
+@wp.func
+def series_dddd_over_u(z: Any):
+    """D'''(u) / u as a series in z = u^2: sum_{n>=3} (-1)^(n+1) (2n-1) (2n-2) (2n-3) (2n-4) u^(2n-6) / (2n)!."""
+    return horner10(z, type(z)(0.16666666666666666), type(z)(-0.020833333333333332), type(z)(0.0008333333333333334), type(z)(-1.6534391534391536e-05), type(z)(1.9683799445704207e-07), type(z)(-1.5657567740901075e-09), type(z)(8.921691020456453e-12), type(z)(-3.8235818659099085e-14), type(z)(1.2779351156116003e-16), type(z)(-3.4252646860934706e-19))
+
+
+@wp.func
 def cat_basis_curved(u: Any):
     """``common.cat_basis`` (A, B, C, D, C', D' by the same formulas: the same bits) with each
     sine and cosine taken once, and the second derivatives C'' and D'':
@@ -85,7 +97,10 @@ def cat_basis_curved(u: Any):
         C'' = (u^3 cos u - 3 u^2 sin u + 6 sin u - 6 u cos u) / u^4,
         D'' = (6 cos u + 6 u sin u - u^3 sin u - 3 u^2 cos u - 6) / u^4,
 
-    their series below SERIES_SWITCH (``series_ddc_over_u``, ``series_ddd``)."""
+    their series below SERIES_SWITCH (``series_ddc_over_u``, ``series_ddd``); and the third
+    derivatives C''' = (24 u cos u - u^4 sin u - 4 u^3 cos u + 12 u^2 sin u - 24 sin u) / u^5 and
+    D''' = (24 - u^4 cos u - 24 cos u - 24 u sin u + 4 u^3 sin u + 12 u^2 cos u) / u^5 (series
+    ``series_dddc``, ``series_dddd_over_u``)."""
     one = type(u)(1.0)
     two = type(u)(2.0)
     half_u = u * type(u)(0.5)
@@ -96,7 +111,7 @@ def cat_basis_curved(u: Any):
     if wp.abs(u) < type(u)(SERIES_SWITCH):
         z = u * u
         return (a_fn, b_fn, u * series_c_over_u(z), series_d(z), series_dc(z), u * series_dd_over_u(z),
-                u * series_ddc_over_u(z), series_ddd(z))
+                u * series_ddc_over_u(z), series_ddd(z), series_dddc(z), u * series_dddd_over_u(z))
     c = wp.cos(u)
     u2 = u * u
     u3 = u2 * u
@@ -109,7 +124,13 @@ def cat_basis_curved(u: Any):
     dd_fn = (u2 * c - two * c - two * u * s + two) / u3
     ddc_fn = (u3 * c - three * u2 * s + six * s - six * u * c) / u4
     ddd_fn = (six * c + six * u * s - u3 * s - three * u2 * c - six) / u4
-    return a_fn, b_fn, c_fn, d_fn, dc_fn, dd_fn, ddc_fn, ddd_fn
+    u5 = u4 * u
+    four = type(u)(4.0)
+    twelve = type(u)(12.0)
+    twenty_four = type(u)(24.0)
+    dddc_fn = (twenty_four * u * c - u4 * s - four * u3 * c + twelve * u2 * s - twenty_four * s) / u5
+    dddd_fn = (twenty_four - u4 * c - twenty_four * c - twenty_four * u * s + four * u3 * s + twelve * u2 * c) / u5
+    return a_fn, b_fn, c_fn, d_fn, dc_fn, dd_fn, ddc_fn, ddd_fn, dddc_fn, dddd_fn
 
 
 @wp.func
@@ -118,7 +139,7 @@ def cat_coefficients(omega: Any, v0: Any, t: Any):
     F = hx y - hy x - c, dF/domega = dhx y - dhy x - dc, and the acceleration of the line
     through P, a = h . (P - v0 f) / |h|^2 = ax x + ay y - a0 (exact at a root)."""
     u = omega * t
-    a_fn, b_fn, c_fn, d_fn, dc_fn, dd_fn, ddc_fn, ddd_fn = cat_basis_curved(u)
+    a_fn, b_fn, c_fn, d_fn, dc_fn, dd_fn, ddc_fn, ddd_fn, dddc_fn, dddd_fn = cat_basis_curved(u)
     t2 = t * t
     fx = t * a_fn
     fy = t * b_fn
@@ -142,15 +163,18 @@ def cat_eval(x: Any, y: Any, omega: Any, v0: Any, t: Any):
 
 @wp.func
 def cat_eval_curved(x: Any, y: Any, omega: Any, v0: Any, t: Any):
-    """F, dF/domega (``cat_eval``'s, the same bits) and d^2F/domega^2 at a local point, and the
-    line's h, f and dh/domega (for ``cat_root_value``).
+    """F, dF/domega (``cat_eval``'s arithmetic, the same bits), d^2F/domega^2 and d^3F/domega^3
+    at a local point, and the acceleration a of the line through it (``cat_eval``'s arithmetic)
+    with da/domega and d^2a/domega^2 (for ``cat_root_value``).
 
-    With h'' = t^4 (C'', D''), f' = t^2 (D, -C): h' x f' = -t^5 (C C' + D D') = -h . h', so
+    With h'' = t^4 (C'', D''), h''' = t^5 (C''', D'''), f' = t^2 (D, -C) = (hy, -hx):
+    h' x f' = -h . h' and h'' x f' = -h . h'', so with Q = P - v0 f
 
-        d^2F/domega^2 = h'' x (P - v0 f) - v0 (h' x f' - 2 h . h') = h'' x (P - v0 f) + 3 v0 h . h'.
+        d^2F/domega^2 = h'' x Q - v0 (h' x f' - 2 h . h') = h'' x Q + 3 v0 h . h',
+        d^3F/domega^3 = h''' x Q + 3 v0 |h'|^2 + 4 v0 h . h''.
     """
     u = omega * t
-    a_fn, b_fn, c_fn, d_fn, dc_fn, dd_fn, ddc_fn, ddd_fn = cat_basis_curved(u)
+    a_fn, b_fn, c_fn, d_fn, dc_fn, dd_fn, ddc_fn, ddd_fn, dddc_fn, dddd_fn = cat_basis_curved(u)
     t2 = t * t
     fx = t * a_fn
     fy = t * b_fn
@@ -164,15 +188,22 @@ def cat_eval_curved(x: Any, y: Any, omega: Any, v0: Any, t: Any):
     c = v0 * (hx * fy - hy * fx)
     dc = v0 * (dhx * fy - dhy * fx - h2)
     ddc = v0 * (ddhx * fy - ddhy * fx) - type(x)(3.0) * v0 * (hx * dhx + hy * dhy)
-    return hx * y - hy * x - c, dhx * y - dhy * x - dc, ddhx * y - ddhy * x - ddc, hx, hy, fx, fy, dhx, dhy
-
-
-@wp.func
-def cat_line_acceleration(x: Any, y: Any, hx: Any, hy: Any, fx: Any, fy: Any, v0: Any):
-    """The acceleration of the line through P, a = h . (P - v0 f) / |h|^2 (``cat_eval``'s
-    arithmetic), from ``cat_eval_curved``'s h and f: taken once, at the root."""
-    h2 = hx * hx + hy * hy
-    return hx / h2 * x + hy / h2 * y - v0 * (hx * fx + hy * fy) / h2
+    t4 = t2 * t2
+    dddhx = t4 * t * dddc_fn
+    dddhy = t4 * t * dddd_fn
+    hh1 = hx * dhx + hy * dhy  # h . h'
+    hh2 = hx * ddhx + hy * ddhy  # h . h''
+    h1h1 = dhx * dhx + dhy * dhy  # |h'|^2
+    qx = x - v0 * fx
+    qy = y - v0 * fy
+    dddf = (dddhx * qy - dddhy * qx) + v0 * (type(x)(3.0) * h1h1 + type(x)(4.0) * hh2)
+    # a = N / D with N = h . Q, D = |h|^2: N' = h' . Q (h . f' = 0), N'' = h'' . Q - v0 h' . f',
+    # f' = (hy, -hx), D' = 2 h . h', D'' = 2 (|h'|^2 + h . h'')
+    acc = hx / h2 * x + hy / h2 * y - v0 * (hx * fx + hy * fy) / h2
+    dacc = (dhx * qx + dhy * qy - type(x)(2.0) * acc * hh1) / h2
+    n2 = ddhx * qx + ddhy * qy - v0 * (dhx * hy - dhy * hx)
+    ddacc = (n2 - type(x)(4.0) * dacc * hh1 - type(x)(2.0) * acc * (h1h1 + hh2)) / h2
+    return hx * y - hy * x - c, dhx * y - dhy * x - dc, ddhx * y - ddhy * x - ddc, dddf, acc, dacc, ddacc
 
 
 @wp.func
@@ -311,8 +342,9 @@ def cat_root_step(w: Any, a: Any, b: Any, fa: Any, f: Any, df: Any, ddf: Any, to
     fa = wp.where(same, f, fa)
     b = wp.where(same, b, w)
     slope = df != zero
-    step_newton = f / df
-    bend = step_newton * ddf / (type(w)(2.0) * df)
+    inv_df = type(w)(1.0) / df  # two divisions a step, not five: each is a long latency
+    step_newton = f * inv_df
+    bend = step_newton * ddf * (type(w)(0.5) * inv_df)
     w_newton = w - step_newton
     w_halley = w - step_newton / (type(w)(1.0) - bend)
     halley_in = slope and wp.abs(bend) <= type(w)(0.5) and w_halley > a and w_halley < b
@@ -331,9 +363,10 @@ def cat_root_step(w: Any, a: Any, b: Any, fa: Any, f: Any, df: Any, ddf: Any, to
     q = f + e * (df + type(w)(0.5) * e * ddf)
     two_e = type(w)(2.0) * wp.abs(e)
     d = wp.abs(df) - wp.abs(ddf) * two_e
-    rho = (wp.abs(q) + m3 * two_e * two_e * two_e / type(w)(6.0)) / d
-    proved = (halley_in and not stop and d > zero and rho <= wp.abs(e) and rho <= tol and w_halley - rho > a
-              and w_halley + rho < b)
+    # rho d, and rho <= min(|e|, tol, the bracket's room) tested as rho d <= that times d (d > 0)
+    rho_d = wp.abs(q) + m3 * two_e * two_e * two_e * type(w)(0.16666666666666666)
+    room = wp.min(wp.min(wp.abs(e), tol), wp.min(w_halley - a, b - w_halley))
+    proved = halley_in and not stop and d > zero and rho_d < room * d
     return a, b, fa, w_new, stop or proved, proved
 
 
@@ -344,27 +377,23 @@ def cat_root_start(lo: Any, hi: Any, f_lo: Any, g_lo: Any, f_hi: Any, g_hi: Any)
 
 
 @wp.func
-def cat_root_value(x: Any, y: Any, w: Any, e: Any, df: Any, ddf: Any, hx: Any, hy: Any, fx: Any, fy: Any, dhx: Any,
-                   dhy: Any, v0: Any, sigma_a: Any, sigma_omega: Any, noise_g: Any):
+def cat_root_value(w: Any, e: Any, df: Any, ddf: Any, dddf: Any, acc: Any, dacc: Any, ddacc: Any, sigma_a: Any,
+                   sigma_omega: Any, noise_g: Any):
     """g(a) g(omega) / max(|dF/domega|, noise_g) at the root omega = w + e, from the values at the
     search's last evaluation w (e = 0: the search stopped there; else ``cat_root_step``'s proved
-    Halley point): dF/domega + e F'' and a + e da/domega, with
-    da/domega = (h' . (P - v0 f) - 2 a h . h') / |h|^2 (h . f' = 0); their remainders are
-    O(e^2), e within a step of the Hermite start. One exponential. Returns the density, the
-    acceleration and omega."""
-    acc = cat_line_acceleration(x, y, hx, hy, fx, fy, v0)
-    slope = df
-    if e != type(x)(0.0):
-        h2 = hx * hx + hy * hy
-        along = dhx * (x - v0 * fx) + dhy * (y - v0 * fy)
-        acc = acc + e * (along - type(x)(2.0) * acc * (hx * dhx + hy * dhy)) / h2
-        slope = df + e * ddf
+    Halley point): dF/domega and a carried to w + e by their Taylor polynomials of degree two,
+    whose remainders are O(e^3), e within a step of the Hermite start (a first-degree carry left
+    a bias of the order of e^2 F''' / F', 1e-14 relative: measurable in a map's total mass). One
+    exponential. Returns the density, the acceleration and omega."""
+    half = type(w)(0.5)
+    slope = df + e * (ddf + half * e * dddf)
+    a = acc + e * (dacc + half * e * ddacc)
     omega = w + e
-    za = acc / sigma_a
+    za = a / sigma_a
     zw = omega / sigma_omega
-    density = (type(x)(INV_2PI) / (sigma_a * sigma_omega) * wp.exp(type(x)(-0.5) * (za * za + zw * zw))
+    density = (type(w)(INV_2PI) / (sigma_a * sigma_omega) * wp.exp(type(w)(-0.5) * (za * za + zw * zw))
                / wp.max(wp.abs(slope), noise_g))
-    return density, acc, omega
+    return density, a, omega
 
 
 @wp.func
@@ -401,7 +430,7 @@ def cat_root_density(
     m3 = cat_third_bound(x, y, v0, t)
     e = type(x)(0.0)
     w = cat_root_start(lo, hi, f_lo, g_lo, f_hi, g_hi)
-    f, df, ddf, hx, hy, fx, fy, dhx, dhy = cat_eval_curved(x, y, w, v0, t)
+    f, df, ddf, dddf, acc, dacc, ddacc = cat_eval_curved(x, y, w, v0, t)
     for _it in range(MAX_NEWTON):
         a, b, fa, w_new, stop, proved = cat_root_step(w, a, b, fa, f, df, ddf, tol, m3)
         if stop:
@@ -409,10 +438,9 @@ def cat_root_density(
                 e = w_new - w
             break
         w = w_new
-        f, df, ddf, hx, hy, fx, fy, dhx, dhy = cat_eval_curved(x, y, w, v0, t)
-    density, acc, omega = cat_root_value(x, y, w, e, df, ddf, hx, hy, fx, fy, dhx, dhy, v0, sigma_a, sigma_omega,
-                                         noise_g)
-    cat_carry_root(carry, acc, omega, v0, density, lw, out)
+        f, df, ddf, dddf, acc, dacc, ddacc = cat_eval_curved(x, y, w, v0, t)
+    density, a_root, omega = cat_root_value(w, e, df, ddf, dddf, acc, dacc, ddacc, sigma_a, sigma_omega, noise_g)
+    cat_carry_root(carry, a_root, omega, v0, density, lw, out)
     return density
 
 
@@ -436,12 +464,10 @@ def cat_root_group(x: Any, y: Any, lo: Any, hi: Any, f_lo: Any, g_lo: Any, f_hi:
     f = lo
     df = lo
     ddf = lo
-    hx = lo
-    hy = lo
-    fx = lo
-    fy = lo
-    dhx = lo
-    dhy = lo
+    dddf = lo
+    acc = lo
+    dacc = lo
+    ddacc = lo
     m3 = lo
     e = lo
     live = lo
@@ -452,16 +478,14 @@ def cat_root_group(x: Any, y: Any, lo: Any, hi: Any, f_lo: Any, g_lo: Any, f_hi:
         m3[m] = cat_third_bound(x[m], y[m], v0, t)
         e[m] = zero
     for m in range(ROOT_GROUP):
-        f_m, df_m, ddf_m, hx_m, hy_m, fx_m, fy_m, dhx_m, dhy_m = cat_eval_curved(x[m], y[m], w[m], v0, t)
+        f_m, df_m, ddf_m, dddf_m, acc_m, dacc_m, ddacc_m = cat_eval_curved(x[m], y[m], w[m], v0, t)
         f[m] = f_m
         df[m] = df_m
         ddf[m] = ddf_m
-        hx[m] = hx_m
-        hy[m] = hy_m
-        fx[m] = fx_m
-        fy[m] = fy_m
-        dhx[m] = dhx_m
-        dhy[m] = dhy_m
+        dddf[m] = dddf_m
+        acc[m] = acc_m
+        dacc[m] = dacc_m
+        ddacc[m] = ddacc_m
     for _it in range(MAX_NEWTON):
         running = int(0)
         for m in range(ROOT_GROUP):
@@ -482,19 +506,17 @@ def cat_root_group(x: Any, y: Any, lo: Any, hi: Any, f_lo: Any, g_lo: Any, f_hi:
             break
         for m in range(ROOT_GROUP):
             if live[m] != zero:
-                f_m, df_m, ddf_m, hx_m, hy_m, fx_m, fy_m, dhx_m, dhy_m = cat_eval_curved(x[m], y[m], w[m], v0, t)
+                f_m, df_m, ddf_m, dddf_m, acc_m, dacc_m, ddacc_m = cat_eval_curved(x[m], y[m], w[m], v0, t)
                 f[m] = f_m
                 df[m] = df_m
                 ddf[m] = ddf_m
-                hx[m] = hx_m
-                hy[m] = hy_m
-                fx[m] = fx_m
-                fy[m] = fy_m
-                dhx[m] = dhx_m
-                dhy[m] = dhy_m
+                dddf[m] = dddf_m
+                acc[m] = acc_m
+                dacc[m] = dacc_m
+                ddacc[m] = ddacc_m
     for m in range(ROOT_GROUP):
-        value, acc, omega = cat_root_value(x[m], y[m], w[m], e[m], df[m], ddf[m], hx[m], hy[m], fx[m], fy[m], dhx[m],
-                                           dhy[m], v0, sigma_a, sigma_omega, noise_g[m])
+        value, a_root, omega = cat_root_value(w[m], e[m], df[m], ddf[m], dddf[m], acc[m], dacc[m], ddacc[m], sigma_a,
+                                              sigma_omega, noise_g[m])
         density[m] = value
     return density
 
