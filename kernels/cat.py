@@ -164,8 +164,8 @@ def cat_eval(x: Any, y: Any, omega: Any, v0: Any, t: Any):
 @wp.func
 def cat_eval_curved(x: Any, y: Any, omega: Any, v0: Any, t: Any):
     """F, dF/domega (``cat_eval``'s arithmetic, the same bits), d^2F/domega^2 and d^3F/domega^3
-    at a local point, and the acceleration a of the line through it (``cat_eval``'s arithmetic)
-    with da/domega and d^2a/domega^2 (for ``cat_root_value``).
+    at a local point, and the acceleration a = h . (P - v0 f) / |h|^2 of the line through it with
+    da/domega and d^2a/domega^2 (for ``cat_root_value``).
 
     With h'' = t^4 (C'', D''), h''' = t^5 (C''', D'''), f' = t^2 (D, -C) = (hy, -hx):
     h' x f' = -h . h' and h'' x f' = -h . h'', so with Q = P - v0 f
@@ -199,10 +199,11 @@ def cat_eval_curved(x: Any, y: Any, omega: Any, v0: Any, t: Any):
     dddf = (dddhx * qy - dddhy * qx) + v0 * (type(x)(3.0) * h1h1 + type(x)(4.0) * hh2)
     # a = N / D with N = h . Q, D = |h|^2: N' = h' . Q (h . f' = 0), N'' = h'' . Q - v0 h' . f',
     # f' = (hy, -hx), D' = 2 h . h', D'' = 2 (|h'|^2 + h . h'')
-    acc = hx / h2 * x + hy / h2 * y - v0 * (hx * fx + hy * fy) / h2
-    dacc = (dhx * qx + dhy * qy - type(x)(2.0) * acc * hh1) / h2
+    inv_h2 = type(x)(1.0) / h2  # one division for the three
+    acc = (hx * qx + hy * qy) * inv_h2
+    dacc = (dhx * qx + dhy * qy - type(x)(2.0) * acc * hh1) * inv_h2
     n2 = ddhx * qx + ddhy * qy - v0 * (dhx * hy - dhy * hx)
-    ddacc = (n2 - type(x)(4.0) * dacc * hh1 - type(x)(2.0) * acc * (h1h1 + hh2)) / h2
+    ddacc = (n2 - type(x)(4.0) * dacc * hh1 - type(x)(2.0) * acc * (h1h1 + hh2)) * inv_h2
     return hx * y - hy * x - c, dhx * y - dhy * x - dc, ddhx * y - ddhy * x - ddc, dddf, acc, dacc, ddacc
 
 
