@@ -11,16 +11,23 @@ The density is  sum over roots of  g(a; sigma_a) g(omega; sigma_omega) / |dF/dom
 
 F and dF/domega are affine in P with omega-only coefficients, so a table of those coefficients
 at N nodes (``cat_table``) lets each cell scan for sign changes with a few multiply-adds per
-node. Which node intervals can hold roots, and how many, is decided from proved bounds on F's
-derivatives (``cat_interval``), so that no root, and no root pair where the banana folds over
-itself, is missed: see ``cat_interval`` for the bounds and the proof.
+node (on the CPU a grid row is swept instead: ``kernels/cat_lanes.py``). Which node intervals
+can hold roots, and how many, is decided from proved bounds on F's derivatives
+(``cat_interval``), so that no root, and no root pair where the banana folds over itself, is
+missed: see ``cat_interval`` for the bounds and the proof. Each root is then found by Halley's
+method from the inverse cubic Hermite start, inside its bracket (``cat_root_density``): one
+evaluation of F and its first two derivatives a root where a bound on the third proves the
+Halley point within the tolerance (``cat_root_step``).
 """
 
 from typing import Any
 
 import warp as wp
 
-from .common import cat_basis, local_to_world, normal_pdf, world_to_local
+from .common import (
+    SERIES_SWITCH, cat_basis, horner10, local_to_world, series_c_over_u, series_d, series_dc, series_dd_over_u,
+    sinc_of, world_to_local,
+)
 from .evidence import EVIDENCE, evidence_add, evidence_node, evidence_nodes, evidence_reset, evidence_time
 from .generate import (
     ARRAY, ARRAY2D, SCALAR, SCALARS, VEC4, Params, carried_points_kernel, density_kernels, overload_on_use,
@@ -34,6 +41,9 @@ TABLE_COLUMNS = 10
 #: Roots whose acceleration lies beyond this many sigma_a contribute g(a) < 1e-313 relative and
 #: are skipped when both ends of their node interval are beyond it on the same side.
 PRUNE_SIGMAS = 38.0
+
+#: 1 / (2 pi)
+INV_2PI = 0.15915494309189535
 
 #: Iteration caps; each iteration at least halves the bracket, so float64 converges well before.
 MAX_NEWTON = 100
@@ -55,12 +65,81 @@ ROUNDING_ULPS = 32.0
 
 
 @wp.func
+def series_ddc_over_u(z: Any):
+    """C''(u) / u as a series in z = u^2: sum_{n>=2} (-1)^(n+1) 2n (2n-1) (2n-2) u^(2n-4) / (2n+1)!
+    (``common.cat_basis``'s C' differentiated term by term)."""
+    return horner10(z, type(z)(-0.2), type(z)(0.023809523809523808), type(z)(-0.000925925925925926), type(z)(1.8037518037518038e-05), type(z)(-2.119793786460453e-07), type(z)(1.6701405590294479e-09), type(z)(-9.44649637460095e-12), type(z)(4.024823016747272e-14), type(z)(-1.3387891687359624e-16), type(z)(3.574189237662752e-19))
+
+
+@wp.func
+def series_ddd(z: Any):
+    """D''(u) as a series in z = u^2: sum_{n>=2} (-1)^(n+1) (2n-1) (2n-2) (2n-3) u^(2n-4) / (2n)!."""
+    return horner10(z, type(z)(-0.25), type(z)(0.08333333333333333), type(z)(-0.005208333333333333), type(z)(0.0001388888888888889), type(z)(-2.066798941798942e-06), type(z)(1.968379944570421e-08), type(z)(-1.3047973117417563e-10), type(z)(6.372636443183181e-13), type(z)(-2.3897386661936928e-15), type(z)(7.099639531175557e-18))
+
+
+@wp.func
+def series_dddc(z: Any):
+    """C'''(u) as a series in z = u^2: sum_{n>=2} (-1)^(n+1) 2n (2n-1) (2n-2) (2n-3) u^(2n-4) / (2n+1)!."""
+    return horner10(z, type(z)(-0.2), type(z)(0.07142857142857142), type(z)(-0.004629629629629629), type(z)(0.00012626262626262626), type(z)(-1.907814407814408e-06), type(z)(1.8371546149323926e-08), type(z)(-1.2280445286981235e-10), type(z)(6.037234525120908e-13), type(z)(-2.275941586851136e-15), type(z)(6.7909595515592285e-18))
+
+
+@wp.func
+def series_dddd_over_u(z: Any):
+    """D'''(u) / u as a series in z = u^2: sum_{n>=3} (-1)^(n+1) (2n-1) (2n-2) (2n-3) (2n-4) u^(2n-6) / (2n)!."""
+    return horner10(z, type(z)(0.16666666666666666), type(z)(-0.020833333333333332), type(z)(0.0008333333333333334), type(z)(-1.6534391534391536e-05), type(z)(1.9683799445704207e-07), type(z)(-1.5657567740901075e-09), type(z)(8.921691020456453e-12), type(z)(-3.8235818659099085e-14), type(z)(1.2779351156116003e-16), type(z)(-3.4252646860934706e-19))
+
+
+@wp.func
+def cat_basis_curved(u: Any):
+    """``common.cat_basis`` (A, B, C, D, C', D' by the same formulas: the same bits) with each
+    sine and cosine taken once, and the second derivatives C'' and D'':
+
+        C'' = (u^3 cos u - 3 u^2 sin u + 6 sin u - 6 u cos u) / u^4,
+        D'' = (6 cos u + 6 u sin u - u^3 sin u - 3 u^2 cos u - 6) / u^4,
+
+    their series below SERIES_SWITCH (``series_ddc_over_u``, ``series_ddd``); and the third
+    derivatives C''' = (24 u cos u - u^4 sin u - 4 u^3 cos u + 12 u^2 sin u - 24 sin u) / u^5 and
+    D''' = (24 - u^4 cos u - 24 cos u - 24 u sin u + 4 u^3 sin u + 12 u^2 cos u) / u^5 (series
+    ``series_dddc``, ``series_dddd_over_u``)."""
+    one = type(u)(1.0)
+    two = type(u)(2.0)
+    half_u = u * type(u)(0.5)
+    sin_half = wp.sin(half_u)
+    s = wp.sin(u)
+    a_fn = sin_half * sinc_of(half_u, sin_half)  # (1 - cos u) / u without cancellation
+    b_fn = sinc_of(u, s)
+    if wp.abs(u) < type(u)(SERIES_SWITCH):
+        z = u * u
+        return (a_fn, b_fn, u * series_c_over_u(z), series_d(z), series_dc(z), u * series_dd_over_u(z),
+                u * series_ddc_over_u(z), series_ddd(z), series_dddc(z), u * series_dddd_over_u(z))
+    c = wp.cos(u)
+    u2 = u * u
+    u3 = u2 * u
+    u4 = u2 * u2
+    six = type(u)(6.0)
+    three = type(u)(3.0)
+    c_fn = (s - u * c) / u2
+    d_fn = (c + u * s - one) / u2
+    dc_fn = (u2 * s - two * s + two * u * c) / u3
+    dd_fn = (u2 * c - two * c - two * u * s + two) / u3
+    ddc_fn = (u3 * c - three * u2 * s + six * s - six * u * c) / u4
+    ddd_fn = (six * c + six * u * s - u3 * s - three * u2 * c - six) / u4
+    u5 = u4 * u
+    four = type(u)(4.0)
+    twelve = type(u)(12.0)
+    twenty_four = type(u)(24.0)
+    dddc_fn = (twenty_four * u * c - u4 * s - four * u3 * c + twelve * u2 * s - twenty_four * s) / u5
+    dddd_fn = (twenty_four - u4 * c - twenty_four * c - twenty_four * u * s + four * u3 * s + twelve * u2 * c) / u5
+    return a_fn, b_fn, c_fn, d_fn, dc_fn, dd_fn, ddc_fn, ddd_fn, dddc_fn, dddd_fn
+
+
+@wp.func
 def cat_coefficients(omega: Any, v0: Any, t: Any):
     """The omega-only coefficients of everything a point needs, from one basis evaluation:
     F = hx y - hy x - c, dF/domega = dhx y - dhy x - dc, and the acceleration of the line
     through P, a = h . (P - v0 f) / |h|^2 = ax x + ay y - a0 (exact at a root)."""
     u = omega * t
-    a_fn, b_fn, c_fn, d_fn, dc_fn, dd_fn = cat_basis(u)
+    a_fn, b_fn, c_fn, d_fn, dc_fn, dd_fn, ddc_fn, ddd_fn, dddc_fn, dddd_fn = cat_basis_curved(u)
     t2 = t * t
     fx = t * a_fn
     fy = t * b_fn
@@ -83,6 +162,52 @@ def cat_eval(x: Any, y: Any, omega: Any, v0: Any, t: Any):
 
 
 @wp.func
+def cat_eval_curved(x: Any, y: Any, omega: Any, v0: Any, t: Any):
+    """F, dF/domega (``cat_eval``'s arithmetic, the same bits), d^2F/domega^2 and d^3F/domega^3
+    at a local point, and the acceleration a = h . (P - v0 f) / |h|^2 of the line through it with
+    da/domega and d^2a/domega^2 (for ``cat_root_value``).
+
+    With h'' = t^4 (C'', D''), h''' = t^5 (C''', D'''), f' = t^2 (D, -C) = (hy, -hx):
+    h' x f' = -h . h' and h'' x f' = -h . h'', so with Q = P - v0 f
+
+        d^2F/domega^2 = h'' x Q - v0 (h' x f' - 2 h . h') = h'' x Q + 3 v0 h . h',
+        d^3F/domega^3 = h''' x Q + 3 v0 |h'|^2 + 4 v0 h . h''.
+    """
+    u = omega * t
+    a_fn, b_fn, c_fn, d_fn, dc_fn, dd_fn, ddc_fn, ddd_fn, dddc_fn, dddd_fn = cat_basis_curved(u)
+    t2 = t * t
+    fx = t * a_fn
+    fy = t * b_fn
+    hx = t2 * c_fn
+    hy = t2 * d_fn
+    dhx = t2 * t * dc_fn
+    dhy = t2 * t * dd_fn
+    ddhx = t2 * t2 * ddc_fn
+    ddhy = t2 * t2 * ddd_fn
+    h2 = hx * hx + hy * hy
+    c = v0 * (hx * fy - hy * fx)
+    dc = v0 * (dhx * fy - dhy * fx - h2)
+    ddc = v0 * (ddhx * fy - ddhy * fx) - type(x)(3.0) * v0 * (hx * dhx + hy * dhy)
+    t4 = t2 * t2
+    dddhx = t4 * t * dddc_fn
+    dddhy = t4 * t * dddd_fn
+    hh1 = hx * dhx + hy * dhy  # h . h'
+    hh2 = hx * ddhx + hy * ddhy  # h . h''
+    h1h1 = dhx * dhx + dhy * dhy  # |h'|^2
+    qx = x - v0 * fx
+    qy = y - v0 * fy
+    dddf = (dddhx * qy - dddhy * qx) + v0 * (type(x)(3.0) * h1h1 + type(x)(4.0) * hh2)
+    # a = N / D with N = h . Q, D = |h|^2: N' = h' . Q (h . f' = 0), N'' = h'' . Q - v0 h' . f',
+    # f' = (hy, -hx), D' = 2 h . h', D'' = 2 (|h'|^2 + h . h'')
+    inv_h2 = type(x)(1.0) / h2  # one division for the three
+    acc = (hx * qx + hy * qy) * inv_h2
+    dacc = (dhx * qx + dhy * qy - type(x)(2.0) * acc * hh1) * inv_h2
+    n2 = ddhx * qx + ddhy * qy - v0 * (dhx * hy - dhy * hx)
+    ddacc = (n2 - type(x)(4.0) * dacc * hh1 - type(x)(2.0) * acc * (h1h1 + hh2)) * inv_h2
+    return hx * y - hy * x - c, dhx * y - dhy * x - dc, ddhx * y - ddhy * x - ddc, dddf, acc, dacc, ddacc
+
+
+@wp.func
 def hermite_cubic(f0: Any, g0: Any, f1: Any, g1: Any, width: Any):
     """Coefficients (m0, q, p) of the cubic Hermite interpolant of F on an interval,
     H(s) = f0 + s (m0 + s (q + s p)) for s in [0, 1], from end values f and slopes g."""
@@ -95,26 +220,26 @@ def hermite_cubic(f0: Any, g0: Any, f1: Any, g1: Any, width: Any):
 
 @wp.func
 def hermite_root(f0: Any, g0: Any, f1: Any, g1: Any, width: Any):
-    """Root in [0, 1] of the Hermite interpolant (f0, f1 of opposite sign): a Newton start for F
-    good to O(width^4)."""
-    m0, q, p = hermite_cubic(f0, g0, f1, g1, width)
+    """A Newton start for the root in [0, 1] of F (f0, f1 of opposite sign), good to O(width^4)
+    where F is monotone: the inverse cubic Hermite interpolant, s as a cubic in
+    tau = (F - f0) / (f1 - f0) with s(0) = 0, s(1) = 1 and slopes ds/dtau = (f1 - f0) / (g width)
+    at the ends, at F = 0 (tau = the chord's root). No iteration, so no chain of divisions: the
+    cubic's forward root by Newton steps took as long as the two evaluations of F after it. A
+    start outside [0, 1] (F not monotone: a slope near zero or of the wrong sign) is clamped:
+    a start needs no guarantee (``cat_root_density`` keeps its own bracket)."""
     zero = type(f0)(0.0)
-    lo = zero
-    hi = type(f0)(1.0)
-    s = f0 / (f0 - f1)
-    for _it in range(6):
-        h = f0 + s * (m0 + s * (q + s * p))
-        if (h >= zero) == (f0 >= zero):
-            lo = s
-        else:
-            hi = s
-        dh = m0 + s * (type(f0)(2.0) * q + type(f0)(3.0) * s * p)
-        s_new = (lo + hi) * type(f0)(0.5)
-        if dh != zero:
-            s_newton = s - h / dh
-            if s_newton > lo and s_newton < hi:
-                s_new = s_newton
-        s = s_new
+    one = type(f0)(1.0)
+    two = type(f0)(2.0)
+    three = type(f0)(3.0)
+    span = f1 - f0
+    tau = -f0 / span
+    d0 = span / (g0 * width)
+    d1 = span / (g1 * width)
+    tau2 = tau * tau
+    tau3 = tau2 * tau
+    s = (tau3 - two * tau2 + tau) * d0 + (three * tau2 - two * tau3) + (tau3 - tau2) * d1
+    # NaN (a zero slope) or out of range: the chord's root, or the end
+    s = wp.where(s >= zero and s <= one, s, wp.where(s > one, one, wp.where(s < zero, zero, tau)))
     return s
 
 
@@ -196,6 +321,92 @@ def cat_carry_root(carry: CAT_CARRY.of(wp.float32), a: wp.float32, omega: wp.flo
 
 
 @wp.func
+def cat_root_step(w: Any, a: Any, b: Any, fa: Any, f: Any, df: Any, ddf: Any, tol: Any, m3: Any):
+    """One step of ``cat_root_density``'s search from w (F, dF/domega, d^2F/domega^2 there):
+    the bracket [a, b] (F(a) = fa) narrowed by w, the next omega, and whether to stop at w.
+
+    Halley's step, the Newton step n over 1 - L with L = n F'' / (2 F') (cubic convergence:
+    from the Hermite start one step leaves w within tol of the root), where |L| <= 1/2 (then
+    it lies within 2/3 to 2 Newton steps: near a fold, where F' vanishes, Halley's step shrinks
+    to -2 F' / F'' whatever F is, and would crawl) and it stays inside the bracket; else
+    Newton's, inside the bracket; else bisection. The search stops where F = 0, where the
+    Newton step is at most tol (whether or not it stays inside: one that rounds to nothing
+    leaves w on the bracket's end), where the step taken or the bracket is at most tol; or at
+    the Halley point, where a bound on the third derivative (``m3``) proves it within
+    tol of the root (the common case: one evaluation a root). Selects rather than branches: the
+    bracket's side and the step's kind are coin tosses from root to root, and a mispredicted
+    branch cost more than the step.
+    """
+    zero = type(w)(0.0)
+    same = (f > zero) == (fa > zero)
+    a = wp.where(same, w, a)
+    fa = wp.where(same, f, fa)
+    b = wp.where(same, b, w)
+    slope = df != zero
+    inv_df = type(w)(1.0) / df  # two divisions a step, not five: each is a long latency
+    step_newton = f * inv_df
+    bend = step_newton * ddf * (type(w)(0.5) * inv_df)
+    w_newton = w - step_newton
+    w_halley = w - step_newton / (type(w)(1.0) - bend)
+    halley_in = slope and wp.abs(bend) <= type(w)(0.5) and w_halley > a and w_halley < b
+    newton_in = slope and w_newton > a and w_newton < b
+    w_new = wp.where(halley_in, w_halley, wp.where(newton_in, w_newton, (a + b) * type(w)(0.5)))
+    stop = (f == zero or (slope and wp.abs(step_newton) <= tol) or wp.abs(w_new - w) <= tol
+            or (b - a) <= tol)
+    # The Halley point proved within tol of the root, without evaluating F there: with
+    # e = w_halley - w, q(e) = F + e F' + e^2 F'' / 2 differs from F(w + e) by at most
+    # m3 |e|^3 / 6 (m3 >= |d^3F/domega^3|), and |q'| >= |F'| - |F''| 2|e| =: d > 0 on
+    # |e'| <= 2|e|. So with rho = (|q(e)| + m3 (2|e|)^3 / 6) / d <= |e|, F at w_halley -+ rho
+    # has opposite signs (q moves by at least rho d from q(e) there, more than |q(e)| and the
+    # remainder together): a root lies within rho of w_halley, the bracket's own if that span
+    # is inside the bracket.
+    e = w_halley - w
+    q = f + e * (df + type(w)(0.5) * e * ddf)
+    two_e = type(w)(2.0) * wp.abs(e)
+    d = wp.abs(df) - wp.abs(ddf) * two_e
+    # rho d, and rho <= min(|e|, tol, the bracket's room) tested as rho d <= that times d (d > 0)
+    rho_d = wp.abs(q) + m3 * two_e * two_e * two_e * type(w)(0.16666666666666666)
+    room = wp.min(wp.min(wp.abs(e), tol), wp.min(w_halley - a, b - w_halley))
+    proved = halley_in and not stop and d > zero and rho_d < room * d
+    return a, b, fa, w_new, stop or proved, proved
+
+
+@wp.func
+def cat_root_start(lo: Any, hi: Any, f_lo: Any, g_lo: Any, f_hi: Any, g_hi: Any):
+    """``cat_root_density``'s first omega: the Hermite start (``hermite_root``)."""
+    return lo + (hi - lo) * hermite_root(f_lo, g_lo, f_hi, g_hi, hi - lo)
+
+
+@wp.func
+def cat_root_value(w: Any, e: Any, df: Any, ddf: Any, dddf: Any, acc: Any, dacc: Any, ddacc: Any, sigma_a: Any,
+                   sigma_omega: Any, noise_g: Any):
+    """g(a) g(omega) / max(|dF/domega|, noise_g) at the root omega = w + e, from the values at the
+    search's last evaluation w (e = 0: the search stopped there; else ``cat_root_step``'s proved
+    Halley point): dF/domega and a carried to w + e by their Taylor polynomials of degree two,
+    whose remainders are O(e^3), e within a step of the Hermite start (a first-degree carry left
+    a bias of the order of e^2 F''' / F', 1e-14 relative: measurable in a map's total mass). One
+    exponential. Returns the density, the acceleration and omega."""
+    half = type(w)(0.5)
+    slope = df + e * (ddf + half * e * dddf)
+    a = acc + e * (dacc + half * e * ddacc)
+    omega = w + e
+    za = a / sigma_a
+    zw = omega / sigma_omega
+    density = (type(w)(INV_2PI) / (sigma_a * sigma_omega) * wp.exp(type(w)(-0.5) * (za * za + zw * zw))
+               / wp.max(wp.abs(slope), noise_g))
+    return density, a, omega
+
+
+@wp.func
+def cat_third_bound(x: Any, y: Any, v0: Any, t: Any):
+    """M3 >= |d^3F/domega^3| at the local point (``cat_interval``'s bound, M3 w^2 / w^2):
+    t^5 (r / 5 + v0 t / 20), r = |P|, rounded up by 1 %."""
+    r = wp.sqrt(x * x + y * y)
+    t2 = t * t
+    return t2 * t2 * t * (r * type(x)(0.2) + v0 * t * type(x)(0.05)) * type(x)(1.01)
+
+
+@wp.func
 def cat_root_density(
     x: Any, y: Any, lo: Any, hi: Any, f_lo: Any, g_lo: Any, f_hi: Any, g_hi: Any,
     v0: Any, t: Any, sigma_a: Any, sigma_omega: Any, tol: Any, noise_g: Any,
@@ -205,37 +416,109 @@ def cat_root_density(
     ``cat_carry_root`` adds the root's path, weighted by the evidence, to ``out`` (a no-op for
     the plain kernels, whose ``carry`` is the integer 0).
 
-    Newton from the Hermite estimate, kept inside the bracket (bisection when it leaves it);
-    the density is taken from the last evaluation, whose omega is within ``tol`` of the root.
+    Halley's method (Newton's where Halley's step leaves the bracket) from the Hermite estimate,
+    kept inside the bracket (bisection when both steps leave it; ``cat_root_step``); the
+    density is taken at an omega within ``tol`` of the root: the last evaluation's, or the
+    Halley point after it that ``cat_root_step`` proves so (``cat_root_value``).
     |det J| = |dF/domega| is taken as at least ``noise_g``, its rounding allowance: on a fold
     caustic the density is infinite, and a point whose coordinates round onto it (in float32,
     within ~1e-7 v0 t) gets the largest value its arithmetic can resolve, never inf.
+    ``cat_root_group`` computes the same, to the bit, for several roots side by side.
     """
-    zero = type(x)(0.0)
     a = lo
     b = hi
     fa = f_lo
-    w = lo + (hi - lo) * hermite_root(f_lo, g_lo, f_hi, g_hi, hi - lo)
-    f, df, acc = cat_eval(x, y, w, v0, t)
+    m3 = cat_third_bound(x, y, v0, t)
+    e = type(x)(0.0)
+    w = cat_root_start(lo, hi, f_lo, g_lo, f_hi, g_hi)
+    f, df, ddf, dddf, acc, dacc, ddacc = cat_eval_curved(x, y, w, v0, t)
     for _it in range(MAX_NEWTON):
-        if f == zero:
-            break
-        if (f > zero) == (fa > zero):
-            a = w
-            fa = f
-        else:
-            b = w
-        w_new = (a + b) * type(a)(0.5)
-        if df != zero:
-            w_newton = w - f / df
-            if w_newton > a and w_newton < b:
-                w_new = w_newton
-        if wp.abs(w_new - w) <= tol or (b - a) <= tol:
+        a, b, fa, w_new, stop, proved = cat_root_step(w, a, b, fa, f, df, ddf, tol, m3)
+        if stop:
+            if proved:
+                e = w_new - w
             break
         w = w_new
-        f, df, acc = cat_eval(x, y, w, v0, t)
-    density = normal_pdf(acc, zero, sigma_a) * normal_pdf(w, zero, sigma_omega) / wp.max(wp.abs(df), noise_g)
-    cat_carry_root(carry, acc, w, v0, density, lw, out)
+        f, df, ddf, dddf, acc, dacc, ddacc = cat_eval_curved(x, y, w, v0, t)
+    density, a_root, omega = cat_root_value(w, e, df, ddf, dddf, acc, dacc, ddacc, sigma_a, sigma_omega, noise_g)
+    cat_carry_root(carry, a_root, omega, v0, density, lw, out)
+    return density
+
+
+#: Roots that ``cat_root_group`` searches side by side: independent chains of divisions and
+#: sines that the core overlaps (one root's search is one long chain of latencies).
+ROOT_GROUP = 4
+
+
+@wp.func
+def cat_root_group(x: Any, y: Any, lo: Any, hi: Any, f_lo: Any, g_lo: Any, f_hi: Any, g_hi: Any, noise_g: Any,
+                   v0: Any, t: Any, sigma_a: Any, sigma_omega: Any, tol: Any):
+    """``cat_root_density`` (without evidence) of ROOT_GROUP roots at once, each argument but the
+    model's a vector of one value per root: each root takes the scalar search's steps
+    (``cat_root_start``, ``cat_eval_curved``, ``cat_root_step``, ``cat_root_value``), so its
+    density has the same bits; the roots' steps interleave (the loops over them are unrolled)."""
+    zero = type(v0)(0.0)
+    w = lo
+    a = lo
+    b = hi
+    fa = f_lo
+    f = lo
+    df = lo
+    ddf = lo
+    dddf = lo
+    acc = lo
+    dacc = lo
+    ddacc = lo
+    m3 = lo
+    e = lo
+    live = lo
+    density = lo
+    for m in range(ROOT_GROUP):
+        w[m] = cat_root_start(lo[m], hi[m], f_lo[m], g_lo[m], f_hi[m], g_hi[m])
+        live[m] = type(v0)(1.0)
+        m3[m] = cat_third_bound(x[m], y[m], v0, t)
+        e[m] = zero
+    for m in range(ROOT_GROUP):
+        f_m, df_m, ddf_m, dddf_m, acc_m, dacc_m, ddacc_m = cat_eval_curved(x[m], y[m], w[m], v0, t)
+        f[m] = f_m
+        df[m] = df_m
+        ddf[m] = ddf_m
+        dddf[m] = dddf_m
+        acc[m] = acc_m
+        dacc[m] = dacc_m
+        ddacc[m] = ddacc_m
+    for _it in range(MAX_NEWTON):
+        running = int(0)
+        for m in range(ROOT_GROUP):
+            if live[m] != zero:
+                a_m, b_m, fa_m, w_new, stop, proved = cat_root_step(w[m], a[m], b[m], fa[m], f[m], df[m], ddf[m], tol,
+                                                                     m3[m])
+                a[m] = a_m
+                b[m] = b_m
+                fa[m] = fa_m
+                if stop:
+                    live[m] = zero
+                    if proved:
+                        e[m] = w_new - w[m]
+                else:
+                    w[m] = w_new
+                    running += 1
+        if running == 0:
+            break
+        for m in range(ROOT_GROUP):
+            if live[m] != zero:
+                f_m, df_m, ddf_m, dddf_m, acc_m, dacc_m, ddacc_m = cat_eval_curved(x[m], y[m], w[m], v0, t)
+                f[m] = f_m
+                df[m] = df_m
+                ddf[m] = ddf_m
+                dddf[m] = dddf_m
+                acc[m] = acc_m
+                dacc[m] = dacc_m
+                ddacc[m] = ddacc_m
+    for m in range(ROOT_GROUP):
+        value, a_root, omega = cat_root_value(w[m], e[m], df[m], ddf[m], dddf[m], acc[m], dacc[m], ddacc[m], sigma_a,
+                                              sigma_omega, noise_g[m])
+        density[m] = value
     return density
 
 
@@ -284,6 +567,27 @@ def cat_negligible(table: wp.array2d(dtype=Any), k: int, x: Any, y: Any, a_cut: 
 
 
 @wp.func
+def cat_curvature(lo: Any, hi: Any, v0: Any, t: Any, r: Any, noise_g: Any):
+    """``cat_interval``'s M3 w^2 on [lo, hi] and the curvature margin M3 w^2 + 2 noise_g."""
+    du = (hi - lo) * t
+    du2 = du * du
+    t2 = t * t
+    m3w2 = t2 * t * (r * type(r)(0.2) + v0 * t * type(r)(0.05)) * du2  # M3 w^2
+    return m3w2, m3w2 + type(r)(2.0) * noise_g
+
+
+@wp.func
+def cat_one_root(g_lo: Any, g_hi: Any, m3w2: Any, curvature: Any, noise_g: Any):
+    """Whether a sign change of F holds exactly one root (``cat_interval`` (iii)): F' keeps its
+    sign (its ends beyond its chord's deviation M3 w^2 / 8) or F'' does."""
+    zero = type(g_lo)(0.0)
+    monotone = (g_lo > zero) == (g_hi > zero) and wp.min(wp.abs(g_lo), wp.abs(g_hi)) > (
+        type(g_lo)(0.125) * m3w2 + noise_g
+    )
+    return monotone or wp.abs(g_hi - g_lo) > curvature
+
+
+@wp.func
 def cat_interval(
     x: Any, y: Any, lo: Any, hi: Any, f_lo: Any, g_lo: Any, f_hi: Any, g_hi: Any,
     v0: Any, t: Any, sigma_a: Any, sigma_omega: Any, tol: Any, r: Any, noise_f: Any, noise_g: Any,
@@ -322,13 +626,9 @@ def cat_interval(
     du = (hi - lo) * t
     du2 = du * du
     t2 = t * t
-    m3w2 = t2 * t * (r * type(x)(0.2) + v0 * t * type(x)(0.05)) * du2  # M3 w^2
-    curvature = m3w2 + type(x)(2.0) * noise_g
+    m3w2, curvature = cat_curvature(lo, hi, v0, t, r, noise_g)
     if (f_hi >= zero) != (f_lo >= zero):
-        monotone = (g_lo > zero) == (g_hi > zero) and wp.min(wp.abs(g_lo), wp.abs(g_hi)) > (
-            type(x)(0.125) * m3w2 + noise_g
-        )
-        if monotone or wp.abs(g_hi - g_lo) > curvature or last:
+        if cat_one_root(g_lo, g_hi, m3w2, curvature, noise_g) or last:
             density = cat_root_density(
                 x, y, lo, hi, f_lo, g_lo, f_hi, g_hi, v0, t, sigma_a, sigma_omega, tol, noise_g, carry, lw, out
             )

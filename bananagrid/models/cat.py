@@ -524,8 +524,9 @@ class CAT(MotionModel):
     -----
     For a fixed turn rate omega the position is affine in the acceleration a, so a point P is
     reached at omega iff F(omega) = h(omega) x (P - v0 f(omega)) = 0, and dF/domega = -det J
-    there. Each cell scans a table of F's coefficients at :func:`scan_nodes`, refines each sign
-    change by Newton from the cubic Hermite root, and finds the root pairs where the banana
+    there. Each cell scans a table of F's coefficients at :func:`scan_nodes` (on the CPU a grid
+    row is swept at once), refines each sign change by Halley's method from the inverse cubic
+    Hermite start, and finds the root pairs where the banana
     folds over itself wherever proved bounds on F's derivatives cannot exclude them; see
     ``kernels/cat.py`` (``cat_interval``).
     """
