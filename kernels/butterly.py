@@ -1321,6 +1321,38 @@ def definite_margin(ev: Any, p: Any, x: Any, y: Any, ex: Any, ey: Any, r: Any, k
 
 
 @wp.func
+def definite_reaches(ev: Any, p: Any, x: Any, y: Any, r: Any, k0: int):
+    """Whether a path through (x, y) of any course can come within h of the definite-range
+    track whose chain starts at smooth node k0: its paths over the track's span lie in the
+    annulus R(s_last) <= |P - x| <= R(s_0) about x, the searcher in the box of its track
+    points; else every course's margin is positive (no break, weight 1)."""
+    zero = type(x)(0.0)
+    j0 = p.smooth_nodes[k0]
+    f = ev.ints[j0, 1]
+    h = ev.data[j0, 4]
+    x0 = ev.data[j0, 0]
+    x1 = x0
+    y0 = ev.data[j0, 1]
+    y1 = y0
+    j_last = j0
+    for k in range(k0, p.smooth_nodes.shape[0]):
+        j = p.smooth_nodes[k]
+        if ev.ints[j, 0] == ek.KIND_DEFINITE and ev.ints[j, 1] == f and (ev.ints[j, 3] & ek.DEFINITE_LEG) != 0:
+            x0 = wp.min(x0, ev.data[j, 0])
+            x1 = wp.max(x1, ev.data[j, 0])
+            y0 = wp.min(y0, ev.data[j, 1])
+            y1 = wp.max(y1, ev.data[j, 1])
+            j_last = j
+    near_x = wp.max(wp.max(x0 - x, zero), x - x1)
+    near_y = wp.max(wp.max(y0 - y, zero), y - y1)
+    far_x = wp.max(wp.abs(x0 - x), wp.abs(x - x1))
+    far_y = wp.max(wp.abs(y0 - y), wp.abs(y - y1))
+    near = wp.sqrt(near_x * near_x + near_y * near_y)
+    far = wp.sqrt(far_x * far_x + far_y * far_y)
+    return near <= node_radius(ev, j0, r, p.t) + h and far >= node_radius(ev, j_last, r, p.t) - h
+
+
+@wp.func
 def add_definite(ev: Any, p: Any, x: Any, y: Any, ex: Any, ey: Any, r: Any, lw: wp.array(dtype=Any)):
     """Set each definite-range track's log-weight for the path of direction e: -inf where it
     comes within h of the searcher (:func:`definite_margin`), else 0."""
@@ -1362,7 +1394,7 @@ def definite_breaks(x: Any, y: Any, r: Any, p: Any, ev: Any, sx: Any, sy: Any, l
         j0 = p.smooth_nodes[k0]
         if ev.ints[j0, 0] == ek.KIND_DEFINITE and (ev.ints[j0, 3] & ek.DEFINITE_START) != 0:
             lip = node_radius(ev, j0, r, p.t)
-            if lip > zero and width > zero:
+            if lip > zero and width > zero and definite_reaches(ev, p, x, y, r, k0):
                 d = lo
                 ex, ey = turned(sx, sy, d)
                 m = definite_margin(ev, p, x, y, ex, ey, r, k0)

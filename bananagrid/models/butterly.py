@@ -861,7 +861,9 @@ class Butterly(Model):
         segments, segment_ints, exact = _interval_searches(pack)
         kind = pack.ints[:, 0]
         polygon = np.flatnonzero((kind == evidence_kernels.KIND_POLYGON) & ~exact).astype(np.int32)
-        smooth = np.flatnonzero(kind != evidence_kernels.KIND_POLYGON).astype(np.int32)
+        # a definite-range track's chords are for curved paths: a straight one takes its legs alone
+        chord = (kind == evidence_kernels.KIND_DEFINITE) & ((pack.ints[:, 3] & evidence_kernels.DEFINITE_LEG) == 0)
+        smooth = np.flatnonzero((kind != evidence_kernels.KIND_POLYGON) & ~chord).astype(np.int32)
         params = ctx.struct(kernels.BUTTERLY_CARRIED, params=ctx.array(self.kernel_parameters(ctx.dtype, floors=True)),
                             n_speeds=self.n_speed_nodes, rule=ctx.array(rule), t=ctx.scalar(self.t),
                             polygon_nodes=ctx.array(polygon, dtype=np.int32),

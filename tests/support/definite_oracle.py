@@ -65,7 +65,8 @@ def switch_courses(track: np.ndarray, x, speed: float, t: float, sweep_width: fl
     """Courses in [0, 2 pi) where the straight path of ``speed`` through ``x`` at ``t`` switches
     between detected and missed: sign changes of (closest approach - W / 2) on a scan of
     ``n_scan`` courses (default: 16 per angle (W / 2) / R, R the path's largest distance from x
-    over the track), each refined by ``brentq`` to 1e-14 on :func:`closest_approach`."""
+    over the track) of the sampled ranges, then of :func:`closest_approach` about each, refined
+    by ``brentq`` to 1e-14."""
     h = 0.5 * sweep_width
     r_max = speed * (t - track[0, 2])
     if r_max <= 0.0:
@@ -80,10 +81,16 @@ def switch_courses(track: np.ndarray, x, speed: float, t: float, sweep_width: fl
     def exact(u):
         return closest_approach(track, straight_path(x, speed, t, u)) - h
 
-    out = []
+    # the sampled ranges overestimate (by up to a few metres here), so a sign change of the
+    # exact margin may sit a scan step or two from the sampled one: the exact margin on the
+    # scan's courses about each sampled change, then brentq across its own changes
+    near = set()
     for i in np.flatnonzero(np.sign(g[:-1]) != np.sign(g[1:])):
-        a, b = c[i], c[i + 1]
-        if np.sign(exact(a)) == np.sign(exact(b)):  # the samples' overestimate moved the sign
-            continue
-        out.append(optimize.brentq(exact, a, b, xtol=1e-14, rtol=1e-15))
+        near.update(range(max(i - 3, 0), min(i + 5, n_scan + 1)))
+    near = sorted(near)
+    values = {i: exact(c[i]) for i in near}
+    out = []
+    for i in near:
+        if i + 1 in values and np.sign(values[i]) != np.sign(values[i + 1]):
+            out.append(optimize.brentq(exact, c[i], c[i + 1], xtol=1e-14, rtol=1e-15))
     return out
