@@ -815,7 +815,10 @@ KERNELS = density_kernels(butterly_world, BUTTERLY, "butterly", grid=butterly_gr
 # interval (t0, t1) is taken exactly (``add_segments``): the path over it is the segment from
 # X(t0) to X(t1), the time inside is its length inside the polygon over the speed, smooth in
 # theta between the courses where an end crosses an edge or the segment passes a vertex
-# (``segment_breaks``).
+# (``segment_breaks``). A definite-range track weighs a path 0 or 1 (detected iff its closest
+# approach to the searcher is within W / 2): exact per leg (the relative motion is straight,
+# ``definite_margin``), constant between the courses where it switches, which a Lipschitz march
+# with bisection finds (``definite_breaks``), so its pieces take the rule as a polygon's do.
 
 #: Gauss-Legendre orders of the course pieces, lowest first (the rule array,
 #: ``models.butterly._carried_rule``: each order's nodes on [-1, 1] and weights from

@@ -35,7 +35,16 @@ log-weight:
   weight switches); a path whose acceleration is at most M deviates from its chords by at most
   M dt^2 / 8 (dt <= t / ``definite_chords``), and only a path whose true closest approach is
   within that of W / 2 can be misjudged (a CAT path: M = sqrt(a^2 + v^2 omega^2), v = v0 + a s
-  its speed; at Figure 1's 4-sigma corner, M ~ 80 m/s^2 at t = 10 s, 6e-2 m with 128 chords);
+  its speed; at Figure 1's 4-sigma corner, M ~ 80 m/s^2 at t = 10 s, 6e-2 m with 128 chords).
+  The weight is a step, so the carried density jumps across the map points whose paths graze
+  the corridor: the CAT's roots are discrete and its density is exact at each point
+  (tests/models/test_cat_carried.py), and its cells take the posterior's sub-cell rule on the
+  carried density, first order at those curves: measured on Figure 1's CAT with two earlier
+  area searches, bearings and a definite track (100 m cells), 8 sub-cells differ from 24 by
+  at most 4.0e-4 of a cell's probability (1.7 % of that cell's), 1.7e-3 summed over the grid,
+  POS by 1.1e-5 and the track's own POS by 2.6e-4; 4 sub-cells by 8.7e-4 (3.7 %) and 3.3e-3.
+  Butterly's course integral is cut where the weight switches (``kernels/butterly.py``,
+  ``definite_breaks``), so its density is exact to the course rule's 1e-12;
 * a :class:`~bananagrid.PositionReport`: one node, the normal log-likelihood;
 * a :class:`~bananagrid.BearingReport`: one node per bearing, same time and factor.
 

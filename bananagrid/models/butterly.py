@@ -845,8 +845,11 @@ class Butterly(Model):
         inside the polygon over its speed is the time spent inside (coverage C spread evenly:
         log-weight -C x that fraction of the interval); its breaks are the courses where an end
         of the segment crosses an edge or the segment passes a vertex (the pack's time nodes
-        for it are recognised and replaced, :func:`_interval_searches`). ``t`` of the pack
-        must be the model's.
+        for it are recognised and replaced, :func:`_interval_searches`). A definite-range
+        track weighs a path 0 where its closest approach (exact per leg: both move straight)
+        is within W / 2: its breaks are the courses where that switches, found by a march that
+        cannot step over one and bisected (``kernels/butterly.py``, ``definite_breaks``); its
+        chords (for curved paths) are left out. ``t`` of the pack must be the model's.
 
         As on a grid (:meth:`kernel_parameters` with ``floors``), a point whose prior bound is
         below CELL_FLOOR = 1e-13 of the density's maximum is 0 in every channel (weights are at
