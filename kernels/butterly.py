@@ -817,7 +817,7 @@ KERNELS = density_kernels(butterly_world, BUTTERLY, "butterly", grid=butterly_gr
 # theta between the courses where an end crosses an edge or the segment passes a vertex
 # (``segment_breaks``). A definite-range track weighs a path 0 or 1 (detected iff its closest
 # approach to the searcher is within W / 2): exact per leg (the relative motion is straight,
-# ``definite_margin``), constant between the courses where it switches, which a Lipschitz march
+# ``track_margin``), constant between the courses where it switches, which a Lipschitz march
 # with bisection finds (``definite_breaks``), so its pieces take the rule as a polygon's do.
 
 #: Gauss-Legendre orders of the course pieces, lowest first (the rule array,
@@ -1295,7 +1295,7 @@ def segment_breaks(x: Any, y: Any, r: Any, p: Any, ev: Any, sx: Any, sy: Any, lo
 
 
 @wp.func
-def definite_margin(ev: Any, p: Any, x: Any, y: Any, ex: Any, ey: Any, r: Any, k0: int):
+def track_margin(ev: Any, p: Any, x: Any, y: Any, ex: Any, ey: Any, r: Any, k0: int):
     """The closest approach less h = W / 2 of the path through (x, y) with direction e to the
     definite-range track whose chain starts at smooth node k0: over each leg (its nodes at track
     points, ``DEFINITE_LEG``) the path and the searcher move straight at constant speeds, so the
@@ -1358,12 +1358,12 @@ def definite_reaches(ev: Any, p: Any, x: Any, y: Any, r: Any, k0: int):
 @wp.func
 def add_definite(ev: Any, p: Any, x: Any, y: Any, ex: Any, ey: Any, r: Any, lw: wp.array(dtype=Any)):
     """Set each definite-range track's log-weight for the path of direction e: -inf where it
-    comes within h of the searcher (:func:`definite_margin`), else 0."""
+    comes within h of the searcher (:func:`track_margin`), else 0."""
     for k in range(p.smooth_nodes.shape[0]):
         j = p.smooth_nodes[k]
         if ev.ints[j, 0] == ek.KIND_DEFINITE and (ev.ints[j, 3] & ek.DEFINITE_START) != 0:
             value = type(x)(0.0)
-            if definite_margin(ev, p, x, y, ex, ey, r, k) <= type(x)(0.0):
+            if track_margin(ev, p, x, y, ex, ey, r, k) <= type(x)(0.0):
                 value = -type(x)(wp.inf)
             lw[ev.ints[j, 1]] = value
 
@@ -1380,7 +1380,7 @@ def turned(sx: Any, sy: Any, d: Any):
 def definite_breaks(x: Any, y: Any, r: Any, p: Any, ev: Any, sx: Any, sy: Any, lo: Any, hi: Any, buf: Any, who: Any,
                     count: int):
     """Add to the window the course offsets in (lo, hi) where a definite-range track's weight
-    switches (its margin, :func:`definite_margin`, changes sign), found by a march that cannot
+    switches (its margin, :func:`track_margin`, changes sign), found by a march that cannot
     step over one: the margin is Lipschitz in the course with constant L = R(s_0), the radius
     at the track's first time (a course change dd moves the path at s by R(s) dd), so from an
     offset where it is m there is no sign change within |m| / L. The march steps by that (at
@@ -1407,13 +1407,13 @@ def definite_breaks(x: Any, y: Any, r: Any, p: Any, ev: Any, sx: Any, sy: Any, l
             if lip > zero and width > zero and definite_reaches(ev, p, x, y, r, k0):
                 d = lo
                 ex, ey = turned(sx, sy, d)
-                m = definite_margin(ev, p, x, y, ex, ey, r, k0)
+                m = track_margin(ev, p, x, y, ex, ey, r, k0)
                 steps = int(0)
                 while d < hi and steps < DEFINITE_STEPS:
                     steps = steps + 1
                     d2 = wp.min(d + wp.max(type(x)(DEFINITE_SAFE) * wp.abs(m) / lip, least), hi)
                     ex, ey = turned(sx, sy, d2)
-                    m2 = definite_margin(ev, p, x, y, ex, ey, r, k0)
+                    m2 = track_margin(ev, p, x, y, ex, ey, r, k0)
                     if (m2 <= zero) != (m <= zero):
                         a = d
                         b = d2
@@ -1422,7 +1422,7 @@ def definite_breaks(x: Any, y: Any, r: Any, p: Any, ev: Any, sx: Any, sy: Any, l
                                 c = half * (a + b)
                                 if c > a and c < b:
                                     cx, cy = turned(sx, sy, c)
-                                    if (definite_margin(ev, p, x, y, cx, cy, r, k0) <= zero) == (m <= zero):
+                                    if (track_margin(ev, p, x, y, cx, cy, r, k0) <= zero) == (m <= zero):
                                         a = c
                                     else:
                                         b = c
