@@ -1011,6 +1011,8 @@ def window_breaks(x: Any, y: Any, r: Any, p: Any, active: Any, n_active: int, sx
         if circle_meets_box(ev, j, x, y, radius):
             buf, who, count = circle_breaks(ev.edges, ev.ints[j, 2], ev.ints[j, 3], x, y, radius, sx, sy, lo, hi,
                                             buf, who, count, k)
+    if p.smooth_nodes.shape[0] == 0:  # no definite-range track (the window is not copied again)
+        return segment_breaks(x, y, r, p, ev, sx, sy, lo, hi, buf, who, count)
     buf, who, count = segment_breaks(x, y, r, p, ev, sx, sy, lo, hi, buf, who, count)
     return definite_breaks(x, y, r, p, ev, sx, sy, lo, hi, buf, who, count)
 
