@@ -197,22 +197,26 @@ def test_interval_searches_alone_against_the_oracle(shape, shift, size, when, co
 
 @seed(33)
 @settings(max_examples=6, deadline=None, suppress_health_check=[HealthCheck.too_slow])
-@given(x0=st.floats(-4000.0, 4000.0), y0=st.floats(-4000.0, 4000.0), heading=st.floats(0.0, 2 * math.pi),
+@given(x0=st.floats(-1500.0, 1500.0), y0=st.floats(-1500.0, 1500.0), heading=st.floats(0.0, 2 * math.pi),
        length=st.floats(1000.0, 8000.0), turn=st.floats(-2.5, 2.5), t0=st.floats(0.0, 700.0), span=st.floats(20.0, 300.0),
        width=st.floats(100.0, 1500.0), legs=st.integers(1, 3))
 def test_definite_track_sweep_against_the_oracle(x0, y0, heading, length, turn, t0, span, width, legs):
     """Definite-range tracks over positions, headings, turns, times and widths: the carried
     density at sampled points against the oracle (closest approach by minimize_scalar, the
-    course integral cut at the switches it finds by brentq), as the cases above."""
+    course integral cut at the switches it finds by brentq), as the cases above. The track
+    starts within 1.5 km of the first point's sampled path at its start time (so that it
+    meets some of the paths through the points: 3 of the 6 seeded examples remove 1 % to all of
+    a point's density)."""
     model = butterly()
     t1 = min(t0 + span, model.t)
-    pts = [(x0, y0, t0)]
+    drawn = model.sample_paths(4, [t0, model.t], np.random.default_rng(3))
+    p = drawn[:, 1]
+    pts = [(drawn[0, 0, 0] + x0, drawn[0, 0, 1] + y0, t0)]
     for k in range(legs):
         a = heading + k * turn
         x, y, _ = pts[-1]
         pts.append((x + length / legs * math.sin(a), y + length / legs * math.cos(a), t0 + (t1 - t0) * (k + 1) / legs))
     evidence = [bg.TrackSearch(pts, sweep_width=width, law="definite")]
-    p = points(model, 4, 3)
     got = evaluate_carried(model, p[:, 0], p[:, 1], pack(evidence, model.t))
     want = carried_density(model, evidence, p[:, 0], p[:, 1])
     np.testing.assert_allclose(got[1], want, rtol=RTOL, atol=1e-12 * float(got[0].max()))
