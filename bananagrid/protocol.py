@@ -502,6 +502,9 @@ class EvidencePack:
         The evidence each factor comes from (``"evidence[K]"``), in factor order.
     factor_kinds : tuple of str
         ``"search"`` or ``"report"`` for each factor.
+    slots : int
+        Scratch values per path beyond the factors' log-weights (a definite-range track's chain
+        keeps the path's previous position in two); :attr:`scratch` is the row's width.
     """
 
     t: float
@@ -515,10 +518,16 @@ class EvidencePack:
     channel_names: tuple
     factor_keys: tuple
     factor_kinds: tuple
+    slots: int = 0
 
     @property
     def nodes(self) -> int:
         return len(self.time)
+
+    @property
+    def scratch(self) -> int:
+        """Width of a path's scratch row ``lw``: the factors, then the slots (at least 1)."""
+        return max(self.factors + self.slots, 1)
 
     @property
     def factors(self) -> int:
@@ -540,7 +549,8 @@ class CarryingModel(Protocol):
 
         ``points(xs, ys, start, p, ev, lw, out)`` over a chunk of points from ``start``:
         ``p`` the binding's params, ``ev`` the pack's struct (``kernels/evidence.py``'s
-        ``EVIDENCE``), ``lw`` a scratch array (points, max(F, 1)) of the factors' log-weights,
+        ``EVIDENCE``), ``lw`` a scratch array (points, ``pack.scratch``): the factors'
+        log-weights, then the pack's slots,
         ``out`` (points, C) the channels, zeroed by the kernel for each of its points before it
         adds, per path through the point, density(path) x weight_c(path) with
         ``evidence_reset`` / ``evidence_node`` / ``evidence_add`` (``kernels/evidence.py``).

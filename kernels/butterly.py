@@ -815,7 +815,10 @@ KERNELS = density_kernels(butterly_world, BUTTERLY, "butterly", grid=butterly_gr
 # interval (t0, t1) is taken exactly (``add_segments``): the path over it is the segment from
 # X(t0) to X(t1), the time inside is its length inside the polygon over the speed, smooth in
 # theta between the courses where an end crosses an edge or the segment passes a vertex
-# (``segment_breaks``).
+# (``segment_breaks``). A definite-range track weighs a path 0 or 1 (detected iff its closest
+# approach to the searcher is within W / 2): exact per leg (the relative motion is straight,
+# ``track_margin``), constant between the courses where it switches, which a Lipschitz march
+# with bisection finds (``definite_breaks``), so its pieces take the rule as a polygon's do.
 
 #: Gauss-Legendre orders of the course pieces, lowest first (the rule array,
 #: ``models.butterly._carried_rule``: each order's nodes on [-1, 1] and weights from
@@ -842,6 +845,14 @@ BREAKS = 32
 #: contributions kept across the pieces of an arc (a break changes one node's); more than this
 #: many: every polygon node is visited at every piece.
 ACTIVE = 128
+#: Definite-range tracks' course breaks (:func:`definite_breaks`): the march's least step and the
+#: bisection's tolerance, as fractions of the arc; its most steps per arc and track; bisections
+#: per break; the share of the Lipschitz step taken (rounding of the margins).
+DEFINITE_MIN_STEP = 1.0e-6
+DEFINITE_TOL = 1.0e-13
+DEFINITE_STEPS = 20000
+DEFINITE_BISECTIONS = 64
+DEFINITE_SAFE = 0.999
 
 
 @wp.func
@@ -987,7 +998,9 @@ def visits(p: Any, count: int):
 def window_breaks(x: Any, y: Any, r: Any, p: Any, active: Any, n_active: int, sx: Any, sy: Any, lo: Any, hi: Any,
                   ev: Any):
     """The smallest BREAKS offsets in (lo, hi) (from the peak's direction (sx, sy)) of the
-    courses whose path crosses a polygon's edge at a polygon node's time: (buf, who, count),
+    courses whose path crosses a polygon's edge at a polygon node's time, those of the searches
+    over intervals (:func:`segment_breaks`) and of the definite-range tracks
+    (:func:`definite_breaks`): (buf, who, count),
     who[b] the visit index k (:func:`polygon_node`) of the node that makes break b."""
     buf = wp.vector(length=BREAKS, dtype=type(x))
     who = wp.vector(length=BREAKS, dtype=wp.int32)
@@ -998,7 +1011,10 @@ def window_breaks(x: Any, y: Any, r: Any, p: Any, active: Any, n_active: int, sx
         if circle_meets_box(ev, j, x, y, radius):
             buf, who, count = circle_breaks(ev.edges, ev.ints[j, 2], ev.ints[j, 3], x, y, radius, sx, sy, lo, hi,
                                             buf, who, count, k)
-    return segment_breaks(x, y, r, p, ev, sx, sy, lo, hi, buf, who, count)
+    if p.smooth_nodes.shape[0] == 0:  # no definite-range track (the window is not copied again)
+        return segment_breaks(x, y, r, p, ev, sx, sy, lo, hi, buf, who, count)
+    buf, who, count = segment_breaks(x, y, r, p, ev, sx, sy, lo, hi, buf, who, count)
+    return definite_breaks(x, y, r, p, ev, sx, sy, lo, hi, buf, who, count)
 
 
 @wp.func
@@ -1015,7 +1031,7 @@ def smooth_spacing(x: Any, y: Any, r: Any, p: Any, delta: Any, ev: Any):
         j = p.smooth_nodes[k]
         kind = ev.ints[j, 0]
         radius = node_radius(ev, j, r, p.t)
-        if radius > zero:
+        if radius > zero and kind != ek.KIND_DEFINITE:  # a definite track's weight is cut, not resolved
             scale = zero
             if kind == ek.KIND_NORMAL:
                 scale = type(x)(1.0) / wp.sqrt(ev.data[j, 2] + ev.data[j, 4])
@@ -1281,16 +1297,163 @@ def segment_breaks(x: Any, y: Any, r: Any, p: Any, ev: Any, sx: Any, sy: Any, lo
 
 
 @wp.func
+def track_margin(ev: Any, p: Any, x: Any, y: Any, ex: Any, ey: Any, r: Any, k0: int):
+    """The closest approach less h = W / 2 of the path through (x, y) with direction e to the
+    definite-range track whose chain starts at smooth node k0: over each leg (its nodes at track
+    points, ``DEFINITE_LEG``) the path and the searcher move straight at constant speeds, so the
+    relative position is linear in time and the leg's closest approach is the distance from the
+    origin to the segment between its ends' relative positions (``evidence.segment_distance``):
+    exact, the chords between ignored. At most 0: detected."""
+    j0 = p.smooth_nodes[k0]
+    f = ev.ints[j0, 1]
+    h = ev.data[j0, 4]
+    margin = type(x)(0.0)
+    prev_x = type(x)(0.0)
+    prev_y = type(x)(0.0)
+    for k in range(k0, p.smooth_nodes.shape[0]):
+        j = p.smooth_nodes[k]
+        if ev.ints[j, 0] == ek.KIND_DEFINITE and ev.ints[j, 1] == f and (ev.ints[j, 3] & ek.DEFINITE_LEG) != 0:
+            radius = node_radius(ev, j, r, p.t)
+            dx = x - radius * ex - ev.data[j, 0]
+            dy = y - radius * ey - ev.data[j, 1]
+            if k == k0:
+                margin = wp.sqrt(dx * dx + dy * dy) - h
+            else:
+                margin = wp.min(margin, ek.segment_distance(prev_x, prev_y, dx, dy) - h)
+            prev_x = dx
+            prev_y = dy
+    return margin
+
+
+@wp.func
+def definite_reaches(ev: Any, p: Any, x: Any, y: Any, r: Any, k0: int):
+    """Whether a path through (x, y) of any course can come within h of the definite-range
+    track whose chain starts at smooth node k0: its paths over the track's span lie in the
+    annulus R(s_last) <= |P - x| <= R(s_0) about x, the searcher in the box of its track
+    points; else every course's margin is positive (no break, weight 1)."""
+    zero = type(x)(0.0)
+    j0 = p.smooth_nodes[k0]
+    f = ev.ints[j0, 1]
+    h = ev.data[j0, 4]
+    x0 = ev.data[j0, 0]
+    x1 = x0
+    y0 = ev.data[j0, 1]
+    y1 = y0
+    j_last = j0
+    for k in range(k0, p.smooth_nodes.shape[0]):
+        j = p.smooth_nodes[k]
+        if ev.ints[j, 0] == ek.KIND_DEFINITE and ev.ints[j, 1] == f and (ev.ints[j, 3] & ek.DEFINITE_LEG) != 0:
+            x0 = wp.min(x0, ev.data[j, 0])
+            x1 = wp.max(x1, ev.data[j, 0])
+            y0 = wp.min(y0, ev.data[j, 1])
+            y1 = wp.max(y1, ev.data[j, 1])
+            j_last = j
+    near_x = wp.max(wp.max(x0 - x, zero), x - x1)
+    near_y = wp.max(wp.max(y0 - y, zero), y - y1)
+    far_x = wp.max(wp.abs(x0 - x), wp.abs(x - x1))
+    far_y = wp.max(wp.abs(y0 - y), wp.abs(y - y1))
+    near = wp.sqrt(near_x * near_x + near_y * near_y)
+    far = wp.sqrt(far_x * far_x + far_y * far_y)
+    return near <= node_radius(ev, j0, r, p.t) + h and far >= node_radius(ev, j_last, r, p.t) - h
+
+
+@wp.func
+def add_definite(ev: Any, p: Any, x: Any, y: Any, ex: Any, ey: Any, r: Any, lw: wp.array(dtype=Any)):
+    """Set each definite-range track's log-weight for the path of direction e: -inf where it
+    comes within h of the searcher (:func:`track_margin`), else 0."""
+    for k in range(p.smooth_nodes.shape[0]):
+        j = p.smooth_nodes[k]
+        if ev.ints[j, 0] == ek.KIND_DEFINITE and (ev.ints[j, 3] & ek.DEFINITE_START) != 0:
+            value = type(x)(0.0)
+            if track_margin(ev, p, x, y, ex, ey, r, k) <= type(x)(0.0):
+                value = -type(x)(wp.inf)
+            lw[ev.ints[j, 1]] = value
+
+
+@wp.func
+def turned(sx: Any, sy: Any, d: Any):
+    """The peak's direction (sx, sy) turned by the course offset d: e(theta* + d)."""
+    c = wp.cos(d)
+    s = wp.sin(d)
+    return sx * c - sy * s, sx * s + sy * c
+
+
+@wp.func
+def definite_breaks(x: Any, y: Any, r: Any, p: Any, ev: Any, sx: Any, sy: Any, lo: Any, hi: Any, buf: Any, who: Any,
+                    count: int):
+    """Add to the window the course offsets in (lo, hi) where a definite-range track's weight
+    switches (its margin, :func:`track_margin`, changes sign), found by a march that cannot
+    step over one: the margin is Lipschitz in the course with constant L = R(s_0), the radius
+    at the track's first time (a course change dd moves the path at s by R(s) dd), so from an
+    offset where it is m there is no sign change within |m| / L. The march steps by that (at
+    least DEFINITE_MIN_STEP of the arc (lo, hi) and four roundings of the offset, at most
+    DEFINITE_STEPS steps) and bisects each
+    step across which the sign changes to DEFINITE_TOL of the arc. What it can miss: a set of
+    courses narrower than the least step where the margin changes sign twice (a sliver of
+    grazing paths), its integral at most the least step times the integrand's peak (the arc
+    spans a normal-like integrand to 1e-15 of its peak, +-8.3 SD, so the least step is 17e-6
+    SD: under 7e-6 of the arc's integral per sliver in float64)."""
+    zero = type(x)(0.0)
+    half = type(x)(0.5)
+    width = hi - lo
+    # the least step also moves the offset by a few of its roundings (float32: 1.2e-7 of it)
+    eps = type(x)(2.2e-16)
+    if type(x)(1.0) + type(x)(1.0e-10) == type(x)(1.0):
+        eps = type(x)(1.2e-7)
+    least = wp.max(width * type(x)(DEFINITE_MIN_STEP), type(x)(4.0) * eps * (wp.abs(lo) + wp.abs(hi)))
+    tol = width * type(x)(DEFINITE_TOL)
+    for k0 in range(p.smooth_nodes.shape[0]):
+        j0 = p.smooth_nodes[k0]
+        if ev.ints[j0, 0] == ek.KIND_DEFINITE and (ev.ints[j0, 3] & ek.DEFINITE_START) != 0:
+            lip = node_radius(ev, j0, r, p.t)
+            if lip > zero and width > zero and definite_reaches(ev, p, x, y, r, k0):
+                d = lo
+                ex, ey = turned(sx, sy, d)
+                m = track_margin(ev, p, x, y, ex, ey, r, k0)
+                steps = int(0)
+                while d < hi and steps < DEFINITE_STEPS:
+                    steps = steps + 1
+                    d2 = wp.min(d + wp.max(type(x)(DEFINITE_SAFE) * wp.abs(m) / lip, least), hi)
+                    ex, ey = turned(sx, sy, d2)
+                    m2 = track_margin(ev, p, x, y, ex, ey, r, k0)
+                    if (m2 <= zero) != (m <= zero):
+                        a = d
+                        b = d2
+                        for _it in range(DEFINITE_BISECTIONS):
+                            if b - a > tol:
+                                c = half * (a + b)
+                                if c > a and c < b:
+                                    cx, cy = turned(sx, sy, c)
+                                    if (track_margin(ev, p, x, y, cx, cy, r, k0) <= zero) == (m <= zero):
+                                        a = c
+                                    else:
+                                        b = c
+                        c = half * (a + b)
+                        if c > lo and c < hi:
+                            buf, who, count = insert_break(buf, who, count, c, -1)
+                    d = d2
+                    m = m2
+    return buf, who, count
+
+
+@wp.func
 def add_smooth(ev: Any, p: Any, x: Any, y: Any, ex: Any, ey: Any, r: Any, lw: wp.array(dtype=Any)):
     """Set the smooth factors' log-weights for the path through (x, y) with direction e (their
     factors zeroed first; the polygons' are left as they are), the searches over intervals'
-    included (:func:`add_segments`)."""
+    included (:func:`add_segments`), and the definite-range tracks' (:func:`add_definite`:
+    their legs, not the pack's chords)."""
     for k in range(p.smooth_nodes.shape[0]):
         lw[ev.ints[p.smooth_nodes[k], 1]] = type(x)(0.0)
+    definite = int(0)
     for k in range(p.smooth_nodes.shape[0]):
         j = p.smooth_nodes[k]
-        radius = node_radius(ev, j, r, p.t)
-        ek.evidence_node(ev, j, x - radius * ex, y - radius * ey, lw)
+        if ev.ints[j, 0] == ek.KIND_DEFINITE:
+            definite = 1
+        else:
+            radius = node_radius(ev, j, r, p.t)
+            ek.evidence_node(ev, j, x - radius * ex, y - radius * ey, lw)
+    if definite == 1:
+        add_definite(ev, p, x, y, ex, ey, r, lw)
     add_segments(ev, p, x, y, ex, ey, r, lw)
 
 

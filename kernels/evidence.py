@@ -30,14 +30,31 @@ with c_j (``KIND_*``):
   s_j, gamma(r) = data[2] / r^3 with data[2] = W^2 v / (8 pi), v the leg's speed: Koopman's
   inverse-cube detection rate (``bananagrid.evidence.searches.TrackSearch`` states it and its
   sources), Gauss-Legendre nodes q_j over the leg's time span; r = 0 gives -inf (detected).
+* ``KIND_DEFINITE``: a definite-range track (detected iff the closest approach of the path to
+  the searcher over the track's span is at most h = W / 2). The track's nodes form a *chain*:
+  chord ends s_0 < s_1 < ... (each leg cut into chords), node j holding the searcher's position
+  Q_j at s_j (``data[0:2]``), Q_{j-1} at the chord's start (``data[2:4]``) and h (``data[4]``);
+  ``ints`` offset: the scratch slots (``lw[offset : offset + 2]``, beyond the factors) that keep
+  the path's position at the chain's previous node; ``ints`` count: bit ``DEFINITE_START`` on
+  the chain's first node, bit ``DEFINITE_LEG`` on every node at a track point (a leg's end).
+  Over a chord the searcher moves straight at constant speed and the path is taken so too
+  (the chord from its position at s_{j-1} to that at s_j), so the relative position
+  D = X - Q is linear in time and the chord's closest approach is the distance from the origin
+  to the segment D_{j-1} D_j, closed form (:func:`segment_distance`). c_j = -inf (the weight 0)
+  where it is at most h, else 0 (the chain's first node: |D_0| <= h). Exact for a path
+  straight at constant speed over each chord (Butterly's); a path whose acceleration is at most
+  M over a chord of dt seconds deviates from its chord by at most M dt^2 / 8, and its computed
+  closest approach is within that of the true one (the pack's chords, ``packing.pack``, bound
+  dt).
 
 The path's weight for a *channel* c is exp(sum over factors k in c of lw_k); the pack lists the
 channels as a 0/1 mask ``channels[c, k]`` (e.g. the prior: no factor; all evidence; the
 searches; the reports; each search with the reports). A model's kernel returns, per map point,
 each channel's weighted density: sum over paths of density(path) x weight_c(path).
 
-How a model's kernel uses it (one path; ``lw`` a scratch row of the factors, ``out`` the
-point's row of channels, zeroed by the launch kernel)::
+How a model's kernel uses it (one path; ``lw`` a scratch row of the factors and, beyond them,
+the definite-range chains' slots (``EvidencePack.scratch``), ``out`` the point's row of
+channels, zeroed by the launch kernel; the nodes must be visited in order, as below)::
 
     evidence_reset(ev, lw)
     for j in range(evidence_nodes(ev)):
@@ -67,6 +84,10 @@ KIND_RASTER = 1
 KIND_NORMAL = 2
 KIND_BEARING = 3
 KIND_INVERSE_CUBE = 4
+KIND_DEFINITE = 5
+#: Bits of a definite-range node's ``ints`` count: the chain's first node; a node at a track point.
+DEFINITE_START = 1
+DEFINITE_LEG = 2
 #: Most factors whose weights :func:`evidence_add` takes as one exp each (more: one per channel).
 EXP_FACTORS = 16
 #: Columns of ``data`` and of ``ints`` (kind, factor, offset, count).
@@ -101,7 +122,8 @@ def evidence_time(ev: Any, j: int):
 
 @wp.func
 def evidence_reset(ev: Any, lw: wp.array(dtype=Any)):
-    """Zero the factors' log-weights of one path."""
+    """Zero the factors' log-weights of one path (the scratch slots beyond them, a
+    definite-range chain's previous position, are written before they are read)."""
     for k in range(ev.channels.shape[1]):
         lw[k] = type(lw[k])(0.0)
 
@@ -169,10 +191,56 @@ def evidence_contribution(ev: Any, j: int, px: Any, py: Any):
 
 
 @wp.func
+def segment_distance(ax: Any, ay: Any, bx: Any, by: Any):
+    """Distance from the origin to the segment from (ax, ay) to (bx, by): the closest approach
+    of a relative position linear in time from a to b (the foot of the perpendicular,
+    u = -a.(b - a) / |b - a|^2, clamped to [0, 1]; an end where the segment is a point)."""
+    dx = bx - ax
+    dy = by - ay
+    zero = type(ax)(0.0)
+    one = type(ax)(1.0)
+    d2 = dx * dx + dy * dy
+    u = zero
+    if d2 > zero:
+        u = wp.min(wp.max(-(ax * dx + ay * dy) / d2, zero), one)
+    cx = ax + u * dx
+    cy = ay + u * dy
+    return wp.sqrt(cx * cx + cy * cy)
+
+
+@wp.func
+def definite_margin(ev: Any, j: int, px: Any, py: Any, prev_x: Any, prev_y: Any):
+    """Closest approach less h over node j's chord of a definite-range chain, the path at
+    (prev_x, prev_y) at the chord's start and at (px, py) at s_j (the chain's first node: the
+    range at s_j less h). At most 0: detected."""
+    dx = px - ev.data[j, 0]
+    dy = py - ev.data[j, 1]
+    if (ev.ints[j, 3] & DEFINITE_START) != 0:
+        return wp.sqrt(dx * dx + dy * dy) - ev.data[j, 4]
+    return segment_distance(prev_x - ev.data[j, 2], prev_y - ev.data[j, 3], dx, dy) - ev.data[j, 4]
+
+
+@wp.func
+def definite_node(ev: Any, j: int, px: Any, py: Any, lw: wp.array(dtype=Any)):
+    """A definite-range chain's node j: the factor's log-weight to -inf where the chord ending
+    at s_j comes within h of the searcher; the path's position kept for the next chord."""
+    slot = ev.ints[j, 2]
+    if definite_margin(ev, j, px, py, lw[slot], lw[slot + 1]) <= type(px)(0.0):
+        k = ev.ints[j, 1]
+        lw[k] = -type(px)(wp.inf)
+    lw[slot] = px
+    lw[slot + 1] = py
+
+
+@wp.func
 def evidence_node(ev: Any, j: int, px: Any, py: Any, lw: wp.array(dtype=Any)):
     """Add node j's contribution q_j c_j(x_j) to its factor's log-weight, the path at the world
     point (px, py) at s_j. A zero contribution adds nothing (q_j is never multiplied by an
-    infinite rate there)."""
+    infinite rate there). A definite-range node reads and writes its chain's scratch slots
+    (:func:`definite_node`)."""
+    if ev.ints[j, 0] == KIND_DEFINITE:
+        definite_node(ev, j, px, py, lw)
+        return
     c = evidence_contribution(ev, j, px, py)
     if c != type(px)(0.0):
         k = ev.ints[j, 1]

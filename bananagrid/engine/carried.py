@@ -78,7 +78,7 @@ def evaluate_carried(model, x, y, pack: EvidencePack, *, dtype=np.float64, devic
     ctx.load(kernel)
     n = bx.size
     xs, ys = ctx.host_array(bx.ravel()), ctx.host_array(by.ravel())
-    lw = ctx.empty((n, max(pack.factors, 1)))
+    lw = ctx.empty((n, pack.scratch))
     out = ctx.zeros((n, channels))
 
     def launch_chunk(a, b):
@@ -107,5 +107,5 @@ def weigh_paths(pack: EvidencePack, positions, density, *, dtype=np.float64, dev
     ctx.load(evidence_kernels.evidence_paths)
     ctx.launch(evidence_kernels.evidence_paths, dim=n, inputs=[
         evidence_struct(ctx, pack), ctx.wp.array(positions, dtype=ctx.scalar_type, ndim=3, device=ctx.device),
-        ctx.array(np.asarray(density)), ctx.zeros((n, max(pack.factors, 1))), out])
+        ctx.array(np.asarray(density)), ctx.zeros((n, pack.scratch)), out])
     return ctx.numpy(out)

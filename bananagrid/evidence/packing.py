@@ -24,13 +24,33 @@ log-weight:
   searcher exceeds W / 4, at target speeds up to a third of the searcher's
   (tests/kernels/test_evidence.py); it grows closer in (3e-3 at W / 8, where the path is
   missed with probability exp(-4 / pi) or less);
+* a :class:`~bananagrid.TrackSearch` with the definite-range law (the path is detected iff its
+  closest approach to the searcher over the track's span is at most W / 2: its weight is 0 or
+  1): a chain of nodes at the ends of *chords*, each leg cut into the fewest equal chords of at
+  most t / ``definite_chords`` seconds (t the map's time), each node holding the searcher's
+  positions at its chord's ends; the kernel takes the closest approach of each chord in closed
+  form with the path straight over the chord, and keeps the path's previous position in two
+  scratch slots (``EvidencePack.slots``). Exact for a path straight at constant speed over each
+  chord (Butterly: its kernel takes the legs alone, and cuts its course integral where the
+  weight switches); a path whose acceleration is at most M deviates from its chords by at most
+  M dt^2 / 8 (dt <= t / ``definite_chords``), and only a path whose true closest approach is
+  within that of W / 2 can be misjudged (a CAT path: M = sqrt(a^2 + v^2 omega^2), v = v0 + a s
+  its speed; at Figure 1's 4-sigma corner, M ~ 80 m/s^2 at t = 10 s, 6e-2 m with 128 chords).
+  The weight is a step, so the carried density jumps across the map points whose paths graze
+  the corridor: the CAT's roots are discrete and its density is exact at each point
+  (tests/models/test_cat_carried.py), and its cells take the posterior's sub-cell rule on the
+  carried density, first order at those curves: measured on Figure 1's CAT with two earlier
+  area searches, bearings and a definite track (100 m cells), 8 sub-cells differ from 24 by
+  at most 4.0e-4 of a cell's probability (1.7 % of that cell's), 1.7e-3 summed over the grid,
+  POS by 1.1e-5 and the track's own POS by 2.6e-4; 4 sub-cells by 8.7e-4 (3.7 %) and 3.3e-3.
+  Butterly's course integral is cut where the weight switches (``kernels/butterly.py``,
+  ``definite_breaks``), so its density is exact to the course rule's 1e-12;
 * a :class:`~bananagrid.PositionReport`: one node, the normal log-likelihood;
 * a :class:`~bananagrid.BearingReport`: one node per bearing, same time and factor.
 
 Refused, one line each naming ``evidence[K]``: evidence after the map's time, land (an
 :class:`~bananagrid.Exclusion` holds at every time: the posterior applies it at the map's own
-time), a definite-range track (its detection of a moving target depends on the closest approach
-of the relative path, not carried yet), and more nodes than ``MAX_NODES``.
+time), and more nodes than ``MAX_NODES``.
 
 The channels (``EvidencePack.channel_names``): ``prior`` (no factor: the model's own density),
 ``all``, ``searches``, ``others`` (the reports) and ``search:K`` for each search K (that search
@@ -49,7 +69,7 @@ from ..validate import BananagridError, finite, positive_int
 from .reports import BearingReport, Exclusion, PositionReport
 from .searches import AreaSearch, RasterSearch, TrackSearch
 
-__all__ = ["pack", "AREA_PANELS", "PANEL_NODES", "MAX_NODES", "CARRIED_TYPES"]
+__all__ = ["pack", "AREA_PANELS", "PANEL_NODES", "MAX_NODES", "CARRIED_TYPES", "DEFINITE_CHORDS"]
 
 #: Gauss-Legendre nodes per panel of an interval.
 PANEL_NODES = 4
@@ -57,6 +77,8 @@ PANEL_NODES = 4
 AREA_PANELS = 16
 #: Most time nodes in a pack (each costs a path position and a contribution per path).
 MAX_NODES = 4096
+#: Chords of a definite-range track per map time: a chord lasts at most t / DEFINITE_CHORDS.
+DEFINITE_CHORDS = 128
 #: What a pack carries.
 CARRIED_TYPES = (AreaSearch, RasterSearch, TrackSearch, PositionReport, BearingReport)
 
@@ -75,6 +97,7 @@ class _Builder:
     def __init__(self):
         self.time, self.q, self.data, self.ints = [], [], [], []
         self.edges, self.raster = [], []
+        self.slots = 0
 
     def node(self, t, q, kind, factor, data=(), offset=0, count=0):
         row = np.zeros(ek.DATA_COLUMNS)
@@ -97,13 +120,14 @@ class _Builder:
         return offset
 
 
-def pack(evidence, t_map: float, *, keys=None, area_panels: int = AREA_PANELS) -> EvidencePack:
+def pack(evidence, t_map: float, *, keys=None, area_panels: int = AREA_PANELS,
+         definite_chords: int = DEFINITE_CHORDS) -> EvidencePack:
     """The evidence at times before ``t_map`` (s since the last fix) as a pack.
 
     Parameters
     ----------
     evidence : sequence
-        :class:`AreaSearch`, :class:`RasterSearch`, :class:`TrackSearch` (inverse cube),
+        :class:`AreaSearch`, :class:`RasterSearch`, :class:`TrackSearch` (either law),
         :class:`PositionReport`, :class:`BearingReport`, each ending at or before ``t_map``.
     t_map : float
         The map's time.
@@ -113,6 +137,10 @@ def pack(evidence, t_map: float, *, keys=None, area_panels: int = AREA_PANELS) -
         Gauss-Legendre panels of an area or raster search over an interval (its error per
         crossing of an edge: C x 0.35 / area_panels in the exponent; the cost: PANEL_NODES
         nodes a panel, each a position and a look-up per path).
+    definite_chords : int, default DEFINITE_CHORDS
+        A definite-range track's chords last at most t_map / definite_chords (a path of
+        acceleration M is misjudged only where its closest approach is within M dt^2 / 8 of
+        W / 2; module docstring).
 
     Returns
     -------
@@ -121,11 +149,12 @@ def pack(evidence, t_map: float, *, keys=None, area_panels: int = AREA_PANELS) -
     Raises
     ------
     BananagridError
-        Evidence of another type, after ``t_map``, land, a definite-range track, or more than
-        :data:`MAX_NODES` nodes in all; the message names the evidence's key.
+        Evidence of another type, after ``t_map``, land, or more than :data:`MAX_NODES` nodes
+        in all; the message names the evidence's key.
     """
     t_map = finite("t", t_map)
     area_panels = positive_int("area_panels", area_panels)
+    definite_chords = positive_int("definite_chords", definite_chords)
     try:
         evidence = list(evidence)
     except TypeError:
@@ -165,10 +194,13 @@ def pack(evidence, t_map: float, *, keys=None, area_panels: int = AREA_PANELS) -
                 for s, q in zip(*_gauss_legendre(t0, t1, area_panels)):
                     b.node(s, q, ek.KIND_RASTER, factor, (g.origin[0], g.origin[1], g.dx, g.dy, g.ny), offset, g.nx)
         elif isinstance(e, TrackSearch):
-            if e.law != "inverse_cube":
-                raise BananagridError(
-                    f"{key}.law = {e.law!r}: a definite-range track earlier than the map cannot be carried yet (its "
-                    "detection of a moving target depends on the closest approach); use law = 'inverse_cube'")
+            if e.law == "definite":
+                _definite_chain(b, e, factor, len(keys), t_map / definite_chords)
+                if len(b.time) > MAX_NODES:
+                    raise BananagridError(
+                        f"{key}: the definite-range track needs {len(b.time)} time nodes with the evidence before it "
+                        f"(chords of at most t / {definite_chords} s), above {MAX_NODES}; pass fewer definite_chords")
+                continue
             w = e.sweep_width
             for (ax, ay, ta), (bx, by, tb) in zip(e.track[:-1], e.track[1:]):
                 length = math.hypot(bx - ax, by - ay)
@@ -190,6 +222,25 @@ def pack(evidence, t_map: float, *, keys=None, area_panels: int = AREA_PANELS) -
         if len(b.time) > MAX_NODES:
             raise BananagridError(f"{key}: the evidence needs {len(b.time)} time nodes in all, above {MAX_NODES}")
     return _finish(b, t_map, keys, kinds)
+
+
+def _definite_chain(b: _Builder, e: TrackSearch, factor: int, n_factors: int, longest: float) -> None:
+    """A definite-range track's chain (``kernels/evidence.py``, ``KIND_DEFINITE``): a node at
+    the first track point, then one at the end of each chord, each leg cut into the fewest
+    equal chords of at most ``longest`` seconds; its two scratch slots after the factors'."""
+    slot = n_factors + b.slots
+    b.slots += 2
+    h = 0.5 * e.sweep_width
+    x0, y0, t0 = (float(v) for v in e.track[0])
+    b.node(t0, 1.0, ek.KIND_DEFINITE, factor, (x0, y0, x0, y0, h), slot, ek.DEFINITE_START | ek.DEFINITE_LEG)
+    for (ax, ay, ta), (bx, by, tb) in zip(e.track[:-1], e.track[1:]):
+        n = max(1, math.ceil((tb - ta) / longest * (1.0 - 1e-12)))
+        for i in range(1, n + 1):
+            f0, f1 = (i - 1) / n, i / n
+            s = tb if i == n else ta + f1 * (tb - ta)
+            b.node(s, 1.0, ek.KIND_DEFINITE, factor,
+                   (ax + f1 * (bx - ax), ay + f1 * (by - ay), ax + f0 * (bx - ax), ay + f0 * (by - ay), h), slot,
+                   ek.DEFINITE_LEG if i == n else 0)
 
 
 def _log_miss(miss: float) -> float:
@@ -222,4 +273,5 @@ def _finish(b: _Builder, t_map: float, keys, kinds) -> EvidencePack:
     for a in arrays.values():
         a.setflags(write=False)
     return EvidencePack(t=t_map, channel_names=tuple(names), factor_keys=tuple(keys),
-                        factor_kinds=tuple("search" if k == "search" else "report" for k in kinds), **arrays)
+                        factor_kinds=tuple("search" if k == "search" else "report" for k in kinds), slots=b.slots,
+                        **arrays)

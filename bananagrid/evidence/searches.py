@@ -154,9 +154,13 @@ class TrackSearch:
     Notes
     -----
     For a target path x(t) the POD is 1 - exp(-int gamma(|x(t) - s(t)|) dt) along the relative
-    motion. A map at a time within the track's span takes the target stationary over the track's
-    duration: the exposure of each point is the integral along the track's legs above (for a
-    straight leg that is the lateral-range curve; tested).
+    motion (inverse cube), or 1 where min over the track's span of |x(t) - s(t)| <= W / 2 and 0
+    elsewhere (definite range: the closest approach of the relative path). A map at a time
+    within the track's span takes the target stationary over the track's duration: the exposure
+    of each point is the integral along the track's legs above (for a straight leg that is the
+    lateral-range curve; tested), its closest approach the distance to the track. A map after
+    the track carries either law along the model's paths (CAT, Butterly:
+    :func:`~bananagrid.evidence.packing.pack` states the rules and their errors).
     """
 
     track: np.ndarray

@@ -845,8 +845,11 @@ class Butterly(Model):
         inside the polygon over its speed is the time spent inside (coverage C spread evenly:
         log-weight -C x that fraction of the interval); its breaks are the courses where an end
         of the segment crosses an edge or the segment passes a vertex (the pack's time nodes
-        for it are recognised and replaced, :func:`_interval_searches`). ``t`` of the pack
-        must be the model's.
+        for it are recognised and replaced, :func:`_interval_searches`). A definite-range
+        track weighs a path 0 where its closest approach (exact per leg: both move straight)
+        is within W / 2: its breaks are the courses where that switches, found by a march that
+        cannot step over one and bisected (``kernels/butterly.py``, ``definite_breaks``); its
+        chords (for curved paths) are left out. ``t`` of the pack must be the model's.
 
         As on a grid (:meth:`kernel_parameters` with ``floors``), a point whose prior bound is
         below CELL_FLOOR = 1e-13 of the density's maximum is 0 in every channel (weights are at
@@ -861,7 +864,9 @@ class Butterly(Model):
         segments, segment_ints, exact = _interval_searches(pack)
         kind = pack.ints[:, 0]
         polygon = np.flatnonzero((kind == evidence_kernels.KIND_POLYGON) & ~exact).astype(np.int32)
-        smooth = np.flatnonzero(kind != evidence_kernels.KIND_POLYGON).astype(np.int32)
+        # a definite-range track's chords are for curved paths: a straight one takes its legs alone
+        chord = (kind == evidence_kernels.KIND_DEFINITE) & ((pack.ints[:, 3] & evidence_kernels.DEFINITE_LEG) == 0)
+        smooth = np.flatnonzero((kind != evidence_kernels.KIND_POLYGON) & ~chord).astype(np.int32)
         params = ctx.struct(kernels.BUTTERLY_CARRIED, params=ctx.array(self.kernel_parameters(ctx.dtype, floors=True)),
                             n_speeds=self.n_speed_nodes, rule=ctx.array(rule), t=ctx.scalar(self.t),
                             polygon_nodes=ctx.array(polygon, dtype=np.int32),

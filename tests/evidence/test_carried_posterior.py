@@ -15,10 +15,13 @@ import pytest
 
 import bananagrid as bg
 from cases import FIG1
+from definite_oracle import sampled_approach
 from evidence_cases import chi_square_p, grid_counts, lattice_counts
 
 ALPHA = 1e-3
 DRAWS = 10**6
+#: Draws of the definite-range cases (their closest approach needs 401 path positions a draw).
+DEFINITE_DRAWS = 250_000
 GRID = bg.Grid.from_bounds(x=(-2400.0, 2400.0), y=(0.0, 3300.0), step=100.0)
 
 
@@ -29,15 +32,24 @@ def binomial_within(count: int, n: int, p: float, sigmas: float = 4.0) -> bool:
 def earlier_evidence(track: bool):
     """Two area searches (t = 4 s and 7 s) across the banana's earlier positions, bearings at
     6 s; with ``track`` an inverse-cube track flown across the paths' way from 2 s to 2.6 s,
-    some 50 to 250 m ahead of them (its own POS about 0.3)."""
+    some 50 to 250 m ahead of them (its own POS about 0.3); with ``track = "definite"``,
+    :data:`DEFINITE`."""
     fix = bg.BearingFix(sensors=[(-3000.0, 1200.0), (1500.0, -500.0)],
                         bearings=[math.atan2(3000.0, 600.0), math.atan2(-1500.0, 2200.0)], sigmas=[0.12, 0.1])
     evidence = [bg.AreaSearch([(-400.0, 900.0), (150.0, 950.0), (250.0, 1400.0), (-300.0, 1350.0)], t=4.0, pod=0.8),
                 bg.AreaSearch([(-100.0, 1600.0), (900.0, 1500.0), (900.0, 2300.0), (0.0, 2200.0)], t=7.0, pod=0.6),
                 bg.BearingReport(fix, t=6.0)]
-    if track:
+    if track == "definite":
+        evidence.append(DEFINITE)
+    elif track:
         evidence.append(bg.TrackSearch([(-300.0, 780.0, 2.0), (300.0, 780.0, 2.6)], sweep_width=300.0))
     return evidence
+
+
+#: A definite-range track (detected iff within 100 m) flown north beside the paths' way from
+#: 1.5 s to 4.5 s, then north-west into it (its own POS 0.34, given the bearings).
+DEFINITE = bg.TrackSearch([(150.0, 400.0, 1.5), (150.0, 1300.0, 4.5), (0.0, 1600.0, 5.0)], sweep_width=200.0,
+                          law="definite")
 
 
 def simulate(model, evidence, n, seed):
@@ -47,13 +59,16 @@ def simulate(model, evidence, n, seed):
     interval, exp(int log(1 - POD(x(s))) ds / span), and a track's exp(-exposure), by the
     trapezoidal rule on fine times over their spans (a track: 121 times, 0.005 s apart, the
     searcher moving 5 m while the paths pass it at some 50 m or more; an interval: 41 times,
-    its error at a crossing of an edge, like the pack's, of either sign)."""
+    its error at a crossing of an edge, like the pack's, of either sign); a definite-range
+    track's factor is 0 where the smallest range sampled at 401 times over its span is within
+    W / 2 (samples 9 ms apart, relative speeds below 700 m/s: the sampled range overestimates
+    the true one by at most (700 x 0.009)^2 / (8 x 100) = 0.05 m)."""
     rng = np.random.default_rng(seed)
     times, slices = [model.t], []
     for e in evidence:
         span = (model.t, model.t) if e.time_span is None else e.time_span  # land: the map's time
         if isinstance(e, bg.TrackSearch):
-            fine = np.linspace(*span, 121)
+            fine = np.linspace(*span, 401 if e.law == "definite" else 121)
         elif span[1] > span[0]:
             fine = np.linspace(*span, 41)
         else:
@@ -69,7 +84,9 @@ def simulate(model, evidence, n, seed):
         out[start:start + m] = paths[:, 0]
         for k, (e, (where, fine)) in enumerate(zip(evidence, slices)):
             pts = paths[:, where]
-            if isinstance(e, bg.TrackSearch):
+            if isinstance(e, bg.TrackSearch) and e.law == "definite":
+                factors[start:start + m, k] = sampled_approach(e.track, pts, fine) > 0.5 * e.sweep_width
+            elif isinstance(e, bg.TrackSearch):
                 sx = np.interp(fine, e.track[:, 2], e.track[:, 0])
                 sy = np.interp(fine, e.track[:, 2], e.track[:, 1])
                 speed = np.hypot(np.diff(e.track[:, 0]), np.diff(e.track[:, 1])) / np.diff(e.track[:, 2])
@@ -103,6 +120,8 @@ CASES = {
     "cat_periods": (bg.CAT(**FIG1), "periods"),
     "cat_heading_searches_bearings": (bg.CAT(**FIG1, sigma_heading=0.04), False),
     "cat_track": (bg.CAT(**FIG1), True),
+    "cat_definite": (bg.CAT(**FIG1), "definite"),
+    "cat_heading_definite": (bg.CAT(**FIG1, sigma_heading=0.04), "definite"),
 }
 
 
@@ -114,13 +133,14 @@ def test_carried_posterior_matches_simulation_of_the_paths(name):
     model, track = CASES[name]
     evidence = {None: [*earlier_evidence(False), *NOW], "periods": PERIODS}.get(track) or earlier_evidence(track)
     post = bg.posterior(model, GRID, evidence, subdivisions=6)
-    positions, factors = simulate(model, evidence, DRAWS, seed=20261127)
+    draws = DEFINITE_DRAWS if track == "definite" else DRAWS
+    positions, factors = simulate(model, evidence, draws, seed=20261127)
     rng = np.random.default_rng(7)
     # each draw detected by each search with its POD, kept by the reports with their likelihood
     searches = [k for k, e in enumerate(evidence) if e.kind == "search"]
     reports = [k for k, e in enumerate(evidence) if e.kind != "search"]  # land too
-    found = rng.uniform(size=(DRAWS, len(searches))) >= factors[:, searches]
-    reported = np.all(rng.uniform(size=(DRAWS, len(reports))) < factors[:, reports], axis=1)
+    found = rng.uniform(size=(draws, len(searches))) >= factors[:, searches]
+    reported = np.all(rng.uniform(size=(draws, len(reports))) < factors[:, reports], axis=1)
     x0, x1, y0, y1 = GRID.extent
     on_grid = (positions[:, 0] >= x0) & (positions[:, 0] < x1) & (positions[:, 1] >= y0) & (positions[:, 1] < y1)
     kept = on_grid & reported & ~found.any(axis=1)

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 import bananagrid as bg
-from bananagrid.evidence.packing import AREA_PANELS, MAX_NODES, PANEL_NODES, pack
+from bananagrid.evidence.packing import AREA_PANELS, DEFINITE_CHORDS, MAX_NODES, PANEL_NODES, pack
 from bananagrid.kernels import evidence as ek
 
 SQUARE = [(0.0, 0.0), (100.0, 0.0), (100.0, 100.0), (0.0, 100.0)]
@@ -55,8 +55,8 @@ REFUSED = [
     ("after the map", [bg.AreaSearch(SQUARE, t=(4.0, 6.0), pod=0.5)],
      r"^evidence\[0\]\.t = 6\.0: after the map's time t = 5\.0"),
     ("land", [bg.AreaSearch(SQUARE, t=1.0, pod=0.5), LAND], r"^evidence\[1\]: land holds at every time"),
-    ("definite", [bg.TrackSearch([(0, 0, 1.0), (100, 0, 2.0)], sweep_width=10.0, law="definite")],
-     r"^evidence\[0\]\.law = 'definite': a definite-range track earlier than the map cannot be carried yet"),
+    ("definite, too many chords", [bg.TrackSearch([(0, 0, 1.0), (100, 0, 4.0)], sweep_width=10.0, law="definite")],
+     r"^evidence\[0\]: the definite-range track needs 6001 time nodes .*above 4096; pass fewer definite_chords"),
     ("not evidence", [SQUARE], r"^evidence\[0\] = .*expected one of bg\.AreaSearch"),
     ("too many nodes", [bg.TrackSearch([(0, 0, 1.0), (1e6, 0, 2.0)], sweep_width=10.0)],
      rf"^evidence\[0\]\.sweep_width = 10\.0: a leg of 1e\+06 m needs 1600000 time nodes .*above {MAX_NODES}"),
@@ -66,8 +66,28 @@ REFUSED = [
 @pytest.mark.parametrize("what, evidence, message", REFUSED, ids=[r[0] for r in REFUSED])
 def test_refused_in_one_line(what, evidence, message):
     with pytest.raises(bg.BananagridError, match=message) as caught:
-        pack(evidence, 5.0)
+        pack(evidence, 5.0, definite_chords=10000 if what.startswith("definite") else DEFINITE_CHORDS)
     assert "\n" not in str(caught.value)
+
+
+def test_definite_track_chain():
+    """A definite-range track: a node at its first point, then one at each chord's end, each
+    leg cut into the fewest equal chords of at most t / definite_chords; the searcher's
+    positions at the chord's ends, h = W / 2, two scratch slots after the factors, the start
+    and leg-end flags; sorted in time among the other nodes with the chain's order kept."""
+    track = bg.TrackSearch([(0.0, 0.0, 1.0), (100.0, 0.0, 2.0), (100.0, 50.0, 2.1)], sweep_width=30.0, law="definite")
+    p = pack([bg.AreaSearch(SQUARE, t=1.5, pod=0.5), track], 8.0, definite_chords=16)  # chords of <= 0.5 s
+    chain = np.flatnonzero(p.ints[:, 0] == ek.KIND_DEFINITE)
+    np.testing.assert_allclose(p.time[chain], [1.0, 1.5, 2.0, 2.1], rtol=0, atol=1e-15)
+    np.testing.assert_allclose(p.data[chain, :5], [[0, 0, 0, 0, 15], [50, 0, 0, 0, 15], [100, 0, 50, 0, 15],
+                                                   [100, 50, 100, 0, 15]], rtol=0, atol=1e-12)
+    assert p.ints[chain, 1].tolist() == [1] * 4 and p.ints[chain, 2].tolist() == [2] * 4  # factor 1; slots 2, 3
+    start, leg = ek.DEFINITE_START, ek.DEFINITE_LEG
+    assert p.ints[chain, 3].tolist() == [start | leg, 0, leg, leg]
+    assert p.slots == 2 and p.scratch == 4
+    assert np.all(np.diff(p.time) >= 0)
+    with pytest.raises(bg.BananagridError, match=r"^definite_chords = 0: must be"):
+        pack([track], 8.0, definite_chords=0)
 
 
 def test_keys_name_the_evidence():

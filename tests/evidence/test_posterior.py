@@ -236,9 +236,6 @@ REFUSED = [
     ("polar banana, earlier", POLAR, [bg.AreaSearch(POLYGON, t=5.0, pod=0.5)],
      r"^evidence\[0\]\.t = 5\.0: earlier than the map's time t = 10\.0; PolarBanana is an approximation with no "
      r"path per parameter.*use bg\.CAT"),
-    ("CAT, earlier definite-range track", CAT,
-     [bg.TrackSearch([(0, 0, 1.0), (100, 0, 2.0)], sweep_width=10.0, law="definite")],
-     r"^evidence\[0\]\.law = 'definite': a definite-range track earlier than the map cannot be carried yet"),
     ("CAT, earlier contradiction", CAT,
      [bg.AreaSearch([(-4000.0, -1000.0), (4000.0, -1000.0), (4000.0, 4000.0), (-4000.0, 4000.0)], t=4.0, pod=1.0)],
      r"^evidence: the probability of the evidence under the prior is 0, below 1e-12; the evidence contradicts the prior"),

@@ -182,3 +182,131 @@ def test_area_search_sweep(t0, span, pod, sx, sy, size, vx, vy):
                 assert got == 0.0
         else:
             assert abs(math.log(max(got, 1e-300)) - math.log(max(want, 1e-300))) <= 2 * coverage * 0.35 / AREA_PANELS + 1e-12
+
+
+# ---------------------------------------------------------------------------------------------
+# Definite-range tracks: a chain of chords, the closest approach of each in closed form
+# ---------------------------------------------------------------------------------------------
+
+
+def definite_weight(track, paths_at, h, dtype, t_map=10.0):
+    """The kernel's weight (0 or 1) of each path for the track with W / 2 = h: ``paths_at(s)``
+    returns the paths' positions (n, len(s), 2) at the pack's node times."""
+    e = bg.TrackSearch(track, sweep_width=2.0 * h, law="definite")
+    p = pack([e], t_map)
+    pos = paths_at(p.time)
+    return weigh_paths(p, pos, np.ones(len(pos)), dtype=dtype)[:, p.channel("all")]
+
+
+def zigzag(rng, legs):
+    """A searcher's track of ``legs`` legs over [0.5, 6] s, turning at random points."""
+    times = np.sort(rng.uniform(0.5, 6.0, legs + 1))
+    times[0], times[-1] = 0.5, 6.0
+    xy = rng.uniform(-100.0, 200.0, (legs + 1, 2))
+    return np.column_stack((xy, times))
+
+
+@pytest.mark.parametrize("dtype", [np.float64, np.float32])
+def test_definite_closest_approach_matches_the_oracle(dtype):
+    """Straight paths (the closed form is exact for them) against the oracle's closest approach
+    d (dense sampling and minimize_scalar per leg, tests/support/definite_oracle.py): with W / 2
+    just below d the path is missed (weight 1), just above it is detected (weight 0). The margin:
+    1e-9 of d in float64 (the oracle's minimize_scalar converges to 1e-12 of a leg's time; the
+    closed form rounds at 1e-15 of the coordinates, ~300 m); 3e-5 of d + 3e-3 m in float32
+    (positions round at 6e-8 x 300 m = 2e-5 m, and the range to the segment at 6e-8 of it)."""
+    from definite_oracle import closest_approach
+
+    rng = np.random.default_rng(33)
+    f32 = dtype == np.float32
+    for trial in range(40):
+        track = zigzag(rng, 1 + trial % 4)
+        p0, v = rng.uniform(-100.0, 200.0, 2), rng.uniform(-40.0, 40.0, 2)
+        d = closest_approach(track, lambda s, p0=p0, v=v: straight(p0, v, s))
+        margin = 3e-5 * d + 3e-3 if f32 else 1e-9 * d
+
+        def at(times, p0=p0, v=v):
+            return straight(p0, v, times)[None]
+
+        assert definite_weight(track, at, d - margin, dtype)[0] == 1.0, (trial, d)
+        assert definite_weight(track, at, d + margin, dtype)[0] == 0.0, (trial, d)
+
+
+def cat_paths(v0, a, omega, heading=0.0):
+    """World positions (n, len(s), 2) of CAT paths with accelerations ``a`` and turn rates
+    ``omega`` from the origin (eq. (1), ``models.cat.cat_position``), heading turned."""
+    from bananagrid.models.cat import cat_position
+
+    ch, sh = math.cos(heading), math.sin(heading)
+
+    def at(times):
+        out = np.stack([cat_position(v0, s, a, omega) for s in np.atleast_1d(times)], axis=1)
+        return np.stack((out[..., 0] * ch + out[..., 1] * sh, -out[..., 0] * sh + out[..., 1] * ch), axis=-1)
+
+    return at
+
+
+@seed(33)
+@settings(max_examples=15, deadline=None)
+@given(t_map=st.floats(4.0, 60.0), start=st.floats(0.0, 0.8), span=st.floats(0.05, 0.9), legs=st.integers(1, 4),
+       width=st.floats(100.0, 1500.0), v0=st.floats(20.0, 300.0), sigma_omega=st.floats(0.01, 0.2),
+       heading=st.floats(-3.0, 3.0), draw=st.integers(0, 2**31 - 1))
+def test_definite_chords_on_curved_paths(t_map, start, span, legs, width, v0, sigma_omega, heading, draw):
+    """CAT paths (curved) over tracks, times and sweep widths: each path's weight agrees with the
+    oracle's closest approach d wherever |d - W / 2| exceeds the pack's stated bound M dt^2 / 8
+    (M = max over the track of sqrt(a^2 + (v0 + a s)^2 omega^2), the path's acceleration, dt
+    its chords' length, t / DEFINITE_CHORDS at most), plus 1e-9 of the range for rounding. A
+    third of the paths are put near grazing (d within 1e-3 W of W / 2): inside the bound either
+    answer is allowed (the chord's range, a straight relative path, differs from the curve's by
+    at most the bound); where the bound is below 1e-3 W (short map times, slow turns) they are
+    checked too."""
+    from bananagrid.evidence.packing import DEFINITE_CHORDS
+    from definite_oracle import closest_approach
+
+    rng = np.random.default_rng(draw)
+    t0 = start * t_map
+    t1 = min(t_map, t0 + span * t_map)
+    times = np.linspace(t0, t1, legs + 1)
+    n = 24
+    a = rng.normal(0.0, 2.0, n)
+    omega = rng.normal(0.0, sigma_omega, n)
+    paths = cat_paths(v0, a, omega, heading)
+    # the searcher flies near the paths' positions, crossing their way
+    mid = paths(np.array([0.5 * (t0 + t1)]))[:, 0].mean(axis=0)
+    track = np.column_stack((mid + rng.normal(0.0, 0.3 * v0 * (t1 - t0) + width, (legs + 1, 2)), times))
+    h = 0.5 * width
+    d = np.array([closest_approach(track, lambda s, k=k: paths(s)[k]) for k in range(n)])
+    # a third near grazing: W / 2 moved to within 1e-3 W of those paths' closest approach is
+    # the same as moving the paths; rather than move them, the test gives each its own h
+    near = d + rng.uniform(-1e-3, 1e-3, n) * width
+    hs = np.where((np.arange(n) % 3 == 0) & (near > 0.0), near, h)
+    dt = (t1 - t0) / legs / math.ceil((t1 - t0) / legs / (t_map / DEFINITE_CHORDS) * (1.0 - 1e-12))
+    s = np.linspace(t0, t1, 64)
+    speed = v0 + np.abs(a)[:, None] * s[None, :]
+    accel = np.sqrt(a[:, None] ** 2 + speed**2 * omega[:, None] ** 2).max(axis=1)
+    bound = accel * dt * dt / 8.0 + 1e-9 * (np.abs(d) + width)
+    checked = 0
+    for k in range(n):
+        got = definite_weight(track, lambda ts, k=k: paths(ts)[k:k + 1], hs[k], np.float64, t_map)[0]
+        if abs(d[k] - hs[k]) > bound[k]:
+            checked += 1
+            assert got == (1.0 if d[k] > hs[k] else 0.0), (k, d[k], hs[k], bound[k])
+    assert checked >= n // 2  # the paths away from grazing are all checked
+
+
+def test_definite_chain_between_other_evidence():
+    """A definite track's chain interleaved in time with other nodes (an area search at a time
+    inside the track's span, a second definite track): each channel is the product of the
+    single-evidence weights (the chains' slots kept apart, their nodes visited in time order)."""
+    rng = np.random.default_rng(5)
+    tracks = [bg.TrackSearch([(-50.0, 50.0, 1.0), (150.0, 60.0, 3.0), (160.0, 200.0, 4.0)], 40.0, "definite"),
+              bg.TrackSearch([(0.0, 150.0, 2.0), (100.0, -20.0, 5.0)], 30.0, "definite")]
+    evidence = [tracks[0], bg.AreaSearch(SQUARE, t=2.5, pod=0.6), tracks[1]]
+    p0, v = paths(400, rng)
+    single = kernel_factors(evidence, p0, v, np.float64)
+    assert 20 < (single[:, 0] == 0).sum() < 380 and 20 < (single[:, 2] == 0).sum() < 380
+    p = pack(evidence, 7.0)
+    assert p.slots == 4 and p.scratch == 7
+    pos = np.stack([straight(a, b, p.time) for a, b in zip(p0, v)])
+    out = weigh_paths(p, pos, np.ones(len(p0)))
+    np.testing.assert_array_equal(out[:, p.channel("all")], single.prod(axis=1))
+    np.testing.assert_array_equal(out[:, p.channel("search:evidence[2]")], single[:, 2])

@@ -482,3 +482,25 @@ def test_fast_contact_carries_the_box_and_the_patrol_as_bg_posterior_does(tmp_pa
     assert abs(by_t[300.0]["search_pos"][0] - by_t[600.0]["search_pos"][0]) < 1e-3
     # the story: the searches found nothing where the contact most likely was
     assert by_t[600.0]["pos"] > 0.5 and by_t[300.0]["pos"] > 0.4
+
+
+def test_an_earlier_definite_range_track_is_carried_in_a_scene(tmp_path):
+    """fast_contact with the patrol's law definite (detected iff within 750 m): the scene runs,
+    and its 10 min map is ``bg.posterior`` with that track carried along the CAT's paths."""
+    text = (SCENES / "fast_contact.toml").read_text().replace("sweep_width = 1500.0",
+                                                              'sweep_width = 1500.0\nlaw = "definite"')
+    assert 'law = "definite"' in text
+    (tmp_path / "fast_contact.toml").write_text(text)
+    scene = bg.load_scene(tmp_path / "fast_contact.toml").with_step(400.0)
+    rows = run_scene(scene, tmp_path, npz=True)
+    model = bg.CAT(v0=20.0, t=600.0, sigma_a=0.005, sigma_omega=math.radians(0.05),
+                   pose=bg.Pose(origin=(0.0, 0.0), heading=math.radians(45.0)))
+    box = bg.AreaSearch([[3300.0, 4500.0], [4500.0, 3300.0], [5500.0, 4300.0], [4300.0, 5500.0]], t=300.0, pod=0.7)
+    patrol = bg.TrackSearch([[11000.0, 3000.0, 330.0], [3000.0, 11000.0, 570.0]], sweep_width=1500.0, law="definite")
+    late = bg.posterior(model, scene.grid, [box, patrol])
+    with np.load(tmp_path / "fast_contact.npz", allow_pickle=False) as arrays:
+        # 1e-12: the same kernels on the same grid; only the threads' order of summing may differ
+        np.testing.assert_allclose(arrays["contact__t600__posterior"], late.values, rtol=0, atol=1e-12)
+    by_t = {row["t"]: row["evidence"] for row in rows}
+    assert by_t[600.0]["search_pos"] == pytest.approx(list(late.search_pos), abs=1e-12)
+    assert 0.05 < late.search_pos[1] < 0.95  # the patrol's own POS: it meets some of the paths

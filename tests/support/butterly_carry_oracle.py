@@ -16,10 +16,16 @@ exactly for a straight path as the length of the segment X([t0, t1]) inside the 
 length (``segment_fraction_inside``), or, with ``rule``, by a composite Gauss-Legendre rule in
 time (the pack's: what the kernels integrate over courses).
 
+A definite-range track weighs a path 0 where its closest approach to the searcher is within
+W / 2 (``definite_oracle.closest_approach``: dense sampling and ``minimize_scalar`` per leg),
+else 1: constant between the courses where that switches (``definite_oracle.switch_courses``),
+so it is taken once per piece, at the piece's middle course.
+
 [0, 2 pi] is cut at every course where a path crosses an edge at a search's time (the circle of
 radius V (t - s) about x against each edge), where a search interval's segment passes a vertex,
-and into sub-intervals no wider than a tenth of the integrand's peak width sigma_min / r, and
-each piece is integrated by ``quad`` to a relative 1e-12.
+where a definite-range track's weight switches, and into sub-intervals no wider than a tenth of
+the integrand's peak width sigma_min / r, and each piece is integrated by ``quad`` to a
+relative 1e-12.
 """
 
 from __future__ import annotations
@@ -29,6 +35,22 @@ import math
 import numpy as np
 from scipy import integrate
 from scipy.special import ive
+
+from definite_oracle import closest_approach, straight_path, switch_courses
+
+
+def _definite(ev) -> bool:
+    return getattr(ev, "law", None) == "definite"
+
+
+def definite_weight(model, evidence, x, r, c) -> float:
+    """The definite-range tracks' weight of the path of course ``c`` (a float) through x with
+    range r at the map's time: 0 if any comes within W / 2, else 1."""
+    for ev in evidence:
+        if _definite(ev):
+            if closest_approach(ev.track, straight_path(x, r / model.t, model.t, c)) <= 0.5 * ev.sweep_width:
+                return 0.0
+    return 1.0
 
 
 def _normal(dx, dy, cov):
@@ -106,6 +128,9 @@ def weight(model, evidence, x, r, c, rule=None):
     e = np.stack((np.sin(c), np.cos(c)), axis=-1)
     w = np.ones(np.shape(c))
     for ev in evidence:
+        if _definite(ev):
+            w = w * np.vectorize(lambda u: definite_weight(model, [ev], x, r, float(u)))(c)
+            continue
         t0, t1 = ev.time_span
         if t0 < t1 and rule is not None:
             nodes, q = time_rule(t0, t1, *rule)
@@ -131,6 +156,9 @@ def breakpoints(model, evidence, x, r, rule=None):
     t = model.t
     out = []
     for ev in evidence:
+        if _definite(ev):
+            out += switch_courses(ev.track, x, r / t, t, ev.sweep_width)
+            continue
         region = getattr(ev, "region", None)
         if region is None:
             continue
@@ -182,14 +210,18 @@ def carried_density(model, evidence, x, y, *, epsrel=1e-12, rule=None) -> np.nda
             knots.update(b for b in breakpoints(model, evidence, point, r, rule))
             knots = np.array(sorted(knots))
 
+            others = [ev for ev in evidence if not _definite(ev)]
+
             def f(c):
-                return math.exp(float(log_g(c)) - top) * float(weight(model, evidence, point, r, np.array(c), rule))
+                return math.exp(float(log_g(c)) - top) * float(weight(model, others, point, r, np.array(c), rule))
 
             total = 0.0
             for a, b in zip(knots[:-1], knots[1:]):
                 mid = np.linspace(a, b, 5)
                 if b - a > 1e-15 and (np.any(lg[np.searchsorted(grid, mid, side="right") - 1] > top - 60.0)
                                       or np.any(log_g(mid) > top - 60.0)):
-                    total += integrate.quad(f, a, b, epsabs=0.0, epsrel=epsrel, limit=200)[0]
+                    # the definite tracks' weight is constant on the piece (their switches are knots)
+                    if definite_weight(model, evidence, point, r, 0.5 * (a + b)) > 0.0:
+                        total += integrate.quad(f, a, b, epsabs=0.0, epsrel=epsrel, limit=200)[0]
             out[k] += w_i * norm * math.exp(top) * total
     return out
