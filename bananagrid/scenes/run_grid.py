@@ -54,7 +54,7 @@ from .run_evidence import (
     evidence_bytes_per_cell, evidence_paths, record_evidence_marks, record_posterior, scene_posterior,
     write_evidence_geojson,
 )
-from .run_plan import ScenePlan, plan_label, plan_paths, plan_scene, record_plan, write_plan_geojson
+from .run_plan import ScenePlan, plan_coverage, plan_label, plan_paths, plan_scene, record_plan, write_plan_geojson
 
 __all__ = ["GridRun", "compute", "array_key", "check_exports", "check_run_memory", "check_run_work",
            "RUN_BYTES_PER_CELL", "EXPORT_BYTES_PER_MAP_CELL", "PROBABILITY_BYTES_PER_CELL", "PLAN_BYTES_PER_CELL",
@@ -137,7 +137,7 @@ class GridRun:
             plan = self.plan
             write_exports(scene, self.out_dir, self.panels, **self.exports, areas=self.areas, cells=self.cells,
                           marks=self.marks, stage=self.outputs.stage,
-                          coverage=None if plan is None else (scene.plan.layer, scene.plan.t, plan.allocation.effort),
+                          coverage=plan_coverage(scene, plan),
                           posteriors=self.posteriors)
             for path in plan_paths(scene, self.out_dir, geojson=self.exports["geojson"]):
                 write_plan_geojson(path, scene, plan, stage=self.outputs.stage)
@@ -386,7 +386,8 @@ def _with_plan(geographic, scene: Scene, plan_frame: tuple | None, layer_frames:
     if scene.evidence:
         panels.append(evidence_view([layer.name for layer in scene.layers], _evidence_frame(scene, layer_frames)))
     if scene.plan is not None:
-        panels.append(plan_view(plan_frame, rectangles=scene.plan.rectangles > 0, bands=scene.plan.bands > 0))
+        panels.append(plan_view(plan_frame, rectangles=scene.plan.rectangles > 0, bands=scene.plan.bands > 0,
+                                periods=scene.plan.several))
     if geographic is not None:
         panels.append(geographic)
     if len(panels) < 2:
