@@ -61,7 +61,7 @@ from .allocation import Allocation, optimal_coverage
 from .detection import EXPONENTIAL, DetectionLaw, detection_law
 
 __all__ = ["PeriodPlan", "PeriodMaps", "SampledPaths", "CarriedMaps", "iterate_periods", "plan_periods", "log_miss",
-           "TOL", "MAX_ITERATIONS", "SUBDIVISIONS", "SKIP_MASS", "REFINE_MASS", "COARSE_TOL"]
+           "TOL", "MAX_ITERATIONS", "SUBDIVISIONS", "SKIP_MASS", "REFINE_MASS", "COARSE_TOL", "FIRST_LOOK_SCALE"]
 
 #: Default convergence: a sweep over the periods that raises the total POS by less than this
 #: stops the iteration (the POS is a probability; 1e-9 is far below any planning decision and
@@ -89,6 +89,12 @@ REFINE_MASS = 1e-10
 #: Sweeps on the first look alone stop when one raises the POS by less than this (or ``tol``
 #: if larger); the iteration then goes on from that plan on the refined maps.
 COARSE_TOL = 1e-6
+#: The first sweeps are made on the first look alone where its sub-cells (a cell's side over
+#: :data:`SCREEN`) are at most this fraction of the model's smallest feature: measured on the
+#: submarine (start SD 430 m) at 400 m cells (sub-cells 0.23 of it), a first-look map's POS
+#: is within 5e-5 of 16 x 16 sub-cells', so the refined sweeps start near their optimum; at
+#: 3,200 m cells (1.9 of it) the first look's plan was no nearer than no plan.
+FIRST_LOOK_SCALE = 0.25
 #: Points per call of the carried kernels (bounds the arrays' memory: C channels x 8 bytes each).
 CARRIED_POINTS = 2**20
 
@@ -513,7 +519,7 @@ def _at_time(prior, t: float, k: int):
 
 def plan_periods(prior, grid: Grid, times, efforts, law="exponential", *, tol: float = TOL,
                  max_iterations: int = MAX_ITERATIONS, subdivisions: int = SUBDIVISIONS, threads=None,
-                 progress=None) -> PeriodPlan:
+                 progress=None, first_look: bool | None = None) -> PeriodPlan:
     """A search plan over several periods for a moving target: effort E_k at time t_k spread to
     maximise the probability that some period detects the target (Brown's iteration, module
     docstring), each period's map computed by the model's kernels given the other periods'
@@ -545,6 +551,10 @@ def plan_periods(prior, grid: Grid, times, efforts, law="exponential", *, tol: f
         Called after each sweep with ``(sweep, pos, stage)``: the sweeps so far, the POS so far
         and ``"first look"`` (the first sweeps, on :data:`SCREEN` x SCREEN sub-cells of every
         cell) or ``"refined"`` (on the plan's own maps, from the first look's plan).
+    first_look : bool, optional
+        Whether to make the first sweeps on the first look alone, and the refined ones from
+        their plan (default: where the first look's sub-cells are at most
+        :data:`FIRST_LOOK_SCALE` of the model's smallest feature, ``prior.feature_scale()``).
 
     Returns
     -------
@@ -582,7 +592,9 @@ def plan_periods(prior, grid: Grid, times, efforts, law="exponential", *, tol: f
     _settings(law, tol, max_iterations)
     maps = CarriedMaps(prior, grid, times, subdivisions=subdivisions, threads=threads)
     start, first_sweeps = None, 0
-    if len(times) > 1 and maps.n > SCREEN:
+    if first_look is None:
+        first_look = max(grid.dx, grid.dy) / SCREEN <= FIRST_LOOK_SCALE * float(prior.feature_scale())
+    if first_look and len(times) > 1 and maps.n > SCREEN:
         # first sweeps on the first look alone (a tenth of the refined maps' points), to the
         # plan those maps give; the refined sweeps then start from it (the optimum is the same
         # whatever the start: the POS is concave in the coverages for random search)
