@@ -685,8 +685,9 @@ def format_plan(scene: str, plan: dict) -> str:
         head = (f"{scene}: plan over {plan['periods']} periods on layer {plan['layer']}: total POS {plan['pos']:.4f} "
                 f"({plan['law']}, {plan['sweeps']} sweeps, {'converged' if plan['converged'] else 'NOT converged'}); "
                 "first detections " + ", ".join(f"{p:.4f}" for p in plan["first_detection"]))
-        return "\n".join(["", head] + [f"  period {k + 1}:" + format_plan(scene, period).replace("\n", "\n  ")[1:]
-                                       for k, period in enumerate(plan["period_plans"])])
+        # each period's lines as a one-period plan's, without the leading blank line and scene name
+        return "\n".join(["", head] + [f"  period {k + 1}: " + format_plan(scene, period)[len(scene) + 3:].replace(
+            "\n", "\n  ") for k, period in enumerate(plan["period_plans"])])
     lines = ["", f"{scene}: plan on layer {plan['layer']} at t = {plan['t']:g} s: {plan['effort_m2'] / 1e6:g} km^2 of "
              f"effort ({plan['law']}), ideal POS {plan['pos']:.4f}, marginal gain {plan['marginal_gain'] * 1e6:.4g} "
              "per km^2"]
