@@ -53,7 +53,7 @@ from .scenes.run_tiled import (
     check_tiled, format_tiled_summary, posterior_worker_need, run_scene_tiled, tiled_maps, tiled_posteriors,
 )
 from .scenes.run_evidence import evidence_paths
-from .scenes.run_plan import plan_paths
+from .scenes.run_plan import plan_paths, sweep_notice
 from .scenes.run import (RUN_ONLY_PROVENANCE, check_exports, check_run_memory, check_run_work, compute, export_paths,
                          plan_outputs, run_scene)
 from .validate import BananagridError, positive
@@ -331,11 +331,13 @@ def _run(args: argparse.Namespace) -> int:
         progress = None if args.quiet else _Progress(scene.name, sys.stderr)
         failed = True
         notice = compile_notice.set(None if progress is None else progress.compiling)
+        sweeps = sweep_notice.set(None if progress is None else progress.note)
         try:
             rows += run_scene(scene, args.out, npz=args.npz, threads=args.threads, progress=progress,
                               max_memory=limit, max_seconds=max_seconds, **exports)
             failed = False
         finally:
+            sweep_notice.reset(sweeps)
             compile_notice.reset(notice)
             if progress is not None:
                 progress.close()
@@ -688,7 +690,16 @@ def format_evidence(rows: list[dict]) -> list[str]:
 
 def format_plan(scene: str, plan: dict) -> str:
     """A scene's plan (:func:`bananagrid.recording.plan.plan_values`) in a few lines: the
-    ideal POS, the effort and marginal gain, and each kind of areas' POS and areas."""
+    ideal POS, the effort and marginal gain, and each kind of areas' POS and areas; a plan over
+    several periods (:func:`bananagrid.recording.plan.periods_values`): its total POS, then each
+    period's so."""
+    if "period_plans" in plan:
+        head = (f"{scene}: plan over {plan['periods']} periods on layer {plan['layer']}: total POS {plan['pos']:.4f} "
+                f"({plan['law']}, {plan['sweeps']} sweeps, {'converged' if plan['converged'] else 'NOT converged'}); "
+                "first detections " + ", ".join(f"{p:.4f}" for p in plan["first_detection"]))
+        # each period's lines as a one-period plan's, without the leading blank line and scene name
+        return "\n".join(["", head] + [f"  period {k + 1}: " + format_plan(scene, period)[len(scene) + 3:].replace(
+            "\n", "\n  ") for k, period in enumerate(plan["period_plans"])])
     lines = ["", f"{scene}: plan on layer {plan['layer']} at t = {plan['t']:g} s: {plan['effort_m2'] / 1e6:g} km^2 of "
              f"effort ({plan['law']}), ideal POS {plan['pos']:.4f}, marginal gain {plan['marginal_gain'] * 1e6:.4g} "
              "per km^2"]
@@ -743,6 +754,12 @@ class _Progress:
             _Progress.open_line = None
             # after a warning the line is restated, so the time is not left alone on a line
             print(f"{self.head if self.broken else ''} {seconds:.2f} s", file=self.stream, flush=True)
+
+    def note(self, text: str) -> None:
+        """Say ``text`` on a line of its own under the open line (a plan's sweeps); the open
+        line is restated with its time when it closes."""
+        _Progress.interrupt()
+        print(f"    {text}", file=self.stream, flush=True)
 
     def compiling(self) -> None:
         """Say on the open line that Warp is compiling kernels (called from a timer thread while

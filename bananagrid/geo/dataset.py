@@ -114,7 +114,10 @@ def raster_dataset(panels: Sequence, frame=None, *, title: str = "", source: str
         each such layer gets ``LAYER_probability`` beside its density.
     coverage : (str, float, Raster), optional
         ``(layer_name, t, effort)``: a search plan's coverage on the same grid (m^2 swept per
-        m^2, ``bg.allocate(...).effort``), written as the variable :data:`COVERAGE_VARIABLE`.
+        m^2, ``bg.allocate(...).effort``), written as the variable :data:`COVERAGE_VARIABLE`; or
+        a list of ``(layer_name, t, effort, attributes)``, a plan over several periods' coverage
+        of each period, written as ``plan_coverage_1``, ``plan_coverage_2``, ... with the
+        attributes (the period, its POS, the plan's).
     posteriors : mapping of (str, float) to Posterior, optional
         ``bg.posterior`` results by ``(layer_name, t)``, at every time of the layers that have
         them (as ``cells``): each such layer gets ``LAYER_posterior`` (the posterior cell
@@ -190,7 +193,11 @@ def raster_dataset(panels: Sequence, frame=None, *, title: str = "", source: str
             {"long_name": f"whether the density of layer {layer} was divided by its captured mass",
              "flag_values": np.array([0, 1], dtype=np.int8), "flag_meanings": "raw normalised"},
         )
-    if coverage is not None:
+    if isinstance(coverage, list):  # a plan over several periods: one variable per period
+        for k, item in enumerate(coverage):
+            data_vars[variable_name(f"{COVERAGE_VARIABLE}_{k + 1}", taken)] = _coverage_variable(xr, *item[:3], grid,
+                                                                                                frame, *item[3:])
+    elif coverage is not None:
         data_vars[variable_name(COVERAGE_VARIABLE, taken)] = _coverage_variable(xr, *coverage, grid, frame)
     attrs = _global_attrs(title, source, frame)
     attrs["bananagrid_grid"] = json.dumps(grid.describe())
@@ -259,13 +266,14 @@ def _posterior_variables(xr, layer: str, posts: list, density, names: dict, tdim
 COVERAGE_VARIABLE = "plan_coverage"
 
 
-def _coverage_variable(xr, layer: str, t: float, effort, grid, frame):
-    """A plan's coverage on the layers' grid, (y, x), m^2 swept per m^2."""
+def _coverage_variable(xr, layer: str, t: float, effort, grid, frame, extra: dict | None = None):
+    """A plan's coverage on the layers' grid, (y, x), m^2 swept per m^2 (``extra``: further
+    attributes, a period's of a plan over several)."""
     if effort.grid.shape != grid.shape or not (np.array_equal(effort.grid.x, grid.x) and np.array_equal(effort.grid.y, grid.y)):
         raise BananagridError("coverage: the plan's grid differs from the layers' grid")
     attrs = {"long_name": f"search effort per unit area of the plan (coverage): layer {layer} at t = {t:g} s",
              "units": "m2 m-2", "cell_methods": "area: mean", "bananagrid_layer": layer, "bananagrid_t": float(t),
-             "bananagrid_provenance": provenance_json(effort.provenance)}
+             "bananagrid_provenance": provenance_json(effort.provenance), **(extra or {})}
     encoding = {}
     if frame is not None:
         attrs["grid_mapping"] = "crs"

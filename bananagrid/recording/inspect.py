@@ -23,7 +23,7 @@ from ..contours import DEFAULT_MASS_LEVELS, cell_regions, mass_regions
 from ..domains.angular_lattice import AngularLattice
 # The readers moved to readback; they stay importable from here for existing callers.
 from .evidence import EVIDENCE_ENTITY
-from .plan import PLAN_ENTITY
+from .plan import PERIODS_ENTITY, PLAN_ENTITY
 from .readback import (
     IMAGE_BUFFER, IMAGE_FORMAT, RecordedCellMap, decode_image, open_recording, plain_cell,
     read_cell_maps, read_depth_image, read_layers, recording_rows, seconds,
@@ -113,11 +113,27 @@ def plan_summary(entities: dict) -> dict | None:
     ``entities``: its numbers (``layer``, ``t``, ``law``, ``effort_m2``, ``pos``,
     ``marginal_gain``, ``map_mass``, ...) and per kind of areas (``rectangles``, ``bands``) the
     plan's ``pos``, ``effort_m2`` and ``areas`` (``probability``, ``pod``, ``pos``,
-    ``track_spacing_m`` each); None when the recording has no plan."""
+    ``track_spacing_m`` each); None when the recording has no plan. A plan over several periods
+    gives its totals (:func:`~bananagrid.recording.plan.periods_values`: ``periods``, ``pos``,
+    ``first_detection``, ...) and ``period_plans``: each period's numbers as above, by time."""
     recorded = entities.get(f"/{PLAN_ENTITY}/values", {}).get("values")
     if not recorded:
         return None
-    values = dict(recorded[-1]["values"])
+    totals = entities.get(f"/{PLAN_ENTITY}/{PERIODS_ENTITY}/values", {}).get("values")
+    if totals:
+        out = {key: (_listed(value) if key in PERIODS_LISTS else value)
+               for key, value in totals[-1]["values"].items()}
+        out["period_plans"] = sorted((_one_plan(dict(item["values"])) for item in recorded), key=lambda v: v["t"])
+        return out
+    return _one_plan(dict(recorded[-1]["values"]))
+
+
+#: A plan over several periods' numbers that are lists (one item comes back as a scalar).
+PERIODS_LISTS = ("times_s", "efforts_m2", "first_detection", "period_pos", "pos_by_sweep")
+
+
+def _one_plan(values: dict) -> dict:
+    """One recorded plan's (or period's) numbers, its areas gathered per kind."""
     out = {key: value for key, value in values.items() if not key.startswith(("rectangles_", "bands_"))}
     for name in ("rectangles", "bands"):
         if f"{name}_pos" not in values:
@@ -401,7 +417,15 @@ def format_inspection(info: dict) -> str:
                       f"    POS                    {item['pos']:.6f}" + (f" given {given}" if given else "")
                       + (f" (each search alone: {own})" if own else ""),
                       f"    probability of the evidence {item['normaliser']:.6g}"]
-    if info.get("plan"):
+    if info.get("plan") and "period_plans" in info["plan"]:
+        plan = info["plan"]
+        lines += ["", f"where to look next (the recorded plan over {plan['periods']} periods)",
+                  f"  layer {plan['layer']}, law {plan['law']}: total POS {plan['pos']:.6f} after {plan['sweeps']} "
+                  f"sweeps ({'converged' if plan['converged'] else 'not converged'} to {plan['tol']:g})"]
+        for k, period in enumerate(plan["period_plans"]):
+            lines += [f"  period {k + 1}: first detection {period.get('first_detection', math.nan):.6f}"]
+            lines += _plan_lines(period)
+    elif info.get("plan"):
         lines += ["", "where to look next (the recorded plan)"] + _plan_lines(info["plan"])
     lines += ["", "timelines"]
     lines += [_timeline_line(name, t) for name, t in info["timelines"].items()] or ["  (none: static only)"]

@@ -13,6 +13,12 @@ Under ``plan`` (north up, world metres):
 - ``plan/summary``: a markdown summary (POS, ideal POS, effort, marginal gain, each area), and
   ``plan/values``: the same numbers as ``AnyValues`` (what ``bananagrid inspect`` reports,
   :func:`plan_values`).
+
+A plan over several periods logs the above once per period at the period's time (its map is
+the target the other periods miss, its POS curve what more effort in it would add), and under
+``plan/periods`` (:func:`log_plan_periods`): ``pos_by_sweep``, the total POS after each update
+of the iteration; ``first_detection``, each period's probability of first detecting the
+target; ``summary`` and ``values`` (:func:`periods_values`'s flat numbers).
 """
 
 from __future__ import annotations
@@ -28,12 +34,14 @@ from .blueprint import HOVER_NOTE
 from .entities import entity_path, strict
 from .images import image_from_values, log_north_up, pixel_to_world
 
-__all__ = ["PLAN_ENTITY", "POS_CURVE_POINTS", "POS_CURVE_SPAN", "POS_CURVE_STEPS", "log_plan", "plan_values", "plan_markdown",
-           "plan_view", "plan_extent", "pos_curve_efforts",
-           "overlay_image"]
+__all__ = ["PLAN_ENTITY", "PERIODS_ENTITY", "POS_CURVE_POINTS", "POS_CURVE_SPAN", "POS_CURVE_STEPS", "log_plan",
+           "plan_values", "plan_markdown", "plan_view", "plan_extent", "pos_curve_efforts", "overlay_image",
+           "periods_values", "periods_markdown", "log_plan_periods"]
 
 #: Where a scene's plan is recorded.
 PLAN_ENTITY = "plan"
+#: Where a plan over several periods records its totals, under :data:`PLAN_ENTITY`.
+PERIODS_ENTITY = "periods"
 #: The recorded POS curve: from no effort to :data:`POS_CURVE_SPAN` times the plan's, in steps
 #: of the plan's effort over :data:`POS_CURVE_STEPS`.
 POS_CURVE_SPAN = 3
@@ -81,8 +89,12 @@ def plan_values(allocation, rectangles=None, bands=None, *, layer: str = "", t: 
 
 def plan_markdown(values: dict) -> str:
     """:func:`plan_values` as the plan's markdown summary."""
+    head = f"## Search plan: layer {values['layer']} at t = {values['t']:g} s"
+    if "period" in values:
+        head = (f"## Search plan, period {values['period']} of {values['periods']}: layer {values['layer']} at "
+                f"t = {values['t']:g} s")
     out = [
-        f"## Search plan: layer {values['layer']} at t = {values['t']:g} s", "",
+        head, "",
         f"- **Effort** {values['effort_m2'] / 1e6:.6g} km² ({values['effort_m2']:.6g} m²: sweep width × track "
         f"length), detection law `{values['law']}`",
         f"- **Ideal POS** {values['pos']:.4f}: the effort spread cell by cell at the optimum (of the whole "
@@ -90,6 +102,13 @@ def plan_markdown(values: dict) -> str:
         f"- **Marginal gain** {values['marginal_gain'] * 1e6:.4g} POS per km² of further effort "
         f"({values['marginal_gain']:.4g} per m²)",
     ]
+    if "period" in values:
+        out[2:4] = [
+            out[2],
+            f"- **POS of this period** {values['pos']:.4f}: that it finds the target the other periods miss (its map "
+            f"holds {values['map_mass']:.6f}); it detects the target first with probability "
+            f"{values['first_detection']:.4f}, and the plan's total POS is {values['plan_pos']:.4f}",
+        ]
     for name in ("rectangles", "bands"):
         if f"{name}_pos" not in values:
             continue
@@ -117,7 +136,7 @@ def _label(name: str, k: int) -> str:
 
 
 def log_plan(rec: rr.RecordingStream, cells: Raster, allocation, rectangles=None, bands=None, *,
-             layer: str = "", t: float = 0.0, entity: str = PLAN_ENTITY) -> dict:
+             layer: str = "", t: float = 0.0, entity: str = PLAN_ENTITY, extra: dict | None = None) -> dict:
     """Log a plan under ``entity`` (see the module) at the recording's current time; returns
     :func:`plan_values`.
 
@@ -133,9 +152,12 @@ def log_plan(rec: rr.RecordingStream, cells: Raster, allocation, rectangles=None
         ``bg.search_regions(allocation, ...)``.
     layer, t : str, float
         Which layer's map at which time (s), for the summary.
+    extra : dict, optional
+        Further numbers of the plan (a period's of a plan over several: ``period``,
+        ``periods``, ``first_detection``, ``plan_pos``), into the summary and the values.
     """
     root = entity_path(entity)
-    values = plan_values(allocation, rectangles, bands, layer=layer, t=t)
+    values = {**plan_values(allocation, rectangles, bands, layer=layer, t=t), **(extra or {})}
     coverage = np.asarray(allocation.effort.values, dtype=np.float64)
     top = float(coverage.max())
     peak = float(np.max(cells.values))
@@ -170,6 +192,59 @@ def log_plan(rec: rr.RecordingStream, cells: Raster, allocation, rectangles=None
         rec.log(f"{root}/summary", rr.TextDocument(plan_markdown(values), media_type=rr.MediaType.MARKDOWN))
         rec.log(f"{root}/values", rr.AnyValues(**values))
     return values
+
+
+def periods_values(plan, period_values: Sequence[dict] = (), *, layer: str = "") -> dict:
+    """A plan over several periods' numbers (``bg.plan_periods``'s :class:`PeriodPlan`):
+    ``layer``, ``law``, ``periods``, ``times_s``, ``efforts_m2``, ``effort_m2`` (their sum),
+    ``pos`` (the total POS), ``first_detection`` (each period's first detections, summing to
+    ``pos``), ``period_pos`` (each period's POS of the target the others miss), ``sweeps``,
+    ``converged``, ``tol``, ``pos_by_sweep`` (the total POS after each update), ``t`` (the last
+    period's time), and ``period_plans``: each period's :func:`plan_values` (``period_values``)."""
+    return {
+        "layer": layer, "law": plan.law.name, "periods": len(plan.times), "times_s": [float(t) for t in plan.times],
+        "t": float(plan.times[-1]), "efforts_m2": [float(z) for z in plan.efforts],
+        "effort_m2": float(sum(plan.efforts)), "pos": float(plan.pos),
+        "first_detection": [float(p) for p in plan.period_pos],
+        "period_pos": [float(a.pos) for a in plan.allocations], "sweeps": int(plan.sweeps),
+        "converged": bool(plan.converged), "tol": float(plan.tol), "pos_by_sweep": [float(p) for p in plan.history],
+        "period_plans": [dict(v) for v in period_values],
+    }
+
+
+def periods_markdown(values: dict) -> str:
+    """:func:`periods_values` as a markdown summary: the total POS and each period's numbers."""
+    out = [f"## Search plan over {values['periods']} periods: layer {values['layer']}", "",
+           f"- **Total POS** {values['pos']:.4f}: that some period detects the target (detection law "
+           f"`{values['law']}`), with the effort {' + '.join(f'{z / 1e6:.6g}' for z in values['efforts_m2'])} km² "
+           f"at t = {', '.join(f'{t:g}' for t in values['times_s'])} s",
+           f"- **Iteration** {values['sweeps']} sweeps over the periods (Brown's forward-and-backward), "
+           f"{'converged' if values['converged'] else 'NOT converged'} to {values['tol']:g} of POS per sweep", "",
+           "| period | t [s] | effort [km²] | first detection | POS of the target the others miss |",
+           "|---|---|---|---|---|"]
+    for k, (t, z, first, pos) in enumerate(zip(values["times_s"], values["efforts_m2"], values["first_detection"],
+                                               values["period_pos"])):
+        out.append(f"| {k + 1} | {t:g} | {z / 1e6:.6g} | {first:.4f} | {pos:.4f} |")
+    out += ["", "**Reading the plan.** Each period is on the timeline at its time: its map is where the target is "
+            "then if the other periods miss it, the colour the effort spread over it. The first detections sum to "
+            "the total POS; the POS by sweep is the total after each update of one period's effort."]
+    return "\n".join(out) + "\n"
+
+
+def log_plan_periods(rec: rr.RecordingStream, plan, values: dict, *, entity: str = PLAN_ENTITY) -> None:
+    """Log a plan over several periods' totals under ``entity``/:data:`PERIODS_ENTITY` at the
+    recording's current time (see the module): ``values`` from :func:`periods_values`."""
+    root = f"{entity_path(entity)}/{PERIODS_ENTITY}"
+    flat = {key: value for key, value in values.items() if key != "period_plans"}
+    history = np.asarray(plan.history, dtype=np.float64)
+    with strict():
+        rec.log(f"{root}/pos_by_sweep", rr.BarChart(history, abscissa=np.arange(1, history.size + 1) / len(plan.times),
+                                                    color=(255, 140, 0)))
+        rec.log(f"{root}/first_detection", rr.BarChart(np.asarray(plan.period_pos, dtype=np.float64),
+                                                       abscissa=np.arange(1, len(plan.times) + 1),
+                                                       color=RECTANGLE_COLOUR))
+        rec.log(f"{root}/summary", rr.TextDocument(periods_markdown(values), media_type=rr.MediaType.MARKDOWN))
+        rec.log(f"{root}/values", rr.AnyValues(**flat))
 
 
 def overlay_image(probability: np.ndarray, coverage: np.ndarray) -> np.ndarray:
@@ -249,11 +324,12 @@ def plan_extent(allocation, rectangles=None, bands=None, margin: float = 0.15) -
 
 
 def plan_view(extent: tuple[float, float, float, float] | None = None, entity: str = PLAN_ENTITY, *,
-              rectangles: bool = True, bands: bool = False) -> rrb.Tabs:
+              rectangles: bool = True, bands: bool = False, periods: bool = False) -> rrb.Tabs:
     """The plan's panel: the coverage over the probability map with the rectangles (the active
     tab, opened on ``extent``) and, in a tab of their own, the bands (each with their tracks and
     labels; one tab each keeps the labels apart), the coverage alone, the map searched, the POS
-    curve and the summary."""
+    curve and the summary; with ``periods`` (a plan over several), the POS by sweep, each
+    period's first detections and the plan's summary."""
     root = entity_path(entity)
     bounds = None
     if extent is not None:  # the view's y axis points down (north up): world y maps to -y
@@ -271,6 +347,11 @@ def plan_view(extent: tuple[float, float, float, float] | None = None, entity: s
                           name=f"plan · the map searched (cell probabilities) · {HOVER_NOTE}", visual_bounds=bounds),
         rrb.BarChartView(origin=f"/{root}/pos_curve", name="plan · POS vs effort (km²)"),
         rrb.TextDocumentView(origin=f"/{root}/summary", name="plan · summary"),
+        *(() if not periods else (
+            rrb.BarChartView(origin=f"/{root}/{PERIODS_ENTITY}/pos_by_sweep", name="plan · total POS by sweep"),
+            rrb.BarChartView(origin=f"/{root}/{PERIODS_ENTITY}/first_detection",
+                             name="plan · first detection by period"),
+            rrb.TextDocumentView(origin=f"/{root}/{PERIODS_ENTITY}/summary", name="plan · periods"))),
         name="plan",
     )
 

@@ -31,10 +31,13 @@ from ..contours import DEFAULT_MASS_LEVELS, mass_levels
 from ..domains.angular_lattice import AngularLattice
 from ..domains.grid import Grid
 from ..domains.region import Region
+from ..engine.carried import carries
+from ..evidence.posterior import NO_PATHS
 from ..geo.frame import DEFAULT_MAX_SCALE_ERROR, GeoFrame
 from ..geo.inputs import PASS_MMSI, read_bearings, read_track
 from ..models.registry import MODEL_KINDS, ModelKind, Registry, installed_kinds
 from ..planning.detection import LAWS
+from ..planning.periods import TOL
 from ..planning.rectangles import MAX_RECTANGLES
 from ..planning.regions import MAX_BANDS
 from ..protocol import DensityModel
@@ -70,22 +73,26 @@ OUTPUT_KEYS = ("mass_levels", "contour_levels", "min_mass", "normalise", "dtype"
 #: ``[plan]``: where to look next on one layer's map at one time, ``(key, type, unit, default,
 #: allowed)`` each; ``docs/scenes.md`` is generated from it (:mod:`bananagrid.scenes.docs`).
 PLAN_TABLE = (
-    ("effort", "number", "m^2", "required (or `effort_km2`)",
-     "finite and > 0: the effort of one period, sweep width times track length"),
-    ("effort_km2", "number", "km^2", "instead of `effort`", "as `effort`, in km^2"),
+    ("effort", "number or list", "m^2", "required (or `effort_km2`)",
+     "finite and > 0: the effort of one period, sweep width times track length; a list: one per period "
+     "(with `t` a list as long), a moving target's plan over the periods (cat and butterly layers)"),
+    ("effort_km2", "number or list", "km^2", "instead of `effort`", "as `effort`, in km^2"),
     ("sweep_width", "number", "m", "required with `rectangles` or `bands`",
      "finite and > 0: the sensor's sweep width W; an area's track spacing is W / its coverage"),
     ("law", "string", "", '`"exponential"`', ", ".join(f'`"{name}"`' for name in LAWS)
      + ": the detection law of the coverage (random search, parallel sweeps under the inverse-cube law, definite range)"),
     ("rectangles", "integer", "", "`0` (none)", f"0 to {MAX_RECTANGLES}: rectangles a crew can fly, any orientation"),
     ("bands", "integer", "", "`0` (none)", f"0 to {MAX_BANDS}: bands of cells by coverage, each at one track spacing"),
-    ("t", "number", "s", "the scene's last time", "a time of the scene's timeline (`scene.times`, or the layer's `t`)"),
+    ("t", "number or list", "s", "the scene's last time",
+     "a time of the scene's timeline (`scene.times`, or the layer's `t`); a list: each period's, increasing"),
     ("layer", "string", "", "the first layer", "the name of a layer of the scene"),
+    ("tol", "number", "", "`1e-9`", "several periods only: finite and > 0, the iteration stops when a sweep over the "
+     "periods raises the total POS by less than this"),
 )
 PLAN_KEYS = tuple(row[0] for row in PLAN_TABLE)
-#: Why a plan takes one effort and one time.
-SEVERAL_PERIODS = ("plans over several periods need the evidence of each period's search carried through the motion "
-                   "model (not yet available); give one effort and one t")
+#: Why a plan over several periods is refused after ``[[evidence]]``.
+SEVERAL_PERIODS = ("a plan over several periods starts from the layer's prior (the searches already flown are not yet "
+                   "carried into it); drop the [[evidence]] or give one effort and one t")
 
 
 @dataclass(frozen=True)
@@ -166,22 +173,29 @@ class RadialOutput:
 class PlanSpec:
     """``[plan]``: search effort spread over one layer's cell probabilities at one time, and the
     areas a crew can fly (:func:`bananagrid.allocate`, :func:`bananagrid.search_rectangles`,
-    :func:`bananagrid.search_regions`).
+    :func:`bananagrid.search_regions`); or, with several periods, a moving target's plan over
+    them (:func:`bananagrid.plan_periods`), each period's areas from its own allocation.
 
     Attributes
     ----------
     layer : str
         The layer whose map is searched.
     t : float
-        Its time, s (a time of the scene's timeline).
+        Its time, s (a time of the scene's timeline); with several periods, the last one's.
     effort : float
-        Total effort of the period, m^2 (sweep width times track length).
+        Total effort of the period, m^2 (sweep width times track length); with several
+        periods, their sum.
     law : str
         The detection law's name.
     sweep_width : float or None
         W, m (None when no areas are asked for).
     rectangles, bands : int
-        How many rectangles and bands (0 for none).
+        How many rectangles and bands (0 for none; per period).
+    times, efforts : tuple of float
+        Several periods: each one's time (increasing, on the timeline) and effort (m^2); empty
+        for one period.
+    tol : float
+        Several periods: the iteration's convergence (:func:`bananagrid.plan_periods`'s ``tol``).
     """
 
     layer: str
@@ -191,11 +205,24 @@ class PlanSpec:
     sweep_width: float | None = None
     rectangles: int = 0
     bands: int = 0
+    times: tuple = ()
+    efforts: tuple = ()
+    tol: float = TOL
 
     @property
     def areas(self) -> bool:
         """Whether the plan has areas a crew can fly (rectangles or bands)."""
         return self.rectangles > 0 or self.bands > 0
+
+    @property
+    def several(self) -> bool:
+        """Whether the plan is over several periods (:func:`bananagrid.plan_periods`)."""
+        return len(self.times) > 1
+
+    @property
+    def periods(self) -> tuple:
+        """``(t, effort)`` of each period (one for a one-period plan)."""
+        return tuple(zip(self.times, self.efforts)) if self.several else ((self.t, self.effort),)
 
 
 @dataclass(frozen=True)
@@ -467,6 +494,8 @@ def _build(doc: dict, text: str, source: str, kinds: Registry, tiled: bool = Fal
     timeline = times or tuple(layer.params.get("t", 0.0) for layer in layers)
     evidence = (parse_evidence(doc["evidence"], timeline, geo, directory or Path.cwd()) if "evidence" in doc
                 else ())
+    if plan is not None and plan.several and evidence:
+        raise SceneKeyError(f"plan.t = {show(list(plan.times))}: {SEVERAL_PERIODS}")
     if geo is not None:  # every UTC time of the scene inside the calendar
         try:
             geo.check_elapsed(times or [layer.params.get("t", 0.0) for layer in layers])
@@ -482,13 +511,11 @@ def _build(doc: dict, text: str, source: str, kinds: Registry, tiled: bool = Fal
 
 
 def _plan(value, layers, times) -> PlanSpec:
-    """``[plan]``: one period's effort on one layer's map at one time of the timeline, the
-    detection law, the sweep width and how many rectangles and bands."""
+    """``[plan]``: one period's effort on one layer's map at one time of the timeline, or one
+    effort per period at increasing times of it (a CAT or Butterly layer's moving-target plan),
+    the detection law, the sweep width and how many rectangles and bands."""
     table = keys.table({"plan": value}, "plan")
     check_keys(table, PLAN_KEYS, "plan")
-    for key in ("effort", "effort_km2", "t"):
-        if isinstance(table.get(key), list):
-            raise SceneKeyError(f"plan.{key} = {show(table[key])}: {SEVERAL_PERIODS}")
     if "effort" in table and "effort_km2" in table:
         raise SceneKeyError(f"plan: give effort (m^2) or effort_km2 (km^2), not both (effort = {show(table['effort'])}, "
                             f"effort_km2 = {show(table['effort_km2'])})")
@@ -496,13 +523,9 @@ def _plan(value, layers, times) -> PlanSpec:
         raise SceneKeyError("plan.effort: missing; expected the effort of the period in m^2 (or effort_km2 in km^2), "
                             "sweep width times track length")
     key = "effort" if "effort" in table else "effort_km2"
-    effort = keys.number(table[key], f"plan.{key}")
-    if not (math.isfinite(effort) and effort > 0.0):
-        raise SceneKeyError(f"plan.{key} = {show(table[key])}: must be finite and > 0 "
-                            f"({'m^2' if key == 'effort' else 'km^2'})")
-    effort = effort if key == "effort" else effort * 1.0e6
-    if not math.isfinite(effort):  # a finite km^2 beyond the largest float in m^2
-        raise SceneKeyError(f"plan.effort_km2 = {show(table[key])}: too large (not finite in m^2)")
+    several = isinstance(table[key], list) or isinstance(table.get("t"), list)
+    efforts = [_plan_effort(v, f"plan.{key}[{k}]" if isinstance(table[key], list) else f"plan.{key}", key)
+               for k, v in enumerate(table[key] if isinstance(table[key], list) else [table[key]])]
     law = table.get("law", "exponential")
     if not isinstance(law, str) or law not in LAWS:
         raise SceneKeyError(f"plan.law = {show(law)}: must be one of {', '.join(map(show, LAWS))}")
@@ -527,15 +550,68 @@ def _plan(value, layers, times) -> PlanSpec:
                             f"{', '.join(map(show, names))})")
     layer = layers[names.index(name)]
     timeline = times if times is not None else (layer.params.get("t", 0.0),)
-    if "t" in table:
-        t = keys.number(table["t"], "plan.t")
+    where = "scene.times" if times is not None else f"layers.{name}.t"
+    if not several:
+        if "t" in table:
+            t = keys.number(table["t"], "plan.t")
+            if t not in timeline:
+                raise SceneKeyError(f"plan.t = {show(table['t'])}: not a time of the scene's timeline ({where}: "
+                                    f"{', '.join(f'{v:g}' for v in timeline)} s)")
+        else:
+            t = max(timeline)
+        if "tol" in table:
+            raise SceneKeyError(f"plan.tol = {show(table['tol'])}: only for a plan over several periods (t and effort "
+                                "as lists); one period's allocation is exact")
+        return PlanSpec(layer=name, t=float(t), effort=efforts[0], law=law, sweep_width=width, **counts)
+    if "t" not in table:
+        raise SceneKeyError(f"plan.t: missing; {len(efforts)} efforts (plan.{key}) need a list of as many increasing "
+                            "times of the scene's timeline (one per period)")
+    if not isinstance(table["t"], list):
+        raise SceneKeyError(f"plan.t = {show(table['t'])}: {len(efforts)} efforts (plan.{key}) need a list of as many "
+                            "increasing times of the scene's timeline (one per period)")
+    if not isinstance(table[key], list):
+        raise SceneKeyError(f"plan.{key} = {show(table[key])}: {len(table['t'])} times (plan.t) need a list of as "
+                            "many efforts (one per period)")
+    if len(table["t"]) != len(efforts):
+        raise SceneKeyError(f"plan.t: {len(table['t'])} times for {len(efforts)} efforts (plan.{key}); expected one "
+                            "time per period")
+    plan_times = []
+    for k, item in enumerate(table["t"]):
+        t = keys.number(item, f"plan.t[{k}]")
         if t not in timeline:
-            where = "scene.times" if times is not None else f"layers.{name}.t"
-            raise SceneKeyError(f"plan.t = {show(table['t'])}: not a time of the scene's timeline ({where}: "
+            raise SceneKeyError(f"plan.t[{k}] = {show(item)}: not a time of the scene's timeline ({where}: "
                                 f"{', '.join(f'{v:g}' for v in timeline)} s)")
-    else:
-        t = max(timeline)
-    return PlanSpec(layer=name, t=float(t), effort=effort, law=law, sweep_width=width, **counts)
+        if plan_times and not t > plan_times[-1]:
+            raise SceneKeyError(f"plan.t[{k}] = {show(item)}: not after plan.t[{k - 1}] = {plan_times[-1]:g}; the "
+                                "periods' times must increase")
+        plan_times.append(t)
+    tol = TOL
+    if "tol" in table:
+        tol = keys.number(table["tol"], "plan.tol")
+        if not (math.isfinite(tol) and tol > 0.0):
+            raise SceneKeyError(f"plan.tol = {show(table['tol'])}: must be finite and > 0 (a change of POS)")
+    if len(plan_times) == 1:  # a list of one period: the one-period plan
+        return PlanSpec(layer=name, t=plan_times[0], effort=efforts[0], law=law, sweep_width=width, **counts)
+    if layer.kind in NO_PATHS:
+        raise SceneKeyError(f"plan.layer = {show(name)}: a {layer.kind} layer, an approximation with no path per "
+                            f"parameter, so the periods' searches cannot be carried between their times; use "
+                            f"{NO_PATHS[layer.kind]} (model = \"cat\")")
+    if not carries(layer.model(plan_times[0])):
+        raise SceneKeyError(f"plan.layer = {show(name)}: a {layer.kind} layer; plans over several periods need a "
+                            "motion model whose paths carry the searches (a cat or butterly layer)")
+    return PlanSpec(layer=name, t=plan_times[-1], effort=math.fsum(efforts), law=law, sweep_width=width, **counts,
+                    times=tuple(plan_times), efforts=tuple(efforts), tol=tol)
+
+
+def _plan_effort(value, path: str, key: str) -> float:
+    """One period's effort in m^2 from ``plan.effort`` (m^2) or ``plan.effort_km2`` (km^2)."""
+    effort = keys.number(value, path)
+    if not (math.isfinite(effort) and effort > 0.0):
+        raise SceneKeyError(f"{path} = {show(value)}: must be finite and > 0 ({'m^2' if key == 'effort' else 'km^2'})")
+    effort = effort if key == "effort" else effort * 1.0e6
+    if not math.isfinite(effort):  # a finite km^2 beyond the largest float in m^2
+        raise SceneKeyError(f"{path} = {show(value)}: too large (not finite in m^2)")
+    return effort
 
 
 def _radial(value, layers) -> RadialOutput:

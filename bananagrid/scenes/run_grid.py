@@ -54,7 +54,7 @@ from .run_evidence import (
     evidence_bytes_per_cell, evidence_paths, record_evidence_marks, record_posterior, scene_posterior,
     write_evidence_geojson,
 )
-from .run_plan import ScenePlan, plan_label, plan_paths, plan_scene, record_plan, write_plan_geojson
+from .run_plan import ScenePlan, plan_coverage, plan_label, plan_paths, plan_scene, record_plan, write_plan_geojson
 
 __all__ = ["GridRun", "compute", "array_key", "check_exports", "check_run_memory", "check_run_work",
            "RUN_BYTES_PER_CELL", "EXPORT_BYTES_PER_MAP_CELL", "PROBABILITY_BYTES_PER_CELL", "PLAN_BYTES_PER_CELL",
@@ -137,7 +137,7 @@ class GridRun:
             plan = self.plan
             write_exports(scene, self.out_dir, self.panels, **self.exports, areas=self.areas, cells=self.cells,
                           marks=self.marks, stage=self.outputs.stage,
-                          coverage=None if plan is None else (scene.plan.layer, scene.plan.t, plan.allocation.effort),
+                          coverage=plan_coverage(scene, plan),
                           posteriors=self.posteriors)
             for path in plan_paths(scene, self.out_dir, geojson=self.exports["geojson"]):
                 write_plan_geojson(path, scene, plan, stage=self.outputs.stage)
@@ -252,6 +252,8 @@ PROBABILITY_BYTES_PER_CELL = 64
 #: 104 (three rectangles and three bands) bytes per cell of Python allocations (tracemalloc, on
 #: geo_ship's 172,800 cells: its map's cell probabilities, the allocation's arrays and sorted
 #: copies), and its recorded images take 11 more (two float32 images and an RGB one); rounded up.
+#: A plan over several periods takes it per period (each period's map, coverage, POD, ln(1 - POD)
+#: and the prior's cells at its time: 40 bytes, below its allocation's and areas').
 PLAN_BYTES_PER_CELL = 160
 #: The cell probabilities' image under a layer's entity (named in the summary's note).
 CELL_IMAGE = CELL_TAB
@@ -265,7 +267,7 @@ def check_run_memory(scene: Scene, *, exports: bool = False, limit: float | None
     kept = len(scene.jobs()) * (2 if scene.cell_probabilities else 1)  # maps kept for the files: densities, cells
     per_cell = (RUN_BYTES_PER_CELL + (EXPORT_BYTES_PER_MAP_CELL * kept if exports else 0)
                 + (PROBABILITY_BYTES_PER_CELL if scene.cell_probabilities else 0)
-                + (PLAN_BYTES_PER_CELL if scene.plan is not None else 0)
+                + (PLAN_BYTES_PER_CELL * len(scene.plan.periods) if scene.plan is not None else 0)
                 + evidence_bytes_per_cell(scene))
     return check_memory(cells, per_cell, f"{scene.source}: a grid of {scene.grid.nx} x {scene.grid.ny} = {cells:,} cells",
                         limit=limit, option="--max-memory GB")
@@ -283,9 +285,11 @@ def check_run_work(scene: Scene, *, threads: int | None = None, limit: float | N
         core_seconds += sum(probability_work(layer.model(t), scene.grid)[0] for layer, t in jobs)
     if scene.evidence:  # each map's posterior: its prior's cell probabilities first
         core_seconds += sum(probability_work(layer.model(t), scene.grid)[0] for layer, t in jobs)
-    if scene.plan is not None:  # the plan's map: the layer's cell probabilities at its time
+    if scene.plan is not None:  # the plan's maps: the layer's cell probabilities at each period's time
         planned = next(layer for layer in scene.layers if layer.name == scene.plan.layer)
-        core_seconds += probability_work(planned.model(scene.plan.t), scene.grid)[0]
+        # (a plan over several periods then sweeps over carried maps, a number of sweeps not
+        # known before: the progress line says each)
+        core_seconds += sum(probability_work(planned.model(t), scene.grid)[0] for t, _ in scene.plan.periods)
     return check_work(core_seconds, check_threads(threads),
                       f"{scene.source}: {len(jobs)} layer map{'s' * (len(jobs) != 1)} of {cells:,} cells",
                       limit=limit, option="--max-seconds S")
@@ -386,7 +390,8 @@ def _with_plan(geographic, scene: Scene, plan_frame: tuple | None, layer_frames:
     if scene.evidence:
         panels.append(evidence_view([layer.name for layer in scene.layers], _evidence_frame(scene, layer_frames)))
     if scene.plan is not None:
-        panels.append(plan_view(plan_frame, rectangles=scene.plan.rectangles > 0, bands=scene.plan.bands > 0))
+        panels.append(plan_view(plan_frame, rectangles=scene.plan.rectangles > 0, bands=scene.plan.bands > 0,
+                                periods=scene.plan.several))
     if geographic is not None:
         panels.append(geographic)
     if len(panels) < 2:

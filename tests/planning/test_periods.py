@@ -5,6 +5,7 @@ each period's own single-period plan."""
 
 from __future__ import annotations
 
+import functools
 import math
 
 import numpy as np
@@ -13,6 +14,7 @@ from hypothesis import HealthCheck, given, seed, settings
 from hypothesis import strategies as st
 
 import bananagrid as bg
+from bananagrid.planning.detection import EXPONENTIAL
 from bananagrid.planning.periods import SampledPaths, iterate_periods, log_miss
 from path_oracle import butterly_paths, cat_paths, detection_probability
 
@@ -144,3 +146,66 @@ def test_bad_input_is_one_line_naming_it():
         assert "\n" not in str(err.value)
     with pytest.raises(bg.BananagridError, match=r"^positions: shape \(100, 2\)"):
         SampledPaths(positions[:, 0, :], GRID)
+
+
+START_TIMES, START_EFFORTS = (300.0, 600.0, 900.0), (2e6, 3e6, 2e6)
+
+
+@functools.lru_cache(maxsize=1)
+def _start_case():
+    """5,000 Butterly paths and their plan from no search."""
+    return _plan_case(butterly_sample(5000, START_TIMES, 3), START_TIMES, START_EFFORTS)
+
+
+@seed(20261127)
+@settings(max_examples=5, deadline=None, database=None, suppress_health_check=[HealthCheck.too_slow])
+@given(spread=st.floats(0.0, 3.0), shares=st.lists(st.floats(0.05, 1.0), min_size=3, max_size=3), data=st.data())
+def test_a_start_anywhere_reaches_the_same_plan_its_history_from_the_starts_pos(spread, shares, data):
+    """The iteration from any start (coverages of any shape and total, here random ones): its
+    history begins at or above the start's own POS on the sample (its first detections, exact
+    there) and never decreases; the plan reaches the POS of the plan from no search (the
+    exponential law's POS is concave: one optimum value) to within the sweeps' last gains; and a
+    start at a plan's own coverages gains under ``tol`` in one sweep and stops. ``progress``
+    hears each sweep's POS, the history's value at the sweep's end."""
+    paths, plan = _start_case()
+    rng = np.random.default_rng(data.draw(st.integers(0, 2**32 - 1)))
+    start = [share * 1e-3 * rng.random(GRID.shape) ** (1.0 + spread) for share in shares]
+    heard = []
+    again = iterate_periods(paths, GRID, START_EFFORTS, times=START_TIMES, start=start,
+                            progress=lambda sweep, pos: heard.append((sweep, pos)))
+    own = paths.pos([log_miss(EXPONENTIAL, s) for s in start])
+    assert again.history[0] >= own - 1e-12 and np.all(np.diff(again.history) >= -1e-13)  # rounding of 900 cells
+    assert again.converged
+    # both stop when a sweep gains under 1e-9 (TOL); the iteration's gains shrink by some 0.5 a
+    # sweep here, so each is within ~1e-9 of the optimum: 1e-8 leaves room
+    assert again.pos == pytest.approx(plan.pos, abs=1e-8)
+    assert heard == [(k + 1, again.history[(k + 1) * 3 - 1]) for k in range(again.sweeps)]
+    held = iterate_periods(paths, GRID, START_EFFORTS, times=START_TIMES, start=plan.coverage)
+    # the plan stopped on a sweep that gained under TOL = 1e-9: one more gains under it too
+    assert held.sweeps == 1 and held.converged and plan.pos - 1e-12 <= held.pos <= plan.pos + 1e-9
+
+
+def test_a_start_of_another_length_is_one_line():
+    positions = butterly_sample(1000, (300.0, 600.0), 3)
+    with pytest.raises(bg.BananagridError, match=r"^start: 1 coverages for 2 periods; expected one per period$"):
+        iterate_periods(SampledPaths(positions, GRID), GRID, (1e6, 1e6), start=[np.zeros(GRID.shape)])
+
+
+@seed(20261127)
+@settings(max_examples=60, deadline=None, database=None)
+@given(errors=st.lists(st.one_of(st.just(0.0), st.floats(1e-14, 1e-6)), min_size=1, max_size=60),
+       budget=st.floats(0.0, 1e-5))
+def test_the_cells_left_unrefined_hold_at_most_the_budget(errors, budget):
+    """Refinement skips the cells of smallest error whose errors sum to at most the budget, and
+    only those: every refined cell's error is at least every skipped one's, cells without error
+    are never refined, and one more skipped cell would break the budget."""
+    from bananagrid.planning.periods import _refined
+    error = np.asarray(errors)
+    refine = _refined(error, budget)
+    skipped = (error > 0.0) & ~refine
+    assert not refine[error == 0.0].any()
+    assert error[skipped].sum() <= budget
+    if refine.any() and skipped.any():
+        assert error[refine].min() >= error[skipped].max()
+    if refine.any():
+        assert error[skipped].sum() + error[refine].min() > budget * (1 - 1e-12) or error[refine].min() > budget

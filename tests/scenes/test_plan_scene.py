@@ -20,7 +20,7 @@ from bananagrid.recording.readback import open_recording, recording_rows
 from bananagrid.recording.timeline import ELAPSED, UTC, elapsed_nanos, utc_nanos
 from bananagrid.recording.inspect import format_inspection, inspect_recording
 from bananagrid.recording.readback import read_depth_image
-from bananagrid.scenes.load import SEVERAL_PERIODS, parse_scene
+from bananagrid.scenes.load import parse_scene
 from bananagrid.scenes.run import plan_outputs, run_scene
 
 #: A vessel 10 and 15 minutes after its fix (as scenes/geo_ship.toml), on 150 m cells: 4,800
@@ -238,9 +238,9 @@ BAD = [
     ("effort = 1e6\nsweep_width = 1\nbands = true", "plan.bands = true: expected an integer"),
     ("effort = 1e6\nt = 700", "plan.t = 700: not a time of the scene's timeline (scene.times: 600, 900 s)"),
     ('effort = 1e6\nlayer = "boat"', 'plan.layer = "boat": not a layer of this scene (those are: "cat", "still")'),
-    ("effort = [1e6, 2e6]", f"plan.effort = [1000000.0, 2000000.0]: {SEVERAL_PERIODS}"),
-    ("effort_km2 = [1, 2]", "plan.effort_km2 = [1, 2]: plans over several periods need"),
-    ("effort = 1e6\nt = [600, 900]", "plan.t = [600, 900]: plans over several periods need"),
+    ("effort = [1e6, 2e6]", "plan.t: missing; 2 efforts (plan.effort) need a list of as many increasing times"),
+    ("effort_km2 = [1, 2]", "plan.t: missing; 2 efforts (plan.effort_km2) need a list"),
+    ("effort = 1e6\nt = [600, 900]", "plan.effort = 1000000.0: 2 times (plan.t) need a list of as many efforts"),
     ("effort = 1e6\nsweep_widht = 5", 'plan.sweep_widht: unknown key; did you mean "sweep_width"?'),
 ]
 
