@@ -496,6 +496,12 @@ def scene_arguments(params: Mapping) -> dict:
         if not (math.isfinite(rho) and -1.0 < rho < 1.0):
             raise BananagridError(f"rho = {rho!r}: must be in (-1, 1) (the start's correlation)")
         cov = [[sx * sx, rho * sx * sy], [rho * sx * sy, sy * sy]]
+        try:  # named by the keys given (sigmas of very different size make it singular in float64)
+            covariance("cov", cov)
+        except BananagridError as exc:
+            rule = str(exc).split(": ", 1)[1]
+            raise BananagridError(f"sigma_x = {sx!r}: with sigma_y = {sy!r} and rho = {rho!r}, the start's covariance "
+                                  f"[[sx^2, rho sx sy], [rho sx sy, sy^2]] {rule}") from None
     law = params.get("speed_law", "discrete")
     weights = None
     if law == "discrete":

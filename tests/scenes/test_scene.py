@@ -417,6 +417,10 @@ def test_butterly_cov_and_continuous_speed_laws_parse():
 BAD_BUTTERLY = {
     "rho out of range": (("rho = 0.5", "rho = 1.0"), "layers.sub.rho = 1.0: must be in (-1, 1)"),
     "negative sigma": (("sigma_x = 40.0", "sigma_x = -40.0"), "layers.sub.sigma_x = -40.0: must be finite and > 0"),
+    # sigmas of very different size: the covariance they give is singular in float64, named by them
+    "sigmas too far apart": (("sigma_x = 40.0", "sigma_x = 4.0e18"),
+                             ("layers.sub.sigma_x = 4e+18: with sigma_y = 20.0 and rho = 0.5, the start's covariance [[sx^2, rho sx sy], "
+                              "[rho sx sy, sy^2]] must be positive definite")),
     "negative speed in knots": (("speeds_kn = [5.0, 10.0]", "speeds_kn = [5.0, -10.0]"), "layers.sub.speeds_kn[1] = -10.0: must be >= 0"),
     "weights not summing to 1": (("weights = [0.25, 0.75]", "weights = [0.25, 0.5]"), "layers.sub.weights = [0.25, 0.5]: must sum to 1"),
     "weights missing": (("weights = [0.25, 0.75]\n", ""), "layers.sub: weights: required for 2 speeds"),
