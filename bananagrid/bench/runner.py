@@ -324,9 +324,11 @@ class _PeriodPlanJob:
     single-period plans (each map's cell probabilities and ``allocate``), what planning the
     periods apart costs. Measured on one thread (Xeon, AVX-512): 788 s (the bench, loaded
     machine); 713 s of CPU in 14 first-look sweeps (24 s each), the refined maps' baseline and 2
-    refined sweeps (126 s each), POS 0.92853. The bench also runs it once as its warm-up."""
+    refined sweeps (126 s each), POS 0.92853. A row of minutes is timed once, with no warm-up
+    run (the kernels' first compile is seconds of it): ``timed_once``."""
 
     dtypes = (np.float64,)
+    timed_once = True
     TIMES = (7200.0, 10800.0, 14400.0)
     EFFORTS = (5e9, 5e9, 5e9)
     STEP = 400.0
@@ -486,13 +488,14 @@ def peer_table(names: list[str], step: float, repeat: int, log=print) -> list[di
 
 def _run_job(name: str, threads: int, repeat: int, stride: int, log, device: str = "cpu") -> list[dict]:
     job = JOBS[name]()
-    base = job.baseline(stride, repeat)
+    once = getattr(job, "timed_once", False)  # a row of minutes: no warm-up run, one timed run
+    base = job.baseline(stride, 1 if once else repeat)
     records = []
     gpu = device != "cpu"
     for dtype in job.dtypes:
-        first = _best_of(1, lambda: job.work(dtype, 1, device))  # warm-up: compile or load the module
+        first = None if once else _best_of(1, lambda: job.work(dtype, 1, device))  # compile or load the module
         for n_threads in ([1] if gpu else sorted({1, threads})):
-            seconds = _best_of(repeat, lambda: job.work(dtype, n_threads, device))
+            seconds = _best_of(1 if once else repeat, lambda: job.work(dtype, n_threads, device))
             record = {
                 "kernel": name, "dtype": np.dtype(dtype).name, "threads": n_threads, "device": device,
                 "cells": job.cells, "seconds": seconds, "baseline_seconds": base, "ratio": base / seconds,
