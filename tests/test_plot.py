@@ -4,6 +4,7 @@ recordings and arrays, its one-line errors, and the gallery's pictures."""
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
 import os
@@ -280,9 +281,14 @@ def test_plot_command_reads_scenes_recordings_and_arrays(tmp_path, scene_file, r
     assert not list(tmp_path.glob(".*partial"))
     # every source keeps the provenance that names the geometry (here the start and heading)
     assert map_geometry(picture.panels[0].raster.provenance).markers == ((0.0, 0.0, "start"),)
-    # every source gives the same regions (the recording's float32 to 3 digits)
-    assert [format_level(r) for r in mass_regions(picture.panels[0].raster)] == \
-        [format_level(r) for r in mass_regions(read_picture(scene_file).panels[0].raster)]
+    # every source gives the same regions as the scene's own map held as the source holds it: the
+    # recording in float32, which rounds mirrored cells an ulp apart to one value, and tied cells
+    # are all inside a region (in float64 such a pair can split at a level's boundary)
+    read = picture.panels[0].raster
+    own = read_picture(scene_file).panels[0].raster
+    if source == "rrd":
+        own = dataclasses.replace(own, values=own.values.astype(np.float32).astype(np.float64))
+    assert [format_level(r) for r in mass_regions(read)] == [format_level(r) for r in mass_regions(own)]
 
 
 def test_plot_picks_layers_a_time_and_a_resolution(tmp_path, scene_file):

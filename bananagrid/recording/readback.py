@@ -23,6 +23,8 @@ from __future__ import annotations
 
 import math
 import os
+import re
+import tempfile
 import warnings
 from collections.abc import Iterator
 from dataclasses import dataclass, field
@@ -122,10 +124,32 @@ def check_in_child(path: Path) -> None:
     _CHECKED.add(key)
 
 
+#: A line rerun's reader logs (on the process's stderr, from its own threads) where a chunk's
+#: metadata is damaged but its rows still decode, e.g. "ERROR re_sorbet::migrations: ... could
+#: not parse 'sorbet:version: 0.!.4'" (ANSI colours removed first).
+RERUN_COMPLAINT = re.compile(r"\b(ERROR|WARN)\b\s+(\S+?):?\s+(.*)")
+_ANSI = re.compile(r"\x1b\[[0-9;]*m")
+
+
 def _read_whole(path: Path) -> None:
-    reader, store = _open(path)
-    for _ in recording_rows(reader, store):
-        pass
+    """Read every row of ``path`` (in the child of :func:`check_in_child`), with what rerun's
+    reader logs kept aside: a complaint of its (a damaged schema it read past) is the file's
+    damage too, so that the file is refused rather than read with rerun's noise on stderr."""
+    with tempfile.TemporaryFile() as log:
+        saved = os.dup(2)
+        os.dup2(log.fileno(), 2)
+        try:
+            reader, store = _open(path)
+            for _ in recording_rows(reader, store):
+                pass
+        finally:
+            os.dup2(saved, 2)
+            os.close(saved)
+        log.seek(0)
+        logged = _ANSI.sub("", log.read().decode(errors="replace"))
+    for line in logged.splitlines():
+        if match := RERUN_COMPLAINT.search(line):
+            raise BananagridError(f"{path}: damaged (rerun's reader: {match.group(3).strip()[:200]})")
 
 
 def recording_rows(reader: RrdReader, store: StoreEntry) -> Iterator[tuple[str, dict, dict]]:

@@ -7,6 +7,7 @@ recording's layers as rasters (``read_rasters``), which ``plot`` shares."""
 from __future__ import annotations
 
 import json
+import os
 import math
 import subprocess
 import sys
@@ -269,3 +270,26 @@ def test_an_unnormalised_map_says_so(tmp_path, capsys):
     assert cli.main(["inspect", "--mass-levels", "0.5", str(path)]) == 0
     mass = api_raster(text, 5.0).mass
     assert f"captured mass          {mass:.6f} ({1 - mass:.3g} missing; the map is not normalised)" in capsys.readouterr().out
+
+
+def test_what_reruns_reader_complains_of_is_damage(recording, monkeypatch, tmp_path):
+    """A recording whose rows decode but whose chunk metadata rerun's reader complains of on
+    stderr (a damaged schema version, say: "ERROR re_sorbet::migrations: ... could not parse")
+    is refused as damaged in one line, not read with rerun's log lines on stderr. The complaint
+    is simulated here (a byte of the real one is hard to hit on purpose: the chunks are
+    compressed); tests/test_damaged_inputs.py meets real ones among its random damages."""
+    import bananagrid.recording.readback as readback
+
+    whole = readback.recording_rows
+
+    def complaining(reader, store):
+        os.write(2, b"\x1b[31mERROR\x1b[0m re_sorbet::migrations: could not parse 'sorbet:version: 0.!.4'\n")
+        yield from whole(reader, store)
+
+    monkeypatch.setattr(readback, "recording_rows", complaining)
+    copy = tmp_path / "copy.rrd"
+    copy.write_bytes(recording.read_bytes())
+    with pytest.raises(BananagridError, match=r"copy\.rrd: damaged \(rerun's reader: could not parse 'sorbet:"):
+        readback._read_whole(copy)
+    monkeypatch.setattr(readback, "recording_rows", whole)
+    readback._read_whole(copy)  # the same file without the complaint reads
