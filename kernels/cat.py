@@ -134,12 +134,10 @@ def cat_basis_curved(u: Any):
 
 
 @wp.func
-def cat_coefficients(omega: Any, v0: Any, t: Any):
-    """The omega-only coefficients of everything a point needs, from one basis evaluation:
-    F = hx y - hy x - c, dF/domega = dhx y - dhy x - dc, and the acceleration of the line
-    through P, a = h . (P - v0 f) / |h|^2 = ax x + ay y - a0 (exact at a root)."""
-    u = omega * t
-    a_fn, b_fn, c_fn, d_fn, dc_fn, dd_fn, ddc_fn, ddd_fn, dddc_fn, dddd_fn = cat_basis_curved(u)
+def cat_line_terms(a_fn: Any, b_fn: Any, c_fn: Any, d_fn: Any, dc_fn: Any, dd_fn: Any, v0: Any, t: Any):
+    """From the basis at omega t: f = t (A, B), h = t^2 (C, D), h' = t^3 (C', D'), |h|^2, and the
+    line's offsets c = v0 h x f, dc = v0 (h' x f - |h|^2) (d/domega (h x f) = h' x f + h x f',
+    and h x f' = -|h|^2): what F, its derivatives and the acceleration share."""
     t2 = t * t
     fx = t * a_fn
     fy = t * b_fn
@@ -148,9 +146,19 @@ def cat_coefficients(omega: Any, v0: Any, t: Any):
     dhx = t2 * t * dc_fn
     dhy = t2 * t * dd_fn
     h2 = hx * hx + hy * hy
-    # d/domega (h x f) = h' x f + h x f', and h x f' = -|h|^2
     c = v0 * (hx * fy - hy * fx)
     dc = v0 * (dhx * fy - dhy * fx - h2)
+    return fx, fy, hx, hy, dhx, dhy, h2, c, dc
+
+
+@wp.func
+def cat_coefficients(omega: Any, v0: Any, t: Any):
+    """The omega-only coefficients of everything a point needs, from one basis evaluation:
+    F = hx y - hy x - c, dF/domega = dhx y - dhy x - dc, and the acceleration of the line
+    through P, a = h . (P - v0 f) / |h|^2 = ax x + ay y - a0 (exact at a root)."""
+    u = omega * t
+    a_fn, b_fn, c_fn, d_fn, dc_fn, dd_fn, ddc_fn, ddd_fn, dddc_fn, dddd_fn = cat_basis_curved(u)
+    fx, fy, hx, hy, dhx, dhy, h2, c, dc = cat_line_terms(a_fn, b_fn, c_fn, d_fn, dc_fn, dd_fn, v0, t)
     return hx, hy, c, dhx, dhy, dc, hx / h2, hy / h2, v0 * (hx * fx + hy * fy) / h2
 
 
@@ -175,18 +183,10 @@ def cat_eval_curved(x: Any, y: Any, omega: Any, v0: Any, t: Any):
     """
     u = omega * t
     a_fn, b_fn, c_fn, d_fn, dc_fn, dd_fn, ddc_fn, ddd_fn, dddc_fn, dddd_fn = cat_basis_curved(u)
+    fx, fy, hx, hy, dhx, dhy, h2, c, dc = cat_line_terms(a_fn, b_fn, c_fn, d_fn, dc_fn, dd_fn, v0, t)
     t2 = t * t
-    fx = t * a_fn
-    fy = t * b_fn
-    hx = t2 * c_fn
-    hy = t2 * d_fn
-    dhx = t2 * t * dc_fn
-    dhy = t2 * t * dd_fn
     ddhx = t2 * t2 * ddc_fn
     ddhy = t2 * t2 * ddd_fn
-    h2 = hx * hx + hy * hy
-    c = v0 * (hx * fy - hy * fx)
-    dc = v0 * (dhx * fy - dhy * fx - h2)
     ddc = v0 * (ddhx * fy - ddhy * fx) - type(x)(3.0) * v0 * (hx * dhx + hy * dhy)
     t4 = t2 * t2
     dddhx = t4 * t * dddc_fn
