@@ -612,10 +612,12 @@ def small_calls(threads: int, repeat: int, log=print) -> dict:
         grids = frame(hypotheses, shape)
         f_cpu, f_wall, _ = _per_call(repeat, lambda: frame(hypotheses, shape))
         l_cpu, l_wall, _ = _per_call(repeat, lambda: rasterise_batch(hypotheses, grids, threads=threads))
-        batches.append({"hypotheses": SMALL_HYPOTHESES, "shape": list(shape), "threads": threads,
-                        "frame_cpu_us": f_cpu * 1e6, "frame_wall_us": f_wall * 1e6, "launch_cpu_us": l_cpu * 1e6,
-                        "launch_wall_us": l_wall * 1e6, "frame_over_launch_wall": f_wall / l_wall,
-                        "frame_over_launch_cpu": f_cpu / l_cpu})
+        us = {"frame_cpu_us": f_cpu * 1e6, "frame_wall_us": f_wall * 1e6, "launch_cpu_us": l_cpu * 1e6,
+              "launch_wall_us": l_wall * 1e6}
+        # the ratios of the recorded figures themselves ((a 1e6) / (b 1e6) can differ from a / b by an ulp)
+        batches.append({"hypotheses": SMALL_HYPOTHESES, "shape": list(shape), "threads": threads, **us,
+                        "frame_over_launch_wall": us["frame_wall_us"] / us["launch_wall_us"],
+                        "frame_over_launch_cpu": us["frame_cpu_us"] / us["launch_cpu_us"]})
         log(f"batch of {SMALL_HYPOTHESES:,} polar hypotheses on {shape[0]} x {shape[1]}, {threads} threads: frame "
             f"{f_wall * 1e3:.2f} ms, rasterise_batch on the framed grids {l_wall * 1e3:.2f} ms (wall; CPU "
             f"{f_cpu * 1e3:.2f} and {l_cpu * 1e3:.2f} ms): framing costs {f_wall / l_wall:.2f}x the launch "
