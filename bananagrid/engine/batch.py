@@ -22,10 +22,26 @@ from ..validate import BananagridError, positive, positive_int
 from .memory import check_memory
 from .warp_runtime import WarpContext, row_sums
 
-__all__ = ["frame", "frame_bounds", "grids_in", "batch_models", "rasterise_batch", "pdf_batch", "FRAME_SDS"]
+__all__ = ["frame", "batch_grids", "frame_bounds", "grids_in", "batch_models", "rasterise_batch", "pdf_batch", "FRAME_SDS"]
 
 #: A framed grid holds each hypothesis to this many SDs in range and bearing.
 FRAME_SDS = 4.0
+
+
+def batch_grids(models: Sequence[BatchModel], grids=None, shape=(64, 64), *, sds: float = FRAME_SDS) -> tuple[Grid, ...]:
+    """One grid per hypothesis, all of one shape: ``grids`` checked (one-line errors naming
+    ``grids[k]``), or by default :func:`frame` of the hypotheses at ``shape`` and ``sds``."""
+    if grids is None:
+        return tuple(frame(models, shape, sds=sds))
+    grids = tuple(grids)
+    if len(grids) != len(models):
+        raise BananagridError(f"grids: {len(grids)} grids for {len(models)} hypotheses")
+    for k, g in enumerate(grids):
+        if not isinstance(g, Grid):
+            raise BananagridError(f"grids[{k}] = {g!r}: expected a bananagrid.Grid")
+        if g.shape != grids[0].shape:
+            raise BananagridError(f"grids[{k}]: shape {g.shape}, but grids[0] has {grids[0].shape}; one shape for all")
+    return grids
 
 
 def frame(models: Sequence[BatchModel], shape=(64, 64), *, sds: float = FRAME_SDS) -> list[Grid]:
@@ -98,16 +114,7 @@ def rasterise_batch(models: Sequence[BatchModel], grids: Sequence[Grid] | None =
     hypotheses at ``shape``.
     """
     models = batch_models(models)
-    if grids is None:
-        grids = frame(models, shape)
-    grids = tuple(grids)
-    if len(grids) != len(models):
-        raise BananagridError(f"grids: {len(grids)} grids for {len(models)} hypotheses")
-    for k, g in enumerate(grids):
-        if not isinstance(g, Grid):
-            raise BananagridError(f"grids[{k}] = {g!r}: expected a bananagrid.Grid")
-        if g.shape != grids[0].shape:
-            raise BananagridError(f"grids[{k}]: shape {g.shape}, but grids[0] has {grids[0].shape}; one shape for all")
+    grids = batch_grids(models, grids, shape)
     ny, nx = grids[0].shape
     _check_memory(len(models), ny * nx, 0, dtype)
     # every grid's cell centres at once, with Grid.x's and Grid.y's arithmetic (the same values)

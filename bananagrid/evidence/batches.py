@@ -26,7 +26,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..domains.grid import Grid
-from ..engine.batch import FRAME_SDS, frame
+from ..engine.batch import FRAME_SDS, batch_grids
 from ..engine.warp_runtime import default_threads
 from ..geo.libraries import CLUSTER_EXTRA, CLUSTER_PURPOSE, require
 from ..validate import BananagridError, positive_int
@@ -92,20 +92,6 @@ def _one(model, grid: Grid, evidence, n: int) -> tuple:
     return values, cells, 1.0 - parts.means["searches"], numbers, out
 
 
-def _grids(models, grids, shape, sds) -> tuple:
-    if grids is None:
-        return tuple(frame(models, shape, sds=sds))
-    grids = tuple(grids)
-    if len(grids) != len(models):
-        raise BananagridError(f"grids: {len(grids)} grids for {len(models)} hypotheses")
-    for k, g in enumerate(grids):
-        if not isinstance(g, Grid):
-            raise BananagridError(f"grids[{k}] = {g!r}: expected a bananagrid.Grid")
-        if g.shape != grids[0].shape:
-            raise BananagridError(f"grids[{k}]: shape {g.shape}, but grids[0] has {grids[0].shape}; one shape for all")
-    return grids
-
-
 def _checked(models, evidence, grids, shape, sds, subdivisions) -> tuple:
     """The hypotheses, the evidence (checked as ``bg.posterior`` checks it, once per kind and
     time of hypothesis, before any computing: one line naming the hypothesis), their grids and
@@ -114,7 +100,7 @@ def _checked(models, evidence, grids, shape, sds, subdivisions) -> tuple:
     if not models:
         raise BananagridError("models: expected at least one hypothesis")
     n = positive_int("subdivisions", subdivisions)
-    grids = _grids(models, grids, shape, sds)
+    grids = batch_grids(models, grids, shape, sds=sds)
     seen, checked = set(), None
     for k, (model, grid) in enumerate(zip(models, grids)):
         key = (type(model), getattr(model, "t", None))

@@ -119,7 +119,7 @@ def allocate(cells, effort: float, law="exponential") -> Allocation:
     law = detection_law(law)
     if not law.strictly_concave and law is not DEFINITE:
         raise BananagridError(f"law {law.name!r}: only the provided 'definite' law may be not strictly concave")
-    z = _effort("effort", effort)
+    z = check_effort("effort", effort)
     p, areas, shape, grid = _cells_and_areas(cells)
     plan = _SortedMap(p.ravel(), np.broadcast_to(areas, shape).ravel(), law)
     coverage, lam, pos = plan.solve(z)
@@ -141,7 +141,9 @@ def optimal_coverage(p: np.ndarray, areas, z: float, law: DetectionLaw) -> tuple
     return coverage.reshape(p.shape), lam, pos
 
 
-def _effort(name: str, value) -> float:
+def check_effort(name: str, value) -> float:
+    """``value`` as an effort in m^2 (sweep width times track length): a positive finite number,
+    or a one-line error naming ``name`` (one period's, or each of a plan's periods')."""
     try:
         z = float(value)
     except (TypeError, ValueError):

@@ -66,7 +66,7 @@ from ..evidence.posterior import NO_PATHS
 from ..evidence.searches import RasterSearch
 from ..results import Raster
 from ..validate import BananagridError, positive_int, show
-from .allocation import Allocation, optimal_coverage
+from .allocation import Allocation, check_effort, optimal_coverage
 from .detection import EXPONENTIAL, DetectionLaw, detection_law
 
 __all__ = ["PeriodPlan", "PeriodMaps", "SampledPaths", "CarriedMaps", "iterate_periods", "plan_periods", "log_miss",
@@ -205,7 +205,7 @@ def iterate_periods(period_maps: PeriodMaps, grid: Grid, efforts: Sequence[float
     PeriodPlan
     """
     law, tol, max_iterations = _settings(law, tol, max_iterations)
-    efforts = tuple(_effort(f"efforts[{k}]", z) for k, z in enumerate(efforts))
+    efforts = tuple(check_effort(f"efforts[{k}]", z) for k, z in enumerate(efforts))
     if not efforts:
         raise BananagridError("efforts = []: expected one effort per period, at least one period")
     n_periods = len(efforts)
@@ -319,18 +319,6 @@ def _marginal_gain(cells, coverage, area, law) -> float:
     if not active.any():
         return 0.0
     return float(np.max(cells[active] / area * law.dpod(coverage[active])))
-
-
-def _effort(name: str, value) -> float:
-    try:
-        z = float(value)
-    except (TypeError, ValueError):
-        raise BananagridError(f"{name} = {show(value)}: expected a positive finite effort in m^2 "
-                              "(sweep width times track length)") from None
-    if not (math.isfinite(z) and z > 0.0):
-        raise BananagridError(f"{name} = {z!r}: expected a positive finite effort in m^2 "
-                              "(sweep width times track length)")
-    return z
 
 
 class SampledPaths:
@@ -600,7 +588,7 @@ def plan_periods(prior, grid: Grid, times, efforts, law="exponential", *, tol: f
         raise BananagridError(f"efforts: {len(efforts)} values for {len(times)} times; expected one effort (m^2) "
                               "per period")
     for k, z in enumerate(efforts):
-        _effort(f"efforts[{k}]", z)
+        check_effort(f"efforts[{k}]", z)
     _settings(law, tol, max_iterations)
     maps = CarriedMaps(prior, grid, times, subdivisions=subdivisions, threads=threads)
     start, first_sweeps = None, 0
