@@ -29,9 +29,8 @@ Rectangle probabilities
 -----------------------
 :func:`bvn_upper` is Genz's BVNU (Drezner & Wesolowsky 1989 with Genz's double-precision
 changes; TVPACK): P(X > h, Y > k) for standard normals of correlation r, by 6/12/20-point
-Gauss-Legendre in the correlation (nodes passed in ``bvn_rule``).
-
-A grid cell is a difference of four such orthant probabilities, which cancels.
+Gauss-Legendre in the correlation (nodes passed in ``bvn_rule``). A grid cell is a difference
+of four such orthant probabilities, which cancels.
 
 Shared corners (:func:`grid_cells`). :func:`bvn_rectangle` reflects each axis of a cell that
 lies on one side of the component's mean so that the four orthants it differences are tail
@@ -53,21 +52,15 @@ equals the per-cell value bit for bit, and so does its error.
 The cells that hold a component's mean coordinate on an axis (a0 < 0 <= a1, or the same in y)
 are not differences of their corners' tail orthants: those face opposite ways, and the
 complement that joins them brings in the 1-D tail Q(|b|) of the whole strip: for a0 < 0 <= a1
-and 0 <= b0 < b1, P = [Q(b0) - V(a0, b0) - V(a1, b0)] - [Q(b1) - V(a0, b1) - V(a1, b1)]. Its
-terms are of the size of Q(b0), which at strong correlation exceeds the cell by orders of
-magnitude (r = -0.99, x in [-0.1, 0.3], y in [5, 5.1]: Q(5) = 2.9e-7 against a cell near
-1e-240), where :func:`bvn_rectangle`'s own orthants stay tail values of the cell's size. These
-cells, at most one row and one column of cells a component, are evaluated by
-:func:`bvn_rectangle` itself. Every cell of a grid is thus the per-cell form's value, within the
-bound of ``bananagrid.models.presence.RECTANGLE_ABS_ERROR`` (1e-14), for one tail orthant a
-component per cell (plus one row of corners a tile) instead of four, each also without its sin
-per node, asin and normal tails. Tested: every cell within 1e-9 relative or 1e-15 absolute of
-an independent SciPy oracle over components from 1e-3 to 1e3 cells, correlations to within
-1e-6 of +-1 and means a thousand SDs outside the grid, and the shared grid equal to the
-per-cell form bit for bit (tests/models/test_presence_grid_corners.py).
-
-Grid cells are float64 whatever the output dtype (why: ``grid_probabilities``' ``dtype``): the
-edges, components and nodes are float64 and only the stored density and probability round once.
+and 0 <= b0 < b1, P = [Q(b0) - V(a0, b0) - V(a1, b0)] - [Q(b1) - V(a0, b1) - V(a1, b1)], terms
+of the size of Q(b0), which at strong correlation exceeds the cell by orders of magnitude
+(r = -0.99, x in [-0.1, 0.3], y in [5, 5.1]: Q(5) = 2.9e-7 against a cell near 1e-240). These
+cells, at most one row and one column of cells a component, are :func:`bvn_rectangle`'s own.
+So every cell of a grid is the per-cell form's value (its bound: ``RECTANGLE_ABS_ERROR`` of
+``bananagrid.models.presence``; tested in tests/models/test_presence_grid_corners.py), for one
+tail orthant a component per cell (plus one row of corners a tile) instead of four, each also
+without its sin per node, asin and normal tails. The cells are float64 whatever the output
+dtype (why: ``grid_probabilities``' ``dtype``); only the stored values round to it.
 
 Precision: normal tails come from :func:`kernels.common.erfcx_pos` (Cephes' ndtr.c), so upper
 tails keep their relative accuracy far out.
@@ -315,9 +308,64 @@ def depth_integral(
     return k_tot, g_tot
 
 
+def _phi_piece(frustum: bool):
+    """The Gauss-Kronrod sums over phi in [pa, pb] on ``panels`` panels of the plane's ray mass
+    (rho in [r0, r1]) or (``frustum``) of the frustum's depth integral (rho in [d t0, d t1], d in
+    [depth_lo, depth_hi] on ``d_panels``), each ray clipped to ``box`` where ``cut``: one body,
+    the geometry's node compiled in (``wp.static``). Returns (k_tot, g_tot) with the piece's (K15,
+    G7) added: the plane's piece summed first, the frustum's nodes added one by one."""
+
+    def piece(
+        k_tot: Any, g_tot: Any, pa: Any, pb: Any, panels: int, r0: Any, r1: Any, t0: Any, t1: Any, infinite: int,
+        cut: int, box: wp.array(dtype=Any), comp: wp.array2d(dtype=Any), i: int, depth_lo: Any, depth_hi: Any,
+        d_panels: int, rule: wp.array2d(dtype=Any), gl: wp.array2d(dtype=Any),
+    ):
+        zero = type(pa)(0.0)
+        half_w = type(pa)(0.5) * (pb - pa) / type(pa)(float(panels))
+        k_sum = zero
+        g_sum = zero
+        for p in range(panels):
+            centre = pa + (type(pa)(2.0) * type(pa)(float(p)) + type(pa)(1.0)) * half_w
+            for j in range(GK_NODES):
+                phi = centre + half_w * rule[0, j]
+                c = wp.cos(phi)
+                s = wp.sin(phi)
+                if wp.static(frustum):
+                    chord_lo = zero
+                    chord_hi = type(pa)(1.0e30)
+                    if cut != 0:
+                        chord_lo, chord_hi = ray_box(c, s, box)
+                    if chord_hi > chord_lo:
+                        kd, gd = depth_integral(depth_lo, depth_hi, d_panels, c, s, t0, t1, infinite, chord_lo,
+                                                chord_hi, comp, i, rule, gl)
+                        k_tot += half_w * rule[1, j] * kd
+                        g_tot += half_w * rule[2, j] * gd
+                else:
+                    lo = r0
+                    hi = r1
+                    inf = infinite
+                    if cut != 0:
+                        bi, bo = ray_box(c, s, box)
+                        lo = wp.max(lo, bi)
+                        if inf != 0 or bo < hi:
+                            hi = bo
+                            inf = 0
+                    v = zero
+                    if inf != 0 or hi > lo:
+                        v = ray_mass(c, s, lo, hi, inf, comp, i, zero, gl)
+                    k_sum += rule[1, j] * v
+                    g_sum += rule[2, j] * v
+        if wp.static(frustum):
+            return k_tot, g_tot
+        return k_tot + k_sum * half_w, g_tot + g_sum * half_w
+
+    return wp.func(piece, name=f"phi_piece_{'frustum' if frustum else 'plane'}")
+
+
 def _cells_kernel(name: str, frustum: bool):
     """The cell kernel of the plane or (``frustum``) of the frustum: one body, the frustum's depth
-    integral compiled in only where it is asked for (``wp.static``)."""
+    panels (``wp.static``) and depth integral (:func:`_phi_piece`) compiled in only for it."""
+    phi_piece = _phi_piece(frustum)
 
     def cells(
         piece_start: wp.array(dtype=wp.int32),
@@ -412,43 +460,8 @@ def _cells_kernel(name: str, frustum: bool):
                     pa = piece_a[q]
                     pb = piece_b[q]
                     panels = wp.min(max_panels, panel_count(pb - pa, scale, max_panels) * mult)
-                    half_w = type(rtol)(0.5) * (pb - pa) / type(rtol)(float(panels))
-                    k_sum = zero
-                    g_sum = zero
-                    for p in range(panels):
-                        centre = pa + (type(rtol)(2.0) * type(rtol)(float(p)) + type(rtol)(1.0)) * half_w
-                        for j in range(GK_NODES):
-                            phi = centre + half_w * rule[0, j]
-                            c = wp.cos(phi)
-                            s = wp.sin(phi)
-                            if wp.static(frustum):
-                                chord_lo = zero
-                                chord_hi = type(rtol)(1.0e30)
-                                if clip != 0:
-                                    chord_lo, chord_hi = ray_box(c, s, box)
-                                if chord_hi > chord_lo:
-                                    kd, gd = depth_integral(depth_lo, depth_hi, d_panels, c, s, t0, t1, infinite,
-                                                            chord_lo, chord_hi, comp, i, rule, gl)
-                                    k_tot += half_w * rule[1, j] * kd
-                                    g_tot += half_w * rule[2, j] * gd
-                            else:
-                                r_in = r0
-                                r_out = r1
-                                inf = infinite
-                                if clip != 0:
-                                    bi, bo = ray_box(c, s, box)
-                                    r_in = wp.max(r_in, bi)
-                                    if inf != 0 or bo < r_out:
-                                        r_out = bo
-                                        inf = 0
-                                v = zero
-                                if inf != 0 or r_out > r_in:
-                                    v = ray_mass(c, s, r_in, r_out, inf, comp, i, zero, gl)
-                                k_sum += rule[1, j] * v
-                                g_sum += rule[2, j] * v
-                    if wp.static(not frustum):
-                        k_tot += k_sum * half_w
-                        g_tot += g_sum * half_w
+                    k_tot, g_tot = phi_piece(k_tot, g_tot, pa, pb, panels, r0, r1, t0, t1, infinite, clip, box, comp, i,
+                                             depth_lo, depth_hi, d_panels, rule, gl)
                     n_used += panels * d_panels
                 e = wp.abs(k_tot - g_tot)
                 if e <= rtol * wp.abs(k_tot) + atol or mult >= max_panels:
