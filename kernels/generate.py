@@ -289,3 +289,11 @@ def carried_points_kernel(carried, params: Params, evidence: Params, name: str) 
         overload_on_use(kernel, scalar, {"xs": vec, "ys": vec, "p": params.of(scalar), "ev": evidence.of(scalar),
                                          "lw": mat, "out": mat})
     return CarriedKernels(f"{carried.module.name.rsplit('.', 1)[-1]}.{kernel.key}", kernel)
+
+
+def overload_each(kernel, **arg_types) -> None:
+    """Record ``kernel``'s overloads for both scalar types, to register on first use
+    (:func:`overload_on_use`): each argument's type a Warp type, or a function of the scalar type
+    (:func:`SCALAR`, :func:`ARRAY`, ...) as :class:`Params` takes its fields."""
+    for scalar in SCALARS:
+        overload_on_use(kernel, scalar, {k: (f(scalar) if inspect.isfunction(f) else f) for k, f in arg_types.items()})

@@ -12,17 +12,13 @@ the ray u = (cos phi, sin phi)
     whitened mean from the whitened ray; no cancellation),
 
 so the polar integral of the density over rho (area element rho d rho) is closed form
-(:func:`ray_moment`): with s = a^-1/2, t = (rho - m) / s,
-
-    int_{rho0}^{rho1} rho exp(-(rho - m)^2 / (2 s^2)) d rho = s^2 J,
-    J = (m / s) sqrt(2 pi) (Phi(t1) - Phi(t0)) + exp(-t0^2 / 2) - exp(-t1^2 / 2).
-
-That makes the nadir (rho0 = 0) and the horizon (rho1 = inf) exact in rho. The phi integral of
-the remaining smooth function is Gauss-Kronrod (7, 15) on panels no wider than two angular
-length scales of the component, doubled until |K15 - G7| meets the tolerance (the G7 error is a
-conservative estimate of the K15 error). A frustum cell (depths d in [h - dh, h + dh]) adds a
-Gauss-Kronrod integral over d of the z marginal times the conditional (x, y) law given z = -d
-(a full 3x3 covariance: the conditional mean moves linearly with z), the same closed form inside.
+(:func:`ray_moment`), exact at the nadir (rho0 = 0) and out to the horizon (rho1 = inf). The
+phi integral of the remaining smooth function is Gauss-Kronrod (7, 15) on panels no wider than
+two angular length scales of the component, refined fourfold until |K15 - G7| meets the
+tolerance (the G7 error is a conservative estimate of the K15 error). A frustum cell (depths d
+in [h - dh, h + dh]) adds a Gauss-Kronrod integral over d of the z marginal times the
+conditional (x, y) law given z = -d (a full 3x3 covariance: the conditional mean moves linearly
+with z), the same closed form inside.
 
 Cells cut by the region S are integrated piece by piece between host-computed breakpoints in phi
 (corners of S, circles of the cell's radii meeting S's edges), so every piece is smooth; on a
@@ -33,9 +29,8 @@ Rectangle probabilities
 -----------------------
 :func:`bvn_upper` is Genz's BVNU (Drezner & Wesolowsky 1989 with Genz's double-precision
 changes; TVPACK): P(X > h, Y > k) for standard normals of correlation r, by 6/12/20-point
-Gauss-Legendre in the correlation (nodes passed in ``bvn_rule``).
-
-A grid cell is a difference of four such orthant probabilities, which cancels.
+Gauss-Legendre in the correlation (nodes passed in ``bvn_rule``). A grid cell is a difference
+of four such orthant probabilities, which cancels.
 
 Shared corners (:func:`grid_cells`). :func:`bvn_rectangle` reflects each axis of a cell that
 lies on one side of the component's mean so that the four orthants it differences are tail
@@ -48,39 +43,24 @@ cell on one side of the mean on both axes is
     P = V(n_x, n_y) - V(f_x, n_y) - V(n_x, f_y) + V(f_x, f_y)      (n: near the mean, f: far),
 
 the very expression :func:`bvn_rectangle` evaluates, on the same float64 numbers: the edges are
-standardised by the same operations, and the nodes that depend on r alone (sin(asin(r) (x_i +
-1) / 2) near 0, Genz's x_i^2 and sqrt(1 - x_i^2) near +-1) come from :func:`bvn_node_table` by
-the same expressions; a reflected orthant's correlation is -r, and sin and asin are odd, so its
-nodes are these negated, exactly. The shared value therefore equals the per-cell value bit for
-bit, and so does its error.
+standardised by the same operations, and the nodes that depend on r alone come from one
+function, :func:`bvn_node`, whether :func:`bvn_upper` asks for them per call or
+:func:`bvn_node_table` tabulates them per component; a reflected orthant's correlation is -r,
+and sin and asin are odd, so its nodes are these negated, exactly. The shared value therefore
+equals the per-cell value bit for bit, and so does its error.
 
 The cells that hold a component's mean coordinate on an axis (a0 < 0 <= a1, or the same in y)
 are not differences of their corners' tail orthants: those face opposite ways, and the
 complement that joins them brings in the 1-D tail Q(|b|) of the whole strip: for a0 < 0 <= a1
-and 0 <= b0 < b1, P = [Q(b0) - V(a0, b0) - V(a1, b0)] - [Q(b1) - V(a0, b1) - V(a1, b1)]. Its
-terms are of the size of Q(b0), which at strong correlation exceeds the cell by orders of
-magnitude (r = -0.99, x in [-0.1, 0.3], y in [5, 5.1]: Q(5) = 2.9e-7 against a cell near
-1e-240), where :func:`bvn_rectangle`'s own orthants stay tail values of the cell's size. These
-cells, at most one row and one column of cells a component, are evaluated by
-:func:`bvn_rectangle` itself. Every cell of a grid is thus the per-cell form's value, and the
-bound below holds unchanged, for one tail orthant a component per cell (plus one row of
-corners a tile) instead of four, each also without its sin per node, asin and normal tails.
-
-Bound (per cell and component): with u = 2^-53, each orthant value within delta of the truth
-(Genz: delta ~ 1e-15 absolute, far less in the tails, where the terms carry relative accuracy)
-and M <= 1 the largest of the four, |P_hat - P| <= 4 delta + 3 u M, at most 1e-14
-(``RECTANGLE_ABS_ERROR``); weights summing to 1 keep a mixture's cells within it too. Tested:
-every cell within 1e-9 relative or 1e-15 absolute of an independent SciPy oracle over
-components from 1e-3 to 1e3 cells, correlations to within 1e-6 of +-1 and means a thousand SDs
-outside the grid, and the shared grid equal to the per-cell form bit for bit
-(tests/models/test_presence_grid_corners.py).
-
-In float32 arithmetic the small cells are lost (tests/models/test_presence.py's room against float64, cells above
-1e-6 of the largest: 40% off at 64 x 64, 560% at 256 x 256), and float32 cell edges alone would
-cost ulp(x) / dx of a cell's width (4e-5 for a 1024-cell row of that 6 m room). So
-:func:`grid_cells` always reads float64 edges, components and Gauss-Legendre nodes and does the
-whole cell in float64; only the stored density and probability take the output arrays' dtype
-(the float32 overload rounds each float64 result once: 2^-24 = 6e-8 relative).
+and 0 <= b0 < b1, P = [Q(b0) - V(a0, b0) - V(a1, b0)] - [Q(b1) - V(a0, b1) - V(a1, b1)], terms
+of the size of Q(b0), which at strong correlation exceeds the cell by orders of magnitude
+(r = -0.99, x in [-0.1, 0.3], y in [5, 5.1]: Q(5) = 2.9e-7 against a cell near 1e-240). These
+cells, at most one row and one column of cells a component, are :func:`bvn_rectangle`'s own.
+So every cell of a grid is the per-cell form's value (its bound: ``RECTANGLE_ABS_ERROR`` of
+``bananagrid.models.presence``; tested in tests/models/test_presence_grid_corners.py), for one
+tail orthant a component per cell (plus one row of corners a tile) instead of four, each also
+without its sin per node, asin and normal tails. The cells are float64 whatever the output
+dtype (why: ``grid_probabilities``' ``dtype``); only the stored values round to it.
 
 Precision: normal tails come from :func:`kernels.common.erfcx_pos` (Cephes' ndtr.c), so upper
 tails keep their relative accuracy far out.
@@ -91,11 +71,10 @@ from typing import Any
 import warp as wp
 
 from .common import INV_SQRT2, erfcx_pos, normal_cdf, normal_interval, normal_sf
-from .generate import overload_on_use
+from .generate import ARRAY, ARRAY2D, SCALAR, overload_each
 
 SQRT_2PI = 2.5066282746310002
 SQRT_HALF_PI = 1.2533141373155003
-INV_2PI = 0.15915494309189535
 
 
 #: ray_moment integrates by 8-point Gauss-Legendre when (t1 - t0)(1 + max|t|) is below this:
@@ -112,12 +91,9 @@ GK_NODES = 15
 # the module's CUDA build took minutes (see the note in kernels/__init__.py).
 wp.set_module_options({"enable_backward": False, "max_unroll": GK_NODES - 1})
 
-#: Layout of a 2-D (conditional) component row, see bananagrid.presence.
-(
-    C_LOGW, C_NORM, C_B11, C_B21, C_B22, C_V1, C_V2, C_MX, C_MY, C_SMIN, C_SMAX,
-    C_VG1, C_VG2, C_GX, C_GY, C_MZ, C_SZ,
-) = range(17)
-COMPONENT_COLUMNS = 17
+#: Layout of a 2-D (conditional) component row (bananagrid.models.presence._component_rows).
+(C_LOGW, C_NORM, C_B11, C_B21, C_B22, C_V1, C_V2, C_MX, C_MY, C_SMIN, C_SMAX, C_VG1, C_VG2, C_MZ, C_SZ) = range(15)
+COMPONENT_COLUMNS = 15
 
 
 @wp.func
@@ -176,28 +152,25 @@ def ray_moment(r0: Any, r1: Any, infinite: int, m: Any, s: Any, gl: wp.array2d(d
 
 
 @wp.func
+def slab(lo: Any, hi: Any, c: Any, b0: Any, b1: Any):
+    """[lo, hi] cut to where rho c lies in [b0, b1] (hi = -1 when c = 0 and 0 is outside)."""
+    if c > type(c)(0.0):
+        lo = wp.max(lo, b0 / c)
+        hi = wp.min(hi, b1 / c)
+    elif c < type(c)(0.0):
+        lo = wp.max(lo, b1 / c)
+        hi = wp.min(hi, b0 / c)
+    elif b0 > type(c)(0.0) or b1 < type(c)(0.0):
+        hi = type(c)(-1.0)
+    return lo, hi
+
+
+@wp.func
 def ray_box(c: Any, s: Any, box: wp.array(dtype=Any)):
     """The chord [rho_in, rho_out] of the ray rho (c, s), rho >= 0, in the box
     [box0, box1] x [box2, box3] (rho_in > rho_out when the ray misses it)."""
-    lo = type(c)(0.0)
-    hi = type(c)(1.0e30)
-    if c > type(c)(0.0):
-        lo = wp.max(lo, box[0] / c)
-        hi = wp.min(hi, box[1] / c)
-    elif c < type(c)(0.0):
-        lo = wp.max(lo, box[1] / c)
-        hi = wp.min(hi, box[0] / c)
-    elif box[0] > type(c)(0.0) or box[1] < type(c)(0.0):
-        hi = type(c)(-1.0)
-    if s > type(c)(0.0):
-        lo = wp.max(lo, box[2] / s)
-        hi = wp.min(hi, box[3] / s)
-    elif s < type(c)(0.0):
-        lo = wp.max(lo, box[3] / s)
-        hi = wp.min(hi, box[2] / s)
-    elif box[2] > type(c)(0.0) or box[3] < type(c)(0.0):
-        hi = type(c)(-1.0)
-    return lo, hi
+    lo, hi = slab(type(c)(0.0), type(c)(1.0e30), c, box[0], box[1])
+    return slab(lo, hi, s, box[2], box[3])
 
 
 @wp.func
@@ -268,123 +241,6 @@ def panel_count(width: Any, scale: Any, max_panels: int):
 
 
 @wp.func
-def phi_piece(
-    pa: Any, pb: Any, panels: int, rlo: Any, rhi: Any, infinite: int, cut: int,
-    box: wp.array(dtype=Any), comp: wp.array2d(dtype=Any), i: int, shift: Any,
-    rule: wp.array2d(dtype=Any), gl: wp.array2d(dtype=Any),
-):
-    """(K15, G7) of the component's ray mass over phi in [pa, pb], on ``panels`` panels."""
-    zero = type(pa)(0.0)
-    half_w = type(pa)(0.5) * (pb - pa) / type(pa)(float(panels))
-    k_sum = zero
-    g_sum = zero
-    for p in range(panels):
-        centre = pa + (type(pa)(2.0) * type(pa)(float(p)) + type(pa)(1.0)) * half_w
-        for j in range(GK_NODES):
-            phi = centre + half_w * rule[0, j]
-            c = wp.cos(phi)
-            s = wp.sin(phi)
-            lo = rlo
-            hi = rhi
-            inf = infinite
-            if cut != 0:
-                bi, bo = ray_box(c, s, box)
-                lo = wp.max(lo, bi)
-                if inf != 0 or bo < hi:
-                    hi = bo
-                    inf = 0
-            v = zero
-            if inf != 0 or hi > lo:
-                v = ray_mass(c, s, lo, hi, inf, comp, i, shift, gl)
-            k_sum += rule[1, j] * v
-            g_sum += rule[2, j] * v
-    return k_sum * half_w, g_sum * half_w
-
-
-@wp.kernel
-def plane_cells(
-    piece_start: wp.array(dtype=wp.int32),
-    piece_a: wp.array(dtype=Any),
-    piece_b: wp.array(dtype=Any),
-    cut: wp.array(dtype=wp.int32),
-    phi_lo: wp.array(dtype=Any),
-    phi_hi: wp.array(dtype=Any),
-    rho_lo: wp.array(dtype=Any),
-    rho_hi: wp.array(dtype=Any),
-    box: wp.array(dtype=Any),
-    box_far: Any,
-    comp: wp.array2d(dtype=Any),
-    n_comp: int,
-    rule: wp.array2d(dtype=Any),
-    gl: wp.array2d(dtype=Any),
-    rtol: Any,
-    log_atol: Any,
-    max_panels: int,
-    start: int,
-    prob: wp.array(dtype=Any),
-    err: wp.array(dtype=Any),
-    evals: wp.array(dtype=wp.int32),
-):
-    """Probability of plane cells ``start + tid``: the cell is the sector rho in
-    [rho_lo, rho_hi] (rho_hi < 0: unbounded, the horizon), phi in [phi_lo, phi_hi], split into
-    the pieces piece_start[c] .. piece_start[c+1] (clipped to ``box`` where ``cut``). Writes the
-    Kronrod sum over components, its error estimate sum |K15 - G7| and the panels used."""
-    cell = start + wp.tid()
-    zero = rho_lo[cell] * type(rtol)(0.0)
-    r0 = rho_lo[cell]
-    r1 = rho_hi[cell]
-    infinite = int(0)
-    if r1 < zero:
-        infinite = 1
-    clip = cut[cell]
-    p0 = phi_lo[cell]
-    p1 = phi_hi[cell]
-    total = zero
-    error = zero
-    used = int(0)
-    reach = type(rtol)(1.0e30)
-    if infinite == 0:
-        reach = r1
-    if clip != 0:
-        reach = wp.min(reach, box_far)
-    for i in range(n_comp):
-        # whole-cell skip: the component's mass beyond Euclidean distance D is below
-        # exp(-(D / sigma_max)^2 / 2) (the Mahalanobis distance is at least D / sigma_max)
-        dist = sector_distance(comp[i, C_MX], comp[i, C_MY], r0, r1, infinite, p0, p1) / comp[i, C_SMAX]
-        if comp[i, C_LOGW] - type(rtol)(0.5) * dist * dist < log_atol:
-            continue
-        mu = wp.sqrt(comp[i, C_MX] * comp[i, C_MX] + comp[i, C_MY] * comp[i, C_MY])
-        rel = wp.min(reach, mu + type(rtol)(9.0) * comp[i, C_SMAX])
-        scale = type(rtol)(1.0e30)
-        if rel > zero:
-            scale = comp[i, C_SMIN] / rel
-        atol = wp.exp(log_atol)
-        mult = int(1)
-        while True:
-            k_tot = zero
-            g_tot = zero
-            n_used = int(0)
-            for q in range(piece_start[cell], piece_start[cell + 1]):
-                pa = piece_a[q]
-                pb = piece_b[q]
-                panels = wp.min(max_panels, panel_count(pb - pa, scale, max_panels) * mult)
-                kk, gg = phi_piece(pa, pb, panels, r0, r1, infinite, clip, box, comp, i, zero, rule, gl)
-                k_tot += kk
-                g_tot += gg
-                n_used += panels
-            e = wp.abs(k_tot - g_tot)
-            if e <= rtol * wp.abs(k_tot) + atol or mult >= max_panels:
-                total += k_tot
-                error += e
-                used += n_used
-                break
-            mult = mult * 4
-    prob[cell] = total
-    err[cell] = error
-    evals[cell] = used
-
-
-@wp.func
 def depth_piece(
     da: Any, db: Any, panels: int, c: Any, s: Any, t0: Any, t1: Any, infinite: int,
     chord_lo: Any, chord_hi: Any, comp: wp.array2d(dtype=Any), i: int,
@@ -452,121 +308,269 @@ def depth_integral(
     return k_tot, g_tot
 
 
-@wp.kernel
-def frustum_cells(
-    piece_start: wp.array(dtype=wp.int32),
-    piece_a: wp.array(dtype=Any),
-    piece_b: wp.array(dtype=Any),
-    cut: wp.array(dtype=wp.int32),
-    phi_lo: wp.array(dtype=Any),
-    phi_hi: wp.array(dtype=Any),
-    tau_lo: wp.array(dtype=Any),
-    tau_hi: wp.array(dtype=Any),
-    depth_lo: Any,
-    depth_hi: Any,
-    box: wp.array(dtype=Any),
-    box_far: Any,
-    comp: wp.array2d(dtype=Any),
-    n_comp: int,
-    rule: wp.array2d(dtype=Any),
-    gl: wp.array2d(dtype=Any),
-    rtol: Any,
-    log_atol: Any,
-    max_panels: int,
-    start: int,
-    prob: wp.array(dtype=Any),
-    err: wp.array(dtype=Any),
-    evals: wp.array(dtype=wp.int32),
-):
-    """Probability of frustum cells: depth d in [depth_lo, depth_hi], rho in [d tau_lo,
-    d tau_hi] (tau_hi < 0: unbounded), phi in the cell's pieces. Tensor Gauss-Kronrod in
-    (phi, d) with the closed-form rho integral inside; error estimate |KK - GG|."""
-    cell = start + wp.tid()
-    zero = tau_lo[cell] * type(rtol)(0.0)
-    t0 = tau_lo[cell]
-    t1 = tau_hi[cell]
-    infinite = int(0)
-    if t1 < zero:
-        infinite = 1
-    clip = cut[cell]
-    p0 = phi_lo[cell]
-    p1 = phi_hi[cell]
-    total = zero
-    error = zero
-    used = int(0)
-    reach = type(rtol)(1.0e30)
-    if infinite == 0:
-        reach = depth_hi * t1
-    if clip != 0:
-        reach = wp.min(reach, box_far)
-    r_far = depth_hi * t1
-    for i in range(n_comp):
-        # skip on the (x, y) marginal (mean C_MX, C_MY; largest SD C_SMAX)
-        dist = sector_distance(comp[i, C_MX], comp[i, C_MY], depth_lo * t0, r_far, infinite, p0, p1) / comp[i, C_SMAX]
-        if comp[i, C_LOGW] - type(rtol)(0.5) * dist * dist < log_atol:
-            continue
-        mu = wp.sqrt(comp[i, C_MX] * comp[i, C_MX] + comp[i, C_MY] * comp[i, C_MY])
-        rel = wp.min(reach, mu + type(rtol)(9.0) * comp[i, C_SMAX])
-        scale = type(rtol)(1.0e30)
-        if rel > zero:
-            scale = comp[i, C_SMIN] / rel
-        # depth scale: the z law's SD; the depth change that moves the whitened conditional
-        # mean by one (1 / |B g|); the one that moves the outer arc (rate tau_hi, capped by the
-        # reach) by the smallest conditional SD
-        d_scale = comp[i, C_SZ]
-        bg = wp.sqrt(comp[i, C_VG1] * comp[i, C_VG1] + comp[i, C_VG2] * comp[i, C_VG2])
-        if bg > zero:
-            d_scale = wp.min(d_scale, type(rtol)(1.0) / bg)
-        arc_rate = rel / depth_lo
+def _phi_piece(frustum: bool):
+    """The Gauss-Kronrod sums over phi in [pa, pb] on ``panels`` panels of the plane's ray mass
+    (rho in [r0, r1]) or (``frustum``) of the frustum's depth integral (rho in [d t0, d t1], d in
+    [depth_lo, depth_hi] on ``d_panels``), each ray clipped to ``box`` where ``cut``: one body,
+    the geometry's node compiled in (``wp.static``). Returns (k_tot, g_tot) with the piece's (K15,
+    G7) added: the plane's piece summed first, the frustum's nodes added one by one."""
+
+    def piece(
+        k_tot: Any, g_tot: Any, pa: Any, pb: Any, panels: int, r0: Any, r1: Any, t0: Any, t1: Any, infinite: int,
+        cut: int, box: wp.array(dtype=Any), comp: wp.array2d(dtype=Any), i: int, depth_lo: Any, depth_hi: Any,
+        d_panels: int, rule: wp.array2d(dtype=Any), gl: wp.array2d(dtype=Any),
+    ):
+        zero = type(pa)(0.0)
+        half_w = type(pa)(0.5) * (pb - pa) / type(pa)(float(panels))
+        k_sum = zero
+        g_sum = zero
+        for p in range(panels):
+            centre = pa + (type(pa)(2.0) * type(pa)(float(p)) + type(pa)(1.0)) * half_w
+            for j in range(GK_NODES):
+                phi = centre + half_w * rule[0, j]
+                c = wp.cos(phi)
+                s = wp.sin(phi)
+                if wp.static(frustum):
+                    chord_lo = zero
+                    chord_hi = type(pa)(1.0e30)
+                    if cut != 0:
+                        chord_lo, chord_hi = ray_box(c, s, box)
+                    if chord_hi > chord_lo:
+                        kd, gd = depth_integral(depth_lo, depth_hi, d_panels, c, s, t0, t1, infinite, chord_lo,
+                                                chord_hi, comp, i, rule, gl)
+                        k_tot += half_w * rule[1, j] * kd
+                        g_tot += half_w * rule[2, j] * gd
+                else:
+                    lo = r0
+                    hi = r1
+                    inf = infinite
+                    if cut != 0:
+                        bi, bo = ray_box(c, s, box)
+                        lo = wp.max(lo, bi)
+                        if inf != 0 or bo < hi:
+                            hi = bo
+                            inf = 0
+                    v = zero
+                    if inf != 0 or hi > lo:
+                        v = ray_mass(c, s, lo, hi, inf, comp, i, zero, gl)
+                    k_sum += rule[1, j] * v
+                    g_sum += rule[2, j] * v
+        if wp.static(frustum):
+            return k_tot, g_tot
+        return k_tot + k_sum * half_w, g_tot + g_sum * half_w
+
+    return wp.func(piece, name=f"phi_piece_{'frustum' if frustum else 'plane'}")
+
+
+def _cells_kernel(name: str, frustum: bool):
+    """The cell kernel of the plane or (``frustum``) of the frustum: one body, the frustum's depth
+    panels (``wp.static``) and depth integral (:func:`_phi_piece`) compiled in only for it."""
+    phi_piece = _phi_piece(frustum)
+
+    def cells(
+        piece_start: wp.array(dtype=wp.int32),
+        piece_a: wp.array(dtype=Any),
+        piece_b: wp.array(dtype=Any),
+        cut: wp.array(dtype=wp.int32),
+        phi_lo: wp.array(dtype=Any),
+        phi_hi: wp.array(dtype=Any),
+        lo: wp.array(dtype=Any),
+        hi: wp.array(dtype=Any),
+        depth_lo: Any,
+        depth_hi: Any,
+        box: wp.array(dtype=Any),
+        box_far: Any,
+        comp: wp.array2d(dtype=Any),
+        n_comp: int,
+        rule: wp.array2d(dtype=Any),
+        gl: wp.array2d(dtype=Any),
+        rtol: Any,
+        log_atol: Any,
+        max_panels: int,
+        start: int,
+        prob: wp.array(dtype=Any),
+        err: wp.array(dtype=Any),
+        evals: wp.array(dtype=wp.int32),
+    ):
+        """Probability of cells ``start + tid``: phi in [phi_lo, phi_hi] split into the pieces
+        piece_start[c] .. piece_start[c+1] (clipped to ``box`` where ``cut``); on the plane rho
+        in [lo, hi], on the frustum depth d in [depth_lo, depth_hi] and rho in [d lo, d hi] (hi < 0:
+        unbounded, the horizon). Writes the Kronrod sum over components, its error estimate sum
+        |K - G| (tensor Gauss-Kronrod in (phi, d) on the frustum) and the panels used."""
+        cell = start + wp.tid()
+        zero = lo[cell] * type(rtol)(0.0)
+        t0 = lo[cell]
+        t1 = hi[cell]
+        infinite = int(0)
+        if t1 < zero:
+            infinite = 1
+        clip = cut[cell]
+        p0 = phi_lo[cell]
+        p1 = phi_hi[cell]
+        total = zero
+        error = zero
+        used = int(0)
+        # the cell's radii (on the frustum, its slab's: nearest and farthest)
+        r0 = t0
+        r1 = t1
+        if wp.static(frustum):
+            r0 = depth_lo * t0
+            r1 = depth_hi * t1
+        reach = type(rtol)(1.0e30)
         if infinite == 0:
-            arc_rate = wp.min(arc_rate, t1)
-        if arc_rate > zero:
-            d_scale = wp.min(d_scale, comp[i, C_SMIN] / arc_rate)
-        atol = wp.exp(log_atol)
-        mult = int(1)
-        while True:
-            k_tot = zero
-            g_tot = zero
-            n_used = int(0)
-            d_panels = wp.min(max_panels, panel_count(depth_hi - depth_lo, d_scale, max_panels) * mult)
-            for q in range(piece_start[cell], piece_start[cell + 1]):
-                pa = piece_a[q]
-                pb = piece_b[q]
-                panels = wp.min(max_panels, panel_count(pb - pa, scale, max_panels) * mult)
-                half_w = type(rtol)(0.5) * (pb - pa) / type(rtol)(float(panels))
-                for p in range(panels):
-                    centre = pa + (type(rtol)(2.0) * type(rtol)(float(p)) + type(rtol)(1.0)) * half_w
-                    for j in range(GK_NODES):
-                        phi = centre + half_w * rule[0, j]
-                        c = wp.cos(phi)
-                        s = wp.sin(phi)
-                        chord_lo = zero
-                        chord_hi = type(rtol)(1.0e30)
-                        if clip != 0:
-                            chord_lo, chord_hi = ray_box(c, s, box)
-                        if chord_hi > chord_lo:
-                            kd, gd = depth_integral(
-                                depth_lo, depth_hi, d_panels, c, s, t0, t1, infinite, chord_lo, chord_hi,
-                                comp, i, rule, gl,
-                            )
-                            k_tot += half_w * rule[1, j] * kd
-                            g_tot += half_w * rule[2, j] * gd
-                n_used += panels * d_panels
-            e = wp.abs(k_tot - g_tot)
-            if e <= rtol * wp.abs(k_tot) + atol or mult >= max_panels:
-                total += k_tot
-                error += e
-                used += n_used
-                break
-            mult = mult * 4
-    prob[cell] = total
-    err[cell] = error
-    evals[cell] = used
+            reach = r1
+        if clip != 0:
+            reach = wp.min(reach, box_far)
+        for i in range(n_comp):
+            # whole-cell skip: the component's mass beyond Euclidean distance D is below
+            # exp(-(D / sigma_max)^2 / 2) (the Mahalanobis distance is at least D / sigma_max;
+            # on the frustum that of the (x, y) marginal)
+            dist = sector_distance(comp[i, C_MX], comp[i, C_MY], r0, r1, infinite, p0, p1) / comp[i, C_SMAX]
+            if comp[i, C_LOGW] - type(rtol)(0.5) * dist * dist < log_atol:
+                continue
+            mu = wp.sqrt(comp[i, C_MX] * comp[i, C_MX] + comp[i, C_MY] * comp[i, C_MY])
+            rel = wp.min(reach, mu + type(rtol)(9.0) * comp[i, C_SMAX])
+            scale = type(rtol)(1.0e30)
+            if rel > zero:
+                scale = comp[i, C_SMIN] / rel
+            d_scale = zero
+            if wp.static(frustum):
+                # depth scale: the z law's SD; the depth change that moves the whitened
+                # conditional mean by one (1 / |B g|); the one that moves the outer arc (rate
+                # tau_hi, capped by the reach) by the smallest conditional SD
+                d_scale = comp[i, C_SZ]
+                bg = wp.sqrt(comp[i, C_VG1] * comp[i, C_VG1] + comp[i, C_VG2] * comp[i, C_VG2])
+                if bg > zero:
+                    d_scale = wp.min(d_scale, type(rtol)(1.0) / bg)
+                arc_rate = rel / depth_lo
+                if infinite == 0:
+                    arc_rate = wp.min(arc_rate, t1)
+                if arc_rate > zero:
+                    d_scale = wp.min(d_scale, comp[i, C_SMIN] / arc_rate)
+            atol = wp.exp(log_atol)
+            mult = int(1)
+            while True:
+                k_tot = zero
+                g_tot = zero
+                n_used = int(0)
+                d_panels = int(1)
+                if wp.static(frustum):
+                    d_panels = wp.min(max_panels, panel_count(depth_hi - depth_lo, d_scale, max_panels) * mult)
+                for q in range(piece_start[cell], piece_start[cell + 1]):
+                    pa = piece_a[q]
+                    pb = piece_b[q]
+                    panels = wp.min(max_panels, panel_count(pb - pa, scale, max_panels) * mult)
+                    k_tot, g_tot = phi_piece(k_tot, g_tot, pa, pb, panels, r0, r1, t0, t1, infinite, clip, box, comp, i,
+                                             depth_lo, depth_hi, d_panels, rule, gl)
+                    n_used += panels * d_panels
+                e = wp.abs(k_tot - g_tot)
+                if e <= rtol * wp.abs(k_tot) + atol or mult >= max_panels:
+                    total += k_tot
+                    error += e
+                    used += n_used
+                    break
+                mult = mult * 4
+        prob[cell] = total
+        err[cell] = error
+        evals[cell] = used
+
+    kernel = wp.kernel(cells, name=name)
+    overload_each(kernel, piece_a=ARRAY, piece_b=ARRAY, phi_lo=ARRAY, phi_hi=ARRAY, lo=ARRAY, hi=ARRAY,
+                  depth_lo=SCALAR, depth_hi=SCALAR, box=ARRAY, box_far=SCALAR, comp=ARRAY2D, rule=ARRAY2D,
+                  gl=ARRAY2D, rtol=SCALAR, log_atol=SCALAR, prob=ARRAY, err=ARRAY)
+    return kernel
+
+
+plane_cells = _cells_kernel("plane_cells", frustum=False)
+frustum_cells = _cells_kernel("frustum_cells", frustum=True)
 
 
 # --------------------------------------------------------------------------------------------
 # Dense grids: density at centres and exact rectangle probabilities
 # --------------------------------------------------------------------------------------------
+
+#: Layout of a grid component row: weight, mean x, mean y, sd x, sd y, correlation, and the
+#: whitening (B11, B21, B22) and density normaliser w / (2 pi det L).
+(G_W, G_MX, G_MY, G_SX, G_SY, G_R, G_B11, G_B21, G_B22, G_NORM) = range(10)
+
+#: Standardised edges are clamped to +-EDGE_CLAMP: beyond 38.5 SDs every normal tail is 0 in
+#: float64, so no probability changes, and squares and products of edges stay finite.
+EDGE_CLAMP = 1.0e30
+
+#: Layout of a component's slab of ``bvn_nodes`` (shape (6, 20)): rows 0-4 per Gauss-Legendre
+#: node (:func:`bvn_node`'s values), row 5 the component's scalars (BVN_KIND, BVN_N, BVN_ASR:
+#: asin r, BVN_ASS: 1 - r^2, BVN_A: its square root).
+(BVN_SN, BVN_W, BVN_RS, BVN_RS1, BVN_RS2) = range(5)
+(BVN_KIND, BVN_N, BVN_ASR, BVN_ASS, BVN_A) = range(5)
+BVN_SCALARS = 5
+#: Columns of ``bvn_nodes``: the most Gauss-Legendre nodes of :func:`bvn_upper`'s rules.
+BVN_NODES = 20
+#: BVN_KIND: the correlation is 0 (product of tails), |r| < 0.925 (Drezner-Wesolowsky in
+#: asin r), |r| >= 0.925 (Genz's expansion about r = +-1).
+(BVN_PRODUCT, BVN_ASIN, BVN_NEAR_ONE) = range(3)
+
+
+@wp.func
+def bvn_rule_of(r: Any):
+    """Genz's rule for correlation r: its nodes' row in ``bvn_rule`` and their count (6 points
+    below |r| = 0.3, 12 below 0.75, 20 above)."""
+    if wp.abs(r) < type(r)(0.3):
+        return 0, 6
+    if wp.abs(r) < type(r)(0.75):
+        return 2, 12
+    return 4, 20
+
+
+@wp.func
+def bvn_node(kind: int, asr: Any, half: Any, row: int, i: int, bvn_rule: wp.array2d(dtype=Any)):
+    """Node i of :func:`bvn_upper`'s rule for a correlation r of ``kind`` (asr = asin r, half =
+    sqrt(1 - r^2) / 2), the numbers that depend on r alone: (sin(asr (x_i + 1) / 2), w_i, 0, 0,
+    0) of Drezner-Wesolowsky's rule, or Genz's (x^2, half w_i, sqrt(1 - x^2), 1 - that, 2 (1 +
+    that)) with x = half (x_i + 1) near |r| = 1."""
+    one = type(asr)(1.0)
+    if kind == BVN_ASIN:
+        zero = type(asr)(0.0)
+        return wp.sin(type(asr)(0.5) * asr * (bvn_rule[row, i] + one)), bvn_rule[row + 1, i], zero, zero, zero
+    xs = half * (bvn_rule[row, i] + one)
+    xs = xs * xs
+    rs = wp.sqrt(one - xs)
+    return xs, half * bvn_rule[row + 1, i], rs, one - rs, type(asr)(2.0) * (one + rs)
+
+
+@wp.func
+def asin_term(sn: Any, w: Any, hk: Any, hs: Any):
+    """A node's term of Drezner-Wesolowsky's integral in asin r (sn, w: :func:`bvn_node`)."""
+    return w * wp.exp((sn * hk - hs) / (type(sn)(1.0) - sn * sn))
+
+
+@wp.func
+def genz_start(h: Any, kk: Any, hk: Any, ass: Any, a: Any):
+    """Genz's expansion about |r| = 1 without its Gauss-Legendre part, for h, kk (k signed with r)
+    and hk = h kk, ass = 1 - r^2, a = sqrt(ass); with the (bs, c, d) its nodes' terms take."""
+    one = type(h)(1.0)
+    bvn = type(h)(0.0)
+    bs = (h - kk) * (h - kk)
+    c = (type(h)(4.0) - hk) * type(h)(0.125)
+    d = (type(h)(12.0) - hk) * type(h)(0.0625)
+    asr = type(h)(-0.5) * (bs / ass + hk)
+    if asr > type(h)(-100.0):
+        bvn = a * wp.exp(asr) * (one - c * (bs - ass) * (one - d * bs / type(h)(5.0)) / type(h)(3.0)
+                                 + c * d * ass * ass / type(h)(5.0))
+    if -hk < type(h)(100.0):
+        b = wp.sqrt(bs)
+        bvn -= (wp.exp(type(h)(-0.5) * hk) * type(h)(SQRT_2PI) * normal_cdf(-b / a) * b
+                * (one - c * bs * (one - d * bs / type(h)(5.0)) / type(h)(3.0)))
+    return bvn, bs, c, d
+
+
+@wp.func
+def genz_add(bvn: Any, xs: Any, w: Any, rs: Any, rs1: Any, rs2: Any, bs: Any, hk: Any, c: Any, d: Any):
+    """``bvn`` plus a node's term of Genz's expansion (xs, w, rs, rs1, rs2: :func:`bvn_node`)."""
+    one = type(bvn)(1.0)
+    asr = type(bvn)(-0.5) * (bs / xs + hk)
+    if asr > type(bvn)(-100.0):
+        return bvn + w * wp.exp(asr) * (wp.exp(-hk * rs1 / rs2) / rs - (one + c * xs * (one + d * xs)))
+    return bvn
 
 
 @wp.func
@@ -578,14 +582,7 @@ def bvn_upper(h: Any, k: Any, r: Any, bvn_rule: wp.array2d(dtype=Any)):
     zero = type(h)(0.0)
     one = type(h)(1.0)
     two_pi = type(h)(6.283185307179586)
-    row = 4
-    n = 20
-    if wp.abs(r) < type(h)(0.3):
-        row = 0
-        n = 6
-    elif wp.abs(r) < type(h)(0.75):
-        row = 2
-        n = 12
+    row, n = bvn_rule_of(r)
     hk = h * k
     bvn = zero
     if wp.abs(r) < type(h)(0.925):
@@ -593,8 +590,8 @@ def bvn_upper(h: Any, k: Any, r: Any, bvn_rule: wp.array2d(dtype=Any)):
             hs = type(h)(0.5) * (h * h + k * k)
             asr = wp.asin(r)
             for i in range(n):
-                sn = wp.sin(type(h)(0.5) * asr * (bvn_rule[row, i] + one))
-                bvn += bvn_rule[row + 1, i] * wp.exp((sn * hk - hs) / (one - sn * sn))
+                sn, w, _rs, _rs1, _rs2 = bvn_node(BVN_ASIN, asr, zero, row, i, bvn_rule)
+                bvn += asin_term(sn, w, hk, hs)
             bvn = bvn * asr / (type(h)(2.0) * two_pi)
         return bvn + normal_sf(h) * normal_sf(k)
     kk = k
@@ -604,26 +601,11 @@ def bvn_upper(h: Any, k: Any, r: Any, bvn_rule: wp.array2d(dtype=Any)):
     if wp.abs(r) < one:
         ass = (one - r) * (one + r)
         a = wp.sqrt(ass)
-        bs = (h - kk) * (h - kk)
-        c = (type(h)(4.0) - hk) * type(h)(0.125)
-        d = (type(h)(12.0) - hk) * type(h)(0.0625)
-        asr = type(h)(-0.5) * (bs / ass + hk)
-        if asr > type(h)(-100.0):
-            bvn = a * wp.exp(asr) * (one - c * (bs - ass) * (one - d * bs / type(h)(5.0)) / type(h)(3.0)
-                                     + c * d * ass * ass / type(h)(5.0))
-        if -hk < type(h)(100.0):
-            b = wp.sqrt(bs)
-            bvn -= (wp.exp(type(h)(-0.5) * hk) * type(h)(SQRT_2PI) * normal_cdf(-b / a) * b
-                    * (one - c * bs * (one - d * bs / type(h)(5.0)) / type(h)(3.0)))
-        a = type(h)(0.5) * a
+        bvn, bs, c, d = genz_start(h, kk, hk, ass, a)
+        half = type(h)(0.5) * a
         for i in range(n):
-            xs = a * (bvn_rule[row, i] + one)
-            xs = xs * xs
-            rs = wp.sqrt(one - xs)
-            asr2 = type(h)(-0.5) * (bs / xs + hk)
-            if asr2 > type(h)(-100.0):
-                bvn += a * bvn_rule[row + 1, i] * wp.exp(asr2) * (
-                    wp.exp(-hk * (one - rs) / (type(h)(2.0) * (one + rs))) / rs - (one + c * xs * (one + d * xs)))
+            xs, w, rs, rs1, rs2 = bvn_node(BVN_NEAR_ONE, zero, half, row, i, bvn_rule)
+            bvn = genz_add(bvn, xs, w, rs, rs1, rs2, bs, hk, c, d)
         bvn = -bvn / two_pi
     if r > zero:
         return bvn + normal_sf(wp.max(h, kk))
@@ -656,53 +638,20 @@ def bvn_rectangle(x0: Any, x1: Any, y0: Any, y1: Any, r: Any, bvn_rule: wp.array
             - bvn_upper(a0, b1, rr, bvn_rule) + bvn_upper(a1, b1, rr, bvn_rule))
 
 
-#: Layout of a grid component row: weight, mean x, mean y, sd x, sd y, correlation, and the
-#: whitening (B11, B21, B22) and density normaliser w / (2 pi det L).
-(G_W, G_MX, G_MY, G_SX, G_SY, G_R, G_B11, G_B21, G_B22, G_NORM) = range(10)
-GRID_COLUMNS = 10
-
-#: Standardised edges are clamped to +-EDGE_CLAMP: beyond 38.5 SDs every normal tail is 0 in
-#: float64, so no probability changes, and squares and products of edges stay finite.
-EDGE_CLAMP = 1.0e30
-
-#: Layout of a component's slab of ``bvn_nodes`` (shape (6, 20)): rows 0-4 per Gauss-Legendre
-#: node (BVN_SN: sin of the node's angle, or x_i^2 of the |r| >= 0.925 rule; BVN_W: its weight,
-#: times a / 2 in the |r| >= 0.925 rule; BVN_RS, BVN_RS1, BVN_RS2: sqrt(1 - x_i^2), 1 - that,
-#: 2 (1 + that)), row 5 the component's scalars (BVN_KIND, BVN_N, BVN_ASR, BVN_ASS, BVN_A).
-(BVN_SN, BVN_W, BVN_RS, BVN_RS1, BVN_RS2) = range(5)
-(BVN_KIND, BVN_N, BVN_ASR, BVN_ASS, BVN_A) = range(5)
-BVN_SCALARS = 5
-#: Columns of ``bvn_nodes``: the most Gauss-Legendre nodes of :func:`bvn_upper`'s rules.
-BVN_NODES = 20
-#: BVN_KIND: the correlation is 0 (product of tails), |r| < 0.925 (Drezner-Wesolowsky in
-#: asin r), |r| >= 0.925 (Genz's expansion about r = +-1).
-(BVN_PRODUCT, BVN_ASIN, BVN_NEAR_ONE) = range(3)
-
-
 @wp.kernel
 def bvn_node_table(
     comp: wp.array2d(dtype=wp.float64),
     bvn_rule: wp.array2d(dtype=wp.float64),
     nodes: wp.array3d(dtype=wp.float64),
 ):
-    """The nodes of :func:`bvn_upper` that depend on a component's correlation only: node ``i``
-    of component ``c`` (launched on (components, BVN_NODES)), by the same expressions as
-    :func:`bvn_upper` for the component's own r (Drezner-Wesolowsky's sin(asin(r) (x_i + 1) / 2);
-    Genz's x_i^2 and sqrt(1 - x_i^2) near |r| = 1), so that :func:`tail_orthant` evaluates per
-    corner the numbers :func:`bvn_upper` evaluates per call. A reflected orthant's correlation is
-    -r: sin and asin are odd, so its nodes are these negated, bit for bit."""
+    """Node ``i`` of component ``c``'s correlation (launched on (components, BVN_NODES)):
+    :func:`bvn_node` and the scalars, the numbers :func:`tail_orthant` reads instead of
+    recomputing them per corner (the module notes)."""
     c, i = wp.tid()
     zero = wp.float64(0.0)
     one = wp.float64(1.0)
     r = comp[c, G_R]
-    row = 4
-    n = 20
-    if wp.abs(r) < wp.float64(0.3):
-        row = 0
-        n = 6
-    elif wp.abs(r) < wp.float64(0.75):
-        row = 2
-        n = 12
+    row, n = bvn_rule_of(r)
     kind = BVN_NEAR_ONE
     if r == zero:
         kind = BVN_PRODUCT
@@ -716,33 +665,21 @@ def bvn_node_table(
         nodes[c, BVN_SCALARS, BVN_ASR] = wp.asin(r)
         nodes[c, BVN_SCALARS, BVN_ASS] = ass
         nodes[c, BVN_SCALARS, BVN_A] = a
-    if i < n:
-        if kind == BVN_ASIN:
-            nodes[c, BVN_SN, i] = wp.sin(wp.float64(0.5) * wp.asin(r) * (bvn_rule[row, i] + one))
-            nodes[c, BVN_W, i] = bvn_rule[row + 1, i]
-        elif kind == BVN_NEAR_ONE:
-            half = wp.float64(0.5) * a
-            xs = half * (bvn_rule[row, i] + one)
-            xs = xs * xs
-            rs = wp.sqrt(one - xs)
-            nodes[c, BVN_SN, i] = xs
-            nodes[c, BVN_W, i] = half * bvn_rule[row + 1, i]
-            nodes[c, BVN_RS, i] = rs
-            nodes[c, BVN_RS1, i] = one - rs
-            nodes[c, BVN_RS2, i] = wp.float64(2.0) * (one + rs)
+    if i < n and kind != BVN_PRODUCT:
+        sn, w, rs, rs1, rs2 = bvn_node(kind, wp.asin(r), wp.float64(0.5) * a, row, i, bvn_rule)
+        nodes[c, BVN_SN, i] = sn
+        nodes[c, BVN_W, i] = w
+        nodes[c, BVN_RS, i] = rs
+        nodes[c, BVN_RS1, i] = rs1
+        nodes[c, BVN_RS2, i] = rs2
 
 
 @wp.func
 def tail_orthant(a: Any, qa: Any, b: Any, qb: Any, c: int, nodes: wp.array3d(dtype=Any)):
-    """The tail orthant of the corner (a, b) of component c's standardised edges: the quadrant
-    that faces away from the mean on both axes, P(s X > |a|, t Y > |b|) with s, t the signs of
-    a and b (+ at 0), given qa = Q(|a|) and qb = Q(|b|).
-
-    It is :func:`bvn_upper` (|a|, |b|, s t r), the orthant :func:`bvn_rectangle` takes for a
-    cell with this corner on the side away from the mean, with the correlation's nodes read
-    from ``nodes`` (:func:`bvn_node_table`) instead of recomputed: the same operations on the
-    same numbers, so the same value, bit for bit, at a cost of one exp per node (two near
-    |r| = 1) instead of a sin and an exp per node, an asin and two normal tails."""
+    """The tail orthant V(a, b) of the corner (a, b) of component c's standardised edges (the
+    module notes), given qa = Q(|a|) and qb = Q(|b|): :func:`bvn_upper` (|a|, |b|, s t r) with
+    the correlation's nodes read from ``nodes`` (:func:`bvn_node_table`), the same operations on
+    the same numbers."""
     zero = type(a)(0.0)
     one = type(a)(1.0)
     two_pi = type(a)(6.283185307179586)
@@ -760,8 +697,7 @@ def tail_orthant(a: Any, qa: Any, b: Any, qb: Any, c: int, nodes: wp.array3d(dty
     if kind == BVN_ASIN:
         hs = type(a)(0.5) * (h * h + k * k)
         for i in range(n):
-            sn = sign * nodes[c, BVN_SN, i]
-            bvn += nodes[c, BVN_W, i] * wp.exp((sn * hk - hs) / (one - sn * sn))
+            bvn += asin_term(sign * nodes[c, BVN_SN, i], nodes[c, BVN_W, i], hk, hs)
         bvn = bvn * (sign * nodes[c, BVN_SCALARS, BVN_ASR]) / (type(a)(2.0) * two_pi)
         return bvn + qa * qb
     # the orthant's correlation s t r: its sign decides Genz's form near |r| = 1
@@ -773,25 +709,10 @@ def tail_orthant(a: Any, qa: Any, b: Any, qb: Any, c: int, nodes: wp.array3d(dty
         hk = -hk
     ass = nodes[c, BVN_SCALARS, BVN_ASS]
     if ass > zero:
-        aa = nodes[c, BVN_SCALARS, BVN_A]
-        bs = (h - kk) * (h - kk)
-        cc = (type(a)(4.0) - hk) * type(a)(0.125)
-        d = (type(a)(12.0) - hk) * type(a)(0.0625)
-        asr = type(a)(-0.5) * (bs / ass + hk)
-        if asr > type(a)(-100.0):
-            bvn = aa * wp.exp(asr) * (one - cc * (bs - ass) * (one - d * bs / type(a)(5.0)) / type(a)(3.0)
-                                      + cc * d * ass * ass / type(a)(5.0))
-        if -hk < type(a)(100.0):
-            bb = wp.sqrt(bs)
-            bvn -= (wp.exp(type(a)(-0.5) * hk) * type(a)(SQRT_2PI) * normal_cdf(-bb / aa) * bb
-                    * (one - cc * bs * (one - d * bs / type(a)(5.0)) / type(a)(3.0)))
+        bvn, bs, cc, d = genz_start(h, kk, hk, ass, nodes[c, BVN_SCALARS, BVN_A])
         for i in range(n):
-            xs = nodes[c, BVN_SN, i]
-            rs = nodes[c, BVN_RS, i]
-            asr2 = type(a)(-0.5) * (bs / xs + hk)
-            if asr2 > type(a)(-100.0):
-                bvn += nodes[c, BVN_W, i] * wp.exp(asr2) * (
-                    wp.exp(-hk * nodes[c, BVN_RS1, i] / nodes[c, BVN_RS2, i]) / rs - (one + cc * xs * (one + d * xs)))
+            bvn = genz_add(bvn, nodes[c, BVN_SN, i], nodes[c, BVN_W, i], nodes[c, BVN_RS, i], nodes[c, BVN_RS1, i],
+                           nodes[c, BVN_RS2, i], bs, hk, cc, d)
         bvn = -bvn / two_pi
     if sign > zero:
         if h >= kk:
@@ -810,14 +731,13 @@ def standardised(x: Any, mean: Any, sd: Any):
 def grid_edge_tails(
     edges: wp.array(dtype=wp.float64),
     comp: wp.array2d(dtype=wp.float64),
-    axis: int,
     std: wp.array2d(dtype=wp.float64),
     tail: wp.array2d(dtype=wp.float64),
 ):
-    """Component c's standardised edge j on ``axis`` (0: x, 1: y) and its tail Q(|edge|)
-    (launched on (components, edges))."""
+    """Component c's standardised column edge j and its tail Q(|edge|) (launched on
+    (components, edges))."""
     c, j = wp.tid()
-    a = standardised(edges[j], comp[c, G_MX + axis], comp[c, G_SX + axis])
+    a = standardised(edges[j], comp[c, G_MX], comp[c, G_SX])
     std[c, j] = a
     tail[c, j] = normal_sf(wp.abs(a))
 
@@ -846,25 +766,16 @@ def grid_cells(
     first; rows stop at ``row1``): the mixture's density at each cell centre and the exact
     probability of each rectangle [x_edges[j], x_edges[j+1]] x [y_edges[i], y_edges[i+1]],
 
-        P_ij = sum_c w_c [V(n_x, n_y) - V(f_x, n_y) - V(n_x, f_y) + V(f_x, f_y)],
+        P_ij = sum_c w_c [V(n_x, n_y) - V(f_x, n_y) - V(n_x, f_y) + V(f_x, f_y)]
 
-    V the tail orthants (:func:`tail_orthant`) at the cell's corners, n and f the edges near
-    to and far from the component's mean on each axis, as :func:`bvn_rectangle` takes them.
+    with shared corners (the module notes): the tile walks its rows from south to north,
+    evaluates each corner's tail orthant once per component and keeps the row of corners below in
+    ``below[slot]`` (``slot0 + tid``; ``acc[slot]`` collects a row of cells over the components);
+    a cell holding the component's mean coordinate on an axis is :func:`bvn_rectangle`'s.
 
-    Shared corners: a corner's tail orthant depends on the corner alone, not on the cell, so
-    the tile walks its rows from south to north, evaluates each corner once per component and
-    keeps the row of corners below in ``below[slot]`` (``slot0 + tid``; ``acc[slot]``
-    collects a row of cells over the components). A cell whose rectangle holds the component's
-    mean coordinate on an axis (edges of both signs: its four corners' orthants face different
-    ways) is evaluated by :func:`bvn_rectangle` itself: at most one row and one column of cells
-    a component. So every cell is the same expression on the same numbers as the per-cell form
-    (the module docstring): the same value with one orthant a component per cell (plus one row
-    a tile) instead of four.
-
-    ``x_edges``, ``y_edges``, ``comp``, ``bvn_rule``, ``nodes``, ``col_std`` (component c's
-    standardised column edges, clamped), ``col_tail`` (their Q(|a|)) and the scratch arrays are
-    float64 in every overload: the four orthant terms cancel, so the arithmetic is float64 and
-    only the stores convert to the dtype of ``density`` and ``prob``."""
+    ``col_std`` holds component c's standardised column edges (clamped), ``col_tail`` their
+    Q(|a|); every input and scratch array is float64 in every overload and only the stores
+    convert to the dtype of ``density`` and ``prob``."""
     t = wp.tid()
     nx = x_edges.shape[0] - 1
     n_tiles_x = (nx + tile_cols - 1) // tile_cols
@@ -945,9 +856,8 @@ def rectangles(
     bvn_rule: wp.array2d(dtype=Any),
     out: wp.array(dtype=Any),
 ):
-    """P(l0 < X < l1, l2 < Y < l3) for standard normals of correlation l4, per row of ``lims``.
-    ``lims`` and ``bvn_rule`` are float64 in every overload (the orthant terms cancel, as in
-    :func:`grid_cells`); only the store takes the dtype of ``out``."""
+    """P(l0 < X < l1, l2 < Y < l3) for standard normals of correlation l4, per row of ``lims``
+    (float64 in every overload, as in :func:`grid_cells`; only the store takes ``out``'s dtype)."""
     k = wp.tid()
     out[k] = out.dtype(bvn_rectangle(lims[k, 0], lims[k, 1], lims[k, 2], lims[k, 3], lims[k, 4], bvn_rule))
 
@@ -972,27 +882,10 @@ def special_functions(
     out[k, 5] = ray_moment(ax, type(x)(0.0), 1, type(x)(0.0), type(x)(1.0), gl)
 
 
-def _register_overloads():
-    # registered when a run in that dtype loads the kernel (generate.use_overload)
-    vec64 = wp.array(dtype=wp.float64)
-    mat64 = wp.array2d(dtype=wp.float64)
-    for scalar in (wp.float32, wp.float64):
-        vec = wp.array(dtype=scalar)
-        mat = wp.array2d(dtype=scalar)
-        cells = {
-            "piece_a": vec, "piece_b": vec, "phi_lo": vec, "phi_hi": vec, "box": vec, "box_far": scalar,
-            "comp": mat, "rule": mat, "gl": mat, "rtol": scalar, "log_atol": scalar, "prob": vec, "err": vec,
-        }
-        overload_on_use(plane_cells, scalar, {**cells, "rho_lo": vec, "rho_hi": vec})
-        overload_on_use(frustum_cells, scalar,
-                        {**cells, "tau_lo": vec, "tau_hi": vec, "depth_lo": scalar, "depth_hi": scalar})
-        # float64 geometry and arithmetic in both overloads (cancellation, see grid_cells)
-        cube64 = wp.array3d(dtype=wp.float64)
-        overload_on_use(grid_cells, scalar, {"x_edges": vec64, "y_edges": vec64, "comp": mat64, "bvn_rule": mat64,
-                                             "nodes": cube64, "col_std": mat64, "col_tail": mat64, "below": cube64,
-                                             "acc": mat64, "density": mat, "prob": mat})
-        overload_on_use(rectangles, scalar, {"lims": mat64, "bvn_rule": mat64, "out": vec})
-        overload_on_use(special_functions, scalar, {"xs": vec, "gl": mat, "out": mat})
-
-
-_register_overloads()
+# registered when a run in that dtype loads the kernel (generate.use_overload); the grid's and
+# the rectangles' geometry and arithmetic are float64 in both (cancellation, see grid_cells)
+F64, F64_2D, F64_3D = wp.array(dtype=wp.float64), wp.array2d(dtype=wp.float64), wp.array3d(dtype=wp.float64)
+overload_each(grid_cells, x_edges=F64, y_edges=F64, comp=F64_2D, bvn_rule=F64_2D, nodes=F64_3D, col_std=F64_2D,
+              col_tail=F64_2D, below=F64_3D, acc=F64_2D, density=ARRAY2D, prob=ARRAY2D)
+overload_each(rectangles, lims=F64_2D, bvn_rule=F64_2D, out=ARRAY)
+overload_each(special_functions, xs=ARRAY, gl=ARRAY2D, out=ARRAY2D)

@@ -752,7 +752,7 @@ def grid_probabilities(mixture: GaussianMixture, grid: Grid, *, dtype=np.float64
     ctx.launch(kp.bvn_node_table, dim=(n_comp, kp.BVN_NODES), inputs=[comp, rule, nodes])
     col_std = ctx.empty((n_comp, grid.nx + 1), dtype=f64)
     col_tail = ctx.empty((n_comp, grid.nx + 1), dtype=f64)
-    ctx.launch(kp.grid_edge_tails, dim=(n_comp, grid.nx + 1), inputs=[xe, comp, 0, col_std, col_tail])
+    ctx.launch(kp.grid_edge_tails, dim=(n_comp, grid.nx + 1), inputs=[xe, comp, col_std, col_tail])
     tiles = _grid_tiles(grid, ctx.bands(grid.ny, 4)) if ctx.cpu else _grid_tiles(grid, None, _GPU_TILE)
     width = tiles[0][3]
     slots = sum(tile[5] for tile in tiles)
@@ -801,7 +801,6 @@ def _component_rows(mixture: GaussianMixture) -> np.ndarray:
         row[kp.C_V1], row[kp.C_V2] = binv @ mu[:2]
         row[kp.C_VG1], row[kp.C_VG2] = binv @ g
         row[kp.C_MX], row[kp.C_MY] = mu[:2]
-        row[kp.C_GX], row[kp.C_GY] = g
         row[kp.C_SMIN] = math.sqrt(np.linalg.eigvalsh(cond)[0])
         row[kp.C_SMAX] = math.sqrt(np.linalg.eigvalsh(cov[:2, :2])[-1])
     return rows
@@ -950,13 +949,10 @@ def _mixture_cells(mixture, lattice, region, p_s, *, dtype, device, threads, rto
     common_tail = [arr(box), scalar(far), comp, mixture.n_components, arr(_gk_rule()), arr(_gl8()),
                    scalar(rtol), scalar(log_atol), MAX_PANELS]
     head = [arr(start, dtype=np.int32), arr(pa), arr(pb), arr(cut, dtype=np.int32), arr(phi0), arr(phi1)]
-    if frustum:
-        kernel = kp.frustum_cells
-        geo = [arr(tau0), arr(np.where(np.isinf(tau1), -1.0, tau1)), scalar(depths[0]), scalar(depths[1])]
-    else:
-        kernel = kp.plane_cells
-        rho_hi = np.where(np.isinf(tau1), -1.0, lattice.h * tau1_k)
-        geo = [arr(lattice.h * tau0), arr(rho_hi)]
+    kernel = kp.frustum_cells if frustum else kp.plane_cells
+    # the plane's radii in float64 here (h tau rounded once to the dtype); the frustum's depths scale tau in the kernel
+    lo, hi = (tau0, tau1_k) if frustum else (lattice.h * tau0, np.where(np.isinf(tau1), -1.0, lattice.h * tau1_k))
+    geo = [arr(lo), arr(hi), scalar(depths[0]), scalar(depths[1])]
     ctx.load(kernel)
     bands = [] if frustum and not depths[1] > depths[0] else ctx.bands(n, 16)
 

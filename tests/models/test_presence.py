@@ -79,6 +79,30 @@ def test_device_special_functions_match_scipy():
             assert abs(o[k, 5] - ref5) <= 1e-12 * ref5
 
 
+def test_cell_kernels_are_one_body_made_per_geometry_with_overloads_for_both_dtypes():
+    """The plane's and the frustum's cell kernels are one body made twice (the frustum's with its
+    depth integral), both in the presence module (one build: no adjoints, the Gauss-Kronrod node
+    loops not unrolled), and each has an overload per dtype, registered when a run first needs it,
+    whose arrays, scalars and components are of that dtype."""
+    from bananagrid.kernels import presence as kp
+    from bananagrid.kernels.generate import use_overload
+
+    wp = _warp()
+    plane, frustum = kp.plane_cells, kp.frustum_cells
+    assert (plane.key, frustum.key) == ("plane_cells", "frustum_cells")
+    assert plane.module is frustum.module is kp.grid_cells.module
+    assert plane.module.options["enable_backward"] is False
+    assert plane.module.options["max_unroll"] == kp.GK_NODES - 1
+    assert [a.label for a in plane.adj.args] == [a.label for a in frustum.adj.args]
+    for kernel in (plane, frustum):
+        for scalar in (wp.float32, wp.float64):
+            use_overload(kernel, scalar)
+            overloads = [{a.label: a.type for a in o.adj.args} for o in kernel.overloads.values()]
+            assert any(a["depth_lo"] is scalar and a["rtol"] is scalar and a["comp"].dtype is scalar
+                       and a["lo"].dtype is scalar and a["prob"].dtype is scalar and a["evals"].dtype is wp.int32
+                       for a in overloads), (kernel.key, scalar)
+
+
 # ----------------------------------------------------------------------------------------------
 # Lattice geometry against independent geometry
 # ----------------------------------------------------------------------------------------------
