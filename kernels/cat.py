@@ -86,15 +86,8 @@ def series_dddd_over_u(z: Any):
 @wp.func
 def cat_basis_curved(u: Any):
     """``common.cat_basis`` (A, B, C, D, C', D' by the same formulas: the same bits) with each
-    sine and cosine taken once, and the second derivatives C'' and D'':
-
-        C'' = (u^3 cos u - 3 u^2 sin u + 6 sin u - 6 u cos u) / u^4,
-        D'' = (6 cos u + 6 u sin u - u^3 sin u - 3 u^2 cos u - 6) / u^4,
-
-    their series below SERIES_SWITCH (``series_ddc_over_u``, ``series_ddd``); and the third
-    derivatives C''' = (24 u cos u - u^4 sin u - 4 u^3 cos u + 12 u^2 sin u - 24 sin u) / u^5 and
-    D''' = (24 - u^4 cos u - 24 cos u - 24 u sin u + 4 u^3 sin u + 12 u^2 cos u) / u^5 (series
-    ``series_dddc``, ``series_dddd_over_u``)."""
+    sine and cosine taken once, and the second and third derivatives C'', D'', C''', D''' (the
+    closed forms below; their series below SERIES_SWITCH)."""
     one = type(u)(1.0)
     two = type(u)(2.0)
     half_u = u * type(u)(0.5)
@@ -147,9 +140,9 @@ def cat_line_terms(a_fn: Any, b_fn: Any, c_fn: Any, d_fn: Any, dc_fn: Any, dd_fn
 
 @wp.func
 def cat_eval_curved(x: Any, y: Any, omega: Any, v0: Any, t: Any):
-    """F, dF/domega, d^2F/domega^2 and d^3F/domega^3
-    at a local point, and the acceleration a = h . (P - v0 f) / |h|^2 of the line through it with
-    da/domega and d^2a/domega^2 (for ``cat_root_value``).
+    """F, dF/domega, d^2F/domega^2 and d^3F/domega^3 at a local point, and the acceleration
+    a = h . (P - v0 f) / |h|^2 of the line through it with da/domega and d^2a/domega^2 (for
+    ``cat_root_value``).
 
     With h'' = t^4 (C'', D''), h''' = t^5 (C''', D'''), f' = t^2 (D, -C) = (hy, -hx):
     h' x f' = -h . h' and h'' x f' = -h . h'', so with Q = P - v0 f
@@ -379,11 +372,8 @@ def cat_root_density(
     ``cat_carry_root`` adds the root's path, weighted by the evidence, to ``out`` (a no-op for
     the plain kernels, whose ``carry`` is the integer 0).
 
-    Halley's method (Newton's where Halley's step leaves the bracket) from the Hermite estimate,
-    kept inside the bracket (bisection when both steps leave it; ``cat_root_step``); the
-    density is taken at an omega within ``tol`` of the root: the last evaluation's, or the
-    Halley point after it that ``cat_root_step`` proves so (``cat_root_value``).
-    |det J| = |dF/domega| is taken as at least ``noise_g``, its rounding allowance: on a fold
+    The search (``cat_root_step``) starts at the Hermite estimate (``cat_root_start``); the
+    density is taken at an omega within ``tol`` of the root (``cat_root_value``). |det J| = |dF/domega| is taken as at least ``noise_g``, its rounding allowance: on a fold
     caustic the density is infinite, and a point whose coordinates round onto it (in float32,
     within ~1e-7 v0 t) gets the largest value its arithmetic can resolve, never inf.
     ``cat_root_group`` computes the same, to the bit, for several roots side by side.
@@ -778,16 +768,9 @@ def cat_table(omegas: wp.array(dtype=Any), v0: Any, t: Any, table: wp.array2d(dt
     a_fn, b_fn, c_fn, d_fn, dc_fn, dd_fn, ddc_fn, ddd_fn, dddc_fn, dddd_fn = cat_basis_curved(w * t)
     fx, fy, hx, hy, dhx, dhy, h2, c, dc = cat_line_terms(a_fn, b_fn, c_fn, d_fn, dc_fn, dd_fn, v0, t)
     # the acceleration of the line through P: a = h . (P - v0 f) / |h|^2 = ax x + ay y - a0
-    table[k, 7] = hx / h2
-    table[k, 8] = hy / h2
-    table[k, 9] = v0 * (hx * fx + hy * fy) / h2
-    table[k, 0] = w
-    table[k, 1] = hx
-    table[k, 2] = hy
-    table[k, 3] = c
-    table[k, 4] = dhx
-    table[k, 5] = dhy
-    table[k, 6] = dc
+    row = wp.vector(w, hx, hy, c, dhx, dhy, dc, hx / h2, hy / h2, v0 * (hx * fx + hy * fy) / h2)
+    for column in range(TABLE_COLUMNS):
+        table[k, column] = row[column]
 
 
 for _scalar in SCALARS:

@@ -21,8 +21,8 @@ from .cat import (
 )
 from .evidence import EVIDENCE
 from .generate import SCALARS, Params, carried_points_kernel, density_kernels, overload_on_use
-from .common import LANES32, LANES64, lanes32, lanes64, world_to_local
-from .lanes import cat_scan_group
+from .common import lanes32, lanes64, world_to_local
+from .lanes import cat_scan_group, lane_count
 
 # No adjoints: nothing differentiates these kernels (see ``polar_lanes``); the scan's split
 # loops stay loops, as in ``cat`` (its module options say why).
@@ -48,23 +48,12 @@ def node_groups(table: np.ndarray, lanes: int) -> np.ndarray:
 
 
 @wp.func
-def group_width(groups: wp.array2d(dtype=lanes64)):
-    """Intervals per group (8 float64 lanes)."""
-    return LANES64
-
-
-@wp.func
-def group_width(groups: wp.array2d(dtype=lanes32)):  # noqa: F811
-    return LANES32
-
-
-@wp.func
 def cat_scan_lanes(x: Any, y: Any, p: Any, carry: Any, lw: wp.array(dtype=Any), out: wp.array(dtype=Any)):
     """``cat.cat_scan`` with its test over nodes in lanes (``p.groups``: :func:`node_groups`)."""
     density = type(x)(0.0)
     r, noise_f, noise_g, chord_coef = cat_scan_noise(x, y, p.v0, p.t, p.eps)
     n = p.table.shape[0]
-    width = group_width(p.groups)
+    width = lane_count(p.table[0])  # intervals per group: the dtype's lanes
     for g in range(p.groups.shape[1]):
         k = 1 + g * width  # the node that the group's first interval ends at
         flags = cat_scan_group(p.groups, g, x, y, chord_coef, noise_f, n - k)
