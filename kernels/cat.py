@@ -9,15 +9,9 @@ A point P is reached at omega iff  F(omega) = h x (P - v0 f) = 0  (2-D cross pro
 a = h . (P - v0 f) / |h|^2, and  dF/domega = h' x (P - v0 f) + v0 |h|^2 = -det d(x,y)/d(a,omega).
 The density is  sum over roots of  g(a; sigma_a) g(omega; sigma_omega) / |dF/domega|.
 
-F and dF/domega are affine in P with omega-only coefficients, so a table of those coefficients
-at N nodes (``cat_table``) lets each cell scan for sign changes with a few multiply-adds per
-node (on the CPU a grid row is swept instead: ``kernels/cat_lanes.py``). Which node intervals
-can hold roots, and how many, is decided from proved bounds on F's derivatives
-(``cat_interval``), so that no root, and no root pair where the banana folds over itself, is
-missed: see ``cat_interval`` for the bounds and the proof. Each root is then found by Halley's
-method from the inverse cubic Hermite start, inside its bracket (``cat_root_density``): one
-evaluation of F and its first two derivatives a root where a bound on the third proves the
-Halley point within the tolerance (``cat_root_step``).
+F and dF/domega are affine in P with omega-only coefficients: each point scans a table of them
+(``cat_table``, ``cat_scan``; on the CPU ``kernels/cat_lanes.py``), ``cat_interval`` proves which
+node intervals hold roots, and ``cat_root_density`` finds each.
 """
 
 from typing import Any
@@ -92,15 +86,8 @@ def series_dddd_over_u(z: Any):
 @wp.func
 def cat_basis_curved(u: Any):
     """``common.cat_basis`` (A, B, C, D, C', D' by the same formulas: the same bits) with each
-    sine and cosine taken once, and the second derivatives C'' and D'':
-
-        C'' = (u^3 cos u - 3 u^2 sin u + 6 sin u - 6 u cos u) / u^4,
-        D'' = (6 cos u + 6 u sin u - u^3 sin u - 3 u^2 cos u - 6) / u^4,
-
-    their series below SERIES_SWITCH (``series_ddc_over_u``, ``series_ddd``); and the third
-    derivatives C''' = (24 u cos u - u^4 sin u - 4 u^3 cos u + 12 u^2 sin u - 24 sin u) / u^5 and
-    D''' = (24 - u^4 cos u - 24 cos u - 24 u sin u + 4 u^3 sin u + 12 u^2 cos u) / u^5 (series
-    ``series_dddc``, ``series_dddd_over_u``)."""
+    sine and cosine taken once, and the second and third derivatives C'', D'', C''', D''' (the
+    closed forms below; their series below SERIES_SWITCH)."""
     one = type(u)(1.0)
     two = type(u)(2.0)
     half_u = u * type(u)(0.5)
@@ -152,28 +139,10 @@ def cat_line_terms(a_fn: Any, b_fn: Any, c_fn: Any, d_fn: Any, dc_fn: Any, dd_fn
 
 
 @wp.func
-def cat_coefficients(omega: Any, v0: Any, t: Any):
-    """The omega-only coefficients of everything a point needs, from one basis evaluation:
-    F = hx y - hy x - c, dF/domega = dhx y - dhy x - dc, and the acceleration of the line
-    through P, a = h . (P - v0 f) / |h|^2 = ax x + ay y - a0 (exact at a root)."""
-    u = omega * t
-    a_fn, b_fn, c_fn, d_fn, dc_fn, dd_fn, ddc_fn, ddd_fn, dddc_fn, dddd_fn = cat_basis_curved(u)
-    fx, fy, hx, hy, dhx, dhy, h2, c, dc = cat_line_terms(a_fn, b_fn, c_fn, d_fn, dc_fn, dd_fn, v0, t)
-    return hx, hy, c, dhx, dhy, dc, hx / h2, hy / h2, v0 * (hx * fx + hy * fy) / h2
-
-
-@wp.func
-def cat_eval(x: Any, y: Any, omega: Any, v0: Any, t: Any):
-    """F(omega), dF/domega and the acceleration a of the line through P, at a local point."""
-    hx, hy, c, dhx, dhy, dc, ax, ay, a0 = cat_coefficients(omega, v0, t)
-    return hx * y - hy * x - c, dhx * y - dhy * x - dc, ax * x + ay * y - a0
-
-
-@wp.func
 def cat_eval_curved(x: Any, y: Any, omega: Any, v0: Any, t: Any):
-    """F, dF/domega (``cat_eval``'s arithmetic, the same bits), d^2F/domega^2 and d^3F/domega^3
-    at a local point, and the acceleration a = h . (P - v0 f) / |h|^2 of the line through it with
-    da/domega and d^2a/domega^2 (for ``cat_root_value``).
+    """F, dF/domega, d^2F/domega^2 and d^3F/domega^3 at a local point, and the acceleration
+    a = h . (P - v0 f) / |h|^2 of the line through it with da/domega and d^2a/domega^2 (for
+    ``cat_root_value``).
 
     With h'' = t^4 (C'', D''), h''' = t^5 (C''', D'''), f' = t^2 (D, -C) = (hy, -hx):
     h' x f' = -h . h' and h'' x f' = -h . h'', so with Q = P - v0 f
@@ -208,14 +177,10 @@ def cat_eval_curved(x: Any, y: Any, omega: Any, v0: Any, t: Any):
 
 
 @wp.func
-def hermite_cubic(f0: Any, g0: Any, f1: Any, g1: Any, width: Any):
-    """Coefficients (m0, q, p) of the cubic Hermite interpolant of F on an interval,
-    H(s) = f0 + s (m0 + s (q + s p)) for s in [0, 1], from end values f and slopes g."""
-    m0 = g0 * width
-    m1 = g1 * width
-    p = type(f0)(2.0) * (f0 - f1) + m0 + m1
-    q = type(f0)(3.0) * (f1 - f0) - type(f0)(2.0) * m0 - m1
-    return m0, q, p
+def cat_eval(x: Any, y: Any, omega: Any, v0: Any, t: Any):
+    """F(omega) and dF/domega at a local point (``cat_eval_curved``'s)."""
+    f, df, ddf, dddf, acc, dacc, ddacc = cat_eval_curved(x, y, omega, v0, t)
+    return f, df
 
 
 @wp.func
@@ -223,10 +188,9 @@ def hermite_root(f0: Any, g0: Any, f1: Any, g1: Any, width: Any):
     """A Newton start for the root in [0, 1] of F (f0, f1 of opposite sign), good to O(width^4)
     where F is monotone: the inverse cubic Hermite interpolant, s as a cubic in
     tau = (F - f0) / (f1 - f0) with s(0) = 0, s(1) = 1 and slopes ds/dtau = (f1 - f0) / (g width)
-    at the ends, at F = 0 (tau = the chord's root). No iteration, so no chain of divisions: the
-    cubic's forward root by Newton steps took as long as the two evaluations of F after it. A
-    start outside [0, 1] (F not monotone: a slope near zero or of the wrong sign) is clamped:
-    a start needs no guarantee (``cat_root_density`` keeps its own bracket)."""
+    at the ends, at F = 0 (tau = the chord's root): no iteration, no chain of divisions. A start
+    outside [0, 1] (F not monotone: a slope near zero or of the wrong sign) is clamped: a start
+    needs no guarantee (``cat_root_density`` keeps its own bracket)."""
     zero = type(f0)(0.0)
     one = type(f0)(1.0)
     two = type(f0)(2.0)
@@ -245,9 +209,13 @@ def hermite_root(f0: Any, g0: Any, f1: Any, g1: Any, width: Any):
 
 @wp.func
 def hermite_minimum(f0: Any, g0: Any, f1: Any, g1: Any, width: Any):
-    """The smallest value on [0, 1] of the cubic Hermite interpolant of F (signed: its ends and
-    its interior stationary points, where 3 p s^2 + 2 q s + m0 = 0)."""
-    m0, q, p = hermite_cubic(f0, g0, f1, g1, width)
+    """The smallest value on [0, 1] of the cubic Hermite interpolant of F on an interval of that
+    width, H(s) = f0 + s (m0 + s (q + s p)), from its end values f and slopes g (signed: its ends
+    and its interior stationary points, where 3 p s^2 + 2 q s + m0 = 0)."""
+    m0 = g0 * width
+    m1 = g1 * width
+    p = type(f0)(2.0) * (f0 - f1) + m0 + m1
+    q = type(f0)(3.0) * (f1 - f0) - type(f0)(2.0) * m0 - m1
     zero = type(f0)(0.0)
     one = type(f0)(1.0)
     lowest = wp.min(f0, f1)
@@ -280,7 +248,14 @@ def cat_path_position(a: Any, omega: Any, v0: Any, s: Any):
 
 
 @wp.func
-def cat_carry_path(carry: Any, a: Any, omega: Any, v0: Any, density: Any, lw: wp.array(dtype=Any),
+def cat_carry_root(carry: int, a: Any, omega: Any, v0: Any, density: Any, lw: wp.array(dtype=Any),
+                   out: wp.array(dtype=Any)):
+    """No evidence (the plain kernels, whose ``carry`` is the integer 0): nothing to add."""
+    return
+
+
+@wp.func
+def cat_carry_root(carry: Any, a: Any, omega: Any, v0: Any, density: Any, lw: wp.array(dtype=Any),  # noqa: F811
                    out: wp.array(dtype=Any)):
     """Add the path (a, omega)'s density times its evidence weights (``kernels/evidence.py``) to
     ``out``, scaled by the heading node's weight; positions at the pack's node times (reused
@@ -299,25 +274,6 @@ def cat_carry_path(carry: Any, a: Any, omega: Any, v0: Any, density: Any, lw: wp
             s_prev = s
         evidence_node(ev, j, px, py, lw)
     evidence_add(ev, lw, carry.scale * density, out)
-
-
-@wp.func
-def cat_carry_root(carry: int, a: Any, omega: Any, v0: Any, density: Any, lw: wp.array(dtype=Any),
-                   out: wp.array(dtype=Any)):
-    """No evidence (the plain kernels): nothing to add."""
-    return
-
-
-@wp.func
-def cat_carry_root(carry: CAT_CARRY.of(wp.float64), a: wp.float64, omega: wp.float64, v0: wp.float64,  # noqa: F811
-                   density: wp.float64, lw: wp.array(dtype=wp.float64), out: wp.array(dtype=wp.float64)):
-    cat_carry_path(carry, a, omega, v0, density, lw, out)
-
-
-@wp.func
-def cat_carry_root(carry: CAT_CARRY.of(wp.float32), a: wp.float32, omega: wp.float32, v0: wp.float32,  # noqa: F811
-                   density: wp.float32, lw: wp.array(dtype=wp.float32), out: wp.array(dtype=wp.float32)):
-    cat_carry_path(carry, a, omega, v0, density, lw, out)
 
 
 @wp.func
@@ -416,11 +372,8 @@ def cat_root_density(
     ``cat_carry_root`` adds the root's path, weighted by the evidence, to ``out`` (a no-op for
     the plain kernels, whose ``carry`` is the integer 0).
 
-    Halley's method (Newton's where Halley's step leaves the bracket) from the Hermite estimate,
-    kept inside the bracket (bisection when both steps leave it; ``cat_root_step``); the
-    density is taken at an omega within ``tol`` of the root: the last evaluation's, or the
-    Halley point after it that ``cat_root_step`` proves so (``cat_root_value``).
-    |det J| = |dF/domega| is taken as at least ``noise_g``, its rounding allowance: on a fold
+    The search (``cat_root_step``) starts at the Hermite estimate (``cat_root_start``); the
+    density is taken at an omega within ``tol`` of the root (``cat_root_value``). |det J| = |dF/domega| is taken as at least ``noise_g``, its rounding allowance: on a fold
     caustic the density is infinite, and a point whose coordinates round onto it (in float32,
     within ~1e-7 v0 t) gets the largest value its arithmetic can resolve, never inf.
     ``cat_root_group`` computes the same, to the bit, for several roots side by side.
@@ -533,7 +486,7 @@ def cat_fold_minimum(x: Any, y: Any, lo: Any, hi: Any, g_lo: Any, g_hi: Any, v0:
     gb = g_hi
     side = int(0)
     m = b - gb * (b - a) / (gb - ga)
-    f_m, g_m, acc = cat_eval(x, y, m, v0, t)
+    f_m, g_m = cat_eval(x, y, m, v0, t)
     for _it in range(MAX_FOLD_SEARCH):
         if g_m == zero:
             break
@@ -554,7 +507,7 @@ def cat_fold_minimum(x: Any, y: Any, lo: Any, hi: Any, g_lo: Any, g_hi: Any, v0:
         m = b - gb * (b - a) / (gb - ga)
         if not (m > a and m < b):
             m = (a + b) * type(x)(0.5)
-        f_m, g_m, acc = cat_eval(x, y, m, v0, t)
+        f_m, g_m = cat_eval(x, y, m, v0, t)
     return m, f_m, g_m
 
 
@@ -665,7 +618,7 @@ def cat_part_end(x: Any, y: Any, lo: Any, hi: Any, f_hi: Any, g_hi: Any, i: int,
     if i == SPLIT - 1:
         return hi, f_hi, g_hi
     b = lo + (hi - lo) * type(x)(float(i + 1) / float(SPLIT))
-    f_b, g_b, acc_b = cat_eval(x, y, b, v0, t)
+    f_b, g_b = cat_eval(x, y, b, v0, t)
     return b, f_b, g_b
 
 
@@ -723,134 +676,115 @@ def cat_scan_noise(x: Any, y: Any, v0: Any, t: Any, eps: Any):
 
 
 @wp.func
-def cat_node_interval(
-    x: Any, y: Any, table: wp.array2d(dtype=Any), k: int, v0: Any, t: Any, sigma_a: Any, sigma_omega: Any,
-    tol: Any, r: Any, noise_f: Any, noise_g: Any, carry: Any, lw: wp.array(dtype=Any), out: wp.array(dtype=Any),
-):
-    """The density of the roots in the node interval [k - 1, k] that the scan's cheap test
-    flagged (0 where both ends' accelerations are beyond PRUNE_SIGMAS on one side): settled by
-    ``cat_interval``, or split by ``cat_split``. Shared by the scalar and the lane scans."""
-    if cat_negligible(table, k, x, y, type(x)(PRUNE_SIGMAS) * sigma_a):
-        return type(x)(0.0)
-    w_prev = table[k - 1, 0]
-    f_prev = table[k - 1, 1] * y - table[k - 1, 2] * x - table[k - 1, 3]
-    g_prev = table[k - 1, 4] * y - table[k - 1, 5] * x - table[k - 1, 6]
-    w_k = table[k, 0]
-    f_k = table[k, 1] * y - table[k, 2] * x - table[k, 3]
-    g_k = table[k, 4] * y - table[k, 5] * x - table[k, 6]
-    part, settled = cat_interval(
-        x, y, w_prev, w_k, f_prev, g_prev, f_k, g_k, v0, t, sigma_a, sigma_omega, tol, r, noise_f, noise_g, False,
-        carry, lw, out,
-    )
-    if settled:
-        return part
-    return cat_split(
-        x, y, w_prev, w_k, f_prev, g_prev, f_k, g_k, v0, t, sigma_a, sigma_omega, tol, r, noise_f, noise_g, carry, lw, out
+def cat_node_f(table: wp.array2d(dtype=Any), k: int, x: Any, y: Any):
+    """F = hx y - hy x - c at node k at the local point (x, y), from the scan table."""
+    return table[k, 1] * y - table[k, 2] * x - table[k, 3]
+
+
+@wp.func
+def cat_node_values(table: wp.array2d(dtype=Any), k: int, x: Any, y: Any):
+    """omega, F (``cat_node_f``) and dF/domega = dhx y - dhy x - dc at node k."""
+    return table[k, 0], cat_node_f(table, k, x, y), table[k, 4] * y - table[k, 5] * x - table[k, 6]
+
+
+@wp.func
+def cat_flagged(f_prev: Any, f_k: Any, width: Any, chord_coef: Any, noise_f: Any):
+    """The scan's cheap test of a node interval (F at its ends, its width): a sign change, or an
+    end within the chord bound M2 w^2 / 8 of zero (``cat_interval``); the rest hold no root."""
+    return (f_k >= type(f_k)(0.0)) != (f_prev >= type(f_k)(0.0)) or wp.min(wp.abs(f_prev), wp.abs(f_k)) <= (
+        chord_coef * width * width + noise_f
     )
 
 
 @wp.func
-def cat_density_local(
-    x: Any,
-    y: Any,
-    table: wp.array2d(dtype=Any),
-    v0: Any,
-    t: Any,
-    sigma_a: Any,
-    sigma_omega: Any,
-    tol: Any,
-    eps: Any,
-    carry: Any,
-    lw: wp.array(dtype=Any),
-    out: wp.array(dtype=Any),
-):
-    """Exact CAT density at a point of the local frame: scan the table, refine every root
-    (each root's path weighted into ``out`` by ``cat_carry_root`` where ``carry`` is evidence).
+def cat_node_interval(x: Any, y: Any, p: Any, k: int, r: Any, noise_f: Any, noise_g: Any, carry: Any,
+                      lw: wp.array(dtype=Any), out: wp.array(dtype=Any)):
+    """The density of the roots in the node interval [k - 1, k] that a scan flagged
+    (``cat_flagged``; 0 where both ends' accelerations are beyond PRUNE_SIGMAS on one side):
+    settled by ``cat_interval``, or split by ``cat_split``. ``p``: the parameters (``CAT``)."""
+    if cat_negligible(p.table, k, x, y, type(x)(PRUNE_SIGMAS) * p.sigma_a):
+        return type(x)(0.0)
+    w_prev, f_prev, g_prev = cat_node_values(p.table, k - 1, x, y)
+    w_k, f_k, g_k = cat_node_values(p.table, k, x, y)
+    part, settled = cat_interval(x, y, w_prev, w_k, f_prev, g_prev, f_k, g_k, p.v0, p.t, p.sigma_a, p.sigma_omega,
+                                 p.tol, r, noise_f, noise_g, False, carry, lw, out)
+    if settled:
+        return part
+    return cat_split(x, y, w_prev, w_k, f_prev, g_prev, f_k, g_k, p.v0, p.t, p.sigma_a, p.sigma_omega, p.tol, r,
+                     noise_f, noise_g, carry, lw, out)
 
-    Intervals with a sign change, and those whose smaller |F| at an end is within the chord
-    bound of zero (``cat_interval``), are examined (``cat_node_interval``); the rest cannot hold
-    a root.
-    """
+
+@wp.func
+def cat_scan(x: Any, y: Any, p: Any, carry: Any, lw: wp.array(dtype=Any), out: wp.array(dtype=Any)):
+    """Exact CAT density at a point of the local frame: scan the table node by node, refine every
+    root of each flagged interval (``cat_node_interval``), each root's path weighted into ``out``
+    by ``cat_carry_root`` where ``carry`` is evidence (the integer 0 and any rows: none)."""
     density = type(x)(0.0)
-    r, noise_f, noise_g, chord_coef = cat_scan_noise(x, y, v0, t, eps)
-    zero = type(x)(0.0)
-    n = table.shape[0]
-    w_prev = table[0, 0]
-    f_prev = table[0, 1] * y - table[0, 2] * x - table[0, 3]
-    for k in range(1, n):
-        w_k = table[k, 0]
-        f_k = table[k, 1] * y - table[k, 2] * x - table[k, 3]
-        width = w_k - w_prev
-        # cheap test first: a sign change, or an end within the chord bound M2 w^2 / 8 of zero
-        if (f_k >= zero) != (f_prev >= zero) or wp.min(wp.abs(f_prev), wp.abs(f_k)) <= (
-            chord_coef * width * width + noise_f
-        ):
-            density += cat_node_interval(
-                x, y, table, k, v0, t, sigma_a, sigma_omega, tol, r, noise_f, noise_g, carry, lw, out
-            )
+    r, noise_f, noise_g, chord_coef = cat_scan_noise(x, y, p.v0, p.t, p.eps)
+    w_prev = p.table[0, 0]
+    f_prev = cat_node_f(p.table, 0, x, y)
+    for k in range(1, p.table.shape[0]):
+        w_k = p.table[k, 0]
+        f_k = cat_node_f(p.table, k, x, y)
+        if cat_flagged(f_prev, f_k, w_k - w_prev, chord_coef, noise_f):
+            density += cat_node_interval(x, y, p, k, r, noise_f, noise_g, carry, lw, out)
         w_prev = w_k
         f_prev = f_k
     return density
 
 
+def cat_scan_functions(scan):
+    """The density and carried ``@wp.func``s of a scan (``cat_scan``, or the lanes' in
+    ``kernels/cat_lanes.py``), in the scan's module: ``density(x, y, p)`` per m^2 at the world
+    point (x, y), the launch kernels' maths; ``carried(x, y, p, ev, lw, out)`` each channel of it
+    weighted by the evidence along each root's path (``bananagrid.protocol.CarryingModel``),
+    summed over the heading nodes ``p.poses`` (the model's pose turned by theta_0; one node of
+    weight 1 without heading noise) with weights ``p.weights``."""
+
+    def density(x: Any, y: Any, p: Any):
+        lx, ly = world_to_local(x, y, p.pose)
+        # no evidence: the integer 0 selects the no-op ``cat_carry_root``; a table row stands in
+        # for the unused scratch and channel rows
+        return scan(lx, ly, p, int(0), p.table[0], p.table[0])
+
+    def carried(x: Any, y: Any, p: Any, ev: Any, lw: wp.array(dtype=Any), out: wp.array(dtype=Any)):
+        carry = p.carry
+        carry.ev = ev
+        for i in range(p.weights.shape[0]):
+            carry.pose = p.poses[i]
+            carry.scale = p.weights[i]
+            lx, ly = world_to_local(x, y, carry.pose)
+            scan(lx, ly, p, carry, lw, out)
+
+    return (wp.func(density, name=f"{scan.key}_density", module=scan.module),
+            wp.func(carried, name=f"{scan.key}_carried", module=scan.module))
+
+
 @wp.kernel
-def cat_table(
-    omegas: wp.array(dtype=Any), v0: Any, t: Any, table: wp.array2d(dtype=Any)
-):
-    """Fill the scan table: one row per turn-rate node."""
+def cat_table(omegas: wp.array(dtype=Any), v0: Any, t: Any, table: wp.array2d(dtype=Any)):
+    """Fill the scan table: one row per turn-rate node (columns: ``TABLE_COLUMNS``)."""
     k = wp.tid()
     w = omegas[k]
-    hx, hy, c, dhx, dhy, dc, ax, ay, a0 = cat_coefficients(w, v0, t)
-    table[k, 7] = ax
-    table[k, 8] = ay
-    table[k, 9] = a0
-    table[k, 0] = w
-    table[k, 1] = hx
-    table[k, 2] = hy
-    table[k, 3] = c
-    table[k, 4] = dhx
-    table[k, 5] = dhy
-    table[k, 6] = dc
+    a_fn, b_fn, c_fn, d_fn, dc_fn, dd_fn, ddc_fn, ddd_fn, dddc_fn, dddd_fn = cat_basis_curved(w * t)
+    fx, fy, hx, hy, dhx, dhy, h2, c, dc = cat_line_terms(a_fn, b_fn, c_fn, d_fn, dc_fn, dd_fn, v0, t)
+    # the acceleration of the line through P: a = h . (P - v0 f) / |h|^2 = ax x + ay y - a0
+    row = wp.vector(w, hx, hy, c, dhx, dhy, dc, hx / h2, hy / h2, v0 * (hx * fx + hy * fy) / h2)
+    for column in range(TABLE_COLUMNS):
+        table[k, column] = row[column]
 
 
-@wp.func
-def cat_density(x: Any, y: Any, p: Any):
-    """Density per m^2 at the world point (x, y): the launch kernels' maths (``p.eps``: the
-    dtype's machine epsilon, for the rounding allowance)."""
-    lx, ly = world_to_local(x, y, p.pose)
-    # no evidence: the integer 0 selects the no-op ``cat_carry_root``; a table row stands in
-    # for the unused scratch and channel rows
-    return cat_density_local(lx, ly, p.table, p.v0, p.t, p.sigma_a, p.sigma_omega, p.tol, p.eps, int(0), p.table[0],
-                             p.table[0])
-
-
-#: The parameters: the scan table (``cat_table``), the model's, its pose, Newton's tolerance.
-CAT = Params("CatParams", __name__, table=ARRAY2D, v0=SCALAR, t=SCALAR, sigma_a=SCALAR, sigma_omega=SCALAR, pose=VEC4,
-             tol=SCALAR, eps=SCALAR)
-KERNELS = density_kernels(cat_density, CAT, "cat")
 for _scalar in SCALARS:
     overload_on_use(cat_table, _scalar, {"omegas": wp.array(dtype=_scalar), "v0": _scalar, "t": _scalar,
-                            "table": wp.array2d(dtype=_scalar)})
+                                         "table": wp.array2d(dtype=_scalar)})
 
-
-
-@wp.func
-def cat_carried(x: Any, y: Any, p: Any, ev: Any, lw: wp.array(dtype=Any), out: wp.array(dtype=Any)):
-    """Each channel of the density at the world point (x, y) weighted by the evidence along each
-    root's path (``bananagrid.protocol.CarryingModel``): summed over the heading nodes
-    ``p.poses`` (the model's pose turned by theta_0; one node of weight 1 without heading noise)
-    with weights ``p.weights``."""
-    carry = p.carry
-    carry.ev = ev
-    for i in range(p.weights.shape[0]):
-        carry.pose = p.poses[i]
-        carry.scale = p.weights[i]
-        lx, ly = world_to_local(x, y, carry.pose)
-        cat_density_local(lx, ly, p.table, p.v0, p.t, p.sigma_a, p.sigma_omega, p.tol, p.eps, carry, lw, out)
-
-
+#: The parameters: the scan table (``cat_table``), the model's, its pose, Newton's tolerance,
+#: the dtype's machine epsilon (for the rounding allowances).
+CAT = Params("CatParams", __name__, table=ARRAY2D, v0=SCALAR, t=SCALAR, sigma_a=SCALAR, sigma_omega=SCALAR, pose=VEC4,
+             tol=SCALAR, eps=SCALAR)
 #: The carried kernel's parameters: the scan's, the carry struct (its ``ev`` set by the kernel)
 #: and the heading nodes (poses and weights).
 CAT_CARRIED = Params("CatCarriedParams", __name__, **CAT.fields, carry=lambda scalar: CAT_CARRY.of(scalar),
                      poses=lambda scalar: wp.array(dtype=wp.types.vector(4, scalar)), weights=ARRAY)
+cat_density, cat_carried = cat_scan_functions(cat_scan)
+KERNELS = density_kernels(cat_density, CAT, "cat")
 CARRIED_POINTS = carried_points_kernel(cat_carried, CAT_CARRIED, EVIDENCE, "cat")

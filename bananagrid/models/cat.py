@@ -249,7 +249,7 @@ def bound_data(model: "CAT", dtypes) -> BoundData:
 
 
 def scan_bounds(model: "CAT", data: BoundData, parts: np.ndarray, target: float = 0.0) -> np.ndarray:
-    r"""Bounds of the density ``cat_density_local`` computes with any of ``data``'s tables over
+    r"""Bounds of the density ``cat_scan`` computes with any of ``data``'s tables over
     each of the local-frame rectangles ``parts`` (rows cx, cy, e1x, e1y, e2x, e2y, delta: the
     points c + s e1 + q e2, |s|, |q| <= 1, each coordinate moved by up to delta by rounding):
     0 where it computes exact zeros, else a finite bound (made tighter, at some cost, only
@@ -592,17 +592,23 @@ class CAT(MotionModel):
             return table_binding(ctx, table, pose, {
                 "k_sigma": self.k_sigma, "truncated_mass": self.truncated_mass, **table.notes(),
             })
+        return self._scan_binding(ctx, (kernels.KERNELS, kernels.CAT), (cat_lanes.KERNELS, cat_lanes.CAT_LANES), {})
+
+    def _scan_binding(self, ctx: KernelContext, scalar: tuple, lanes: tuple, notes: dict, **fields) -> KernelBinding:
+        """The scan's binding: ``scalar``'s (kernels, parameter struct) pair, on the CPU ``lanes``'s
+        (the scan over nodes in lanes, ``kernels/cat_lanes.py``, with the table's node groups),
+        with the turn-rate table, Newton's tolerance and ``fields``; ``notes`` added to the scan's."""
         table = scan_table(self, ctx)
+        eps = np.finfo(ctx.dtype).eps
         # Newton stops when its step is below a few ulps of the searched range.
-        tol = 8.0 * np.finfo(ctx.dtype).eps * self.k_sigma * self.sigma_omega
-        params = dict(table=table, v0=self.v0, t=self.t, sigma_a=self.sigma_a, sigma_omega=self.sigma_omega, pose=pose,
-                      tol=tol, eps=np.finfo(ctx.dtype).eps)
-        notes = {"scan_nodes": table.shape[0], "k_sigma": self.k_sigma, "truncated_mass": self.truncated_mass}
-        if ctx.device == "cpu":  # the scan over nodes in lanes (kernels/cat_lanes.py)
-            lanes = LANES64 if ctx.dtype == np.float64 else LANES32
-            groups = ctx.array(cat_lanes.node_groups(table.numpy(), lanes), dtype=ctx.vector(lanes))
-            return KernelBinding(cat_lanes.KERNELS, ctx.struct(cat_lanes.CAT_LANES, **params, groups=groups), notes)
-        return KernelBinding(kernels.KERNELS, ctx.struct(kernels.CAT, **params), notes)
+        params = dict(table=table, v0=self.v0, t=self.t, sigma_a=self.sigma_a, sigma_omega=self.sigma_omega,
+                      pose=self.pose.as_array(), tol=8.0 * eps * self.k_sigma * self.sigma_omega, eps=eps, **fields)
+        notes = {"scan_nodes": table.shape[0], "k_sigma": self.k_sigma, "truncated_mass": self.truncated_mass, **notes}
+        if ctx.device == "cpu":
+            width = LANES64 if ctx.dtype == np.float64 else LANES32
+            params["groups"] = ctx.array(cat_lanes.node_groups(table.numpy(), width), dtype=ctx.vector(width))
+            scalar = lanes
+        return KernelBinding(scalar[0], ctx.struct(scalar[1], **params), notes)
 
     def bind_carried(self, ctx: KernelContext, extent: Extent, pack: EvidencePack) -> KernelBinding:
         """The carried points kernel (``kernels/cat.py``'s ``cat_carried``; the scan in lanes on
@@ -611,24 +617,16 @@ class CAT(MotionModel):
         (:class:`~bananagrid.protocol.CarryingModel`). With heading noise the heading error
         theta_0 turns the path: a sum over the nodes of :func:`heading_nodes` of the turned
         model's weighted roots (not the heading table: the evidence is fixed in the world)."""
-        table = scan_table(self, ctx)
-        tol = 8.0 * np.finfo(ctx.dtype).eps * self.k_sigma * self.sigma_omega
         pose = self.pose.as_array()
         thetas, weights = heading_nodes(self)
         heading = self.pose.heading + thetas
         poses = np.column_stack([np.full(len(thetas), pose[0]), np.full(len(thetas), pose[1]), np.cos(heading),
                                  np.sin(heading)])
-        params = dict(table=table, v0=self.v0, t=self.t, sigma_a=self.sigma_a, sigma_omega=self.sigma_omega, pose=pose,
-                      tol=tol, eps=np.finfo(ctx.dtype).eps, carry=ctx.struct(kernels.CAT_CARRY, pose=pose, scale=1.0),
-                      poses=ctx.array(poses, dtype=ctx.vector(4)), weights=ctx.array(weights))
-        notes = {"scan_nodes": table.shape[0], "k_sigma": self.k_sigma, "truncated_mass": self.truncated_mass,
-                 "heading_nodes": len(thetas), "evidence_nodes": pack.nodes}
-        if ctx.device == "cpu":
-            lanes = LANES64 if ctx.dtype == np.float64 else LANES32
-            groups = ctx.array(cat_lanes.node_groups(table.numpy(), lanes), dtype=ctx.vector(lanes))
-            return KernelBinding(cat_lanes.CARRIED_POINTS, ctx.struct(cat_lanes.CAT_CARRIED_LANES, **params,
-                                                                      groups=groups), notes)
-        return KernelBinding(kernels.CARRIED_POINTS, ctx.struct(kernels.CAT_CARRIED, **params), notes)
+        return self._scan_binding(
+            ctx, (kernels.CARRIED_POINTS, kernels.CAT_CARRIED), (cat_lanes.CARRIED_POINTS, cat_lanes.CAT_CARRIED_LANES),
+            {"heading_nodes": len(thetas), "evidence_nodes": pack.nodes},
+            carry=ctx.struct(kernels.CAT_CARRY, pose=pose, scale=1.0), poses=ctx.array(poses, dtype=ctx.vector(4)),
+            weights=ctx.array(weights))
 
     def work_estimate(self, cells: int, extent: Extent) -> float:
         """Seconds of one core: ``cells (SECONDS_PER_CELL + nodes SECONDS_PER_NODE)`` for the
