@@ -61,67 +61,37 @@ lanes32 = wp.types.vector(LANES32, wp.float32)
 # kernels with the same roundings. ``lane0`` gives a value of the scalar type, whose type makes
 # constants (``type(lane0(x))(2.0) * v`` scales a vector; ``type(v)(1.0)`` fills one).
 
-@wp.func
-def each_mul(a: wp.float64, b: wp.float64):
-    """a * b."""
-    return a * b
+for _scalar in (wp.float64, wp.float32):
+
+    @wp.func
+    def each_mul(a: _scalar, b: _scalar):
+        """a * b, lane by lane for vectors."""
+        return a * b
+
+    @wp.func
+    def each_div(a: _scalar, b: _scalar):
+        """a / b, lane by lane for vectors."""
+        return a / b
+
+    @wp.func
+    def lane0(x: _scalar):
+        """x itself, or a vector's first lane: a value of the scalar type."""
+        return x
 
 
-@wp.func
-def each_mul(a: wp.float32, b: wp.float32):  # noqa: F811
-    return a * b
+for _lanes in (lanes64, lanes32):
 
+    @wp.func
+    def each_mul(a: _lanes, b: _lanes):  # noqa: F811
+        return wp.cw_mul(a, b)
 
-@wp.func
-def each_mul(a: lanes64, b: lanes64):  # noqa: F811
-    return wp.cw_mul(a, b)
+    @wp.func
+    def each_div(a: _lanes, b: _lanes):  # noqa: F811
+        return wp.cw_div(a, b)
 
-
-@wp.func
-def each_mul(a: lanes32, b: lanes32):  # noqa: F811
-    return wp.cw_mul(a, b)
-
-
-@wp.func
-def each_div(a: wp.float64, b: wp.float64):
-    """a / b."""
-    return a / b
-
-
-@wp.func
-def each_div(a: wp.float32, b: wp.float32):  # noqa: F811
-    return a / b
-
-
-@wp.func
-def each_div(a: lanes64, b: lanes64):  # noqa: F811
-    return wp.cw_div(a, b)
-
-
-@wp.func
-def each_div(a: lanes32, b: lanes32):  # noqa: F811
-    return wp.cw_div(a, b)
-
-
-@wp.func
-def lane0(x: wp.float64):
-    """x itself, or a vector's first lane: a value of the scalar type."""
-    return x
-
-
-@wp.func
-def lane0(x: wp.float32):  # noqa: F811
-    return x
-
-
-@wp.func
-def lane0(x: lanes64):  # noqa: F811
-    return x[0]
-
-
-@wp.func
-def lane0(x: lanes32):  # noqa: F811
-    return x[0]
+    @wp.func
+    def lane0(x: _lanes):  # noqa: F811
+        return x[0]
 
 
 @wp.func
@@ -234,6 +204,13 @@ def atan2_fast(x: Any, y: Any):
 
 
 @wp.func
+def wrap_angle(d: Any):
+    """Angle difference wrapped to [-pi, pi]."""
+    two_pi = type(d)(2.0) * type(d)(PI)
+    return d - two_pi * wp.floor((d + type(d)(PI)) / two_pi)
+
+
+@wp.func
 def normal_pdf(x: Any, mu: Any, sigma: Any):
     """g(x; mu, sigma) = exp(-((x - mu) / sigma)^2 / 2) / (sigma sqrt(2 pi))."""
     z = (x - mu) / sigma
@@ -309,9 +286,10 @@ def cat_basis(u: Any):
 @wp.func
 def world_to_local(x: Any, y: Any, pose: Any):
     """World (east, north) to a model's local frame (+y along the heading, a bearing from
-    north); ``pose`` = (origin x, origin y, cos heading, sin heading), an array or a vector."""
-    dx = x - pose[0]
-    dy = y - pose[1]
+    north), a point or a vector of lanes; ``pose`` = (origin x, origin y, cos heading, sin heading),
+    an array or a vector."""
+    dx = x - type(x)(pose[0])
+    dy = y - type(x)(pose[1])
     return dx * pose[2] - dy * pose[3], dx * pose[3] + dy * pose[2]
 
 

@@ -154,12 +154,14 @@ class DensityKernels:
 
 def density_kernels(density, params: Params, name: str, *, lanes: bool = False, batch: bool = False,
                     bands_per_thread: int = 16, suffix: str | None = None, grid=None, tile_rows: int = 0,
-                    scratch_width: int = 0, quad_width: int = 0) -> DensityKernels:
+                    scratch_width: int = 0, quad_width: int = 0, module: str | None = None) -> DensityKernels:
     """The grid and points kernels (and with ``batch`` the batch kernels) of ``density``, named
-    ``NAME_grid``, ``NAME_points``, ... (``suffix`` appended: by default ``_lanes`` with ``lanes``), in its module and
-    overloaded for both scalar types on first use (:func:`overload_on_use`); ``grid``: the
-    family's own grid kernel instead (its overloads the family's to record)."""
-    module = density.module
+    ``NAME_grid``, ``NAME_points``, ... (``suffix`` appended: by default ``_lanes`` with ``lanes``), in its module
+    (or the one named ``module``: a family's lane kernels in a module of their own, over the density
+    that its scalar kernels call) and overloaded for both scalar types on first use
+    (:func:`overload_on_use`); ``grid``: the family's own grid kernel instead (its overloads the
+    family's to record)."""
+    module = density.module if module is None else wp.get_module(module)
     suffix = ("_lanes" if lanes else "") if suffix is None else suffix
 
     def make(f, kind):

@@ -47,7 +47,7 @@ from dataclasses import dataclass
 import warp as wp
 
 # the lane types live with the arithmetic generic over them (common.each_mul, ...)
-from .common import LANES32, LANES64, lanes32, lanes64  # noqa: F401
+from .common import LANES32, LANES64, atan2_fast, lanes32, lanes64, wrap_angle  # noqa: F401
 
 
 @dataclass(frozen=True)
@@ -513,187 +513,119 @@ def _store(fmt: _Format) -> str:
     )
 
 
-# --- float64 lanes ---------------------------------------------------------------------------
+# --- the lane functions, from the templates, for float64 (8 lanes) and float32 (16): Warp overloads
+# each name by its argument types, so that one generic kernel calls either
 
-@wp.func_native(_exp(F64))
-def lane_exp(x: lanes64) -> lanes64: ...
+for _fmt, _v, _s in ((F64, lanes64, wp.float64), (F32, lanes32, wp.float32)):
 
+    @wp.func_native(_exp(_fmt))
+    def lane_exp(x: _v) -> _v: ...
 
-@wp.func_native(_snippet(F64, "x y", _ATAN2))
-def lane_atan2(x: lanes64, y: lanes64) -> lanes64: ...
+    @wp.func_native(_snippet(_fmt, "x y", _ATAN2))
+    def lane_atan2(x: _v, y: _v) -> _v: ...
 
+    @wp.func_native(_sqrt(_fmt))
+    def lane_sqrt(x: _v) -> _v: ...
 
-@wp.func_native(_sqrt(F64))
-def lane_sqrt(x: lanes64) -> lanes64: ...
+    @wp.func_native(_snippet(_fmt, "phi sin_phi", _SINC_OF))
+    def lane_sinc_of(phi: _v, sin_phi: _v) -> _v: ...
 
+    @wp.func_native(_reciprocal(_fmt))
+    def lane_reciprocal(x: _v) -> _v: ...
 
-@wp.func_native(_snippet(F64, "phi sin_phi", _SINC_OF))
-def lane_sinc_of(phi: lanes64, sin_phi: lanes64) -> lanes64: ...
+    @wp.func_native(_quotient(_fmt))
+    def lane_quotient(a: _v, b: _v) -> _v: ...
 
+    @wp.func_native(_rsqrt(_fmt))
+    def lane_rsqrt(x: _v) -> _v: ...
 
-@wp.func_native(_reciprocal(F64))
-def lane_reciprocal(x: lanes64) -> lanes64: ...
+    @wp.func_native(_snippet(_fmt, "c a", _WHERE_POSITIVE))
+    def lane_where_positive(c: _v, a: _v) -> _v: ...
 
+    @wp.func_native(_polar_plain(_fmt))
+    def lane_polar_plain(x: _v, y: _v, ox: _s, oy: _s, c: _s, s: _s, mean_sinc: _s, mean_scc: _s, sd_scale: _s,
+                         sd_t_term: _s, sd_curvature: _s, inv_sigma_phi: _s, inv_sigma_omega_sq: _s, norm: _s,
+                         improved: int) -> _v:
+        """The polar-banana density without heading noise at the world points (x, y) (``_polar_plain``)."""
+        ...
 
-@wp.func_native(_quotient(F64))
-def lane_quotient(a: lanes64, b: lanes64) -> lanes64: ...
+    @wp.func_native(_polar_plain_row(_fmt))
+    def polar_plain_row(xs: wp.array(dtype=_s), y: _s, out: wp.array2d(dtype=_s), row: int, j0: int, j1: int, ox: _s,
+                        oy: _s, c: _s, s: _s, mean_sinc: _s, mean_scc: _s, sd_scale: _s, sd_t_term: _s,
+                        sd_curvature: _s, inv_sigma_phi: _s, inv_sigma_omega_sq: _s, norm: _s, improved: int):
+        """out[row, j0 .. j1 - 1] = the density without heading noise at (xs[j], y) (``_polar_plain_row``)."""
+        ...
 
+    @wp.func_native(_wrap_angle(_fmt))
+    def lane_wrap_angle(d: _v) -> _v: ...
 
-@wp.func_native(_rsqrt(F64))
-def lane_rsqrt(x: lanes64) -> lanes64: ...
+    @wp.func_native(_snippet(_fmt, "c a b", _WHERE_NOT_NEGATIVE))
+    def lane_where_not_negative(c: _v, a: _v, b: _v) -> _v: ...
 
+    @wp.func_native(_snippet(_fmt, "x", _ABS))
+    def lane_abs(x: _v) -> _v: ...
 
-@wp.func_native(_snippet(F64, "c a", _WHERE_POSITIVE))
-def lane_where_positive(c: lanes64, a: lanes64) -> lanes64: ...
+    @wp.func_native(_sine(_fmt, cosine=False))
+    def lane_sin(x: _v) -> _v: ...
 
+    @wp.func_native(_sine(_fmt, cosine=True))
+    def lane_cos(x: _v) -> _v: ...
 
-@wp.func_native(_polar_plain(F64))
-def lane_polar_plain(x: lanes64, y: lanes64, ox: wp.float64, oy: wp.float64, c: wp.float64, s: wp.float64, mean_sinc: wp.float64, mean_scc: wp.float64,
-                     sd_scale: wp.float64, sd_t_term: wp.float64, sd_curvature: wp.float64, inv_sigma_phi: wp.float64,
-                     inv_sigma_omega_sq: wp.float64, norm: wp.float64, improved: int) -> lanes64:
-    """The polar-banana density without heading noise at the world points (x, y) (``_polar_plain``)."""
-    ...
+    @wp.func_native(_scan_group(_fmt))
+    def cat_scan_group(groups: wp.array2d(dtype=_v), g: int, x: _s, y: _s, chord: _s, noise: _s, count: int) -> int: ...
 
+    @wp.func_native(_load(_fmt))
+    def load_lanes(values: wp.array(dtype=_s), start: int) -> _v:
+        """values[start .. start + lanes - 1], the index clamped to the last element past the end."""
+        ...
 
-@wp.func_native(_polar_plain_row(F64))
-def polar_plain_row(xs: wp.array(dtype=wp.float64), y: wp.float64, out: wp.array2d(dtype=wp.float64), row: int,
-                    j0: int, j1: int, ox: wp.float64, oy: wp.float64, c: wp.float64, s: wp.float64, mean_sinc: wp.float64, mean_scc: wp.float64,
-                       sd_scale: wp.float64, sd_t_term: wp.float64, sd_curvature: wp.float64, inv_sigma_phi: wp.float64,
-                       inv_sigma_omega_sq: wp.float64, norm: wp.float64, improved: int):
-    """out[row, j0 .. j1 - 1] = the density without heading noise at (xs[j], y) (``_polar_plain_row``)."""
-    ...
-
-
-@wp.func_native(_wrap_angle(F64))
-def lane_wrap_angle(d: lanes64) -> lanes64: ...
-
-
-@wp.func_native(_snippet(F64, "c a b", _WHERE_NOT_NEGATIVE))
-def lane_where_not_negative(c: lanes64, a: lanes64, b: lanes64) -> lanes64: ...
-
-
-@wp.func_native(_snippet(F64, "x", _ABS))
-def lane_abs(x: lanes64) -> lanes64: ...
-
-
-@wp.func_native(_sine(F64, cosine=False))
-def lane_sin(x: lanes64) -> lanes64: ...
-
-
-@wp.func_native(_sine(F64, cosine=True))
-def lane_cos(x: lanes64) -> lanes64: ...
-
-
-@wp.func_native(_scan_group(F64))
-def cat_scan_group(groups: wp.array2d(dtype=lanes64), g: int, x: wp.float64, y: wp.float64, chord: wp.float64,
-                   noise: wp.float64, count: int) -> int: ...
+    @wp.func_native(_store(_fmt))
+    def store_lanes(out: wp.array(dtype=_s), start: int, values: _v, count: int):
+        """out[start + k] = values[k] for k < min(count, lanes)."""
+        ...
 
 
+# --- one name for a value and for lanes (as ``common.each_mul``), so that one generic body serves the
+# scalar kernels (the GPU path's) and the lane kernels: the scalar function, or its lane snippet
+
+for _s, _v in ((wp.float64, lanes64), (wp.float32, lanes32)):
+
+    @wp.func(inline=True)
+    def each_exp(x: _s):
+        """exp(x): ``wp.exp``, or :func:`lane_exp` on lanes."""
+        return wp.exp(x)
+
+    @wp.func(inline=True)
+    def each_exp(x: _v):  # noqa: F811
+        return lane_exp(x)
+
+    @wp.func(inline=True)
+    def each_atan2(x: _s, y: _s):
+        """atan2(x, y): ``common.atan2_fast``, or :func:`lane_atan2` (its steps) on lanes."""
+        return atan2_fast(x, y)
+
+    @wp.func(inline=True)
+    def each_atan2(x: _v, y: _v):  # noqa: F811
+        return lane_atan2(x, y)
+
+    @wp.func(inline=True)
+    def each_wrap_angle(d: _s):
+        """d wrapped to [-pi, pi]: ``common.wrap_angle``, or :func:`lane_wrap_angle` on lanes."""
+        return wrap_angle(d)
+
+    @wp.func(inline=True)
+    def each_wrap_angle(d: _v):  # noqa: F811
+        return lane_wrap_angle(d)
+
+
+# (a Warp function's body reads the module's names when it is built, after the loop: written out)
 @wp.func
 def lane_count(values: wp.array(dtype=wp.float64)):
     """Lanes in the vectors :func:`load_lanes` makes of ``values`` (8)."""
     return LANES64
 
 
-@wp.func_native(_load(F64))
-def load_lanes(values: wp.array(dtype=wp.float64), start: int) -> lanes64:
-    """values[start .. start + 7], the index clamped to the last element past the end."""
-    ...
-
-
-@wp.func_native(_store(F64))
-def store_lanes(out: wp.array(dtype=wp.float64), start: int, values: lanes64, count: int):
-    """out[start + k] = values[k] for k < min(count, 8)."""
-    ...
-
-
-# --- float32 lanes: the same functions (Warp overloads them by the argument types) -------------
-
-@wp.func_native(_exp(F32))
-def lane_exp(x: lanes32) -> lanes32: ...  # noqa: F811
-
-
-@wp.func_native(_snippet(F32, "x y", _ATAN2))
-def lane_atan2(x: lanes32, y: lanes32) -> lanes32: ...  # noqa: F811
-
-
-@wp.func_native(_sqrt(F32))
-def lane_sqrt(x: lanes32) -> lanes32: ...  # noqa: F811
-
-
-@wp.func_native(_snippet(F32, "phi sin_phi", _SINC_OF))
-def lane_sinc_of(phi: lanes32, sin_phi: lanes32) -> lanes32: ...  # noqa: F811
-
-
-@wp.func_native(_reciprocal(F32))
-def lane_reciprocal(x: lanes32) -> lanes32: ...  # noqa: F811
-
-
-@wp.func_native(_quotient(F32))
-def lane_quotient(a: lanes32, b: lanes32) -> lanes32: ...  # noqa: F811
-
-
-@wp.func_native(_rsqrt(F32))
-def lane_rsqrt(x: lanes32) -> lanes32: ...  # noqa: F811
-
-
-@wp.func_native(_snippet(F32, "c a", _WHERE_POSITIVE))
-def lane_where_positive(c: lanes32, a: lanes32) -> lanes32: ...  # noqa: F811
-
-
-@wp.func_native(_polar_plain(F32))
-def lane_polar_plain(x: lanes32, y: lanes32, ox: wp.float32, oy: wp.float32, c: wp.float32, s: wp.float32, mean_sinc: wp.float32, mean_scc: wp.float32,
-                     sd_scale: wp.float32, sd_t_term: wp.float32, sd_curvature: wp.float32, inv_sigma_phi: wp.float32,
-                     inv_sigma_omega_sq: wp.float32, norm: wp.float32, improved: int) -> lanes32:  # noqa: F811
-    ...
-
-
-@wp.func_native(_polar_plain_row(F32))
-def polar_plain_row(xs: wp.array(dtype=wp.float32), y: wp.float32, out: wp.array2d(dtype=wp.float32),  # noqa: F811
-                    row: int, j0: int, j1: int, ox: wp.float32, oy: wp.float32, c: wp.float32, s: wp.float32, mean_sinc: wp.float32, mean_scc: wp.float32,
-                       sd_scale: wp.float32, sd_t_term: wp.float32, sd_curvature: wp.float32, inv_sigma_phi: wp.float32,
-                       inv_sigma_omega_sq: wp.float32, norm: wp.float32, improved: int):
-    ...
-
-
-@wp.func_native(_wrap_angle(F32))
-def lane_wrap_angle(d: lanes32) -> lanes32: ...  # noqa: F811
-
-
-@wp.func_native(_snippet(F32, "c a b", _WHERE_NOT_NEGATIVE))
-def lane_where_not_negative(c: lanes32, a: lanes32, b: lanes32) -> lanes32: ...  # noqa: F811
-
-
-@wp.func_native(_snippet(F32, "x", _ABS))
-def lane_abs(x: lanes32) -> lanes32: ...  # noqa: F811
-
-
-@wp.func_native(_sine(F32, cosine=False))
-def lane_sin(x: lanes32) -> lanes32: ...  # noqa: F811
-
-
-@wp.func_native(_sine(F32, cosine=True))
-def lane_cos(x: lanes32) -> lanes32: ...  # noqa: F811
-
-
-@wp.func_native(_scan_group(F32))
-def cat_scan_group(groups: wp.array2d(dtype=lanes32), g: int, x: wp.float32, y: wp.float32,  # noqa: F811
-                   chord: wp.float32, noise: wp.float32, count: int) -> int: ...
-
-
 @wp.func
 def lane_count(values: wp.array(dtype=wp.float32)):  # noqa: F811
     """Lanes in the vectors :func:`load_lanes` makes of ``values`` (16)."""
     return LANES32
-
-
-@wp.func_native(_load(F32))
-def load_lanes(values: wp.array(dtype=wp.float32), start: int) -> lanes32:  # noqa: F811
-    """values[start .. start + 15], the index clamped to the last element past the end."""
-    ...
-
-
-@wp.func_native(_store(F32))
-def store_lanes(out: wp.array(dtype=wp.float32), start: int, values: lanes32, count: int):  # noqa: F811
-    """out[start + k] = values[k] for k < min(count, 16)."""
-    ...
