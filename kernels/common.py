@@ -286,10 +286,9 @@ def cat_basis(u: Any):
 @wp.func
 def world_to_local(x: Any, y: Any, pose: Any):
     """World (east, north) to a model's local frame (+y along the heading, a bearing from
-    north), a point or a vector of lanes; ``pose`` = (origin x, origin y, cos heading, sin heading),
-    an array or a vector."""
-    dx = x - type(x)(pose[0])
-    dy = y - type(x)(pose[1])
+    north); ``pose`` = (origin x, origin y, cos heading, sin heading), an array or a vector."""
+    dx = x - pose[0]
+    dy = y - pose[1]
     return dx * pose[2] - dy * pose[3], dx * pose[3] + dy * pose[2]
 
 
