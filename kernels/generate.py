@@ -6,9 +6,10 @@ A family declares its parameters once, with :class:`Params` (a ``wp.struct`` in 
 float64, made from one list of fields), and its maths as a ``@wp.func density(x, y, p)``: the
 density per m^2 at the world point (x, y) under the parameters ``p``. With ``lanes=True`` the
 density takes vectors of world points (``kernels/lanes.py``, CPU only) and the kernels move a
-vector of cells or points at a time. Every generated kernel of a family calls the one density,
-so that grids, points and batches agree bit for bit. The kernels join the density's module
-(one module per family, one build) and take its module options.
+vector of cells or points at a time (a density generic over both, as the bearing fix's, serves
+the scalar and the lane kernels). Every generated kernel of a family calls the one density, so
+that grids, points and batches agree bit for bit. The kernels join the density's module (one
+module per family, one build; or the family's lane module, ``module``) and take its options.
 
 Overloads on first use. Warp builds a module with every overload registered in it, so a module
 that registered both scalar types and every kernel (the GPU path's scalar kernels beside the CPU
@@ -33,7 +34,7 @@ Kernel arguments (``P`` the struct):
 A family whose grid kernel works on blocks of rows (Butterly's tiles) passes its own ``grid``
 with ``tile_rows``, ``scratch_width`` and ``quad_width`` (the engine's ``grid_block`` gives it
 ``(xs, ys, row0, row_end, rows, columns, step_x, step_y, p, scratch, quads, band, out)``); the
-generator then writes the others.
+generator then writes the others. One with a faster way to fill a grid row passes ``row``.
 """
 
 import inspect
