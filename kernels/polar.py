@@ -245,18 +245,11 @@ def polar_moments(phis: wp.array(dtype=Any), p: Any, mean: wp.array(dtype=Any), 
 
 
 @wp.kernel
-def polar_derivatives(phis: wp.array(dtype=Any), p: Any, out: wp.array2d(dtype=Any)):
-    """P_mu and its derivatives 1-4, P_sigma and its derivatives 1-2, at each phi (8 columns)."""
+def polar_derivatives(phis: wp.array(dtype=Any), p: Any, out: wp.array(dtype=Any)):
+    """P_mu and its derivatives 1-4, P_sigma and its derivatives 1-2, at each phi (a vector of 8)."""
     k = wp.tid()
     m0, m1, m2, m3, m4, s0, s1, s2 = polar_law_derivatives(phis[k], p)
-    out[k, 0] = m0
-    out[k, 1] = m1
-    out[k, 2] = m2
-    out[k, 3] = m3
-    out[k, 4] = m4
-    out[k, 5] = s0
-    out[k, 6] = s1
-    out[k, 7] = s2
+    out[k] = wp.vector(m0, m1, m2, m3, m4, s0, s1, s2)
 
 
 #: The parameters: the coefficients (:func:`coefficients`, in their order), the pose, the
@@ -267,4 +260,4 @@ for _scalar in SCALARS:
     _vec = wp.array(dtype=_scalar)
     overload_on_use(polar_moments, _scalar, {"phis": _vec, "p": POLAR.of(_scalar), "mean": _vec, "sd": _vec})
     overload_on_use(polar_derivatives, _scalar,
-                    {"phis": _vec, "p": POLAR.of(_scalar), "out": wp.array2d(dtype=_scalar)})
+                    {"phis": _vec, "p": POLAR.of(_scalar), "out": wp.array(dtype=wp.types.vector(8, _scalar))})
