@@ -1,7 +1,7 @@
 """The bearing-fix kernels in CPU lanes: 8 float64 or 16 float32 cells at a time, by
 ``bearing.bearing_density`` itself on vectors of cells (the lane atan2, wrap and exp, every other
-step in the scalar kernel's order). The scalar kernel, one cell at a time, ran at 0.7x NumPy's
-speed on one core (NumPy's arctan2 and exp are SIMD loops).
+step in the scalar kernel's order): one cell at a time it ran at 0.7x NumPy's speed on one core
+(docs/speed.md; NumPy's arctan2 and exp are SIMD loops).
 
 CPU only (see ``kernels/lanes.py``); the GPU path uses ``bearing.KERNELS``. The grid and points
 kernels are generated from the one density, so that ``rasterise`` and ``pdf`` agree bit for bit.

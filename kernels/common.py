@@ -46,9 +46,7 @@ SINC_SERIES_TERMS = 15
 
 #: A vector of cells: 8 float64 or 16 float32 lanes, one 512-bit register (``kernels/lanes.py``).
 #: Half as many (256 bits, one AVX2 register) measured slower on every lane kernel on AVX-512
-#: (one core, Mcells/s, 8-wide against 4-wide: polar improved float64 122 vs 78, float32 200 vs
-#: 114; with heading noise 42 vs 38; the bearing map 125 vs 75); on an AVX2 machine a 512-bit
-#: vector compiles to two registers.
+#: (docs/speed.md); on an AVX2 machine a 512-bit vector compiles to two registers.
 LANES64 = 8
 LANES32 = 16
 lanes64 = wp.types.vector(LANES64, wp.float64)
