@@ -544,6 +544,11 @@ for _fmt, _v, _s in ((F64, lanes64, wp.float64), (F32, lanes32, wp.float32)):
     @wp.func_native(_scan_group(_fmt))
     def cat_scan_group(groups: wp.array2d(dtype=_v), g: int, x: _s, y: _s, chord: _s, noise: _s, count: int) -> int: ...
 
+    @wp.func_native(f"return {_fmt.lanes};\n")
+    def lane_count(values: wp.array(dtype=_s)) -> int:
+        """Lanes in the vectors :func:`load_lanes` makes of ``values`` (8 float64, 16 float32)."""
+        ...
+
     @wp.func_native(_load(_fmt))
     def load_lanes(values: wp.array(dtype=_s), start: int) -> _v:
         """values[start .. start + lanes - 1], the index clamped to the last element past the end."""
@@ -586,16 +591,3 @@ for _s, _v in ((wp.float64, lanes64), (wp.float32, lanes32)):
     @wp.func(inline=True)
     def each_wrap_angle(d: _v):  # noqa: F811
         return lane_wrap_angle(d)
-
-
-# (a Warp function's body reads the module's names when it is built, after the loop: written out)
-@wp.func
-def lane_count(values: wp.array(dtype=wp.float64)):
-    """Lanes in the vectors :func:`load_lanes` makes of ``values`` (8)."""
-    return LANES64
-
-
-@wp.func
-def lane_count(values: wp.array(dtype=wp.float32)):  # noqa: F811
-    """Lanes in the vectors :func:`load_lanes` makes of ``values`` (16)."""
-    return LANES32
