@@ -7,11 +7,9 @@ writes the grid, points and batch kernels (scalar, and in CPU lanes where the fa
 lane density) into the family's own module; only kernels of another shape (Butterly's tiles,
 the CAT's scan table, cell rules) are written by hand.
 
-Overloads are registered on first use (``generate.overload_on_use``, ``generate.use_overload``,
-called by the engine's ``WarpContext.load``): Warp builds a module with every overload registered
-in it, so a float64 run on the CPU builds the float64 kernels it launches and not the float32
-ones, the batch kernels or the GPU path's scalar kernels beside the CPU lanes. The module stays one
-per family (one NVRTC build of its shared functions on a GPU); the kernel cache keeps each set.
+Overloads are registered on first use, so that a run builds the kernels it launches and no
+others, one module per family still (``generate.overload_on_use``; the module docstring of
+``kernels/generate.py`` says why).
 
 Module options, and why. Every module sets ``enable_backward = False``: nothing differentiates
 these kernels, and Warp otherwise generates an adjoint kernel beside every launch kernel, most

@@ -20,8 +20,9 @@ from typing import Any
 
 import warp as wp
 
-from .common import PI, atan2_fast
+from .common import each_mul
 from .generate import ARRAY, Params, density_kernels
+from .lanes import each_atan2, each_exp, each_wrap_angle
 
 # No adjoints: nothing differentiates these kernels, and the backward kernels Warp would
 # generate for every launch kernel are most of a module's code (the CAT module's CUDA build:
@@ -37,36 +38,25 @@ HEAD = 6
 PER_SENSOR = 4
 
 
-@wp.func
-def wrap_angle(d: Any):
-    """Angle difference wrapped to [-pi, pi]."""
-    two_pi = type(d)(2.0) * type(d)(PI)
-    return d - two_pi * wp.floor((d + type(d)(PI)) / two_pi)
-
-
-@wp.func
-def bearing_log_density(x: Any, y: Any, params: wp.array(dtype=Any), n_sensors: int, variant: int):
-    """log p at the world point (x, y) (see the module docstring)."""
-    if variant == LINEAR:
-        half = type(x)(0.5)
-        dx = x * half - params[1] * half
-        dy = y * half - params[2] * half
-        u = dx + params[4] * dy
-        q = params[3] * u * u + params[5] * dy * dy  # a quarter of the form
-        return params[0] - type(x)(2.0) * q
-    total = params[0]
-    for i in range(n_sensors):
-        base = HEAD + PER_SENSOR * i
-        beta = atan2_fast(x - params[base], y - params[base + 1])
-        z = wrap_angle(beta - params[base + 2]) * params[base + 3]
-        total = total - type(x)(0.5) * z * z
-    return total
-
-
-@wp.func
+@wp.func(inline=True)
 def bearing_density(x: Any, y: Any, p: Any):
-    """Density per m^2 at the world point (x, y): the launch kernels' maths."""
-    return wp.exp(bearing_log_density(x, y, p.params, p.n_sensors, p.variant))
+    """Density per m^2 at the world point (x, y), exp(log p) (see the module docstring): the
+    launch kernels' maths, at a point or lane by lane at a vector of them (``bearing_lanes``)."""
+    params = p.params
+    half = type(params[0])(0.5)
+    if p.variant == LINEAR:
+        dx = x * half - type(x)(params[1] * half)
+        dy = y * half - type(x)(params[2] * half)
+        u = dx + dy * params[4]
+        q = each_mul(u * params[3], u) + each_mul(dy * params[5], dy)  # a quarter of the form
+        return each_exp(type(x)(params[0]) - q * type(params[0])(2.0))
+    total = type(x)(params[0])
+    for i in range(p.n_sensors):
+        base = HEAD + PER_SENSOR * i
+        beta = each_atan2(x - type(x)(params[base]), y - type(x)(params[base + 1]))
+        z = each_wrap_angle(beta - type(x)(params[base + 2])) * params[base + 3]
+        total = total - each_mul(z * half, z)
+    return each_exp(total)
 
 
 #: The parameters: the array laid out as HEAD and PER_SENSOR say, the sensors' count, the variant.

@@ -46,9 +46,7 @@ SINC_SERIES_TERMS = 15
 
 #: A vector of cells: 8 float64 or 16 float32 lanes, one 512-bit register (``kernels/lanes.py``).
 #: Half as many (256 bits, one AVX2 register) measured slower on every lane kernel on AVX-512
-#: (one core, Mcells/s, 8-wide against 4-wide: polar improved float64 122 vs 78, float32 200 vs
-#: 114; with heading noise 42 vs 38; the bearing map 125 vs 75); on an AVX2 machine a 512-bit
-#: vector compiles to two registers.
+#: (docs/speed.md); on an AVX2 machine a 512-bit vector compiles to two registers.
 LANES64 = 8
 LANES32 = 16
 lanes64 = wp.types.vector(LANES64, wp.float64)
@@ -61,67 +59,37 @@ lanes32 = wp.types.vector(LANES32, wp.float32)
 # kernels with the same roundings. ``lane0`` gives a value of the scalar type, whose type makes
 # constants (``type(lane0(x))(2.0) * v`` scales a vector; ``type(v)(1.0)`` fills one).
 
-@wp.func
-def each_mul(a: wp.float64, b: wp.float64):
-    """a * b."""
-    return a * b
+for _scalar in (wp.float64, wp.float32):
+
+    @wp.func
+    def each_mul(a: _scalar, b: _scalar):
+        """a * b, lane by lane for vectors."""
+        return a * b
+
+    @wp.func
+    def each_div(a: _scalar, b: _scalar):
+        """a / b, lane by lane for vectors."""
+        return a / b
+
+    @wp.func
+    def lane0(x: _scalar):
+        """x itself, or a vector's first lane: a value of the scalar type."""
+        return x
 
 
-@wp.func
-def each_mul(a: wp.float32, b: wp.float32):  # noqa: F811
-    return a * b
+for _lanes in (lanes64, lanes32):
 
+    @wp.func
+    def each_mul(a: _lanes, b: _lanes):  # noqa: F811
+        return wp.cw_mul(a, b)
 
-@wp.func
-def each_mul(a: lanes64, b: lanes64):  # noqa: F811
-    return wp.cw_mul(a, b)
+    @wp.func
+    def each_div(a: _lanes, b: _lanes):  # noqa: F811
+        return wp.cw_div(a, b)
 
-
-@wp.func
-def each_mul(a: lanes32, b: lanes32):  # noqa: F811
-    return wp.cw_mul(a, b)
-
-
-@wp.func
-def each_div(a: wp.float64, b: wp.float64):
-    """a / b."""
-    return a / b
-
-
-@wp.func
-def each_div(a: wp.float32, b: wp.float32):  # noqa: F811
-    return a / b
-
-
-@wp.func
-def each_div(a: lanes64, b: lanes64):  # noqa: F811
-    return wp.cw_div(a, b)
-
-
-@wp.func
-def each_div(a: lanes32, b: lanes32):  # noqa: F811
-    return wp.cw_div(a, b)
-
-
-@wp.func
-def lane0(x: wp.float64):
-    """x itself, or a vector's first lane: a value of the scalar type."""
-    return x
-
-
-@wp.func
-def lane0(x: wp.float32):  # noqa: F811
-    return x
-
-
-@wp.func
-def lane0(x: lanes64):  # noqa: F811
-    return x[0]
-
-
-@wp.func
-def lane0(x: lanes32):  # noqa: F811
-    return x[0]
+    @wp.func
+    def lane0(x: _lanes):  # noqa: F811
+        return x[0]
 
 
 @wp.func
@@ -231,6 +199,13 @@ def atan2_fast(x: Any, y: Any):
     if x < type(x)(0.0):
         a = -a
     return a
+
+
+@wp.func
+def wrap_angle(d: Any):
+    """Angle difference wrapped to [-pi, pi]."""
+    two_pi = type(d)(2.0) * type(d)(PI)
+    return d - two_pi * wp.floor((d + type(d)(PI)) / two_pi)
 
 
 @wp.func

@@ -6,9 +6,10 @@ A family declares its parameters once, with :class:`Params` (a ``wp.struct`` in 
 float64, made from one list of fields), and its maths as a ``@wp.func density(x, y, p)``: the
 density per m^2 at the world point (x, y) under the parameters ``p``. With ``lanes=True`` the
 density takes vectors of world points (``kernels/lanes.py``, CPU only) and the kernels move a
-vector of cells or points at a time. Every generated kernel of a family calls the one density,
-so that grids, points and batches agree bit for bit. The kernels join the density's module
-(one module per family, one build) and take its module options.
+vector of cells or points at a time (a density generic over both, as the bearing fix's, serves
+the scalar and the lane kernels). Every generated kernel of a family calls the one density, so
+that grids, points and batches agree bit for bit. The kernels join the density's module (one
+module per family, one build; or the family's lane module, ``module``) and take its options.
 
 Overloads on first use. Warp builds a module with every overload registered in it, so a module
 that registered both scalar types and every kernel (the GPU path's scalar kernels beside the CPU
@@ -33,7 +34,7 @@ Kernel arguments (``P`` the struct):
 A family whose grid kernel works on blocks of rows (Butterly's tiles) passes its own ``grid``
 with ``tile_rows``, ``scratch_width`` and ``quad_width`` (the engine's ``grid_block`` gives it
 ``(xs, ys, row0, row_end, rows, columns, step_x, step_y, p, scratch, quads, band, out)``); the
-generator then writes the others.
+generator then writes the others. One with a faster way to fill a grid row passes ``row``.
 """
 
 import inspect
@@ -152,91 +153,91 @@ class DensityKernels:
     quad_width: int = 0
 
 
+@wp.func
+def one_value(values: wp.array(dtype=Any)):
+    """Values per step of a scalar kernel (as :func:`lanes.lane_count` of a lane kernel's): 1."""
+    return 1
+
+
+@wp.func
+def load_value(values: wp.array(dtype=Any), start: int):
+    """values[start] (as :func:`lanes.load_lanes` loads a vector)."""
+    return values[start]
+
+
+@wp.func
+def store_value(out: wp.array(dtype=Any), start: int, value: Any, count: int):
+    """out[start] = value (as :func:`lanes.store_lanes` stores a vector; ``count`` >= 1)."""
+    out[start] = value
+
+
 def density_kernels(density, params: Params, name: str, *, lanes: bool = False, batch: bool = False,
                     bands_per_thread: int = 16, suffix: str | None = None, grid=None, tile_rows: int = 0,
-                    scratch_width: int = 0, quad_width: int = 0) -> DensityKernels:
+                    scratch_width: int = 0, quad_width: int = 0, module: str | None = None,
+                    row=None) -> DensityKernels:
     """The grid and points kernels (and with ``batch`` the batch kernels) of ``density``, named
-    ``NAME_grid``, ``NAME_points``, ... (``suffix`` appended: by default ``_lanes`` with ``lanes``), in its module and
-    overloaded for both scalar types on first use (:func:`overload_on_use`); ``grid``: the
-    family's own grid kernel instead (its overloads the family's to record)."""
-    module = density.module
+    ``NAME_grid``, ``NAME_points``, ... (``suffix`` appended: by default ``_lanes`` with ``lanes``), in its module
+    (or the one named ``module``: a family's lane kernels in a module of their own, over the density
+    that its scalar kernels call) and overloaded for both scalar types on first use
+    (:func:`overload_on_use`); ``grid``: the family's own grid kernel instead (its overloads the
+    family's to record); ``row``: a family's own code for a grid row, ``row(xs, y, out, row, j0, j1,
+    p)``, that returns 1 where it filled ``out[row, j0:j1]`` and 0 to leave the row to the density.
+
+    One body for each kernel: a scalar kernel takes one value a step, a lane kernel a vector of
+    them (:func:`lanes.load_lanes`, :func:`lanes.store_lanes`)."""
+    module = density.module if module is None else wp.get_module(module)
     suffix = ("_lanes" if lanes else "") if suffix is None else suffix
+    step, load, store = (lane_count, load_lanes, store_lanes) if lanes else (one_value, load_value, store_value)
 
     def make(f, kind):
         return wp.kernel(f, name=f"{name}_{kind}{suffix}", module=module)
 
-    if lanes:
-        def grid_kernel(xs: wp.array(dtype=Any), ys: wp.array(dtype=Any), row0: int, columns: int, p: Any,
-                        out: wp.array2d(dtype=Any)):
-            i, block = wp.tid()
-            row = row0 + i
-            j1 = wp.min((block + 1) * columns, xs.shape[0])
-            y = ys[row]
-            j = block * columns
+    def grid_kernel(xs: wp.array(dtype=Any), ys: wp.array(dtype=Any), row0: int, columns: int, p: Any,
+                    out: wp.array2d(dtype=Any)):
+        i, block = wp.tid()
+        r = row0 + i
+        j = block * columns
+        j1 = wp.min((block + 1) * columns, xs.shape[0])
+        y = ys[r]
+        done = int(0)
+        if wp.static(row is not None):
+            done = row(xs, y, out, r, j, j1, p)
+        if done == 0:
             while j < j1:
-                x = load_lanes(xs, j)
-                store_lanes(out[row], j, density(x, type(x)(y), p), j1 - j)
-                j += lane_count(xs)
+                x = load(xs, j)
+                store(out[r], j, density(x, type(x)(y), p), j1 - j)
+                j += step(xs)
 
-        def points_kernel(xs: wp.array(dtype=Any), ys: wp.array(dtype=Any), start: int, p: Any,
-                          out: wp.array(dtype=Any)):
-            # the thread of every lane-count-th point (counted from the first of all, so that a
-            # vector is computed once where it straddles two launches' chunks) fills it and the
-            # next ones; the others return
-            k = start + wp.tid()
-            if k % lane_count(xs) == 0:
-                store_lanes(out, k, density(load_lanes(xs, k), load_lanes(ys, k), p), xs.shape[0] - k)
+    def points_kernel(xs: wp.array(dtype=Any), ys: wp.array(dtype=Any), start: int, p: Any,
+                      out: wp.array(dtype=Any)):
+        # the thread of every step-th point (counted from the first of all, so that a vector is
+        # computed once where it straddles two launches' chunks) fills it and the next ones; the
+        # others return
+        k = start + wp.tid()
+        if k % step(xs) == 0:
+            store(out, k, density(load(xs, k), load(ys, k), p), xs.shape[0] - k)
 
-        def batch_grid_kernel(xs: wp.array2d(dtype=Any), ys: wp.array2d(dtype=Any), h0: int, ps: wp.array(dtype=Any),
-                              out: wp.array3d(dtype=Any)):
-            hh, i = wp.tid()
-            h = h0 + hh
-            p = ps[h]  # loaded once: the output's stores could alias it
-            xs_h = xs[h]
-            y = ys[h, i]
-            j = int(0)
-            while j < xs.shape[1]:
-                x = load_lanes(xs_h, j)
-                store_lanes(out[h, i], j, density(x, type(x)(y), p), xs.shape[1] - j)
-                j += lane_count(xs_h)
+    def batch_grid_kernel(xs: wp.array2d(dtype=Any), ys: wp.array2d(dtype=Any), h0: int, ps: wp.array(dtype=Any),
+                          out: wp.array3d(dtype=Any)):
+        hh, i = wp.tid()
+        h = h0 + hh
+        p = ps[h]  # loaded once: the output's stores could alias it
+        xs_h = xs[h]
+        y = ys[h, i]
+        j = int(0)
+        while j < xs.shape[1]:
+            x = load(xs_h, j)
+            store(out[h, i], j, density(x, type(x)(y), p), xs.shape[1] - j)
+            j += step(xs_h)
 
-        def batch_points_kernel(xs: wp.array(dtype=Any), ys: wp.array(dtype=Any), h0: int, ps: wp.array(dtype=Any),
-                                out: wp.array2d(dtype=Any)):
-            h = h0 + wp.tid()
-            p = ps[h]
-            k = int(0)
-            while k < xs.shape[0]:
-                store_lanes(out[h], k, density(load_lanes(xs, k), load_lanes(ys, k), p), xs.shape[0] - k)
-                k += lane_count(xs)
-    else:
-        def grid_kernel(xs: wp.array(dtype=Any), ys: wp.array(dtype=Any), row0: int, columns: int, p: Any,
-                        out: wp.array2d(dtype=Any)):
-            i, block = wp.tid()
-            row = row0 + i
-            y = ys[row]
-            for j in range(block * columns, wp.min((block + 1) * columns, xs.shape[0])):
-                out[row, j] = density(xs[j], y, p)
-
-        def points_kernel(xs: wp.array(dtype=Any), ys: wp.array(dtype=Any), start: int, p: Any,
-                          out: wp.array(dtype=Any)):
-            k = start + wp.tid()
-            out[k] = density(xs[k], ys[k], p)
-
-        def batch_grid_kernel(xs: wp.array2d(dtype=Any), ys: wp.array2d(dtype=Any), h0: int, ps: wp.array(dtype=Any),
-                              out: wp.array3d(dtype=Any)):
-            hh, i = wp.tid()
-            h = h0 + hh
-            p = ps[h]  # loaded once: the output's stores could alias it
-            y = ys[h, i]
-            for j in range(xs.shape[1]):
-                out[h, i, j] = density(xs[h, j], y, p)
-
-        def batch_points_kernel(xs: wp.array(dtype=Any), ys: wp.array(dtype=Any), h0: int, ps: wp.array(dtype=Any),
-                                out: wp.array2d(dtype=Any)):
-            h = h0 + wp.tid()
-            p = ps[h]
-            for k in range(xs.shape[0]):
-                out[h, k] = density(xs[k], ys[k], p)
+    def batch_points_kernel(xs: wp.array(dtype=Any), ys: wp.array(dtype=Any), h0: int, ps: wp.array(dtype=Any),
+                            out: wp.array2d(dtype=Any)):
+        h = h0 + wp.tid()
+        p = ps[h]
+        k = int(0)
+        while k < xs.shape[0]:
+            store(out[h], k, density(load(xs, k), load(ys, k), p), xs.shape[0] - k)
+            k += step(xs)
 
     own_grid = grid is not None
     grid = grid if own_grid else make(grid_kernel, "grid")

@@ -6,12 +6,12 @@ round-to-integer or bit-cast builtin and no vector sqrt, and helpers that loop o
 for those left the polar kernel half scalar (62 Mcells/s on one core, against 116 with the
 helpers below). The helpers are therefore ``wp.func_native`` snippets written with the
 compiler's vector extension (``vector_size``), which give whole-register instructions
-(``vblendmpd``, ``vsqrtpd``, ``vdivpd``; two ymm halves on a CPU without AVX-512). Each is
-defined twice, for ``lanes64`` and ``lanes32`` (Warp overloads them by argument type), from one
-template. They are C++ for the CPU only: a kernel that calls them lives in a module never
-launched on a GPU (the models bind them on the CPU alone). :func:`load_lanes` and
-:func:`store_lanes` move a whole vector in one unaligned load or store where it lies in a
-contiguous array (lane by lane they cost a third of the float32 kernel's time).
+(``vblendmpd``, ``vsqrtpd``, ``vdivpd``; two ymm halves on a CPU without AVX-512), each declared
+for ``lanes64`` and ``lanes32`` from one template (Warp overloads them by argument type). They
+are C++ for the CPU only: a kernel that calls them lives in a module never launched on a GPU
+(the models bind them on the CPU alone). :func:`load_lanes` and :func:`store_lanes` move a whole
+vector in one unaligned load or store where it lies in a contiguous array (lane by lane they
+cost a third of the float32 kernel's time).
 
 Warp compiles without contracting a * b + c into one fused multiply-add; the exp and sine
 snippets ask for it (``#pragma clang fp contract(fast)``): their Horner steps become FMAs, one
@@ -20,13 +20,11 @@ rounding fewer each. The atan2 snippet does not: its rounding is then the scalar
 zero (an FMA there moved the density 3e-13 from the scalar kernel's).
 
 Division without the divider (AVX-512: a 512-bit ``vdivpd`` occupies it 16 cycles, ``vsqrtpd``
-longer, and the polar kernel needed six of them and a square root per vector): :func:`lane_reciprocal`
-and :func:`lane_rsqrt` refine the 14-bit ``vrcp14`` / ``vrsqrt14`` estimates by Newton steps
-(fused multiply-adds), and :func:`lane_quotient` makes a / b correctly rounded from the
-reciprocal (Markstein's correction): the division's bits at a third of its cost, which is how the
-polar density takes ``common.atan2_fast``'s three quotients and keeps the scalar kernel's phi to
-the bit. The polar density without heading noise is one snippet (:func:`lane_polar_plain`) and a
-grid row one native loop over ``CHAINS`` registers of lanes a step (:func:`polar_plain_row`).
+longer): reciprocals, reciprocal square roots and correctly rounded quotients from the 14-bit
+estimates (:func:`_reciprocal_steps`, :func:`_rsqrt_steps`, :func:`_quotient_steps`), which is how
+the polar density takes ``common.atan2_fast``'s three quotients and keeps the scalar kernel's phi
+to the bit. The polar density without heading noise is one snippet (:func:`lane_polar_plain`) and
+a grid row one native loop over ``CHAINS`` registers of lanes a step (:func:`polar_plain_row`).
 Without AVX-512 these snippets divide and take the square root (the same values but in the last
 ulp of 1 / x and 1 / sqrt(x), and a / b exactly).
 
@@ -47,7 +45,7 @@ from dataclasses import dataclass
 import warp as wp
 
 # the lane types live with the arithmetic generic over them (common.each_mul, ...)
-from .common import LANES32, LANES64, lanes32, lanes64  # noqa: F401
+from .common import LANES32, LANES64, atan2_fast, lanes32, lanes64, wrap_angle  # noqa: F401
 
 
 @dataclass(frozen=True)
@@ -164,11 +162,16 @@ def _snippet(fmt: _Format, names: str, body: str, contract: bool = False) -> str
 
 
 def _exp_steps(fmt: _Format, x: str, out: str, upper: bool = True, scalef: bool = False) -> str:
-    """C statements leaving ``out`` = exp(``x``) (both ``vt``; :func:`_exp`), in a block of their
-    own; without ``upper`` for an ``x`` known not positive (no test against the ceiling); with
-    ``scalef`` (where :func:`_estimates`' lambdas are defined) p 2^n by one ``scale(p, n)`` on
-    AVX-512: the two factors' bits (the first product is exact, each way rounds once), in one
-    instruction instead of nine."""
+    """C statements leaving ``out`` = exp(``x``) (both ``vt``), in a block of their own: 0 below
+    the format's floor (where libm's exp is 0 too), inf above its ceiling, NaN for NaN. Cody-Waite
+    reduction x = n ln2 + r, |r| <= ln2 / 2, ln 2 split in two so that n ln2_hi is exact; n by the
+    1.5 * 2^mantissa shifter (round to nearest in one add); exp(r) by its Taylor polynomial; 2^n
+    as two factors 2^(n/2) built from their exponent bits, so that results below the smallest
+    normal underflow gradually to subnormals as libm's do and n = 1024 (x near the ceiling) still
+    has a factor (one factor 2^n would wrap its exponent). Without ``upper`` for an ``x`` known
+    not positive (no test against the ceiling); with ``scalef`` (where :func:`_estimates`'
+    lambdas are defined) p 2^n by one ``scale(p, n)`` on AVX-512: the two factors' bits (the
+    first product is exact, each way rounds once), in one instruction instead of nine."""
     shifter = 1.5 * 2.0**fmt.mantissa
     floor, ceiling = f"L({fmt.exp_floor!r})", f"L({fmt.exp_ceiling!r})"
     horner = "".join(f"p = p * r + L({1.0 / math.factorial(k)!r});\n" for k in range(fmt.taylor - 2, -1, -1))
@@ -188,16 +191,6 @@ def _exp_steps(fmt: _Format, x: str, out: str, upper: bool = True, scalef: bool 
         f"{out} = {x} < {floor} ? zero : {out};\n"
         + (f"{out} = {x} > {ceiling} ? zero + {fmt.infinity} : {out};\n" if upper else "") + "}\n"
     )
-
-
-def _exp(fmt: _Format) -> str:
-    """exp(x): 0 below the format's floor (where libm's exp is 0 too), inf above its ceiling, NaN
-    for NaN. Cody-Waite reduction x = n ln2 + r, |r| <= ln2 / 2, ln 2 split in two so that
-    n ln2_hi is exact; n by the 1.5 * 2^mantissa shifter (round to nearest in one add); exp(r)
-    by its Taylor polynomial; 2^n as two factors 2^(n/2) built from their exponent bits, so that
-    results below the smallest normal underflow gradually to subnormals as libm's do and
-    n = 1024 (x near the ceiling) still has a factor (one factor 2^n would wrap its exponent)."""
-    return _snippet(fmt, "x", contract=True, body=_exp_steps(fmt, "vx", "res"))
 
 
 #: atan2(x, y), the angle of (y, x) from the +y axis toward +x, lane by lane; the same steps as
@@ -283,34 +276,17 @@ def _reciprocal_steps(fmt: _Format, d: str, out: str, guard: bool = True) -> str
             f"#else\n{out} = 1 / {d};\n#endif\n")
 
 
-def _reciprocal(fmt: _Format) -> str:
-    """1 / x lane by lane (:func:`_reciprocal_steps`): within 1 ulp on AVX-512, correctly rounded
-    elsewhere."""
-    return _snippet(fmt, "x", _reciprocal_steps(fmt, "vx", "res"), contract=True)
-
-
-def _quotient(fmt: _Format) -> str:
-    """a / b lane by lane by :func:`_quotient_steps`: the division's bits."""
-    return _snippet(fmt, "a b", _quotient_steps(fmt, "va", "vb", "res"))
-
-
 def _rsqrt_steps(fmt: _Format, x: str, out: str, guard: bool = True) -> str:
-    """C statements leaving ``out`` = 1 / sqrt(``x``) (:func:`_rsqrt`; ``guard`` as
-    :func:`_reciprocal_steps`'s)."""
+    """C statements leaving ``out`` = 1 / sqrt(``x``). With AVX-512: the 14-bit estimate
+    (``vrsqrt14pd`` / ``ps``) and Newton steps e = 1 - (x y) y, y + (y / 2) e (as many as the
+    reciprocal's; ``guard`` as :func:`_reciprocal_steps`'s: where a step gives NaN, x zero or
+    infinite, the estimate stands, inf or 0). Elsewhere: a division by the correctly rounded square
+    root. x y is then sqrt(x) to within about 1 ulp, without the ``vsqrtpd``/``vdivpd`` pair."""
     keep = f" {out} = next == next ? next : {out};" if guard else f" {out} = next;"
     steps = "".join(f"{{ vt e = 1 - ({x} * {out}) * {out}; vt next = {out} + ({out} * L(0.5)) * e;{keep} }}\n"
                     for _ in range(fmt.newton))
     return (f"vt {out};\n#if defined(__AVX512F__)\n{out} = rsqrt_est({x});\n{steps}"
             f"#else\nfor (int k = 0; k < {fmt.lanes}; ++k) {out}[k] = 1 / {fmt.sqrt}({x}[k]);\n#endif\n")
-
-
-def _rsqrt(fmt: _Format) -> str:
-    """1 / sqrt(x) lane by lane. With AVX-512: the 14-bit estimate (``vrsqrt14pd`` / ``ps``) and
-    Newton steps e = 1 - (x y) y, y + (y / 2) e (as many as the reciprocal's); where a step gives
-    NaN (x zero or infinite) the estimate stands (inf or 0). Elsewhere: a division by the
-    correctly rounded square root. x y is then sqrt(x) to within about 1 ulp, without the
-    ``vsqrtpd``/``vdivpd`` pair."""
-    return _snippet(fmt, "x", _rsqrt_steps(fmt, "vx", "res"), contract=True)
 
 
 def _quotient_steps(fmt: _Format, a: str, b: str, out: str) -> str:
@@ -353,9 +329,17 @@ def _cephes_angle_steps(fmt: _Format, x: str, y: str, out: str) -> str:
 
 
 def _polar_plain_steps(fmt: _Format, x: str, y: str, out: str) -> str:
-    """C statements leaving ``out`` = the density without heading noise at the world points
-    (``x``, ``y``) (:func:`_polar_plain`), in a block of their own; the parameters are the
-    scalars of ``lane_polar_plain``'s signature."""
+    """C statements leaving ``out`` = the polar-banana density without heading noise
+    (``polar.polar_density_local``'s maths) at the world points (``x``, ``y``), in a block of their
+    own; the parameters are the scalars of ``lane_polar_plain``'s signature. One snippet, so that
+    all of it is whole-register vector code with fused multiply-adds and its constants kept in
+    registers across the row (the same formulas as Warp code compiled to half-register pieces,
+    every multiply and add apart, and took twice as long). The world point to the model's frame; r
+    and 1 / r from one reciprocal square root (:func:`_rsqrt_steps`); phi by
+    :func:`_cephes_angle_steps`; sinc(phi) = (x / r) / phi by a reciprocal (1 - phi^2 / 6 below
+    |phi| = 1e-4); with ``improved``: scc, the mean's correction (8) and P_sigma (11); 1 / sd by a
+    reciprocal (once per call for the rough variant's constant sd); one exp for both normal
+    factors. 0 at r = 0 and where sd is not positive."""
     third = f"L({1 / 3!r})"
     return (
         f"vt {out};\n{{\n"
@@ -394,20 +378,6 @@ def _polar_plain_steps(fmt: _Format, x: str, y: str, out: str) -> str:
     )
 
 
-def _polar_plain(fmt: _Format) -> str:
-    """The polar-banana density without heading noise (``polar_lanes.polar_plain_lanes``'s maths)
-    at a vector of world points, in one snippet so that all of it is whole-register vector code
-    with fused multiply-adds and its constants kept in registers across the row (the same
-    formulas as Warp code compiled to half-register pieces, every multiply and add apart, and
-    took twice as long). The world point to the model's frame; r and 1 / r from one reciprocal
-    square root (:func:`_rsqrt_steps`); phi by :func:`_cephes_angle_steps`; sinc(phi) = (x / r) / phi
-    by a reciprocal (1 - phi^2 / 6 below |phi| = 1e-4); with ``improved``: scc, the mean's
-    correction (8) and P_sigma (11); 1 / sd by a reciprocal (once per call for the rough
-    variant's constant sd); one exp for both normal factors. 0 at r = 0 and where sd is not
-    positive."""
-    return _snippet(fmt, "x y", _polar_plain_steps(fmt, "vx", "vy", "res"), contract=True)
-
-
 #: Registers of lanes per step of ``polar_plain_row``: independent chains the core overlaps.
 #: Figure 1 grid, float64, one core (Intel Xeon AVX-512): 1 register 10.0 ms a launch, 2: 8.98
 #: ms a rasterise, 4: 6.75 ms, 8: 6.67 ms and float32 5.17 -> 6.39 ms (spills).
@@ -421,7 +391,7 @@ def _polar_plain_row(fmt: _Format) -> str:
     chains that the core overlaps; a chain one register wide left the core waiting on each
     step's latency, 7.4 ns a float64 cell), elsewhere one vector of ``lanes`` (two ymm halves
     already, and 16 registers would spill four). Lane by lane the same operations as
-    :func:`_polar_plain`, so the same bits as the points kernel's; whole vectors loaded and
+    :func:`lane_polar_plain`, so the same bits as the points kernel's; whole vectors loaded and
     stored where they lie in contiguous rows, else lane by lane (the index clamped to the last
     element, as ``load_lanes``)."""
     def loop(chains: int) -> str:
@@ -513,187 +483,111 @@ def _store(fmt: _Format) -> str:
     )
 
 
-# --- float64 lanes ---------------------------------------------------------------------------
+# --- the lane functions, from the templates, for float64 (8 lanes) and float32 (16): Warp overloads
+# each name by its argument types, so that one generic kernel calls either
 
-@wp.func_native(_exp(F64))
-def lane_exp(x: lanes64) -> lanes64: ...
+for _fmt, _v, _s in ((F64, lanes64, wp.float64), (F32, lanes32, wp.float32)):
 
+    @wp.func_native(_snippet(_fmt, "x", _exp_steps(_fmt, "vx", "res"), contract=True))
+    def lane_exp(x: _v) -> _v: ...
 
-@wp.func_native(_snippet(F64, "x y", _ATAN2))
-def lane_atan2(x: lanes64, y: lanes64) -> lanes64: ...
+    @wp.func_native(_snippet(_fmt, "x y", _ATAN2))
+    def lane_atan2(x: _v, y: _v) -> _v: ...
 
+    @wp.func_native(_sqrt(_fmt))
+    def lane_sqrt(x: _v) -> _v: ...
 
-@wp.func_native(_sqrt(F64))
-def lane_sqrt(x: lanes64) -> lanes64: ...
+    @wp.func_native(_snippet(_fmt, "phi sin_phi", _SINC_OF))
+    def lane_sinc_of(phi: _v, sin_phi: _v) -> _v: ...
 
+    @wp.func_native(_snippet(_fmt, "x", _reciprocal_steps(_fmt, "vx", "res"), contract=True))
+    def lane_reciprocal(x: _v) -> _v: ...
 
-@wp.func_native(_snippet(F64, "phi sin_phi", _SINC_OF))
-def lane_sinc_of(phi: lanes64, sin_phi: lanes64) -> lanes64: ...
+    @wp.func_native(_snippet(_fmt, "a b", _quotient_steps(_fmt, "va", "vb", "res")))
+    def lane_quotient(a: _v, b: _v) -> _v: ...
 
+    @wp.func_native(_snippet(_fmt, "x", _rsqrt_steps(_fmt, "vx", "res"), contract=True))
+    def lane_rsqrt(x: _v) -> _v: ...
 
-@wp.func_native(_reciprocal(F64))
-def lane_reciprocal(x: lanes64) -> lanes64: ...
+    @wp.func_native(_snippet(_fmt, "c a", _WHERE_POSITIVE))
+    def lane_where_positive(c: _v, a: _v) -> _v: ...
 
+    @wp.func_native(_snippet(_fmt, "x y", _polar_plain_steps(_fmt, "vx", "vy", "res"), contract=True))
+    def lane_polar_plain(x: _v, y: _v, ox: _s, oy: _s, c: _s, s: _s, mean_sinc: _s, mean_scc: _s, sd_scale: _s,
+                         sd_t_term: _s, sd_curvature: _s, inv_sigma_phi: _s, inv_sigma_omega_sq: _s, norm: _s,
+                         improved: int) -> _v:
+        """The polar-banana density without heading noise at the world points (x, y) (``_polar_plain_steps``)."""
+        ...
 
-@wp.func_native(_quotient(F64))
-def lane_quotient(a: lanes64, b: lanes64) -> lanes64: ...
+    @wp.func_native(_polar_plain_row(_fmt))
+    def polar_plain_row(xs: wp.array(dtype=_s), y: _s, out: wp.array2d(dtype=_s), row: int, j0: int, j1: int, ox: _s,
+                        oy: _s, c: _s, s: _s, mean_sinc: _s, mean_scc: _s, sd_scale: _s, sd_t_term: _s,
+                        sd_curvature: _s, inv_sigma_phi: _s, inv_sigma_omega_sq: _s, norm: _s, improved: int):
+        """out[row, j0 .. j1 - 1] = the density without heading noise at (xs[j], y) (``_polar_plain_row``)."""
+        ...
 
+    @wp.func_native(_wrap_angle(_fmt))
+    def lane_wrap_angle(d: _v) -> _v: ...
 
-@wp.func_native(_rsqrt(F64))
-def lane_rsqrt(x: lanes64) -> lanes64: ...
+    @wp.func_native(_snippet(_fmt, "c a b", _WHERE_NOT_NEGATIVE))
+    def lane_where_not_negative(c: _v, a: _v, b: _v) -> _v: ...
 
+    @wp.func_native(_snippet(_fmt, "x", _ABS))
+    def lane_abs(x: _v) -> _v: ...
 
-@wp.func_native(_snippet(F64, "c a", _WHERE_POSITIVE))
-def lane_where_positive(c: lanes64, a: lanes64) -> lanes64: ...
+    @wp.func_native(_sine(_fmt, cosine=False))
+    def lane_sin(x: _v) -> _v: ...
 
+    @wp.func_native(_sine(_fmt, cosine=True))
+    def lane_cos(x: _v) -> _v: ...
 
-@wp.func_native(_polar_plain(F64))
-def lane_polar_plain(x: lanes64, y: lanes64, ox: wp.float64, oy: wp.float64, c: wp.float64, s: wp.float64, mean_sinc: wp.float64, mean_scc: wp.float64,
-                     sd_scale: wp.float64, sd_t_term: wp.float64, sd_curvature: wp.float64, inv_sigma_phi: wp.float64,
-                     inv_sigma_omega_sq: wp.float64, norm: wp.float64, improved: int) -> lanes64:
-    """The polar-banana density without heading noise at the world points (x, y) (``_polar_plain``)."""
-    ...
+    @wp.func_native(_scan_group(_fmt))
+    def cat_scan_group(groups: wp.array2d(dtype=_v), g: int, x: _s, y: _s, chord: _s, noise: _s, count: int) -> int: ...
 
+    @wp.func_native(f"return {_fmt.lanes};\n")
+    def lane_count(values: wp.array(dtype=_s)) -> int:
+        """Lanes in the vectors :func:`load_lanes` makes of ``values`` (8 float64, 16 float32)."""
+        ...
 
-@wp.func_native(_polar_plain_row(F64))
-def polar_plain_row(xs: wp.array(dtype=wp.float64), y: wp.float64, out: wp.array2d(dtype=wp.float64), row: int,
-                    j0: int, j1: int, ox: wp.float64, oy: wp.float64, c: wp.float64, s: wp.float64, mean_sinc: wp.float64, mean_scc: wp.float64,
-                       sd_scale: wp.float64, sd_t_term: wp.float64, sd_curvature: wp.float64, inv_sigma_phi: wp.float64,
-                       inv_sigma_omega_sq: wp.float64, norm: wp.float64, improved: int):
-    """out[row, j0 .. j1 - 1] = the density without heading noise at (xs[j], y) (``_polar_plain_row``)."""
-    ...
+    @wp.func_native(_load(_fmt))
+    def load_lanes(values: wp.array(dtype=_s), start: int) -> _v:
+        """values[start .. start + lanes - 1], the index clamped to the last element past the end."""
+        ...
 
+    @wp.func_native(_store(_fmt))
+    def store_lanes(out: wp.array(dtype=_s), start: int, values: _v, count: int):
+        """out[start + k] = values[k] for k < min(count, lanes)."""
+        ...
 
-@wp.func_native(_wrap_angle(F64))
-def lane_wrap_angle(d: lanes64) -> lanes64: ...
 
+# --- one name for a value and for lanes (as ``common.each_mul``), so that one generic body serves the
+# scalar kernels (the GPU path's) and the lane kernels: the scalar function, or its lane snippet
 
-@wp.func_native(_snippet(F64, "c a b", _WHERE_NOT_NEGATIVE))
-def lane_where_not_negative(c: lanes64, a: lanes64, b: lanes64) -> lanes64: ...
+for _s, _v in ((wp.float64, lanes64), (wp.float32, lanes32)):
 
+    @wp.func(inline=True)
+    def each_exp(x: _s):
+        """exp(x): ``wp.exp``, or :func:`lane_exp` on lanes."""
+        return wp.exp(x)
 
-@wp.func_native(_snippet(F64, "x", _ABS))
-def lane_abs(x: lanes64) -> lanes64: ...
+    @wp.func(inline=True)
+    def each_exp(x: _v):  # noqa: F811
+        return lane_exp(x)
 
+    @wp.func(inline=True)
+    def each_atan2(x: _s, y: _s):
+        """atan2(x, y): ``common.atan2_fast``, or :func:`lane_atan2` (its steps) on lanes."""
+        return atan2_fast(x, y)
 
-@wp.func_native(_sine(F64, cosine=False))
-def lane_sin(x: lanes64) -> lanes64: ...
+    @wp.func(inline=True)
+    def each_atan2(x: _v, y: _v):  # noqa: F811
+        return lane_atan2(x, y)
 
-
-@wp.func_native(_sine(F64, cosine=True))
-def lane_cos(x: lanes64) -> lanes64: ...
-
-
-@wp.func_native(_scan_group(F64))
-def cat_scan_group(groups: wp.array2d(dtype=lanes64), g: int, x: wp.float64, y: wp.float64, chord: wp.float64,
-                   noise: wp.float64, count: int) -> int: ...
-
-
-@wp.func
-def lane_count(values: wp.array(dtype=wp.float64)):
-    """Lanes in the vectors :func:`load_lanes` makes of ``values`` (8)."""
-    return LANES64
-
-
-@wp.func_native(_load(F64))
-def load_lanes(values: wp.array(dtype=wp.float64), start: int) -> lanes64:
-    """values[start .. start + 7], the index clamped to the last element past the end."""
-    ...
-
-
-@wp.func_native(_store(F64))
-def store_lanes(out: wp.array(dtype=wp.float64), start: int, values: lanes64, count: int):
-    """out[start + k] = values[k] for k < min(count, 8)."""
-    ...
-
-
-# --- float32 lanes: the same functions (Warp overloads them by the argument types) -------------
-
-@wp.func_native(_exp(F32))
-def lane_exp(x: lanes32) -> lanes32: ...  # noqa: F811
-
-
-@wp.func_native(_snippet(F32, "x y", _ATAN2))
-def lane_atan2(x: lanes32, y: lanes32) -> lanes32: ...  # noqa: F811
-
-
-@wp.func_native(_sqrt(F32))
-def lane_sqrt(x: lanes32) -> lanes32: ...  # noqa: F811
-
-
-@wp.func_native(_snippet(F32, "phi sin_phi", _SINC_OF))
-def lane_sinc_of(phi: lanes32, sin_phi: lanes32) -> lanes32: ...  # noqa: F811
-
-
-@wp.func_native(_reciprocal(F32))
-def lane_reciprocal(x: lanes32) -> lanes32: ...  # noqa: F811
-
-
-@wp.func_native(_quotient(F32))
-def lane_quotient(a: lanes32, b: lanes32) -> lanes32: ...  # noqa: F811
-
-
-@wp.func_native(_rsqrt(F32))
-def lane_rsqrt(x: lanes32) -> lanes32: ...  # noqa: F811
-
-
-@wp.func_native(_snippet(F32, "c a", _WHERE_POSITIVE))
-def lane_where_positive(c: lanes32, a: lanes32) -> lanes32: ...  # noqa: F811
-
-
-@wp.func_native(_polar_plain(F32))
-def lane_polar_plain(x: lanes32, y: lanes32, ox: wp.float32, oy: wp.float32, c: wp.float32, s: wp.float32, mean_sinc: wp.float32, mean_scc: wp.float32,
-                     sd_scale: wp.float32, sd_t_term: wp.float32, sd_curvature: wp.float32, inv_sigma_phi: wp.float32,
-                     inv_sigma_omega_sq: wp.float32, norm: wp.float32, improved: int) -> lanes32:  # noqa: F811
-    ...
-
-
-@wp.func_native(_polar_plain_row(F32))
-def polar_plain_row(xs: wp.array(dtype=wp.float32), y: wp.float32, out: wp.array2d(dtype=wp.float32),  # noqa: F811
-                    row: int, j0: int, j1: int, ox: wp.float32, oy: wp.float32, c: wp.float32, s: wp.float32, mean_sinc: wp.float32, mean_scc: wp.float32,
-                       sd_scale: wp.float32, sd_t_term: wp.float32, sd_curvature: wp.float32, inv_sigma_phi: wp.float32,
-                       inv_sigma_omega_sq: wp.float32, norm: wp.float32, improved: int):
-    ...
-
-
-@wp.func_native(_wrap_angle(F32))
-def lane_wrap_angle(d: lanes32) -> lanes32: ...  # noqa: F811
-
-
-@wp.func_native(_snippet(F32, "c a b", _WHERE_NOT_NEGATIVE))
-def lane_where_not_negative(c: lanes32, a: lanes32, b: lanes32) -> lanes32: ...  # noqa: F811
-
-
-@wp.func_native(_snippet(F32, "x", _ABS))
-def lane_abs(x: lanes32) -> lanes32: ...  # noqa: F811
-
-
-@wp.func_native(_sine(F32, cosine=False))
-def lane_sin(x: lanes32) -> lanes32: ...  # noqa: F811
-
-
-@wp.func_native(_sine(F32, cosine=True))
-def lane_cos(x: lanes32) -> lanes32: ...  # noqa: F811
-
-
-@wp.func_native(_scan_group(F32))
-def cat_scan_group(groups: wp.array2d(dtype=lanes32), g: int, x: wp.float32, y: wp.float32,  # noqa: F811
-                   chord: wp.float32, noise: wp.float32, count: int) -> int: ...
-
-
-@wp.func
-def lane_count(values: wp.array(dtype=wp.float32)):  # noqa: F811
-    """Lanes in the vectors :func:`load_lanes` makes of ``values`` (16)."""
-    return LANES32
-
-
-@wp.func_native(_load(F32))
-def load_lanes(values: wp.array(dtype=wp.float32), start: int) -> lanes32:  # noqa: F811
-    """values[start .. start + 15], the index clamped to the last element past the end."""
-    ...
-
-
-@wp.func_native(_store(F32))
-def store_lanes(out: wp.array(dtype=wp.float32), start: int, values: lanes32, count: int):  # noqa: F811
-    """out[start + k] = values[k] for k < min(count, 16)."""
-    ...
+    @wp.func(inline=True)
+    def each_wrap_angle(d: _s):
+        """d wrapped to [-pi, pi]: ``common.wrap_angle``, or :func:`lane_wrap_angle` on lanes."""
+        return wrap_angle(d)
+
+    @wp.func(inline=True)
+    def each_wrap_angle(d: _v):  # noqa: F811
+        return lane_wrap_angle(d)

@@ -189,13 +189,24 @@ def polar_heading_mean_sd(theta: Any, p: Any):
 
 
 @wp.func
+def normal_pair(z_angle: Any, r: Any, inv_r: Any, mean: Any, sd: Any, norm: Any):
+    """norm / sd / r exp(-(z_angle^2 + ((r - mean) / sd)^2) / 2): the angle's and r's normal
+    factors under one exp, with the 1/r Jacobian; 0 where sd is not positive."""
+    if sd <= type(r)(0.0):
+        return type(r)(0.0)
+    inv_sd = type(r)(1.0) / sd
+    z_r = (r - mean) * inv_sd
+    return norm * inv_sd * inv_r * wp.exp(type(r)(-0.5) * (z_angle * z_angle + z_r * z_r))
+
+
+@wp.func
 def polar_density_local(x: Any, y: Any, p: Any):
     """Density per m^2 at a local point: g(phi; 0, sigma_phi) g(r; mu, sd) / r.
 
-    sin(phi) = x / r and cos(phi) = y / r, and the two normal factors share one exp. Zero where
-    the improved P_sigma is not positive (outside the approximation's domain; the model warns
-    when that can happen) and at r = 0. With heading noise (``order`` 2 or 4) the angle is
-    theta ~ N(0, sigma_theta) and r | theta follows (15)-(16).
+    sin(phi) = x / r and cos(phi) = y / r. Zero where the improved P_sigma is not positive
+    (outside the approximation's domain; the model warns when that can happen) and at r = 0.
+    With heading noise (``order`` 2 or 4) the angle is theta ~ N(0, sigma_theta) and r | theta
+    follows (15)-(16).
     """
     zero = type(x)(0.0)
     r = wp.sqrt(x * x + y * y)
@@ -205,19 +216,9 @@ def polar_density_local(x: Any, y: Any, p: Any):
     phi = atan2_fast(x, y)
     if p.order != 0:
         mean_t, sd_t = polar_heading_mean_sd(phi, p)
-        if sd_t <= zero:
-            return zero
-        inv_sd_t = type(x)(1.0) / sd_t
-        z_theta = phi * p.inv_sigma_theta
-        z_rt = (r - mean_t) * inv_sd_t
-        return p.theta_norm * inv_sd_t * inv_r * wp.exp(type(x)(-0.5) * (z_theta * z_theta + z_rt * z_rt))
+        return normal_pair(phi * p.inv_sigma_theta, r, inv_r, mean_t, sd_t, p.theta_norm)
     mu, sd = polar_mean_sd(phi, sinc_of(phi, x * inv_r), y * inv_r, p)
-    if sd <= zero:
-        return zero
-    inv_sd = type(x)(1.0) / sd
-    z_phi = phi * p.inv_sigma_phi
-    z_r = (r - mu) * inv_sd
-    return p.norm * inv_sd * inv_r * wp.exp(type(x)(-0.5) * (z_phi * z_phi + z_r * z_r))
+    return normal_pair(phi * p.inv_sigma_phi, r, inv_r, mu, sd, p.norm)
 
 
 @wp.func
@@ -233,29 +234,22 @@ def polar_moments(phis: wp.array(dtype=Any), p: Any, mean: wp.array(dtype=Any), 
     the improved variant), at order 2 or 4 given theta with heading noise ((15), (16))."""
     k = wp.tid()
     phi = phis[k]
+    m = phi
+    s = phi
     if p.order == 0:
         m, s = polar_mean_sd(phi, sinc_of(phi, wp.sin(phi)), wp.cos(phi), p)
-        mean[k] = m
-        sd[k] = s
     else:
         m, s = polar_heading_mean_sd(phi, p)
-        mean[k] = m
-        sd[k] = s
+    mean[k] = m
+    sd[k] = s
 
 
 @wp.kernel
-def polar_derivatives(phis: wp.array(dtype=Any), p: Any, out: wp.array2d(dtype=Any)):
-    """P_mu and its derivatives 1-4, P_sigma and its derivatives 1-2, at each phi (8 columns)."""
+def polar_derivatives(phis: wp.array(dtype=Any), p: Any, out: wp.array(dtype=Any)):
+    """P_mu and its derivatives 1-4, P_sigma and its derivatives 1-2, at each phi (a vector of 8)."""
     k = wp.tid()
     m0, m1, m2, m3, m4, s0, s1, s2 = polar_law_derivatives(phis[k], p)
-    out[k, 0] = m0
-    out[k, 1] = m1
-    out[k, 2] = m2
-    out[k, 3] = m3
-    out[k, 4] = m4
-    out[k, 5] = s0
-    out[k, 6] = s1
-    out[k, 7] = s2
+    out[k] = wp.vector(m0, m1, m2, m3, m4, s0, s1, s2)
 
 
 #: The parameters: the coefficients (:func:`coefficients`, in their order), the pose, the
@@ -266,4 +260,4 @@ for _scalar in SCALARS:
     _vec = wp.array(dtype=_scalar)
     overload_on_use(polar_moments, _scalar, {"phis": _vec, "p": POLAR.of(_scalar), "mean": _vec, "sd": _vec})
     overload_on_use(polar_derivatives, _scalar,
-                    {"phis": _vec, "p": POLAR.of(_scalar), "out": wp.array2d(dtype=_scalar)})
+                    {"phis": _vec, "p": POLAR.of(_scalar), "out": wp.array(dtype=wp.types.vector(8, _scalar))})

@@ -1,24 +1,20 @@
 """The polar-banana kernels in CPU lanes: 8 float64 or 16 float32 cells at a time, end to end.
 
-The same density as ``polar.polar_density_local``. Without heading noise (rough and improved
-variants; the formulas are in ``kernels/polar.py``): one native snippet
-(``lanes.lane_polar_plain``, and ``lanes.polar_plain_row`` for a grid row): r and 1 / r from one
-reciprocal square root, phi by the scalar kernel's atan2 steps in float64 (its divisions
-correctly rounded by reciprocals, so the bits of ``common.atan2_fast``) and by a one-reciprocal
-atan2 with a float32 polynomial of its own degree in float32, sinc(phi) = (x / r) / phi,
-cos(phi) = y / r, P_mu (8) and P_sigma (11) with the host's coefficients, one reciprocal for
-1 / sd and one exp for both normal factors; no division instruction on a CPU with AVX-512.
-With initial-heading noise (order 2 or 4): the law's derivatives at theta_bar and the moments (15)-(16) by the generic
-functions the scalar kernel runs too (``polar.polar_law_of``, ``polar.polar_heading_moments``),
-with the lane sine and both branches of the sinc derivatives selected per lane. The scalar
-kernel's branches are selects: 0 at r = 0 and where P_sigma (or the variance) is not positive.
-Values agree with the scalar kernel to about 1e-14 relative in float64 where the density is well
-conditioned (``tests/kernels/test_lanes.py`` sweeps the parameter domain).
+The density of ``polar.polar_density_local``. Without heading noise: one native snippet
+(``lanes.lane_polar_plain``; a grid row in ``lanes.polar_plain_row``), its steps stated in
+``kernels/lanes.py`` (no division instruction on a CPU with AVX-512; phi by the scalar kernel's
+atan2 steps, to the bit). With initial-heading noise (order 2 or 4): the law's derivatives at
+theta_bar and the moments (15)-(16) by the generic functions the scalar kernel runs too
+(``polar.polar_law_of``, ``polar.polar_heading_moments``), with the lane sine and both branches of
+the sinc derivatives selected per lane. The scalar kernel's branches are selects: 0 at r = 0 and
+where P_sigma (or the variance) is not positive. Values agree with the scalar kernel to about
+1e-14 relative in float64 where the density is well conditioned (``tests/kernels/test_lanes.py``
+sweeps the parameter domain).
 
-CPU only (see ``kernels/lanes.py``); the GPU path uses ``polar.KERNELS``. The points and batch
-kernels are generated from :func:`polar_density_lanes`; the grid kernel (:data:`GRID`) runs
-a row without heading noise in ``lanes.polar_plain_row``, the same operations lane by lane, so
-that ``rasterise``, ``pdf`` and the batches agree bit for bit.
+CPU only (see ``kernels/lanes.py``); the GPU path uses ``polar.KERNELS``. Every kernel is
+generated from :func:`polar_density_lanes`, the grid kernel with :func:`polar_row_lanes` (a row
+without heading noise by ``lanes.polar_plain_row``, the same operations lane by lane), so that
+``rasterise``, ``pdf`` and the batches agree bit for bit.
 """
 
 from typing import Any
@@ -26,10 +22,10 @@ from typing import Any
 import warp as wp
 
 from .common import SINC_SERIES_SWITCH, sinc_derivatives_recurrence, sinc_derivatives_series
-from .generate import SCALARS, density_kernels, overload_on_use
+from .generate import density_kernels
 from .lanes import (
-    lane_abs, lane_atan2, lane_cos, lane_count, lane_exp, lane_polar_plain, lane_sin, lane_sqrt, lane_where_not_negative,
-    lane_where_positive, load_lanes, polar_plain_row, store_lanes,
+    lane_abs, lane_atan2, lane_cos, lane_exp, lane_polar_plain, lane_sin, lane_sqrt, lane_where_not_negative,
+    lane_where_positive, polar_plain_row,
 )
 from .polar import POLAR, ROUGH, polar_heading_moments, polar_law_of
 
@@ -93,30 +89,18 @@ def polar_density_lanes(x: Any, y: Any, p: Any):
     return polar_heading_lanes(lx, ly, p)
 
 
-def _polar_grid_lanes(xs: wp.array(dtype=Any), ys: wp.array(dtype=Any), row0: int, columns: int, p: Any,
-                      out: wp.array2d(dtype=Any)):
-    """The generated lane grid kernel's layout (``columns`` cells of a row per thread), with a row
-    without heading noise in one native loop (``lanes.polar_plain_row``: two registers of lanes
-    a step, the same bits as :func:`polar_density_lanes`)."""
-    i, block = wp.tid()
-    row = row0 + i
-    j0 = block * columns
-    j1 = wp.min((block + 1) * columns, xs.shape[0])
-    y = ys[row]
+@wp.func(inline=True)
+def polar_row_lanes(xs: wp.array(dtype=Any), y: Any, out: wp.array2d(dtype=Any), row: int, j0: int, j1: int, p: Any):
+    """The generated grid kernel's row without heading noise, in one native loop
+    (``lanes.polar_plain_row``: ``lanes.CHAINS`` registers of lanes a step, the same bits as
+    :func:`polar_density_lanes`): 1; with heading noise 0 (the row is left to the density)."""
     if p.order == 0:
-        polar_plain_row(xs, y, out, row, j0, j1, p.pose[0], p.pose[1], p.pose[2], p.pose[3], p.mean_sinc,
-                        p.mean_scc, p.sd_scale, p.sd_t_term, p.sd_curvature, p.inv_sigma_phi, p.inv_sigma_omega_sq,
-                        p.norm, wp.where(p.variant != ROUGH, 1, 0))
-    else:
-        j = j0
-        while j < j1:
-            x = load_lanes(xs, j)
-            store_lanes(out[row], j, polar_density_lanes(x, type(x)(y), p), j1 - j)
-            j += lane_count(xs)
+        polar_plain_row(xs, y, out, row, j0, j1, p.pose[0], p.pose[1], p.pose[2], p.pose[3], p.mean_sinc, p.mean_scc,
+                        p.sd_scale, p.sd_t_term, p.sd_curvature, p.inv_sigma_phi, p.inv_sigma_omega_sq, p.norm,
+                        wp.where(p.variant != ROUGH, 1, 0))
+        return 1
+    return 0
 
 
-GRID = wp.kernel(_polar_grid_lanes, name="polar_grid_lanes", module=polar_density_lanes.module)
-for _scalar in SCALARS:
-    _vec = wp.array(dtype=_scalar)
-    overload_on_use(GRID, _scalar, {"xs": _vec, "ys": _vec, "p": POLAR.of(_scalar), "out": wp.array2d(dtype=_scalar)})
-KERNELS = density_kernels(polar_density_lanes, POLAR, "polar", lanes=True, batch=True, bands_per_thread=1, grid=GRID)
+KERNELS = density_kernels(polar_density_lanes, POLAR, "polar", lanes=True, batch=True, bands_per_thread=1,
+                          row=polar_row_lanes)

@@ -56,20 +56,15 @@ def table_density_local(x: Any, y: Any, p: Any):
     zero = type(x)(0.0)
     n_r = p.table.shape[0]
     n_theta = p.table.shape[1]
-    r0 = p.r0
-    dr = p.dr
-    theta0 = p.theta0
-    dtheta = p.dtheta
-    floor_value = p.floor_value
     r = wp.sqrt(x * x + y * y)
-    u = (r - r0) / dr
+    u = (r - p.r0) / p.dr
     base = int(wp.floor(u))
     if p.mirror == 0:
         base = wp.clamp(base, 1, n_r - 3)  # one-sided stencils at the lattice's ends
     else:
         base = wp.min(base, n_r - 3)
     fr = u - type(x)(float(base))
-    v = (atan2_fast(x, y) - theta0) / dtheta
+    v = (atan2_fast(x, y) - p.theta0) / p.dtheta
     col = int(wp.floor(v))
     ft = v - type(x)(float(col))
     wr0, wr1, wr2, wr3 = lagrange4(fr)
@@ -97,7 +92,7 @@ def table_density_local(x: Any, y: Any, p: Any):
                 lowest = value
             else:
                 lowest = wp.min(lowest, value)
-    if lowest > floor_value:
+    if lowest > p.floor_value:
         return wp.exp(log_sum)
     return wp.max(lin_sum, zero)
 

@@ -325,7 +325,7 @@ class PolarBanana(MotionModel):
         analytic, through the kernel that (15)-(16) use."""
         phi = _angles("phi", phi)
         ctx = WarpContext(dtype, device)
-        out = ctx.zeros((phi.size, 8))
+        out = ctx.zeros(phi.size, dtype=ctx.vector(8))
         if phi.size:
             ctx.launch(kernels.polar_derivatives, dim=phi.size, inputs=[ctx.array(phi.ravel()), self._params(ctx), out])
         return ctx.numpy(out).reshape(phi.shape + (8,))

@@ -21,8 +21,9 @@ from bananagrid.engine.grid_kernel import grid_block
 from bananagrid.engine.points import launch_points
 from bananagrid.engine.warp_runtime import WarpContext
 from bananagrid.kernels import cat
+from bananagrid.kernels.common import each_mul
 from bananagrid.kernels.generate import SCALAR, SCALARS, VEC4, Params, density_kernels
-from bananagrid.kernels.lanes import lane_exp
+from bananagrid.kernels.lanes import each_exp, lane_count, lane_exp, load_lanes, store_lanes
 from bananagrid.protocol import KernelBinding
 
 
@@ -40,10 +41,52 @@ def bump_lanes(x: Any, y: Any, p: Any):
     return lane_exp((wp.cw_mul(dx, dx) + wp.cw_mul(dy, dy)) * p.minus_half_inv_var) * p.scale
 
 
+@wp.func
+def bump_generic(x: Any, y: Any, p: Any):
+    """The bump written once, at a point or lane by lane at a vector of points."""
+    dx = x - type(x)(p.centre[0])
+    dy = y - type(x)(p.centre[1])
+    return each_exp((each_mul(dx, dx) + each_mul(dy, dy)) * p.minus_half_inv_var) * p.scale
+
+
+@wp.func
+def bump_row(xs: wp.array(dtype=Any), y: Any, out: wp.array2d(dtype=Any), row: int, j0: int, j1: int, p: Any):
+    """A family's own row: the rows at or north of the centre in a loop of its own (1), the others
+    left to the generated loop (0)."""
+    if y < p.centre[1]:
+        return 0
+    j = j0
+    while j < j1:
+        x = load_lanes(xs, j)
+        store_lanes(out[row], j, bump_lanes(x, type(x)(y), p), j1 - j)
+        j += lane_count(xs)
+    return 1
+
+
+@wp.func
+def bump_row_mark(xs: wp.array(dtype=Any), y: Any, out: wp.array2d(dtype=Any), row: int, j0: int, j1: int,
+                  p: Any):
+    """Marks the rows at or north of the centre with -1 instead of the density: shows which rows
+    the generated grid kernel left to the family's row."""
+    if y < p.centre[1]:
+        return 0
+    for j in range(j0, j1):
+        out[row, j] = type(y)(-1.0)
+    return 1
+
+
 BUMP = Params("BumpParams", __name__, centre=VEC4, minus_half_inv_var=SCALAR, scale=SCALAR)
 SCALAR_KERNELS = density_kernels(bump, BUMP, "bump", batch=True, bands_per_thread=3)
 LANE_KERNELS = density_kernels(bump_lanes, BUMP, "bump", lanes=True, batch=True)
 FAMILIES = {"scalar": SCALAR_KERNELS, "lanes": LANE_KERNELS}
+#: The generic bump's scalar and lane kernels and the two rows' families, each in a module of its
+#: own (``module``): one build per dtype each, not a rebuild of this module's families
+_ONCE = {"generic": {}, "generic_lanes": {"lanes": True}, "row": {"lanes": True, "row": bump_row},
+         "mark": {"lanes": True, "row": bump_row_mark}}
+for _family in _ONCE:
+    wp.set_module_options({"enable_backward": False}, module=f"{__name__}_{_family}")
+ONCE = {family: density_kernels(bump_lanes if "row" in options else bump_generic, BUMP, "bump",
+                                module=f"{__name__}_{family}", **options) for family, options in _ONCE.items()}
 DTYPES = {np.float64: "float64", np.float32: "float32"}
 
 
@@ -145,12 +188,52 @@ def test_lane_kernels_agree_with_the_scalar_kernels(dtype):
     3 ulp of libm's (exp's argument is computed in the same order, lane by lane)."""
     grid = bg.Grid(origin=(-60.0, -45.0), dx=0.7, dy=0.9, nx=171, ny=100)
     out = {}
-    for family, kernels in FAMILIES.items():
+    for family, kernels in {**FAMILIES, **ONCE}.items():
+        if family == "mark":
+            continue
         ctx = WarpContext(dtype, "cpu", 2)
         out[family] = grid_block(ctx, KernelBinding(kernels, _params(ctx, (3.0, -4.0), 11.0)), grid)
     normal = out["scalar"] > np.finfo(dtype).tiny
     rel = np.abs(out["lanes"][normal].astype(float) - out["scalar"][normal]) / out["scalar"][normal]
     assert rel.max() <= 4 * np.finfo(dtype).eps, rel.max()
+
+
+@pytest.mark.parametrize("dtype", list(DTYPES))
+def test_a_density_written_once_gives_the_bits_of_its_scalar_and_lane_twins(dtype):
+    """A density generic over a value and a vector of lanes (``each_mul``, ``each_exp``) generates
+    scalar kernels with the scalar density's bits and lane kernels (in the module named for them)
+    with the lane density's; a family's own row (``row``) gives the generated loop's bits."""
+    assert ONCE["generic_lanes"].points.module.name == f"{__name__}_generic_lanes" != bump_generic.module.name
+    assert ONCE["generic_lanes"].name == "test_generate_generic_lanes.bump_grid_lanes"
+    grid = bg.Grid(origin=(-60.0, -45.0), dx=0.7, dy=0.9, nx=171, ny=100)
+    rng = np.random.default_rng(4)
+    px, py = rng.uniform(-60.0, 60.0, 333), rng.uniform(-45.0, 45.0, 333)
+    out = {}
+    for family, kernels in {**FAMILIES, **ONCE}.items():
+        if family == "mark":
+            continue
+        ctx = WarpContext(dtype, "cpu", 2)
+        binding = KernelBinding(kernels, _params(ctx, (3.0, -4.0), 11.0))
+        ctx.load(kernels.points)
+        out[family] = grid_block(ctx, binding, grid), launch_points(ctx, binding, px, py)
+    for twin, family in (("scalar", "generic"), ("lanes", "generic_lanes"), ("lanes", "row")):
+        for a, b in zip(out[twin], out[family]):
+            assert np.array_equal(a, b), (twin, family)
+    assert not np.array_equal(out["scalar"][0], out["lanes"][0])  # the two exps differ: the check can fail
+
+
+@pytest.mark.parametrize("dtype", list(DTYPES))
+def test_a_family_row_fills_the_rows_it_takes_and_leaves_the_others(dtype):
+    """The generated grid kernel calls the family's row on every row of every band, and fills a
+    row with the density exactly where the row returned 0."""
+    grid = bg.Grid(origin=(-60.0, -45.0), dx=0.7, dy=0.9, nx=37, ny=100)
+    ctx = WarpContext(dtype, "cpu", 2)
+    marked = grid_block(ctx, KernelBinding(ONCE["mark"], _params(ctx, (3.0, -4.0), 11.0)), grid)
+    plain = grid_block(ctx, KernelBinding(LANE_KERNELS, _params(ctx, (3.0, -4.0), 11.0)), grid)
+    north = grid.y.astype(dtype) >= dtype(-4.0)
+    assert 0 < north.sum() < grid.ny
+    assert np.all(marked[north] == -1.0)
+    assert np.array_equal(marked[~north], plain[~north])
 
 
 @pytest.mark.parametrize("family", list(FAMILIES))
