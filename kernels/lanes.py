@@ -432,7 +432,7 @@ def _wrap_angle(fmt: _Format) -> str:
 
 def _scan_group(fmt: _Format) -> str:
     """The CAT scan's cheap test on one group of node intervals (``cat_lanes.node_groups``), as
-    ``cat.cat_density_local`` computes it: F = hx y - hy x - c at the group's nodes and at their
+    ``cat.cat_scan`` computes it: F = hx y - hy x - c at the group's nodes and at their
     predecessors, the chord bound (chord (w - w_prev)) (w - w_prev) + noise; bit k set where F
     changes sign over interval k or the smaller |F| at its ends is within the bound (of the
     first ``count`` intervals). One snippet, so that all of it is vector code."""
