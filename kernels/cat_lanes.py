@@ -20,7 +20,7 @@ from .cat import (
     cat_node_values, cat_one_root, cat_root_density, cat_root_group, cat_scan_functions, cat_scan_noise,
 )
 from .evidence import EVIDENCE
-from .generate import SCALARS, Params, carried_points_kernel, density_kernels, overload_on_use
+from .generate import Params, carried_points_kernel, density_kernels
 from .common import lanes32, lanes64, world_to_local
 from .lanes import cat_scan_group, lane_count
 
@@ -287,32 +287,20 @@ def cat_sweep_row(xs: wp.array(dtype=Any), y: Any, row: int, j0: int, j1: int, p
         h_prev = h_k
 
 
-def _cat_grid_lanes(xs: wp.array(dtype=Any), ys: wp.array(dtype=Any), row0: int, columns: int, p: Any,
-                    out: wp.array2d(dtype=Any)):
-    """The generated grid kernel's layout (``columns`` cells of a row per thread), each row by
-    the sweep (:func:`cat_sweep_row`) where its centres are non-decreasing (a grid's always are),
-    else cell by cell (``cat_density_lanes``)."""
-    i, block = wp.tid()
-    row = row0 + i
-    j0 = block * columns
-    j1 = wp.min((block + 1) * columns, xs.shape[0])
-    y = ys[row]
+@wp.func
+def cat_row(xs: wp.array(dtype=Any), y: Any, out: wp.array2d(dtype=Any), row: int, j0: int, j1: int, p: Any):
+    """The generated grid kernel's row by the sweep (:func:`cat_sweep_row`) where its centres are
+    non-decreasing (a grid's always are): 1; else 0 (the row is left to the density, cell by cell)."""
     unsorted = int(0)
     for j in range(j0 + 1, j1):
         if not (xs[j] >= xs[j - 1]):
             unsorted = 1
     if unsorted == 0:
         cat_sweep_row(xs, y, row, j0, j1, p, out)
-    else:
-        for j in range(j0, j1):
-            out[row, j] = cat_density_lanes(xs[j], y, p)
+        return 1
+    return 0
 
 
-GRID = wp.kernel(_cat_grid_lanes, name="cat_grid_lanes", module=cat_density_lanes.module)
-for _scalar in SCALARS:
-    _vec = wp.array(dtype=_scalar)
-    overload_on_use(GRID, _scalar, {"xs": _vec, "ys": _vec, "p": CAT_LANES.of(_scalar),
-                                    "out": wp.array2d(dtype=_scalar)})
 # the grid by the row sweep, the points one by one with the nodes in lanes
-KERNELS = density_kernels(cat_density_lanes, CAT_LANES, "cat", suffix="_lanes", grid=GRID)
+KERNELS = density_kernels(cat_density_lanes, CAT_LANES, "cat", suffix="_lanes", row=cat_row)
 CARRIED_POINTS = carried_points_kernel(cat_carried_lanes, CAT_CARRIED_LANES, EVIDENCE, "cat")
