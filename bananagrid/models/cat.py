@@ -11,6 +11,7 @@ from scipy.special import erfc
 
 from ..domains.grid import Grid
 from ..domains.pose import Pose
+from ..engine.grid_kernel import GridExtent
 from ..engine.warp_runtime import WarpContext
 from ..kernels import cat as kernels
 from ..kernels import cat_lanes
@@ -39,12 +40,39 @@ MIN_NODES = 64
 #: wider scan is refused, not thinned, since the kernel's proof needs nodes NODE_SPACING apart.
 MAX_NODES = 2**22
 
-#: Work estimate of a cell where the density is not negligible, one core, float64
-#: (:meth:`CAT.work_estimate`): its root refinements, plus each scan node's multiply-adds.
-#: Measured 1.8-2.0 us at 81 nodes, 15-17 us at 481, 56-94 us at 4,801 and 0.68-0.80 ms at
-#: 48,001, on grids of 10,000-22,000 cells framing the banana's 99 % (AMD Zen 4); rounded up.
+#: Work estimate (:meth:`CAT.work_estimate`), seconds of one core, float64 or float32, about twice
+#: the upper envelope of the process CPU time measured on Intel Xeon AVX-512, one and two threads,
+#: sigma_omega t 0.1 to 25,000 rad, sigma_a 0.001 to 50, grids framing the banana, within a few
+#: metres of the pose and 10 to 30 times wider (the margin: a CPU up to 2x slower still finishes
+#: within the estimate; the calibration table is in :meth:`CAT.work_estimate`). A point
+#: (the points kernel, a polar lattice's or a cell quadrature's node): SECONDS_PER_CELL, and
+#: SECONDS_PER_NODE for each scan node (far from the pose: 15 ns a node measured at 480,001 nodes).
 SECONDS_PER_CELL = 2e-6
 SECONDS_PER_NODE = 40e-9
+#: The row sweep of a grid (``kernels/cat_lanes.py``): each row scans every node
+#: (SECONDS_PER_ROW_NODE: 90-160 ns measured, the table streamed from memory), and each cell
+#: costs SECONDS_PER_SWEPT_CELL plus SECONDS_PER_CROSSING for each half-turn of the lines'
+#: direction the scan covers (:func:`scan_half_turns`): every node's line (infinite in the
+#: acceleration) crosses every row, and the cells near each crossing are tested (20-63 ns
+#: measured per cell and half-turn).
+SECONDS_PER_ROW_NODE = 330e-9
+SECONDS_PER_SWEPT_CELL = 300e-9
+SECONDS_PER_CROSSING = 130e-9
+#: Near the pose, where the paths that turn fast curl (within CORE_RADII (2 v0 + sigma_a t) /
+#: sigma_omega, a share (r_core / r)^2 beyond: :func:`core_share`), the scan's cheap test
+#: flags most node intervals and each costs its search: SECONDS_PER_FLAGGED_NODE a node, times
+#: sqrt(nodes / FLAGGED_NODES) up to 5x, and nodes / STREAMED_NODES beyond (the table out of
+#: cache, more roots to split). Measured per node within a metre of the pose (sigma_a 0.05): on
+#: grids 7 ns at 1,601 nodes, 28 at 16,001, 46 at 160,001, 44 at 480,001; at points 83 at
+#: 480,001 and 390 at 4,000,001. CORE_RADII: the mean cost within 10 and 30 m of the pose at
+#: 16,001, 160,001 and 480,001 nodes (a share 0.17-0.8 of the cost within 1 m).
+CORE_RADII = 3.0
+SECONDS_PER_FLAGGED_NODE = 20e-9
+FLAGGED_NODES = 1601
+STREAMED_NODES = 480001
+#: A point's flagged intervals cost this much more than a grid cell's (83 against 44 ns a node
+#: at 480,001 nodes: the points kernel searches each root alone, the sweep in groups).
+POINT_FLAGGED_FACTOR = 1.5
 #: And per cell interpolated in a heading table.
 SECONDS_PER_TABLE_CELL = 0.5e-6
 
@@ -97,6 +125,51 @@ MAX_CELL_NODES = 2**26
 #: allowance for the work check, twice the cost measured on the Figure 1 grid with two searches
 #: (1.5x; the weighted terms cost only in the cells the polygons' edges reach).
 CARRIED_WORK_FACTOR = 3.0
+
+
+def scan_half_turns(model: "CAT") -> float:
+    """Half-turns of the direction of the lines of reachable points, h(omega) = t^2 (C, D), over
+    the scan (at least 1): it turns like omega t, over 2 k_sigma sigma_omega t, and each line
+    (infinite in the acceleration) crosses a grid row once for each."""
+    return max(1.0, 2.0 * model.k_sigma * model.sigma_omega * model.t / math.pi)
+
+
+def core_radius(model: "CAT") -> float:
+    """The radius about the pose within which the scan's test flags most node intervals (for the
+    work estimate): CORE_RADII times the radius (2 v0 + sigma_a t) / sigma_omega of the curls of
+    the paths turning at sigma_omega (at omega t = u a path ends within (2 v0 t + |a| t^2 ...) / |u|
+    of the pose)."""
+    return CORE_RADII * (2.0 * model.v0 + model.sigma_a * model.t) / model.sigma_omega
+
+
+def core_share(model: "CAT", grid: Grid | None, r_near: float) -> float:
+    """min(1, (:func:`core_radius` / r)^2) at a point at least ``r_near`` from the pose (``grid``
+    None), or its mean over ``grid``'s cell centres at most: the sum over the centres of that
+    decreasing function of r is at most its integral over the disc of the grid's area about the
+    pose (the largest for such a function), each radius less half a cell's diagonal d:
+    pi (R + d)^2 cells' worth within R, 2 pi R^2 ln((R_eq + 2 d) / R) beyond."""
+    radius = core_radius(model)
+    if grid is None:
+        return 1.0 if r_near <= radius else (radius / r_near) ** 2
+    area, cells = grid.dx * grid.dy, grid.nx * grid.ny
+    d = 0.5 * math.hypot(grid.dx, grid.dy)
+    r_eq = math.sqrt(cells * area / math.pi)
+    worth = math.pi * (radius + d) ** 2 + 2.0 * math.pi * radius**2 * math.log(max(1.0, (r_eq + 2.0 * d) / radius))
+    return min(1.0, (worth / area + 1.0) / cells)
+
+
+def flagged_seconds(nodes: int) -> float:
+    """Seconds of a point where the scan's test flags every node interval (near the pose)."""
+    growth = min(5.0, math.sqrt(max(1.0, nodes / FLAGGED_NODES))) * max(1.0, nodes / STREAMED_NODES)
+    return nodes * SECONDS_PER_FLAGGED_NODE * growth
+
+
+def point_seconds(model: "CAT", r_near: float) -> float:
+    """Seconds of one point at least ``r_near`` from the pose (the points kernel): the scan, and
+    the flagged intervals' search near the pose."""
+    nodes = scan_node_count(model.k_sigma, model.sigma_omega, model.t)
+    return (SECONDS_PER_CELL + nodes * SECONDS_PER_NODE
+            + core_share(model, None, r_near) * POINT_FLAGGED_FACTOR * flagged_seconds(nodes))
 
 
 def line_speed(model: "CAT") -> float:
@@ -631,15 +704,53 @@ class CAT(MotionModel):
         return KernelBinding(kernels.CARRIED_POINTS, ctx.struct(kernels.CAT_CARRIED, **params), notes)
 
     def work_estimate(self, cells: int, extent: Extent) -> float:
-        """Seconds of one core: ``cells (SECONDS_PER_CELL + nodes SECONDS_PER_NODE)`` for the
-        scan; with heading noise the heading table's nodes (:func:`first_table_nodes`, the
-        lattice before any refinement) cost that each, and the grid's cells
-        ``SECONDS_PER_TABLE_CELL``."""
-        per_point = SECONDS_PER_CELL + scan_node_count(self.k_sigma, self.sigma_omega, self.t) * SECONDS_PER_NODE
+        """Seconds of one core. On a grid (:class:`~bananagrid.engine.grid_kernel.GridExtent`;
+        ``cells`` its rows' cells, or a share of them), the row sweep: rows x nodes
+        ``SECONDS_PER_ROW_NODE``, and each cell ``SECONDS_PER_SWEPT_CELL``, half-turns
+        (:func:`scan_half_turns`) x ``SECONDS_PER_CROSSING`` and, near the pose
+        (:func:`core_share`), every interval's search (:func:`flagged_seconds`). At points (any
+        other extent: the points kernel, a polar lattice's or a quadrature's nodes):
+        :func:`point_seconds` each, at the extent's least distance from the pose. With heading
+        noise the heading table's nodes (:func:`first_table_nodes`, the lattice before any
+        refinement) cost a point each, and the grid's cells ``SECONDS_PER_TABLE_CELL``.
+
+        Calibration: process CPU time of ``rasterise`` on rows spread evenly over the grid
+        (scaled to all its rows), or of the points kernel at sampled points, against this
+        estimate; Intel Xeon AVX-512, one thread, float64 (float32 and two threads alike), load
+        7-9 on 2 cores; v0 10 m/s, t 100 s; "framing": a square about the sample's 99.9 %.
+
+        ======================  ======  =========================  ========  =========
+        sigma_omega t (rad)     nodes   grid or points             measured  estimate
+        ======================  ======  =========================  ========  =========
+        0.1, sigma_a 0.05       64      framing, 200^2             0.0096 s  0.073 s
+        10, sigma_a 2           1,601   framing, 200^2             0.15 s    0.68 s
+        100, sigma_a 0.05       16,001  framing, 200^2             0.62 s    4.8 s
+        100, sigma_a 0.05       16,001  +-1 m about the pose 100^2 4.7 s     11 s
+        1,000, sigma_a 2        160,001 framing, 800^2             222 s     474 s
+        3,000, sigma_a 2        480,001 framing, 200^2             54 s      112 s
+        3,000, sigma_a 0.05     480,001 +-1 m about the pose 100^2 212 s     516 s
+        25,000 (v0 8)           4e6     +-1 km, 2000^2             9.9 h     19 h
+        3,000, sigma_a 0.05     480,001 a point near the pose      40 ms     91 ms
+        25,000 (v0 8)           4e6     a point near the pose      1.6 s     5.2 s
+        ======================  ======  =========================  ========  =========
+
+        Over 94 cases (sigma_omega t 0.1 to 25,000 rad, sigma_a 0.001 to 50, grids 50^2 to
+        2000^2 framing the banana, near the pose and 10-30 times wider) the estimate is 1.9 to
+        30 times the measured time (median 5.6; the widest ratios on grids much wider than the
+        banana at small turn spreads, whose cost is below a second).
+        """
+        r_near = extent.radii(self.pose.origin)[0]
         if self.sigma_heading > 0.0:
             nodes = first_table_nodes(self, *extent.radii(self.pose.origin))
-            return nodes * per_point + float(cells) * SECONDS_PER_TABLE_CELL
-        return float(cells) * per_point
+            return nodes * point_seconds(self, r_near) + float(cells) * SECONDS_PER_TABLE_CELL
+        if not isinstance(extent, GridExtent):
+            return float(cells) * point_seconds(self, r_near)
+        grid = extent.grid
+        nodes = scan_node_count(self.k_sigma, self.sigma_omega, self.t)
+        rows = float(cells) / grid.nx
+        per_cell = (SECONDS_PER_SWEPT_CELL + scan_half_turns(self) * SECONDS_PER_CROSSING
+                    + core_share(self, grid, r_near) * flagged_seconds(nodes))
+        return rows * nodes * SECONDS_PER_ROW_NODE + float(cells) * per_cell
 
     def cell_plan(self, domain, region=None) -> CellPlan | None:
         r"""A grid's cell probabilities exact in the acceleration (without heading noise; with

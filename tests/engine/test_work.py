@@ -20,8 +20,11 @@ from bananagrid.scenes.examples import example_names, example_path
 from bananagrid.scenes.load import load_scene
 from bananagrid.scenes.run import check_run_work
 
-#: A CAT whose turn-rate SD is 5,000 rad over the minute: 800,001 scan nodes, about 32 ms a cell.
-WILD_CAT = dict(v0=8.0, t=100.0, sigma_a=0.05, sigma_omega=50.0)
+#: A CAT whose turn-rate SD is 25,000 rad over t: 4,000,001 scan nodes. On WILD_GRID its map
+#: took 9.2-9.9 h of one core (rows at y = 0 and 500 m, each 17-18 s of process CPU time; Intel
+#: Xeon AVX-512), so that even two threads need over 4 h: enormous work on any CPU.
+WILD_CAT = dict(v0=8.0, t=100.0, sigma_a=0.05, sigma_omega=250.0)
+WILD_GRID = dict(x=(-1000.0, 1000.0), y=(-1000.0, 1000.0), step=1.0)  # 2000 x 2000 cells
 
 
 def no_launch(monkeypatch):
@@ -32,14 +35,15 @@ def no_launch(monkeypatch):
 
 def test_rasterise_refuses_enormous_work_before_any_launch(monkeypatch):
     model = bg.CAT(**WILD_CAT)
-    grid = bg.Grid.from_bounds((-1000.0, 1000.0), (-1000.0, 1000.0), 2.0)  # 1000 x 1000 cells
+    grid = bg.Grid.from_bounds(WILD_GRID["x"], WILD_GRID["y"], WILD_GRID["step"])
     estimate = model.work_estimate(grid.nx * grid.ny, GridExtent(grid))
-    assert estimate > 2 * DEFAULT_MAX_SECONDS  # so that 2 threads cannot bring it under the limit
+    # above the 9.9 h measured (WILD_CAT), and so above the limit on 2 threads
+    assert estimate > 9.9 * 3600 > 2 * DEFAULT_MAX_SECONDS
     no_launch(monkeypatch)
     with pytest.raises(BananagridError) as error:
         bg.rasterise(model, grid, threads=2)
     message = str(error.value)
-    assert message.startswith("CAT: rasterise on a grid of 1000 x 1000 = 1,000,000 cells would take about ")
+    assert message.startswith("CAT: rasterise on a grid of 2000 x 2000 = 4,000,000 cells would take about ")
     assert "more than the 1 h allowed" in message and "max_seconds=S to allow more" in message
     assert "\n" not in message
 
@@ -72,15 +76,15 @@ def test_run_refuses_a_scene_above_the_limit_before_computing(tmp_path, capsys, 
 def test_a_refused_scene_leaves_nothing_and_computes_nothing(tmp_path, capsys, monkeypatch):
     scene = tmp_path / "wild.toml"
     scene.write_text(
-        '[scene]\nname = "wild"\n[grid]\nx = [-1000, 1000]\ny = [-1000, 1000]\nstep = 2\n'
-        "[layers.cat]\nmodel = \"cat\"\nv0 = 8\nt = 100\nsigma_a = 0.05\nsigma_omega = 50\n"
+        '[scene]\nname = "wild"\n[grid]\nx = [-1000, 1000]\ny = [-1000, 1000]\nstep = 1\n'
+        "[layers.cat]\nmodel = \"cat\"\nv0 = 8\nt = 100\nsigma_a = 0.05\nsigma_omega = 250\n"
     )
     no_launch(monkeypatch)
     out = tmp_path / "out"
     out.mkdir()
     assert cli.main(["run", str(scene), "--out", str(out)]) == 2
     err = capsys.readouterr().err.strip().splitlines()
-    assert err[-1].startswith(f"bananagrid: error: {scene}: 1 layer map of 1,000,000 cells would take about ")
+    assert err[-1].startswith(f"bananagrid: error: {scene}: 1 layer map of 4,000,000 cells would take about ")
     assert "--max-seconds S" in err[-1]
     assert list(out.iterdir()) == []
 
