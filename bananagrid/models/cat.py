@@ -58,15 +58,17 @@ SECONDS_PER_NODE = 40e-9
 SECONDS_PER_ROW_NODE = 330e-9
 SECONDS_PER_SWEPT_CELL = 300e-9
 SECONDS_PER_CROSSING = 130e-9
-#: Near the pose, where the paths that turn fast curl (within CORE_RADII (2 v0 + sigma_a t) /
-#: sigma_omega, a share (r_core / r)^2 beyond: :func:`core_share`), the scan's cheap test
-#: flags most node intervals and each costs its search: SECONDS_PER_FLAGGED_NODE a node, times
-#: sqrt(nodes / FLAGGED_NODES) up to 5x, and nodes / STREAMED_NODES beyond (the table out of
-#: cache, more roots to split). Measured per node within a metre of the pose (sigma_a 0.05): on
-#: grids 7 ns at 1,601 nodes, 28 at 16,001, 46 at 160,001, 44 at 480,001; at points 83 at
-#: 480,001 and 390 at 4,000,001. CORE_RADII: the mean cost within 10 and 30 m of the pose at
-#: 16,001, 160,001 and 480,001 nodes (a share 0.17-0.8 of the cost within 1 m).
-CORE_RADII = 3.0
+#: Near the pose the scan's cheap test flags most node intervals, and each costs its search: at
+#: distance r about min(nodes, FLAG_REACH (v0 t + FLAG_ACCELERATION sigma_a t^2) / (r
+#: NODE_SPACING)) of them (the nodes of |omega t| up to a reach over r, where the paths that
+#: turn fast curl: :func:`flagged_nodes`), SECONDS_PER_FLAGGED_NODE each, times sqrt(nodes /
+#: FLAGGED_NODES) up to 5x and nodes / STREAMED_NODES beyond (the table out of cache, more roots
+#: to split: :func:`flagged_seconds`). Measured per node within a metre of the pose: on grids 7
+#: ns at 1,601 nodes, 28 at 16,001, 46-55 at 160,001, 44 at 480,001; at points 83 at 480,001,
+#: 390 at 4,000,001. The reach: the mean cost over +-10, 30 and 100 m about the pose at
+#: sigma_a 0.05 and 2, 16,001 to 480,001 nodes (as flagged nodes at 45 ns).
+FLAG_REACH = 100.0
+FLAG_ACCELERATION = 0.3
 SECONDS_PER_FLAGGED_NODE = 20e-9
 FLAGGED_NODES = 1601
 STREAMED_NODES = 480001
@@ -134,34 +136,30 @@ def scan_half_turns(model: "CAT") -> float:
     return max(1.0, 2.0 * model.k_sigma * model.sigma_omega * model.t / math.pi)
 
 
-def core_radius(model: "CAT") -> float:
-    """The radius about the pose within which the scan's test flags most node intervals (for the
-    work estimate): CORE_RADII times the radius (2 v0 + sigma_a t) / sigma_omega of the curls of
-    the paths turning at sigma_omega (at omega t = u a path ends within (2 v0 t + |a| t^2 ...) / |u|
-    of the pose)."""
-    return CORE_RADII * (2.0 * model.v0 + model.sigma_a * model.t) / model.sigma_omega
-
-
-def core_share(model: "CAT", grid: Grid | None, r_near: float) -> float:
-    """min(1, (:func:`core_radius` / r)^2) at a point at least ``r_near`` from the pose (``grid``
-    None), or its mean over ``grid``'s cell centres at most: the sum over the centres of that
-    decreasing function of r is at most its integral over the disc of the grid's area about the
-    pose (the largest for such a function), each radius less half a cell's diagonal d:
-    pi (R + d)^2 cells' worth within R, 2 pi R^2 ln((R_eq + 2 d) / R) beyond."""
-    radius = core_radius(model)
+def flagged_nodes(model: "CAT", nodes: int, grid: Grid | None, r_near: float) -> float:
+    """Node intervals the scan's test flags (for the work estimate), min(nodes, K / r) at distance
+    r from the pose, K = FLAG_REACH (v0 t + FLAG_ACCELERATION sigma_a t^2) / NODE_SPACING: at a
+    point at least ``r_near`` from it (``grid`` None), or on average over ``grid``'s cell centres.
+    Over a grid, the sum of that decreasing function of r is bounded by its integral over the
+    disc of the grid's area about the pose (the largest for such a function), in cells' areas:
+    nodes pi (R + 2 d)^2 within R + 2 d (R = K / nodes, d half a cell's diagonal; the cells
+    nearest the pose included), and 4 pi K (R_eq + 2 d) beyond (a centre at r holds K / r,
+    at most twice the mean of K / r over its cell there)."""
+    t = model.t
+    k = FLAG_REACH * (model.v0 * t + FLAG_ACCELERATION * model.sigma_a * t * t) / NODE_SPACING
     if grid is None:
-        return 1.0 if r_near <= radius else (radius / r_near) ** 2
+        return float(nodes) if r_near * nodes <= k else k / r_near
     area, cells = grid.dx * grid.dy, grid.nx * grid.ny
     d = 0.5 * math.hypot(grid.dx, grid.dy)
     r_eq = math.sqrt(cells * area / math.pi)
-    worth = math.pi * (radius + d) ** 2 + 2.0 * math.pi * radius**2 * math.log(max(1.0, (r_eq + 2.0 * d) / radius))
-    return min(1.0, (worth / area + 1.0) / cells)
+    total = (nodes * math.pi * (k / nodes + 2.0 * d) ** 2 + 4.0 * math.pi * k * (r_eq + 2.0 * d)) / area
+    return min(float(nodes), total / cells)
 
 
 def flagged_seconds(nodes: int) -> float:
-    """Seconds of a point where the scan's test flags every node interval (near the pose)."""
+    """Seconds of one flagged node interval in a scan of ``nodes`` nodes."""
     growth = min(5.0, math.sqrt(max(1.0, nodes / FLAGGED_NODES))) * max(1.0, nodes / STREAMED_NODES)
-    return nodes * SECONDS_PER_FLAGGED_NODE * growth
+    return SECONDS_PER_FLAGGED_NODE * growth
 
 
 def point_seconds(model: "CAT", r_near: float) -> float:
@@ -169,7 +167,7 @@ def point_seconds(model: "CAT", r_near: float) -> float:
     the flagged intervals' search near the pose."""
     nodes = scan_node_count(model.k_sigma, model.sigma_omega, model.t)
     return (SECONDS_PER_CELL + nodes * SECONDS_PER_NODE
-            + core_share(model, None, r_near) * POINT_FLAGGED_FACTOR * flagged_seconds(nodes))
+            + flagged_nodes(model, nodes, None, r_near) * POINT_FLAGGED_FACTOR * flagged_seconds(nodes))
 
 
 def line_speed(model: "CAT") -> float:
@@ -708,7 +706,7 @@ class CAT(MotionModel):
         ``cells`` its rows' cells, or a share of them), the row sweep: rows x nodes
         ``SECONDS_PER_ROW_NODE``, and each cell ``SECONDS_PER_SWEPT_CELL``, half-turns
         (:func:`scan_half_turns`) x ``SECONDS_PER_CROSSING`` and, near the pose
-        (:func:`core_share`), every interval's search (:func:`flagged_seconds`). At points (any
+        the flagged intervals' search (:func:`flagged_nodes` x :func:`flagged_seconds`). At points (any
         other extent: the points kernel, a polar lattice's or a quadrature's nodes):
         :func:`point_seconds` each, at the extent's least distance from the pose. With heading
         noise the heading table's nodes (:func:`first_table_nodes`, the lattice before any
@@ -719,25 +717,27 @@ class CAT(MotionModel):
         estimate; Intel Xeon AVX-512, one thread, float64 (float32 and two threads alike), load
         7-9 on 2 cores; v0 10 m/s, t 100 s; "framing": a square about the sample's 99.9 %.
 
-        ======================  ======  =========================  ========  =========
-        sigma_omega t (rad)     nodes   grid or points             measured  estimate
-        ======================  ======  =========================  ========  =========
-        0.1, sigma_a 0.05       64      framing, 200^2             0.0096 s  0.073 s
-        10, sigma_a 2           1,601   framing, 200^2             0.15 s    0.68 s
-        100, sigma_a 0.05       16,001  framing, 200^2             0.62 s    4.8 s
-        100, sigma_a 0.05       16,001  +-1 m about the pose 100^2 4.7 s     11 s
-        1,000, sigma_a 2        160,001 framing, 800^2             222 s     474 s
-        3,000, sigma_a 2        480,001 framing, 200^2             54 s      112 s
-        3,000, sigma_a 0.05     480,001 +-1 m about the pose 100^2 212 s     516 s
-        25,000 (v0 8)           4e6     +-1 km, 2000^2             9.9 h     19 h
-        3,000, sigma_a 0.05     480,001 a point near the pose      40 ms     91 ms
-        25,000 (v0 8)           4e6     a point near the pose      1.6 s     5.2 s
-        ======================  ======  =========================  ========  =========
+        ======================  =======  ==========================  ========  ========
+        sigma_omega t (rad)     nodes    grid or points              measured  estimate
+        ======================  =======  ==========================  ========  ========
+        0.1, sigma_a 0.05       64       framing, 200^2              0.0096 s  0.073 s
+        10, sigma_a 2           1,601    framing, 200^2              0.15 s    1.3 s
+        100, sigma_a 0.05       16,001   framing, 200^2              0.62 s    14 s
+        100, sigma_a 0.05       16,001   +-1 m about the pose, 100^2 4.7 s     11 s
+        1,000, sigma_a 2        160,001  framing, 800^2              222 s     693 s
+        3,000, sigma_a 2        480,001  framing, 200^2              54 s      140 s
+        3,000, sigma_a 0.05     480,001  +-1 m about the pose, 100^2 212 s     516 s
+        25,000 (v0 8, sa 0.05)  4e6      +-1 km, 2000^2              9.9 h     22 h
+        3,000, sigma_a 0.05     480,001  a point near the pose       40 ms     91 ms
+        25,000 (v0 8, sa 0.05)  4e6      a point near the pose       1.6 s     5.2 s
+        ======================  =======  ==========================  ========  ========
 
         Over 94 cases (sigma_omega t 0.1 to 25,000 rad, sigma_a 0.001 to 50, grids 50^2 to
-        2000^2 framing the banana, near the pose and 10-30 times wider) the estimate is 1.9 to
-        30 times the measured time (median 5.6; the widest ratios on grids much wider than the
-        banana at small turn spreads, whose cost is below a second).
+        2000^2 framing the banana, about the pose and 10-30 times wider, points near and far) the
+        estimate is 2.0 to 38 times the measured time (median 8; the old per-cell constants
+        were 16-50 times it on grids, and half of it near the pose at 480,001 nodes). The widest
+        ratios: mid-sized scans (16,001 nodes) and grids much wider than the banana, where the
+        flagged intervals' reach (:func:`flagged_nodes`) is generous.
         """
         r_near = extent.radii(self.pose.origin)[0]
         if self.sigma_heading > 0.0:
@@ -749,7 +749,7 @@ class CAT(MotionModel):
         nodes = scan_node_count(self.k_sigma, self.sigma_omega, self.t)
         rows = float(cells) / grid.nx
         per_cell = (SECONDS_PER_SWEPT_CELL + scan_half_turns(self) * SECONDS_PER_CROSSING
-                    + core_share(self, grid, r_near) * flagged_seconds(nodes))
+                    + flagged_nodes(self, nodes, grid, r_near) * flagged_seconds(nodes))
         return rows * nodes * SECONDS_PER_ROW_NODE + float(cells) * per_cell
 
     def cell_plan(self, domain, region=None) -> CellPlan | None:

@@ -7,13 +7,14 @@ import math
 
 import numpy as np
 import pytest
-from hypothesis import given, settings
+from hypothesis import given, seed, settings
 from hypothesis import strategies as st
 
 import bananagrid as bg
 from bananagrid import BananagridError, cli
 from bananagrid.engine import warp_runtime
 from bananagrid.engine.grid_kernel import GridExtent
+from bananagrid.engine.points import PointsExtent
 from bananagrid.engine.work import DEFAULT_MAX_SECONDS, check_work, format_duration, work_limit
 from bananagrid.models.cat import MAX_NODES, NODE_SPACING, scan_node_count, scan_nodes
 from bananagrid.scenes.examples import example_names, example_path
@@ -143,6 +144,60 @@ def test_the_estimate_follows_the_work_sizes():
     many = bg.Butterly(mean=(0, 0), cov=[[100.0, 0], [0, 100.0]], speeds=list(np.linspace(1, 2, 50)),
                         weights=[0.02] * 50, t=100.0)
     assert many.work_estimate(1000, extent) > 5 * one.work_estimate(1000, extent)
+
+
+class SameRadii:
+    """An extent (not a grid's) with another extent's radii."""
+
+    def __init__(self, extent):
+        self.radii = extent.radii
+
+
+def square_grid(centre, half: float, n: int) -> bg.Grid:
+    """n x n cells over centre +- half."""
+    return bg.Grid(origin=(centre[0] - half, centre[1] - half), dx=2 * half / n, dy=2 * half / n, nx=n, ny=n)
+
+
+@seed(20261127)
+@settings(max_examples=300, deadline=None)
+@given(
+    turn=st.floats(1e-3, 2.5e4),  # sigma_omega t, rad: 64 to 4,000,001 scan nodes
+    more=st.floats(1.0, 30.0),
+    sigma_a=st.floats(1e-3, 50.0),
+    t=st.floats(1.0, 1e4),
+    half=st.floats(1e-2, 1e5),
+    n=st.integers(1, 3000),
+    away=st.floats(0.0, 1e6),
+)
+def test_the_grid_estimate_grows_with_the_scan_the_cells_and_nearness(turn, more, sigma_a, t, half, n, away):
+    """The CAT's grid estimate (the row sweep) grows with the scan's nodes, is proportional to the
+    cells of whole rows, grows with the grid's rows, and is largest about the pose (where every
+    node interval is searched); with 64 columns or more it is below the same cells' estimate as
+    points (the per-point scan the sweep replaces)."""
+    narrow = bg.CAT(v0=10.0, t=t, sigma_a=sigma_a, sigma_omega=turn / t)
+    wide = bg.CAT(v0=10.0, t=t, sigma_a=sigma_a, sigma_omega=min(turn * more, 2.5e4) / t)
+    near = square_grid((0.0, 0.0), half, n)
+    far = square_grid((away, 0.0), half, n)
+    cells = n * n
+    for model in (narrow, wide):
+        at_pose = model.work_estimate(cells, GridExtent(near))
+        assert 0.0 < at_pose < math.inf
+        # proportional to the cells (a share of the rows: tiles of it), to rounding
+        assert model.work_estimate(n, GridExtent(near)) == pytest.approx(at_pose / n, rel=1e-12)
+        assert model.work_estimate(cells, GridExtent(far)) <= at_pose * (1 + 1e-12)
+        taller = bg.Grid(origin=near.origin, dx=near.dx, dy=near.dy, nx=n, ny=2 * n)
+        assert model.work_estimate(2 * cells, GridExtent(taller)) >= at_pose
+        if n >= 64:  # the same cells as points: an extent with the grid's radii that is no GridExtent
+            points = model.work_estimate(cells, SameRadii(GridExtent(near)))
+            assert at_pose <= points
+    for grid in (near, far):
+        assert wide.work_estimate(cells, GridExtent(grid)) >= narrow.work_estimate(cells, GridExtent(grid)) * (1 - 1e-12)
+    # at points (the per-point scan): the same growth with the nodes, and nearness to the pose
+    xy = np.array([[away, 0.0], [away + half, half]])
+    at, beyond = PointsExtent(xy[:, 0], xy[:, 1]), PointsExtent(xy[:, 0] + 2 * half, xy[:, 1])
+    assert wide.work_estimate(cells, at) >= narrow.work_estimate(cells, at) > 0.0
+    assert narrow.work_estimate(cells, beyond) <= narrow.work_estimate(cells, at)
+    assert narrow.work_estimate(2 * cells, at) == pytest.approx(2 * narrow.work_estimate(cells, at), rel=1e-12)
 
 
 def test_format_duration_and_the_limit_option():
