@@ -69,6 +69,12 @@ SECONDS_PER_CROSSING = 130e-9
 #: sigma_a 0.05 and 2, 16,001 to 480,001 nodes (as flagged nodes at 45 ns).
 FLAG_REACH = 100.0
 FLAG_ACCELERATION = 0.3
+#: The reach grows with the turn-rate spread (measured flagged work +-100 m about the pose: 900
+#: of 1,601 nodes at sigma_omega t = 10 rad, 4,700 of 16,001 at 100, 16,000 of 160,001 at 1,000;
+#: within 1 m at 0.1 and 1 rad, 0.12 and 0.29 us a cell, next to nothing flagged): as
+#: sqrt(sigma_omega t / FLAG_TURN), linearly below FLAG_FEW_TURNS rad.
+FLAG_TURN = 1000.0
+FLAG_FEW_TURNS = 10.0
 SECONDS_PER_FLAGGED_NODE = 20e-9
 FLAGGED_NODES = 1601
 STREAMED_NODES = 480001
@@ -138,7 +144,8 @@ def scan_half_turns(model: "CAT") -> float:
 
 def flagged_nodes(model: "CAT", nodes: int, grid: Grid | None, r_near: float) -> float:
     """Node intervals the scan's test flags (for the work estimate), min(nodes, K / r) at distance
-    r from the pose, K = FLAG_REACH (v0 t + FLAG_ACCELERATION sigma_a t^2) / NODE_SPACING: at a
+    r from the pose, K = FLAG_REACH s (v0 t + FLAG_ACCELERATION sigma_a t^2) / NODE_SPACING, s =
+    sqrt(sigma_omega t / FLAG_TURN) (linear in sigma_omega t below FLAG_FEW_TURNS): at a
     point at least ``r_near`` from it (``grid`` None), or on average over ``grid``'s cell centres.
     Over a grid, the sum of that decreasing function of r is bounded by its integral over the
     disc of the grid's area about the pose (the largest for such a function), in cells' areas:
@@ -146,7 +153,10 @@ def flagged_nodes(model: "CAT", nodes: int, grid: Grid | None, r_near: float) ->
     nearest the pose included), and 4 pi K (R_eq + 2 d) beyond (a centre at r holds K / r,
     at most twice the mean of K / r over its cell there)."""
     t = model.t
-    k = FLAG_REACH * (model.v0 * t + FLAG_ACCELERATION * model.sigma_a * t * t) / NODE_SPACING
+    turn = model.sigma_omega * t
+    # the reach grows with the turns the paths may make: as sqrt(turn / FLAG_TURN), linearly below FLAG_FEW_TURNS
+    spread = math.sqrt(turn / FLAG_TURN) if turn >= FLAG_FEW_TURNS else turn / math.sqrt(FLAG_FEW_TURNS * FLAG_TURN)
+    k = FLAG_REACH * spread * (model.v0 * t + FLAG_ACCELERATION * model.sigma_a * t * t) / NODE_SPACING
     if grid is None:
         return float(nodes) if r_near * nodes <= k else k / r_near
     area, cells = grid.dx * grid.dy, grid.nx * grid.ny
@@ -720,24 +730,24 @@ class CAT(MotionModel):
         ======================  =======  ==========================  ========  ========
         sigma_omega t (rad)     nodes    grid or points              measured  estimate
         ======================  =======  ==========================  ========  ========
-        0.1, sigma_a 0.05       64       framing, 200^2              0.0096 s  0.073 s
-        10, sigma_a 2           1,601    framing, 200^2              0.15 s    1.3 s
-        100, sigma_a 0.05       16,001   framing, 200^2              0.62 s    14 s
+        0.1, sigma_a 0.05       64       framing, 200^2              0.0096 s  0.025 s
+        10, sigma_a 2           1,601    framing, 200^2              0.15 s    0.47 s
+        100, sigma_a 0.05       16,001   framing, 200^2              0.62 s    6.9 s
         100, sigma_a 0.05       16,001   +-1 m about the pose, 100^2 4.7 s     11 s
         1,000, sigma_a 2        160,001  framing, 800^2              222 s     693 s
-        3,000, sigma_a 2        480,001  framing, 200^2              54 s      140 s
+        3,000, sigma_a 2        480,001  framing, 200^2              54 s      161 s
         3,000, sigma_a 0.05     480,001  +-1 m about the pose, 100^2 212 s     516 s
-        25,000 (v0 8, sa 0.05)  4e6      +-1 km, 2000^2              9.9 h     22 h
+        25,000 (v0 8, sa 0.05)  4e6      +-1 km, 2000^2              9.9 h     35 h
         3,000, sigma_a 0.05     480,001  a point near the pose       40 ms     91 ms
         25,000 (v0 8, sa 0.05)  4e6      a point near the pose       1.6 s     5.2 s
         ======================  =======  ==========================  ========  ========
 
-        Over 94 cases (sigma_omega t 0.1 to 25,000 rad, sigma_a 0.001 to 50, grids 50^2 to
+        Over 107 cases (sigma_omega t 0.1 to 25,000 rad, sigma_a 0.001 to 50, grids 50^2 to
         2000^2 framing the banana, about the pose and 10-30 times wider, points near and far) the
-        estimate is 2.0 to 38 times the measured time (median 8; the old per-cell constants
+        estimate is 2.0 to 30 times the measured time (median 5.2; the old per-cell constants
         were 16-50 times it on grids, and half of it near the pose at 480,001 nodes). The widest
-        ratios: mid-sized scans (16,001 nodes) and grids much wider than the banana, where the
-        flagged intervals' reach (:func:`flagged_nodes`) is generous.
+        ratios: grids much wider than the banana and points at small scans (64-161 nodes, well
+        under a microsecond a point).
         """
         r_near = extent.radii(self.pose.origin)[0]
         if self.sigma_heading > 0.0:
