@@ -151,7 +151,8 @@ def flagged_nodes(model: "CAT", nodes: int, grid: Grid | None, r_near: float) ->
     disc of the grid's area about the pose (the largest for such a function), in cells' areas:
     nodes pi (R + 2 d)^2 within R + 2 d (R = K / nodes, d half a cell's diagonal; the cells
     nearest the pose included), and 4 pi K (R_eq + 2 d) beyond (a centre at r holds K / r,
-    at most twice the mean of K / r over its cell there)."""
+    at most twice the mean of K / r over its cell there); and K / ``r_near`` (the centres' least
+    distance from the pose) bounds every centre."""
     t = model.t
     turn = model.sigma_omega * t
     # the reach grows with the turns the paths may make: as sqrt(turn / FLAG_TURN), linearly below FLAG_FEW_TURNS
@@ -163,7 +164,8 @@ def flagged_nodes(model: "CAT", nodes: int, grid: Grid | None, r_near: float) ->
     d = 0.5 * math.hypot(grid.dx, grid.dy)
     r_eq = math.sqrt(cells * area / math.pi)
     total = (nodes * math.pi * (k / nodes + 2.0 * d) ** 2 + 4.0 * math.pi * k * (r_eq + 2.0 * d)) / area
-    return min(float(nodes), total / cells)
+    # every centre is at least r_near from the pose: K / r_near bounds them all
+    return min(float(nodes), total / cells, k / r_near if r_near > 0.0 else math.inf)
 
 
 def flagged_seconds(nodes: int) -> float:
