@@ -11,6 +11,7 @@ from scipy.special import erfc
 
 from ..domains.grid import Grid
 from ..domains.pose import Pose
+from ..engine.grid_kernel import GridExtent
 from ..engine.warp_runtime import WarpContext
 from ..kernels import cat as kernels
 from ..kernels import cat_lanes
@@ -39,12 +40,47 @@ MIN_NODES = 64
 #: wider scan is refused, not thinned, since the kernel's proof needs nodes NODE_SPACING apart.
 MAX_NODES = 2**22
 
-#: Work estimate of a cell where the density is not negligible, one core, float64
-#: (:meth:`CAT.work_estimate`): its root refinements, plus each scan node's multiply-adds.
-#: Measured 1.8-2.0 us at 81 nodes, 15-17 us at 481, 56-94 us at 4,801 and 0.68-0.80 ms at
-#: 48,001, on grids of 10,000-22,000 cells framing the banana's 99 % (AMD Zen 4); rounded up.
+#: Work estimate (:meth:`CAT.work_estimate`), seconds of one core, float64 or float32, about twice
+#: the upper envelope of the process CPU time measured on Intel Xeon AVX-512, one and two threads,
+#: sigma_omega t 0.1 to 25,000 rad, sigma_a 0.001 to 50, grids framing the banana, within a few
+#: metres of the pose and 10 to 30 times wider (the margin: a CPU up to 2x slower still finishes
+#: within the estimate; the calibration table is in :meth:`CAT.work_estimate`). A point
+#: (the points kernel, a polar lattice's or a cell quadrature's node): SECONDS_PER_CELL, and
+#: SECONDS_PER_NODE for each scan node (far from the pose: 15 ns a node measured at 480,001 nodes).
 SECONDS_PER_CELL = 2e-6
 SECONDS_PER_NODE = 40e-9
+#: The row sweep of a grid (``kernels/cat_lanes.py``): each row scans every node
+#: (SECONDS_PER_ROW_NODE: 90-160 ns measured, the table streamed from memory), and each cell
+#: costs SECONDS_PER_SWEPT_CELL plus SECONDS_PER_CROSSING for each half-turn of the lines'
+#: direction the scan covers (:func:`scan_half_turns`): every node's line (infinite in the
+#: acceleration) crosses every row, and the cells near each crossing are tested (20-63 ns
+#: measured per cell and half-turn).
+SECONDS_PER_ROW_NODE = 330e-9
+SECONDS_PER_SWEPT_CELL = 300e-9
+SECONDS_PER_CROSSING = 130e-9
+#: Near the pose the scan's cheap test flags most node intervals, and each costs its search: at
+#: distance r about min(nodes, FLAG_REACH (v0 t + FLAG_ACCELERATION sigma_a t^2) / (r
+#: NODE_SPACING)) of them (the nodes of |omega t| up to a reach over r, where the paths that
+#: turn fast curl: :func:`flagged_nodes`), SECONDS_PER_FLAGGED_NODE each, times sqrt(nodes /
+#: FLAGGED_NODES) up to 5x and nodes / STREAMED_NODES beyond (the table out of cache, more roots
+#: to split: :func:`flagged_seconds`). Measured per node within a metre of the pose: on grids 7
+#: ns at 1,601 nodes, 28 at 16,001, 46-55 at 160,001, 44 at 480,001; at points 83 at 480,001,
+#: 390 at 4,000,001. The reach: the mean cost over +-10, 30 and 100 m about the pose at
+#: sigma_a 0.05 and 2, 16,001 to 480,001 nodes (as flagged nodes at 45 ns).
+FLAG_REACH = 100.0
+FLAG_ACCELERATION = 0.3
+#: The reach grows with the turn-rate spread (measured flagged work +-100 m about the pose: 900
+#: of 1,601 nodes at sigma_omega t = 10 rad, 4,700 of 16,001 at 100, 16,000 of 160,001 at 1,000;
+#: within 1 m at 0.1 and 1 rad, 0.12 and 0.29 us a cell, next to nothing flagged): as
+#: sqrt(sigma_omega t / FLAG_TURN), linearly below FLAG_FEW_TURNS rad.
+FLAG_TURN = 1000.0
+FLAG_FEW_TURNS = 10.0
+SECONDS_PER_FLAGGED_NODE = 20e-9
+FLAGGED_NODES = 1601
+STREAMED_NODES = 480001
+#: A point's flagged intervals cost this much more than a grid cell's (83 against 44 ns a node
+#: at 480,001 nodes: the points kernel searches each root alone, the sweep in groups).
+POINT_FLAGGED_FACTOR = 1.5
 #: And per cell interpolated in a heading table.
 SECONDS_PER_TABLE_CELL = 0.5e-6
 
@@ -97,6 +133,53 @@ MAX_CELL_NODES = 2**26
 #: allowance for the work check, twice the cost measured on the Figure 1 grid with two searches
 #: (1.5x; the weighted terms cost only in the cells the polygons' edges reach).
 CARRIED_WORK_FACTOR = 3.0
+
+
+def scan_half_turns(model: "CAT") -> float:
+    """Half-turns of the direction of the lines of reachable points, h(omega) = t^2 (C, D), over
+    the scan (at least 1): it turns like omega t, over 2 k_sigma sigma_omega t, and each line
+    (infinite in the acceleration) crosses a grid row once for each."""
+    return max(1.0, 2.0 * model.k_sigma * model.sigma_omega * model.t / math.pi)
+
+
+def flagged_nodes(model: "CAT", nodes: int, grid: Grid | None, r_near: float) -> float:
+    """Node intervals the scan's test flags (for the work estimate), min(nodes, K / r) at distance
+    r from the pose, K = FLAG_REACH s (v0 t + FLAG_ACCELERATION sigma_a t^2) / NODE_SPACING, s =
+    sqrt(sigma_omega t / FLAG_TURN) (linear in sigma_omega t below FLAG_FEW_TURNS): at a
+    point at least ``r_near`` from it (``grid`` None), or on average over ``grid``'s cell centres.
+    Over a grid, the sum of that decreasing function of r is bounded by its integral over the
+    disc of the grid's area about the pose (the largest for such a function), in cells' areas:
+    nodes pi (R + 2 d)^2 within R + 2 d (R = K / nodes, d half a cell's diagonal; the cells
+    nearest the pose included), and 4 pi K (R_eq + 2 d) beyond (a centre at r holds K / r,
+    at most twice the mean of K / r over its cell there); and K / ``r_near`` (the centres' least
+    distance from the pose) bounds every centre."""
+    t = model.t
+    turn = model.sigma_omega * t
+    # the reach grows with the turns the paths may make: as sqrt(turn / FLAG_TURN), linearly below FLAG_FEW_TURNS
+    spread = math.sqrt(turn / FLAG_TURN) if turn >= FLAG_FEW_TURNS else turn / math.sqrt(FLAG_FEW_TURNS * FLAG_TURN)
+    k = FLAG_REACH * spread * (model.v0 * t + FLAG_ACCELERATION * model.sigma_a * t * t) / NODE_SPACING
+    if grid is None:
+        return float(nodes) if r_near * nodes <= k else k / r_near
+    area, cells = grid.dx * grid.dy, grid.nx * grid.ny
+    d = 0.5 * math.hypot(grid.dx, grid.dy)
+    r_eq = math.sqrt(cells * area / math.pi)
+    total = (nodes * math.pi * (k / nodes + 2.0 * d) ** 2 + 4.0 * math.pi * k * (r_eq + 2.0 * d)) / area
+    # every centre is at least r_near from the pose: K / r_near bounds them all
+    return min(float(nodes), total / cells, k / r_near if r_near > 0.0 else math.inf)
+
+
+def flagged_seconds(nodes: int) -> float:
+    """Seconds of one flagged node interval in a scan of ``nodes`` nodes."""
+    growth = min(5.0, math.sqrt(max(1.0, nodes / FLAGGED_NODES))) * max(1.0, nodes / STREAMED_NODES)
+    return SECONDS_PER_FLAGGED_NODE * growth
+
+
+def point_seconds(model: "CAT", r_near: float) -> float:
+    """Seconds of one point at least ``r_near`` from the pose (the points kernel): the scan, and
+    the flagged intervals' search near the pose."""
+    nodes = scan_node_count(model.k_sigma, model.sigma_omega, model.t)
+    return (SECONDS_PER_CELL + nodes * SECONDS_PER_NODE
+            + flagged_nodes(model, nodes, None, r_near) * POINT_FLAGGED_FACTOR * flagged_seconds(nodes))
 
 
 def line_speed(model: "CAT") -> float:
@@ -629,15 +712,55 @@ class CAT(MotionModel):
             weights=ctx.array(weights))
 
     def work_estimate(self, cells: int, extent: Extent) -> float:
-        """Seconds of one core: ``cells (SECONDS_PER_CELL + nodes SECONDS_PER_NODE)`` for the
-        scan; with heading noise the heading table's nodes (:func:`first_table_nodes`, the
-        lattice before any refinement) cost that each, and the grid's cells
-        ``SECONDS_PER_TABLE_CELL``."""
-        per_point = SECONDS_PER_CELL + scan_node_count(self.k_sigma, self.sigma_omega, self.t) * SECONDS_PER_NODE
+        """Seconds of one core. On a grid (:class:`~bananagrid.engine.grid_kernel.GridExtent`;
+        ``cells`` its rows' cells, or a share of them), the row sweep: rows x nodes
+        ``SECONDS_PER_ROW_NODE``, and each cell ``SECONDS_PER_SWEPT_CELL``, half-turns
+        (:func:`scan_half_turns`) x ``SECONDS_PER_CROSSING`` and, near the pose
+        the flagged intervals' search (:func:`flagged_nodes` x :func:`flagged_seconds`). At points (any
+        other extent: the points kernel, a polar lattice's or a quadrature's nodes):
+        :func:`point_seconds` each, at the extent's least distance from the pose. With heading
+        noise the heading table's nodes (:func:`first_table_nodes`, the lattice before any
+        refinement) cost a point each, and the grid's cells ``SECONDS_PER_TABLE_CELL``.
+
+        Calibration: process CPU time of ``rasterise`` on rows spread evenly over the grid
+        (scaled to all its rows), or of the points kernel at sampled points, against this
+        estimate; Intel Xeon AVX-512, one thread, float64 (float32 and two threads alike), load
+        7-9 on 2 cores; v0 10 m/s, t 100 s; "framing": a square about the sample's 99.9 %.
+
+        ======================  =======  ==========================  ========  ========
+        sigma_omega t (rad)     nodes    grid or points              measured  estimate
+        ======================  =======  ==========================  ========  ========
+        0.1, sigma_a 0.05       64       framing, 200^2              0.0096 s  0.025 s
+        10, sigma_a 2           1,601    framing, 200^2              0.15 s    0.47 s
+        100, sigma_a 0.05       16,001   framing, 200^2              0.62 s    6.9 s
+        100, sigma_a 0.05       16,001   +-1 m about the pose, 100^2 4.7 s     11 s
+        1,000, sigma_a 2        160,001  framing, 800^2              222 s     693 s
+        3,000, sigma_a 2        480,001  framing, 200^2              54 s      161 s
+        3,000, sigma_a 0.05     480,001  +-1 m about the pose, 100^2 212 s     516 s
+        25,000 (v0 8, sa 0.05)  4e6      +-1 km, 2000^2              9.9 h     35 h
+        3,000, sigma_a 0.05     480,001  a point near the pose       40 ms     91 ms
+        25,000 (v0 8, sa 0.05)  4e6      a point near the pose       1.6 s     5.2 s
+        ======================  =======  ==========================  ========  ========
+
+        Over 107 cases (sigma_omega t 0.1 to 25,000 rad, sigma_a 0.001 to 50, grids 50^2 to
+        2000^2 framing the banana, about the pose and 10-30 times wider, points near and far) the
+        estimate is 2.0 to 30 times the measured time (median 5.2; the old per-cell constants
+        were 16-50 times it on grids, and half of it near the pose at 480,001 nodes). The widest
+        ratios: grids much wider than the banana and points at small scans (64-161 nodes, well
+        under a microsecond a point).
+        """
+        r_near = extent.radii(self.pose.origin)[0]
         if self.sigma_heading > 0.0:
             nodes = first_table_nodes(self, *extent.radii(self.pose.origin))
-            return nodes * per_point + float(cells) * SECONDS_PER_TABLE_CELL
-        return float(cells) * per_point
+            return nodes * point_seconds(self, r_near) + float(cells) * SECONDS_PER_TABLE_CELL
+        if not isinstance(extent, GridExtent):
+            return float(cells) * point_seconds(self, r_near)
+        grid = extent.grid
+        nodes = scan_node_count(self.k_sigma, self.sigma_omega, self.t)
+        rows = float(cells) / grid.nx
+        per_cell = (SECONDS_PER_SWEPT_CELL + scan_half_turns(self) * SECONDS_PER_CROSSING
+                    + flagged_nodes(self, nodes, grid, r_near) * flagged_seconds(nodes))
+        return rows * nodes * SECONDS_PER_ROW_NODE + float(cells) * per_cell
 
     def cell_plan(self, domain, region=None) -> CellPlan | None:
         r"""A grid's cell probabilities exact in the acceleration (without heading noise; with

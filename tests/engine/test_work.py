@@ -7,21 +7,25 @@ import math
 
 import numpy as np
 import pytest
-from hypothesis import given, settings
+from hypothesis import given, seed, settings
 from hypothesis import strategies as st
 
 import bananagrid as bg
 from bananagrid import BananagridError, cli
 from bananagrid.engine import warp_runtime
 from bananagrid.engine.grid_kernel import GridExtent
+from bananagrid.engine.points import PointsExtent
 from bananagrid.engine.work import DEFAULT_MAX_SECONDS, check_work, format_duration, work_limit
-from bananagrid.models.cat import MAX_NODES, NODE_SPACING, scan_node_count, scan_nodes
+from bananagrid.models.cat import MAX_NODES, NODE_SPACING, SECONDS_PER_FLAGGED_NODE, scan_node_count, scan_nodes
 from bananagrid.scenes.examples import example_names, example_path
 from bananagrid.scenes.load import load_scene
 from bananagrid.scenes.run import check_run_work
 
-#: A CAT whose turn-rate SD is 5,000 rad over the minute: 800,001 scan nodes, about 32 ms a cell.
-WILD_CAT = dict(v0=8.0, t=100.0, sigma_a=0.05, sigma_omega=50.0)
+#: A CAT whose turn-rate SD is 25,000 rad over t: 4,000,001 scan nodes. On WILD_GRID its map
+#: took 9.2-9.9 h of one core (rows at y = 0 and 500 m, each 17-18 s of process CPU time; Intel
+#: Xeon AVX-512), so that even two threads need over 4 h: enormous work on any CPU.
+WILD_CAT = dict(v0=8.0, t=100.0, sigma_a=0.05, sigma_omega=250.0)
+WILD_GRID = dict(x=(-1000.0, 1000.0), y=(-1000.0, 1000.0), step=1.0)  # 2000 x 2000 cells
 
 
 def no_launch(monkeypatch):
@@ -32,14 +36,15 @@ def no_launch(monkeypatch):
 
 def test_rasterise_refuses_enormous_work_before_any_launch(monkeypatch):
     model = bg.CAT(**WILD_CAT)
-    grid = bg.Grid.from_bounds((-1000.0, 1000.0), (-1000.0, 1000.0), 2.0)  # 1000 x 1000 cells
+    grid = bg.Grid.from_bounds(WILD_GRID["x"], WILD_GRID["y"], WILD_GRID["step"])
     estimate = model.work_estimate(grid.nx * grid.ny, GridExtent(grid))
-    assert estimate > 2 * DEFAULT_MAX_SECONDS  # so that 2 threads cannot bring it under the limit
+    # above the 9.9 h measured (WILD_CAT), and so above the limit on 2 threads
+    assert estimate > 9.9 * 3600 > 2 * DEFAULT_MAX_SECONDS
     no_launch(monkeypatch)
     with pytest.raises(BananagridError) as error:
         bg.rasterise(model, grid, threads=2)
     message = str(error.value)
-    assert message.startswith("CAT: rasterise on a grid of 1000 x 1000 = 1,000,000 cells would take about ")
+    assert message.startswith("CAT: rasterise on a grid of 2000 x 2000 = 4,000,000 cells would take about ")
     assert "more than the 1 h allowed" in message and "max_seconds=S to allow more" in message
     assert "\n" not in message
 
@@ -72,15 +77,15 @@ def test_run_refuses_a_scene_above_the_limit_before_computing(tmp_path, capsys, 
 def test_a_refused_scene_leaves_nothing_and_computes_nothing(tmp_path, capsys, monkeypatch):
     scene = tmp_path / "wild.toml"
     scene.write_text(
-        '[scene]\nname = "wild"\n[grid]\nx = [-1000, 1000]\ny = [-1000, 1000]\nstep = 2\n'
-        "[layers.cat]\nmodel = \"cat\"\nv0 = 8\nt = 100\nsigma_a = 0.05\nsigma_omega = 50\n"
+        '[scene]\nname = "wild"\n[grid]\nx = [-1000, 1000]\ny = [-1000, 1000]\nstep = 1\n'
+        "[layers.cat]\nmodel = \"cat\"\nv0 = 8\nt = 100\nsigma_a = 0.05\nsigma_omega = 250\n"
     )
     no_launch(monkeypatch)
     out = tmp_path / "out"
     out.mkdir()
     assert cli.main(["run", str(scene), "--out", str(out)]) == 2
     err = capsys.readouterr().err.strip().splitlines()
-    assert err[-1].startswith(f"bananagrid: error: {scene}: 1 layer map of 1,000,000 cells would take about ")
+    assert err[-1].startswith(f"bananagrid: error: {scene}: 1 layer map of 4,000,000 cells would take about ")
     assert "--max-seconds S" in err[-1]
     assert list(out.iterdir()) == []
 
@@ -139,6 +144,73 @@ def test_the_estimate_follows_the_work_sizes():
     many = bg.Butterly(mean=(0, 0), cov=[[100.0, 0], [0, 100.0]], speeds=list(np.linspace(1, 2, 50)),
                         weights=[0.02] * 50, t=100.0)
     assert many.work_estimate(1000, extent) > 5 * one.work_estimate(1000, extent)
+
+
+class SameRadii:
+    """An extent (not a grid's) with another extent's radii."""
+
+    def __init__(self, extent):
+        self.radii = extent.radii
+
+
+def square_grid(centre, half: float, n: int) -> bg.Grid:
+    """n x n cells over centre +- half."""
+    return bg.Grid(origin=(centre[0] - half, centre[1] - half), dx=2 * half / n, dy=2 * half / n, nx=n, ny=n)
+
+
+@seed(20261127)
+@settings(max_examples=300, deadline=None)
+@given(
+    turn=st.floats(1e-3, 2.5e4),  # sigma_omega t, rad: 64 to 4,000,001 scan nodes
+    more=st.floats(1.0, 30.0),
+    sigma_a=st.floats(1e-3, 50.0),
+    t=st.floats(1.0, 1e4),
+    half=st.floats(1e-2, 1e5),
+    n=st.integers(1, 3000),
+    away=st.floats(0.0, 1e6),
+)
+def test_the_grid_estimate_grows_with_the_scan_the_cells_and_nearness(turn, more, sigma_a, t, half, n, away):
+    """The CAT's grid estimate (the row sweep) grows with the scan's nodes, is proportional to the
+    cells of whole rows, grows with the grid's rows, and is largest about the pose (where every
+    node interval is searched); with 64 columns or more it is below the same cells' estimate as
+    points (the per-point scan the sweep replaces)."""
+    narrow = bg.CAT(v0=10.0, t=t, sigma_a=sigma_a, sigma_omega=turn / t)
+    wide = bg.CAT(v0=10.0, t=t, sigma_a=sigma_a, sigma_omega=min(turn * more, 2.5e4) / t)
+    near = square_grid((0.0, 0.0), half, n)
+    far = square_grid((away, 0.0), half, n)
+    cells = n * n
+    for model in (narrow, wide):
+        at_pose = model.work_estimate(cells, GridExtent(near))
+        assert 0.0 < at_pose < math.inf
+        # proportional to the cells (a share of the rows: tiles of it), to rounding (1e-12: a few ulps)
+        assert model.work_estimate(n, GridExtent(near)) == pytest.approx(at_pose / n, rel=1e-12)
+        assert model.work_estimate(cells, GridExtent(far)) <= at_pose * (1 + 1e-12)  # 1e-12: a few ulps
+        taller = bg.Grid(origin=near.origin, dx=near.dx, dy=near.dy, nx=n, ny=2 * n)
+        assert model.work_estimate(2 * cells, GridExtent(taller)) >= at_pose
+        if n >= 64:  # the same cells as points: an extent with the grid's radii that is no GridExtent
+            points = model.work_estimate(cells, SameRadii(GridExtent(near)))
+            assert at_pose <= points
+    for grid in (near, far):  # 1e-12: the estimates' float rounding (a few terms, a few ulps each)
+        extent = GridExtent(grid)
+        assert wide.work_estimate(cells, extent) >= narrow.work_estimate(cells, extent) * (1 - 1e-12)
+    # at points (the per-point scan): the same growth with the nodes, and nearness to the pose
+    xy = np.array([[away, 0.0], [away + half, half]])
+    at, beyond = PointsExtent(xy[:, 0], xy[:, 1]), PointsExtent(xy[:, 0] + 2 * half, xy[:, 1])
+    assert wide.work_estimate(cells, at) >= narrow.work_estimate(cells, at) > 0.0
+    assert narrow.work_estimate(cells, beyond) <= narrow.work_estimate(cells, at)
+    assert narrow.work_estimate(2 * cells, at) == pytest.approx(2 * narrow.work_estimate(cells, at), rel=1e-12)
+
+
+def test_a_big_scan_costs_most_about_the_pose():
+    """Near the pose the scan flags most node intervals (measured: 7.4 ms a cell within 1 m of it
+    at 160,001 nodes, 0.74 ms on average within 100 m); far from it the grid is estimated lower."""
+    big = bg.CAT(v0=10.0, t=100.0, sigma_a=0.05, sigma_omega=10.0)  # 160,001 nodes
+    about = big.work_estimate(2500, GridExtent(square_grid((0.0, 0.0), 1.0, 50)))
+    wider = big.work_estimate(2500, GridExtent(square_grid((0.0, 0.0), 100.0, 50)))
+    remote = big.work_estimate(2500, GridExtent(square_grid((1e5, 0.0), 1.0, 50)))
+    assert about > wider > remote
+    # within 1 m every interval is searched: at least the 160,001 nodes a cell, each at the least rate
+    assert about >= 2500 * 160001 * SECONDS_PER_FLAGGED_NODE
 
 
 def test_format_duration_and_the_limit_option():
