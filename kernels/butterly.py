@@ -498,13 +498,10 @@ def tile_speed(
     # the rule for the largest amplitude on the tile (|(a, b)| is convex in z: at a corner)
     amp = zero
     for corner in range(4):
-        sx = one
-        sy = one
-        if corner % 2 == 1:
-            sx = -one
-        if corner >= 2:
-            sy = -one
-        a, b, corner_amp = rule_terms(z1 + h * (sx * dzx1 + sy * dzy1), z2 + h * (sx * dzx2 + sy * dzy2), params, base)
+        sx = type(z1)(1 - 2 * (corner % 2))  # +-1
+        sy = type(z1)(1 - 2 * (corner // 2))
+        corner_a, corner_b, corner_amp = rule_terms(z1 + h * (sx * dzx1 + sy * dzy1), z2 + h * (sx * dzx2 + sy * dzy2),
+                                                    params, base)
         amp = wp.max(amp, corner_amp)
     n = node_count(amp, params[LOG_TOL])
     n = (n + 15) // 16 * 16
