@@ -24,15 +24,13 @@ converges geometrically: with A = |(a, b)| + 4 F >= max |E''| its relative error
 4 pi exp(min_y(A sinh(y)^2 / 2 - N y)) / sqrt(2 pi / A) (Fourier coefficients bounded on the
 strip |Im theta| < y), and :func:`node_count` takes N = sqrt(2 A (L + ln(1 + A) / 2)) + 12,
 L = ln(1 / tol) + ln(4 pi), which the tests check against that bound for A up to 1e10. The
-rule's nodes are anchored at the global maximum theta* of E (the root mu > 0 of the secular
-equation a^2 / (mu + 4F)^2 + b^2 / mu^2 = 1, by Newton on 1/sqrt(h) - 1, which is concave), and
-only the nodes where exp(E - E*) > ``stop`` are evaluated: the walk goes outward from theta* on
-both sides until the integrand falls below ``stop`` (it decreases monotonically up to the next
-minimum). E has a second local maximum exactly when (|a|^(2/3) + |b|^(2/3))^(3/2) < 4F (inside
-the astroid, the evolute of the whitened ring); then it is the root of the same equation on
-(-4F, 0) where h increases, and the nodes around it are walked too. Every term is
-exp(E - E*) <= 1, so nothing overflows or underflows before the final exp(E*): the density is
-exact in relative terms far into the tails (until it underflows itself).
+rule's nodes are anchored at the global maximum theta* of E (:func:`global_peak`), and only the
+nodes where exp(E - E*) > ``stop`` are evaluated: the walk goes outward from theta* on both
+sides until the integrand falls below ``stop`` (it decreases monotonically up to the next
+minimum). Where E has a second local maximum (:func:`second_peak`: inside the astroid, the
+evolute of the whitened ring) the nodes around it are walked too. Every term is exp(E - E*) <= 1,
+so nothing overflows or underflows before the final exp(E*): the density is exact in relative
+terms far into the tails (until it underflows itself).
 
 Each node costs one exp and a dozen multiply-adds: cos and sin of the offset delta = k Delta are
 advanced by the rotation recurrence in the form (cos delta - 1, sin delta) (error proportional to
@@ -43,32 +41,13 @@ delta, not 1; recomputed exactly every 64 steps), and E - E* is the quadratic fo
 
 whose coefficients come from the residual at theta* (no cancellation of large exponents).
 
-Grids. ``butterly_grid`` (a strip of TILE rows per thread on the CPU) computes the same rule
-faster:
+Grids: ``butterly_grid`` computes the same rule faster, skipping what its bounds prove
+negligible (:func:`log_bound`) and summing tiles of cells as a matrix product (:func:`tile_speed`).
 
-* Skipping. exp(E) <= exp(-d^2 / 2) with d a lower bound of the whitened distance to the ring
-  (:func:`ring_distance`, :func:`log_bound`, no exp), so each speed's term is bounded before
-  any work. A cell whose bound (all speeds) is below LOG_CELL_FLOOR is set to 0, and a speed
-  whose bound is below LOG_SPEED_FLOOR is left out; the host sets them from a lower bound of
-  the density's maximum M (1e-13 M, and 1e-22 M over the number of speeds: a relative 1e-10 at
-  most wherever the density exceeds 1e-12 M). d is 1-Lipschitz, so whole tiles are skipped,
-  computed or left out of a speed from the bound at their centre. ``butterly_points`` skips
-  only what would underflow.
-* Tiles (:func:`tile_speed`, rules of up to TILE_NODES nodes, r / sigma_min up to a few
-  hundred): on a uniform grid each node's exponent is a quadratic in the cell's (row, column)
-  whose only mixed term does not depend on the node, so a TILE x TILE tile's rule is a matrix
-  product, sum_k A_k(column) B_k(row), times a node-free cross factor: two short geometric
-  sequences per node instead of an exp per node and cell, and only the nodes that reach
-  ``stop`` / TILE_NODES of the largest somewhere on the tile (an exact test: the difference of
-  two nodes' exponents is linear on the tile).
-* Otherwise each cell walks from its peak as above, Newton starting from the root of the
-  neighbouring cell (the speeds are the outer loop).
-
-Carried evidence (the section at the end, ``CARRIED_KERNELS``): evidence at earlier times weighs
-each course's path inside the same integral, through the shared helpers of
-``kernels/evidence.py``. Carried maps take the point path (a walk per point and speed, not the
-tiles: a tile's matrix product has no place for a weight per node and cell); cells that no
-weighted path reaches are left to the tiles (``Butterly.weighted_cells``).
+Carried evidence (the section at the end, ``CARRIED_KERNELS``; the rule and its error in
+``bananagrid.models.butterly.Butterly.bind_carried``): evidence at earlier times weighs each
+course's path inside the same integral, through the shared helpers of ``kernels/evidence.py``,
+at points only (a tile's matrix product has no place for a weight per node and cell).
 """
 
 from typing import Any
@@ -240,9 +219,14 @@ def second_peak(a: Any, b: Any, four_f: Any, eps: Any, depth: Any):
 
 
 @wp.func
-def anchor_exponent(z1: Any, z2: Any, rho1: Any, rho2: Any, kappa: Any, c0: Any, s0: Any, x: Any, y: Any):
+def anchor_exponent(z1: Any, z2: Any, params: wp.array(dtype=Any), base: int, x: Any, y: Any):
     """E at theta* = atan2(y, x) (without the constant) and the coefficients (C1, C2, P11, P12,
     P22) of E(theta* + delta) - E* in u = cos delta - 1, v = sin delta."""
+    rho1 = params[base + RHO1]
+    rho2 = params[base + RHO2]
+    kappa = params[KAPPA]
+    c0 = params[COS_THETA0]
+    s0 = params[SIN_THETA0]
     r1 = z1 - rho1 * x  # residual zeta* = z - (rho1 cos, rho2 sin)
     r2 = z2 - rho2 * y
     ax = rho1 * x  # d zeta / du = -(ax, ay), d zeta / dv = -(bx, by)
@@ -255,6 +239,18 @@ def anchor_exponent(z1: Any, z2: Any, rho1: Any, rho2: Any, kappa: Any, c0: Any,
     c1 = r1 * ax + r2 * ay + kappa * cos_rel
     c2 = r1 * bx + r2 * by - kappa * sin_rel
     return e_star, c1, c2, ax * ax + ay * ay, ax * bx + ay * by, bx * bx + by * by
+
+
+@wp.func
+def walk_side(going: int, k: int, lim: int, full: bool, exponent: Any, total: Any, stop: Any, last: int):
+    """One side's node k of :func:`walk` (offsets up to ``lim``; none where the walk is ``full``):
+    (still going, the sum, its last node)."""
+    if going == 0 or k > lim or full:
+        return int(0), total, last
+    term = wp.exp(exponent)
+    if term < stop:
+        return int(0), total + term, k
+    return int(1), total + term, k
 
 
 @wp.func
@@ -297,52 +293,42 @@ def walk(
             u = u_next
         even = u * (c1 - half * p11 * u) - half * p22 * v * v
         odd = v * (c2 - p12 * u)
-        if plus == 1:
-            if k > lim_plus or p + m >= lim_total:
-                plus = int(0)
-            else:
-                term = wp.exp(even + odd)
-                total = total + term
-                p = k
-                if term < stop:
-                    plus = int(0)
-        if minus == 1:
-            if k > lim_minus or p + m >= lim_total:
-                minus = int(0)
-            else:
-                term = wp.exp(even - odd)
-                total = total + term
-                m = k
-                if term < stop:
-                    minus = int(0)
+        plus, total, p = walk_side(plus, k, lim_plus, p + m >= lim_total, even + odd, total, stop, p)
+        minus, total, m = walk_side(minus, k, lim_minus, p + m >= lim_total, even - odd, total, stop, m)
     return total, p, m
 
 
 @wp.func
-def speed_density(z1: Any, z2: Any, params: wp.array(dtype=Any), base: int, mu_start: Any):
-    """(w_i P_{r_i}(u), mu) for the speed whose constants start at ``params[base]``; ``mu_start``
-    and ``mu`` are the secular equation's multiplier at the previous and this point (see
-    :func:`global_peak`; 0 for a cold start)."""
+def rule_terms(z1: Any, z2: Any, params: wp.array(dtype=Any), base: int):
+    """(a, b, A = |(a, b)| + 4F) of one speed at the whitened point z."""
+    a = params[base + RHO1] * z1 + params[KAPPA] * params[COS_THETA0]
+    b = params[base + RHO2] * z2 + params[KAPPA] * params[SIN_THETA0]
+    return a, b, wp.sqrt(a * a + b * b) + params[base + FOUR_F]
+
+
+@wp.func
+def peak_rule(z1: Any, z2: Any, params: wp.array(dtype=Any), base: int, mu_start: Any):
+    """One speed's periodic rule at the whitened point z, anchored at its global peak: (a, b, N,
+    Delta, cos theta*, sin theta*, mu, then E* and the coefficients of :func:`anchor_exponent`)."""
+    a, b, amplitude = rule_terms(z1, z2, params, base)
+    n = node_count(amplitude, params[LOG_TOL])
+    x, y, mu = global_peak(a, b, params[base + FOUR_F], params[NEWTON_TOL], mu_start)
+    e1, c1, c2, p11, p12, p22 = anchor_exponent(z1, z2, params, base, x, y)
+    return a, b, n, type(z1)(TWO_PI) / type(z1)(n), x, y, mu, e1, c1, c2, p11, p12, p22
+
+
+@wp.func
+def second_walk(
+    z1: Any, z2: Any, params: wp.array(dtype=Any), base: int, a: Any, b: Any, n: int, delta: Any, x: Any, y: Any,
+    e1: Any, p1: int, m1: int,
+):
+    """The walk about the second local maximum (:func:`second_peak`) where it matters, from the
+    node of the same periodic rule nearest to it, over the nodes the first walk (p1, m1 nodes on
+    its sides from the peak (x, y), E* = e1) left: (exp(E2 - E*), its sum, its node j2, its
+    nodes on each side); (0, 0, 0, 0, 0) where there is no such walk."""
     zero = type(z1)(0.0)
-    rho1 = params[base + RHO1]
-    rho2 = params[base + RHO2]
-    four_f = params[base + FOUR_F]
-    kappa = params[KAPPA]
-    c0 = params[COS_THETA0]
-    s0 = params[SIN_THETA0]
-    stop = params[STOP]
-    a = rho1 * z1 + kappa * c0
-    b = rho2 * z2 + kappa * s0
-    n = node_count(wp.sqrt(a * a + b * b) + four_f, params[LOG_TOL])
-    delta = type(z1)(TWO_PI) / type(z1)(n)
-    x, y, mu = global_peak(a, b, four_f, params[NEWTON_TOL], mu_start)
-    e1, c1, c2, p11, p12, p22 = anchor_exponent(z1, z2, rho1, rho2, kappa, c0, s0, x, y)
-    if params[base + LOG_COEF] + e1 < params[LOG_TINY]:
-        return zero, mu  # below the smallest positive number even if all N terms were 1 (Delta N = 2 pi)
-    total, p1, m1 = walk(c1, c2, p11, p12, p22, delta, stop, n - 1, n - 1, n - 1)
-    found, x2, y2 = second_peak(a, b, four_f, params[NEWTON_TOL], params[LOG_STOP])
+    found, x2, y2 = second_peak(a, b, params[base + FOUR_F], params[NEWTON_TOL], params[LOG_STOP])
     if found == 1 and p1 + m1 + 1 < n:
-        # the node of the same periodic rule nearest to the second maximum
         offset = wp.atan2(x * y2 - y * x2, x * x2 + y * y2)
         j2 = int(wp.round(offset / delta))
         if j2 < 0:
@@ -351,15 +337,30 @@ def speed_density(z1: Any, z2: Any, params: wp.array(dtype=Any), base: int, mu_s
             angle = type(z1)(j2) * delta
             cj = wp.cos(angle)
             sj = wp.sin(angle)
-            xa = x * cj - y * sj
-            ya = y * cj + x * sj
-            e2, d1, d2, q11, q12, q22 = anchor_exponent(z1, z2, rho1, rho2, kappa, c0, s0, xa, ya)
+            e2, d1, d2, q11, q12, q22 = anchor_exponent(z1, z2, params, base, x * cj - y * sj, y * cj + x * sj)
             scale = wp.exp(e2 - e1)
-            if scale >= stop:
+            if scale >= params[STOP]:
                 lim_plus = n - m1 - 1 - j2
                 lim_minus = j2 - p1 - 1
-                extra, p2, m2 = walk(d1, d2, q11, q12, q22, delta, stop, lim_plus, lim_minus, lim_plus + lim_minus)
-                total = total + scale * extra
+                extra, p2, m2 = walk(d1, d2, q11, q12, q22, delta, params[STOP], lim_plus, lim_minus,
+                                     lim_plus + lim_minus)
+                return scale, extra, j2, p2, m2
+    return zero, zero, int(0), int(0), int(0)
+
+
+@wp.func
+def speed_density(z1: Any, z2: Any, params: wp.array(dtype=Any), base: int, mu_start: Any):
+    """(w_i P_{r_i}(u), mu) for the speed whose constants start at ``params[base]``; ``mu_start``
+    and ``mu`` are the secular equation's multiplier at the previous and this point (see
+    :func:`global_peak`; 0 for a cold start)."""
+    zero = type(z1)(0.0)
+    a, b, n, delta, x, y, mu, e1, c1, c2, p11, p12, p22 = peak_rule(z1, z2, params, base, mu_start)
+    if params[base + LOG_COEF] + e1 < params[LOG_TINY]:
+        return zero, mu  # below the smallest positive number even if all N terms were 1 (Delta N = 2 pi)
+    total, p1, m1 = walk(c1, c2, p11, p12, p22, delta, params[STOP], n - 1, n - 1, n - 1)
+    scale, extra, j2, p2, m2 = second_walk(z1, z2, params, base, a, b, n, delta, x, y, e1, p1, m1)
+    if scale > zero:
+        total = total + scale * extra
     if total <= zero:
         return zero, mu
     return delta * total * wp.exp(params[base + LOG_COEF] + e1), mu
@@ -397,12 +398,14 @@ def log_bound(z1: Any, z2: Any, z_norm: Any, params: wp.array(dtype=Any), base: 
 
 @wp.func
 def whiten(x: Any, y: Any, params: wp.array(dtype=Any)):
-    """The whitened coordinates (z1, z2) of the world point (x, y)."""
+    """The whitened coordinates (z1, z2) of the world point (x, y), and |z|."""
     dx = x - params[MEAN_X]
     dy = y - params[MEAN_Y]
     q1x = params[Q1_X]
     q1y = params[Q1_Y]
-    return (dx * q1x + dy * q1y) * params[INV_SQRT_S1], (dy * q1x - dx * q1y) * params[INV_SQRT_S2]
+    z1 = (dx * q1x + dy * q1y) * params[INV_SQRT_S1]
+    z2 = (dy * q1x - dx * q1y) * params[INV_SQRT_S2]
+    return z1, z2, wp.sqrt(z1 * z1 + z2 * z2)
 
 
 @wp.func
@@ -410,8 +413,7 @@ def butterly_density(x: Any, y: Any, params: wp.array(dtype=Any), n_speeds: int)
     """Density per m^2 at the world point (x, y): sum over speeds of w_i P_{r_i}(x, y), each
     from a cold start, a speed skipped only where its bound is below LOG_POINT_FLOOR (its value
     would underflow to 0)."""
-    z1, z2 = whiten(x, y, params)
-    z_norm = wp.sqrt(z1 * z1 + z2 * z2)
+    z1, z2, z_norm = whiten(x, y, params)
     total = type(x)(0.0)
     floor = params[LOG_POINT_FLOOR]
     for i in range(n_speeds):
@@ -420,14 +422,6 @@ def butterly_density(x: Any, y: Any, params: wp.array(dtype=Any), n_speeds: int)
             value, mu = speed_density(z1, z2, params, base, type(x)(0.0))
             total = total + value
     return total
-
-
-@wp.func
-def rule_size(z1: Any, z2: Any, params: wp.array(dtype=Any), base: int):
-    """The amplitude A = |(a, b)| + 4F at the whitened point z for one speed."""
-    a = params[base + RHO1] * z1 + params[KAPPA] * params[COS_THETA0]
-    b = params[base + RHO2] * z2 + params[KAPPA] * params[SIN_THETA0]
-    return wp.sqrt(a * a + b * b) + params[base + FOUR_F]
 
 
 @wp.func
@@ -504,13 +498,11 @@ def tile_speed(
     # the rule for the largest amplitude on the tile (|(a, b)| is convex in z: at a corner)
     amp = zero
     for corner in range(4):
-        sx = one
-        sy = one
-        if corner % 2 == 1:
-            sx = -one
-        if corner >= 2:
-            sy = -one
-        amp = wp.max(amp, rule_size(z1 + h * (sx * dzx1 + sy * dzy1), z2 + h * (sx * dzx2 + sy * dzy2), params, base))
+        sx = type(z1)(1 - 2 * (corner % 2))  # +-1
+        sy = type(z1)(1 - 2 * (corner // 2))
+        corner_a, corner_b, corner_amp = rule_terms(z1 + h * (sx * dzx1 + sy * dzy1), z2 + h * (sx * dzx2 + sy * dzy2),
+                                                    params, base)
+        amp = wp.max(amp, corner_amp)
     n = node_count(amp, params[LOG_TOL])
     n = (n + 15) // 16 * 16
     if n > TILE_NODES:
@@ -579,40 +571,20 @@ def tile_speed(
     scale = delta
     if safe_scale == 1:
         scale = wp.exp(log_scale) * delta
-    # the product, 4 rows x 8 columns at a time (eight vec4 sums; one node's A and B per step)
-    z4 = wp.vector(zero, zero, zero, zero)
+    # the product, 4 rows x 8 columns at a time (two 4 x 4 sums of outer products B_k A_k^T: row
+    # i of ``sum_lo`` the columns m .. m + 3 of row rb + i; one node's A and B per step)
     for rb in range(0, rows, 4):
         for q in range(0, (cols + 3) // 4, 2):
-            s00 = z4
-            s01 = z4
-            s10 = z4
-            s11 = z4
-            s20 = z4
-            s21 = z4
-            s30 = z4
-            s31 = z4
+            sum_lo = wp.matrix(shape=(4, 4), dtype=type(zero))
+            sum_hi = wp.matrix(shape=(4, 4), dtype=type(zero))
             for k in range(kept):
-                a_lo = quads[band, QUAD_A + k * QUADS + q]
-                a_hi = quads[band, QUAD_A + k * QUADS + q + 1]
                 bk = quads[band, QUAD_B + k * QUADS + rb // 4]
-                s00 = s00 + a_lo * bk[0]
-                s01 = s01 + a_hi * bk[0]
-                s10 = s10 + a_lo * bk[1]
-                s11 = s11 + a_hi * bk[1]
-                s20 = s20 + a_lo * bk[2]
-                s21 = s21 + a_hi * bk[2]
-                s30 = s30 + a_lo * bk[3]
-                s31 = s31 + a_hi * bk[3]
+                sum_lo = sum_lo + wp.outer(bk, quads[band, QUAD_A + k * QUADS + q])
+                sum_hi = sum_hi + wp.outer(bk, quads[band, QUAD_A + k * QUADS + q + 1])
             m = 4 * q
-            left = cols - m
-            at = CROSS + rb * TILE + m
-            add_row(out, row + rb, col + m, left, s00, s01, scratch, band, at, scale, log_scale, safe_scale)
-            if rb + 1 < rows:
-                add_row(out, row + rb + 1, col + m, left, s10, s11, scratch, band, at + TILE, scale, log_scale, safe_scale)
-            if rb + 2 < rows:
-                add_row(out, row + rb + 2, col + m, left, s20, s21, scratch, band, at + 2 * TILE, scale, log_scale, safe_scale)
-            if rb + 3 < rows:
-                add_row(out, row + rb + 3, col + m, left, s30, s31, scratch, band, at + 3 * TILE, scale, log_scale, safe_scale)
+            for i in range(wp.min(4, rows - rb)):
+                add_row(out, row + rb + i, col + m, cols - m, sum_lo[i], sum_hi[i], scratch, band,
+                        CROSS + (rb + i) * TILE + m, scale, log_scale, safe_scale)
     return int(1)
 
 
@@ -629,8 +601,7 @@ def walk_cells(
         mu = zero
         for j in range(c_begin, c_end):
             if out[row, j] >= zero:
-                z1, z2 = whiten(xs[j], y, params)
-                z_norm = wp.sqrt(z1 * z1 + z2 * z2)
+                z1, z2, z_norm = whiten(xs[j], y, params)
                 if log_bound(z1, z2, z_norm, params, base) >= params[LOG_SPEED_FLOOR]:
                     value, mu_next = speed_density(z1, z2, params, base, mu)
                     mu = mu_next
@@ -649,8 +620,7 @@ def mark_cells(
     for row in range(r_begin, r_end):
         y = ys[row]
         for j in range(c_begin, c_end):
-            z1, z2 = whiten(xs[j], y, params)
-            z_norm = wp.sqrt(z1 * z1 + z2 * z2)
+            z1, z2, z_norm = whiten(xs[j], y, params)
             mark = type(y)(-1.0)
             for s in range(n_speeds):
                 if log_bound(z1, z2, z_norm, params, HEAD + PER_SPEED * s) >= cell_floor:
@@ -689,15 +659,16 @@ def butterly_grid(
     ``quads[band]`` are this band's work space (a band's threads run one after another on the
     CPU; a GPU's one-cell blocks never use it).
 
-    A cell is set to 0 without computing anything where the sum of the speeds' bounds
-    (:func:`log_bound`; n times the largest) is below LOG_CELL_FLOOR. A strip is cut into
-    TILE x TILE tiles. The bound's distance is 1-Lipschitz, so on a tile it is within the
-    half-diagonal ``reach`` of its value at the centre: a tile is skipped whole, computed whole,
-    or (near the floor's contour) marked cell by cell. For each speed whose bound on the tile
-    reaches LOG_SPEED_FLOOR, :func:`tile_speed` adds the speed's term, or, where it refuses the
-    tile (rules over TILE_NODES nodes, coarse cells), :func:`walk_cells` does each cell from its
-    peak. Blocks too small for a tile (a GPU's cells) are marked and walked cell by cell.
-    ``out`` holds -1 for skipped cells until the end.
+    Skipping (no exp): a cell is set to 0 where the sum of the speeds' bounds
+    (:func:`log_bound`; n times the largest) is below LOG_CELL_FLOOR, and a speed is left out
+    where its bound is below LOG_SPEED_FLOOR (the floors: ``Butterly.kernel_parameters``). A
+    strip is cut into TILE x TILE tiles. The bound's distance is 1-Lipschitz, so on a tile it is
+    within the half-diagonal ``reach`` of its value at the centre: a tile is skipped whole,
+    computed whole, or (near the floor's contour) marked cell by cell. For each speed whose
+    bound on the tile reaches LOG_SPEED_FLOOR, :func:`tile_speed` adds the speed's term, or,
+    where it refuses the tile (rules over TILE_NODES nodes, coarse cells), :func:`walk_cells`
+    does each cell from its peak. Blocks too small for a tile (a GPU's cells) are marked and
+    walked cell by cell. ``out`` holds -1 for skipped cells until the end.
     """
     params = p.params
     n_speeds = p.n_speeds
@@ -738,7 +709,7 @@ def butterly_grid(
     reach = h * (wp.sqrt(dzx1 * dzx1 + dzx2 * dzx2) + wp.sqrt(dzy1 * dzy1 + dzy2 * dzy2))
     for c_begin in range(j_begin, j_end, TILE):
         c_end = wp.min(c_begin + TILE, j_end)
-        zo1, zo2 = whiten(xs[c_begin], ys[r_begin], params)
+        zo1, zo2, zo_norm = whiten(xs[c_begin], ys[r_begin], params)
         z1 = zo1 + h * (dzx1 + dzy1)
         z2 = zo2 + h * (dzx2 + dzy2)
         z_norm = wp.sqrt(z1 * z1 + z2 * z2)
@@ -797,36 +768,19 @@ KERNELS = density_kernels(butterly_world, BUTTERLY, "butterly", grid=butterly_gr
 # Carried evidence: the course integral with each path's weight inside
 # ---------------------------------------------------------------------------------------------
 #
-# For the course c (theta = pi/2 - c - beta in the eigen frame, e(c) = cos theta q1 +
-# sin theta q2) and the speed of range r = V t, the path through the map point x at t is at
-# X(s) = x - r (t - s) / t e(c) at time s: on the circle of radius R(s) = r (t - s) / t about x.
-# Evidence at s is a weight W(theta) on the course (``kernels/evidence.py``: the shared
-# helpers), and the speed's carried density is
+# For the course c (theta = pi/2 - c - beta in the eigen frame) and the speed of range r = V t,
+# the path through the map point x is at X(s) = x - r (t - s) / t e(c) at time s: on the
+# circle of radius R(s) = r (t - s) / t about x. Evidence at s weighs the course by W(theta)
+# (``kernels/evidence.py``), and the speed's carried density is
 #
-#     w_i P_i^W(x) = w_i coef int exp(E(theta)) W(theta) dtheta.
+#     w_i P_i^W(x) = w_i coef int exp(E(theta)) W(theta) dtheta,
 #
-# A polygon's factor at s is constant in theta except where the circle R(s) crosses one of its
-# edges, so the support of exp(E) (the arcs that the density's walk finds, beyond which every
-# term is below ``stop`` of the peak) is cut at every such crossing, and each piece is
-# integrated by Gauss-Legendre, its order and panels sized to the piece's width in trapezoid
-# spacings (``carried_arc``, ``ORDERS``): exact for polygons but for the rule's error on the smooth exp(E). Smooth
-# factors (reports, bearings, inverse-cube tracks, rasters) are evaluated at every node, on
-# panels narrowed to their own angular scale (``smooth_spacing``). An area search over an
-# interval (t0, t1) is taken exactly (``add_segments``): the path over it is the segment from
-# X(t0) to X(t1), the time inside is its length inside the polygon over the speed, smooth in
-# theta between the courses where an end crosses an edge or the segment passes a vertex
-# (``segment_breaks``). A definite-range track weighs a path 0 or 1 (detected iff its closest
-# approach to the searcher is within W / 2): exact per leg (the relative motion is straight,
-# ``track_margin``), constant between the courses where it switches, which a Lipschitz march
-# with bisection finds (``definite_breaks``), so its pieces take the rule as a polygon's do.
+# integrated by pieces between the courses where W is not smooth (``carried_arc``): the rule,
+# its pieces' breaks and its error are ``bananagrid.models.butterly.Butterly.bind_carried``'s.
 
-#: Gauss-Legendre orders of the course pieces, lowest first (the rule array,
-#: ``models.butterly._carried_rule``: each order's nodes on [-1, 1] and weights from
-#: RULE_AT[n], then the constants below). A piece is cut into the fewest equal panels no wider
-#: than the highest order's limit, each panel integrated by the lowest order whose limit (the
-#: widest panel, in spacings, it integrates within the error bound of the 8-point rule on
-#: CARRIED_PANEL spacings) covers it: a wide piece takes 16 nodes per 6.7 spacings (2.4 a
-#: spacing, not 8 per 2), a narrow one 2 to 6.
+#: Gauss-Legendre orders of the course pieces, lowest first (:func:`panel_rule`); the rule array
+#: (``models.butterly._carried_rule``) holds each order's nodes on [-1, 1] and weights from
+#: RULE_AT[n], then the constants below.
 ORDERS = (2, 3, 4, 6, 8, 12, 16)
 N_ORDERS = 7
 RULE_AT = {2: 0, 3: 4, 4: 10, 6: 18, 8: 30, 12: 46, 16: 70}
@@ -914,24 +868,49 @@ def insert_break(buf: Any, who: Any, count: int, value: Any, node: int):
 
 
 @wp.func
-def node_radius(ev: Any, j: int, r: Any, t: Any):
-    """R(s_j) = r (t - s_j) / t: the distance from the map point to the path at node j's time."""
+def path_radius(r: Any, t: Any, s: Any):
+    """R(s) = r (t - s) / t: the distance from the map point to the path at time s."""
     if t <= type(r)(0.0):
         return type(r)(0.0)
-    return r * ((t - ek.evidence_time(ev, j)) / t)
+    return r * ((t - s) / t)
+
+
+@wp.func
+def insert_course(buf: Any, who: Any, count: int, ex: Any, ey: Any, sx: Any, sy: Any, lo: Any, hi: Any, node: int):
+    """Insert into the window (:func:`insert_break`, made by ``node``) the course offset from the
+    peak's direction (sx, sy) to the direction (ex, ey), wrapped into (lo, hi) if it can be."""
+    d = wp.atan2(sx * ey - sy * ex, sx * ex + sy * ey)
+    for wrap in range(3):
+        dd = d + type(ex)(float(wrap - 1)) * type(ex)(TWO_PI)
+        if dd > lo and dd < hi:
+            buf, who, count = insert_break(buf, who, count, dd, node)
+    return buf, who, count
+
+
+@wp.func
+def node_radius(ev: Any, j: int, r: Any, t: Any):
+    """R(s_j): the path's distance from the map point at node j's time."""
+    return path_radius(r, t, ek.evidence_time(ev, j))
+
+
+@wp.func
+def box_distances(x: Any, y: Any, x0: Any, x1: Any, y0: Any, y1: Any):
+    """The squared least and greatest distances from (x, y) to the box [x0, x1] x [y0, y1]."""
+    zero = type(x)(0.0)
+    near_x = wp.max(wp.max(x0 - x, zero), x - x1)
+    near_y = wp.max(wp.max(y0 - y, zero), y - y1)
+    far_x = wp.max(wp.abs(x0 - x), wp.abs(x - x1))
+    far_y = wp.max(wp.abs(y0 - y), wp.abs(y - y1))
+    return near_x * near_x + near_y * near_y, far_x * far_x + far_y * far_y
 
 
 @wp.func
 def circle_meets_box(ev: Any, j: int, x: Any, y: Any, radius: Any):
     """Whether the circle of ``radius`` about (x, y) meets polygon node j's bounding box (else
     the node's path points are all outside its polygon, and none crosses an edge)."""
-    zero = type(x)(0.0)
-    near_x = wp.max(wp.max(ev.data[j, 1] - x, zero), x - ev.data[j, 2])
-    near_y = wp.max(wp.max(ev.data[j, 3] - y, zero), y - ev.data[j, 4])
-    far_x = wp.max(wp.abs(ev.data[j, 1] - x), wp.abs(x - ev.data[j, 2]))
-    far_y = wp.max(wp.abs(ev.data[j, 3] - y), wp.abs(y - ev.data[j, 4]))
+    near2, far2 = box_distances(x, y, ev.data[j, 1], ev.data[j, 2], ev.data[j, 3], ev.data[j, 4])
     r2 = radius * radius
-    return radius > zero and near_x * near_x + near_y * near_y <= r2 and far_x * far_x + far_y * far_y >= r2
+    return radius > type(x)(0.0) and near2 <= r2 and far2 >= r2
 
 
 @wp.func
@@ -957,7 +936,6 @@ def circle_breaks(edges: Any, first: int, n_edges: int, x: Any, y: Any, radius: 
     """Insert into the window (:func:`insert_break`, made by ``node``) the course offsets in
     (lo, hi), from the peak's direction (sx, sy), where the circle of ``radius`` about (x, y)
     crosses the edges ``edges[first:first + n_edges]``: (buf, who, count)."""
-    two_pi = type(x)(TWO_PI)
     for e in range(first, first + n_edges):
         ax = edges[e, 0]
         ay = edges[e, 1]
@@ -970,11 +948,7 @@ def circle_breaks(edges: Any, first: int, n_edges: int, x: Any, y: Any, radius: 
                 u = u2
             ex = (x - (ax + u * (bx - ax))) / radius
             ey = (y - (ay + u * (by - ay))) / radius
-            d = wp.atan2(sx * ey - sy * ex, sx * ex + sy * ey)
-            for wrap in range(3):
-                dd = d + type(x)(float(wrap - 1)) * two_pi
-                if dd > lo and dd < hi:
-                    buf, who, count = insert_break(buf, who, count, dd, node)
+            buf, who, count = insert_course(buf, who, count, ex, ey, sx, sy, lo, hi, node)
     return buf, who, count
 
 
@@ -1108,11 +1082,23 @@ def polygon_weights(ev: Any, p: Any, active: Any, n_active: int, cached: Any, lw
 
 
 @wp.func
-def segment_radius(p: Any, t_s: Any, r: Any):
-    """R(s) = r (t - s) / t for a segment's end time s."""
-    if p.t <= type(r)(0.0):
-        return type(r)(0.0)
-    return r * ((p.t - t_s) / p.t)
+def edge_crossing(edges: wp.array2d(dtype=Any), e: int, ax: Any, ay: Any, dx: Any, dy: Any):
+    """Whether the segment from (ax, ay) along (dx, dy) crosses edge e (at 0 < u < 1 along the
+    segment, 0 <= v < 1 along the edge): (crosses, u, cross(d, edge))."""
+    zero = type(ax)(0.0)
+    one = type(ax)(1.0)
+    px = edges[e, 0]
+    py = edges[e, 1]
+    qx = edges[e, 2] - px
+    qy = edges[e, 3] - py
+    denom = dx * qy - dy * qx
+    if denom != zero:
+        wx = px - ax
+        wy = py - ay
+        u = (wx * qy - wy * qx) / denom
+        v = (wx * dy - wy * dx) / denom
+        return u > zero and u < one and v >= zero and v < one, u, denom
+    return False, zero, denom
 
 
 @wp.func
@@ -1130,21 +1116,12 @@ def inside_length(ev: Any, first: int, count: int, orient: Any, ax: Any, ay: Any
     dx = bx - ax
     dy = by - ay
     for e in range(first, first + count):
-        px = ev.edges[e, 0]
-        py = ev.edges[e, 1]
-        qx = ev.edges[e, 2] - px
-        qy = ev.edges[e, 3] - py
-        denom = dx * qy - dy * qx  # cross(d, edge)
-        if denom != zero:
-            wx = px - ax
-            wy = py - ay
-            u = (wx * qy - wy * qx) / denom  # along the segment
-            v = (wx * dy - wy * dx) / denom  # along the edge
-            if u > zero and u < one and v >= zero and v < one:
-                step = orient
-                if denom > zero:
-                    step = -orient  # crossing the edge from its left (inner) side: leaving
-                total = total + step * (one - u)
+        crosses, u, denom = edge_crossing(ev.edges, e, ax, ay, dx, dy)
+        if crosses:
+            step = orient
+            if denom > zero:
+                step = -orient  # crossing the edge from its left (inner) side: leaving
+            total = total + step * (one - u)
     return wp.min(wp.max(total, zero), one)
 
 
@@ -1152,14 +1129,10 @@ def inside_length(ev: Any, first: int, count: int, orient: Any, ax: Any, ay: Any
 def segment_reaches(p: Any, k: int, x: Any, y: Any, r: Any):
     """Whether the annulus R(t1) <= |P - x| <= R(t0) swept by search k's path segments (any
     course) meets the search polygon's box: else the segment is never inside."""
-    zero = type(x)(0.0)
-    r_far = segment_radius(p, p.segments[k, 0], r)
-    r_near = segment_radius(p, p.segments[k, 1], r)
-    near_x = wp.max(wp.max(p.segments[k, 4] - x, zero), x - p.segments[k, 5])
-    near_y = wp.max(wp.max(p.segments[k, 6] - y, zero), y - p.segments[k, 7])
-    far_x = wp.max(wp.abs(p.segments[k, 4] - x), wp.abs(x - p.segments[k, 5]))
-    far_y = wp.max(wp.abs(p.segments[k, 6] - y), wp.abs(y - p.segments[k, 7]))
-    return near_x * near_x + near_y * near_y <= r_far * r_far and far_x * far_x + far_y * far_y >= r_near * r_near
+    r_far = path_radius(r, p.t, p.segments[k, 0])
+    r_near = path_radius(r, p.t, p.segments[k, 1])
+    near2, far2 = box_distances(x, y, p.segments[k, 4], p.segments[k, 5], p.segments[k, 6], p.segments[k, 7])
+    return near2 <= r_far * r_far and far2 >= r_near * r_near
 
 
 @wp.func
@@ -1188,8 +1161,8 @@ def reaching_segments(p: Any, x: Any, y: Any, r: Any, sx: Any, sy: Any, lo: Any,
             if wide:
                 count = count + 1
             else:
-                r0 = segment_radius(p, p.segments[k, 0], r)
-                r1 = segment_radius(p, p.segments[k, 1], r)
+                r0 = path_radius(r, p.t, p.segments[k, 0])
+                r1 = path_radius(r, p.t, p.segments[k, 1])
                 x0 = wp.min(wp.min(x - r0 * lx, x - r1 * lx), wp.min(x - r0 * hx, x - r1 * hx)) - r0 * bulge
                 x1 = wp.max(wp.max(x - r0 * lx, x - r1 * lx), wp.max(x - r0 * hx, x - r1 * hx)) + r0 * bulge
                 y0 = wp.min(wp.min(y - r0 * ly, y - r1 * ly), wp.min(y - r0 * hy, y - r1 * hy)) - r0 * bulge
@@ -1207,8 +1180,8 @@ def add_segments(ev: Any, p: Any, x: Any, y: Any, ex: Any, ey: Any, r: Any, lw: 
     zero = type(x)(0.0)
     for k in range(p.segments.shape[0]):
         f = p.segment_ints[k, 0]
-        r0 = segment_radius(p, p.segments[k, 0], r)
-        r1 = segment_radius(p, p.segments[k, 1], r)
+        r0 = path_radius(r, p.t, p.segments[k, 0])
+        r1 = path_radius(r, p.t, p.segments[k, 1])
         first = p.segment_ints[k, 1]
         count = p.segment_ints[k, 2]
         frac = zero
@@ -1232,30 +1205,19 @@ def segments_cross(ev: Any, p: Any, x: Any, y: Any, ex: Any, ey: Any, r: Any):
     the segment through a vertex) the set of edges a segment crosses does not change, so where
     it crosses none at one course of a piece its fraction inside (0 or 1) is constant on the
     piece."""
-    zero = type(x)(0.0)
-    one = type(x)(1.0)
     for k in range(p.segments.shape[0]):
         if segment_reaches(p, k, x, y, r):
-            r0 = segment_radius(p, p.segments[k, 0], r)
-            r1 = segment_radius(p, p.segments[k, 1], r)
+            r0 = path_radius(r, p.t, p.segments[k, 0])
+            r1 = path_radius(r, p.t, p.segments[k, 1])
             ax = x - r0 * ex
             ay = y - r0 * ey
             dx = (r0 - r1) * ex
             dy = (r0 - r1) * ey
             first = p.segment_ints[k, 1]
             for e in range(first, first + p.segment_ints[k, 2]):
-                px = ev.edges[e, 0]
-                py = ev.edges[e, 1]
-                qx = ev.edges[e, 2] - px
-                qy = ev.edges[e, 3] - py
-                denom = dx * qy - dy * qx
-                if denom != zero:
-                    wx = px - ax
-                    wy = py - ay
-                    u = (wx * qy - wy * qx) / denom
-                    v = (wx * dy - wy * dx) / denom
-                    if u > zero and u < one and v >= zero and v < one:
-                        return True
+                crosses, u, denom = edge_crossing(ev.edges, e, ax, ay, dx, dy)
+                if crosses:
+                    return True
     return False
 
 
@@ -1265,13 +1227,12 @@ def segment_breaks(x: Any, y: Any, r: Any, p: Any, ev: Any, sx: Any, sy: Any, lo
     """Add to the window the courses where a search-over-an-interval's weight is not smooth:
     where an end of the path's segment crosses an edge (the circles R(t0), R(t1)) and where the
     segment passes a vertex (its direction from x, at a distance between R(t1) and R(t0))."""
-    two_pi = type(x)(TWO_PI)
     zero = type(x)(0.0)
     for k in range(p.segments.shape[0]):
         first = p.segment_ints[k, 1]
         n_edges = p.segment_ints[k, 2]
-        r_far = segment_radius(p, p.segments[k, 0], r)
-        r_near = segment_radius(p, p.segments[k, 1], r)
+        r_far = path_radius(r, p.t, p.segments[k, 0])
+        r_near = path_radius(r, p.t, p.segments[k, 1])
         if not segment_reaches(p, k, x, y, r):
             n_edges = 0  # never inside: no break
         for end in range(2):
@@ -1286,24 +1247,16 @@ def segment_breaks(x: Any, y: Any, r: Any, p: Any, ev: Any, sx: Any, sy: Any, lo
             vy = y - ev.edges[e, 1]
             dist = wp.sqrt(vx * vx + vy * vy)
             if dist > zero and dist >= r_near and dist <= r_far:
-                ex = vx / dist
-                ey = vy / dist
-                d = wp.atan2(sx * ey - sy * ex, sx * ex + sy * ey)
-                for wrap in range(3):
-                    dd = d + type(x)(float(wrap - 1)) * two_pi
-                    if dd > lo and dd < hi:
-                        buf, who, count = insert_break(buf, who, count, dd, -1)
+                buf, who, count = insert_course(buf, who, count, vx / dist, vy / dist, sx, sy, lo, hi, -1)
     return buf, who, count
 
 
 @wp.func
 def track_margin(ev: Any, p: Any, x: Any, y: Any, ex: Any, ey: Any, r: Any, k0: int):
     """The closest approach less h = W / 2 of the path through (x, y) with direction e to the
-    definite-range track whose chain starts at smooth node k0: over each leg (its nodes at track
-    points, ``DEFINITE_LEG``) the path and the searcher move straight at constant speeds, so the
-    relative position is linear in time and the leg's closest approach is the distance from the
-    origin to the segment between its ends' relative positions (``evidence.segment_distance``):
-    exact, the chords between ignored. At most 0: detected."""
+    definite-range track whose chain starts at smooth node k0, exact per leg (its nodes at track
+    points, ``DEFINITE_LEG``; ``kernels/evidence.py``'s ``KIND_DEFINITE`` with the legs as
+    chords, the chords between ignored). At most 0: detected."""
     j0 = p.smooth_nodes[k0]
     f = ev.ints[j0, 1]
     h = ev.data[j0, 4]
@@ -1331,7 +1284,6 @@ def definite_reaches(ev: Any, p: Any, x: Any, y: Any, r: Any, k0: int):
     track whose chain starts at smooth node k0: its paths over the track's span lie in the
     annulus R(s_last) <= |P - x| <= R(s_0) about x, the searcher in the box of its track
     points; else every course's margin is positive (no break, weight 1)."""
-    zero = type(x)(0.0)
     j0 = p.smooth_nodes[k0]
     f = ev.ints[j0, 1]
     h = ev.data[j0, 4]
@@ -1348,13 +1300,8 @@ def definite_reaches(ev: Any, p: Any, x: Any, y: Any, r: Any, k0: int):
             y0 = wp.min(y0, ev.data[j, 1])
             y1 = wp.max(y1, ev.data[j, 1])
             j_last = j
-    near_x = wp.max(wp.max(x0 - x, zero), x - x1)
-    near_y = wp.max(wp.max(y0 - y, zero), y - y1)
-    far_x = wp.max(wp.abs(x0 - x), wp.abs(x - x1))
-    far_y = wp.max(wp.abs(y0 - y), wp.abs(y - y1))
-    near = wp.sqrt(near_x * near_x + near_y * near_y)
-    far = wp.sqrt(far_x * far_x + far_y * far_y)
-    return near <= node_radius(ev, j0, r, p.t) + h and far >= node_radius(ev, j_last, r, p.t) - h
+    near2, far2 = box_distances(x, y, x0, x1, y0, y1)
+    return wp.sqrt(near2) <= node_radius(ev, j0, r, p.t) + h and wp.sqrt(far2) >= node_radius(ev, j_last, r, p.t) - h
 
 
 @wp.func
@@ -1475,10 +1422,15 @@ def panel_rule(a: Any, b: Any, spacing: Any, rule: Any):
 
 
 @wp.func
-def gauss_piece(a: Any, b: Any, spacing: Any, cx: Any, cy: Any, q1x: Any, q1y: Any, c1: Any, c2: Any, p11: Any,
-                p12: Any, p22: Any, log_scale: Any, rule: Any):
-    """The integral of exp(E + log_scale) over theta* + (a, b) by the pieces' rule (the fewest
-    equal panels no wider than the highest order's limit, each by the lowest order covering it)."""
+def gauss_piece(
+    a: Any, b: Any, spacing: Any, cx: Any, cy: Any, q1x: Any, q1y: Any, c1: Any, c2: Any, p11: Any, p12: Any,
+    p22: Any, log_scale: Any, rule: Any, weighted: int, x: Any, y: Any, r: Any, p: Any, ev: Any,
+    lw: wp.array(dtype=Any), out: wp.array(dtype=Any), others: Any,
+):
+    """The integral of exp(E + log_scale) over theta* + (a, b) by the pieces' rule
+    (:func:`panel_rule`), and ``others`` plus it; with ``weighted`` each node's term times the
+    path's weight there (the polygons' log-weights already in ``lw``) is added to each channel
+    instead, and the integral returned is 0."""
     half = type(a)(0.5)
     m, h, order, at = panel_rule(a, b, spacing, rule)
     total = type(a)(0.0)
@@ -1486,8 +1438,37 @@ def gauss_piece(a: Any, b: Any, spacing: Any, cx: Any, cy: Any, q1x: Any, q1y: A
         mid = a + (type(a)(k) + half) * h
         for g in range(order):
             e, ex, ey = course_node(cx, cy, q1x, q1y, c1, c2, p11, p12, p22, mid + half * h * rule[at + g])
-            total = total + half * h * rule[at + order + g] * wp.exp(e + log_scale)
-    return total
+            term = half * h * rule[at + order + g] * wp.exp(e + log_scale)
+            others = others + term
+            if weighted == 0:
+                total = total + term
+            else:
+                add_smooth(ev, p, x, y, ex, ey, r, lw)
+                ek.evidence_add(ev, lw, term, out)
+    return total, others
+
+
+@wp.func
+def course_polygon_weights(ev: Any, p: Any, active: Any, n_active: int, x: Any, y: Any, r: Any, ex: Any, ey: Any,
+                           lw: wp.array(dtype=Any)):
+    """The factors' log-weights from every polygon node to visit for the path through (x, y)
+    with direction e (the smooth factors' zeroed)."""
+    ek.evidence_reset(ev, lw)
+    for k in range(visits(p, n_active)):
+        j = polygon_node(p, active, n_active, k)
+        radius = node_radius(ev, j, r, p.t)
+        ek.evidence_node(ev, j, x - radius * ex, y - radius * ey, lw)
+
+
+@wp.func
+def segments_constant(ev: Any, p: Any, x: Any, y: Any, ex: Any, ey: Any, r: Any, lw: wp.array(dtype=Any)):
+    """Where searches over intervals are the only smooth factors: whether their weights are
+    constant about the path of direction e (no segment crosses an edge, :func:`segments_cross`),
+    and then their log-weights set."""
+    if segments_cross(ev, p, x, y, ex, ey, r):
+        return False
+    add_segments(ev, p, x, y, ex, ey, r, lw)
+    return True
 
 
 @wp.func
@@ -1497,15 +1478,13 @@ def carried_arc(
     ev: Any, lw: wp.array(dtype=Any), out: wp.array(dtype=Any),
 ):
     """Add to each channel the integral over theta* + (lo, hi) of exp(E + log_scale) times the
-    path's weight: pieces between the polygons' course breaks (a window of BREAKS at a time),
-    Gauss-Legendre on the fewest equal panels no wider than the 16-point rule's limit in
-    ``spacing``, each by the lowest order whose limit covers it (``ORDERS``). Without smooth factors the weight is
-    constant on a piece: one weight per piece, and an arc without breaks takes the density's
-    own trapezoid sum over it (``trapezoid``, relative to exp(E*)) times its weight. With
-    breaks, the piece holding the peak's course, where its weight is constant, takes the
-    trapezoid sum less the other pieces' integrals (where that is at least half the sum, so
-    the trapezoid's error, 1e-12 of the arc, stays within 2e-12 of the piece's; else its own
-    rule): the arc's widest piece costs no nodes."""
+    path's weight: pieces between the polygons' course breaks (a window of BREAKS at a time), each
+    by :func:`gauss_piece` in ``spacing``. Without smooth factors the weight is constant on a piece:
+    one weight per piece, and an arc without breaks takes the density's own trapezoid sum over it
+    (``trapezoid``, relative to exp(E*)) times its weight. With breaks, the piece holding the peak's
+    course, where its weight is constant, takes the trapezoid sum less the other pieces' integrals
+    (where that is at least half the sum, so the trapezoid's error, 1e-12 of the arc, stays within
+    2e-12 of the piece's; else its own rule): the arc's widest piece costs no nodes."""
     zero = type(x)(0.0)
     half = type(x)(0.5)
     rule = p.rule
@@ -1514,7 +1493,6 @@ def carried_arc(
     reach = reaching_segments(p, x, y, r, sx, sy, lo, hi)
     smooth = p.smooth_nodes.shape[0] + reach
     cached = wp.vector(length=ACTIVE, dtype=type(x))
-    n_visit = visits(p, n_active)
     # the peak's piece (theta* inside it), where its weight is constant, is not integrated by
     # its own rule: its integral is the arc's trapezoid sum less the other pieces' (below)
     use_base = p.smooth_nodes.shape[0] == 0 and ev.channels.shape[1] <= ek.EXP_FACTORS and lo < zero and hi > zero
@@ -1529,18 +1507,11 @@ def carried_arc(
         if count == 0 and a == lo:
             # no break: the polygons' weight is constant on the arc
             e_mid, mx, my = course_node(cx, cy, q1x, q1y, c1, c2, p11, p12, p22, half * (lo + hi))
-            ek.evidence_reset(ev, lw)
-            for k in range(n_visit):
-                j = polygon_node(p, active, n_active, k)
-                radius = node_radius(ev, j, r, p.t)
-                ek.evidence_node(ev, j, x - radius * mx, y - radius * my, lw)
+            course_polygon_weights(ev, p, active, n_active, x, y, r, mx, my, lw)
             constant = smooth == 0
             if not constant and p.smooth_nodes.shape[0] == 0:
-                # only searches over intervals weigh the arc: constant where no segment crosses an
-                # edge (their weights are then those at the middle course)
-                if not segments_cross(ev, p, x, y, mx, my, r):
-                    add_segments(ev, p, x, y, mx, my, r, lw)
-                    constant = True
+                # only searches over intervals weigh the arc: their weights at the middle course
+                constant = segments_constant(ev, p, x, y, mx, my, r, lw)
             if constant:
                 ek.evidence_add(ev, lw, trapezoid * wp.exp(log_scale), out)
             else:
@@ -1560,14 +1531,10 @@ def carried_arc(
             if b > a:
                 e_mid, mx, my = course_node(cx, cy, q1x, q1y, c1, c2, p11, p12, p22, half * (a + b))
                 if n_active < 0:
-                    ek.evidence_reset(ev, lw)
-                    for k in range(n_visit):
-                        j = polygon_node(p, active, n_active, k)
-                        radius = node_radius(ev, j, r, p.t)
-                        ek.evidence_node(ev, j, x - radius * mx, y - radius * my, lw)
+                    course_polygon_weights(ev, p, active, n_active, x, y, r, mx, my, lw)
                 else:
                     if fresh == 1:
-                        for k in range(n_visit):
+                        for k in range(n_active):
                             cached[k] = polygon_contribution(ev, p, active, n_active, k, x, y, mx, my, r)
                         polygon_weights(ev, p, active, n_active, cached, lw)
                     else:
@@ -1590,13 +1557,10 @@ def carried_arc(
                             polygon_weights(ev, p, active, n_active, cached, lw)
                 fresh = int(0)
                 applied = piece
-                m, h, order, at = panel_rule(a, b, spacing, rule)
                 piece_smooth = smooth
                 if smooth > 0 and p.smooth_nodes.shape[0] == 0:
-                    # only searches over intervals: the piece's weight is constant where no
-                    # segment crosses an edge at its middle course (segments_cross)
-                    if not segments_cross(ev, p, x, y, mx, my, r):
-                        add_segments(ev, p, x, y, mx, my, r, lw)
+                    # only searches over intervals: the piece's weight may be constant
+                    if segments_constant(ev, p, x, y, mx, my, r, lw):
                         piece_smooth = 0
                 if use_base and piece_smooth == 0 and a <= zero and b > zero:
                     for f in range(ev.channels.shape[1]):
@@ -1606,18 +1570,8 @@ def carried_arc(
                     base_b = b
                     a = b
                     continue
-                total = zero
-                for k in range(m):
-                    mid = a + (type(x)(k) + half) * h
-                    for g in range(order):
-                        e, ex, ey = course_node(cx, cy, q1x, q1y, c1, c2, p11, p12, p22, mid + half * h * rule[at + g])
-                        term = half * h * rule[at + order + g] * wp.exp(e + log_scale)
-                        others = others + term
-                        if piece_smooth == 0:
-                            total = total + term
-                        else:
-                            add_smooth(ev, p, x, y, ex, ey, r, lw)
-                            ek.evidence_add(ev, lw, term, out)
+                total, others = gauss_piece(a, b, spacing, cx, cy, q1x, q1y, c1, c2, p11, p12, p22, log_scale, rule,
+                                            piece_smooth, x, y, r, p, ev, lw, out, others)
                 if piece_smooth == 0:
                     ek.evidence_add(ev, lw, total, out)
                 a = b
@@ -1631,7 +1585,8 @@ def carried_arc(
         if base < half * whole:
             # the peak's piece holds under half the arc: its own rule (the difference's
             # cancellation would cost more than the trapezoid's 1e-12 of the arc)
-            base = gauss_piece(base_a, base_b, spacing, cx, cy, q1x, q1y, c1, c2, p11, p12, p22, log_scale, rule)
+            base, unused = gauss_piece(base_a, base_b, spacing, cx, cy, q1x, q1y, c1, c2, p11, p12, p22, log_scale,
+                                       rule, 0, x, y, r, p, ev, lw, out, zero)
         for f in range(ev.channels.shape[1]):
             lw[f] = base_lw[f]
         ek.evidence_add(ev, lw, base, out)
@@ -1647,31 +1602,19 @@ def carried_speed(
     params = p.params
     zero = type(z1)(0.0)
     pi = type(z1)(PI)
-    rho1 = params[base + RHO1]
-    rho2 = params[base + RHO2]
-    four_f = params[base + FOUR_F]
-    kappa = params[KAPPA]
-    c0 = params[COS_THETA0]
-    s0 = params[SIN_THETA0]
-    stop = params[STOP]
     q1x = params[Q1_X]
     q1y = params[Q1_Y]
-    r = rho1 / params[INV_SQRT_S1]
-    a = rho1 * z1 + kappa * c0
-    b = rho2 * z2 + kappa * s0
-    n = node_count(wp.sqrt(a * a + b * b) + four_f, params[LOG_TOL])
-    delta = type(z1)(TWO_PI) / type(z1)(n)
+    r = params[base + RHO1] / params[INV_SQRT_S1]
+    a, b, n, delta, cx, cy, mu, e1, c1, c2, p11, p12, p22 = peak_rule(z1, z2, params, base, zero)
     spacing = delta
     if p.smooth_nodes.shape[0] > 0:
         spacing = smooth_spacing(x, y, r, p, delta, ev)
         spacing = delta / type(z1)(float(int(wp.ceil(delta / spacing))))  # delta a multiple of it
-    cx, cy, mu = global_peak(a, b, four_f, params[NEWTON_TOL], zero)
-    e1, c1, c2, p11, p12, p22 = anchor_exponent(z1, z2, rho1, rho2, kappa, c0, s0, cx, cy)
     log_scale = params[base + LOG_COEF] + e1
     if log_scale < params[LOG_TINY]:
         return
     active, n_active = active_polygons(ev, p, x, y, r)
-    trapezoid, p1, m1 = walk(c1, c2, p11, p12, p22, delta, stop, n - 1, n - 1, n - 1)
+    trapezoid, p1, m1 = walk(c1, c2, p11, p12, p22, delta, params[STOP], n - 1, n - 1, n - 1)
     lo = -type(z1)(m1) * delta
     hi = type(z1)(p1) * delta
     if p1 + m1 + 1 >= n:
@@ -1679,25 +1622,11 @@ def carried_speed(
         hi = pi
     carried_arc(x, y, r, cx, cy, q1x, q1y, c1, c2, p11, p12, p22, lo, hi, spacing, log_scale, delta * trapezoid, p,
                 active, n_active, ev, lw, out)
-    found, x2, y2 = second_peak(a, b, four_f, params[NEWTON_TOL], params[LOG_STOP])
-    if found == 1 and p1 + m1 + 1 < n:
-        offset = wp.atan2(cx * y2 - cy * x2, cx * x2 + cy * y2)
-        j2 = int(wp.round(offset / delta))
-        if j2 < 0:
-            j2 = j2 + n
-        if j2 > p1 and j2 < n - m1:
-            angle = type(z1)(j2) * delta
-            cj = wp.cos(angle)
-            sj = wp.sin(angle)
-            e2, d1, d2, q11, q12, q22 = anchor_exponent(z1, z2, rho1, rho2, kappa, c0, s0, cx * cj - cy * sj,
-                                                        cy * cj + cx * sj)
-            if wp.exp(e2 - e1) >= stop:
-                lim_plus = n - m1 - 1 - j2
-                lim_minus = j2 - p1 - 1
-                extra, p2, m2 = walk(d1, d2, q11, q12, q22, delta, stop, lim_plus, lim_minus, lim_plus + lim_minus)
-                carried_arc(x, y, r, cx, cy, q1x, q1y, c1, c2, p11, p12, p22, type(z1)(j2 - m2) * delta,
-                            type(z1)(j2 + p2) * delta, spacing, log_scale, delta * wp.exp(e2 - e1) * extra, p, active,
-                            n_active, ev, lw, out)
+    scale, extra, j2, p2, m2 = second_walk(z1, z2, params, base, a, b, n, delta, cx, cy, e1, p1, m1)
+    if scale > zero:
+        carried_arc(x, y, r, cx, cy, q1x, q1y, c1, c2, p11, p12, p22, type(z1)(j2 - m2) * delta,
+                    type(z1)(j2 + p2) * delta, spacing, log_scale, delta * scale * extra, p, active, n_active, ev,
+                    lw, out)
 
 
 @wp.func
@@ -1707,8 +1636,7 @@ def butterly_carried(x: Any, y: Any, p: Any, ev: Any, lw: wp.array(dtype=Any), o
     LOG_SPEED_FLOOR (and the point where every speed's is below LOG_CELL_FLOOR): weights are at
     most one, so the prior's bound bounds every channel."""
     params = p.params
-    z1, z2 = whiten(x, y, params)
-    z_norm = wp.sqrt(z1 * z1 + z2 * z2)
+    z1, z2, z_norm = whiten(x, y, params)
     cell_floor = params[LOG_CELL_FLOOR] - wp.log(type(x)(float(p.n_speeds)))
     keep = int(0)
     for i in range(p.n_speeds):
