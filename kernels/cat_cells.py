@@ -22,20 +22,16 @@ tiny change of omega. Crossings are computed from the lines alone, not accumulat
 drifts and the result does not depend on the bands. Always float64: a cell's share is a
 difference of two normal tails.
 
-Earlier evidence (:class:`Earlier`; the weighted share's formula:
-``bananagrid.models.cat_carried``): a polygon at an earlier time s weighs each path by where it
-was at s. For one omega the paths' points at s form the line of omega at s, affine in the same
-z, so the polygon's edges cut the cell's window [z_in, z_out] into pieces of constant weight,
-exact in z (``weighted_share``). The earlier lines are interpolated across the interval like
-the lines at t (``earlier_line``). Over omega the share has kinks where an earlier line passes a
-polygon vertex and where a crossing enters or leaves the window: breaks of the Gauss rule
-(``weighted_piece``). Sub-pieces whose earlier points no polygon edge comes near take the plain
-terms times constant factors, so the evidence costs only where it cuts, and without evidence
-the sums are the plain rule's bit for bit. On a sub-piece that polygons cut, only the channels
-weighed by one of them take the split rule; the others (the prior, the channels of other
-polygons) take the plain terms times constant factors, so the prior channel is always the plain
-rule's terms, regrouped (equal to float64 rounding). One pass fills several channels: channel c
-weighs by the polygons of the bit mask ``masks[c]``.
+Earlier evidence (:class:`Earlier`): polygons at earlier times weigh each path by where it was
+then, exactly in z along each line (``weighted_share``), with the kinks over omega as breaks of
+the Gauss rule (``weighted_piece``); the rule and its error: ``bananagrid.models.cat_carried``.
+Sub-pieces whose earlier points no polygon edge comes near take the plain terms times constant
+factors, so the evidence costs only where it cuts, and without evidence the sums are the plain
+rule's bit for bit. On a sub-piece that polygons cut, only the channels weighed by one of them
+take the split rule; the others (the prior, the channels of other polygons) take the plain
+terms times constant factors, so the prior channel is always the plain rule's terms, regrouped
+(equal to float64 rounding). One pass fills several channels: channel c weighs by the polygons
+of the bit mask ``masks[c]``.
 """
 
 
@@ -186,9 +182,7 @@ def corner_roots(line: wp.vec4d, d: wp.vec4d, cx: wp.float64, cy: wp.float64, af
     disc = c1 * c1 - wp.float64(4.0) * c2 * c0
     if disc < zero:
         return best
-    q = wp.float64(-0.5) * (c1 + wp.sign(c1) * wp.sqrt(disc))  # no cancellation (Numerical Recipes 5.6)
-    if c1 == zero:
-        q = wp.float64(-0.5) * wp.sqrt(disc)
+    q = wp.float64(-0.5) * (c1 + wp.sign(c1) * wp.sqrt(disc))  # no cancellation (Numerical Recipes 5.6; sign(0) = 1)
     r1 = q / c2
     if r1 > after and r1 < best:
         best = r1
@@ -297,25 +291,19 @@ def window_state(ev: Earlier, active: int, k: int, s: wp.float64, lo: wp.float64
 
 
 @wp.func
-def mask_weight(ev: Earlier, mask: int):
-    """The weight of a path inside the polygons of the bit mask ``mask``: the product of their
-    factors (1 - POD, 0 on land)."""
-    w = wp.float64(1.0)
-    for p in range(ev.count):
-        if (mask >> p) & 1 == 1:
-            w = w * ev.miss[p]
-    return w
-
-
-@wp.func
 def add_channels(ev: Earlier, cut: int, meets: bool, inside: int, value: wp.float64, i: int, j: int,
                  out: wp.array3d(dtype=wp.float64)):
     """Add ``value`` times each channel's weight of a path inside the polygons of the bit mask
-    ``inside`` to cell (i, j) of the channels whose mask meets ``cut`` (``meets``) or misses it
-    (not ``meets``: with ``cut`` 0, every channel)."""
+    ``inside`` (the product of the factors of the channel's polygons among them) to cell (i, j)
+    of the channels whose mask meets ``cut`` (``meets``) or misses it (not ``meets``: with
+    ``cut`` 0, every channel)."""
     for c in range(ev.channels):
         if (ev.masks[c] & cut != 0) == meets:
-            out[c, j, i] += mask_weight(ev, ev.masks[c] & inside) * value
+            w = wp.float64(1.0)
+            for p in range(ev.count):
+                if ((ev.masks[c] & inside) >> p) & 1 == 1:
+                    w = w * ev.miss[p]
+            out[c, j, i] += w * value
 
 
 @wp.func
@@ -364,18 +352,6 @@ def patch_meets(ev: Earlier, p: int, k: int, s0: wp.float64, s1: wp.float64, z0:
     hi = wp.max(wp.max(a0, a1), wp.max(b0, b1))
     box = ev.boxes[p]
     return hi[0] >= box[0] and lo[0] <= box[1] and hi[1] >= box[2] and lo[1] <= box[3], lo, hi
-
-
-@wp.func
-def patch_active(ev: Earlier, k: int, s0: wp.float64, s1: wp.float64, z0: wp.float64, z1: wp.float64):
-    """Bit mask of the polygons whose box meets that of the earlier points of the lines s in
-    [s0, s1], z in [z0, z1] (:func:`patch_meets`)."""
-    active = int(0)
-    for p in range(ev.count):
-        meets, _lo, _hi = patch_meets(ev, p, k, s0, s1, z0, z1)
-        if meets:
-            active = active | (1 << p)
-    return active
 
 
 @wp.func
@@ -436,8 +412,7 @@ def gauss_node(r: Ribbon, n: int, mid: wp.float64, half: wp.float64, i: int, j: 
 
 @wp.func
 def gauss_nodes(r: Ribbon, i: int, j: int, mid: wp.float64, half: wp.float64, total: wp.float64):
-    """``total`` plus, node by node, the 3-point Gauss-Legendre terms of the lines' shares of
-    cell (i, j) over s in [mid - half, mid + half] (the plain rule's sub-piece)."""
+    """``total`` plus the terms of the lines' shares of cell (i, j) (:func:`gauss_node`)."""
     for n in range(3):
         s, lo, hi, scale = gauss_node(r, n, mid, half, i, j)
         if lo < hi:
@@ -448,11 +423,10 @@ def gauss_nodes(r: Ribbon, i: int, j: int, mid: wp.float64, half: wp.float64, to
 @wp.func
 def weighted_gauss(ev: Earlier, active: int, base: int, r: Ribbon, a: wp.float64, b: wp.float64, i: int, j: int,
                    out: wp.array3d(dtype=wp.float64)):
-    """3-point Gauss-Legendre over s in [a, b] of the weighted shares (``weighted_share``)."""
+    """:func:`gauss_nodes` over s in [a, b] of the weighted shares (``weighted_share``)."""
     half = wp.float64(0.5) * (b - a)
-    mid = a + half
     for n in range(3):
-        s, lo, hi, scale = gauss_node(r, n, mid, half, i, j)
+        s, lo, hi, scale = gauss_node(r, n, a + half, half, i, j)
         if lo < hi:
             weighted_share(ev, active, base, r.k, s, lo, hi, scale, i, j, out)
 
@@ -588,12 +562,8 @@ def walk_edge(r: Ribbon, edge: wp.float64, row0: int, row1: int, nx: int, ev: Ea
     i = first_cell(line[0] + lo * line[2], line[2], 0, nx)
     j = first_cell(line[1] + lo * line[3], line[3], row0, row1)
     z = lo
-    step_i = 1
-    if line[2] < wp.float64(0.0):
-        step_i = -1
-    step_j = 1
-    if line[3] < wp.float64(0.0):
-        step_j = -1
+    step_i = int(wp.sign(line[2]))  # 1 for a step of 0
+    step_j = int(wp.sign(line[3]))
     for _ in range(nx + row1 - row0 + 2):  # a line crosses at most nx + rows cells of the band
         zi = next_crossing(line[0], line[2], i)
         zj = next_crossing(line[1], line[3], j)
@@ -636,7 +606,10 @@ def cat_cells(edges: wp.array(dtype=wp.float64), sigma_omega: wp.float64, t: wp.
     r.step = world_line(r.omega0 + r.h, t, f) - r.line
     r.sigma_omega = sigma_omega
     r.k = k
-    # the polygons that the interval's earlier lines reach at all (|z| <= Z_MAX)
-    near = patch_active(ev, k, wp.float64(0.0), wp.float64(1.0), wp.float64(-Z_MAX), wp.float64(Z_MAX))
+    # the polygons that cut or hold the interval's earlier points (|z| <= Z_MAX); the others
+    # miss every one of them
+    cut, inside = patch_state(ev, (1 << ev.count) - 1, k, wp.float64(0.0), wp.float64(1.0), wp.float64(-Z_MAX),
+                              wp.float64(Z_MAX))
+    near = cut | inside
     walk_edge(r, wp.float64(0.0), row0, row1, nx, ev, near, out)
     walk_edge(r, wp.float64(1.0), row0, row1, nx, ev, near, out)
