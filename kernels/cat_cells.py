@@ -273,21 +273,26 @@ def polygon_crossings(ev: Earlier, p: int, line: wp.vec4d, lo: wp.float64, hi: w
 
 
 @wp.func
-def window_state(ev: Earlier, active: int, k: int, s: wp.float64, lo: wp.float64, hi: wp.float64):
-    """For the earlier lines of s and the polygons of ``active``: the bit mask of those holding
-    the point at z = lo, and the number of crossings in (lo, hi)."""
+def window_state(ev: Earlier, active: int, r: Ribbon, s: wp.float64, i: int, j: int):
+    """The window [lo, hi] of z of the ribbon's line s in cell (i, j) and, for the earlier lines
+    of s and the polygons of ``active``, the bit mask of those holding the point at z = lo and
+    the number of crossings in (lo, hi): -1 where the window is empty (the number changes where
+    a crossing enters or leaves the window, a kink of the weighted share in s)."""
+    lo, hi = ribbon_clip(r, s, i, j)
     inside = int(0)
     inner = int(0)
+    if lo >= hi:
+        return lo, hi, inside, -1
     for p in range(ev.count):
         if (active >> p) & 1 == 1:
-            line = earlier_line(ev, p, k, s)
+            line = earlier_line(ev, p, r.k, s)
             if line[2] == wp.float64(0.0) and line[3] == wp.float64(0.0):  # the time of the last fix: one point
                 inside = inside | (holds(ev, p, wp.vec2d(line[0], line[1])) << p)
             else:
                 below, n, _first, _toggle = polygon_crossings(ev, p, line, lo, hi)
                 inside = inside | (below << p)
                 inner += n
-    return inside, inner
+    return lo, hi, inside, inner
 
 
 @wp.func
@@ -307,15 +312,15 @@ def add_channels(ev: Earlier, cut: int, meets: bool, inside: int, value: wp.floa
 
 
 @wp.func
-def weighted_share(ev: Earlier, active: int, base: int, k: int, s: wp.float64, lo: wp.float64, hi: wp.float64,
-                   scale: wp.float64, i: int, j: int, out: wp.array3d(dtype=wp.float64)):
-    """Add ``scale`` times the weighted normal mass of the line's piece [lo, hi] of z (in the
-    cell) to every channel whose mask meets ``active`` (the others: :func:`ribbon_cell`): the
-    earlier lines' crossings with the polygons (``active``'s bits; of the others, ``base``'s
-    hold the whole window, the rest miss it) cut [lo, hi] into pieces of constant weight, each
-    adding its weight times Phi(z_hi) - Phi(z_lo), exactly. The pieces are taken in order by
-    finding the least crossing above the last (no sort, no buffer)."""
-    inside, inner = window_state(ev, active, k, s, lo, hi)
+def weighted_share(ev: Earlier, active: int, base: int, r: Ribbon, s: wp.float64, scale: wp.float64, i: int, j: int,
+                   out: wp.array3d(dtype=wp.float64)):
+    """Add ``scale`` times the weighted normal mass of the ribbon's line s in cell (i, j) (its
+    window [lo, hi] of z, not empty) to every channel whose mask meets ``active`` (the others:
+    :func:`ribbon_cell`): the earlier lines' crossings with the polygons (``active``'s bits; of
+    the others, ``base``'s hold the whole window, the rest miss it) cut [lo, hi] into pieces of
+    constant weight, each adding its weight times Phi(z_hi) - Phi(z_lo), exactly. The pieces are
+    taken in order by finding the least crossing above the last (no sort, no buffer)."""
+    lo, hi, inside, inner = window_state(ev, active, r, s, i, j)
     inside = inside | base
     z = lo
     for _ in range(inner + 1):
@@ -324,7 +329,7 @@ def weighted_share(ev: Earlier, active: int, base: int, k: int, s: wp.float64, l
         if inner > 0:
             for p in range(ev.count):
                 if (active >> p) & 1 == 1:
-                    _below, _n, first, flip = polygon_crossings(ev, p, earlier_line(ev, p, k, s), z, z_next)
+                    _below, _n, first, flip = polygon_crossings(ev, p, earlier_line(ev, p, r.k, s), z, z_next)
                     if first < z_next:
                         z_next = first
                         toggle = flip << p
@@ -383,18 +388,6 @@ def patch_state(ev: Earlier, near: int, k: int, s0: wp.float64, s1: wp.float64, 
 
 
 @wp.func
-def window_signature(ev: Earlier, active: int, r: Ribbon, s: wp.float64, i: int, j: int):
-    """The number of crossings of the earlier lines with the polygons inside the cell's window
-    [z_in, z_out] of the line s (-1 where it misses the cell): it changes where a crossing
-    enters or leaves the window, a kink of the weighted share in s."""
-    lo, hi = ribbon_clip(r, s, i, j)
-    if lo >= hi:
-        return -1
-    _inside, inner = window_state(ev, active, r.k, s, lo, hi)
-    return inner
-
-
-@wp.func
 def gauss_node(r: Ribbon, n: int, mid: wp.float64, half: wp.float64, i: int, j: int):
     """Node n (0, 1, 2) of 3-point Gauss-Legendre over s in [mid - half, mid + half]: its s, the
     line's window [lo, hi] of z in cell (i, j) and, where it is not empty, the node's factor
@@ -428,7 +421,7 @@ def weighted_gauss(ev: Earlier, active: int, base: int, r: Ribbon, a: wp.float64
     for n in range(3):
         s, lo, hi, scale = gauss_node(r, n, a + half, half, i, j)
         if lo < hi:
-            weighted_share(ev, active, base, r.k, s, lo, hi, scale, i, j, out)
+            weighted_share(ev, active, base, r, s, scale, i, j, out)
 
 
 @wp.func
@@ -450,21 +443,23 @@ def weighted_piece(ev: Earlier, active: int, base: int, r: Ribbon, a: wp.float64
                 for e in range(ev.starts[p], ev.starts[p + 1]):
                     s1 = corner_roots(l0, d, ev.edges[e, 0], ev.edges[e, 1], s0, s1)
         # [s0, s1]: no vertex pass inside; cut where the window's crossing count changes
-        left = window_signature(ev, active, r, s0, i, j)
+        _lo, _hi, _inside, left = window_state(ev, active, r, s0, i, j)
         for _e in range(MAX_EVENTS):
-            if window_signature(ev, active, r, s1, i, j) == left:
+            _lo, _hi, _inside, right = window_state(ev, active, r, s1, i, j)
+            if right == left:
                 break
             lo_s = s0
             hi_s = s1
             for _b in range(WINDOW_BISECTIONS):
                 m = wp.float64(0.5) * (lo_s + hi_s)
-                if window_signature(ev, active, r, m, i, j) == left:
+                _lo, _hi, _inside, middle = window_state(ev, active, r, m, i, j)
+                if middle == left:
                     lo_s = m
                 else:
                     hi_s = m
             weighted_gauss(ev, active, base, r, s0, hi_s, i, j, out)
             s0 = hi_s
-            left = window_signature(ev, active, r, s0, i, j)
+            _lo, _hi, _inside, left = window_state(ev, active, r, s0, i, j)
         weighted_gauss(ev, active, base, r, s0, s1, i, j, out)
         if s1 >= b:
             break
