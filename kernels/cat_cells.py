@@ -38,7 +38,7 @@ of the bit mask ``masks[c]``.
 import warp as wp
 
 from .common import cat_basis, local_to_world, normal_interval, normal_pdf
-from .evidence import polygon_contains
+from .evidence import polygon_contains, polygon_edge
 
 # No adjoints: nothing differentiates these kernels, and the backward kernels Warp would
 # generate for every launch kernel are most of a module's code (the CAT module's CUDA build:
@@ -235,10 +235,7 @@ def edge_crossing(line: wp.vec4d, edges: wp.array2d(dtype=wp.float64), e: int):
     the sign of cross(q, v - p) > 0 (the even-odd rule's half-open convention), so a line
     through a vertex crosses exactly one of its two edges, or both or neither where it only
     touches the polygon there: the parity of the crossings below any z is the inside test."""
-    ax = edges[e, 0]
-    ay = edges[e, 1]
-    bx = edges[e, 2]
-    by = edges[e, 3]
+    ax, ay, bx, by = polygon_edge(edges, e)
     ca = line[2] * (ay - line[1]) - line[3] * (ax - line[0])
     cb = line[2] * (by - line[1]) - line[3] * (bx - line[0])
     zero = wp.float64(0.0)
@@ -373,10 +370,7 @@ def patch_state(ev: Earlier, near: int, k: int, s0: wp.float64, s1: wp.float64, 
             if meets:
                 hit = bool(False)
                 for e in range(ev.starts[p], ev.starts[p + 1]):
-                    ax = ev.edges[e, 0]
-                    ay = ev.edges[e, 1]
-                    bx = ev.edges[e, 2]
-                    by = ev.edges[e, 3]
+                    ax, ay, bx, by = polygon_edge(ev.edges, e)
                     if wp.max(ax, bx) >= lo[0] and wp.min(ax, bx) <= hi[0] and wp.max(ay, by) >= lo[1] and wp.min(
                             ay, by) <= hi[1]:
                         hit = True

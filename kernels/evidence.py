@@ -118,15 +118,18 @@ def evidence_reset(ev: Any, lw: wp.array(dtype=Any)):
 
 
 @wp.func
+def polygon_edge(edges: wp.array2d(dtype=Any), e: int):
+    """The ends (ax, ay, bx, by) of edge e of a polygon's edge rows (x0, y0, x1, y1)."""
+    return edges[e, 0], edges[e, 1], edges[e, 2], edges[e, 3]
+
+
+@wp.func
 def polygon_contains(edges: wp.array2d(dtype=Any), offset: int, count: int, px: Any, py: Any):
     """Whether (px, py) is inside the polygon ``edges[offset : offset + count]`` (even-odd rule,
     as ``bananagrid.evidence.geometry.Polygon.contains``)."""
     inside = bool(False)
     for e in range(offset, offset + count):
-        ax = edges[e, 0]
-        ay = edges[e, 1]
-        bx = edges[e, 2]
-        by = edges[e, 3]
+        ax, ay, bx, by = polygon_edge(edges, e)
         if (ay > py) != (by > py):
             cross = ax + (py - ay) * (bx - ax) / (by - ay)
             if px < cross:
