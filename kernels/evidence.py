@@ -13,10 +13,8 @@ factor's log-weight is
 with c_j (``KIND_*``):
 
 * ``KIND_POLYGON``: ``data[0]`` inside the polygon (``edges[off : off + count]``, even-odd
-  rule, bounding box ``data[1:5]`` = x0, x1, y0, y1), else 0. A search at one time: data[0] =
-  log(1 - POD), q = 1. A search over (t0, t1) with coverage C spread over it (random search,
-  POD of a path = 1 - exp(-C * fraction of the interval spent inside)): data[0] = -C / (t1 - t0)
-  and Gauss-Legendre nodes q_j over (t0, t1).
+  rule, bounding box ``data[1:5]`` = x0, x1, y0, y1), else 0: log(1 - POD) (a search at one
+  time, q = 1) or -C / (t1 - t0) (coverage C spread over an interval, Gauss-Legendre nodes).
 * ``KIND_RASTER``: the value of the raster cell holding x_j (``raster[off + i nx + j]``; row i
   from ``data[1]`` = y0 north by ``data[3]`` = dy, column j from ``data[0]`` = x0 east by
   ``data[2]`` = dx, ``ints`` count = nx, ``data[4]`` = ny), 0 outside the raster; the values are
@@ -41,11 +39,8 @@ with c_j (``KIND_*``):
   (the chord from its position at s_{j-1} to that at s_j), so the relative position
   D = X - Q is linear in time and the chord's closest approach is the distance from the origin
   to the segment D_{j-1} D_j, closed form (:func:`segment_distance`). c_j = -inf (the weight 0)
-  where it is at most h, else 0 (the chain's first node: |D_0| <= h). Exact for a path
-  straight at constant speed over each chord (Butterly's); a path whose acceleration is at most
-  M over a chord of dt seconds deviates from its chord by at most M dt^2 / 8, and its computed
-  closest approach is within that of the true one (the pack's chords, ``packing.pack``, bound
-  dt).
+  where it is at most h, else 0 (the chain's first node: |D_0| <= h); exact for a path
+  straight over each chord (the error of others: ``packing``).
 
 The path's weight for a *channel* c is exp(sum over factors k in c of lw_k); the pack lists the
 channels as a 0/1 mask ``channels[c, k]`` (e.g. the prior: no factor; all evidence; the
@@ -109,12 +104,6 @@ def evidence_nodes(ev: Any):
 
 
 @wp.func
-def evidence_channels(ev: Any):
-    """Number of channels."""
-    return ev.channels.shape[0]
-
-
-@wp.func
 def evidence_time(ev: Any, j: int):
     """Time s_j of node j (s since the last fix)."""
     return ev.time[j]
@@ -129,15 +118,18 @@ def evidence_reset(ev: Any, lw: wp.array(dtype=Any)):
 
 
 @wp.func
+def polygon_edge(edges: wp.array2d(dtype=Any), e: int):
+    """The ends (ax, ay, bx, by) of edge e of a polygon's edge rows (x0, y0, x1, y1)."""
+    return edges[e, 0], edges[e, 1], edges[e, 2], edges[e, 3]
+
+
+@wp.func
 def polygon_contains(edges: wp.array2d(dtype=Any), offset: int, count: int, px: Any, py: Any):
     """Whether (px, py) is inside the polygon ``edges[offset : offset + count]`` (even-odd rule,
     as ``bananagrid.evidence.geometry.Polygon.contains``)."""
     inside = bool(False)
     for e in range(offset, offset + count):
-        ax = edges[e, 0]
-        ay = edges[e, 1]
-        bx = edges[e, 2]
-        by = edges[e, 3]
+        ax, ay, bx, by = polygon_edge(edges, e)
         if (ay > py) != (by > py):
             cross = ax + (py - ay) * (bx - ax) / (by - ay)
             if px < cross:
@@ -159,6 +151,8 @@ def evidence_contribution(ev: Any, j: int, px: Any, py: Any):
     kind = ev.ints[j, 0]
     zero = type(px)(0.0)
     half = type(px)(0.5)
+    dx = px - ev.data[j, 0]  # from the report's mean, the sensor, the searcher
+    dy = py - ev.data[j, 1]
     if kind == KIND_POLYGON:
         if px < ev.data[j, 1] or px > ev.data[j, 2] or py < ev.data[j, 3] or py > ev.data[j, 4]:
             return zero
@@ -175,16 +169,12 @@ def evidence_contribution(ev: Any, j: int, px: Any, py: Any):
         row = wp.min(int(fy), int(ev.data[j, 4]) - 1)
         return ev.raster[ev.ints[j, 2] + row * nx + col]
     if kind == KIND_NORMAL:
-        dx = px - ev.data[j, 0]
-        dy = py - ev.data[j, 1]
         return -half * (ev.data[j, 2] * dx * dx + type(px)(2.0) * ev.data[j, 3] * dx * dy + ev.data[j, 4] * dy * dy)
     if kind == KIND_BEARING:
-        beta = wp.atan2(px - ev.data[j, 0], py - ev.data[j, 1])
+        beta = wp.atan2(dx, dy)
         z = wrap_angle(beta - ev.data[j, 2]) * ev.data[j, 3]
         return -half * z * z
     if kind == KIND_INVERSE_CUBE:
-        dx = px - ev.data[j, 0]
-        dy = py - ev.data[j, 1]
         r2 = dx * dx + dy * dy
         return -ev.data[j, 2] / (r2 * wp.sqrt(r2))
     return zero
@@ -209,23 +199,19 @@ def segment_distance(ax: Any, ay: Any, bx: Any, by: Any):
 
 
 @wp.func
-def definite_margin(ev: Any, j: int, px: Any, py: Any, prev_x: Any, prev_y: Any):
-    """Closest approach less h over node j's chord of a definite-range chain, the path at
-    (prev_x, prev_y) at the chord's start and at (px, py) at s_j (the chain's first node: the
-    range at s_j less h). At most 0: detected."""
-    dx = px - ev.data[j, 0]
-    dy = py - ev.data[j, 1]
-    if (ev.ints[j, 3] & DEFINITE_START) != 0:
-        return wp.sqrt(dx * dx + dy * dy) - ev.data[j, 4]
-    return segment_distance(prev_x - ev.data[j, 2], prev_y - ev.data[j, 3], dx, dy) - ev.data[j, 4]
-
-
-@wp.func
 def definite_node(ev: Any, j: int, px: Any, py: Any, lw: wp.array(dtype=Any)):
     """A definite-range chain's node j: the factor's log-weight to -inf where the chord ending
-    at s_j comes within h of the searcher; the path's position kept for the next chord."""
+    at s_j comes within h of the searcher (the chain's first node: where the range at s_j is at
+    most h); the path's position kept in the slots for the next chord."""
     slot = ev.ints[j, 2]
-    if definite_margin(ev, j, px, py, lw[slot], lw[slot + 1]) <= type(px)(0.0):
+    dx = px - ev.data[j, 0]
+    dy = py - ev.data[j, 1]
+    margin = type(px)(0.0)  # closest approach less h
+    if (ev.ints[j, 3] & DEFINITE_START) != 0:
+        margin = wp.sqrt(dx * dx + dy * dy) - ev.data[j, 4]
+    else:
+        margin = segment_distance(lw[slot] - ev.data[j, 2], lw[slot + 1] - ev.data[j, 3], dx, dy) - ev.data[j, 4]
+    if margin <= type(px)(0.0):
         k = ev.ints[j, 1]
         lw[k] = -type(px)(wp.inf)
     lw[slot] = px
@@ -248,16 +234,6 @@ def evidence_node(ev: Any, j: int, px: Any, py: Any, lw: wp.array(dtype=Any)):
 
 
 @wp.func
-def evidence_weight(ev: Any, lw: wp.array(dtype=Any), c: int):
-    """The path's weight in channel c: exp(sum of the log-weights of the channel's factors)."""
-    total = type(lw[0])(0.0)
-    for k in range(ev.channels.shape[1]):
-        if ev.channels[c, k] != 0:
-            total += lw[k]
-    return wp.exp(total)
-
-
-@wp.func
 def evidence_add(ev: Any, lw: wp.array(dtype=Any), density: Any, out: wp.array(dtype=Any)):
     """Add the path's density times its weight in each channel to ``out`` (one row per point).
 
@@ -270,7 +246,11 @@ def evidence_add(ev: Any, lw: wp.array(dtype=Any), density: Any, out: wp.array(d
     n_factors = ev.channels.shape[1]
     if n_factors > EXP_FACTORS:
         for c in range(ev.channels.shape[0]):
-            out[c] = out[c] + density * evidence_weight(ev, lw, c)
+            total = type(lw[0])(0.0)
+            for k in range(n_factors):
+                if ev.channels[c, k] != 0:
+                    total += lw[k]
+            out[c] = out[c] + density * wp.exp(total)
         return
     zero = type(density)(0.0)
     one = type(density)(1.0)

@@ -107,43 +107,36 @@ class EarlierPolygons:
         object.__setattr__(self, "count", count)
 
 
-def _earlier(ctx: KernelContext, model, grid: Grid, edges: np.ndarray, polygons: EarlierPolygons | None):
+def _frame(model, grid: Grid):
+    """The kernels' :class:`kernels.cat_cells.Frame` of ``model``'s lines on ``grid``."""
+    f = cat_cells.Frame()
+    f.v0, f.sigma_a, f.pose = model.v0, model.sigma_a, cat_cells.VEC4(*model.pose.as_array())
+    f.x_edge, _, f.y_edge, _ = grid.extent
+    f.dx, f.dy = grid.dx, grid.dy
+    return f
+
+
+def _earlier(ctx: KernelContext, frame, grid: Grid, edges: np.ndarray, polygons: EarlierPolygons | None):
     """The kernels' :class:`kernels.cat_cells.Earlier` for ``polygons`` on ``grid`` (grid
     coordinates: (world - edge) / cell size), with the earlier lines at every interval edge."""
-    x0, _, y0, _ = grid.extent
     ev = cat_cells.Earlier()
-    f64 = np.float64
-    if polygons is None or polygons.count == 0:
-        ev.lines = ctx.zeros((0, 0), dtype=cat_cells.VEC4)
-        ev.starts = ctx.array(np.zeros(1, dtype=np.int32), dtype=np.int32)
-        ev.verts = ctx.zeros(0, dtype=cat_cells.VEC2)
-        ev.boxes = ctx.zeros(0, dtype=cat_cells.VEC4)
-        ev.miss = ctx.zeros(0, dtype=f64)
-        ev.masks = ctx.array(np.zeros(1, dtype=np.int32), dtype=np.int32)
-        ev.count = 0
-        ev.channels = 1 if polygons is None else len(polygons.masks)
-        if polygons is not None:
-            ev.masks = ctx.array(np.asarray(polygons.masks, dtype=np.int32), dtype=np.int32)
-        return ev
-    scale = np.array([grid.dx, grid.dy])
-    local = [(v - (x0, y0)) / scale for v in polygons.vertices]
-    verts = np.concatenate(local)
-    starts = np.concatenate(([0], np.cumsum([len(v) for v in local]))).astype(np.int32)
-    boxes = np.array([(v[:, 0].min(), v[:, 0].max(), v[:, 1].min(), v[:, 1].max()) for v in local])
-    ev.starts = ctx.array(starts, dtype=np.int32)
-    ev.verts = ctx.array(verts, dtype=cat_cells.VEC2)
-    ev.boxes = ctx.array(boxes, dtype=cat_cells.VEC4)
-    ev.miss = ctx.array(polygons.miss, dtype=f64)
-    ev.masks = ctx.array(np.asarray(polygons.masks, dtype=np.int32), dtype=np.int32)
-    ev.count = polygons.count
-    ev.channels = len(polygons.masks)
-    lines = ctx.zeros((polygons.count, len(edges)), dtype=cat_cells.VEC4)
-    ctx.load(cat_cells.earlier_lines)
-    ctx.launch(cat_cells.earlier_lines, dim=(polygons.count, len(edges)), inputs=[
-        ctx.array(edges, dtype=f64), ctx.array(polygons.times, dtype=f64), f64(model.v0), f64(model.sigma_a),
-        ctx.array(model.pose.as_array(), dtype=f64), f64(x0), f64(y0), f64(grid.dx), f64(grid.dy), lines,
-    ])
-    ev.lines = lines
+    count = 0 if polygons is None else polygons.count
+    x0, _, y0, _ = grid.extent
+    local = [(v - (x0, y0)) / np.array([grid.dx, grid.dy]) for v in polygons.vertices] if count else []
+    ev.starts = ctx.array(np.concatenate(([0], np.cumsum([len(v) for v in local]))).astype(np.int32), dtype=np.int32)
+    ev.edges = ctx.array(np.concatenate([np.hstack((v, np.roll(v, -1, axis=0))) for v in local]) if count
+                         else np.zeros((0, 4)), dtype=np.float64)
+    ev.boxes = ctx.array(np.array([(v[:, 0].min(), v[:, 0].max(), v[:, 1].min(), v[:, 1].max()) for v in local])
+                         if count else np.zeros((0, 4)), dtype=cat_cells.VEC4)
+    ev.miss = ctx.array(polygons.miss if count else np.zeros(0), dtype=np.float64)
+    ev.masks = ctx.array(np.asarray((0,) if polygons is None else polygons.masks, dtype=np.int32), dtype=np.int32)
+    ev.count = count
+    ev.channels = 1 if polygons is None else len(polygons.masks)
+    ev.lines = ctx.zeros((count, len(edges) if count else 0), dtype=cat_cells.VEC4)
+    if count:
+        ctx.load(cat_cells.earlier_lines)
+        ctx.launch(cat_cells.earlier_lines, dim=(count, len(edges)), inputs=[
+            ctx.array(edges, dtype=np.float64), ctx.array(polygons.times, dtype=np.float64), frame, ev.lines])
     return ev
 
 
@@ -159,19 +152,14 @@ def grid_cell_channels(ctx: KernelContext, model, grid: Grid, edges: np.ndarray,
         masks = list(dict.fromkeys(polygons.masks))
         unique = EarlierPolygons(vertices=polygons.vertices, times=polygons.times, miss=polygons.miss,
                                  masks=tuple(masks))
-    ev = _earlier(ctx, model, grid, edges, unique)
+    frame = _frame(model, grid)
+    ev = _earlier(ctx, frame, grid, edges, unique)
     out = ctx.zeros((ev.channels, grid.ny, grid.nx), dtype=np.float64)
-    x0, _, y0, _ = grid.extent
-    f64 = np.float64
-    head = [ctx.array(edges, dtype=f64), f64(model.sigma_omega)]
-    scalars = [f64(model.v0), f64(model.t), f64(model.sigma_a)]
-    pose = ctx.array(model.pose.as_array(), dtype=f64)
+    head = [ctx.array(edges, dtype=np.float64), np.float64(model.sigma_omega), np.float64(model.t), frame]
     ctx.load(cat_cells.cat_cells)
 
     def launch(r0, r1):
-        ctx.launch(cat_cells.cat_cells, dim=len(edges) - 1, inputs=[
-            *head, r0, r1, *scalars, pose, f64(x0), f64(y0), f64(grid.dx), f64(grid.dy), grid.nx, ev, out,
-        ])
+        ctx.launch(cat_cells.cat_cells, dim=len(edges) - 1, inputs=[*head, r0, r1, grid.nx, ev, out])
 
     ctx.run_bands(launch, ctx.bands(grid.ny, 4))
     values = ctx.numpy(out)
