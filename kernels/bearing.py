@@ -21,7 +21,7 @@ from typing import Any
 import warp as wp
 
 from .common import each_mul
-from .generate import ARRAY, Params, density_kernels
+from .generate import ARRAY_VEC4, SCALAR, Params, density_kernels
 from .lanes import each_atan2, each_exp, each_wrap_angle
 
 # No adjoints: nothing differentiates these kernels, and the backward kernels Warp would
@@ -32,33 +32,29 @@ wp.set_module_options({"enable_backward": False})
 EXACT = 0
 LINEAR = 1
 
-#: Layout of the parameter array: [log_norm, fix_x, fix_y, p_xx, p_xy / p_xx, det(p) / p_xx]
-#: (p = C^-1: the linear map's form as a sum of squares), then per sensor (x, y, bearing, 1/sigma).
-HEAD = 6
-PER_SENSOR = 4
-
-
 @wp.func(inline=True)
 def bearing_density(x: Any, y: Any, p: Any):
     """Density per m^2 at the world point (x, y), exp(log p) (see the module docstring): the
     launch kernels' maths, at a point or lane by lane at a vector of them (``bearing_lanes``)."""
-    params = p.params
-    half = type(params[0])(0.5)
+    half = type(p.log_norm)(0.5)
     if p.variant == LINEAR:
-        dx = x * half - type(x)(params[1] * half)
-        dy = y * half - type(x)(params[2] * half)
-        u = dx + dy * params[4]
-        q = each_mul(u * params[3], u) + each_mul(dy * params[5], dy)  # a quarter of the form
-        return each_exp(type(x)(params[0]) - q * type(params[0])(2.0))
-    total = type(x)(params[0])
-    for i in range(p.n_sensors):
-        base = HEAD + PER_SENSOR * i
-        beta = each_atan2(x - type(x)(params[base]), y - type(x)(params[base + 1]))
-        z = each_wrap_angle(beta - type(x)(params[base + 2])) * params[base + 3]
+        dx = x * half - type(x)(p.fix_x * half)
+        dy = y * half - type(x)(p.fix_y * half)
+        u = dx + dy * p.p_ratio
+        q = each_mul(u * p.p_xx, u) + each_mul(dy * p.det_ratio, dy)  # a quarter of the form
+        return each_exp(type(x)(p.log_norm) - q * type(p.log_norm)(2.0))
+    total = type(x)(p.log_norm)
+    for i in range(p.sensors.shape[0]):
+        s = p.sensors[i]
+        beta = each_atan2(x - type(x)(s[0]), y - type(x)(s[1]))
+        z = each_wrap_angle(beta - type(x)(s[2])) * s[3]
         total = total - each_mul(z * half, z)
     return each_exp(total)
 
 
-#: The parameters: the array laid out as HEAD and PER_SENSOR say, the sensors' count, the variant.
-BEARING = Params("BearingParams", __name__, params=ARRAY, n_sensors=int, variant=int)
+#: The parameters: the normaliser log_norm, the fix and the linear map's form as a sum of squares
+#: (p = C^-1: p_xx, p_ratio = p_xy / p_xx, det_ratio = det(p) / p_xx), each sensor's
+#: (x, y, bearing, 1 / sigma), the variant.
+BEARING = Params("BearingParams", __name__, log_norm=SCALAR, fix_x=SCALAR, fix_y=SCALAR, p_xx=SCALAR, p_ratio=SCALAR,
+                 det_ratio=SCALAR, sensors=ARRAY_VEC4, variant=int)
 KERNELS = density_kernels(bearing_density, BEARING, "bearing")

@@ -69,6 +69,7 @@ from typing import Any
 
 import warp as wp
 
+from .common import wrap_angle
 from .generate import ARRAY, ARRAY2D, SCALARS, Params, overload_on_use
 
 wp.set_module_options({"enable_backward": False})
@@ -135,14 +136,6 @@ def polygon_contains(edges: wp.array2d(dtype=Any), offset: int, count: int, px: 
             if px < cross:
                 inside = not inside
     return inside
-
-
-@wp.func
-def wrap_angle(a: Any):
-    """a wrapped to [-pi, pi)."""
-    two_pi = type(a)(6.283185307179586)
-    half = type(a)(3.141592653589793)
-    return a - two_pi * wp.floor((a + half) / two_pi)
 
 
 @wp.func

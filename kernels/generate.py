@@ -64,6 +64,11 @@ def ARRAY(scalar):
     return wp.array(dtype=scalar)
 
 
+def ARRAY_VEC4(scalar):
+    """Field type: a device array of four-scalar vectors."""
+    return wp.array(dtype=wp.types.vector(4, scalar))
+
+
 def ARRAY2D(scalar):
     """Field type: a 2-D device array of scalars."""
     return wp.array2d(dtype=scalar)

@@ -288,7 +288,7 @@ def test_bearing_maps_anywhere_at_points_anywhere(ox, oy, baseline, angle, sigma
     fx, fy = model.fix
     x = np.array([fx] + [a for a in FAR_POINTS for _ in FAR_POINTS])
     y = np.array([fy] + [b for _ in FAR_POINTS for b in FAR_POINTS])
-    peak = math.exp(model.kernel_parameters()[0])
+    peak = math.exp(model.kernel_parameters()["log_norm"])
     for dtype in (np.float64, np.float32):
         values = refused_or(lambda: model.pdf(x, y, dtype=dtype), ["x", "y", "points"])
         finite(values)

@@ -160,8 +160,8 @@ def bearing_density(x, y, fix) -> np.ndarray:
     x = np.asarray(x, dtype=float)
     y = np.asarray(y, dtype=float)
     params = fix.kernel_parameters()
-    log_p = np.full(np.broadcast(x, y).shape, params[0])
-    for sx, sy, b, inv_sigma in params[6:].reshape(-1, 4):
+    log_p = np.full(np.broadcast(x, y).shape, params["log_norm"])
+    for sx, sy, b, inv_sigma in params["sensors"]:
         resid = np.arctan2(x - sx, y - sy) - b
         resid -= 2 * np.pi * np.floor((resid + np.pi) / (2 * np.pi))
         log_p -= 0.5 * (resid * inv_sigma) ** 2

@@ -708,8 +708,10 @@ class BearingFix(Model):
         """The same fix with the other presence map."""
         return replace(self, variant=variant)
 
-    def kernel_parameters(self) -> np.ndarray:
-        """The bearing kernels' parameter array (layout in ``kernels/bearing.py``)."""
+    def kernel_parameters(self) -> dict:
+        """The bearing kernels' parameters (``kernels/bearing.py``'s ``BEARING`` struct, float64):
+        log_norm, fix_x, fix_y, p_xx, p_ratio, det_ratio, and ``sensors`` (one row (x, y,
+        bearing, 1 / sigma) each)."""
         precision, det = self._information()  # the precision is the information matrix itself
         log_norm = 0.5 * math.log(det) - math.log(2.0 * math.pi)  # -log(2 pi sqrt(det C))
         if self.variant == "exact":
@@ -720,9 +722,10 @@ class BearingFix(Model):
         # the linear form as p_xx (dx + k dy)^2 + m dy^2 (k = p_xy / p_xx, m = det p / p_xx, the
         # Cauchy-Binet determinant): two non-negative squares, finite or +inf however far the point
         p_xx = float(precision[0, 0])
-        head = [log_norm, *self._fix, p_xx, float(precision[0, 1]) / p_xx, det / p_xx]
-        sensors = np.column_stack((self.sensors, self.bearings, 1.0 / self.sigmas)).ravel()
-        return np.concatenate((head, sensors))
+        fix_x, fix_y = (float(v) for v in self._fix)
+        return {"log_norm": log_norm, "fix_x": fix_x, "fix_y": fix_y, "p_xx": p_xx,
+                "p_ratio": float(precision[0, 1]) / p_xx, "det_ratio": det / p_xx,
+                "sensors": np.column_stack((self.sensors, self.bearings, 1.0 / self.sigmas))}
 
     def parameters(self) -> dict:
         """Plain-data parameters for provenance and recordings: the declared ones and the fix."""
@@ -734,7 +737,9 @@ class BearingFix(Model):
         return self.bind_once(ctx, lambda: self._binding(ctx))
 
     def _binding(self, ctx: KernelContext) -> KernelBinding:
-        params = ctx.struct(kernels.BEARING, params=ctx.array(self.kernel_parameters()), n_sensors=len(self.sensors),
+        fields = self.kernel_parameters()
+        sensors = ctx.array(fields.pop("sensors"), dtype=ctx.vector(4))
+        params = ctx.struct(kernels.BEARING, **fields, sensors=sensors,
                             variant=kernels.EXACT if self.variant == "exact" else kernels.LINEAR)
         # on the CPU a vector of cells or points at a time (kernels/bearing_lanes.py)
         return KernelBinding(bearing_lanes.KERNELS if ctx.device == "cpu" else kernels.KERNELS, params,
@@ -746,17 +751,16 @@ class BearingFix(Model):
         cached = self.__dict__.get("_density_bound_terms")
         if cached is not None:
             return cached
-        params = self.kernel_parameters()
+        fields = self.kernel_parameters()
         precision, _ = self._information()
-        rounded = params.astype(np.float32).astype(np.float64)
-        per_sensor = slice(kernels.HEAD + 3, None, kernels.PER_SENSOR)
+        log_norm, inv_sigma = fields["log_norm"], fields["sensors"][:, 3]
         bearings = self.bearings
         n = len(self.sensors)
         terms = {
-            "log_norm": float(max(params[0], rounded[0])),
+            "log_norm": float(max(log_norm, float(np.float32(log_norm)))),
             # the kernel's log-density: n + 1 terms summed, each z^2 from two rounded products
             "log_roundoffs": (2 * n + 8) * UNIT_ROUNDOFF,
-            "inv_sigma": np.minimum(params[per_sensor], rounded[per_sensor]),
+            "inv_sigma": np.minimum(inv_sigma, inv_sigma.astype(np.float32).astype(np.float64)),
             # an upper bound of the kernel's error in wrap(beta - b): atan2_fast, the bearing's
             # float32 rounding, the subtraction, and k 2 pi in wrap_angle (|k| <= |b| / 2 pi + 2)
             "angle_slack": (UNIT_ROUNDOFF * (ATAN2_ROUNDOFFS * math.pi + 8.0 * (2.0 * math.pi + np.abs(bearings)))

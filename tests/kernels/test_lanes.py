@@ -409,10 +409,7 @@ def _scalar_bearing(model, x, y, dtype):
     xs = wp.array(np.ravel(x).astype(dtype), dtype=scalar, device="cpu")
     ys = wp.array(np.ravel(y).astype(dtype), dtype=scalar, device="cpu")
     out = wp.zeros(xs.shape[0], dtype=scalar, device="cpu")
-    params = bearing.BEARING.of(scalar)()
-    params.params = wp.array(model.kernel_parameters().astype(dtype), dtype=scalar, device="cpu")
-    params.n_sensors = len(model.sensors)
-    params.variant = bearing.EXACT if model.variant == "exact" else bearing.LINEAR
+    params = model.bind(WarpContext(dtype, "cpu", 1), None).params  # the struct the lane kernels take
     wp.launch(bearing.KERNELS.points, dim=xs.shape[0], device="cpu", inputs=[xs, ys, 0, params, out])
     return out.numpy().reshape(np.shape(x))
 

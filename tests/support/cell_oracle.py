@@ -234,7 +234,7 @@ def bearing_density(model):
     """The exact bearing map's density at a point, written with ``math`` (kernels/bearing.py's
     module docstring): exp(log_norm - sum_i wrap(beta_i - b_i)^2 / (2 sigma_i^2)), log_norm the
     model's normaliser (this oracle checks the cell rule, not the normaliser)."""
-    log_norm = float(model.kernel_parameters()[0])
+    log_norm = float(model.kernel_parameters()["log_norm"])
     stations = [(float(x), float(y), float(b), float(s)) for (x, y), b, s in
                 zip(model.sensors, model.bearings, model.sigmas)]
 
