@@ -25,10 +25,15 @@ CENTRES_KEPT = 32
 
 
 class GridExtent:
-    """The cell centres of a grid, seen from an origin."""
+    """The cell centres of a grid, seen from an origin.
 
-    def __init__(self, grid: Grid):
+    ``row_cells`` is how many cells of a row one launch covers: the whole row (``grid.nx``), or
+    a block's columns when the grid is computed in blocks (a row sweep's cost is per launch row).
+    """
+
+    def __init__(self, grid: Grid, row_cells: int | None = None):
         self.grid = grid
+        self.row_cells = grid.nx if row_cells is None else max(1, min(int(row_cells), grid.nx))
 
     def radii(self, origin) -> tuple[float, float]:
         """Least and greatest distance from ``origin`` to the grid's cell centres."""

@@ -35,7 +35,7 @@ from ..results import TiledRaster
 from ..validate import BananagridError, show
 from .cluster import minimum_memory_limit, worker_need
 from .grid_cells import probability_raster, probability_work
-from .grid_kernel import grid_block, grid_context
+from .grid_kernel import GridExtent, grid_block, grid_context
 from .memory import format_bytes
 from .points import check_finite, check_model
 from .warp_runtime import WarpContext, default_threads
@@ -243,7 +243,7 @@ def rasterise_tiles(model: DensityModel, grid: Grid, chunks=DEFAULT_CHUNK, *, dt
     computed = int(np.sum(np.outer(sizes_y, sizes_x)[~skipped]))
     if ctx.cpu:
         core_seconds = (probability_work(model, grid)[0] * computed / (grid.nx * grid.ny) if quantity == "probability"
-                        else model.work_estimate(computed, extent))
+                        else model.work_estimate(computed, GridExtent(grid, row_cells=cx)))
         check_work(core_seconds, default_threads(), f"{type(model).__name__}: {computed:,} cells in tiles",
                    limit=max_seconds, option="max_seconds=S")
     check_cluster_memory((cy, cx), asked, ctx.dtype)

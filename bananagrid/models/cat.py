@@ -713,8 +713,9 @@ class CAT(MotionModel):
 
     def work_estimate(self, cells: int, extent: Extent) -> float:
         """Seconds of one core. On a grid (:class:`~bananagrid.engine.grid_kernel.GridExtent`;
-        ``cells`` its rows' cells, or a share of them), the row sweep: rows x nodes
-        ``SECONDS_PER_ROW_NODE``, and each cell ``SECONDS_PER_SWEPT_CELL``, half-turns
+        ``cells`` its rows' cells, or a share of them, swept ``extent.row_cells`` a launch row),
+        the row sweep: rows x nodes ``SECONDS_PER_ROW_NODE``, and each cell
+        ``SECONDS_PER_SWEPT_CELL``, half-turns
         (:func:`scan_half_turns`) x ``SECONDS_PER_CROSSING`` and, near the pose
         the flagged intervals' search (:func:`flagged_nodes` x :func:`flagged_seconds`). At points (any
         other extent: the points kernel, a polar lattice's or a quadrature's nodes):
@@ -757,7 +758,7 @@ class CAT(MotionModel):
             return float(cells) * point_seconds(self, r_near)
         grid = extent.grid
         nodes = scan_node_count(self.k_sigma, self.sigma_omega, self.t)
-        rows = float(cells) / grid.nx
+        rows = float(cells) / extent.row_cells  # a block narrower than the grid sweeps its rows again
         per_cell = (SECONDS_PER_SWEPT_CELL + scan_half_turns(self) * SECONDS_PER_CROSSING
                     + flagged_nodes(self, nodes, grid, r_near) * flagged_seconds(nodes))
         return rows * nodes * SECONDS_PER_ROW_NODE + float(cells) * per_cell

@@ -187,6 +187,12 @@ def test_the_grid_estimate_grows_with_the_scan_the_cells_and_nearness(turn, more
         assert model.work_estimate(cells, GridExtent(far)) <= at_pose * (1 + 1e-12)  # 1e-12: a few ulps
         taller = bg.Grid(origin=near.origin, dx=near.dx, dy=near.dy, nx=n, ny=2 * n)
         assert model.work_estimate(2 * cells, GridExtent(taller)) >= at_pose
+        # launches narrower than the row (blocks of columns) sweep each row once per block:
+        # never cheaper, and the sweep's term grows as the width shrinks
+        blocks = [model.work_estimate(cells, GridExtent(near, row_cells=w)) for w in (n, max(1, n // 4), 1)]
+        assert blocks[0] == at_pose and blocks[0] <= blocks[1] <= blocks[2]
+        if n >= 4:
+            assert blocks[2] > at_pose  # n sweeps of each row where there was one
         if n >= 64:  # the same cells as points: an extent with the grid's radii that is no GridExtent
             points = model.work_estimate(cells, SameRadii(GridExtent(near)))
             assert at_pose <= points
