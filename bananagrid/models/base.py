@@ -86,9 +86,9 @@ class Model:
     #: Peak bytes per sample of :meth:`sample` (measured; :func:`check_n` refuses what would not fit).
     sample_bytes: float = SAMPLE_BYTES
 
-    #: Seconds of one CPU core per cell assumed by the default :meth:`work_estimate`: above the
-    #: cost of the models without a scan or a table (the polar and bearing kernels take
-    #: 50-150 ns per cell on the reference machine, ``bananagrid bench``).
+    #: Seconds of one CPU core per cell assumed by the default :meth:`work_estimate`, for a model
+    #: that gives none of its own (every bundled model does): above what the closed-form kernels
+    #: take (polar and bearing 2-90 ns a cell, ``bananagrid bench``).
     seconds_per_cell: float = 1e-6
 
     def work_estimate(self, cells: int, extent) -> float:

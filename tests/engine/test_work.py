@@ -231,3 +231,23 @@ def test_format_duration_and_the_limit_option():
         check_work(10.0, 1, "x", limit=5.0)
     with pytest.raises(BananagridError):
         check_work(math.nan, 1, "x")
+
+
+def test_closed_form_models_estimate_per_cell_and_per_station():
+    """The polar and bearing estimates are per cell, the same wherever the cells lie (a closed-form
+    density costs the same everywhere), heading noise costs more, and each station adds its term
+    (the bearing density sums one per bearing)."""
+    grid = square_grid((0.0, 0.0), 1000.0, 100)
+    far = square_grid((1e6, 0.0), 1000.0, 100)
+    polar = bg.PolarBanana(v0=280.0, t=10.0, sigma_a=5 / 3, sigma_omega=math.pi / 54)
+    turned = bg.PolarBanana(v0=280.0, t=10.0, sigma_a=5 / 3, sigma_omega=math.pi / 54, sigma_heading=0.2)
+    assert polar.work_estimate(10_000, GridExtent(grid)) == polar.work_estimate(10_000, GridExtent(far)) > 0.0
+    assert turned.work_estimate(10_000, GridExtent(grid)) > polar.work_estimate(10_000, GridExtent(grid))
+    costs = []
+    for n in (2, 3, 6):
+        angles = np.linspace(0.0, 2.0, n)
+        sensors = np.column_stack([1e4 * np.sin(angles), 1e4 * np.cos(angles)])
+        fix = bg.BearingFix(sensors=sensors, bearings=angles + math.pi, sigmas=np.full(n, 0.03))
+        costs.append(fix.work_estimate(10_000, GridExtent(grid)))
+    # 2, 3 and 6 stations: equal steps of one station's term (1e-12: float rounding)
+    assert costs[1] - costs[0] == pytest.approx((costs[2] - costs[1]) / 3, rel=1e-12) and costs[1] > costs[0]
