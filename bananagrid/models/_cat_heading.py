@@ -34,20 +34,20 @@ from __future__ import annotations
 import functools
 import math
 import warnings
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
 from ..domains.pose import Pose
 from ..engine.points import evaluate_points, launch_points
 from ..engine.warp_runtime import WarpContext
-from ..kernels import tabulated
+from ..kernels import cat_lanes, tabulated
 from ..protocol import KernelBinding, KernelContext
 from ..validate import BananagridError, BananagridWarning
 from .motion import MotionModel, natural_scales
 
 __all__ = [
-    "HeadingTable", "heading_table", "build_heading_table", "convolved_rows", "ray_densities",
+    "HeadingTable", "heading_table", "build_heading_table", "convolved_rows", "plain_lattice", "ray_densities",
     "convolve_heading", "table_binding", "clear_heading_tables", "interpolate_table", "RESOLUTION", "BEARING_RESOLUTION",
     "first_table_nodes", "table_spacing_limits", "interpolation_bound",
     "TARGET_ERROR", "CHECK_LEVEL", "heading_nodes", "HEADING_SDS", "HEADING_NODES_PER_SCALE",
@@ -110,6 +110,22 @@ class HeadingTable:
     mirror: bool
     error_estimate: float
     refinements: int
+    #: The kernel's arrays per dtype (:meth:`kernel_arrays`), made once.
+    _kernel_arrays: dict = field(default_factory=dict, repr=False, compare=False)
+
+    def kernel_arrays(self, dtype) -> tuple[np.ndarray, np.ndarray, float]:
+        """The padded lattice (``kernels/tabulated.py``'s ``pad_table``) in ``dtype``, its log
+        (entries at or below the dtype's ``FLOOR`` are never used in log) and that floor: made
+        once per dtype (the check rows and every grid of a remembered table share them)."""
+        dtype = np.dtype(dtype)
+        arrays = self._kernel_arrays.get(dtype)
+        if arrays is None:
+            values = tabulated.pad_table(self.values, self.mirror).astype(dtype)
+            floor = FLOOR[dtype]
+            with np.errstate(divide="ignore"):
+                logs = np.log(np.maximum(values, floor))
+            arrays = self._kernel_arrays.setdefault(dtype, (values, logs, floor))
+        return arrays
 
     @property
     def shape(self) -> tuple[int, int]:
@@ -144,12 +160,50 @@ def _base_model(model: MotionModel) -> MotionModel:
 def convolved_rows(model: MotionModel, radii, theta_start: float, n_theta: int, *, threads=None) -> np.ndarray:
     """(*) at ranges ``radii`` and bearings theta_start + 2 pi j / n_theta (j < n_theta), exact
     to rounding when n_theta resolves the rows (float64, shape (len(radii), n_theta))."""
-    radii = np.asarray(radii, dtype=float)
     theta = theta_start + 2.0 * math.pi * np.arange(n_theta) / n_theta
-    x = radii[:, None] * np.sin(theta)[None, :]
-    y = radii[:, None] * np.cos(theta)[None, :]
-    p0 = evaluate_points(_base_model(model), x, y, dtype=np.float64, threads=threads)
-    return convolve_heading(p0, model.sigma_heading)
+    return convolve_heading(plain_lattice(model, radii, theta, threads=threads), model.sigma_heading)
+
+
+#: Fewer ranges than this are evaluated point by point (a ray's sweep costs O(nodes) whatever its
+#: length; at 16 ranges the per-point scan was the cheaper, 9 against 14 ms on Figure 1's lattice).
+RAY_MIN_RADII = 32
+#: Ray bands per thread of :func:`plain_lattice`: the rays through the banana cost far more than
+#: the others.
+RAY_BANDS_PER_THREAD = 16
+
+
+def plain_lattice(model: MotionModel, radii, theta, *, threads=None) -> np.ndarray:
+    """p_0, the CAT density without heading noise (float64), at the local points
+    (r sin theta, r cos theta) for r in ``radii`` and each bearing ``theta``:
+    shape (len(radii), len(theta)). Each bearing's ray is swept as a grid row
+    (``kernels/cat_lanes.py``'s ``cat_rays``): the per-point scan's values, to the bit, at a
+    fraction of its cost (O(nodes) a ray plus the roots, instead of the scan at every point)."""
+    radii = np.ascontiguousarray(radii, dtype=np.float64)
+    theta = np.asarray(theta, dtype=np.float64)
+    if radii.size < RAY_MIN_RADII or not np.isfinite(radii).all():
+        # a few ranges (the check rows): the scan at each point is cheaper (and it refuses
+        # non-finite points)
+        x = radii[:, None] * np.sin(theta)[None, :]
+        y = radii[:, None] * np.cos(theta)[None, :]
+        return evaluate_points(_base_model(model), x, y, dtype=np.float64, threads=threads)
+    if np.any(np.diff(radii) < 0.0):  # the sweep takes a ray's points in order
+        order = np.argsort(radii, kind="stable")
+        values = np.empty((radii.size, theta.size))
+        values[order] = plain_lattice(model, radii[order], theta, threads=threads)
+        return values
+    ctx = WarpContext(np.float64, "cpu", threads)
+    binding = _base_model(model).bind(ctx, None, grid=True)
+    sines = ctx.host_array(np.sin(theta))
+    cosines = ctx.host_array(np.cos(theta))
+    rays = np.empty((theta.size, radii.size))
+    out = ctx.shared(rays)
+    xs = ctx.host_array(radii)
+    ctx.load(cat_lanes.cat_rays)
+
+    def launch_band(a, b):
+        ctx.launch(cat_lanes.cat_rays, dim=b - a, inputs=[xs, sines, cosines, a, binding.params, out])
+    ctx.run_bands(launch_band, ctx.bands(theta.size, RAY_BANDS_PER_THREAD))
+    return np.ascontiguousarray(rays.T)
 
 
 def _even(n: float) -> int:
@@ -317,9 +371,7 @@ def ray_densities(model: MotionModel, radii, angles, *, threads=None) -> np.ndar
     # profile of SD w has exp(-(6 pi)^2 / 2) ~ 1e-77 there)
     n_theta = max(16, _even(2.0 * math.pi * RAY_RESOLUTION / angular))
     theta = -math.pi + 2.0 * math.pi * np.arange(n_theta) / n_theta
-    x = radii[:, None] * np.sin(theta)[None, :]
-    y = radii[:, None] * np.cos(theta)[None, :]
-    p0 = evaluate_points(_base_model(model), x, y, dtype=np.float64, threads=threads)
+    p0 = plain_lattice(model, radii, theta, threads=threads)
     k = np.arange(n_theta // 2 + 1)
     spectrum = np.fft.rfft(p0, axis=-1) * np.exp(-0.5 * (k * model.sigma_heading) ** 2)
     # p(theta) = (1/n) sum_k c_k e^{i k (theta - theta_start)} over k in [-n/2, n/2): the real
@@ -336,10 +388,7 @@ def table_binding(ctx: KernelContext, table: HeadingTable, pose, notes: dict) ->
     """The interpolating kernels (``kernels/tabulated.py``) over ``table``, placed by ``pose``
     (origin x, origin y, cos heading, sin heading): log-cubic stencils where the table is above
     its floor."""
-    values = table.values.astype(ctx.dtype)
-    floor = FLOOR[np.dtype(ctx.dtype)]
-    with np.errstate(divide="ignore"):
-        logs = np.log(np.maximum(values, floor))  # entries at the floor are never used in log
+    values, logs, floor = table.kernel_arrays(ctx.dtype)
     params = ctx.struct(tabulated.TABLE, log_table=ctx.array(logs), table=ctx.array(values), r0=table.r0, dr=table.dr,
                         theta0=table.theta0, dtheta=table.dtheta, floor_value=floor, mirror=int(table.mirror), pose=pose)
     return KernelBinding(tabulated.KERNELS, params, notes)
