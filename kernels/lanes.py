@@ -455,6 +455,64 @@ def _scan_group(fmt: _Format) -> str:
     )
 
 
+def _tabulated(fmt: _Format) -> str:
+    """``tabulated.table_density`` at a vector of world points, in one snippet: the world point to
+    the model's frame (``common.world_to_local``'s arithmetic); r by the square root; the bearing by
+    :func:`_cephes_angle_steps`; the stencils' rows and columns clamped as the scalar kernel's
+    (a NaN's to the first); the cubic Lagrange weights by ``tabulated.lagrange4``'s formulas; the
+    16 entries of each lane's stencil from the padded lattice (``tabulated.pad_table``: no
+    remainder, no branch), weighted in the scalar kernel's order with fused multiply-adds; exp of
+    the log sum where every entry is above the floor, else the linear sum clamped at zero."""
+    size = fmt.bytes
+    gather = "".join(
+        f"{{ vt w = wr{a} * wt{b}; vt tv, lv;\n"
+        f"for (int k = 0; k < {fmt.lanes}; ++k) {{ long long at = off[k] + {a} * row + {b} * col; "
+        "tv[k] = tdata[at]; lv[k] = ldata[at]; }\n"
+        "lin = lin + w * tv; lsum = lsum + w * lv; lowest = tv < lowest ? tv : lowest; }\n"
+        for a in range(4) for b in range(4))
+    weights = "".join(
+        f"vt {name}0 = -(f * (f - 1) * (f - 2)) * sixth;\n"
+        f"vt {name}1 = (f + 1) * (f - 1) * (f - 2) * L(0.5);\n"
+        f"vt {name}2 = -((f + 1) * f * (f - 2)) * L(0.5);\n"
+        f"vt {name}3 = (f + 1) * f * (f - 1) * sixth;\n".replace("f", f) for name, f in (("wr", "fr"), ("wt", "ft")))
+    return (
+        "vt dx = vx - ox;\n"
+        "vt dy = vy - oy;\n"
+        "vt lx = dx * c - dy * s;\n"
+        "vt ly = dx * s + dy * c;\n"
+        "vt r2 = lx * lx + ly * ly;\n"
+        f"vt r; for (int k = 0; k < {fmt.lanes}; ++k) r[k] = {fmt.sqrt}(r2[k]);\n"
+        "vt u = (r - r0) / dr;\n"
+        f"vt base; for (int k = 0; k < {fmt.lanes}; ++k) base[k] = {fmt.floor}(u[k]);\n"
+        f"vt lo = zero + ({fmt.scalar})(mirror != 0 ? 0 : 1);\n"
+        f"vt hi = zero + ({fmt.scalar})(table.shape[0] - 1 - 3);\n"
+        "base = base >= lo ? base : lo;\n"  # a NaN to the first row
+        "base = base <= hi ? base : hi;\n"
+        "vt fr = u - base;\n"
+        + _cephes_angle_steps(fmt, "lx", "ly", "angle") +
+        "vt v = (angle - theta0) / dtheta;\n"
+        f"vt column; for (int k = 0; k < {fmt.lanes}; ++k) column[k] = {fmt.floor}(v[k]);\n"
+        "column = column >= -1 ? column : zero - 1;\n"
+        f"vt last = zero + ({fmt.scalar})(table.shape[1] - 5);\n"  # n_theta: the padded columns less PAD_BEFORE + PAD_AFTER
+        "column = column <= last ? column : last;\n"
+        "vt ft = v - column;\n"
+        f"vt sixth = zero + L(1.0) / L(6.0);\n"
+        + weights +
+        f"const {fmt.scalar}* tdata = &wp::index(table, 0, 0);\n"
+        f"const {fmt.scalar}* ldata = &wp::index(log_table, 0, 0);\n"
+        f"long long row = table.strides[0] / sizeof({fmt.scalar});\n"
+        f"long long col = table.strides[1] / sizeof({fmt.scalar});\n"
+        f"long long off[{fmt.lanes}];\n"
+        # padded row of lattice row base - 1 is base; padded column of column - 1 is column + 1
+        f"for (int k = 0; k < {fmt.lanes}; ++k) off[k] = (long long)base[k] * row + ((long long)column[k] + 1) * col;\n"
+        "vt lin = zero; vt lsum = zero; vt lowest = zero + " + fmt.infinity + ";\n"
+        + gather
+        + _exp_steps(fmt, "lsum", "e", upper=True)
+        + "lin = lin > 0 ? lin : zero;\n"
+        "vt res = lowest > floor_value ? e : lin;"
+    )
+
+
 def _load(fmt: _Format) -> str:
     """values[start ..] as one vector: one unaligned vector load where the whole vector lies in a
     contiguous array, else lane by lane with the index clamped to the last element."""
@@ -543,6 +601,12 @@ for _fmt, _v, _s in ((F64, lanes64, wp.float64), (F32, lanes32, wp.float32)):
 
     @wp.func_native(_scan_group(_fmt))
     def cat_scan_group(groups: wp.array2d(dtype=_v), g: int, x: _s, y: _s, chord: _s, noise: _s, count: int) -> int: ...
+
+    @wp.func_native(_snippet(_fmt, "x y", _tabulated(_fmt), contract=True))
+    def lane_tabulated(x: _v, y: _v, log_table: wp.array2d(dtype=_s), table: wp.array2d(dtype=_s), r0: _s, dr: _s,
+                       theta0: _s, dtheta: _s, floor_value: _s, mirror: int, ox: _s, oy: _s, c: _s, s: _s) -> _v:
+        """The interpolated density of a padded polar lattice at the world points (x, y) (``_tabulated``)."""
+        ...
 
     @wp.func_native(f"return {_fmt.lanes};\n")
     def lane_count(values: wp.array(dtype=_s)) -> int:

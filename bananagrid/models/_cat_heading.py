@@ -41,7 +41,7 @@ import numpy as np
 from ..domains.pose import Pose
 from ..engine.points import evaluate_points, launch_points
 from ..engine.warp_runtime import WarpContext
-from ..kernels import cat_lanes, tabulated
+from ..kernels import cat_lanes, tabulated, tabulated_lanes
 from ..protocol import KernelBinding, KernelContext
 from ..validate import BananagridError, BananagridWarning
 from .motion import MotionModel, natural_scales
@@ -161,7 +161,28 @@ def convolved_rows(model: MotionModel, radii, theta_start: float, n_theta: int, 
     """(*) at ranges ``radii`` and bearings theta_start + 2 pi j / n_theta (j < n_theta), exact
     to rounding when n_theta resolves the rows (float64, shape (len(radii), n_theta))."""
     theta = theta_start + 2.0 * math.pi * np.arange(n_theta) / n_theta
-    return convolve_heading(plain_lattice(model, radii, theta, threads=threads), model.sigma_heading)
+    partner = _mirror_bearings(theta_start, n_theta)
+    if partner is None:
+        p0 = plain_lattice(model, radii, theta, threads=threads)
+    else:
+        # p_0 is symmetric about the nominal heading (the turn rate's law is symmetric, and
+        # omega -> -omega mirrors each path: p_0(r, -theta) = p_0(r, theta)): each pair of
+        # mirrored bearings is evaluated once, at the one of the pair listed first
+        j = np.arange(n_theta)
+        first = np.minimum(j, partner)
+        own = np.unique(first)
+        p0 = plain_lattice(model, radii, theta[own], threads=threads)[:, np.searchsorted(own, first)]
+    return convolve_heading(p0, model.sigma_heading)
+
+
+def _mirror_bearings(theta_start: float, n_theta: int) -> np.ndarray | None:
+    """For bearings theta_j = theta_start + 2 pi j / n_theta, the index of -theta_j's bearing
+    (mod 2 pi) for each j where every bearing has one (theta_start an integer multiple of
+    pi / n_theta, as the lattice's -pi and the check rows' half-steps), else None."""
+    s = -theta_start * n_theta / math.pi  # -theta_j = theta_m (mod 2 pi) for m = s - j (mod n_theta)
+    if not abs(s - round(s)) <= 1e-9 * max(1.0, abs(s)):
+        return None
+    return (int(round(s)) - np.arange(n_theta)) % n_theta
 
 
 #: Fewer ranges than this are evaluated point by point (a ray's sweep costs O(nodes) whatever its
@@ -391,7 +412,8 @@ def table_binding(ctx: KernelContext, table: HeadingTable, pose, notes: dict) ->
     values, logs, floor = table.kernel_arrays(ctx.dtype)
     params = ctx.struct(tabulated.TABLE, log_table=ctx.array(logs), table=ctx.array(values), r0=table.r0, dr=table.dr,
                         theta0=table.theta0, dtheta=table.dtheta, floor_value=floor, mirror=int(table.mirror), pose=pose)
-    return KernelBinding(tabulated.KERNELS, params, notes)
+    # on the CPU the lane kernels (``kernels/tabulated_lanes.py``)
+    return KernelBinding(tabulated_lanes.KERNELS if ctx.device == "cpu" else tabulated.KERNELS, params, notes)
 
 
 def interpolate_table(table: HeadingTable, x, y, *, dtype=np.float64, device: str = "cpu", threads=None) -> np.ndarray:

@@ -5,8 +5,13 @@ import math
 
 import numpy as np
 import pytest
+from hypothesis import HealthCheck, given, seed, settings
+from hypothesis import strategies as st
 
+from bananagrid.engine.points import launch_points
+from bananagrid.engine.warp_runtime import WarpContext
 from bananagrid.kernels import tabulated
+from bananagrid.protocol import KernelBinding
 from bananagrid.models import _cat_heading as heading
 
 
@@ -49,3 +54,59 @@ def test_interpolation_is_periodic_and_exact_for_log_cubics(mirror):
                  (f + 1) * f * (f - 1) / 6]
             np.testing.assert_allclose(near, np.exp(sum(wk * logs[k] for wk, k in zip(w, (1, 0, 1, 2)))),
                                        rtol=1e-13)
+
+
+def _scalar_interpolation(table, x, y, dtype):
+    """The scalar kernel (``tabulated.KERNELS.points``, the GPU path's) on the CPU."""
+    ctx = WarpContext(dtype, "cpu", 1)
+    values, logs, floor = table.kernel_arrays(ctx.dtype)
+    params = ctx.struct(tabulated.TABLE, log_table=ctx.array(logs), table=ctx.array(values), r0=table.r0,
+                        dr=table.dr, theta0=table.theta0, dtheta=table.dtheta, floor_value=floor,
+                        mirror=int(table.mirror), pose=(0.0, 0.0, 1.0, 0.0))
+    ctx.load(tabulated.KERNELS.points)
+    return launch_points(ctx, KernelBinding(tabulated.KERNELS, params, {}), np.asarray(x, float), np.asarray(y, float))
+
+
+@st.composite
+def _tables(draw):
+    """A lattice of a smooth log-density (a Gaussian ridge in r, periodic in theta, 6-40 ranges by
+    8-64 bearings, from the fix or not) reaching from near 1 down past both floors (the linear
+    branch), with rough noise of up to 3 in the log, and points over all of it (a row's margin at its
+    ends, as the heading tables keep two)."""
+    n_r, n_theta = draw(st.integers(6, 40)), 2 * draw(st.integers(4, 32))
+    mirror = draw(st.booleans())
+    dr = draw(st.floats(0.01, 100.0))
+    r0 = 0.0 if mirror else dr * draw(st.floats(0.0, 50.0))
+    depth = draw(st.sampled_from([5.0, 50.0, 800.0]))
+    rng = np.random.default_rng(draw(st.integers(0, 1000)))
+    radii = r0 + dr * np.arange(n_r)
+    theta = -math.pi + 2.0 * math.pi * np.arange(n_theta) / n_theta
+    z = (radii[:, None] - radii.mean()) / (dr * n_r / 4.0)
+    logs = -depth * (z**2 + 0.5 * (1.0 - np.cos(theta[None, :] - rng.uniform(-3, 3))))
+    logs += draw(st.sampled_from([0.0, 3.0])) * rng.uniform(-1.0, 1.0, logs.shape)
+    table = heading.HeadingTable(np.exp(logs), r0, dr, -math.pi, 2.0 * math.pi / n_theta, mirror, 0.0, 0)
+    r = rng.uniform(0.0 if mirror else r0 + dr, radii[-1] - dr, 300)  # where a table is queried
+    phi = rng.uniform(-math.pi, math.pi, 300)
+    return table, r * np.sin(phi), r * np.cos(phi)
+
+
+@seed(20261129)
+@settings(max_examples=40, deadline=None, database=None, suppress_health_check=[HealthCheck.too_slow])
+@given(case=_tables())
+def test_lanes_agree_with_the_scalar_kernel(case):
+    """The CPU's lane kernels (``kernels/tabulated_lanes.py``, what ``interpolate_table`` runs) and the
+    scalar kernel agree in both dtypes: in the log branch to a few ulps of the log sum (the lane exp's
+    3 ulp, fused multiply-adds, the angle's ulps times its weights' slope), in the linear branch to
+    a few ulps of the stencil's largest entry."""
+    table, x, y = case
+    for dtype in (np.float64, np.float32):
+        eps = float(np.finfo(dtype).eps)
+        lanes = heading.interpolate_table(table, x, y, dtype=dtype).astype(float)
+        scalar = _scalar_interpolation(table, x, y, dtype).astype(float)
+        top = float(table.values.max())
+        big = np.abs(np.log(np.maximum(table.values, 1e-300))).max()
+        # log branch: e^(L (1 + k eps)) - e^L ~ k eps |L| e^L, with |L| up to the table's largest
+        # log, plus slope terms of the same order (64 ulps: a margin of ten over what was measured)
+        tol = 64.0 * eps * (1.0 + big) * np.maximum(lanes, scalar) + 64.0 * eps * top
+        bad = ~(np.abs(lanes - scalar) <= tol)
+        assert not bad.any(), (dtype, lanes[bad], scalar[bad], tol[bad], x[bad], y[bad])
