@@ -55,10 +55,18 @@ def pad_table(values: np.ndarray, mirror: bool) -> np.ndarray:
     the lattice mirrors through the origin; else row 0, which no stencil reads), and padded column
     c holds bearing (c - PAD_BEFORE) mod n_theta."""
     n_r, n_theta = values.shape
-    below = np.roll(values[1], -(n_theta // 2)) if mirror else values[0]
-    rows = np.concatenate([below[None, :], values], axis=0)
-    columns = (np.arange(n_theta + PAD_BEFORE + PAD_AFTER) - PAD_BEFORE) % n_theta
-    return np.ascontiguousarray(rows[:, columns])
+    out = np.empty((n_r + 1, n_theta + PAD_BEFORE + PAD_AFTER), dtype=values.dtype)
+    out[1:, PAD_BEFORE:PAD_BEFORE + n_theta] = values
+    if mirror:
+        half = n_theta // 2
+        out[0, PAD_BEFORE:PAD_BEFORE + n_theta - half] = values[1, half:]
+        out[0, PAD_BEFORE + n_theta - half:PAD_BEFORE + n_theta] = values[1, :half]
+    else:
+        out[0, PAD_BEFORE:PAD_BEFORE + n_theta] = values[0]
+    # the wrapped columns (PAD_BEFORE, PAD_AFTER <= n_theta)
+    out[:, :PAD_BEFORE] = out[:, n_theta:n_theta + PAD_BEFORE]
+    out[:, PAD_BEFORE + n_theta:] = out[:, PAD_BEFORE:PAD_BEFORE + PAD_AFTER]
+    return out
 
 
 @wp.func

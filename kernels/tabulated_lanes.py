@@ -14,7 +14,7 @@ from typing import Any
 import warp as wp
 
 from .generate import density_kernels
-from .lanes import lane_tabulated
+from .lanes import lane_tabulated, tabulated_row
 from .tabulated import TABLE
 
 # No adjoints: nothing differentiates these kernels (see ``polar_lanes``).
@@ -28,4 +28,14 @@ def table_density_lanes(x: Any, y: Any, p: Any):
                           p.pose[0], p.pose[1], p.pose[2], p.pose[3])
 
 
-KERNELS = density_kernels(table_density_lanes, TABLE, "table", lanes=True, bands_per_thread=4, module=__name__)
+@wp.func(inline=True)
+def table_row_lanes(xs: wp.array(dtype=Any), y: Any, out: wp.array2d(dtype=Any), row: int, j0: int, j1: int, p: Any):
+    """The generated grid kernel's row in one native loop (``lanes.tabulated_row``: two registers of
+    lanes a step, the same bits as :func:`table_density_lanes`): 1."""
+    tabulated_row(xs, y, out, row, j0, j1, p.log_table, p.table, p.r0, p.dr, p.theta0, p.dtheta, p.floor_value,
+                  p.mirror, p.pose[0], p.pose[1], p.pose[2], p.pose[3])
+    return 1
+
+
+KERNELS = density_kernels(table_density_lanes, TABLE, "table", lanes=True, bands_per_thread=4, module=__name__,
+                          row=table_row_lanes)

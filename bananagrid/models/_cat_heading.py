@@ -171,7 +171,7 @@ def convolved_rows(model: MotionModel, radii, theta_start: float, n_theta: int, 
         j = np.arange(n_theta)
         first = np.minimum(j, partner)
         own = np.unique(first)
-        p0 = plain_lattice(model, radii, theta[own], threads=threads)[:, np.searchsorted(own, first)]
+        p0 = plain_lattice(model, radii, theta[own], threads=threads, rays=True)[np.searchsorted(own, first)].T
     return convolve_heading(p0, model.sigma_heading)
 
 
@@ -193,10 +193,10 @@ RAY_MIN_RADII = 32
 RAY_BANDS_PER_THREAD = 16
 
 
-def plain_lattice(model: MotionModel, radii, theta, *, threads=None) -> np.ndarray:
+def plain_lattice(model: MotionModel, radii, theta, *, threads=None, rays: bool = False) -> np.ndarray:
     """p_0, the CAT density without heading noise (float64), at the local points
     (r sin theta, r cos theta) for r in ``radii`` and each bearing ``theta``:
-    shape (len(radii), len(theta)). Each bearing's ray is swept as a grid row
+    shape (len(radii), len(theta)) (with ``rays``: its transpose, a ray a row). Each bearing's ray is swept as a grid row
     (``kernels/cat_lanes.py``'s ``cat_rays``): the per-point scan's values, to the bit, at a
     fraction of its cost (O(nodes) a ray plus the roots, instead of the scan at every point)."""
     radii = np.ascontiguousarray(radii, dtype=np.float64)
@@ -206,25 +206,26 @@ def plain_lattice(model: MotionModel, radii, theta, *, threads=None) -> np.ndarr
         # non-finite points)
         x = radii[:, None] * np.sin(theta)[None, :]
         y = radii[:, None] * np.cos(theta)[None, :]
-        return evaluate_points(_base_model(model), x, y, dtype=np.float64, threads=threads)
+        values = evaluate_points(_base_model(model), x, y, dtype=np.float64, threads=threads)
+        return values.T if rays else values
     if np.any(np.diff(radii) < 0.0):  # the sweep takes a ray's points in order
         order = np.argsort(radii, kind="stable")
-        values = np.empty((radii.size, theta.size))
-        values[order] = plain_lattice(model, radii[order], theta, threads=threads)
-        return values
+        values = np.empty((theta.size, radii.size))
+        values[:, order] = plain_lattice(model, radii[order], theta, threads=threads, rays=True)
+        return values if rays else values.T
     ctx = WarpContext(np.float64, "cpu", threads)
     binding = _base_model(model).bind(ctx, None, grid=True)
     sines = ctx.host_array(np.sin(theta))
     cosines = ctx.host_array(np.cos(theta))
-    rays = np.empty((theta.size, radii.size))
-    out = ctx.shared(rays)
+    lattice = np.empty((theta.size, radii.size))  # a ray a row
+    out = ctx.shared(lattice)
     xs = ctx.host_array(radii)
     ctx.load(cat_lanes.cat_rays)
 
     def launch_band(a, b):
         ctx.launch(cat_lanes.cat_rays, dim=b - a, inputs=[xs, sines, cosines, a, binding.params, out])
     ctx.run_bands(launch_band, ctx.bands(theta.size, RAY_BANDS_PER_THREAD))
-    return np.ascontiguousarray(rays.T)
+    return lattice if rays else lattice.T
 
 
 def _even(n: float) -> int:

@@ -8,6 +8,8 @@ import pytest
 from hypothesis import HealthCheck, given, seed, settings
 from hypothesis import strategies as st
 
+import bananagrid as bg
+from bananagrid.engine.grid_kernel import grid_block
 from bananagrid.engine.points import launch_points
 from bananagrid.engine.warp_runtime import WarpContext
 from bananagrid.kernels import tabulated
@@ -110,3 +112,27 @@ def test_lanes_agree_with_the_scalar_kernel(case):
         tol = 64.0 * eps * (1.0 + big) * np.maximum(lanes, scalar) + 64.0 * eps * top
         bad = ~(np.abs(lanes - scalar) <= tol)
         assert not bad.any(), (dtype, lanes[bad], scalar[bad], tol[bad], x[bad], y[bad])
+
+
+@seed(20261130)
+@settings(max_examples=15, deadline=None, database=None, suppress_health_check=[HealthCheck.too_slow])
+@given(case=_tables(), nx=st.integers(1, 70), pose=st.tuples(st.floats(-50.0, 50.0), st.floats(-50.0, 50.0),
+                                                             st.floats(-math.pi, math.pi)))
+def test_grid_rows_are_the_points_kernels_bits(case, nx, pose):
+    """The grid kernel's rows (``lanes.tabulated_row``: two registers of lanes a step, a partial
+    vector at a row's end) give the points kernel's bits at every cell centre, in both dtypes,
+    under any pose."""
+    table, _, _ = case
+    reach = table.r0 + table.dr * (table.shape[0] - 2)
+    ox, oy, heading_ = pose
+    grid = bg.Grid.from_bounds(x=(ox - reach, ox + reach), y=(oy - reach, oy + reach), dx=2 * reach / nx,
+                               dy=2 * reach / 7)
+    placed = (ox, oy, math.cos(heading_), math.sin(heading_))
+    for dtype in (np.float64, np.float32):
+        ctx = WarpContext(dtype, "cpu", 2)
+        binding = heading.table_binding(ctx, table, placed, {})
+        values = grid_block(ctx, binding, grid)
+        x, y = np.meshgrid(grid.x, grid.y)
+        ctx.load(binding.kernels.points)
+        points = launch_points(ctx, binding, x, y)
+        assert np.array_equal(values, points), int(np.sum(values != points))
