@@ -37,6 +37,7 @@ import warnings
 from dataclasses import dataclass, field, replace
 
 import numpy as np
+import scipy.fft
 
 from ..domains.pose import Pose
 from ..engine.points import evaluate_points, launch_points
@@ -48,7 +49,7 @@ from .motion import MotionModel, natural_scales
 
 __all__ = [
     "HeadingTable", "heading_table", "build_heading_table", "convolved_rows", "plain_lattice", "ray_densities",
-    "convolve_heading", "table_binding", "clear_heading_tables", "interpolate_table", "RESOLUTION", "BEARING_RESOLUTION",
+    "convolve_heading", "convolve_even_heading", "table_binding", "clear_heading_tables", "interpolate_table", "RESOLUTION", "BEARING_RESOLUTION",
     "first_table_nodes", "table_spacing_limits", "interpolation_bound",
     "TARGET_ERROR", "CHECK_LEVEL", "heading_nodes", "HEADING_SDS", "HEADING_NODES_PER_SCALE",
 ]
@@ -152,6 +153,17 @@ def convolve_heading(values: np.ndarray, sigma_heading: float) -> np.ndarray:
     return np.maximum(out, 0.0)
 
 
+def convolve_even_heading(half: np.ndarray, sigma_heading: float) -> np.ndarray:
+    """:func:`convolve_heading` of rows that are even about their first bearing, given by their
+    first n / 2 + 1 bearings (n even; shape (..., n / 2 + 1)), and so returned: the Fourier
+    coefficients of an even row are its type-I cosine transform (real, half the length)."""
+    k = np.arange(half.shape[-1])
+    spectrum = scipy.fft.dct(half, type=1, axis=-1) * np.exp(-0.5 * (k * sigma_heading) ** 2)
+    out = scipy.fft.idct(spectrum, type=1, axis=-1)
+    # rounding leaves values of a few ulps of the row maximum, of either sign, where p is ~0
+    return np.maximum(out, 0.0)
+
+
 def _base_model(model: MotionModel) -> MotionModel:
     """The same CAT without heading noise, in its own local frame."""
     return replace(model, sigma_heading=0.0, pose=Pose())
@@ -164,6 +176,12 @@ def convolved_rows(model: MotionModel, radii, theta_start: float, n_theta: int, 
     partner = _mirror_bearings(theta_start, n_theta)
     if partner is None:
         p0 = plain_lattice(model, radii, theta, threads=threads)
+    elif partner[0] == 0 and n_theta % 2 == 0:
+        # bearing 0 its own mirror (the lattice's -pi): each row is even about it, bearings
+        # 0 .. n_theta / 2 hold all of it, and so does its convolution (the wrapped normal is even)
+        half = np.ascontiguousarray(plain_lattice(model, radii, theta[: n_theta // 2 + 1], threads=threads))
+        j = np.arange(n_theta)
+        return convolve_even_heading(half, model.sigma_heading)[:, np.minimum(j, n_theta - j)]
     else:
         # p_0 is symmetric about the nominal heading (the turn rate's law is symmetric, and
         # omega -> -omega mirrors each path: p_0(r, -theta) = p_0(r, theta)): each pair of
