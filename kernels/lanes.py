@@ -467,7 +467,7 @@ def _tabulated_steps(fmt: _Format, x: str, y: str, out: str) -> str:
     log sum where every entry is above the floor, else the linear sum clamped at zero. ``fmt``
     may be one register or two (:func:`_tabulated_row`'s chains)."""
     parts = fmt.bytes // 64
-    assert parts in (1, 2), "the gathers take one register or two"
+    assert parts in (1, 2, 4), "the gathers join one, two or four registers"
     double = fmt.scalar == "double"
     gather_builtin = "__builtin_ia32_gatherdiv8df" if double else "__builtin_ia32_gathersiv16sf"
     step = fmt.lanes // parts
@@ -475,12 +475,19 @@ def _tabulated_steps(fmt: _Format, x: str, y: str, out: str) -> str:
     def gather(data: str, name: str) -> str:
         if parts == 1:
             native = f"{name} = {gather_builtin}(zero, {data}, at, {fmt.mask}, {8 if double else 4});\n"
-        else:
-            halves = [f"__builtin_shufflevector(at, at, {', '.join(map(str, range(k * step, (k + 1) * step)))})"
-                      for k in range(2)]
-            native = (f"{{ gv g0 = {gather_builtin}(gzero, {data}, (gi){halves[0]}, {fmt.mask}, {8 if double else 4});\n"
-                      f"gv g1 = {gather_builtin}(gzero, {data}, (gi){halves[1]}, {fmt.mask}, {8 if double else 4});\n"
-                      f"{name} = __builtin_shufflevector(g0, g1, {', '.join(map(str, range(fmt.lanes)))}); }}\n")
+        else:  # a gather per register, the pieces joined pairwise
+            size = 8 if double else 4
+            native = "{ " + "".join(
+                f"gv g{k} = {gather_builtin}(gzero, {data}, (gi)__builtin_shufflevector(at, at, "
+                f"{', '.join(map(str, range(k * step, (k + 1) * step)))}), {fmt.mask}, {size}); "
+                for k in range(parts))
+            names, width = [f"g{k}" for k in range(parts)], step
+            while len(names) > 1:
+                joined = [f"{names[k]}{names[k + 1]}" for k in range(0, len(names), 2)]
+                native += "".join(f"auto {joined[k // 2]} = __builtin_shufflevector({names[k]}, {names[k + 1]}, "
+                                  f"{', '.join(map(str, range(2 * width)))}); " for k in range(0, len(names), 2))
+                names, width = joined, 2 * width
+            native += f"{name} = {names[0]}; }}\n"
         return (f"vt {name};\n#if defined(__AVX512F__)\n{native}"
                 f"#else\nfor (int k = 0; k < {fmt.lanes}; ++k) {name}[k] = {data}[at[k]];\n#endif\n")
     stencil = "".join(
@@ -497,7 +504,7 @@ def _tabulated_steps(fmt: _Format, x: str, y: str, out: str) -> str:
         f"vt {out};\n{{\n"
         + (f"typedef {fmt.scalar} gv __attribute__((vector_size(64)));\n"
            f"typedef {fmt.integer} gi __attribute__((vector_size(64)));\n"
-           "gv gzero = {};\n" if parts == 2 else "") +
+           "gv gzero = {};\n" if parts > 1 else "") +
         f"vt dx = {x} - ox;\n"
         f"vt dy = {y} - oy;\n"
         "vt lx = dx * c - dy * s;\n"
@@ -535,7 +542,8 @@ def _tabulated_steps(fmt: _Format, x: str, y: str, out: str) -> str:
 
 
 #: Registers of lanes per step of ``tabulated_row``, float64 and float32: independent chains that
-#: the core overlaps (the bearing's and the exp's steps are long chains of dependent operations).
+#: the core overlaps (the bearing's and the exp's steps are long chains of dependent operations;
+#: float64 four registers measured no faster than two, float32 two slower than one: spills).
 TABLE_CHAINS = {"double": 2, "float": 1}
 
 
