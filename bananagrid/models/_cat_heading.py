@@ -203,9 +203,6 @@ def _mirror_bearings(theta_start: float, n_theta: int) -> np.ndarray | None:
     return (int(round(s)) - np.arange(n_theta)) % n_theta
 
 
-#: Fewer ranges than this are evaluated point by point (a ray's sweep costs O(nodes) whatever its
-#: length; at 16 ranges the per-point scan was the cheaper, 9 against 14 ms on Figure 1's lattice).
-RAY_MIN_RADII = 32
 #: Ray bands per thread of :func:`plain_lattice`: the rays through the banana cost far more than
 #: the others.
 RAY_BANDS_PER_THREAD = 16
@@ -219,9 +216,9 @@ def plain_lattice(model: MotionModel, radii, theta, *, threads=None, rays: bool 
     fraction of its cost (O(nodes) a ray plus the roots, instead of the scan at every point)."""
     radii = np.ascontiguousarray(radii, dtype=np.float64)
     theta = np.asarray(theta, dtype=np.float64)
-    if radii.size < RAY_MIN_RADII or not np.isfinite(radii).all():
-        # a few ranges (the check rows): the scan at each point is cheaper (and it refuses
-        # non-finite points)
+    if radii.size == 0 or not np.isfinite(radii).all():
+        # the points kernel refuses non-finite points (and has none to evaluate): always the rays
+        # otherwise, also for the check rows' few ranges, so that a run builds one CAT kernel
         x = radii[:, None] * np.sin(theta)[None, :]
         y = radii[:, None] * np.cos(theta)[None, :]
         values = evaluate_points(_base_model(model), x, y, dtype=np.float64, threads=threads)
