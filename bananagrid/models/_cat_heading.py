@@ -14,13 +14,17 @@ How it is computed, and why the error is controlled:
 1. p_0 is evaluated by the exact CAT kernel on a polar lattice: ranges r_i = r0 + i dr and
    n_theta bearings over the full circle. The spacings come from the banana's own scales
    (:func:`natural_scales`): ``RESOLUTION`` nodes per range SD and ``BEARING_RESOLUTION`` per
-   angular width of the banana on a circle.
-2. Each lattice row is convolved with the wrapped normal by FFT. With the row resolved (its
+   angular width of the banana on a circle. Each bearing's ray is swept as a grid row
+   (:func:`plain_lattice`: the per-point scan's values to the bit), and p_0 is symmetric about
+   the heading, so each pair of mirrored bearings is swept once.
+2. Each lattice row is convolved with the wrapped normal by FFT (the lattice's rows, even about
+   their first bearing, by the cosine transform of their half). With the row resolved (its
    Fourier coefficients negligible at the Nyquist frequency) this is (*) to rounding: the
    error is a few ulps of the row's largest value, so relative accuracy holds down to about
    1e-12 of the peak.
 3. Cells and points interpolate the convolved lattice (``kernels/tabulated.py``: cubic Lagrange in
-   r and theta applied to log p, exact for a locally Gaussian density).
+   r and theta applied to log p, exact for a locally Gaussian density; on the CPU in lanes,
+   ``kernels/tabulated_lanes.py``).
 4. The interpolation error is measured on every table: ``CHECK_ROWS`` extra rows at half-steps
    in range, convolved exactly at bearings half-way between the lattice's, are compared with
    the interpolated values wherever the density exceeds ``CHECK_LEVEL`` of its peak. If the
@@ -314,7 +318,9 @@ def table_spacing_limits(model: MotionModel) -> tuple[float, int]:
 
 
 def interpolation_bound(value_bound: float) -> float:
-    """A bound of what ``kernels/tabulated.py`` returns, in float32 or float64, from a stencil
+    """A bound of what ``kernels/tabulated.py`` (and its CPU lanes, ``kernels/tabulated_lanes.py``:
+    the same weights, sums and selects, with fused multiply-adds and an exp within 3 ulp) returns,
+    in float32 or float64, from a stencil
     whose 16 table entries (float64, before the cast to the kernel's dtype) are at most
     ``value_bound`` (0 from entries all 0: the linear branch sums zeros).
 
