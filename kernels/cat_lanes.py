@@ -20,7 +20,7 @@ from .cat import (
     cat_node_values, cat_one_root, cat_root_density, cat_root_group, cat_scan_functions, cat_scan_noise,
 )
 from .evidence import EVIDENCE
-from .generate import Params, carried_points_kernel, density_kernels
+from .generate import Params, carried_points_kernel, density_kernels, overload_on_use
 from .common import lanes32, lanes64, world_to_local
 from .lanes import cat_scan_group, lane_count
 
@@ -304,3 +304,29 @@ def cat_row(xs: wp.array(dtype=Any), y: Any, out: wp.array2d(dtype=Any), row: in
 # the grid by the row sweep, the points one by one with the nodes in lanes
 KERNELS = density_kernels(cat_density_lanes, CAT_LANES, "cat", suffix="_lanes", row=cat_row)
 CARRIED_POINTS = carried_points_kernel(cat_carried_lanes, CAT_CARRIED_LANES, EVIDENCE, "cat")
+
+
+# --- rays from the fix: the row sweep along a bearing ---------------------------------------------
+
+
+@wp.kernel
+def cat_rays(radii: wp.array(dtype=Any), sines: wp.array(dtype=Any), cosines: wp.array(dtype=Any), k0: int, p: Any,
+             out: wp.array2d(dtype=Any)):
+    """out[k, j] = the density at the local point radii[j] (sines[k], cosines[k]) (radii
+    non-decreasing), for k = k0 + the thread: a ray from the fix swept as a grid row
+    (:func:`cat_sweep_row`) through the frame turned so that the world x axis lies along it
+    (pose (0, 0, sines[k], cosines[k]): the local point is (r sin, r cos) to the bit, so each value
+    is the per-point scan's). ``p``'s pose is not used. A polar lattice of the plain CAT costs
+    O(nodes) a ray plus its roots, instead of the scan at every point."""
+    k = k0 + wp.tid()
+    sine = sines[k]
+    zero = type(sine)(0.0)
+    q = p
+    q.pose = wp.vector(zero, zero, sine, cosines[k])
+    cat_sweep_row(radii, zero, k, 0, radii.shape[0], q, out)
+
+
+for _scalar in (wp.float64, wp.float32):
+    overload_on_use(cat_rays, _scalar, {"radii": wp.array(dtype=_scalar), "sines": wp.array(dtype=_scalar),
+                                        "cosines": wp.array(dtype=_scalar), "p": CAT_LANES.of(_scalar),
+                                        "out": wp.array2d(dtype=_scalar)})

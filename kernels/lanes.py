@@ -455,6 +455,128 @@ def _scan_group(fmt: _Format) -> str:
     )
 
 
+def _tabulated_steps(fmt: _Format, x: str, y: str, out: str) -> str:
+    """C statements leaving ``out`` = ``tabulated.table_density`` at the world points (``x``, ``y``),
+    in a block of their own; the parameters are the scalars and arrays of ``lane_tabulated``'s
+    signature. The world point to the model's frame (``common.world_to_local``'s arithmetic); r by
+    the square root; the bearing by :func:`_cephes_angle_steps` (the scalar atan2's bits); the
+    stencils' rows and columns clamped as the scalar kernel's (a NaN's to the first); the cubic
+    Lagrange weights by ``tabulated.lagrange4``'s formulas; the 16 entries of each lane's stencil
+    from the padded lattice (``tabulated.pad_table``: no remainder, no branch; with AVX-512 one
+    gather instruction per entry and register), weighted in the scalar kernel's order; exp of the
+    log sum where every entry is above the floor, else the linear sum clamped at zero. ``fmt``
+    may be one register or two (:func:`_tabulated_row`'s chains)."""
+    parts = fmt.bytes // 64
+    assert parts in (1, 2, 4), "the gathers join one, two or four registers"
+    double = fmt.scalar == "double"
+    gather_builtin = "__builtin_ia32_gatherdiv8df" if double else "__builtin_ia32_gathersiv16sf"
+    step = fmt.lanes // parts
+
+    def gather(data: str, name: str) -> str:
+        if parts == 1:
+            native = f"{name} = {gather_builtin}(zero, {data}, at, {fmt.mask}, {8 if double else 4});\n"
+        else:  # a gather per register, the pieces joined pairwise
+            size = 8 if double else 4
+            native = "{ " + "".join(
+                f"gv g{k} = {gather_builtin}(gzero, {data}, (gi)__builtin_shufflevector(at, at, "
+                f"{', '.join(map(str, range(k * step, (k + 1) * step)))}), {fmt.mask}, {size}); "
+                for k in range(parts))
+            names, width = [f"g{k}" for k in range(parts)], step
+            while len(names) > 1:
+                joined = [f"{names[k]}{names[k + 1]}" for k in range(0, len(names), 2)]
+                native += "".join(f"auto {joined[k // 2]} = __builtin_shufflevector({names[k]}, {names[k + 1]}, "
+                                  f"{', '.join(map(str, range(2 * width)))}); " for k in range(0, len(names), 2))
+                names, width = joined, 2 * width
+            native += f"{name} = {names[0]}; }}\n"
+        return (f"vt {name};\n#if defined(__AVX512F__)\n{native}"
+                f"#else\nfor (int k = 0; k < {fmt.lanes}; ++k) {name}[k] = {data}[at[k]];\n#endif\n")
+    stencil = "".join(
+        f"{{ vt w = wr{a} * wt{b}; vi at = off + ({a} * row + {b} * col);\n"
+        + gather("tdata", "tv") + gather("ldata", "lv") +
+        "lin = lin + w * tv; lsum = lsum + w * lv; lowest = tv < lowest ? tv : lowest; }\n"
+        for a in range(4) for b in range(4))
+    weights = "".join(
+        f"vt {name}0 = -(f * (f - 1) * (f - 2)) * sixth;\n"
+        f"vt {name}1 = (f + 1) * (f - 1) * (f - 2) * L(0.5);\n"
+        f"vt {name}2 = -((f + 1) * f * (f - 2)) * L(0.5);\n"
+        f"vt {name}3 = (f + 1) * f * (f - 1) * sixth;\n".replace("f", f) for name, f in (("wr", "fr"), ("wt", "ft")))
+    return (
+        f"vt {out};\n{{\n"
+        + (f"typedef {fmt.scalar} gv __attribute__((vector_size(64)));\n"
+           f"typedef {fmt.integer} gi __attribute__((vector_size(64)));\n"
+           "gv gzero = {};\n" if parts > 1 else "") +
+        f"vt dx = {x} - ox;\n"
+        f"vt dy = {y} - oy;\n"
+        "vt lx = dx * c - dy * s;\n"
+        "vt ly = dx * s + dy * c;\n"
+        "vt r2 = lx * lx + ly * ly;\n"
+        f"vt r; for (int k = 0; k < {fmt.lanes}; ++k) r[k] = {fmt.sqrt}(r2[k]);\n"
+        "vt u = (r - r0) / dr;\n"
+        f"vt base; for (int k = 0; k < {fmt.lanes}; ++k) base[k] = {fmt.floor}(u[k]);\n"
+        f"vt lo = zero + ({fmt.scalar})(mirror != 0 ? 0 : 1);\n"
+        f"vt hi = zero + ({fmt.scalar})(table.shape[0] - 1 - 3);\n"
+        "base = base >= lo ? base : lo;\n"  # a NaN to the first row
+        "base = base <= hi ? base : hi;\n"
+        "vt fr = u - base;\n"
+        + _cephes_angle_steps(fmt, "lx", "ly", "angle") +
+        "vt v = (angle - theta0) / dtheta;\n"
+        f"vt column; for (int k = 0; k < {fmt.lanes}; ++k) column[k] = {fmt.floor}(v[k]);\n"
+        "column = column >= -1 ? column : zero - 1;\n"
+        f"vt last = zero + ({fmt.scalar})(table.shape[1] - 5);\n"  # n_theta: the padded columns less 2 + 3
+        "column = column <= last ? column : last;\n"
+        "vt ft = v - column;\n"
+        "vt sixth = zero + L(1.0) / L(6.0);\n"
+        + weights +
+        f"const {fmt.scalar}* tdata = &wp::index(table, 0, 0);\n"
+        f"const {fmt.scalar}* ldata = &wp::index(log_table, 0, 0);\n"
+        f"{fmt.integer} row = ({fmt.integer})(table.strides[0] / sizeof({fmt.scalar}));\n"
+        f"{fmt.integer} col = ({fmt.integer})(table.strides[1] / sizeof({fmt.scalar}));\n"
+        # padded row of lattice row base - 1 is base; padded column of column - 1 is column + 1
+        "vi off = __builtin_convertvector(base, vi) * row + (__builtin_convertvector(column, vi) + 1) * col;\n"
+        "vt lin = zero; vt lsum = zero; vt lowest = zero + " + fmt.infinity + ";\n"
+        + stencil
+        + _exp_steps(fmt, "lsum", "e", upper=True)
+        + "lin = lin > 0 ? lin : zero;\n"
+        f"{out} = lowest > floor_value ? e : lin;\n}}\n"
+    )
+
+
+#: Registers of lanes per step of ``tabulated_row``, float64 and float32: independent chains that
+#: the core overlaps (the bearing's and the exp's steps are long chains of dependent operations;
+#: float64 four registers measured no faster than two, float32 two slower than one: spills).
+TABLE_CHAINS = {"double": 2, "float": 1}
+
+
+def _tabulated_row(fmt: _Format) -> str:
+    """out[row, j0 .. j1 - 1] = ``tabulated.table_density`` at (xs[j], y): the grid kernel's row in
+    one loop, with AVX-512 ``TABLE_CHAINS`` registers of lanes a step (as :func:`_polar_plain_row`;
+    two float32 registers spilled), elsewhere one; lane by lane the operations of ``lane_tabulated`` (:func:`_tabulated_steps`), so
+    the points kernel's bits."""
+    def loop(chains: int) -> str:
+        wide = dataclasses.replace(fmt, lanes=chains * fmt.lanes)
+        size, n = wide.bytes, wide.lanes
+        body = (
+            "{\n"
+            f"typedef {fmt.scalar} vt __attribute__((vector_size({size})));\n"
+            f"typedef {fmt.integer} vi __attribute__((vector_size({size})));\n"
+            "vt zero = {};\n" + _estimates(wide) +
+            "vt vy = zero + y;\n"
+            f"for (int j = j0; j < j1; j += {n}) {{\n"
+            f"bool whole = contiguous && j + {n} <= j1;\n"
+            "vt vx;\n"
+            f"if (whole) {{ __builtin_memcpy(&vx, wp::address(xs, j), {size}); }}\n"
+            f"else {{ for (int k = 0; k < {n}; ++k) {{ vx[k] = wp::index(xs, j + k < last_x ? j + k : last_x); }} }}\n"
+            + _tabulated_steps(wide, "vx", "vy", "res") +
+            f"if (whole) {{ __builtin_memcpy(wp::address(out, row, j), &res, {size}); }}\n"
+            f"else {{ for (int k = 0; k < {n} && j + k < j1; ++k) {{ *wp::address(out, row, j + k) = res[k]; }} }}\n"
+            "}\n}\n"
+        )
+        return re.sub(r"L\(([^()]+)\)", lambda m: fmt.literal(float(m.group(1))), body)
+    return (CONTRACT + "int last_x = xs.shape[0] - 1;\n"
+            f"bool contiguous = xs.strides[0] == sizeof({fmt.scalar}) && out.strides[1] == sizeof({fmt.scalar});\n"
+            f"#if defined(__AVX512F__)\n{loop(TABLE_CHAINS[fmt.scalar])}#else\n{loop(1)}#endif\n")
+
+
 def _load(fmt: _Format) -> str:
     """values[start ..] as one vector: one unaligned vector load where the whole vector lies in a
     contiguous array, else lane by lane with the index clamped to the last element."""
@@ -543,6 +665,19 @@ for _fmt, _v, _s in ((F64, lanes64, wp.float64), (F32, lanes32, wp.float32)):
 
     @wp.func_native(_scan_group(_fmt))
     def cat_scan_group(groups: wp.array2d(dtype=_v), g: int, x: _s, y: _s, chord: _s, noise: _s, count: int) -> int: ...
+
+    @wp.func_native(_snippet(_fmt, "x y", _tabulated_steps(_fmt, "vx", "vy", "res"), contract=True))
+    def lane_tabulated(x: _v, y: _v, log_table: wp.array2d(dtype=_s), table: wp.array2d(dtype=_s), r0: _s, dr: _s,
+                       theta0: _s, dtheta: _s, floor_value: _s, mirror: int, ox: _s, oy: _s, c: _s, s: _s) -> _v:
+        """The interpolated density of a padded polar lattice at the world points (x, y) (``_tabulated_steps``)."""
+        ...
+
+    @wp.func_native(_tabulated_row(_fmt))
+    def tabulated_row(xs: wp.array(dtype=_s), y: _s, out: wp.array2d(dtype=_s), row: int, j0: int, j1: int,
+                      log_table: wp.array2d(dtype=_s), table: wp.array2d(dtype=_s), r0: _s, dr: _s, theta0: _s,
+                      dtheta: _s, floor_value: _s, mirror: int, ox: _s, oy: _s, c: _s, s: _s):
+        """out[row, j0 .. j1 - 1] = the interpolated density at (xs[j], y) (``_tabulated_row``)."""
+        ...
 
     @wp.func_native(f"return {_fmt.lanes};\n")
     def lane_count(values: wp.array(dtype=_s)) -> int:

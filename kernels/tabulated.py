@@ -9,10 +9,16 @@ and relative accuracy holds far into the tails; where a stencil touches a value 
 
 When the lattice starts at the origin (``mirror`` = 1, n_theta even), stencil rows below it are
 reflected through the origin: p(-r, theta) = p(r, theta + pi).
+
+The kernel reads a padded copy of the lattice (:func:`pad_table`): a row -1 before it (row 1 turned
+by half a turn where it mirrors) and the bearings wrapped by ``PAD_BEFORE`` columns before and
+``PAD_AFTER`` after, so that a stencil's 16 entries are read without a remainder or a branch each
+(the integer remainder was most of a cell's cost).
 """
 
 from typing import Any
 
+import numpy as np
 import warp as wp
 
 from .common import atan2_fast, world_to_local
@@ -37,61 +43,66 @@ def lagrange4(f: Any):
     return w0, w1, w2, w3
 
 
-@wp.func
-def row_weight(k: int, w0: Any, w1: Any, w2: Any, w3: Any):
-    """The k-th of four stencil weights."""
-    w = w0
-    if k == 1:
-        w = w1
-    elif k == 2:
-        w = w2
-    elif k == 3:
-        w = w3
-    return w
+#: Wrapped bearing columns of the padded table before and after the lattice's (:func:`pad_table`):
+#: a stencil at column col in [-1, n_theta] reads columns col - 1 .. col + 2.
+PAD_BEFORE = 2
+PAD_AFTER = 3
+
+
+def pad_table(values: np.ndarray, mirror: bool) -> np.ndarray:
+    """The lattice ``values`` (n_r, n_theta) as the kernel reads it, shape (n_r + 1, n_theta +
+    PAD_BEFORE + PAD_AFTER): row 0 is lattice row -1 (row 1 turned by n_theta / 2 bearings where
+    the lattice mirrors through the origin; else row 0, which no stencil reads), and padded column
+    c holds bearing (c - PAD_BEFORE) mod n_theta."""
+    n_r, n_theta = values.shape
+    out = np.empty((n_r + 1, n_theta + PAD_BEFORE + PAD_AFTER), dtype=values.dtype)
+    out[1:, PAD_BEFORE:PAD_BEFORE + n_theta] = values
+    if mirror:
+        half = n_theta // 2
+        out[0, PAD_BEFORE:PAD_BEFORE + n_theta - half] = values[1, half:]
+        out[0, PAD_BEFORE + n_theta - half:PAD_BEFORE + n_theta] = values[1, :half]
+    else:
+        out[0, PAD_BEFORE:PAD_BEFORE + n_theta] = values[0]
+    # the wrapped columns (PAD_BEFORE, PAD_AFTER <= n_theta)
+    out[:, :PAD_BEFORE] = out[:, n_theta:n_theta + PAD_BEFORE]
+    out[:, PAD_BEFORE + n_theta:] = out[:, PAD_BEFORE:PAD_BEFORE + PAD_AFTER]
+    return out
 
 
 @wp.func
 def table_density_local(x: Any, y: Any, p: Any):
-    """Interpolated density at a local point."""
+    """Interpolated density at a local point (``p.table``, ``p.log_table``: :func:`pad_table`'s)."""
     zero = type(x)(0.0)
-    n_r = p.table.shape[0]
-    n_theta = p.table.shape[1]
+    n_r = p.table.shape[0] - 1
+    n_theta = p.table.shape[1] - (PAD_BEFORE + PAD_AFTER)
     r = wp.sqrt(x * x + y * y)
     u = (r - p.r0) / p.dr
     base = int(wp.floor(u))
-    if p.mirror == 0:
-        base = wp.clamp(base, 1, n_r - 3)  # one-sided stencils at the lattice's ends
-    else:
-        base = wp.min(base, n_r - 3)
+    # one-sided stencils at the lattice's ends (a lattice from the origin reads row -1, mirrored);
+    # the clamps also keep a NaN's stencil inside the table
+    base = wp.clamp(base, 1 - p.mirror, n_r - 3)
     fr = u - type(x)(float(base))
     v = (atan2_fast(x, y) - p.theta0) / p.dtheta
-    col = int(wp.floor(v))
+    col = wp.clamp(int(wp.floor(v)), -1, n_theta)  # v in [0, n_theta] up to rounding
     ft = v - type(x)(float(col))
     wr0, wr1, wr2, wr3 = lagrange4(fr)
     wt0, wt1, wt2, wt3 = lagrange4(ft)
+    wr = wp.vector(wr0, wr1, wr2, wr3)
+    wt = wp.vector(wt0, wt1, wt2, wt3)
     log_sum = zero
     lin_sum = zero
-    lowest = type(x)(1.0)
-    half_turn = n_theta / 2
+    # padded row of lattice row base - 1 + a is base + a; padded column of col - 1 + b is
+    # col - 1 + b + PAD_BEFORE
+    i0 = base
+    j0 = col + (PAD_BEFORE - 1)
+    lowest = p.table[i0, j0]
     for a in range(4):
-        i = base - 1 + a
-        shift = int(0)
-        if i < 0:
-            i = -i
-            shift = half_turn
-        wr = row_weight(a, wr0, wr1, wr2, wr3)
         for b in range(4):
-            j = (col - 1 + b + shift) % n_theta
-            if j < 0:
-                j = j + n_theta
-            w = wr * row_weight(b, wt0, wt1, wt2, wt3)
-            value = p.table[i, j]
+            w = wr[a] * wt[b]
+            value = p.table[i0 + a, j0 + b]
             lin_sum += w * value
-            log_sum += w * p.log_table[i, j]
-            if b == 0 and a == 0:
-                lowest = value
-            else:
-                lowest = wp.min(lowest, value)
+            log_sum += w * p.log_table[i0 + a, j0 + b]
+            lowest = wp.min(lowest, value)
     if lowest > p.floor_value:
         return wp.exp(log_sum)
     return wp.max(lin_sum, zero)
@@ -104,7 +115,7 @@ def table_density(x: Any, y: Any, p: Any):
     return table_density_local(lx, ly, p)
 
 
-#: The parameters: log p and p on the lattice, its geometry, ``mirror``, the pose.
+#: The parameters: log p and p on the padded lattice (:func:`pad_table`), its geometry, ``mirror``, the pose.
 TABLE = Params("TableParams", __name__, log_table=ARRAY2D, table=ARRAY2D, r0=SCALAR, dr=SCALAR, theta0=SCALAR,
                dtheta=SCALAR, floor_value=SCALAR, mirror=int, pose=VEC4)
 KERNELS = density_kernels(table_density, TABLE, "table", bands_per_thread=1)

@@ -14,13 +14,17 @@ How it is computed, and why the error is controlled:
 1. p_0 is evaluated by the exact CAT kernel on a polar lattice: ranges r_i = r0 + i dr and
    n_theta bearings over the full circle. The spacings come from the banana's own scales
    (:func:`natural_scales`): ``RESOLUTION`` nodes per range SD and ``BEARING_RESOLUTION`` per
-   angular width of the banana on a circle.
-2. Each lattice row is convolved with the wrapped normal by FFT. With the row resolved (its
+   angular width of the banana on a circle. Each bearing's ray is swept as a grid row
+   (:func:`plain_lattice`: the per-point scan's values to the bit), and p_0 is symmetric about
+   the heading, so each pair of mirrored bearings is swept once.
+2. Each lattice row is convolved with the wrapped normal by FFT (the lattice's rows, even about
+   their first bearing, by the cosine transform of their half). With the row resolved (its
    Fourier coefficients negligible at the Nyquist frequency) this is (*) to rounding: the
    error is a few ulps of the row's largest value, so relative accuracy holds down to about
    1e-12 of the peak.
 3. Cells and points interpolate the convolved lattice (``kernels/tabulated.py``: cubic Lagrange in
-   r and theta applied to log p, exact for a locally Gaussian density).
+   r and theta applied to log p, exact for a locally Gaussian density; on the CPU in lanes,
+   ``kernels/tabulated_lanes.py``).
 4. The interpolation error is measured on every table: ``CHECK_ROWS`` extra rows at half-steps
    in range, convolved exactly at bearings half-way between the lattice's, are compared with
    the interpolated values wherever the density exceeds ``CHECK_LEVEL`` of its peak. If the
@@ -34,21 +38,22 @@ from __future__ import annotations
 import functools
 import math
 import warnings
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 
 import numpy as np
+import scipy.fft
 
 from ..domains.pose import Pose
 from ..engine.points import evaluate_points, launch_points
 from ..engine.warp_runtime import WarpContext
-from ..kernels import tabulated
+from ..kernels import cat_lanes, tabulated, tabulated_lanes
 from ..protocol import KernelBinding, KernelContext
 from ..validate import BananagridError, BananagridWarning
 from .motion import MotionModel, natural_scales
 
 __all__ = [
-    "HeadingTable", "heading_table", "build_heading_table", "convolved_rows", "ray_densities",
-    "convolve_heading", "table_binding", "clear_heading_tables", "interpolate_table", "RESOLUTION", "BEARING_RESOLUTION",
+    "HeadingTable", "heading_table", "build_heading_table", "convolved_rows", "plain_lattice", "ray_densities",
+    "convolve_heading", "convolve_even_heading", "table_binding", "clear_heading_tables", "interpolate_table", "RESOLUTION", "BEARING_RESOLUTION",
     "first_table_nodes", "table_spacing_limits", "interpolation_bound",
     "TARGET_ERROR", "CHECK_LEVEL", "heading_nodes", "HEADING_SDS", "HEADING_NODES_PER_SCALE",
 ]
@@ -110,6 +115,22 @@ class HeadingTable:
     mirror: bool
     error_estimate: float
     refinements: int
+    #: The kernel's arrays per dtype (:meth:`kernel_arrays`), made once.
+    _kernel_arrays: dict = field(default_factory=dict, repr=False, compare=False)
+
+    def kernel_arrays(self, dtype) -> tuple[np.ndarray, np.ndarray, float]:
+        """The padded lattice (``kernels/tabulated.py``'s ``pad_table``) in ``dtype``, its log
+        (entries at or below the dtype's ``FLOOR`` are never used in log) and that floor: made
+        once per dtype (the check rows and every grid of a remembered table share them)."""
+        dtype = np.dtype(dtype)
+        arrays = self._kernel_arrays.get(dtype)
+        if arrays is None:
+            values = tabulated.pad_table(self.values, self.mirror).astype(dtype)
+            floor = FLOOR[dtype]
+            with np.errstate(divide="ignore"):
+                logs = np.log(np.maximum(values, floor))
+            arrays = self._kernel_arrays.setdefault(dtype, (values, logs, floor))
+        return arrays
 
     @property
     def shape(self) -> tuple[int, int]:
@@ -136,6 +157,17 @@ def convolve_heading(values: np.ndarray, sigma_heading: float) -> np.ndarray:
     return np.maximum(out, 0.0)
 
 
+def convolve_even_heading(half: np.ndarray, sigma_heading: float) -> np.ndarray:
+    """:func:`convolve_heading` of rows that are even about their first bearing, given by their
+    first n / 2 + 1 bearings (n even; shape (..., n / 2 + 1)), and so returned: the Fourier
+    coefficients of an even row are its type-I cosine transform (real, half the length)."""
+    k = np.arange(half.shape[-1])
+    spectrum = scipy.fft.dct(half, type=1, axis=-1) * np.exp(-0.5 * (k * sigma_heading) ** 2)
+    out = scipy.fft.idct(spectrum, type=1, axis=-1)
+    # rounding leaves values of a few ulps of the row maximum, of either sign, where p is ~0
+    return np.maximum(out, 0.0)
+
+
 def _base_model(model: MotionModel) -> MotionModel:
     """The same CAT without heading noise, in its own local frame."""
     return replace(model, sigma_heading=0.0, pose=Pose())
@@ -144,12 +176,75 @@ def _base_model(model: MotionModel) -> MotionModel:
 def convolved_rows(model: MotionModel, radii, theta_start: float, n_theta: int, *, threads=None) -> np.ndarray:
     """(*) at ranges ``radii`` and bearings theta_start + 2 pi j / n_theta (j < n_theta), exact
     to rounding when n_theta resolves the rows (float64, shape (len(radii), n_theta))."""
-    radii = np.asarray(radii, dtype=float)
     theta = theta_start + 2.0 * math.pi * np.arange(n_theta) / n_theta
-    x = radii[:, None] * np.sin(theta)[None, :]
-    y = radii[:, None] * np.cos(theta)[None, :]
-    p0 = evaluate_points(_base_model(model), x, y, dtype=np.float64, threads=threads)
+    partner = _mirror_bearings(theta_start, n_theta)
+    if partner is None:
+        p0 = plain_lattice(model, radii, theta, threads=threads)
+    elif partner[0] == 0 and n_theta % 2 == 0:
+        # bearing 0 its own mirror (the lattice's -pi): each row is even about it, bearings
+        # 0 .. n_theta / 2 hold all of it, and so does its convolution (the wrapped normal is even)
+        half = np.ascontiguousarray(plain_lattice(model, radii, theta[: n_theta // 2 + 1], threads=threads))
+        j = np.arange(n_theta)
+        return convolve_even_heading(half, model.sigma_heading)[:, np.minimum(j, n_theta - j)]
+    else:
+        # p_0 is symmetric about the nominal heading (the turn rate's law is symmetric, and
+        # omega -> -omega mirrors each path: p_0(r, -theta) = p_0(r, theta)): each pair of
+        # mirrored bearings is evaluated once, at the one of the pair listed first
+        j = np.arange(n_theta)
+        first = np.minimum(j, partner)
+        own = np.unique(first)
+        p0 = plain_lattice(model, radii, theta[own], threads=threads, rays=True)[np.searchsorted(own, first)].T
     return convolve_heading(p0, model.sigma_heading)
+
+
+def _mirror_bearings(theta_start: float, n_theta: int) -> np.ndarray | None:
+    """For bearings theta_j = theta_start + 2 pi j / n_theta, the index of -theta_j's bearing
+    (mod 2 pi) for each j where every bearing has one (theta_start an integer multiple of
+    pi / n_theta, as the lattice's -pi and the check rows' half-steps), else None."""
+    s = -theta_start * n_theta / math.pi  # -theta_j = theta_m (mod 2 pi) for m = s - j (mod n_theta)
+    if not abs(s - round(s)) <= 1e-9 * max(1.0, abs(s)):
+        return None
+    return (int(round(s)) - np.arange(n_theta)) % n_theta
+
+
+#: Ray bands per thread of :func:`plain_lattice`: the rays through the banana cost far more than
+#: the others.
+RAY_BANDS_PER_THREAD = 16
+
+
+def plain_lattice(model: MotionModel, radii, theta, *, threads=None, rays: bool = False) -> np.ndarray:
+    """p_0, the CAT density without heading noise (float64), at the local points
+    (r sin theta, r cos theta) for r in ``radii`` and each bearing ``theta``:
+    shape (len(radii), len(theta)) (with ``rays``: its transpose, a ray a row). Each bearing's ray is swept as a grid row
+    (``kernels/cat_lanes.py``'s ``cat_rays``): the per-point scan's values, to the bit, at a
+    fraction of its cost (O(nodes) a ray plus the roots, instead of the scan at every point)."""
+    radii = np.ascontiguousarray(radii, dtype=np.float64)
+    theta = np.asarray(theta, dtype=np.float64)
+    if radii.size == 0 or not np.isfinite(radii).all():
+        # the points kernel refuses non-finite points (and has none to evaluate): always the rays
+        # otherwise, also for the check rows' few ranges, so that a run builds one CAT kernel
+        x = radii[:, None] * np.sin(theta)[None, :]
+        y = radii[:, None] * np.cos(theta)[None, :]
+        values = evaluate_points(_base_model(model), x, y, dtype=np.float64, threads=threads)
+        return values.T if rays else values
+    if np.any(np.diff(radii) < 0.0):  # the sweep takes a ray's points in order
+        order = np.argsort(radii, kind="stable")
+        values = np.empty((theta.size, radii.size))
+        values[:, order] = plain_lattice(model, radii[order], theta, threads=threads, rays=True)
+        return values if rays else values.T
+    ctx = WarpContext(np.float64, "cpu", threads)
+    binding = _base_model(model).bind(ctx, None, grid=True)
+    sines = ctx.host_array(np.sin(theta))
+    cosines = ctx.host_array(np.cos(theta))
+    lattice = np.empty((theta.size, radii.size))  # a ray a row
+    out = ctx.shared(lattice)
+    xs = ctx.host_array(radii)
+    ctx.load(cat_lanes.cat_rays)
+
+    def launch_band(a, b):
+        ctx.launch(cat_lanes.cat_rays, dim=b - a, inputs=[xs, sines, cosines, a, binding.params, out])
+    ctx.run_bands(launch_band, ctx.bands(theta.size, RAY_BANDS_PER_THREAD))
+    return lattice if rays else lattice.T
 
 
 def _even(n: float) -> int:
@@ -223,7 +318,9 @@ def table_spacing_limits(model: MotionModel) -> tuple[float, int]:
 
 
 def interpolation_bound(value_bound: float) -> float:
-    """A bound of what ``kernels/tabulated.py`` returns, in float32 or float64, from a stencil
+    """A bound of what ``kernels/tabulated.py`` (and its CPU lanes, ``kernels/tabulated_lanes.py``:
+    the same weights, sums and selects, with fused multiply-adds and an exp within 3 ulp) returns,
+    in float32 or float64, from a stencil
     whose 16 table entries (float64, before the cast to the kernel's dtype) are at most
     ``value_bound`` (0 from entries all 0: the linear branch sums zeros).
 
@@ -317,9 +414,7 @@ def ray_densities(model: MotionModel, radii, angles, *, threads=None) -> np.ndar
     # profile of SD w has exp(-(6 pi)^2 / 2) ~ 1e-77 there)
     n_theta = max(16, _even(2.0 * math.pi * RAY_RESOLUTION / angular))
     theta = -math.pi + 2.0 * math.pi * np.arange(n_theta) / n_theta
-    x = radii[:, None] * np.sin(theta)[None, :]
-    y = radii[:, None] * np.cos(theta)[None, :]
-    p0 = evaluate_points(_base_model(model), x, y, dtype=np.float64, threads=threads)
+    p0 = plain_lattice(model, radii, theta, threads=threads)
     k = np.arange(n_theta // 2 + 1)
     spectrum = np.fft.rfft(p0, axis=-1) * np.exp(-0.5 * (k * model.sigma_heading) ** 2)
     # p(theta) = (1/n) sum_k c_k e^{i k (theta - theta_start)} over k in [-n/2, n/2): the real
@@ -336,13 +431,11 @@ def table_binding(ctx: KernelContext, table: HeadingTable, pose, notes: dict) ->
     """The interpolating kernels (``kernels/tabulated.py``) over ``table``, placed by ``pose``
     (origin x, origin y, cos heading, sin heading): log-cubic stencils where the table is above
     its floor."""
-    values = table.values.astype(ctx.dtype)
-    floor = FLOOR[np.dtype(ctx.dtype)]
-    with np.errstate(divide="ignore"):
-        logs = np.log(np.maximum(values, floor))  # entries at the floor are never used in log
+    values, logs, floor = table.kernel_arrays(ctx.dtype)
     params = ctx.struct(tabulated.TABLE, log_table=ctx.array(logs), table=ctx.array(values), r0=table.r0, dr=table.dr,
                         theta0=table.theta0, dtheta=table.dtheta, floor_value=floor, mirror=int(table.mirror), pose=pose)
-    return KernelBinding(tabulated.KERNELS, params, notes)
+    # on the CPU the lane kernels (``kernels/tabulated_lanes.py``)
+    return KernelBinding(tabulated_lanes.KERNELS if ctx.device == "cpu" else tabulated.KERNELS, params, notes)
 
 
 def interpolate_table(table: HeadingTable, x, y, *, dtype=np.float64, device: str = "cpu", threads=None) -> np.ndarray:

@@ -14,6 +14,7 @@ from hypothesis import strategies as st
 import bananagrid as bg
 from bananagrid.engine.warp_runtime import WarpContext
 from bananagrid.kernels import cat, cat_lanes
+from bananagrid.models import _cat_heading as heading
 
 
 def _scalar_points(model, ctx, binding, x, y):
@@ -99,3 +100,55 @@ def test_unsorted_centres_take_the_per_cell_scan():
     assert np.count_nonzero(scalar) > 0
     assert np.array_equal(out.numpy(), scalar)
     assert binding.kernels.grid is cat_lanes.KERNELS.grid  # the row sweep's generated grid kernel
+
+
+@st.composite
+def _ray_cases(draw):
+    """A plain CAT over the sweep's domain (as :func:`_sweep_cases`) and a polar lattice of its
+    local frame: 1-80 ranges from the fix (0 included or not) to twice v0 t, in order or shuffled
+    (the lattice sorts them), spaced from a hundredth of the range to all of it, and 12-40 bearings
+    anywhere on the circle, the nominal heading and its reverse among them."""
+    v0, t = draw(st.floats(1.0, 1000.0)), draw(st.floats(1.0, 600.0))
+    accel, turn = draw(st.floats(0.1, 20.0)), draw(st.floats(1e-3, 2.0))
+    model = bg.CAT(v0=v0, t=t, sigma_a=accel * v0 / 100.0, sigma_omega=turn / t)
+    n_r = draw(st.integers(1, 80))
+    start = draw(st.sampled_from([0.0, draw(st.floats(0.0, 1.5))])) * v0 * t
+    step = draw(st.floats(0.01, 1.0)) * v0 * t / n_r
+    radii = start + step * np.arange(n_r)
+    if draw(st.booleans()):
+        radii = np.random.default_rng(draw(st.integers(0, 100))).permutation(radii)
+    n_theta = draw(st.integers(12, 40))
+    theta = np.concatenate([[0.0, math.pi], np.random.default_rng(draw(st.integers(0, 100))).uniform(
+        -math.pi, math.pi, n_theta - 2)])
+    return model, radii, theta
+
+
+@seed(20261128)
+@settings(max_examples=30, deadline=None, database=None, suppress_health_check=[HealthCheck.too_slow])
+@given(case=_ray_cases())
+def test_rays_equal_the_per_point_scan_bit_for_bit(case):
+    """``cat_lanes.cat_rays`` (each bearing's ray swept as a grid row, what the heading table is
+    built from: ``models/_cat_heading.plain_lattice``) equals the scalar per-point kernel at every
+    lattice point (r sin theta, r cos theta): the turned frame gives the same local points, and the
+    sweep the scan's roots."""
+    model, radii, theta = case
+    got = heading.plain_lattice(model, radii, theta, threads=2)
+    ctx = WarpContext(np.float64, "cpu", 1)
+    binding = model.bind(ctx, None, grid=True)
+    x = radii[:, None] * np.sin(theta)[None, :]
+    y = radii[:, None] * np.cos(theta)[None, :]
+    scalar = _scalar_points(model, ctx, binding, x, y)
+    assert np.array_equal(got, scalar), int(np.sum(got != scalar))
+
+
+def test_rays_of_the_figure_1_lattice_find_the_banana():
+    """A guard that the bit-for-bit test compares something: on the Figure 1 banana's heading
+    lattice most points of the rays through it hold roots; and a ray of one range, or of a few as
+    the heading tables' check rows, gives the long rays' values."""
+    model = bg.CAT(v0=280.0, t=10.0, sigma_a=5 / 3, sigma_omega=math.pi / 54)
+    radii = np.linspace(0.0, 3400.0, 32)
+    theta = np.linspace(-math.pi, math.pi, 64, endpoint=False)
+    rays = heading.plain_lattice(model, radii, theta, threads=1)
+    assert np.count_nonzero(rays) > 0.3 * rays.size
+    for few in (radii[5:6], radii[3:19:4]):
+        assert np.array_equal(heading.plain_lattice(model, few, theta, threads=1), rays[np.isin(radii, few)])

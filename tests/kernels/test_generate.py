@@ -257,6 +257,7 @@ def test_generated_batches_equal_one_hypothesis_at_a_time(family, dtype):
 
 
 @pytest.mark.parametrize("family", ["polar", "polar_lanes", "bearing", "bearing_lanes", "cat", "cat_lanes", "tabulated",
+                                    "tabulated_lanes",
                                     "butterly"])
 def test_every_family_builds_one_module_without_adjoints(family):
     """The package's families: every kernel of a family (generated or its own) lives in the family's
