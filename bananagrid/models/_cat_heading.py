@@ -21,8 +21,8 @@ How it is computed, and why the error is controlled:
    their first bearing, by the cosine transform of their half). With the row resolved (its
    Fourier coefficients negligible at the Nyquist frequency) this is (*) to rounding: the
    error is a few ulps of the row's largest value: relative to the value, 1e-6 holds down to
-   about 1e-9 of the row's peak (7e-7 measured at 1e-10 of it on Figure 1), and the error grows
-   as the value falls below that.
+   about 1e-10 of the peak (7e-7 measured there on Figure 1), and grows as the value falls
+   below that.
 3. Cells and points interpolate the convolved lattice (``kernels/tabulated.py``: cubic Lagrange in
    r and theta applied to log p, exact for a locally Gaussian density; on the CPU in lanes,
    ``kernels/tabulated_lanes.py``).
