@@ -517,7 +517,7 @@ def weighted_piece(ev: Earlier, active: int, base: int, r: Ribbon, a: wp.float64
 
 @wp.func
 def ribbon_cell(r: Ribbon, i: int, j: int, ev: Earlier, near: int, out: wp.array3d(dtype=wp.float64), tz: wp.vec3d,
-                tq: wp.vec3d):
+                tq: wp.vec3d, edge_lo: wp.float64, edge_hi: wp.float64):
     """Add the ribbon's mass in cell (i, j) to every channel of ``out``: the integral over s of
     g(omega) h [Phi(z_out(s)) - Phi(z_in(s))], weighted by the earlier evidence ``ev``.
 
@@ -529,7 +529,11 @@ def ribbon_cell(r: Ribbon, i: int, j: int, ev: Earlier, near: int, out: wp.array
     sub-piece whose earlier points (a hull, z_in and z_out being monotone) miss every polygon's
     box takes the plain terms; where no edge's box meets them either, the polygons that hold
     them give constant factors (:func:`patch_state`); otherwise :func:`weighted_piece` for the
-    channels a cutting polygon weighs, the plain terms times constant factors for the others."""
+    channels a cutting polygon weighs, the plain terms times constant factors for the others.
+
+    ``edge_lo``, ``edge_hi``: the window of the line s = 0 in the cell (the walk's ``cell_clip``,
+    the same bits as :func:`ribbon_clip` at s = 0); ``tz``, ``tq``: the nodes' last tails
+    (:func:`gauss_nodes`), returned updated."""
     fi = wp.float64(float(i))
     fj = wp.float64(float(j))
     one = wp.float64(1.0)
@@ -543,7 +547,10 @@ def ribbon_cell(r: Ribbon, i: int, j: int, ev: Earlier, near: int, out: wp.array
         s1 = corner_roots(r.line, r.step, fi + one, fj + one, s0, s1)
         s1 = corner_roots(r.line, r.step, fi, fj + one, s0, s1)
         # sub-pieces short enough that neither z_in nor z_out moves by more than Z_PIECE SDs
-        lo0, hi0 = ribbon_clip(r, s0, i, j)
+        lo0 = edge_lo
+        hi0 = edge_hi
+        if s0 > wp.float64(0.0):
+            lo0, hi0 = ribbon_clip(r, s0, i, j)
         lo1, hi1 = ribbon_clip(r, s1, i, j)
         moved = wp.max(wp.abs(lo1 - lo0), wp.abs(hi1 - hi0))
         pieces = wp.clamp(int(wp.ceil(moved / wp.float64(Z_PIECE))), 1, MAX_PIECES)
@@ -619,7 +626,7 @@ def walk_edge(r: Ribbon, edge: wp.float64, row0: int, row1: int, nx: int, ev: Ea
         z_next = wp.max(z, wp.min(hi, wp.min(zi, zj)))
         a_lo, a_hi = cell_clip(r.line, i, j)
         if (a_lo < a_hi) == (edge == wp.float64(0.0)):
-            tz, tq = ribbon_cell(r, i, j, ev, near, out, tz, tq)
+            tz, tq = ribbon_cell(r, i, j, ev, near, out, tz, tq, a_lo, a_hi)
         z = z_next
         if z >= hi:
             return
