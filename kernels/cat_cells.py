@@ -20,7 +20,11 @@ by Gauss-Legendre. A line's share is smooth between those passes, so the rule st
 where a midpoint rule in omega is not: a line running along a cell side leaves the cell over a
 tiny change of omega. Crossings are computed from the lines alone, not accumulated, so no step
 drifts and the result does not depend on the bands. Always float64: a cell's share is a
-difference of two normal tails.
+difference of two normal tails. Work shared along the walk, the same bits as without it: a
+Gauss node's line leaves one cell at the z it enters the next by, so its tail there is taken
+from the cell before (``gauss_nodes``); the nodes' weights over the whole ribbon (every cell
+no corner pass cuts) are computed once a ribbon; a corner that stays on one side of every line
+of the ribbon by a margin needs no root (``corner_roots``).
 
 Earlier evidence (:class:`Earlier`): polygons at earlier times weigh each path by where it was
 then, exactly in z along each line (``weighted_share``), with the kinks over omega as breaks of
