@@ -20,7 +20,11 @@ by Gauss-Legendre. A line's share is smooth between those passes, so the rule st
 where a midpoint rule in omega is not: a line running along a cell side leaves the cell over a
 tiny change of omega. Crossings are computed from the lines alone, not accumulated, so no step
 drifts and the result does not depend on the bands. Always float64: a cell's share is a
-difference of two normal tails.
+difference of two normal tails. Work shared along the walk, the same bits as without it: a
+Gauss node's line leaves one cell at the z it enters the next by, so its tail there is taken
+from the cell before (``gauss_nodes``); the nodes' weights over the whole ribbon (every cell
+no corner pass cuts) are computed once a ribbon; a corner that stays on one side of every line
+of the ribbon by a margin needs no root (``corner_roots``).
 
 Earlier evidence (:class:`Earlier`): polygons at earlier times weigh each path by where it was
 then, exactly in z along each line (``weighted_share``), with the kinks over omega as breaks of
@@ -37,7 +41,7 @@ of the bit mask ``masks[c]``.
 
 import warp as wp
 
-from .common import cat_basis, local_to_world, normal_interval, normal_pdf
+from .common import cat_basis, local_to_world, normal_interval, normal_pdf, normal_sf
 from .evidence import polygon_contains, polygon_edge
 
 # No adjoints: nothing differentiates these kernels, and the backward kernels Warp would
@@ -45,8 +49,10 @@ from .evidence import polygon_contains, polygon_edge
 # see the note in kernels/__init__.py).
 wp.set_module_options({"enable_backward": False})
 
-#: Largest |z| walked: the normal mass beyond it, erfc(9 / sqrt 2) = 2.3e-19, is left out.
-Z_MAX = 9.0
+#: Largest |z| walked: the normal mass beyond it, erfc(7.5 / sqrt 2) = 6.4e-14, is left out (a
+#: tenth of the cells' absolute error floor, 1e-12: no cell there holds more than that; the
+#: walk of |z| from 7.5 to 9 was a sixth of the cells it visited).
+Z_MAX = 7.5
 #: 3-point Gauss-Legendre on [-1, 1]: nodes 0, +-sqrt(3/5), weights 8/9 and 5/9 (module
 #: constants: a literal inside a Warp function is a float32 constant).
 GAUSS_NODE = 0.7745966692414834
@@ -84,8 +90,9 @@ class Frame:
 @wp.struct
 class Ribbon:
     """The lines of the turn rates omega0 + s h, s in [0, 1], of interval ``k``: ``line + s
-    step`` (a line: its point at z = 0 and its step per unit z, :func:`world_line`), and the SD
-    of the turn rate's normal weight."""
+    step`` (a line: its point at z = 0 and its step per unit z, :func:`world_line`), the SD of the
+    turn rate's normal weight, and the factors of the Gauss nodes of the whole ribbon taken as
+    one piece (:func:`node_scale` over s in [0, 1]: the same in every cell no corner pass cuts)."""
 
     line: wp.vec4d
     step: wp.vec4d
@@ -93,6 +100,7 @@ class Ribbon:
     h: wp.float64
     sigma_omega: wp.float64
     k: int
+    weights: wp.vec3d
 
 
 @wp.func
@@ -172,6 +180,15 @@ def corner_roots(line: wp.vec4d, d: wp.vec4d, cx: wp.float64, cy: wp.float64, af
     zero = wp.float64(0.0)
     scale = wp.abs(c0) + wp.abs(c1) + wp.abs(c2)
     if scale == zero:
+        return best
+    # most corners stay on one side of every line of a narrow ribbon: on [0, 1], c(s) =
+    # (1 - s) c(0) + s c(1) - c2 s (1 - s) is at least min(|c(0)|, |c(1)|) - |c2| / 4 from 0 when
+    # c(0), c(1) share a sign; a margin of 1e-9 scale keeps every root the solver below would
+    # compute outside [0, 1] too (rounding moves them by a few ulps of scale / |c'|, or by
+    # sqrt(eps scale / |c2|) at a double root), so it would return best as well
+    end = c0 + c1 + c2
+    if (c0 > zero) == (end > zero) and wp.min(wp.abs(c0), wp.abs(end)) > wp.float64(0.25) * wp.abs(c2) + wp.float64(
+            1.0e-9) * scale:
         return best
     if wp.abs(c2) <= wp.float64(1.0e-14) * scale:  # linear: one root
         if c1 != zero:
@@ -382,29 +399,71 @@ def patch_state(ev: Earlier, near: int, k: int, s0: wp.float64, s1: wp.float64, 
 
 
 @wp.func
+def node_s(n: int, mid: wp.float64, half: wp.float64):
+    """s of node n (0, 1, 2) of 3-point Gauss-Legendre over [mid - half, mid + half]."""
+    return mid + wp.float64(float(n - 1)) * wp.float64(GAUSS_NODE) * half
+
+
+@wp.func
+def node_scale(r: Ribbon, n: int, s: wp.float64, half: wp.float64):
+    """The factor of node n at s of a rule of half-width ``half``: weight x half x g(omega) h."""
+    w = wp.float64(GAUSS_CENTRE_WEIGHT)
+    if n != 1:
+        w = wp.float64(GAUSS_SIDE_WEIGHT)
+    return w * half * normal_pdf(r.omega0 + s * r.h, wp.float64(0.0), r.sigma_omega) * r.h
+
+
+@wp.func
 def gauss_node(r: Ribbon, n: int, mid: wp.float64, half: wp.float64, i: int, j: int):
     """Node n (0, 1, 2) of 3-point Gauss-Legendre over s in [mid - half, mid + half]: its s, the
     line's window [lo, hi] of z in cell (i, j) and, where it is not empty, the node's factor
-    (weight x half x g(omega) h)."""
-    s = mid + wp.float64(float(n - 1)) * wp.float64(GAUSS_NODE) * half
+    (:func:`node_scale`; the ribbon's own for the whole of [0, 1], computed once)."""
+    s = node_s(n, mid, half)
     lo, hi = ribbon_clip(r, s, i, j)
     scale = wp.float64(0.0)
     if lo < hi:
-        w = wp.float64(GAUSS_CENTRE_WEIGHT)
-        if n != 1:
-            w = wp.float64(GAUSS_SIDE_WEIGHT)
-        scale = w * half * normal_pdf(r.omega0 + s * r.h, wp.float64(0.0), r.sigma_omega) * r.h
+        if mid == wp.float64(0.5) and half == wp.float64(0.5):
+            scale = r.weights[n]
+        else:
+            scale = node_scale(r, n, s, half)
     return s, lo, hi, scale
 
 
 @wp.func
-def gauss_nodes(r: Ribbon, i: int, j: int, mid: wp.float64, half: wp.float64, total: wp.float64):
-    """``total`` plus the terms of the lines' shares of cell (i, j) (:func:`gauss_node`)."""
+def normal_tail(z: wp.float64):
+    """Q(|z|): the normal tail on the side of z away from 0 (``normal_sf``'s upper branch)."""
+    return normal_sf(wp.abs(z))
+
+
+@wp.func
+def tail_interval(lo: wp.float64, hi: wp.float64, q_lo: wp.float64, q_hi: wp.float64):
+    """Phi(hi) - Phi(lo) for lo <= hi from q_lo = Q(|lo|) and q_hi = Q(|hi|): ``normal_interval``'s
+    three cases with the same operations, so the same bits."""
+    if lo >= wp.float64(0.0):
+        return q_lo - q_hi
+    if hi <= wp.float64(0.0):
+        return q_hi - q_lo
+    return wp.float64(1.0) - q_lo - q_hi
+
+
+@wp.func
+def gauss_nodes(r: Ribbon, i: int, j: int, mid: wp.float64, half: wp.float64, total: wp.float64, tz: wp.vec3d,
+                tq: wp.vec3d):
+    """``total`` plus the terms of the lines' shares of cell (i, j) (:func:`gauss_node`). ``tz``,
+    ``tq``: each node's last exit z and its tail Q(|z|); where node n enters at that z (its line
+    leaves one cell into the next of the walk) the tail is taken, not computed again. Returns
+    the new total and the updated tails."""
     for n in range(3):
         s, lo, hi, scale = gauss_node(r, n, mid, half, i, j)
         if lo < hi:
-            total += scale * normal_interval(lo, hi)
-    return total
+            q_lo = tq[n]
+            if lo != tz[n]:
+                q_lo = normal_tail(lo)
+            q_hi = normal_tail(hi)
+            tz[n] = hi
+            tq[n] = q_hi
+            total += scale * tail_interval(lo, hi, q_lo, q_hi)
+    return total, tz, tq
 
 
 @wp.func
@@ -461,7 +520,8 @@ def weighted_piece(ev: Earlier, active: int, base: int, r: Ribbon, a: wp.float64
 
 
 @wp.func
-def ribbon_cell(r: Ribbon, i: int, j: int, ev: Earlier, near: int, out: wp.array3d(dtype=wp.float64)):
+def ribbon_cell(r: Ribbon, i: int, j: int, ev: Earlier, near: int, out: wp.array3d(dtype=wp.float64), tz: wp.vec3d,
+                tq: wp.vec3d, edge_lo: wp.float64, edge_hi: wp.float64):
     """Add the ribbon's mass in cell (i, j) to every channel of ``out``: the integral over s of
     g(omega) h [Phi(z_out(s)) - Phi(z_in(s))], weighted by the earlier evidence ``ev``.
 
@@ -473,7 +533,11 @@ def ribbon_cell(r: Ribbon, i: int, j: int, ev: Earlier, near: int, out: wp.array
     sub-piece whose earlier points (a hull, z_in and z_out being monotone) miss every polygon's
     box takes the plain terms; where no edge's box meets them either, the polygons that hold
     them give constant factors (:func:`patch_state`); otherwise :func:`weighted_piece` for the
-    channels a cutting polygon weighs, the plain terms times constant factors for the others."""
+    channels a cutting polygon weighs, the plain terms times constant factors for the others.
+
+    ``edge_lo``, ``edge_hi``: the window of the line s = 0 in the cell (the walk's ``cell_clip``,
+    the same bits as :func:`ribbon_clip` at s = 0); ``tz``, ``tq``: the nodes' last tails
+    (:func:`gauss_nodes`), returned updated."""
     fi = wp.float64(float(i))
     fj = wp.float64(float(j))
     one = wp.float64(1.0)
@@ -487,7 +551,10 @@ def ribbon_cell(r: Ribbon, i: int, j: int, ev: Earlier, near: int, out: wp.array
         s1 = corner_roots(r.line, r.step, fi + one, fj + one, s0, s1)
         s1 = corner_roots(r.line, r.step, fi, fj + one, s0, s1)
         # sub-pieces short enough that neither z_in nor z_out moves by more than Z_PIECE SDs
-        lo0, hi0 = ribbon_clip(r, s0, i, j)
+        lo0 = edge_lo
+        hi0 = edge_hi
+        if s0 > wp.float64(0.0):
+            lo0, hi0 = ribbon_clip(r, s0, i, j)
         lo1, hi1 = ribbon_clip(r, s1, i, j)
         moved = wp.max(wp.abs(lo1 - lo0), wp.abs(hi1 - hi0))
         pieces = wp.clamp(int(wp.ceil(moved / wp.float64(Z_PIECE))), 1, MAX_PIECES)
@@ -515,16 +582,17 @@ def ribbon_cell(r: Ribbon, i: int, j: int, ev: Earlier, near: int, out: wp.array
                     weighted_piece(ev, cut, inside, r, a, b, i, j, out)
                     # the channels no cut polygon weighs (the prior): the plain rule's terms,
                     # not weighted_piece's finer split (its own quadrature, 1e-12 apart)
-                    add_channels(ev, cut, False, inside, gauss_nodes(r, i, j, mid, half, wp.float64(0.0)), i, j, out)
+                    plain, tz, tq = gauss_nodes(r, i, j, mid, half, wp.float64(0.0), tz, tq)
+                    add_channels(ev, cut, False, inside, plain, i, j, out)
             if cut == 0 and inside == 0:
-                total = gauss_nodes(r, i, j, mid, half, total)
+                total, tz, tq = gauss_nodes(r, i, j, mid, half, total, tz, tq)
             elif cut == 0:  # inside some polygons throughout: their constant factors
                 if inside != held:
                     if held != 0:
                         add_channels(ev, 0, False, held, held_total, i, j, out)
                     held = inside
                     held_total = wp.float64(0.0)
-                held_total = gauss_nodes(r, i, j, mid, half, held_total)
+                held_total, tz, tq = gauss_nodes(r, i, j, mid, half, held_total, tz, tq)
         if s1 >= one:
             break
         s0 = s1
@@ -532,6 +600,7 @@ def ribbon_cell(r: Ribbon, i: int, j: int, ev: Earlier, near: int, out: wp.array
         add_channels(ev, 0, False, held, held_total, i, j, out)
     for c in range(ev.channels):  # outside every polygon: weight 1 in every channel
         out[c, j, i] += total
+    return tz, tq
 
 
 @wp.func
@@ -553,13 +622,15 @@ def walk_edge(r: Ribbon, edge: wp.float64, row0: int, row1: int, nx: int, ev: Ea
     z = lo
     step_i = int(wp.sign(line[2]))  # 1 for a step of 0
     step_j = int(wp.sign(line[3]))
+    tz = wp.vec3d(wp.float64(1.0e300))  # no exit yet (|z| <= Z_MAX)
+    tq = wp.vec3d(wp.float64(0.0))
     for _ in range(nx + row1 - row0 + 2):  # a line crosses at most nx + rows cells of the band
         zi = next_crossing(line[0], line[2], i)
         zj = next_crossing(line[1], line[3], j)
         z_next = wp.max(z, wp.min(hi, wp.min(zi, zj)))
         a_lo, a_hi = cell_clip(r.line, i, j)
         if (a_lo < a_hi) == (edge == wp.float64(0.0)):
-            ribbon_cell(r, i, j, ev, near, out)
+            tz, tq = ribbon_cell(r, i, j, ev, near, out, tz, tq, a_lo, a_hi)
         z = z_next
         if z >= hi:
             return
@@ -595,6 +666,9 @@ def cat_cells(edges: wp.array(dtype=wp.float64), sigma_omega: wp.float64, t: wp.
     r.step = world_line(r.omega0 + r.h, t, f) - r.line
     r.sigma_omega = sigma_omega
     r.k = k
+    half = wp.float64(0.5)
+    r.weights = wp.vec3d(node_scale(r, 0, node_s(0, half, half), half), node_scale(r, 1, node_s(1, half, half), half),
+                         node_scale(r, 2, node_s(2, half, half), half))
     # the polygons that cut or hold the interval's earlier points (|z| <= Z_MAX); the others
     # miss every one of them
     cut, inside = patch_state(ev, (1 << ev.count) - 1, k, wp.float64(0.0), wp.float64(1.0), wp.float64(-Z_MAX),

@@ -778,7 +778,7 @@ class CAT(MotionModel):
         omega is taken piecewise between the turn rates whose lines pass a corner of the cell
         (where the share has kinks, and where a line running along a side starts or stops
         crossing), by 3-point Gauss-Legendre with the normal weight. The cells of a grid holding
-        all the mass sum to 1 - truncated_mass (|a| <= 9 sigma_a, 2.3e-19 left out) within the
+        all the mass sum to 1 - truncated_mass (|a| <= 7.5 sigma_a, 6.4e-14 left out) within the
         Gauss rule's error on g, below 1e-12. The remaining error, the ribbons' linear
         interpolation, is second order in the interval, which is kept short enough for it
         (``CELL_CURVE_TOL``): stated as 5e-5 of a cell's probability plus 1e-12, tested over

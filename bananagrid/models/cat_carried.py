@@ -161,7 +161,9 @@ def grid_cell_channels(ctx: KernelContext, model, grid: Grid, edges: np.ndarray,
     def launch(r0, r1):
         ctx.launch(cat_cells.cat_cells, dim=len(edges) - 1, inputs=[*head, r0, r1, grid.nx, ev, out])
 
-    ctx.run_bands(launch, ctx.bands(grid.ny, 4))
+    # a band walks every interval's lines again: four a thread balance the threads' work, one
+    # thread takes one band
+    ctx.run_bands(launch, ctx.bands(grid.ny, 4 if ctx.threads > 1 else 1))
     values = ctx.numpy(out)
     if unique is None:
         return values
