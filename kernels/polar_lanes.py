@@ -90,12 +90,14 @@ def polar_density_lanes(x: Any, y: Any, p: Any):
 
 
 @wp.func(inline=True)
-def polar_row_lanes(xs: wp.array(dtype=Any), y: Any, out: wp.array2d(dtype=Any), row: int, j0: int, j1: int, p: Any):
+def polar_row_lanes(xs: wp.array(dtype=Any), y: Any, out: wp.array2d(dtype=Any), row: int, j0: int, j1: int, p: Any,
+                    sums: wp.array(dtype=wp.float64)):
     """The generated grid kernel's row without heading noise, in one native loop
     (``lanes.polar_plain_row``: ``lanes.CHAINS`` registers of lanes a step, the same bits as
-    :func:`polar_density_lanes`): 1; with heading noise 0 (the row is left to the density)."""
+    :func:`polar_density_lanes`), its float64 sum in ``sums[row]``: 1; with heading noise 0 (the
+    row and its sum are left to the generated kernel)."""
     if p.order == 0:
-        polar_plain_row(xs, y, out, row, j0, j1, p.pose[0], p.pose[1], p.pose[2], p.pose[3], p.mean_sinc, p.mean_scc,
+        sums[row] = polar_plain_row(xs, y, out, row, j0, j1, p.pose[0], p.pose[1], p.pose[2], p.pose[3], p.mean_sinc, p.mean_scc,
                         p.sd_scale, p.sd_t_term, p.sd_curvature, p.inv_sigma_phi, p.inv_sigma_omega_sq, p.norm,
                         wp.where(p.variant != ROUGH, 1, 0))
         return 1
@@ -103,4 +105,4 @@ def polar_row_lanes(xs: wp.array(dtype=Any), y: Any, out: wp.array2d(dtype=Any),
 
 
 KERNELS = density_kernels(polar_density_lanes, POLAR, "polar", lanes=True, batch=True, bands_per_thread=1,
-                          row=polar_row_lanes)
+                          row=polar_row_lanes, row_sums=True)

@@ -280,9 +280,10 @@ class WarpContext:
             return self.array(values)
         return self.shared(np.ascontiguousarray(values, dtype=self.dtype))
 
-    def shared(self, values: np.ndarray):
-        """A device array that shares the memory of ``values`` on the CPU (same dtype)."""
-        return self.wp.array(values, dtype=self.scalar_type, copy=False, device=self.device)
+    def shared(self, values: np.ndarray, *, dtype=None):
+        """A device array that shares the memory of ``values`` on the CPU (the same dtype: the
+        scalar type, or ``dtype`` as :meth:`zeros` takes it)."""
+        return self.wp.array(values, dtype=self._type(dtype), copy=False, device=self.device)
 
     def zeros(self, shape, *, dtype=None):
         return self.wp.zeros(shape, dtype=self._type(dtype), device=self.device)
