@@ -16,14 +16,14 @@ cost a third of the float32 kernel's time).
 Warp compiles without contracting a * b + c into one fused multiply-add; the exp and sine
 snippets ask for it (``#pragma clang fp contract(fast)``): their Horner steps become FMAs, one
 rounding fewer each. The atan2 snippet does not: its rounding is then the scalar
-``common.atan2_fast``'s, step for step, and phi feeds P_sigma, which is ill conditioned near its
-zero (an FMA there moved the density 3e-13 from the scalar kernel's).
+``common.atan2_fast``'s, step for step. The polar density's angle (:func:`_angle_steps`) fuses
+only its polynomial's Horner steps, damped by w s: within 1 ulp of the scalar kernel's
+``common.atan2_one_division`` (measured: 68 of 400,000 angles differ, by 1 ulp).
 
 Division without the divider (AVX-512: a 512-bit ``vdivpd`` occupies it 16 cycles, ``vsqrtpd``
 longer): reciprocals, reciprocal square roots and correctly rounded quotients from the 14-bit
 estimates (:func:`_reciprocal_steps`, :func:`_rsqrt_steps`, :func:`_quotient_steps`), which is how
-the polar density takes ``common.atan2_fast``'s three quotients and keeps the scalar kernel's phi
-to the bit. The polar density without heading noise is one snippet (:func:`lane_polar_plain`) and
+the polar density takes its angle's one quotient with the division's bits. The polar density without heading noise is one snippet (:func:`lane_polar_plain`) and
 a grid row one native loop over ``CHAINS`` registers of lanes a step (:func:`polar_plain_row`).
 Without AVX-512 these snippets divide and take the square root (the same values but in the last
 ulp of 1 / x and 1 / sqrt(x), and a / b exactly).
@@ -311,33 +311,16 @@ def _quotient_steps(fmt: _Format, a: str, b: str, out: str) -> str:
             f"#else\n{out} = {a} / {b};\n#endif\n")
 
 
-def _cephes_angle_steps(fmt: _Format, x: str, y: str, out: str) -> str:
-    """C statements leaving ``out`` = atan2(``x``, ``y``) by ``common.atan2_fast``'s steps
-    (``_ATAN2``: Cephes, three divisions, no fused multiply-adds) with each division by
-    :func:`_quotient_steps`: the scalar kernel's bits, as the polar density's flat 1e-13
-    agreement with it needs in float64 (phi feeds P_sigma, ill conditioned near its zero, where
-    one ulp of phi moves the density 3e-13)."""
-    body = _ATAN2
-    body = body.replace("vt z = big > 0 ? (ax > ay ? ay : ax) / big : zero;",
-                        "vt small = ax > ay ? ay : ax;\nvt big_or_1 = big > 0 ? big : zero + 1;\n"
-                        + _quotient_steps(fmt, "small", "big_or_1", "ratio") + "vt z = big > 0 ? ratio : zero;")
-    body = body.replace("vt w = z > L(0.66) ? (z - 1) / (z + 1) : z;",
-                        "vt zm = z - 1;\nvt zp = z + 1;\n" + _quotient_steps(fmt, "zm", "zp", "reduced")
-                        + "vt w = z > L(0.66) ? reduced : z;")
-    body = body.replace("vt a = w + w * (s * p / q);",
-                        "vt sp = s * p;\n" + _quotient_steps(fmt, "sp", "q", "spq") + "vt a = w + w * spq;")
-    assert body.count("_est(") == 3, "the Cephes steps' divisions were not all replaced"
-    body = body.replace("vt res = vx < 0 ? -a : a;", f"{out} = vx < 0 ? -a : a;")
-    return (f"vt {out};\n{{\n#pragma clang fp contract(off)\nvt vx = {x}; vt vy = {y};\n" + body + "\n}\n")
-
-
 def _angle_steps(fmt: _Format, x: str, y: str, out: str) -> str:
     """C statements leaving ``out`` = atan2(``x``, ``y``) by ``common.atan2_one_division``'s steps:
     one quotient (:func:`_quotient_steps`: the division's bits), numerator and denominator selected
-    first, then atan(w) = w + w s R(s), every branch a select, no fused multiply-adds: in float64
-    the scalar function's bits in both precisions (phi feeds P_sigma, ill conditioned near its
-    zero, where one ulp of phi moves the density 3e-13), R of each precision's own degree (9 in
-    float64, 3 in float32: ``common.atan_series``)."""
+    first, then atan(w) = w + w s R(s), R of each precision's own degree (9 in float64, 3 in
+    float32: ``common.atan_series``), every branch a select. Its Horner steps are fused
+    multiply-adds (the scalar function rounds each product): their roundings are damped by w s,
+    so that phi stays within 1 ulp of the scalar kernel's and is its bits at all but 1 in 6,000
+    angles. The last step, w + w (s R), is not fused: phi feeds P_sigma, ill conditioned near its
+    zero, and a fused one changed phi by an ulp at many more cells, moving the density 3.1e-13
+    from the scalar kernel's there (``tests/kernels/test_lanes.py`` allows 1e-13)."""
     series = ATAN_SERIES64 if fmt.scalar == "double" else ATAN_SERIES32
     fma = "__builtin_elementwise_fma"
     horner = f"vt p = {fma}(s, zero + L({series[-1]!r}), zero + L({series[-2]!r}));\n" + "".join(
@@ -370,7 +353,7 @@ def _polar_plain_steps(fmt: _Format, x: str, y: str, out: str) -> str:
     registers across the row (the same formulas as Warp code compiled to half-register pieces,
     every multiply and add apart, and took twice as long). The world point to the model's frame; r
     and 1 / r from one reciprocal square root (:func:`_rsqrt_steps`); phi by
-    :func:`_cephes_angle_steps`; sinc(phi) = (x / r) / phi by a reciprocal (1 - phi^2 / 6 below
+    :func:`_angle_steps`; sinc(phi) = (x / r) / phi by a reciprocal (1 - phi^2 / 6 below
     |phi| = 1e-4); with ``improved``: scc, the mean's correction (8) and P_sigma (11); 1 / sd by a
     reciprocal (once per call for the rough variant's constant sd); one exp for both normal
     factors. 0 at r = 0 and where sd is not positive."""
@@ -384,7 +367,7 @@ def _polar_plain_steps(fmt: _Format, x: str, y: str, out: str) -> str:
         "vt r2 = lx * lx + ly * ly;\n"
         + _rsqrt_steps(fmt, "r2", "inv_r", guard=False) +  # r = NaN at r2 = 0: selected away below
         "vt r = r2 * inv_r;\n"
-        + _angle_steps(fmt, "lx", "ly", "phi") +  # the scalar kernel's phi, to the bit (float64)
+        + _angle_steps(fmt, "lx", "ly", "phi") +  # the scalar kernel's phi within 1 ulp
         "vt aphi = phi < 0 ? -phi : phi;\n"
         "vt phi_or_1 = aphi < L(1.0e-4) ? zero + 1 : phi;\n"
         + _reciprocal_steps(fmt, "phi_or_1", "inv_phi", guard=False) +  # |phi_or_1| >= 1e-4

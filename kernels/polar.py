@@ -217,7 +217,7 @@ def polar_density_local(x: Any, y: Any, p: Any):
         theta = atan2_fast(x, y)
         mean_t, sd_t = polar_heading_mean_sd(theta, p)
         return normal_pair(theta * p.inv_sigma_theta, r, inv_r, mean_t, sd_t, p.theta_norm)
-    phi = atan2_one_division(x, y)  # the lane kernel's phi, to the bit (float64)
+    phi = atan2_one_division(x, y)  # one division: the lane kernel's steps
     mu, sd = polar_mean_sd(phi, sinc_of(phi, x * inv_r), y * inv_r, p)
     return normal_pair(phi * p.inv_sigma_phi, r, inv_r, mu, sd, p.norm)
 

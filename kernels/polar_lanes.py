@@ -3,7 +3,7 @@
 The density of ``polar.polar_density_local``. Without heading noise: one native snippet
 (``lanes.lane_polar_plain``; a grid row in ``lanes.polar_plain_row``), its steps stated in
 ``kernels/lanes.py`` (no division instruction on a CPU with AVX-512; phi by the scalar kernel's
-atan2 steps, to the bit). With initial-heading noise (order 2 or 4): the law's derivatives at
+atan2 steps, ``common.atan2_one_division``, within 1 ulp: fused multiply-adds in its polynomial). With initial-heading noise (order 2 or 4): the law's derivatives at
 theta_bar and the moments (15)-(16) by the generic functions the scalar kernel runs too
 (``polar.polar_law_of``, ``polar.polar_heading_moments``), with the lane sine and both branches of
 the sinc derivatives selected per lane. The scalar kernel's branches are selects: 0 at r = 0 and
