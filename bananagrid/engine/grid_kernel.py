@@ -130,8 +130,10 @@ def grid_block(ctx: WarpContext, binding, grid: Grid, rows: tuple[int, int] | No
             head = [xs, ys, r0, r1, tile, columns, ctx.scalar(grid.dx), ctx.scalar(grid.dy)]
         extra = [scratch, quads, band_of[r0]] if family.scratch_width else []
         # a small grid again and again (kept centres, a model's kept parameters): replayed, with
-        # the output and any work rows (made for each call) packed afresh
-        fresh = (-1, len(head) + 1, len(head) + 2) if family.scratch_width else (-2, -1) if summed else (-1,)
+        # the outputs and any work rows (made for each call) packed afresh
+        fresh = [-k for k in range(1, len(outputs) + 1)]
+        if family.scratch_width:
+            fresh += [len(head) + 1, len(head) + 2]
         (ctx.launch_kept if serial else ctx.launch)(family.grid, dim=dim,
                                                     inputs=[*head, binding.params, *extra, *outputs], fresh=fresh)
         if with_sum and ctx.cpu and not summed:  # a CPU launch has finished when it returns
