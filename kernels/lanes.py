@@ -23,8 +23,9 @@ only its polynomial's Horner steps, damped by w s: within 1 ulp of the scalar ke
 Division without the divider (AVX-512: a 512-bit ``vdivpd`` occupies it 16 cycles, ``vsqrtpd``
 longer): reciprocals, reciprocal square roots and correctly rounded quotients from the 14-bit
 estimates (:func:`_reciprocal_steps`, :func:`_rsqrt_steps`, :func:`_quotient_steps`), which is how
-the polar density takes its angle's one quotient with the division's bits. The polar density without heading noise is one snippet (:func:`lane_polar_plain`) and
-a grid row one native loop over ``CHAINS`` registers of lanes a step (:func:`polar_plain_row`).
+the polar density takes its angle's one quotient with the division's bits. The polar density
+without heading noise is one snippet (:func:`lane_polar_plain`) and a grid row one native loop
+over ``CHAINS`` registers of lanes a step (:func:`polar_plain_row`), which also sums the row.
 Without AVX-512 these snippets divide and take the square root (the same values but in the last
 ulp of 1 / x and 1 / sqrt(x), and a / b exactly).
 
@@ -522,7 +523,8 @@ for _fmt, _v, _s in ((F64, lanes64, wp.float64), (F32, lanes32, wp.float32)):
 
     @wp.func_native(_snippet(_fmt, "x y", _angle_steps(_fmt, "vx", "vy", "res")))
     def lane_atan2_one_division(x: _v, y: _v) -> _v:
-        """atan2(x, y) by ``common.atan2_one_division``'s steps (:func:`_angle_steps`), as the polar kernel takes phi."""
+        """atan2(x, y) by ``common.atan2_one_division``'s steps (:func:`_angle_steps`), as the
+        polar kernel takes phi."""
         ...
 
     @wp.func_native(_sqrt(_fmt))
