@@ -26,7 +26,8 @@ Kernel arguments (``P`` the struct):
 
 * grid ``(xs, ys, row0, columns, p: P, out[ny, nx])`` over ``(rows, blocks)``: ``columns``
   cells of a row per thread (a whole row on the CPU, where Warp's 2-D thread index costs an
-  integer division per thread; one cell on a GPU);
+  integer division per thread; one cell on a GPU); with ``row_sums`` (a CPU family's own row
+  code) also ``sums[ny]`` after ``out``, each row's float64 sum;
 * points ``(xs, ys, start, p: P, out[n])`` over a chunk of points from ``start``;
 * batch grid ``(xs[H, nx], ys[H, ny], h0, ps: array of P, out[H, ny, nx])`` over
   ``(hypotheses, rows)``, and batch points ``(xs, ys, h0, ps, out[H, n])`` over hypotheses.
@@ -144,6 +145,10 @@ class DensityKernels:
     tile_rows, scratch_width, quad_width : int
         Of a family's own block kernel (0 for the generated grid kernel): rows per thread on the
         CPU, and scalar and 4-vector scratch per band.
+    row_sums : bool
+        The grid kernel takes a last argument ``sums`` (float64, one per row of ``out``) and
+        writes each row's float64 sum there, taken while the row is computed (so that the engine
+        does not read the grid again to sum it).
     """
 
     name: str
@@ -156,6 +161,7 @@ class DensityKernels:
     tile_rows: int = 0
     scratch_width: int = 0
     quad_width: int = 0
+    row_sums: bool = False
 
 
 @wp.func
@@ -179,14 +185,18 @@ def store_value(out: wp.array(dtype=Any), start: int, value: Any, count: int):
 def density_kernels(density, params: Params, name: str, *, lanes: bool = False, batch: bool = False,
                     bands_per_thread: int = 16, suffix: str | None = None, grid=None, tile_rows: int = 0,
                     scratch_width: int = 0, quad_width: int = 0, module: str | None = None,
-                    row=None) -> DensityKernels:
+                    row=None, row_sums: bool = False) -> DensityKernels:
     """The grid and points kernels (and with ``batch`` the batch kernels) of ``density``, named
     ``NAME_grid``, ``NAME_points``, ... (``suffix`` appended: by default ``_lanes`` with ``lanes``), in its module
     (or the one named ``module``: a family's lane kernels in a module of their own, over the density
     that its scalar kernels call) and overloaded for both scalar types on first use
     (:func:`overload_on_use`); ``grid``: the family's own grid kernel instead (its overloads the
     family's to record); ``row``: a family's own code for a grid row, ``row(xs, y, out, row, j0, j1,
-    p)``, that returns 1 where it filled ``out[row, j0:j1]`` and 0 to leave the row to the density.
+    p)``, that returns 1 where it filled ``out[row, j0:j1]`` and 0 to leave the row to the density;
+    ``row_sums`` (with ``row``): the grid kernel takes ``sums`` (float64, a value per row of ``out``)
+    after ``out`` and fills ``sums[row]`` with the row's float64 sum: ``row(xs, y, out, row, j0, j1,
+    p, sums)`` sums what it fills (returning 1), and the kernel sums in order the rows it leaves to the
+    density (on the CPU, where a block is a whole row: :class:`DensityKernels`' ``row_sums``).
 
     One body for each kernel: a scalar kernel takes one value a step, a lane kernel a vector of
     them (:func:`lanes.load_lanes`, :func:`lanes.store_lanes`)."""
@@ -212,6 +222,37 @@ def density_kernels(density, params: Params, name: str, *, lanes: bool = False, 
                 x = load(xs, j)
                 store(out[r], j, density(x, type(x)(y), p), j1 - j)
                 j += step(xs)
+
+    def summed_grid_kernel(xs: wp.array(dtype=Any), ys: wp.array(dtype=Any), row0: int, columns: int, p: Any,
+                           out: wp.array2d(dtype=Any), sums: wp.array(dtype=wp.float64)):
+        i, block = wp.tid()
+        r = row0 + i
+        j0 = block * columns
+        j1 = wp.min((block + 1) * columns, xs.shape[0])
+        y = ys[r]
+        if row(xs, y, out, r, j0, j1, p, sums) == 0:
+            j = j0
+            while j < j1:
+                x = load(xs, j)
+                store(out[r], j, density(x, type(x)(y), p), j1 - j)
+                j += step(xs)
+            # four running sums side by side (one chain of adds waits on each add: 2 ms of a
+            # 30 ms Figure 1 map with heading noise), then in a fixed order
+            s0 = wp.float64(0.0)
+            s1 = wp.float64(0.0)
+            s2 = wp.float64(0.0)
+            s3 = wp.float64(0.0)
+            k = j0
+            while k + 4 <= j1:
+                s0 += wp.float64(out[r, k])
+                s1 += wp.float64(out[r, k + 1])
+                s2 += wp.float64(out[r, k + 2])
+                s3 += wp.float64(out[r, k + 3])
+                k += 4
+            while k < j1:
+                s0 += wp.float64(out[r, k])
+                k += 1
+            sums[r] = (s0 + s1) + (s2 + s3)
 
     def points_kernel(xs: wp.array(dtype=Any), ys: wp.array(dtype=Any), start: int, p: Any,
                       out: wp.array(dtype=Any)):
@@ -244,8 +285,10 @@ def density_kernels(density, params: Params, name: str, *, lanes: bool = False, 
             store(out[h], k, density(load(xs, k), load(ys, k), p), xs.shape[0] - k)
             k += step(xs)
 
+    if row_sums and (row is None or grid is not None):
+        raise ValueError("row_sums: the generated grid kernel with a family's row")
     own_grid = grid is not None
-    grid = grid if own_grid else make(grid_kernel, "grid")
+    grid = grid if own_grid else make(summed_grid_kernel if row_sums else grid_kernel, "grid")
     points = make(points_kernel, "points")
     batch_grid = make(batch_grid_kernel, "batch_grid") if batch else None
     batch_points = make(batch_points_kernel, "batch_points") if batch else None
@@ -254,8 +297,10 @@ def density_kernels(density, params: Params, name: str, *, lanes: bool = False, 
         # the grid and points kernels together: a run that rasterises also evaluates points
         # (a tile's seams, a pdf), and adding one to a built module would build it again
         # (a family's own grid kernel: with the overloads it recorded)
-        grids = _ON_USE.get(grid, {}).get(scalar, []) if own_grid else [(grid, {"xs": vec, "ys": vec, "p": struct,
-                                                                                "out": mat})]
+        grid_types = {"xs": vec, "ys": vec, "p": struct, "out": mat}
+        if row_sums:
+            grid_types["sums"] = wp.array(dtype=wp.float64)
+        grids = _ON_USE.get(grid, {}).get(scalar, []) if own_grid else [(grid, grid_types)]
         overload_on_use(points, scalar, {"xs": vec, "ys": vec, "p": struct, "out": vec}, *grids)
         if batch:
             many = wp.array(dtype=struct)
@@ -263,7 +308,7 @@ def density_kernels(density, params: Params, name: str, *, lanes: bool = False, 
             overload_on_use(batch_points, scalar, {"xs": vec, "ys": vec, "ps": many, "out": mat})
     short = module.name.rsplit(".", 1)[-1]
     return DensityKernels(f"{short}.{grid.key}", params, grid, points, batch_grid, batch_points, bands_per_thread,
-                          tile_rows, scratch_width, quad_width)
+                          tile_rows, scratch_width, quad_width, row_sums)
 
 
 @dataclass(frozen=True)

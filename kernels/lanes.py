@@ -16,15 +16,16 @@ cost a third of the float32 kernel's time).
 Warp compiles without contracting a * b + c into one fused multiply-add; the exp and sine
 snippets ask for it (``#pragma clang fp contract(fast)``): their Horner steps become FMAs, one
 rounding fewer each. The atan2 snippet does not: its rounding is then the scalar
-``common.atan2_fast``'s, step for step, and phi feeds P_sigma, which is ill conditioned near its
-zero (an FMA there moved the density 3e-13 from the scalar kernel's).
+``common.atan2_fast``'s, step for step. The polar density's angle (:func:`_angle_steps`) fuses
+only its polynomial's Horner steps, damped by w s: within 1 ulp of the scalar kernel's
+``common.atan2_one_division`` (measured: 68 of 400,000 angles differ, by 1 ulp).
 
 Division without the divider (AVX-512: a 512-bit ``vdivpd`` occupies it 16 cycles, ``vsqrtpd``
 longer): reciprocals, reciprocal square roots and correctly rounded quotients from the 14-bit
 estimates (:func:`_reciprocal_steps`, :func:`_rsqrt_steps`, :func:`_quotient_steps`), which is how
-the polar density takes ``common.atan2_fast``'s three quotients and keeps the scalar kernel's phi
-to the bit. The polar density without heading noise is one snippet (:func:`lane_polar_plain`) and
-a grid row one native loop over ``CHAINS`` registers of lanes a step (:func:`polar_plain_row`).
+the polar density takes its angle's one quotient with the division's bits. The polar density
+without heading noise is one snippet (:func:`lane_polar_plain`) and a grid row one native loop
+over ``CHAINS`` registers of lanes a step (:func:`polar_plain_row`), which also sums the row.
 Without AVX-512 these snippets divide and take the square root (the same values but in the last
 ulp of 1 / x and 1 / sqrt(x), and a / b exactly).
 
@@ -45,7 +46,10 @@ from dataclasses import dataclass
 import warp as wp
 
 # the lane types live with the arithmetic generic over them (common.each_mul, ...)
-from .common import LANES32, LANES64, atan2_fast, lanes32, lanes64, wrap_angle  # noqa: F401
+from .common import (  # noqa: F401
+    ATAN_SERIES32, ATAN_SERIES64, HALF_PI, LANES32, LANES64, PI, QUARTER_PI, QUARTER_PI_LO, TAN_PI_8, atan2_fast,
+    lanes32, lanes64, wrap_angle,
+)
 
 
 @dataclass(frozen=True)
@@ -308,24 +312,38 @@ def _quotient_steps(fmt: _Format, a: str, b: str, out: str) -> str:
             f"#else\n{out} = {a} / {b};\n#endif\n")
 
 
-def _cephes_angle_steps(fmt: _Format, x: str, y: str, out: str) -> str:
-    """C statements leaving ``out`` = atan2(``x``, ``y``) by ``common.atan2_fast``'s steps
-    (``_ATAN2``: Cephes, three divisions, no fused multiply-adds) with each division by
-    :func:`_quotient_steps`: the scalar kernel's bits, as the polar density's flat 1e-13
-    agreement with it needs in float64 (phi feeds P_sigma, ill conditioned near its zero, where
-    one ulp of phi moves the density 3e-13)."""
-    body = _ATAN2
-    body = body.replace("vt z = big > 0 ? (ax > ay ? ay : ax) / big : zero;",
-                        "vt small = ax > ay ? ay : ax;\nvt big_or_1 = big > 0 ? big : zero + 1;\n"
-                        + _quotient_steps(fmt, "small", "big_or_1", "ratio") + "vt z = big > 0 ? ratio : zero;")
-    body = body.replace("vt w = z > L(0.66) ? (z - 1) / (z + 1) : z;",
-                        "vt zm = z - 1;\nvt zp = z + 1;\n" + _quotient_steps(fmt, "zm", "zp", "reduced")
-                        + "vt w = z > L(0.66) ? reduced : z;")
-    body = body.replace("vt a = w + w * (s * p / q);",
-                        "vt sp = s * p;\n" + _quotient_steps(fmt, "sp", "q", "spq") + "vt a = w + w * spq;")
-    assert body.count("_est(") == 3, "the Cephes steps' divisions were not all replaced"
-    body = body.replace("vt res = vx < 0 ? -a : a;", f"{out} = vx < 0 ? -a : a;")
-    return (f"vt {out};\n{{\n#pragma clang fp contract(off)\nvt vx = {x}; vt vy = {y};\n" + body + "\n}\n")
+def _angle_steps(fmt: _Format, x: str, y: str, out: str) -> str:
+    """C statements leaving ``out`` = atan2(``x``, ``y``) by ``common.atan2_one_division``'s steps:
+    one quotient (:func:`_quotient_steps`: the division's bits), numerator and denominator selected
+    first, then atan(w) = w + w s R(s), R of each precision's own degree (9 in float64, 3 in
+    float32: ``common.atan_series``), every branch a select. Its Horner steps are fused
+    multiply-adds (the scalar function rounds each product): their roundings are damped by w s,
+    so that phi stays within 1 ulp of the scalar kernel's and is its bits at all but 1 in 6,000
+    angles. The last step, w + w (s R), is not fused: phi feeds P_sigma, ill conditioned near its
+    zero, and a fused one changed phi by an ulp at many more cells, moving the density 3.1e-13
+    from the scalar kernel's there (``tests/kernels/test_lanes.py`` allows 1e-13)."""
+    series = ATAN_SERIES64 if fmt.scalar == "double" else ATAN_SERIES32
+    fma = "__builtin_elementwise_fma"
+    horner = f"vt p = {fma}(s, zero + L({series[-1]!r}), zero + L({series[-2]!r}));\n" + "".join(
+        f"p = {fma}(p, s, zero + L({c!r}));\n" for c in series[-3::-1])
+    return (
+        f"vt {out};\n{{\n#pragma clang fp contract(off)\nvt ux = {x}; vt uy = {y};\n"
+        "vt ax = ux < 0 ? -ux : ux;\n"
+        "vt ay = uy < 0 ? -uy : uy;\n"
+        "vt lo = ax > ay ? ay : ax;\n"
+        "vt hi = ax > ay ? ax : ay;\n"
+        f"auto reduced = lo > L({TAN_PI_8!r}) * hi;\n"
+        "vt num = reduced ? lo - hi : lo;\n"
+        "vt den = reduced ? lo + hi : hi;\n"
+        "den = hi > 0 ? den : zero + 1;\n"  # x = y = 0: num = 0, w = 0
+        + _quotient_steps(fmt, "num", "den", "w") +
+        "vt s = w * w;\n" + horner +
+        "vt a = w + w * (s * p);\n"
+        f"a = reduced ? L({QUARTER_PI!r}) + (a + L({QUARTER_PI_LO!r})) : a;\n"
+        f"a = ax > ay ? L({HALF_PI!r}) - a : a;\n"
+        f"a = uy < 0 ? L({PI!r}) - a : a;\n"
+        f"{out} = ux < 0 ? -a : a;\n}}\n"
+    )
 
 
 def _polar_plain_steps(fmt: _Format, x: str, y: str, out: str) -> str:
@@ -336,7 +354,7 @@ def _polar_plain_steps(fmt: _Format, x: str, y: str, out: str) -> str:
     registers across the row (the same formulas as Warp code compiled to half-register pieces,
     every multiply and add apart, and took twice as long). The world point to the model's frame; r
     and 1 / r from one reciprocal square root (:func:`_rsqrt_steps`); phi by
-    :func:`_cephes_angle_steps`; sinc(phi) = (x / r) / phi by a reciprocal (1 - phi^2 / 6 below
+    :func:`_angle_steps`; sinc(phi) = (x / r) / phi by a reciprocal (1 - phi^2 / 6 below
     |phi| = 1e-4); with ``improved``: scc, the mean's correction (8) and P_sigma (11); 1 / sd by a
     reciprocal (once per call for the rough variant's constant sd); one exp for both normal
     factors. 0 at r = 0 and where sd is not positive."""
@@ -350,7 +368,7 @@ def _polar_plain_steps(fmt: _Format, x: str, y: str, out: str) -> str:
         "vt r2 = lx * lx + ly * ly;\n"
         + _rsqrt_steps(fmt, "r2", "inv_r", guard=False) +  # r = NaN at r2 = 0: selected away below
         "vt r = r2 * inv_r;\n"
-        + _cephes_angle_steps(fmt, "lx", "ly", "phi") +  # the scalar kernel's phi, to the bit
+        + _angle_steps(fmt, "lx", "ly", "phi") +  # the scalar kernel's phi within 1 ulp
         "vt aphi = phi < 0 ? -phi : phi;\n"
         "vt phi_or_1 = aphi < L(1.0e-4) ? zero + 1 : phi;\n"
         + _reciprocal_steps(fmt, "phi_or_1", "inv_phi", guard=False) +  # |phi_or_1| >= 1e-4
@@ -393,7 +411,10 @@ def _polar_plain_row(fmt: _Format) -> str:
     already, and 16 registers would spill four). Lane by lane the same operations as
     :func:`lane_polar_plain`, so the same bits as the points kernel's; whole vectors loaded and
     stored where they lie in contiguous rows, else lane by lane (the index clamped to the last
-    element, as ``load_lanes``)."""
+    element, as ``load_lanes``). Returns the row's sum in float64: each lane position's values
+    added in order as they are computed (while in registers: a pass over the grid after the
+    kernel cost 12 % of a Figure 1 rasterise), then the positions in order, so that a row's sum
+    depends on the row alone."""
     def loop(chains: int) -> str:
         wide = dataclasses.replace(fmt, lanes=chains * fmt.lanes)
         size, n = wide.bytes, wide.lanes
@@ -402,6 +423,8 @@ def _polar_plain_row(fmt: _Format) -> str:
             f"typedef {fmt.scalar} vt __attribute__((vector_size({size})));\n"
             f"typedef {fmt.integer} vi __attribute__((vector_size({size})));\n"
             "vt zero = {};\n" + _estimates(wide) +
+            f"typedef double vd __attribute__((vector_size({8 * n})));\n"
+            "vd acc = {};\n"
             "vt vy = zero + y;\n"
             f"for (int j = j0; j < j1; j += {n}) {{\n"
             f"bool whole = contiguous && j + {n} <= j1;\n"
@@ -410,8 +433,12 @@ def _polar_plain_row(fmt: _Format) -> str:
             f"else {{ for (int k = 0; k < {n}; ++k) {{ vx[k] = wp::index(xs, j + k < last ? j + k : last); }} }}\n"
             + _polar_plain_steps(wide, "vx", "vy", "res") +
             f"if (whole) {{ __builtin_memcpy(wp::address(out, row, j), &res, {size}); }}\n"
-            f"else {{ for (int k = 0; k < {n} && j + k < j1; ++k) {{ *wp::address(out, row, j + k) = res[k]; }} }}\n"
-            "}\n}\n"
+            f"else {{ for (int k = 0; k < {n}; ++k) {{ if (j + k < j1) {{ *wp::address(out, row, j + k) = res[k]; }} "
+            "else { res[k] = 0; } } }\n"
+            "acc += __builtin_convertvector(res, vd);\n"
+            "}\n"
+            f"double total = 0.0;\nfor (int k = 0; k < {n}; ++k) {{ total += acc[k]; }}\nreturn total;\n"
+            "}\n"
         )
         return re.sub(r"L\(([^()]+)\)", lambda m: fmt.literal(float(m.group(1))), body)
     return (CONTRACT + "int last = xs.shape[0] - 1;\n"
@@ -616,6 +643,12 @@ for _fmt, _v, _s in ((F64, lanes64, wp.float64), (F32, lanes32, wp.float32)):
     @wp.func_native(_snippet(_fmt, "x y", _ATAN2))
     def lane_atan2(x: _v, y: _v) -> _v: ...
 
+    @wp.func_native(_snippet(_fmt, "x y", _angle_steps(_fmt, "vx", "vy", "res")))
+    def lane_atan2_one_division(x: _v, y: _v) -> _v:
+        """atan2(x, y) by ``common.atan2_one_division``'s steps (:func:`_angle_steps`), as the
+        polar kernel takes phi."""
+        ...
+
     @wp.func_native(_sqrt(_fmt))
     def lane_sqrt(x: _v) -> _v: ...
 
@@ -644,8 +677,10 @@ for _fmt, _v, _s in ((F64, lanes64, wp.float64), (F32, lanes32, wp.float32)):
     @wp.func_native(_polar_plain_row(_fmt))
     def polar_plain_row(xs: wp.array(dtype=_s), y: _s, out: wp.array2d(dtype=_s), row: int, j0: int, j1: int, ox: _s,
                         oy: _s, c: _s, s: _s, mean_sinc: _s, mean_scc: _s, sd_scale: _s, sd_t_term: _s,
-                        sd_curvature: _s, inv_sigma_phi: _s, inv_sigma_omega_sq: _s, norm: _s, improved: int):
-        """out[row, j0 .. j1 - 1] = the density without heading noise at (xs[j], y) (``_polar_plain_row``)."""
+                        sd_curvature: _s, inv_sigma_phi: _s, inv_sigma_omega_sq: _s, norm: _s,
+                        improved: int) -> wp.float64:
+        """out[row, j0 .. j1 - 1] = the density without heading noise at (xs[j], y); returns their
+        float64 sum (``_polar_plain_row``)."""
         ...
 
     @wp.func_native(_wrap_angle(_fmt))

@@ -36,7 +36,7 @@ from typing import Any
 
 import warp as wp
 
-from .common import atan2_fast, each_mul, lane0, scc_of, sinc_derivatives, sinc_of, world_to_local
+from .common import atan2_fast, atan2_one_division, each_mul, lane0, scc_of, sinc_derivatives, sinc_of, world_to_local
 from .generate import SCALAR, SCALARS, VEC4, Params, density_kernels, overload_on_use
 
 # No adjoints: nothing differentiates these kernels, and the backward kernels Warp would
@@ -213,10 +213,11 @@ def polar_density_local(x: Any, y: Any, p: Any):
     if r == zero:
         return zero  # the 1/r Jacobian is singular at the origin
     inv_r = type(x)(1.0) / r
-    phi = atan2_fast(x, y)
     if p.order != 0:
-        mean_t, sd_t = polar_heading_mean_sd(phi, p)
-        return normal_pair(phi * p.inv_sigma_theta, r, inv_r, mean_t, sd_t, p.theta_norm)
+        theta = atan2_fast(x, y)
+        mean_t, sd_t = polar_heading_mean_sd(theta, p)
+        return normal_pair(theta * p.inv_sigma_theta, r, inv_r, mean_t, sd_t, p.theta_norm)
+    phi = atan2_one_division(x, y)  # one division: the lane kernel's steps
     mu, sd = polar_mean_sd(phi, sinc_of(phi, x * inv_r), y * inv_r, p)
     return normal_pair(phi * p.inv_sigma_phi, r, inv_r, mu, sd, p.norm)
 

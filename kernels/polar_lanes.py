@@ -3,8 +3,9 @@
 The density of ``polar.polar_density_local``. Without heading noise: one native snippet
 (``lanes.lane_polar_plain``; a grid row in ``lanes.polar_plain_row``), its steps stated in
 ``kernels/lanes.py`` (no division instruction on a CPU with AVX-512; phi by the scalar kernel's
-atan2 steps, to the bit). With initial-heading noise (order 2 or 4): the law's derivatives at
-theta_bar and the moments (15)-(16) by the generic functions the scalar kernel runs too
+atan2 steps, ``common.atan2_one_division``, within 1 ulp: fused multiply-adds in its
+polynomial). With initial-heading noise (order 2 or 4): the law's derivatives at theta_bar and
+the moments (15)-(16) by the generic functions the scalar kernel runs too
 (``polar.polar_law_of``, ``polar.polar_heading_moments``), with the lane sine and both branches of
 the sinc derivatives selected per lane. The scalar kernel's branches are selects: 0 at r = 0 and
 where P_sigma (or the variance) is not positive. Values agree with the scalar kernel to about
@@ -90,17 +91,19 @@ def polar_density_lanes(x: Any, y: Any, p: Any):
 
 
 @wp.func(inline=True)
-def polar_row_lanes(xs: wp.array(dtype=Any), y: Any, out: wp.array2d(dtype=Any), row: int, j0: int, j1: int, p: Any):
+def polar_row_lanes(xs: wp.array(dtype=Any), y: Any, out: wp.array2d(dtype=Any), row: int, j0: int, j1: int, p: Any,
+                    sums: wp.array(dtype=wp.float64)):
     """The generated grid kernel's row without heading noise, in one native loop
     (``lanes.polar_plain_row``: ``lanes.CHAINS`` registers of lanes a step, the same bits as
-    :func:`polar_density_lanes`): 1; with heading noise 0 (the row is left to the density)."""
+    :func:`polar_density_lanes`), its float64 sum in ``sums[row]``: 1; with heading noise 0 (the
+    row and its sum are left to the generated kernel)."""
     if p.order == 0:
-        polar_plain_row(xs, y, out, row, j0, j1, p.pose[0], p.pose[1], p.pose[2], p.pose[3], p.mean_sinc, p.mean_scc,
-                        p.sd_scale, p.sd_t_term, p.sd_curvature, p.inv_sigma_phi, p.inv_sigma_omega_sq, p.norm,
-                        wp.where(p.variant != ROUGH, 1, 0))
+        sums[row] = polar_plain_row(xs, y, out, row, j0, j1, p.pose[0], p.pose[1], p.pose[2], p.pose[3],
+                                    p.mean_sinc, p.mean_scc, p.sd_scale, p.sd_t_term, p.sd_curvature, p.inv_sigma_phi,
+                                    p.inv_sigma_omega_sq, p.norm, wp.where(p.variant != ROUGH, 1, 0))
         return 1
     return 0
 
 
 KERNELS = density_kernels(polar_density_lanes, POLAR, "polar", lanes=True, batch=True, bands_per_thread=1,
-                          row=polar_row_lanes)
+                          row=polar_row_lanes, row_sums=True)

@@ -80,8 +80,9 @@ def grid_block(ctx: WarpContext, binding, grid: Grid, rows: tuple[int, int] | No
     columns ``cols[0]:cols[1]`` of ``grid`` (default all), in the context's dtype.
 
     With ``with_sum``, returns ``(values, total)``: ``total`` the float64 sum of the values,
-    the same bits for any number of threads: each row is summed on its own
-    (:func:`~bananagrid.engine.warp_runtime.row_sums`; on the CPU by the thread that computed its
+    the same bits for any number of threads: each row is summed on its own (by the kernel as it
+    computes the row where the family's grid kernel does, ``DensityKernels.row_sums``; else by
+    :func:`~bananagrid.engine.warp_runtime.row_sums`, on the CPU by the thread that computed its
     band, right after the launch, in parallel and while the band is in that core's cache: one
     serial pass over the grid after the kernel held the 1 -> 2 thread speedup of the fastest
     kernels to 1.5x), and the rows' sums are added exactly (``math.fsum``), so neither the
@@ -106,6 +107,11 @@ def grid_block(ctx: WarpContext, binding, grid: Grid, rows: tuple[int, int] | No
         out = ctx.shared(values)
     else:
         out = ctx.zeros((ny, nx))
+    # a kernel that sums each row as it computes it (``DensityKernels.row_sums``, CPU kernels): its
+    # sums, instead of a pass over the grid after the launch
+    summed = ctx.cpu and family.row_sums
+    kernel_sums = np.empty(ny) if summed else None
+    outputs = [out, ctx.shared(kernel_sums, dtype=np.float64)] if summed else [out]
 
     # whole rows per thread on the CPU, one cell per thread on a GPU
     columns = nx if ctx.cpu else 1
@@ -129,11 +135,13 @@ def grid_block(ctx: WarpContext, binding, grid: Grid, rows: tuple[int, int] | No
             head = [xs, ys, r0, r1, tile, columns, ctx.scalar(grid.dx), ctx.scalar(grid.dy)]
         extra = [scratch, quads, band_of[r0]] if family.scratch_width else []
         # a small grid again and again (kept centres, a model's kept parameters): replayed, with
-        # the output and any work rows (made for each call) packed afresh
-        fresh = (-1, len(head) + 1, len(head) + 2) if family.scratch_width else (-1,)
-        (ctx.launch_kept if serial else ctx.launch)(family.grid, dim=dim, inputs=[*head, binding.params, *extra, out],
-                                                    fresh=fresh)
-        if with_sum and ctx.cpu:  # a CPU launch has finished when it returns
+        # the outputs and any work rows (made for each call) packed afresh
+        fresh = [-k for k in range(1, len(outputs) + 1)]
+        if family.scratch_width:
+            fresh += [len(head) + 1, len(head) + 2]
+        (ctx.launch_kept if serial else ctx.launch)(family.grid, dim=dim,
+                                                    inputs=[*head, binding.params, *extra, *outputs], fresh=fresh)
+        if with_sum and ctx.cpu and not summed:  # a CPU launch has finished when it returns
             sums[r0:r1] = row_sums(values[r0:r1])
 
     ctx.run_bands(launch_band, bands)
@@ -142,6 +150,8 @@ def grid_block(ctx: WarpContext, binding, grid: Grid, rows: tuple[int, int] | No
         values = out.numpy()
     if not with_sum:
         return values
-    if not ctx.cpu:
+    if summed:
+        sums = kernel_sums
+    elif not ctx.cpu:
         sums = row_sums(values)
     return values, math.fsum(sums.tolist())  # Python floats: fsum converts NumPy's one by one
