@@ -486,7 +486,7 @@ def _tabulated_steps(fmt: _Format, x: str, y: str, out: str) -> str:
     """C statements leaving ``out`` = ``tabulated.table_density`` at the world points (``x``, ``y``),
     in a block of their own; the parameters are the scalars and arrays of ``lane_tabulated``'s
     signature. The world point to the model's frame (``common.world_to_local``'s arithmetic); r by
-    the square root; the bearing by :func:`_cephes_angle_steps` (the scalar atan2's bits); the
+    the square root; the bearing by :func:`_angle_steps` (within 3 ulp, one division); the
     stencils' rows and columns clamped as the scalar kernel's (a NaN's to the first); the cubic
     Lagrange weights by ``tabulated.lagrange4``'s formulas; the 16 entries of each lane's stencil
     from the padded lattice (``tabulated.pad_table``: no remainder, no branch; with AVX-512 one
@@ -545,7 +545,7 @@ def _tabulated_steps(fmt: _Format, x: str, y: str, out: str) -> str:
         "base = base >= lo ? base : lo;\n"  # a NaN to the first row
         "base = base <= hi ? base : hi;\n"
         "vt fr = u - base;\n"
-        + _cephes_angle_steps(fmt, "lx", "ly", "angle") +
+        + _angle_steps(fmt, "lx", "ly", "angle") +
         "vt v = (angle - theta0) / dtheta;\n"
         f"vt column; for (int k = 0; k < {fmt.lanes}; ++k) column[k] = {fmt.floor}(v[k]);\n"
         "column = column >= -1 ? column : zero - 1;\n"
