@@ -16,13 +16,13 @@ import numpy as np
 import warp as wp
 
 from .cat import (
-    CAT, CAT_CARRIED, PRUNE_SIGMAS, ROOT_GROUP, SPLIT, cat_curvature, cat_flagged, cat_negligible, cat_node_interval,
+    CAT, CAT_CARRIED, PRUNE_SIGMAS, SPLIT, cat_curvature, cat_flagged, cat_negligible, cat_node_interval,
     cat_node_values, cat_one_root, cat_root_density, cat_root_group, cat_scan_functions, cat_scan_noise,
 )
 from .evidence import EVIDENCE
 from .generate import Params, carried_points_kernel, density_kernels
-from .common import lanes32, lanes64, world_to_local
-from .lanes import cat_scan_group, lane_count
+from .common import LANES32, LANES64, lanes32, lanes64, world_to_local
+from .lanes import LANE_TURN_LIMIT, cat_scan_group, lane_cat_roots, lane_count, root_count, root_lanes, root_slots
 
 # No adjoints: nothing differentiates these kernels (see ``polar_lanes``); the scan's split
 # loops stay loops, as in ``cat`` (its module options say why).
@@ -151,59 +151,14 @@ def sweep_node(table: wp.array2d(dtype=Any), k: int, ox: wp.float64, cs: wp.floa
 
 
 @wp.func
-def sweep_cells(xs: wp.array(dtype=Any), y: Any, row: int, j_begin: int, j_end: int, k: int, p: Any,
-                skip: wp.vec4i, out: wp.array2d(dtype=Any)):
-    """Add the roots of node interval [k - 1, k] to out[row, j] for j in [j_begin, j_end): at the
-    cells that the scan's test flags (``cat.cat_flagged``), what ``cat.cat_node_interval`` adds
-    there. A single root (a sign change that ``cat.cat_one_root`` settles, the common case) joins
-    a group of ROOT_GROUP searched side by side (``cat.cat_root_group``: the scalar search's
-    bits); the rest, and the roots left over at the end, are settled by the scalar functions.
-    Cells in [skip[0], skip[1]) and [skip[2], skip[3]) are skipped: proved pruned there
-    (``cat.cat_negligible``, which adds nothing)."""
-    zero = type(y)(0.0)
-    q_x = wp.vector(zero, zero, zero, zero)
-    q_y = q_x
-    q_f_lo = q_x
-    q_g_lo = q_x
-    q_f_hi = q_x
-    q_g_hi = q_x
-    q_noise = q_x
-    q_j = wp.vec4i(0, 0, 0, 0)
-    queued = int(0)
-    a_cut = type(y)(PRUNE_SIGMAS) * p.sigma_a
-    for j in range(j_begin, j_end):
-        if (j >= skip[0] and j < skip[1]) or (j >= skip[2] and j < skip[3]):
-            continue
-        lx, ly = world_to_local(xs[j], y, p.pose)
-        r, noise_f, noise_g, chord_coef = cat_scan_noise(lx, ly, p.v0, p.t, p.eps)
-        lo, f_prev, g_prev = cat_node_values(p.table, k - 1, lx, ly)
-        hi, f_k, g_k = cat_node_values(p.table, k, lx, ly)
-        # where the interval is negligible cat_node_interval adds 0
-        if cat_flagged(f_prev, f_k, hi - lo, chord_coef, noise_f) and not cat_negligible(p.table, k, lx, ly, a_cut):
-            m3w2, curvature = cat_curvature(lo, hi, p.v0, p.t, r, noise_g)
-            if (f_k >= zero) != (f_prev >= zero) and cat_one_root(g_prev, g_k, m3w2, curvature, noise_g):
-                q_x[queued] = lx
-                q_y[queued] = ly
-                q_f_lo[queued] = f_prev
-                q_g_lo[queued] = g_prev
-                q_f_hi[queued] = f_k
-                q_g_hi[queued] = g_k
-                q_noise[queued] = noise_g
-                q_j[queued] = j
-                queued += 1
-                if queued == ROOT_GROUP:
-                    found = cat_root_group(q_x, q_y, wp.vector(lo, lo, lo, lo), wp.vector(hi, hi, hi, hi), q_f_lo,
-                                           q_g_lo, q_f_hi, q_g_hi, q_noise, p.v0, p.t, p.sigma_a, p.sigma_omega, p.tol)
-                    for m in range(ROOT_GROUP):
-                        out[row, q_j[m]] = out[row, q_j[m]] + found[m]
-                    queued = 0
-            else:
-                out[row, j] = out[row, j] + cat_node_interval(lx, ly, p, k, r, noise_f, noise_g, int(0), p.table[0],
-                                                              p.table[0])
-    for m in range(queued):
-        out[row, q_j[m]] = out[row, q_j[m]] + cat_root_density(
-            q_x[m], q_y[m], p.table[k - 1, 0], p.table[k, 0], q_f_lo[m], q_g_lo[m], q_f_hi[m], q_g_hi[m], p.v0, p.t,
-            p.sigma_a, p.sigma_omega, p.tol, q_noise[m], int(0), p.table[0], p.table[0])
+def sweep_roots(x: Any, y: Any, lo: Any, hi: Any, f_lo: Any, g_lo: Any, f_hi: Any, g_hi: Any, noise_g: Any, j: Any,
+                count: int, row: int, p: Any, out: wp.array2d(dtype=Any)):
+    """Add the single roots queued in the first ``count`` lanes (each in its node interval
+    [lo, hi], at the cell j of the row) to out[row, j]: ``lanes.lane_cat_roots``."""
+    found = lane_cat_roots(x, y, lo, hi, f_lo, g_lo, f_hi, g_hi, noise_g, p.v0, p.t, p.sigma_a, p.sigma_omega, p.tol,
+                           count)
+    for m in range(count):
+        out[row, j[m]] = out[row, j[m]] + found[m]
 
 
 @wp.func
@@ -263,28 +218,88 @@ def cat_sweep_row(xs: wp.array(dtype=Any), y: Any, row: int, j0: int, j1: int, p
     # the acceleration's rounding allowance, over |h| (its coefficients are h / |h|^2, v0 h.f / |h|^2)
     acc_delta = delta / (t * t)
     cut = wp.float64(PRUNE_SIGMAS) * wp.float64(p.sigma_a) * wp.float64(1.000001)
+    # the single roots, queued across the row and searched a vector of lanes at a time
+    q_x = root_lanes(y)
+    q_y = q_x
+    q_lo = q_x
+    q_hi = q_x
+    q_f_lo = q_x
+    q_g_lo = q_x
+    q_f_hi = q_x
+    q_g_hi = q_x
+    q_noise = q_x
+    q_j = root_slots(y)
+    width = root_count(y)
+    queued = int(0)
+    a_cut = type(y)(PRUNE_SIGMAS) * p.sigma_a
     for k in range(1, n):
         alpha, beta, acc_alpha, acc_beta, h_k = sweep_node(p.table, k, ox, cs, sn, dyo)
         # the cells where both accelerations are beyond the cut on one side: skipped (pruned)
         beyond = cut + acc_delta / wp.min(h_prev, h_k)
         a_hi, b_hi = sweep_span(xs, j0, j1, -acc_alpha_prev, -acc_beta_prev, -acc_alpha, -acc_beta, -beyond)
         a_lo, b_lo = sweep_span(xs, j0, j1, acc_alpha_prev, acc_beta_prev, acc_alpha, acc_beta, -beyond)
-        skip = wp.vec4i(a_hi, b_hi, a_lo, b_lo)
-        width = wp.float64(p.table[k, 0] - p.table[k - 1, 0])
-        e = (chord_max * width * width + noise_max) * wp.float64(1.000001) + delta
+        width_k = wp.float64(p.table[k, 0] - p.table[k - 1, 0])
+        e = (chord_max * width_k * width_k + noise_max) * wp.float64(1.000001) + delta
         # the cells where F_(k-1) <= E and F_k >= -E, and where F_(k-1) >= -E and F_k <= E
         a1, b1 = sweep_span(xs, j0, j1, alpha_prev, beta_prev, -alpha, -beta, e)
         a2, b2 = sweep_span(xs, j0, j1, -alpha_prev, -beta_prev, alpha, beta, e)
         if a1 < b1 and a2 < b2 and a2 <= b1 and a1 <= b2:  # overlapping: one range
-            sweep_cells(xs, y, row, wp.min(a1, a2), wp.max(b1, b2), k, p, skip, out)
-        else:
-            sweep_cells(xs, y, row, a1, b1, k, p, skip, out)
-            sweep_cells(xs, y, row, a2, b2, k, p, skip, out)
+            a1 = wp.min(a1, a2)
+            b1 = wp.max(b1, b2)
+            a2 = j1
+            b2 = j1
+        w_lo = p.table[k - 1, 0]
+        w_hi = p.table[k, 0]
+        # the lanes' sine reduction holds below LANE_TURN_LIMIT; wider turns take the scalar search
+        in_lanes = wp.max(wp.abs(w_lo), wp.abs(w_hi)) * p.t * type(y)(0.5) < type(y)(LANE_TURN_LIMIT)
+        for part in range(2):
+            begin = a1
+            end = b1
+            if part == 1:
+                begin = a2
+                end = b2
+            for j in range(begin, end):
+                if (j >= a_hi and j < b_hi) or (j >= a_lo and j < b_lo):
+                    continue
+                lx, ly = world_to_local(xs[j], y, p.pose)
+                r, noise_f, noise_g, chord_coef = cat_scan_noise(lx, ly, p.v0, p.t, p.eps)
+                lo, f_prev, g_prev = cat_node_values(p.table, k - 1, lx, ly)
+                hi, f_k, g_k = cat_node_values(p.table, k, lx, ly)
+                # where the interval is negligible cat_node_interval adds 0
+                if cat_flagged(f_prev, f_k, hi - lo, chord_coef, noise_f) and not cat_negligible(p.table, k, lx, ly,
+                                                                                                a_cut):
+                    m3w2, curvature = cat_curvature(lo, hi, p.v0, p.t, r, noise_g)
+                    if (f_k >= zero) != (f_prev >= zero) and cat_one_root(g_prev, g_k, m3w2, curvature, noise_g):
+                        if in_lanes:
+                            q_x[queued] = lx
+                            q_y[queued] = ly
+                            q_lo[queued] = lo
+                            q_hi[queued] = hi
+                            q_f_lo[queued] = f_prev
+                            q_g_lo[queued] = g_prev
+                            q_f_hi[queued] = f_k
+                            q_g_hi[queued] = g_k
+                            q_noise[queued] = noise_g
+                            q_j[queued] = j
+                            queued += 1
+                            if queued == width:
+                                sweep_roots(q_x, q_y, q_lo, q_hi, q_f_lo, q_g_lo, q_f_hi, q_g_hi, q_noise, q_j, queued,
+                                            row, p, out)
+                                queued = 0
+                        else:
+                            out[row, j] = out[row, j] + cat_root_density(
+                                lx, ly, lo, hi, f_prev, g_prev, f_k, g_k, p.v0, p.t, p.sigma_a, p.sigma_omega, p.tol,
+                                noise_g, int(0), p.table[0], p.table[0])
+                    else:
+                        out[row, j] = out[row, j] + cat_node_interval(lx, ly, p, k, r, noise_f, noise_g, int(0),
+                                                                      p.table[0], p.table[0])
         alpha_prev = alpha
         beta_prev = beta
         acc_alpha_prev = acc_alpha
         acc_beta_prev = acc_beta
         h_prev = h_k
+    if queued > 0:
+        sweep_roots(q_x, q_y, q_lo, q_hi, q_f_lo, q_g_lo, q_f_hi, q_g_hi, q_noise, q_j, queued, row, p, out)
 
 
 @wp.func
