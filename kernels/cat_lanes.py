@@ -17,12 +17,12 @@ import warp as wp
 
 from .cat import (
     CAT, CAT_CARRIED, PRUNE_SIGMAS, SPLIT, cat_curvature, cat_flagged, cat_negligible, cat_node_interval,
-    cat_node_values, cat_one_root, cat_root_density, cat_root_group, cat_scan_functions, cat_scan_noise,
+    cat_node_values, cat_one_root, cat_scan_functions, cat_scan_noise,
 )
 from .evidence import EVIDENCE
 from .generate import Params, carried_points_kernel, density_kernels
-from .common import LANES32, LANES64, lanes32, lanes64, world_to_local
-from .lanes import LANE_TURN_LIMIT, cat_scan_group, lane_cat_roots, lane_count, root_count, root_lanes, root_slots
+from .common import lanes32, lanes64, world_to_local
+from .lanes import LANE_TURN_LIMIT, cat_scan_group, lane_cat_roots, lane_count, lane_slots, load_lanes
 
 # No adjoints: nothing differentiates these kernels (see ``polar_lanes``); the scan's split
 # loops stay loops, as in ``cat`` (its module options say why).
@@ -65,6 +65,123 @@ def cat_scan_lanes(x: Any, y: Any, p: Any, carry: Any, lw: wp.array(dtype=Any), 
 
 
 cat_density_lanes, cat_carried_lanes = cat_scan_functions(cat_scan_lanes)
+
+
+@wp.func
+def cat_interval_kind(p: Any, k: int, x: Any, y: Any, r: Any, noise_f: Any, noise_g: Any, chord_coef: Any,
+                      in_lanes: bool):
+    """How the scan takes node interval [k - 1, k] at the local point (x, y): 0, nothing to add
+    (not flagged, ``cat.cat_flagged``, or negligible, ``cat.cat_negligible``); 1, one root that
+    ``cat.cat_node_interval`` would search directly (a sign change that ``cat.cat_one_root``
+    settles), for ``lanes.lane_cat_roots`` (with ``in_lanes``); 2, the rest, for
+    ``cat.cat_node_interval``. With the node values (lo, hi, F and dF/domega at each)."""
+    lo, f_lo, g_lo = cat_node_values(p.table, k - 1, x, y)
+    hi, f_hi, g_hi = cat_node_values(p.table, k, x, y)
+    kind = int(0)
+    if cat_flagged(f_lo, f_hi, hi - lo, chord_coef, noise_f) and not cat_negligible(
+        p.table, k, x, y, type(x)(PRUNE_SIGMAS) * p.sigma_a
+    ):
+        kind = 2
+        m3w2, curvature = cat_curvature(lo, hi, p.v0, p.t, r, noise_g)
+        if in_lanes and (f_hi >= type(x)(0.0)) != (f_lo >= type(x)(0.0)) and cat_one_root(
+            g_lo, g_hi, m3w2, curvature, noise_g
+        ):
+            kind = 1
+    return kind, lo, hi, f_lo, g_lo, f_hi, g_hi
+
+
+@wp.func
+def lanes_hold(j: Any, count: int, slot: int):
+    """Whether one of the first ``count`` queued roots belongs to ``slot``."""
+    held = int(0)
+    for m in range(count):
+        if j[m] == slot:
+            held = 1
+    return held != 0
+
+
+@wp.func
+def in_lane_turns(p: Any, k: int):
+    """Whether node interval [k - 1, k] is within the lanes' sine reduction (LANE_TURN_LIMIT)."""
+    return wp.max(wp.abs(p.table[k - 1, 0]), wp.abs(p.table[k, 0])) * p.t * type(p.t)(0.5) < type(p.t)(
+        LANE_TURN_LIMIT)
+
+
+@wp.func
+def points_roots(x: Any, y: Any, lo: Any, hi: Any, f_lo: Any, g_lo: Any, f_hi: Any, g_hi: Any, noise_g: Any, j: Any,
+                 count: int, p: Any, density: Any):
+    """``density`` with the single roots queued in the first ``count`` lanes added to the lanes
+    j of their points (``lanes.lane_cat_roots``)."""
+    found = lane_cat_roots(x, y, lo, hi, f_lo, g_lo, f_hi, g_hi, noise_g, p.v0, p.t, p.sigma_a, p.sigma_omega, p.tol,
+                           count)
+    out = density
+    for m in range(count):
+        out[j[m]] = out[j[m]] + found[m]
+    return out
+
+
+@wp.func
+def cat_points_lanes(xs: Any, ys: Any, p: Any):
+    """The density at a vector of world points (the points kernel's, and the grid kernel's on a
+    row it cannot sweep): each point's nodes scanned in lanes (``cat_scan_lanes``' test), the
+    single roots of all of them queued and searched a vector at a time (``lanes.lane_cat_roots``)
+    and the rest by ``cat.cat_node_interval``, each point's roots added in node order from 0
+    (a point's queued roots go in before its next interval of the rest): the grid kernel's row
+    sweep's sum, to the bit."""
+    width = lane_count(p.table[0])
+    density = xs
+    for m in range(width):
+        density[m] = type(p.t)(0.0)
+    q_x = xs
+    q_y = xs
+    q_lo = xs
+    q_hi = xs
+    q_f_lo = xs
+    q_g_lo = xs
+    q_f_hi = xs
+    q_g_hi = xs
+    q_noise = xs
+    q_j = lane_slots(xs)
+    queued = int(0)
+    n = p.table.shape[0]
+    for m in range(width):
+        x, y = world_to_local(xs[m], ys[m], p.pose)
+        r, noise_f, noise_g, chord_coef = cat_scan_noise(x, y, p.v0, p.t, p.eps)
+        for g in range(p.groups.shape[1]):
+            k0 = 1 + g * width  # the node that the group's first interval ends at
+            flags = cat_scan_group(p.groups, g, x, y, chord_coef, noise_f, n - k0)
+            if flags != 0:
+                for i in range(width):
+                    if ((flags >> i) & 1) != 0:
+                        k = k0 + i
+                        kind, lo, hi, f_lo, g_lo, f_hi, g_hi = cat_interval_kind(p, k, x, y, r, noise_f, noise_g,
+                                                                                 chord_coef, in_lane_turns(p, k))
+                        if kind == 1:
+                            q_x[queued] = x
+                            q_y[queued] = y
+                            q_lo[queued] = lo
+                            q_hi[queued] = hi
+                            q_f_lo[queued] = f_lo
+                            q_g_lo[queued] = g_lo
+                            q_f_hi[queued] = f_hi
+                            q_g_hi[queued] = g_hi
+                            q_noise[queued] = noise_g
+                            q_j[queued] = m
+                            queued += 1
+                            if queued == width:
+                                density = points_roots(q_x, q_y, q_lo, q_hi, q_f_lo, q_g_lo, q_f_hi, q_g_hi, q_noise,
+                                                       q_j, queued, p, density)
+                                queued = 0
+                        elif kind == 2:
+                            if lanes_hold(q_j, queued, m):
+                                density = points_roots(q_x, q_y, q_lo, q_hi, q_f_lo, q_g_lo, q_f_hi, q_g_hi, q_noise,
+                                                       q_j, queued, p, density)
+                                queued = 0
+                            density[m] = density[m] + cat_node_interval(x, y, p, k, r, noise_f, noise_g, int(0),
+                                                                        p.table[0], p.table[0])
+    if queued > 0:
+        density = points_roots(q_x, q_y, q_lo, q_hi, q_f_lo, q_g_lo, q_f_hi, q_g_hi, q_noise, q_j, queued, p, density)
+    return density
 
 
 def GROUPS(scalar):
@@ -219,7 +336,7 @@ def cat_sweep_row(xs: wp.array(dtype=Any), y: Any, row: int, j0: int, j1: int, p
     acc_delta = delta / (t * t)
     cut = wp.float64(PRUNE_SIGMAS) * wp.float64(p.sigma_a) * wp.float64(1.000001)
     # the single roots, queued across the row and searched a vector of lanes at a time
-    q_x = root_lanes(y)
+    q_x = load_lanes(xs, j0)  # a vector of the dtype's lanes (its values overwritten)
     q_y = q_x
     q_lo = q_x
     q_hi = q_x
@@ -228,10 +345,9 @@ def cat_sweep_row(xs: wp.array(dtype=Any), y: Any, row: int, j0: int, j1: int, p
     q_f_hi = q_x
     q_g_hi = q_x
     q_noise = q_x
-    q_j = root_slots(y)
-    width = root_count(y)
+    q_j = lane_slots(q_x)
+    width = lane_count(xs)
     queued = int(0)
-    a_cut = type(y)(PRUNE_SIGMAS) * p.sigma_a
     for k in range(1, n):
         alpha, beta, acc_alpha, acc_beta, h_k = sweep_node(p.table, k, ox, cs, sn, dyo)
         # the cells where both accelerations are beyond the cut on one side: skipped (pruned)
@@ -248,10 +364,7 @@ def cat_sweep_row(xs: wp.array(dtype=Any), y: Any, row: int, j0: int, j1: int, p
             b1 = wp.max(b1, b2)
             a2 = j1
             b2 = j1
-        w_lo = p.table[k - 1, 0]
-        w_hi = p.table[k, 0]
-        # the lanes' sine reduction holds below LANE_TURN_LIMIT; wider turns take the scalar search
-        in_lanes = wp.max(wp.abs(w_lo), wp.abs(w_hi)) * p.t * type(y)(0.5) < type(y)(LANE_TURN_LIMIT)
+        in_lanes = in_lane_turns(p, k)
         for part in range(2):
             begin = a1
             end = b1
@@ -263,36 +376,32 @@ def cat_sweep_row(xs: wp.array(dtype=Any), y: Any, row: int, j0: int, j1: int, p
                     continue
                 lx, ly = world_to_local(xs[j], y, p.pose)
                 r, noise_f, noise_g, chord_coef = cat_scan_noise(lx, ly, p.v0, p.t, p.eps)
-                lo, f_prev, g_prev = cat_node_values(p.table, k - 1, lx, ly)
-                hi, f_k, g_k = cat_node_values(p.table, k, lx, ly)
-                # where the interval is negligible cat_node_interval adds 0
-                if cat_flagged(f_prev, f_k, hi - lo, chord_coef, noise_f) and not cat_negligible(p.table, k, lx, ly,
-                                                                                                a_cut):
-                    m3w2, curvature = cat_curvature(lo, hi, p.v0, p.t, r, noise_g)
-                    if (f_k >= zero) != (f_prev >= zero) and cat_one_root(g_prev, g_k, m3w2, curvature, noise_g):
-                        if in_lanes:
-                            q_x[queued] = lx
-                            q_y[queued] = ly
-                            q_lo[queued] = lo
-                            q_hi[queued] = hi
-                            q_f_lo[queued] = f_prev
-                            q_g_lo[queued] = g_prev
-                            q_f_hi[queued] = f_k
-                            q_g_hi[queued] = g_k
-                            q_noise[queued] = noise_g
-                            q_j[queued] = j
-                            queued += 1
-                            if queued == width:
-                                sweep_roots(q_x, q_y, q_lo, q_hi, q_f_lo, q_g_lo, q_f_hi, q_g_hi, q_noise, q_j, queued,
-                                            row, p, out)
-                                queued = 0
-                        else:
-                            out[row, j] = out[row, j] + cat_root_density(
-                                lx, ly, lo, hi, f_prev, g_prev, f_k, g_k, p.v0, p.t, p.sigma_a, p.sigma_omega, p.tol,
-                                noise_g, int(0), p.table[0], p.table[0])
-                    else:
-                        out[row, j] = out[row, j] + cat_node_interval(lx, ly, p, k, r, noise_f, noise_g, int(0),
-                                                                      p.table[0], p.table[0])
+                kind, lo, hi, f_lo, g_lo, f_hi, g_hi = cat_interval_kind(p, k, lx, ly, r, noise_f, noise_g, chord_coef,
+                                                                         in_lanes)
+                if kind == 1:
+                    q_x[queued] = lx
+                    q_y[queued] = ly
+                    q_lo[queued] = lo
+                    q_hi[queued] = hi
+                    q_f_lo[queued] = f_lo
+                    q_g_lo[queued] = g_lo
+                    q_f_hi[queued] = f_hi
+                    q_g_hi[queued] = g_hi
+                    q_noise[queued] = noise_g
+                    q_j[queued] = j
+                    queued += 1
+                    if queued == width:
+                        sweep_roots(q_x, q_y, q_lo, q_hi, q_f_lo, q_g_lo, q_f_hi, q_g_hi, q_noise, q_j, queued, row, p,
+                                    out)
+                        queued = 0
+                elif kind == 2:
+                    # the cell's queued roots first: each cell's roots add in node order
+                    if lanes_hold(q_j, queued, j):
+                        sweep_roots(q_x, q_y, q_lo, q_hi, q_f_lo, q_g_lo, q_f_hi, q_g_hi, q_noise, q_j, queued, row, p,
+                                    out)
+                        queued = 0
+                    out[row, j] = out[row, j] + cat_node_interval(lx, ly, p, k, r, noise_f, noise_g, int(0),
+                                                                  p.table[0], p.table[0])
         alpha_prev = alpha
         beta_prev = beta
         acc_alpha_prev = acc_alpha
@@ -317,5 +426,5 @@ def cat_row(xs: wp.array(dtype=Any), y: Any, out: wp.array2d(dtype=Any), row: in
 
 
 # the grid by the row sweep, the points one by one with the nodes in lanes
-KERNELS = density_kernels(cat_density_lanes, CAT_LANES, "cat", suffix="_lanes", row=cat_row)
+KERNELS = density_kernels(cat_points_lanes, CAT_LANES, "cat", lanes=True, row=cat_row)
 CARRIED_POINTS = carried_points_kernel(cat_carried_lanes, CAT_CARRIED_LANES, EVIDENCE, "cat")

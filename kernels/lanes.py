@@ -553,25 +553,35 @@ def _cat_roots(fmt: _Format) -> str:
         f"  vt a_fn = au < L(2.0e-4) ? sh * (1 - hu * hu * {sixth}) : 2 * sh * sh * iu;\n"
         f"  vt b_fn = au < L(1.0e-4) ? 1 - u * u * {sixth} : s * iu;\n"
         "  vt z = u * u;\n"
-        f"  vt c_fn = u * {_horner('z', c_over_u)};\n"
-        f"  vt d_fn = {_horner('z', d)};\n"
-        f"  vt dc_fn = {_horner('z', dc)};\n"
-        f"  vt dd_fn = u * {_horner('z', dd_over_u)};\n"
-        f"  vt ddc_fn = u * {_horner('z', ddc_over_u)};\n"
-        f"  vt ddd_fn = {_horner('z', ddd)};\n"
-        f"  vt dddc_fn = {_horner('z', dddc)};\n"
-        f"  vt dddd_fn = u * {_horner('z', dddd_over_u)};\n"
+        # the series where some lane is below the switch, the closed forms where some is above
+        # (the lanes hold neighbouring cells' roots, most often on one side)
         "  vi closed = au >= L(1.0);\n"
-        "  vt i2 = iu * iu; vt i3 = i2 * iu; vt i4 = i2 * i2; vt i5 = i4 * iu;\n"
-        "  vt u2 = z; vt u3 = u2 * u; vt u4 = u2 * u2;\n"
-        "  c_fn = closed ? (s - u * c) * i2 : c_fn;\n"
-        "  d_fn = closed ? (c + u * s - 1) * i2 : d_fn;\n"
-        "  dc_fn = closed ? (u2 * s - 2 * s + 2 * u * c) * i3 : dc_fn;\n"
-        "  dd_fn = closed ? (u2 * c - 2 * c - 2 * u * s + 2) * i3 : dd_fn;\n"
-        "  ddc_fn = closed ? (u3 * c - 3 * u2 * s + 6 * s - 6 * u * c) * i4 : ddc_fn;\n"
-        "  ddd_fn = closed ? (6 * c + 6 * u * s - u3 * s - 3 * u2 * c - 6) * i4 : ddd_fn;\n"
-        "  dddc_fn = closed ? (24 * u * c - u4 * s - 4 * u3 * c + 12 * u2 * s - 24 * s) * i5 : dddc_fn;\n"
-        "  dddd_fn = closed ? (24 - u4 * c - 24 * c - 24 * u * s + 4 * u3 * s + 12 * u2 * c) * i5 : dddd_fn;\n"
+        "  int n_closed = 0;\n"
+        f"  for (int k = 0; k < {n}; ++k) n_closed += closed[k] != 0;\n"
+        "  vt c_fn = zero, d_fn = zero, dc_fn = zero, dd_fn = zero, ddc_fn = zero, ddd_fn = zero, dddc_fn = zero,"
+        " dddd_fn = zero;\n"
+        f"  if (n_closed < {n}) {{\n"
+        f"    c_fn = u * {_horner('z', c_over_u)};\n"
+        f"    d_fn = {_horner('z', d)};\n"
+        f"    dc_fn = {_horner('z', dc)};\n"
+        f"    dd_fn = u * {_horner('z', dd_over_u)};\n"
+        f"    ddc_fn = u * {_horner('z', ddc_over_u)};\n"
+        f"    ddd_fn = {_horner('z', ddd)};\n"
+        f"    dddc_fn = {_horner('z', dddc)};\n"
+        f"    dddd_fn = u * {_horner('z', dddd_over_u)};\n"
+        "  }\n"
+        "  if (n_closed > 0) {\n"
+        "    vt i2 = iu * iu; vt i3 = i2 * iu; vt i4 = i2 * i2; vt i5 = i4 * iu;\n"
+        "    vt u2 = z; vt u3 = u2 * u; vt u4 = u2 * u2;\n"
+        "    c_fn = closed ? (s - u * c) * i2 : c_fn;\n"
+        "    d_fn = closed ? (c + u * s - 1) * i2 : d_fn;\n"
+        "    dc_fn = closed ? (u2 * s - 2 * s + 2 * u * c) * i3 : dc_fn;\n"
+        "    dd_fn = closed ? (u2 * c - 2 * c - 2 * u * s + 2) * i3 : dd_fn;\n"
+        "    ddc_fn = closed ? (u3 * c - 3 * u2 * s + 6 * s - 6 * u * c) * i4 : ddc_fn;\n"
+        "    ddd_fn = closed ? (6 * c + 6 * u * s - u3 * s - 3 * u2 * c - 6) * i4 : ddd_fn;\n"
+        "    dddc_fn = closed ? (24 * u * c - u4 * s - 4 * u3 * c + 12 * u2 * s - 24 * s) * i5 : dddc_fn;\n"
+        "    dddd_fn = closed ? (24 - u4 * c - 24 * c - 24 * u * s + 4 * u3 * s + 12 * u2 * c) * i5 : dddd_fn;\n"
+        "  }\n"
         # cat_line_terms and cat_eval_curved's derivatives
         "  vt fx = tt * a_fn; vt fy = tt * b_fn;\n"
         "  vt hx = t2 * c_fn; vt hy = t2 * d_fn;\n"
@@ -764,41 +774,21 @@ for _fmt, _v, _s in ((F64, lanes64, wp.float64), (F32, lanes32, wp.float32)):
         ...
 
 
-# --- the CAT's root search, ROOT_CHAINS registers of lanes a call
+# --- the CAT's root search, a vector of lanes a call (two registers a call, interleaved, measured
+# no faster in float64 and 25 % slower in float32: Figure 1 grid, one core, Intel Xeon AVX-512)
 
-#: Registers of lanes that :func:`lane_cat_roots` searches side by side: one root's search is a
-#: long chain of latencies, and two independent chains keep the core busy (Figure 1 grid, float64,
-#: one core, Intel Xeon AVX-512: one register 208 ns a group of 8 roots).
-ROOT_CHAINS = 1
-#: The root search's vectors: ROOT_CHAINS registers of float64 or float32 lanes, and a cell
-#: index a lane.
-roots64 = wp.types.vector(ROOT_CHAINS * LANES64, wp.float64)
-roots32 = wp.types.vector(ROOT_CHAINS * LANES32, wp.float32)
-root_slots64 = wp.types.vector(ROOT_CHAINS * LANES64, wp.int32)
-root_slots32 = wp.types.vector(ROOT_CHAINS * LANES32, wp.int32)
+for _fmt, _v, _s in ((F64, lanes64, wp.float64), (F32, lanes32, wp.float32)):
 
-for _fmt, _v, _s, _slots in ((F64, roots64, wp.float64, root_slots64), (F32, roots32, wp.float32, root_slots32)):
-
-    @wp.func_native(_cat_roots(dataclasses.replace(_fmt, lanes=ROOT_CHAINS * _fmt.lanes)))
+    @wp.func_native(_cat_roots(_fmt))
     def lane_cat_roots(x: _v, y: _v, lo: _v, hi: _v, f_lo: _v, g_lo: _v, f_hi: _v, g_hi: _v, noise_g: _v, v0: _s, t: _s,
                        sigma_a: _s, sigma_omega: _s, tol: _s, count: int) -> _v:
         """The density of the single root of F in each of the first ``count`` lanes' [lo, hi]
         (``_cat_roots``)."""
         ...
 
-    @wp.func_native(f"return wp::vec_t<{ROOT_CHAINS * _fmt.lanes}, {_fmt.scalar}>();\n")
-    def root_lanes(y: _s) -> _v:
-        """A vector of :func:`lane_cat_roots`' lanes for the scalar type of ``y`` (zeros)."""
-        ...
-
-    @wp.func_native(f"return wp::vec_t<{ROOT_CHAINS * _fmt.lanes}, wp::int32>();\n")
-    def root_slots(y: _s) -> _slots:
-        """A cell index for each of :func:`lane_cat_roots`' lanes (zeros)."""
-        ...
-
-    @wp.func_native(f"return {ROOT_CHAINS * _fmt.lanes};\n")
-    def root_count(y: _s) -> int:
-        """:func:`lane_cat_roots`' lanes for the scalar type of ``y``: 16 float64, 32 float32."""
+    @wp.func_native(f"return wp::vec_t<{_fmt.lanes}, wp::int32>();\n")
+    def lane_slots(x: _v) -> wp.types.vector(_fmt.lanes, wp.int32):
+        """An integer for each lane of ``x`` (zeros)."""
         ...
 
 
