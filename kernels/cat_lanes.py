@@ -348,6 +348,7 @@ def cat_sweep_row(xs: wp.array(dtype=Any), y: Any, row: int, j0: int, j1: int, p
     q_j = lane_slots(q_x)
     width = lane_count(xs)
     queued = int(0)
+    parts = int(2)
     for k in range(1, n):
         alpha, beta, acc_alpha, acc_beta, h_k = sweep_node(p.table, k, ox, cs, sn, dyo)
         # the cells where both accelerations are beyond the cut on one side: skipped (pruned)
@@ -365,7 +366,7 @@ def cat_sweep_row(xs: wp.array(dtype=Any), y: Any, row: int, j0: int, j1: int, p
             a2 = j1
             b2 = j1
         in_lanes = in_lane_turns(p, k)
-        for part in range(2):
+        for part in range(parts):  # a loop, not two copies of its body
             begin = a1
             end = b1
             if part == 1:

@@ -507,15 +507,16 @@ def _cat_roots(fmt: _Format) -> str:
     sin_poly, cos_poly = (_horner("r2", c) for c in (fmt.sin_coefficients, fmt.cos_coefficients))
     n = fmt.lanes
     inputs = "x y lo hi f_lo g_lo f_hi g_hi noise_g"
-    pad = "".join(f"v{name}[k] = v{name}[0]; " for name in inputs.split())
+    pad = "".join(f"v{name} = live ? v{name} : zero + v{name}[0];\n" for name in inputs.split())
+    index = "{" + ", ".join(str(k) for k in range(n)) + "}"
     sixth = f"L({1 / 6!r})"
     body = (
         # lanes past count: a copy of the first (finite values), never live
-        f"vi live;\nfor (int k = 0; k < {n}; ++k) {{ live[k] = k < count ? -1 : 0; if (k >= count) {{ {pad}}} }}\n"
+        f"vi lane = {index};\nvi live = lane < count;\n" + pad +
         "vt tt = zero + t; vt vv = zero + v0; vt tl = zero + tol;\n"
         "vt t2 = tt * tt;\nvt t4 = t2 * t2;\n"
         # cat_third_bound
-        f"vt rad;\nfor (int k = 0; k < {n}; ++k) rad[k] = {fmt.sqrt}(vx[k] * vx[k] + vy[k] * vy[k]);\n"
+        "vt rad = __builtin_elementwise_sqrt(vx * vx + vy * vy);\n"
         "vt m3 = t4 * tt * (rad * L(0.2) + vv * tt * L(0.05)) * L(1.01);\n"
         # hermite_root
         "vt width = vhi - vlo;\n"
@@ -556,8 +557,7 @@ def _cat_roots(fmt: _Format) -> str:
         # the series where some lane is below the switch, the closed forms where some is above
         # (the lanes hold neighbouring cells' roots, most often on one side)
         "  vi closed = au >= L(1.0);\n"
-        "  int n_closed = 0;\n"
-        f"  for (int k = 0; k < {n}; ++k) n_closed += closed[k] != 0;\n"
+        "  int n_closed = (int)-__builtin_reduce_add(closed);\n"
         "  vt c_fn = zero, d_fn = zero, dc_fn = zero, dd_fn = zero, ddc_fn = zero, ddd_fn = zero, dddc_fn = zero,"
         " dddd_fn = zero;\n"
         f"  if (n_closed < {n}) {{\n"
@@ -608,9 +608,11 @@ def _cat_roots(fmt: _Format) -> str:
         "  dacc = keep ? dacc_n : dacc;\n"
         "  ddacc = keep ? (n2 - 4 * dacc_n * hh1 - 2 * acc_n * (h1h1 + hh2)) * inv_h2 : ddacc;\n"
         "};\n"
-        "eval(w, live);\n"
-        # cat_root_step, MAX_NEWTON steps at most, until every lane has stopped
-        "for (int it = 0; it < MAX_NEWTON; ++it) {\n"
+        # cat_root_step, MAX_NEWTON steps at most, until every lane has stopped (one evaluation
+        # site: the snippet's size is its build time)
+        "for (int it = 0; it <= MAX_NEWTON; ++it) {\n"
+        "  eval(w, live);\n"
+        "  if (it == MAX_NEWTON) break;\n"
         "  vi same = (f > 0) == (fa > 0);\n"
         "  a = (live & same) ? w : a;\n"
         "  fa = (live & same) ? f : fa;\n"
@@ -649,10 +651,7 @@ def _cat_roots(fmt: _Format) -> str:
         "  e = (live & proved) ? w_new - w : e;\n"
         "  live = live & ~(stop | proved);\n"
         "  w = live ? w_new : w;\n"
-        "  int any = 0;\n"
-        f"  for (int k = 0; k < {n}; ++k) any |= live[k] != 0;\n"
-        "  if (!any) break;\n"
-        "  eval(w, live);\n"
+        "  if (!__builtin_reduce_or(live)) break;\n"
         "}\n"
         # cat_root_value
         "vt slope_r = df + e * (ddf + L(0.5) * e * dddf);\n"
@@ -666,6 +665,9 @@ def _cat_roots(fmt: _Format) -> str:
         + _reciprocal_steps(fmt, "aslope", "inv_slope") +
         f"vt res = (g * (L({1 / (2 * math.pi)!r}) / (sigma_a * sigma_omega))) * inv_slope;"
     )
+    # one out-of-line body, however many call sites inline the snippet (each copy cost seconds of
+    # build time)
+    body = "vt res = [&]() __attribute__((noinline)) -> vt {\n" + body + "\nreturn res;\n}();"
     return _snippet(fmt, inputs, body.replace("MAX_NEWTON", str(CAT_MAX_NEWTON)), contract=True)
 
 
