@@ -1,8 +1,10 @@
 """The CAT grid kernel's row sweep (``kernels/cat_lanes.py``: the scan swept along each row, single
-roots searched four side by side) against the per-cell scalar kernel, bit for bit, on the grids that
-are hard for it: cells far smaller than the bands around each interval's lines, rows crossing
-the lines at every angle (lines parallel to the rows included), float32 far from the origin, and
-the folds at large turn noise; and rows whose centres are not sorted (the per-cell fallback)."""
+roots searched a vector of lanes at a time) against the points kernel, which scans every node of
+each point, bit for bit, and against the per-cell scalar kernel (the GPU path's) to the lane
+search's rounding, on the grids that are hard for it: cells far smaller than the bands around
+each interval's lines, rows crossing the lines at every angle (lines parallel to the rows
+included), float32 far from the origin, and the folds at large turn noise; and rows whose
+centres are not sorted (the per-cell fallback)."""
 
 import math
 
@@ -14,6 +16,8 @@ from hypothesis import strategies as st
 import bananagrid as bg
 from bananagrid.engine.warp_runtime import WarpContext
 from bananagrid.kernels import cat, cat_lanes
+
+from cat_lane_roots import lane_roots_agree
 
 
 def _scalar_points(model, ctx, binding, x, y):
@@ -54,10 +58,12 @@ def _sweep_cases(draw):
 @seed(20261127)
 @settings(max_examples=40, deadline=None, database=None, suppress_health_check=[HealthCheck.too_slow])
 @given(case=_sweep_cases())
-def test_row_sweep_equals_the_per_cell_scan_bit_for_bit(case):
-    """rasterise (the sweep) equals the scalar per-cell kernel at every cell centre, in both
-    dtypes: the sweep's bands hold every cell that the scan flags (or a bit would differ: a
-    missed interval drops a root), and the grouped root search takes the scalar one's steps."""
+def test_row_sweep_equals_the_per_cell_scan(case):
+    """rasterise (the sweep) equals the points kernel (``pdf``: every node of each point scanned)
+    at every cell centre bit for bit, in both dtypes: the sweep's bands hold every cell that the
+    scan flags (or a bit would differ: a missed interval drops a root), and both search the same
+    roots with the same lane search, each cell's roots summed in node order. The scalar per-cell
+    kernel agrees to the lane search's rounding (``cat_lane_roots``)."""
     model, grid = case
     x, y = np.meshgrid(grid.x, grid.y)
     for dtype in (np.float64, np.float32):
@@ -66,8 +72,11 @@ def test_row_sweep_equals_the_per_cell_scan_bit_for_bit(case):
         ctx = WarpContext(computed, "cpu", 1)
         binding = model.bind(ctx, None, grid=True)
         assert binding.kernels.grid.key == "cat_grid_lanes"
-        scalar = _scalar_points(model, ctx, binding, x, y)
-        assert np.array_equal(raster.values, scalar.astype(dtype)), int(np.sum(raster.values != scalar))
+        points = model.pdf(x, y, dtype=computed).astype(dtype)
+        assert np.array_equal(raster.values, points), int(np.sum(raster.values != points))
+        scalar = _scalar_points(model, ctx, binding, x, y).astype(dtype)
+        agree = lane_roots_agree(raster.values, scalar)
+        assert np.all(agree), (int(np.sum(~agree)), np.abs(raster.values - scalar).max())
 
 
 def test_the_sweep_finds_roots_on_most_cells_of_the_figure_1_frame():
@@ -83,7 +92,8 @@ def test_the_sweep_finds_roots_on_most_cells_of_the_figure_1_frame():
 
 def test_unsorted_centres_take_the_per_cell_scan():
     """A row whose centres are not sorted (the grid kernel launched on reversed and shuffled
-    columns) is computed cell by cell, and equals the scalar kernel there."""
+    columns) is computed cell by cell (the points kernel's density), and equals ``pdf`` there
+    bit for bit and the scalar kernel to the lane search's rounding."""
     model = bg.CAT(v0=280.0, t=10.0, sigma_a=5 / 3, sigma_omega=math.pi / 20)
     grid = bg.Grid.from_bounds(x=(-3000.0, 3000.0), y=(-200.0, 3400.0), step=100.0)
     rng = np.random.default_rng(7)
@@ -97,5 +107,6 @@ def test_unsorted_centres_take_the_per_cell_scan():
     x, y = np.meshgrid(xs, grid.y)
     scalar = _scalar_points(model, ctx, binding, x, y)
     assert np.count_nonzero(scalar) > 0
-    assert np.array_equal(out.numpy(), scalar)
+    assert np.array_equal(out.numpy(), model.pdf(x, y))
+    assert np.all(lane_roots_agree(out.numpy(), scalar))
     assert binding.kernels.grid is cat_lanes.KERNELS.grid  # the row sweep's generated grid kernel
