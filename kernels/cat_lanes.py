@@ -1,11 +1,17 @@
 """The CAT scan on the CPU: along grid rows (the grid kernel), and over nodes in lanes (points).
 
 The grid kernel sweeps each row (:func:`cat_sweep_row`: only the cells where a node interval
-can be flagged are tested, with the scan's own arithmetic) and searches single roots
-ROOT_GROUP at a time (``cat.cat_root_group``); the points kernels test a group of node
-intervals at once (:func:`cat_scan_lanes`). Either way each flagged interval's roots are
-``cat.cat_node_interval``'s, added in node order, so the density is the scalar kernel's
-(``kernels/cat.py``) bit for bit (``tests/kernels/test_cat_sweep.py``, ``tests/kernels/test_lanes.py``).
+can be flagged are tested, with the scan's own arithmetic); the points kernels test a group of
+node intervals at once (:func:`cat_points_lanes`, :func:`cat_scan_lanes`). Each flagged interval
+is taken as ``cat.cat_node_interval`` takes it, but that the single roots (a sign change that
+``cat.cat_one_root`` settles: nearly all of them) are queued, across the cells of a row or the
+points of a vector, and searched a vector of lanes at a time (``lanes.lane_cat_roots``: the
+scalar search's steps and proofs, other roundings). Each cell's roots are added in node order,
+so the grid and points kernels give the same density bit for bit, and the scalar kernel
+(``kernels/cat.py``, the GPU path's) the same to the lane search's rounding
+(``tests/kernels/test_cat_sweep.py``, ``tests/kernels/test_lanes.py``). The carried kernel scans
+with :func:`cat_scan_lanes` and the scalar root search (its roots weigh the evidence along their
+paths).
 
 CPU only (see ``kernels/lanes.py``); the GPU path uses ``cat.KERNELS``.
 """
@@ -282,7 +288,9 @@ def sweep_roots(x: Any, y: Any, lo: Any, hi: Any, f_lo: Any, g_lo: Any, f_hi: An
 def cat_sweep_row(xs: wp.array(dtype=Any), y: Any, row: int, j0: int, j1: int, p: Any, out: wp.array2d(dtype=Any)):
     """out[row, j0 .. j1 - 1] = the density at (xs[j], y), xs non-decreasing there: the scan
     swept along the row, node interval by node interval, each cell's roots added in node order
-    from 0 (``cat.cat_scan``'s sum, to the bit).
+    from 0 (:func:`cat_points_lanes`' sum, to the bit); the single roots queued across the row
+    and searched a vector of lanes at a time (a cell's queued roots are added before its next
+    interval that ``cat.cat_node_interval`` takes).
 
     Along the row the local point is affine in x, and so is F at a node:
     F_k(x) = alpha_k + beta_k x with beta_k = hx s - hy c and alpha_k = -ox beta_k +

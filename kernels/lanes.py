@@ -28,6 +28,10 @@ a grid row one native loop over ``CHAINS`` registers of lanes a step (:func:`pol
 Without AVX-512 these snippets divide and take the square root (the same values but in the last
 ulp of 1 / x and 1 / sqrt(x), and a / b exactly).
 
+The CAT's single roots are searched a vector of lanes at a time by one snippet
+(:func:`lane_cat_roots`: the scalar ``cat.cat_root_density``'s steps and proofs, with this
+module's sine, exp and reciprocals), out of line once per dtype.
+
 Accuracy (``tests/kernels/test_lanes.py`` measures each over its reduced range and the whole domain
 against long double references): :func:`lane_exp` within 3 ulp (float64) and 2 ulp
 (float32), :func:`lane_atan2` within 2 ulp (Cephes' rational function, as the scalar
@@ -479,9 +483,10 @@ def _cat_series():
 #: The root search's step cap, ``cat.MAX_NEWTON`` (this module is below ``cat``'s).
 CAT_MAX_NEWTON = 100
 
-#: Largest |u| / 2 = |omega t| / 2 that :func:`lane_cat_roots` takes: its Cody-Waite reduction
-#: keeps n pi/2 exact for |n| < 2^20 in float64 and 2^16 in float32 (the parts' bits); the
-#: callers search roots of wider turns by the scalar functions.
+#: Largest |u| / 2 = |omega t| / 2 that :func:`lane_cat_roots` takes (n <= 6367 quarter turns):
+#: its Cody-Waite reduction's first two products n pi/2 are exact for |n| < 2^22 in float64 and
+#: 2^13 in float32 (the parts hold 31 and 32, 8 and 11 bits); the callers search roots of wider
+#: turns by the scalar functions.
 LANE_TURN_LIMIT = 1.0e4
 
 
