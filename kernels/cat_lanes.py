@@ -109,8 +109,7 @@ def lanes_hold(j: Any, count: int, slot: int):
 @wp.func
 def in_lane_turns(p: Any, k: int):
     """Whether node interval [k - 1, k] is within the lanes' sine reduction (LANE_TURN_LIMIT)."""
-    return wp.max(wp.abs(p.table[k - 1, 0]), wp.abs(p.table[k, 0])) * p.t * type(p.t)(0.5) < type(p.t)(
-        LANE_TURN_LIMIT)
+    return wp.max(wp.abs(p.table[k - 1, 0]), wp.abs(p.table[k, 0])) * p.t < type(p.t)(LANE_TURN_LIMIT)
 
 
 @wp.func

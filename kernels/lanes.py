@@ -483,10 +483,10 @@ def _cat_series():
 #: The root search's step cap, ``cat.MAX_NEWTON`` (this module is below ``cat``'s).
 CAT_MAX_NEWTON = 100
 
-#: Largest |u| / 2 = |omega t| / 2 that :func:`lane_cat_roots` takes (n <= 6367 quarter turns):
-#: its Cody-Waite reduction's first two products n pi/2 are exact for |n| < 2^22 in float64 and
-#: 2^13 in float32 (the parts hold 31 and 32, 8 and 11 bits); the callers search roots of wider
-#: turns by the scalar functions.
+#: Largest |u| = |omega t| that :func:`lane_cat_roots` takes (n <= 6367 quarter turns in its
+#: reductions, of u / 2 and in float32 of u): the Cody-Waite reduction's first two products
+#: n pi/2 are exact for |n| < 2^22 in float64 and 2^13 in float32 (the parts hold 31 and 32, 8
+#: and 11 bits); the callers search roots of wider turns by the scalar functions.
 LANE_TURN_LIMIT = 1.0e4
 
 
@@ -497,11 +497,11 @@ def _cat_roots(fmt: _Format) -> str:
 
     The scalar functions' steps: the Hermite start (``cat.hermite_root``); F, its derivatives
     and the acceleration (``cat.cat_eval_curved``) from the basis of ``cat.cat_basis_curved``
-    (the series below |u| = 1 and the closed forms above both computed, one selected), with sin
-    and cos of u / 2 from one Cody-Waite reduction (pi / 2 in three parts; |u| / 2 below
-    LANE_TURN_LIMIT) and Cephes' polynomials (those of :func:`lane_sin`), sin u = 2 sin cos and
-    cos u = (cos - sin)(cos + sin) of the half angle, and the closed forms' 1 / u^k as powers of
-    one reciprocal; Halley's step with Newton's and bisection as fallbacks, the bracket, and the
+    (the series below |u| = 1 and the closed forms above, each computed where a lane needs it
+    and selected), with sin and cos of u / 2 from one Cody-Waite reduction (pi / 2 in three
+    parts; |u| below LANE_TURN_LIMIT) and Cephes' polynomials (those of :func:`lane_sin`), sin u
+    and cos u from the half angle's (2 sin cos, (cos - sin)(cos + sin)) in float64 and by their
+    own reduction in float32, and the closed forms' 1 / u^k as powers of one reciprocal; Halley's step with Newton's and bisection as fallbacks, the bracket, and the
     proof that ends a search at the Halley point (``cat.cat_root_step``); the density by the
     Taylor carry and one exp (``cat.cat_root_value``). Fused multiply-adds allowed. The values
     differ from the scalar search's in the last bits (the sine, exp and reciprocals are not
@@ -550,8 +550,21 @@ def _cat_roots(fmt: _Format) -> str:
         "  vi q = __builtin_convertvector(nq, vi) & 3;\n"
         "  vt sh = q == 0 ? sr : (q == 1 ? cr : (q == 2 ? -sr : -cr));\n"
         "  vt ch = q == 0 ? cr : (q == 1 ? -sr : (q == 2 ? -cr : sr));\n"
-        "  vt s = 2 * sh * ch;\n"
-        "  vt c = (ch - sh) * (ch + sh);\n"
+        + (
+            # float32: sin u and cos u by their own reduction, to within 2 ulp (the half angle's
+            # products add two roundings, which beside a fold float32 cannot spare)
+            f"  vt nu = (u * L({2 / math.pi!r}) + L({shifter!r})) - L({shifter!r});\n"
+            f"  vt ru = ((u - nu * {p1}) - nu * {p2}) - nu * {p3};\n"
+            "  vt ru2 = ru * ru;\n"
+            f"  vt su = ru + ru * ru2 * {sin_poly.replace('r2', 'ru2')};\n"
+            f"  vt cu = (1 - L(0.5) * ru2) + ru2 * ru2 * {cos_poly.replace('r2', 'ru2')};\n"
+            "  vi qu = __builtin_convertvector(nu, vi) & 3;\n"
+            "  vt s = qu == 0 ? su : (qu == 1 ? cu : (qu == 2 ? -su : -cu));\n"
+            "  vt c = qu == 0 ? cu : (qu == 1 ? -su : (qu == 2 ? -cu : su));\n"
+            if fmt.scalar == "float" else
+            "  vt s = 2 * sh * ch;\n"
+            "  vt c = (ch - sh) * (ch + sh);\n"
+        ) +
         "  vt au = u < 0 ? -u : u;\n"
         "  vt u_or_1 = au < L(1.0e-4) ? zero + 1 : u;\n"
         + _reciprocal_steps(fmt, "u_or_1", "iu", guard=False) +

@@ -15,7 +15,7 @@ from hypothesis import strategies as st
 
 import bananagrid as bg
 from bananagrid.engine.warp_runtime import WarpContext
-from bananagrid.kernels import cat, cat_lanes
+from bananagrid.kernels import cat, cat_lanes, lanes
 
 from cat_lane_roots import lane_roots_agree
 
@@ -110,3 +110,22 @@ def test_unsorted_centres_take_the_per_cell_scan():
     assert np.array_equal(out.numpy(), model.pdf(x, y))
     assert np.all(lane_roots_agree(out.numpy(), scalar))
     assert binding.kernels.grid is cat_lanes.KERNELS.grid  # the row sweep's generated grid kernel
+
+
+def test_turns_beyond_the_lanes_reduction_take_the_scalar_search():
+    """Node intervals at |omega t| beyond ``lanes.LANE_TURN_LIMIT`` (where the lanes' sine
+    reduction would round) are searched by the scalar functions, in the sweep and at points
+    alike: a CAT scanning 3,000 turns each way (k_sigma sigma_omega t = 2e4 rad) about its pose,
+    where every interval's roots lie; the grid equals ``pdf`` bit for bit and the scalar kernel
+    to the lane search's rounding."""
+    model = bg.CAT(v0=10.0, t=100.0, sigma_a=0.5, sigma_omega=25.0)
+    assert model.k_sigma * model.sigma_omega * model.t > 1.5 * lanes.LANE_TURN_LIMIT
+    grid = bg.Grid.from_bounds(x=(-2.0, 2.0), y=(-2.0, 2.0), step=1.0)
+    x, y = np.meshgrid(grid.x, grid.y)
+    raster = bg.rasterise(model, grid, threads=1, min_mass=0.0)
+    ctx = WarpContext(np.float64, "cpu", 1)
+    binding = model.bind(ctx, None, grid=True)
+    scalar = _scalar_points(model, ctx, binding, x, y)
+    assert np.count_nonzero(scalar) == scalar.size
+    assert np.array_equal(raster.values, model.pdf(x, y))
+    assert np.all(lane_roots_agree(raster.values, scalar))
