@@ -53,6 +53,11 @@ SPLIT = 8
 # minutes to build the module for a GPU (see the note in kernels/__init__.py).
 wp.set_module_options({"enable_backward": False, "max_unroll": SPLIT - 1})
 
+#: 1/3, 7/12 and 1/12, for the scan's allowances (``cat_scan_noise``).
+ONE_THIRD = 1.0 / 3.0
+SEVEN_TWELFTHS = 7.0 / 12.0
+ONE_TWELFTH = 1.0 / 12.0
+
 #: Rounding allowance on computed values of F and dF/domega, in units of the dtype's epsilon
 #: times the largest term they sum (their table coefficients carry a few ulps each).
 ROUNDING_ULPS = 32.0
@@ -668,10 +673,11 @@ def cat_scan_noise(x: Any, y: Any, v0: Any, t: Any, eps: Any):
     r = wp.sqrt(x * x + y * y)
     t2 = t * t
     noise_f = type(x)(ROUNDING_ULPS) * eps * t2 * type(x)(0.5) * (wp.abs(x) + wp.abs(y) + v0 * t)
+    # products by the constants, not quotients: the scan takes these at every point it tests
     noise_g = type(x)(ROUNDING_ULPS) * eps * t2 * t * (
-        (wp.abs(x) + wp.abs(y)) / type(x)(3.0) + v0 * t * type(x)(7.0 / 12.0)
+        (wp.abs(x) + wp.abs(y)) * type(x)(ONE_THIRD) + v0 * t * type(x)(SEVEN_TWELFTHS)
     )
-    chord_coef = t2 * t2 * (r * type(x)(0.25) + v0 * t / type(x)(12.0)) * type(x)(0.125)
+    chord_coef = t2 * t2 * (r * type(x)(0.25) + v0 * t * type(x)(ONE_TWELFTH)) * type(x)(0.125)
     return r, noise_f, noise_g, chord_coef
 
 

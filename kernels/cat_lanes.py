@@ -208,20 +208,17 @@ SWEEP_ULPS = 32.0
 
 
 @wp.func
-def sweep_first(xs: wp.array(dtype=Any), j0: int, j1: int, bound: wp.float64, strict: bool):
+def sweep_first(xs: wp.array(dtype=Any), j0: int, j1: int, bound: wp.float64, strict: bool, x_first: wp.float64,
+                x_last: wp.float64, per_x: wp.float64):
     """The first j in [j0, j1) with xs[j] >= bound (> bound with ``strict``), j1 if none, for xs
-    non-decreasing there: a guess from the row's mean spacing, then a walk to it (a step or two on
-    a uniform grid)."""
-    x_first = wp.float64(xs[j0])
-    x_last = wp.float64(xs[j1 - 1])
+    non-decreasing there, from x_first = xs[j0] to x_last = xs[j1 - 1]: a guess from the row's
+    mean spacing (per_x = (j1 - 1 - j0) / (x_last - x_first), 0 for one x), then a walk to it (a
+    step or two on a uniform grid)."""
     if bound < x_first or (bound == x_first and not strict):
         return j0
     if bound > x_last or (bound == x_last and strict):
         return j1
-    j = j0
-    if x_last > x_first:
-        j = j0 + int(wp.float64(j1 - 1 - j0) * (bound - x_first) / (x_last - x_first))
-        j = wp.clamp(j, j0, j1 - 1)
+    j = wp.clamp(j0 + int(per_x * (bound - x_first)), j0, j1 - 1)
     # xs[j - 1] < bound <= xs[j] (or <, <= with strict) at the answer
     while j > j0 and (wp.float64(xs[j - 1]) > bound or (wp.float64(xs[j - 1]) == bound and not strict)):
         j -= 1
@@ -231,45 +228,52 @@ def sweep_first(xs: wp.array(dtype=Any), j0: int, j1: int, bound: wp.float64, st
 
 
 @wp.func
-def sweep_half_line(alpha: wp.float64, beta: wp.float64, e: wp.float64):
-    """The x with alpha + beta x <= e, as (lo, hi) (+-inf for an open end; lo > hi: none)."""
+def sweep_half_line(alpha: wp.float64, beta: wp.float64, inv_beta: wp.float64, e: wp.float64):
+    """The x with alpha + beta x <= e, as (lo, hi) (+-inf for an open end; lo > hi: none);
+    inv_beta = 1 / beta."""
     inf = wp.float64(wp.inf)
     if beta > wp.float64(0.0):
-        return -inf, (e - alpha) / beta
+        return -inf, (e - alpha) * inv_beta
     if beta < wp.float64(0.0):
-        return (e - alpha) / beta, inf
+        return (e - alpha) * inv_beta, inf
     if alpha <= e:
         return -inf, inf
     return inf, -inf
 
 
 @wp.func
-def sweep_span(xs: wp.array(dtype=Any), j0: int, j1: int, alpha1: wp.float64, beta1: wp.float64, alpha2: wp.float64,
-               beta2: wp.float64, e: wp.float64):
-    """The index range [begin, end) of the cells j in [j0, j1) (xs non-decreasing there) where
-    alpha1 + beta1 x <= e and alpha2 + beta2 x <= e ((j1, j1) if none)."""
-    lo1, hi1 = sweep_half_line(alpha1, beta1, e)
-    lo2, hi2 = sweep_half_line(alpha2, beta2, e)
+def sweep_span(xs: wp.array(dtype=Any), j0: int, j1: int, alpha1: wp.float64, beta1: wp.float64,
+               inv_beta1: wp.float64, alpha2: wp.float64, beta2: wp.float64, inv_beta2: wp.float64, e: wp.float64,
+               x_first: wp.float64, x_last: wp.float64, per_x: wp.float64):
+    """The index range [begin, end) of the cells j in [j0, j1) (xs non-decreasing there, from
+    x_first to x_last, ``sweep_first``'s per_x) where alpha1 + beta1 x <= e and
+    alpha2 + beta2 x <= e ((j1, j1) if none); inv_beta = 1 / beta."""
+    lo1, hi1 = sweep_half_line(alpha1, beta1, inv_beta1, e)
+    lo2, hi2 = sweep_half_line(alpha2, beta2, inv_beta2, e)
     lo = wp.max(lo1, lo2)
     hi = wp.min(hi1, hi2)
     if lo <= hi:
-        return sweep_first(xs, j0, j1, lo, False), sweep_first(xs, j0, j1, hi, True)
+        return (sweep_first(xs, j0, j1, lo, False, x_first, x_last, per_x),
+                sweep_first(xs, j0, j1, hi, True, x_first, x_last, per_x))
     return j1, j1
 
 
 @wp.func
 def sweep_node(table: wp.array2d(dtype=Any), k: int, ox: wp.float64, cs: wp.float64, sn: wp.float64, dyo: wp.float64):
     """Node k's F and acceleration along the row (float64): F = hx ly - hy lx - c = alpha + beta x
-    and a = ax lx + ay ly - a0 = acc_alpha + acc_beta x, as (alpha, beta, acc_alpha, acc_beta),
-    and |h| = |(hx, hy)|."""
+    and a = ax lx + ay ly - a0 = acc_alpha + acc_beta x, as (alpha, beta, 1 / beta, acc_alpha,
+    acc_beta, 1 / acc_beta), and |h| = |(hx, hy)| (each node's lines bound two intervals' spans:
+    their reciprocals are taken once)."""
     tx = wp.float64(table[k, 1])
     ty = wp.float64(table[k, 2])
     beta = tx * sn - ty * cs
     ax = wp.float64(table[k, 7])
     ay = wp.float64(table[k, 8])
     acc_beta = ax * cs + ay * sn
-    return (-ox * beta + dyo * (tx * cs + ty * sn) - wp.float64(table[k, 3]), beta,
-            -ox * acc_beta + dyo * (ay * cs - ax * sn) - wp.float64(table[k, 9]), acc_beta, wp.sqrt(tx * tx + ty * ty))
+    one = wp.float64(1.0)
+    return (-ox * beta + dyo * (tx * cs + ty * sn) - wp.float64(table[k, 3]), beta, one / beta,
+            -ox * acc_beta + dyo * (ay * cs - ax * sn) - wp.float64(table[k, 9]), acc_beta, one / acc_beta,
+            wp.sqrt(tx * tx + ty * ty))
 
 
 @wp.func
@@ -338,7 +342,13 @@ def cat_sweep_row(xs: wp.array(dtype=Any), y: Any, row: int, j0: int, j1: int, p
     far = wp.max(wp.abs(wp.float64(xs[j0])), wp.abs(wp.float64(xs[j1 - 1]))) + wp.abs(yy) + wp.abs(ox) + wp.abs(oy)
     local = wp.float64(wp.max(wp.abs(lx0) + wp.abs(ly0), wp.abs(lx1) + wp.abs(ly1)))
     delta = wp.float64(SWEEP_ULPS) * wp.float64(p.eps) * t * t * (far + local + wp.float64(p.v0) * t)
-    alpha_prev, beta_prev, acc_alpha_prev, acc_beta_prev, h_prev = sweep_node(p.table, 0, ox, cs, sn, dyo)
+    alpha_prev, beta_prev, inv_prev, acc_alpha_prev, acc_beta_prev, acc_inv_prev, h_prev = sweep_node(
+        p.table, 0, ox, cs, sn, dyo)
+    x_first = wp.float64(xs[j0])
+    x_last = wp.float64(xs[j1 - 1])
+    per_x = wp.float64(0.0)
+    if x_last > x_first:
+        per_x = wp.float64(j1 - 1 - j0) / (x_last - x_first)
     # the acceleration's rounding allowance, over |h| (its coefficients are h / |h|^2, v0 h.f / |h|^2)
     acc_delta = delta / (t * t)
     cut = wp.float64(PRUNE_SIGMAS) * wp.float64(p.sigma_a) * wp.float64(1.000001)
@@ -357,16 +367,20 @@ def cat_sweep_row(xs: wp.array(dtype=Any), y: Any, row: int, j0: int, j1: int, p
     queued = int(0)
     parts = int(2)
     for k in range(1, n):
-        alpha, beta, acc_alpha, acc_beta, h_k = sweep_node(p.table, k, ox, cs, sn, dyo)
+        alpha, beta, inv_k, acc_alpha, acc_beta, acc_inv_k, h_k = sweep_node(p.table, k, ox, cs, sn, dyo)
         # the cells where both accelerations are beyond the cut on one side: skipped (pruned)
         beyond = cut + acc_delta / wp.min(h_prev, h_k)
-        a_hi, b_hi = sweep_span(xs, j0, j1, -acc_alpha_prev, -acc_beta_prev, -acc_alpha, -acc_beta, -beyond)
-        a_lo, b_lo = sweep_span(xs, j0, j1, acc_alpha_prev, acc_beta_prev, acc_alpha, acc_beta, -beyond)
+        a_hi, b_hi = sweep_span(xs, j0, j1, -acc_alpha_prev, -acc_beta_prev, -acc_inv_prev, -acc_alpha, -acc_beta,
+                                -acc_inv_k, -beyond, x_first, x_last, per_x)
+        a_lo, b_lo = sweep_span(xs, j0, j1, acc_alpha_prev, acc_beta_prev, acc_inv_prev, acc_alpha, acc_beta,
+                                acc_inv_k, -beyond, x_first, x_last, per_x)
         width_k = wp.float64(p.table[k, 0] - p.table[k - 1, 0])
         e = (chord_max * width_k * width_k + noise_max) * wp.float64(1.000001) + delta
         # the cells where F_(k-1) <= E and F_k >= -E, and where F_(k-1) >= -E and F_k <= E
-        a1, b1 = sweep_span(xs, j0, j1, alpha_prev, beta_prev, -alpha, -beta, e)
-        a2, b2 = sweep_span(xs, j0, j1, -alpha_prev, -beta_prev, alpha, beta, e)
+        a1, b1 = sweep_span(xs, j0, j1, alpha_prev, beta_prev, inv_prev, -alpha, -beta, -inv_k, e, x_first, x_last,
+                            per_x)
+        a2, b2 = sweep_span(xs, j0, j1, -alpha_prev, -beta_prev, -inv_prev, alpha, beta, inv_k, e, x_first, x_last,
+                            per_x)
         if a1 < b1 and a2 < b2 and a2 <= b1 and a1 <= b2:  # overlapping: one range
             a1 = wp.min(a1, a2)
             b1 = wp.max(b1, b2)
@@ -412,8 +426,10 @@ def cat_sweep_row(xs: wp.array(dtype=Any), y: Any, row: int, j0: int, j1: int, p
                                                                   p.table[0], p.table[0])
         alpha_prev = alpha
         beta_prev = beta
+        inv_prev = inv_k
         acc_alpha_prev = acc_alpha
         acc_beta_prev = acc_beta
+        acc_inv_prev = acc_inv_k
         h_prev = h_k
     if queued > 0:
         sweep_roots(q_x, q_y, q_lo, q_hi, q_f_lo, q_g_lo, q_f_hi, q_g_hi, q_noise, q_j, queued, row, p, out)
