@@ -22,8 +22,8 @@ import numpy as np
 import warp as wp
 
 from .cat import (
-    CAT, CAT_CARRIED, PRUNE_SIGMAS, SPLIT, cat_curvature, cat_flagged, cat_negligible, cat_node_interval,
-    cat_node_values, cat_one_root, cat_scan_functions, cat_scan_noise,
+    CAT, CAT_CARRIED, PRUNE_SIGMAS, SPLIT, cat_curvature, cat_flagged, cat_interval, cat_negligible,
+    cat_node_interval, cat_node_values, cat_one_root, cat_scan_functions, cat_scan_noise, cat_split,
 )
 from .evidence import EVIDENCE
 from .generate import Params, carried_points_kernel, density_kernels
@@ -94,6 +94,19 @@ def cat_interval_kind(p: Any, k: int, x: Any, y: Any, r: Any, noise_f: Any, nois
         ):
             kind = 1
     return kind, lo, hi, f_lo, g_lo, f_hi, g_hi
+
+
+@wp.func
+def cat_rest(p: Any, x: Any, y: Any, lo: Any, hi: Any, f_lo: Any, g_lo: Any, f_hi: Any, g_hi: Any, r: Any, noise_f: Any,
+             noise_g: Any):
+    """What ``cat.cat_node_interval`` adds for an interval of kind 2 (``cat_interval_kind``: not
+    negligible, its node values known): ``cat.cat_interval``'s settled density, or ``cat.cat_split``'s."""
+    part, settled = cat_interval(x, y, lo, hi, f_lo, g_lo, f_hi, g_hi, p.v0, p.t, p.sigma_a, p.sigma_omega, p.tol, r,
+                                 noise_f, noise_g, False, int(0), p.table[0], p.table[0])
+    if settled:
+        return part
+    return cat_split(x, y, lo, hi, f_lo, g_lo, f_hi, g_hi, p.v0, p.t, p.sigma_a, p.sigma_omega, p.tol, r, noise_f,
+                     noise_g, int(0), p.table[0], p.table[0])
 
 
 @wp.func
@@ -182,8 +195,8 @@ def cat_points_lanes(xs: Any, ys: Any, p: Any):
                                 density = points_roots(q_x, q_y, q_lo, q_hi, q_f_lo, q_g_lo, q_f_hi, q_g_hi, q_noise,
                                                        q_j, queued, p, density)
                                 queued = 0
-                            density[m] = density[m] + cat_node_interval(x, y, p, k, r, noise_f, noise_g, int(0),
-                                                                        p.table[0], p.table[0])
+                            density[m] = density[m] + cat_rest(p, x, y, lo, hi, f_lo, g_lo, f_hi, g_hi, r, noise_f,
+                                                               noise_g)
     if queued > 0:
         density = points_roots(q_x, q_y, q_lo, q_hi, q_f_lo, q_g_lo, q_f_hi, q_g_hi, q_noise, q_j, queued, p, density)
     return density
@@ -422,8 +435,8 @@ def cat_sweep_row(xs: wp.array(dtype=Any), y: Any, row: int, j0: int, j1: int, p
                         sweep_roots(q_x, q_y, q_lo, q_hi, q_f_lo, q_g_lo, q_f_hi, q_g_hi, q_noise, q_j, queued, row, p,
                                     out)
                         queued = 0
-                    out[row, j] = out[row, j] + cat_node_interval(lx, ly, p, k, r, noise_f, noise_g, int(0),
-                                                                  p.table[0], p.table[0])
+                    out[row, j] = out[row, j] + cat_rest(p, lx, ly, lo, hi, f_lo, g_lo, f_hi, g_hi, r, noise_f,
+                                                         noise_g)
         alpha_prev = alpha
         beta_prev = beta
         inv_prev = inv_k
