@@ -501,8 +501,9 @@ def _cat_roots(fmt: _Format) -> str:
     and selected), with sin and cos of u / 2 from one Cody-Waite reduction (pi / 2 in three
     parts; |u| below LANE_TURN_LIMIT) and Cephes' polynomials (those of :func:`lane_sin`), sin u
     and cos u from the half angle's (2 sin cos, (cos - sin)(cos + sin)) in float64 and by their
-    own reduction in float32, and the closed forms' 1 / u^k as powers of one reciprocal; Halley's step with Newton's and bisection as fallbacks, the bracket, and the
-    proof that ends a search at the Halley point (``cat.cat_root_step``); the density by the
+    own reduction in float32, and the closed forms' 1 / u^k as powers of one reciprocal;
+    Halley's step with Newton's and bisection as fallbacks, the bracket, and the proof that ends
+    a search at the Halley point (``cat.cat_root_step``); the density by the
     Taylor carry and one exp (``cat.cat_root_value``). Fused multiply-adds allowed. The values
     differ from the scalar search's in the last bits (the sine, exp and reciprocals are not
     libm's); the roots are the same roots of the same brackets."""
