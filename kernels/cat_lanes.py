@@ -28,7 +28,7 @@ from .cat import (
 from .evidence import EVIDENCE
 from .generate import Params, carried_points_kernel, density_kernels
 from .common import lanes32, lanes64, world_to_local
-from .lanes import LANE_TURN_LIMIT, cat_scan_group, lane_cat_roots, lane_count, lane_slots, load_lanes
+from .lanes import LANE_TURN_LIMIT, cat_scan_group, lane_cat_roots, lane_count, lane_slots, load_lanes, row_start
 
 # No adjoints: nothing differentiates these kernels (see ``polar_lanes``); the scan's split
 # loops stay loops, as in ``cat`` (its module options say why).
@@ -302,7 +302,8 @@ def sweep_roots(x: Any, y: Any, lo: Any, hi: Any, f_lo: Any, g_lo: Any, f_hi: An
 
 @wp.func
 def cat_sweep_row(xs: wp.array(dtype=Any), y: Any, row: int, j0: int, j1: int, p: Any, out: wp.array2d(dtype=Any)):
-    """out[row, j0 .. j1 - 1] = the density at (xs[j], y), xs non-decreasing there: the scan
+    """out[row, j0 .. j1 - 1] (zeroed: ``lanes.row_start``) += the density at (xs[j], y), xs
+    non-decreasing there: the scan
     swept along the row, node interval by node interval, each cell's roots added in node order
     from 0 (:func:`cat_points_lanes`' sum, to the bit); the single roots queued across the row
     and searched a vector of lanes at a time (a cell's queued roots are added before its next
@@ -332,9 +333,6 @@ def cat_sweep_row(xs: wp.array(dtype=Any), y: Any, row: int, j0: int, j1: int, p
     h / |h|^2 and v0 h . f / |h|^2, so delta / (t^2 |h|)) are skipped without a test: the scan's
     ``cat.cat_negligible`` prunes them, and they add nothing.
     """
-    zero = type(y)(0.0)
-    for j in range(j0, j1):
-        out[row, j] = zero
     if j1 <= j0:
         return
     n = p.table.shape[0]
@@ -452,11 +450,7 @@ def cat_sweep_row(xs: wp.array(dtype=Any), y: Any, row: int, j0: int, j1: int, p
 def cat_row(xs: wp.array(dtype=Any), y: Any, out: wp.array2d(dtype=Any), row: int, j0: int, j1: int, p: Any):
     """The generated grid kernel's row by the sweep (:func:`cat_sweep_row`) where its centres are
     non-decreasing (a grid's always are): 1; else 0 (the row is left to the density, cell by cell)."""
-    unsorted = int(0)
-    for j in range(j0 + 1, j1):
-        if not (xs[j] >= xs[j - 1]):
-            unsorted = 1
-    if unsorted == 0:
+    if row_start(xs, out, row, j0, j1) != 0:  # the row zeroed, its centres sorted
         cat_sweep_row(xs, y, row, j0, j1, p, out)
         return 1
     return 0
