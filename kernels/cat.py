@@ -53,6 +53,11 @@ SPLIT = 8
 # minutes to build the module for a GPU (see the note in kernels/__init__.py).
 wp.set_module_options({"enable_backward": False, "max_unroll": SPLIT - 1})
 
+#: 1/3, 7/12 and 1/12, for the scan's allowances (``cat_scan_noise``).
+ONE_THIRD = 1.0 / 3.0
+SEVEN_TWELFTHS = 7.0 / 12.0
+ONE_TWELFTH = 1.0 / 12.0
+
 #: Rounding allowance on computed values of F and dF/domega, in units of the dtype's epsilon
 #: times the largest term they sum (their table coefficients carry a few ulps each).
 ROUNDING_ULPS = 32.0
@@ -376,7 +381,7 @@ def cat_root_density(
     density is taken at an omega within ``tol`` of the root (``cat_root_value``). |det J| = |dF/domega| is taken as at least ``noise_g``, its rounding allowance: on a fold
     caustic the density is infinite, and a point whose coordinates round onto it (in float32,
     within ~1e-7 v0 t) gets the largest value its arithmetic can resolve, never inf.
-    ``cat_root_group`` computes the same, to the bit, for several roots side by side.
+    On the CPU, ``lanes.lane_cat_roots`` takes the same steps for a vector of single roots.
     """
     a = lo
     b = hi
@@ -395,83 +400,6 @@ def cat_root_density(
         f, df, ddf, dddf, acc, dacc, ddacc = cat_eval_curved(x, y, w, v0, t)
     density, a_root, omega = cat_root_value(w, e, df, ddf, dddf, acc, dacc, ddacc, sigma_a, sigma_omega, noise_g)
     cat_carry_root(carry, a_root, omega, v0, density, lw, out)
-    return density
-
-
-#: Roots that ``cat_root_group`` searches side by side: independent chains of divisions and
-#: sines that the core overlaps (one root's search is one long chain of latencies).
-ROOT_GROUP = 4
-
-
-@wp.func
-def cat_root_group(x: Any, y: Any, lo: Any, hi: Any, f_lo: Any, g_lo: Any, f_hi: Any, g_hi: Any, noise_g: Any,
-                   v0: Any, t: Any, sigma_a: Any, sigma_omega: Any, tol: Any):
-    """``cat_root_density`` (without evidence) of ROOT_GROUP roots at once, each argument but the
-    model's a vector of one value per root: each root takes the scalar search's steps
-    (``cat_root_start``, ``cat_eval_curved``, ``cat_root_step``, ``cat_root_value``), so its
-    density has the same bits; the roots' steps interleave (the loops over them are unrolled)."""
-    zero = type(v0)(0.0)
-    w = lo
-    a = lo
-    b = hi
-    fa = f_lo
-    f = lo
-    df = lo
-    ddf = lo
-    dddf = lo
-    acc = lo
-    dacc = lo
-    ddacc = lo
-    m3 = lo
-    e = lo
-    live = lo
-    density = lo
-    for m in range(ROOT_GROUP):
-        w[m] = cat_root_start(lo[m], hi[m], f_lo[m], g_lo[m], f_hi[m], g_hi[m])
-        live[m] = type(v0)(1.0)
-        m3[m] = cat_third_bound(x[m], y[m], v0, t)
-        e[m] = zero
-    for m in range(ROOT_GROUP):
-        f_m, df_m, ddf_m, dddf_m, acc_m, dacc_m, ddacc_m = cat_eval_curved(x[m], y[m], w[m], v0, t)
-        f[m] = f_m
-        df[m] = df_m
-        ddf[m] = ddf_m
-        dddf[m] = dddf_m
-        acc[m] = acc_m
-        dacc[m] = dacc_m
-        ddacc[m] = ddacc_m
-    for _it in range(MAX_NEWTON):
-        running = int(0)
-        for m in range(ROOT_GROUP):
-            if live[m] != zero:
-                a_m, b_m, fa_m, w_new, stop, proved = cat_root_step(w[m], a[m], b[m], fa[m], f[m], df[m], ddf[m], tol,
-                                                                     m3[m])
-                a[m] = a_m
-                b[m] = b_m
-                fa[m] = fa_m
-                if stop:
-                    live[m] = zero
-                    if proved:
-                        e[m] = w_new - w[m]
-                else:
-                    w[m] = w_new
-                    running += 1
-        if running == 0:
-            break
-        for m in range(ROOT_GROUP):
-            if live[m] != zero:
-                f_m, df_m, ddf_m, dddf_m, acc_m, dacc_m, ddacc_m = cat_eval_curved(x[m], y[m], w[m], v0, t)
-                f[m] = f_m
-                df[m] = df_m
-                ddf[m] = ddf_m
-                dddf[m] = dddf_m
-                acc[m] = acc_m
-                dacc[m] = dacc_m
-                ddacc[m] = ddacc_m
-    for m in range(ROOT_GROUP):
-        value, a_root, omega = cat_root_value(w[m], e[m], df[m], ddf[m], dddf[m], acc[m], dacc[m], ddacc[m], sigma_a,
-                                              sigma_omega, noise_g[m])
-        density[m] = value
     return density
 
 
@@ -668,10 +596,11 @@ def cat_scan_noise(x: Any, y: Any, v0: Any, t: Any, eps: Any):
     r = wp.sqrt(x * x + y * y)
     t2 = t * t
     noise_f = type(x)(ROUNDING_ULPS) * eps * t2 * type(x)(0.5) * (wp.abs(x) + wp.abs(y) + v0 * t)
+    # products by the constants, not quotients: the scan takes these at every point it tests
     noise_g = type(x)(ROUNDING_ULPS) * eps * t2 * t * (
-        (wp.abs(x) + wp.abs(y)) / type(x)(3.0) + v0 * t * type(x)(7.0 / 12.0)
+        (wp.abs(x) + wp.abs(y)) * type(x)(ONE_THIRD) + v0 * t * type(x)(SEVEN_TWELFTHS)
     )
-    chord_coef = t2 * t2 * (r * type(x)(0.25) + v0 * t / type(x)(12.0)) * type(x)(0.125)
+    chord_coef = t2 * t2 * (r * type(x)(0.25) + v0 * t * type(x)(ONE_TWELFTH)) * type(x)(0.125)
     return r, noise_f, noise_g, chord_coef
 
 

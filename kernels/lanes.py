@@ -29,6 +29,10 @@ over ``CHAINS`` registers of lanes a step (:func:`polar_plain_row`), which also 
 Without AVX-512 these snippets divide and take the square root (the same values but in the last
 ulp of 1 / x and 1 / sqrt(x), and a / b exactly).
 
+The CAT's single roots are searched a vector of lanes at a time by one snippet
+(:func:`lane_cat_roots`: the scalar ``cat.cat_root_density``'s steps and proofs, with this
+module's sine, exp and reciprocals), out of line once per dtype.
+
 Accuracy (``tests/kernels/test_lanes.py`` measures each over its reduced range and the whole domain
 against long double references): :func:`lane_exp` within 3 ulp (float64) and 2 ulp
 (float32), :func:`lane_atan2` within 2 ulp (Cephes' rational function, as the scalar
@@ -42,6 +46,7 @@ import dataclasses
 import math
 import re
 from dataclasses import dataclass
+from fractions import Fraction
 
 import warp as wp
 
@@ -604,6 +609,258 @@ def _tabulated_row(fmt: _Format) -> str:
             f"#if defined(__AVX512F__)\n{loop(TABLE_CHAINS[fmt.scalar])}#else\n{loop(1)}#endif\n")
 
 
+def _cat_series():
+    """The Taylor series of the CAT basis below ``common.SERIES_SWITCH`` in z = u^2, lowest
+    degree first, ten terms each, from their terms' formulas (``common.series_c_over_u`` ..
+    ``cat.series_dddd_over_u``): C / u, D, dC/du, (dD/du) / u, (d^2C/du^2) / u, d^2D/du^2,
+    d^3C/du^3 and (d^3D/du^3) / u."""
+
+    def series(first, odd, term, count=10):
+        # sum_n (-1)^(n+1) term(n) u^(2n - 2 first) / (2n+1)! (odd) or / (2n)!
+        return tuple(float(Fraction((-1) ** (n + 1) * term(n), math.factorial(2 * n + 1 if odd else 2 * n)))
+                     for n in range(first, first + count))
+
+    return (series(1, True, lambda n: 2 * n), series(1, False, lambda n: 2 * n - 1),
+            series(1, True, lambda n: 2 * n * (2 * n - 1)),
+            series(2, False, lambda n: (2 * n - 1) * (2 * n - 2), 9) + (0.0,),
+            series(2, True, lambda n: 2 * n * (2 * n - 1) * (2 * n - 2)),
+            series(2, False, lambda n: (2 * n - 1) * (2 * n - 2) * (2 * n - 3)),
+            series(2, True, lambda n: 2 * n * (2 * n - 1) * (2 * n - 2) * (2 * n - 3)),
+            series(3, False, lambda n: (2 * n - 1) * (2 * n - 2) * (2 * n - 3) * (2 * n - 4)))
+
+
+#: The root search's step cap, ``cat.MAX_NEWTON`` (this module is below ``cat``'s).
+CAT_MAX_NEWTON = 100
+
+#: Largest |u| = |omega t| that :func:`lane_cat_roots` takes (n <= 6367 quarter turns in its
+#: reductions, of u / 2 and in float32 of u): the Cody-Waite reduction's first two products
+#: n pi/2 are exact for |n| < 2^22 in float64 and 2^13 in float32 (the parts hold 31 and 32, 8
+#: and 11 bits); the callers search roots of wider turns by the scalar functions.
+LANE_TURN_LIMIT = 1.0e4
+
+
+def _cat_roots(fmt: _Format) -> str:
+    """The single roots of F in each lane's [lo, hi] (F(lo), F(hi) of opposite sign) for the
+    first ``count`` lanes: ``cat.cat_root_density``'s search and density (without evidence) as
+    vector code, every branch a select, the lanes stepping until all have stopped.
+
+    The scalar functions' steps: the Hermite start (``cat.hermite_root``); F, its derivatives
+    and the acceleration (``cat.cat_eval_curved``) from the basis of ``cat.cat_basis_curved``
+    (the series below |u| = 1 and the closed forms above, each computed where a lane needs it
+    and selected), with sin and cos of u / 2 from one Cody-Waite reduction (pi / 2 in three
+    parts; |u| below LANE_TURN_LIMIT) and Cephes' polynomials (those of :func:`lane_sin`), sin u
+    and cos u from the half angle's (2 sin cos, (cos - sin)(cos + sin)) in float64 and by their
+    own reduction in float32, and the closed forms' 1 / u^k as powers of one reciprocal;
+    Halley's step with Newton's and bisection as fallbacks, the bracket, and the proof that ends
+    a search at the Halley point (``cat.cat_root_step``); the density by the
+    Taylor carry and one exp (``cat.cat_root_value``). Fused multiply-adds allowed. The values
+    differ from the scalar search's in the last bits (the sine, exp and reciprocals are not
+    libm's); the roots are the same roots of the same brackets."""
+    c_over_u, d, dc, dd_over_u, ddc_over_u, ddd, dddc, dddd_over_u = (tuple(reversed(c)) for c in _cat_series())
+    shifter = 1.5 * 2.0**fmt.mantissa
+    p1, p2, p3 = (f"L({v!r})" for v in fmt.pio2)
+    sin_poly, cos_poly = (_horner("r2", c) for c in (fmt.sin_coefficients, fmt.cos_coefficients))
+    n = fmt.lanes
+    inputs = "x y lo hi f_lo g_lo f_hi g_hi noise_g"
+    pad = "".join(f"v{name} = live ? v{name} : zero + v{name}[0];\n" for name in inputs.split())
+    index = "{" + ", ".join(str(k) for k in range(n)) + "}"
+    sixth = f"L({1 / 6!r})"
+    body = (
+        # lanes past count: a copy of the first (finite values), never live
+        f"vi lane = {index};\nvi live = lane < count;\n" + pad +
+        "vt tt = zero + t; vt vv = zero + v0; vt tl = zero + tol;\n"
+        "vt t2 = tt * tt;\nvt t4 = t2 * t2;\n"
+        # cat_third_bound
+        "vt rad = __builtin_elementwise_sqrt(vx * vx + vy * vy);\n"
+        "vt m3 = t4 * tt * (rad * L(0.2) + vv * tt * L(0.05)) * L(1.01);\n"
+        # hermite_root
+        "vt width = vhi - vlo;\n"
+        "vt span = vf_hi - vf_lo;\n"
+        "vt gw_lo = vg_lo * width;\nvt gw_hi = vg_hi * width;\n"
+        + _reciprocal_steps(fmt, "span", "inv_span") + _reciprocal_steps(fmt, "gw_lo", "inv_lo")
+        + _reciprocal_steps(fmt, "gw_hi", "inv_hi") +
+        "vt tau = -vf_lo * inv_span;\n"
+        "vt d0 = span * inv_lo;\n"
+        "vt d1 = span * inv_hi;\n"
+        "vt tau2 = tau * tau;\nvt tau3 = tau2 * tau;\n"
+        "vt st = (tau3 - 2 * tau2 + tau) * d0 + (3 * tau2 - 2 * tau3) + (tau3 - tau2) * d1;\n"
+        "st = ((st >= 0) & (st <= 1)) ? st : (st > 1 ? zero + 1 : (st < 0 ? zero : tau));\n"
+        "vt w = vlo + width * st;\n"
+        "vt a = vlo; vt b = vhi; vt fa = vf_lo; vt e = zero;\n"
+        "vt f = zero; vt df = zero; vt ddf = zero; vt dddf = zero; vt acc = zero; vt dacc = zero; vt ddacc = zero;\n"
+        # cat_eval_curved at om, kept in the lanes of keep
+        "auto eval = [&](vt om, vi keep) {\n"
+        "  vt u = om * tt;\n"
+        "  vt hu = u * L(0.5);\n"
+        f"  vt nq = (hu * L({2 / math.pi!r}) + L({shifter!r})) - L({shifter!r});\n"
+        f"  vt rr = ((hu - nq * {p1}) - nq * {p2}) - nq * {p3};\n"
+        "  vt r2 = rr * rr;\n"
+        f"  vt sr = rr + rr * r2 * {sin_poly};\n"
+        f"  vt cr = (1 - L(0.5) * r2) + r2 * r2 * {cos_poly};\n"
+        "  vi q = __builtin_convertvector(nq, vi) & 3;\n"
+        "  vt sh = q == 0 ? sr : (q == 1 ? cr : (q == 2 ? -sr : -cr));\n"
+        "  vt ch = q == 0 ? cr : (q == 1 ? -sr : (q == 2 ? -cr : sr));\n"
+        + (
+            # float32: sin u and cos u by their own reduction, to within 2 ulp (the half angle's
+            # products add two roundings, which beside a fold float32 cannot spare)
+            f"  vt nu = (u * L({2 / math.pi!r}) + L({shifter!r})) - L({shifter!r});\n"
+            f"  vt ru = ((u - nu * {p1}) - nu * {p2}) - nu * {p3};\n"
+            "  vt ru2 = ru * ru;\n"
+            f"  vt su = ru + ru * ru2 * {sin_poly.replace('r2', 'ru2')};\n"
+            f"  vt cu = (1 - L(0.5) * ru2) + ru2 * ru2 * {cos_poly.replace('r2', 'ru2')};\n"
+            "  vi qu = __builtin_convertvector(nu, vi) & 3;\n"
+            "  vt s = qu == 0 ? su : (qu == 1 ? cu : (qu == 2 ? -su : -cu));\n"
+            "  vt c = qu == 0 ? cu : (qu == 1 ? -su : (qu == 2 ? -cu : su));\n"
+            if fmt.scalar == "float" else
+            "  vt s = 2 * sh * ch;\n"
+            "  vt c = (ch - sh) * (ch + sh);\n"
+        ) +
+        "  vt au = u < 0 ? -u : u;\n"
+        "  vt u_or_1 = au < L(1.0e-4) ? zero + 1 : u;\n"
+        + _reciprocal_steps(fmt, "u_or_1", "iu", guard=False) +
+        # sinc_of's small arguments: |u / 2| < 1e-4 and |u| < 1e-4
+        f"  vt a_fn = au < L(2.0e-4) ? sh * (1 - hu * hu * {sixth}) : 2 * sh * sh * iu;\n"
+        f"  vt b_fn = au < L(1.0e-4) ? 1 - u * u * {sixth} : s * iu;\n"
+        "  vt z = u * u;\n"
+        # the series where some lane is below the switch, the closed forms where some is above
+        # (the lanes hold neighbouring cells' roots, most often on one side)
+        "  vi closed = au >= L(1.0);\n"
+        "  int n_closed = (int)-__builtin_reduce_add(closed);\n"
+        "  vt c_fn = zero, d_fn = zero, dc_fn = zero, dd_fn = zero, ddc_fn = zero, ddd_fn = zero, dddc_fn = zero,"
+        " dddd_fn = zero;\n"
+        f"  if (n_closed < {n}) {{\n"
+        f"    c_fn = u * {_horner('z', c_over_u)};\n"
+        f"    d_fn = {_horner('z', d)};\n"
+        f"    dc_fn = {_horner('z', dc)};\n"
+        f"    dd_fn = u * {_horner('z', dd_over_u)};\n"
+        f"    ddc_fn = u * {_horner('z', ddc_over_u)};\n"
+        f"    ddd_fn = {_horner('z', ddd)};\n"
+        f"    dddc_fn = {_horner('z', dddc)};\n"
+        f"    dddd_fn = u * {_horner('z', dddd_over_u)};\n"
+        "  }\n"
+        "  if (n_closed > 0) {\n"
+        "    vt i2 = iu * iu; vt i3 = i2 * iu; vt i4 = i2 * i2; vt i5 = i4 * iu;\n"
+        "    vt u2 = z; vt u3 = u2 * u; vt u4 = u2 * u2;\n"
+        "    c_fn = closed ? (s - u * c) * i2 : c_fn;\n"
+        "    d_fn = closed ? (c + u * s - 1) * i2 : d_fn;\n"
+        "    dc_fn = closed ? (u2 * s - 2 * s + 2 * u * c) * i3 : dc_fn;\n"
+        "    dd_fn = closed ? (u2 * c - 2 * c - 2 * u * s + 2) * i3 : dd_fn;\n"
+        "    ddc_fn = closed ? (u3 * c - 3 * u2 * s + 6 * s - 6 * u * c) * i4 : ddc_fn;\n"
+        "    ddd_fn = closed ? (6 * c + 6 * u * s - u3 * s - 3 * u2 * c - 6) * i4 : ddd_fn;\n"
+        "    dddc_fn = closed ? (24 * u * c - u4 * s - 4 * u3 * c + 12 * u2 * s - 24 * s) * i5 : dddc_fn;\n"
+        "    dddd_fn = closed ? (24 - u4 * c - 24 * c - 24 * u * s + 4 * u3 * s + 12 * u2 * c) * i5 : dddd_fn;\n"
+        "  }\n"
+        # cat_line_terms and cat_eval_curved's derivatives
+        "  vt fx = tt * a_fn; vt fy = tt * b_fn;\n"
+        "  vt hx = t2 * c_fn; vt hy = t2 * d_fn;\n"
+        "  vt dhx = t2 * tt * dc_fn; vt dhy = t2 * tt * dd_fn;\n"
+        "  vt h2 = hx * hx + hy * hy;\n"
+        "  vt cc = vv * (hx * fy - hy * fx);\n"
+        "  vt dcc = vv * (dhx * fy - dhy * fx - h2);\n"
+        "  vt ddhx = t4 * ddc_fn; vt ddhy = t4 * ddd_fn;\n"
+        "  vt hh1 = hx * dhx + hy * dhy;\n"
+        "  vt ddcc = vv * (ddhx * fy - ddhy * fx) - 3 * vv * hh1;\n"
+        "  vt dddhx = t4 * tt * dddc_fn; vt dddhy = t4 * tt * dddd_fn;\n"
+        "  vt hh2 = hx * ddhx + hy * ddhy;\n"
+        "  vt h1h1 = dhx * dhx + dhy * dhy;\n"
+        "  vt qx = vx - vv * fx; vt qy = vy - vv * fy;\n"
+        + _reciprocal_steps(fmt, "h2", "inv_h2") +
+        "  vt acc_n = (hx * qx + hy * qy) * inv_h2;\n"
+        "  vt dacc_n = (dhx * qx + dhy * qy - 2 * acc_n * hh1) * inv_h2;\n"
+        "  vt n2 = ddhx * qx + ddhy * qy - vv * (dhx * hy - dhy * hx);\n"
+        "  f = keep ? hx * vy - hy * vx - cc : f;\n"
+        "  df = keep ? dhx * vy - dhy * vx - dcc : df;\n"
+        "  ddf = keep ? ddhx * vy - ddhy * vx - ddcc : ddf;\n"
+        "  dddf = keep ? (dddhx * qy - dddhy * qx) + vv * (3 * h1h1 + 4 * hh2) : dddf;\n"
+        "  acc = keep ? acc_n : acc;\n"
+        "  dacc = keep ? dacc_n : dacc;\n"
+        "  ddacc = keep ? (n2 - 4 * dacc_n * hh1 - 2 * acc_n * (h1h1 + hh2)) * inv_h2 : ddacc;\n"
+        "};\n"
+        # cat_root_step, MAX_NEWTON steps at most, until every lane has stopped (one evaluation
+        # site: the snippet's size is its build time)
+        "for (int it = 0; it <= MAX_NEWTON; ++it) {\n"
+        "  eval(w, live);\n"
+        "  if (it == MAX_NEWTON) break;\n"
+        "  vi same = (f > 0) == (fa > 0);\n"
+        "  a = (live & same) ? w : a;\n"
+        "  fa = (live & same) ? f : fa;\n"
+        "  b = (live & ~same) ? w : b;\n"
+        "  vi slope = df != 0;\n"
+        + _reciprocal_steps(fmt, "df", "inv_df") +
+        "  vt step = f * inv_df;\n"
+        "  vt bend = step * ddf * (L(0.5) * inv_df);\n"
+        "  vt w_newton = w - step;\n"
+        "  vt one_less = 1 - bend;\n"
+        + _reciprocal_steps(fmt, "one_less", "inv_less") +
+        "  vt w_halley = w - step * inv_less;\n"
+        "  vt abend = bend < 0 ? -bend : bend;\n"
+        "  vi halley_in = slope & (abend <= L(0.5)) & (w_halley > a) & (w_halley < b);\n"
+        "  vi newton_in = slope & (w_newton > a) & (w_newton < b);\n"
+        "  vt w_new = halley_in ? w_halley : (newton_in ? w_newton : (a + b) * L(0.5));\n"
+        "  vt astep = step < 0 ? -step : step;\n"
+        "  vt moved = w_new - w;\n"
+        "  moved = moved < 0 ? -moved : moved;\n"
+        "  vi stop = (f == 0) | (slope & (astep <= tl)) | (moved <= tl) | ((b - a) <= tl);\n"
+        "  vt eh = w_halley - w;\n"
+        "  vt q = f + eh * (df + L(0.5) * eh * ddf);\n"
+        "  vt aeh = eh < 0 ? -eh : eh;\n"
+        "  vt two_e = 2 * aeh;\n"
+        "  vt adf = df < 0 ? -df : df;\n"
+        "  vt addf = ddf < 0 ? -ddf : ddf;\n"
+        "  vt aq = q < 0 ? -q : q;\n"
+        "  vt dd = adf - addf * two_e;\n"
+        f"  vt rho_d = aq + m3 * two_e * two_e * two_e * {sixth};\n"
+        "  vt room = aeh < tl ? aeh : tl;\n"
+        "  vt left = w_halley - a;\n"
+        "  vt right = b - w_halley;\n"
+        "  vt inner = left < right ? left : right;\n"
+        "  room = room < inner ? room : inner;\n"
+        "  vi proved = halley_in & ~stop & (dd > 0) & (rho_d < room * dd);\n"
+        "  e = (live & proved) ? w_new - w : e;\n"
+        "  live = live & ~(stop | proved);\n"
+        "  w = live ? w_new : w;\n"
+        "  if (!__builtin_reduce_or(live)) break;\n"
+        "}\n"
+        # cat_root_value
+        "vt slope_r = df + e * (ddf + L(0.5) * e * dddf);\n"
+        "vt acc_r = acc + e * (dacc + L(0.5) * e * ddacc);\n"
+        "vt za = acc_r * (1 / sigma_a);\n"
+        "vt zw = (w + e) * (1 / sigma_omega);\n"
+        "vt arg = L(-0.5) * (za * za + zw * zw);\n"
+        + _exp_steps(fmt, "arg", "g", upper=False, scalef=True) +
+        "vt aslope = slope_r < 0 ? -slope_r : slope_r;\n"
+        "aslope = aslope > vnoise_g ? aslope : vnoise_g;\n"
+        + _reciprocal_steps(fmt, "aslope", "inv_slope") +
+        f"vt res = (g * (L({1 / (2 * math.pi)!r}) / (sigma_a * sigma_omega))) * inv_slope;"
+    )
+    # one out-of-line body, however many call sites inline the snippet (each copy cost seconds of
+    # build time)
+    body = "vt res = [&]() __attribute__((noinline)) -> vt {\n" + body + "\nreturn res;\n}();"
+    return _snippet(fmt, inputs, body.replace("MAX_NEWTON", str(CAT_MAX_NEWTON)), contract=True)
+
+
+def _row_start(fmt: _Format) -> str:
+    """out[row, j0 .. j1 - 1] = 0, and 1 where xs[j0 .. j1 - 1] is non-decreasing (no NaN), else
+    0: two plain loops over contiguous memory, which the compiler turns into vector code (the
+    same loops in Warp code index the arrays element by element: 5 ms of a 60 ms CAT grid)."""
+    return (
+        "int ok = 1;\n"
+        f"if (xs.strides[0] == sizeof({fmt.scalar})) {{\n"
+        f"  const {fmt.scalar}* x = wp::address(xs, 0);\n"
+        "  for (int j = j0 + 1; j < j1; ++j) ok &= x[j] >= x[j - 1];\n"
+        "} else {\n"
+        "  for (int j = j0 + 1; j < j1; ++j) ok &= wp::index(xs, j) >= wp::index(xs, j - 1);\n"
+        "}\n"
+        f"if (j1 > j0 && out.strides[1] == sizeof({fmt.scalar})) {{\n"
+        f"  {fmt.scalar}* o = wp::address(out, row, 0);\n"
+        "  for (int j = j0; j < j1; ++j) o[j] = 0;\n"
+        "} else {\n"
+        "  for (int j = j0; j < j1; ++j) *wp::address(out, row, j) = 0;\n"
+        "}\n"
+        "return ok;\n"
+    )
+
+
 def _load(fmt: _Format) -> str:
     """values[start ..] as one vector: one unaligned vector load where the whole vector lies in a
     contiguous array, else lane by lane with the index clamped to the last element."""
@@ -727,6 +984,30 @@ for _fmt, _v, _s in ((F64, lanes64, wp.float64), (F32, lanes32, wp.float32)):
     @wp.func_native(_store(_fmt))
     def store_lanes(out: wp.array(dtype=_s), start: int, values: _v, count: int):
         """out[start + k] = values[k] for k < min(count, lanes)."""
+        ...
+
+
+# --- the CAT's root search, a vector of lanes a call (two registers a call, interleaved, measured
+# no faster in float64 and 25 % slower in float32: Figure 1 grid, one core, Intel Xeon AVX-512)
+
+for _fmt, _v, _s in ((F64, lanes64, wp.float64), (F32, lanes32, wp.float32)):
+
+    @wp.func_native(_cat_roots(_fmt))
+    def lane_cat_roots(x: _v, y: _v, lo: _v, hi: _v, f_lo: _v, g_lo: _v, f_hi: _v, g_hi: _v, noise_g: _v, v0: _s, t: _s,
+                       sigma_a: _s, sigma_omega: _s, tol: _s, count: int) -> _v:
+        """The density of the single root of F in each of the first ``count`` lanes' [lo, hi]
+        (``_cat_roots``)."""
+        ...
+
+    @wp.func_native(_row_start(_fmt))
+    def row_start(xs: wp.array(dtype=_s), out: wp.array2d(dtype=_s), row: int, j0: int, j1: int) -> int:
+        """Zero out[row, j0 .. j1 - 1]; 1 where xs[j0 .. j1 - 1] is non-decreasing, else 0
+        (``_row_start``)."""
+        ...
+
+    @wp.func_native(f"return wp::vec_t<{_fmt.lanes}, wp::int32>();\n")
+    def lane_slots(x: _v) -> wp.types.vector(_fmt.lanes, wp.int32):
+        """An integer for each lane of ``x`` (zeros)."""
         ...
 
 

@@ -15,7 +15,7 @@ How it is computed, and why the error is controlled:
    n_theta bearings over the full circle. The spacings come from the banana's own scales
    (:func:`natural_scales`): ``RESOLUTION`` nodes per range SD and ``BEARING_RESOLUTION`` per
    angular width of the banana on a circle. Each bearing's ray is swept as a grid row
-   (:func:`plain_lattice`: the per-point scan's values to the bit), and p_0 is symmetric about
+   (:func:`plain_lattice`: ``pdf``'s values to the bit), and p_0 is symmetric about
    the heading, so each pair of mirrored bearings is swept once.
 2. Each lattice row is convolved with the wrapped normal by FFT (the lattice's rows, even about
    their first bearing, by the cosine transform of their half). With the row resolved (its
@@ -217,7 +217,7 @@ def plain_lattice(model: MotionModel, radii, theta, *, threads=None, rays: bool 
     """p_0, the CAT density without heading noise (float64), at the local points
     (r sin theta, r cos theta) for r in ``radii`` and each bearing ``theta``:
     shape (len(radii), len(theta)) (with ``rays``: its transpose, a ray a row). Each bearing's ray is swept as a grid row
-    (``kernels/cat_lanes.py``'s ``cat_rays``): the per-point scan's values, to the bit, at a
+    (``kernels/cat_lanes.py``'s ``cat_rays``): ``pdf``'s values, to the bit, at a
     fraction of its cost (O(nodes) a ray plus the roots, instead of the scan at every point)."""
     radii = np.ascontiguousarray(radii, dtype=np.float64)
     theta = np.asarray(theta, dtype=np.float64)

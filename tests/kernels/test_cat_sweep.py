@@ -1,8 +1,10 @@
 """The CAT grid kernel's row sweep (``kernels/cat_lanes.py``: the scan swept along each row, single
-roots searched four side by side) against the per-cell scalar kernel, bit for bit, on the grids that
-are hard for it: cells far smaller than the bands around each interval's lines, rows crossing
-the lines at every angle (lines parallel to the rows included), float32 far from the origin, and
-the folds at large turn noise; and rows whose centres are not sorted (the per-cell fallback)."""
+roots searched a vector of lanes at a time) against the points kernel, which scans every node of
+each point, bit for bit, and against the per-cell scalar kernel (the GPU path's) to the lane
+search's rounding, on the grids that are hard for it: cells far smaller than the bands around
+each interval's lines, rows crossing the lines at every angle (lines parallel to the rows
+included), float32 far from the origin, and the folds at large turn noise; and rows whose
+centres are not sorted (the per-cell fallback)."""
 
 import math
 
@@ -13,8 +15,10 @@ from hypothesis import strategies as st
 
 import bananagrid as bg
 from bananagrid.engine.warp_runtime import WarpContext
-from bananagrid.kernels import cat, cat_lanes
+from bananagrid.kernels import cat, cat_lanes, lanes
 from bananagrid.models import _cat_heading as heading
+
+from cat_lane_roots import lane_roots_agree
 
 
 def _scalar_points(model, ctx, binding, x, y):
@@ -55,10 +59,12 @@ def _sweep_cases(draw):
 @seed(20261127)
 @settings(max_examples=40, deadline=None, database=None, suppress_health_check=[HealthCheck.too_slow])
 @given(case=_sweep_cases())
-def test_row_sweep_equals_the_per_cell_scan_bit_for_bit(case):
-    """rasterise (the sweep) equals the scalar per-cell kernel at every cell centre, in both
-    dtypes: the sweep's bands hold every cell that the scan flags (or a bit would differ: a
-    missed interval drops a root), and the grouped root search takes the scalar one's steps."""
+def test_row_sweep_equals_the_per_cell_scan(case):
+    """rasterise (the sweep) equals the points kernel (``pdf``: every node of each point scanned)
+    at every cell centre bit for bit, in both dtypes: the sweep's bands hold every cell that the
+    scan flags (or a bit would differ: a missed interval drops a root), and both search the same
+    roots with the same lane search, each cell's roots summed in node order. The scalar per-cell
+    kernel agrees to the lane search's rounding (``cat_lane_roots``)."""
     model, grid = case
     x, y = np.meshgrid(grid.x, grid.y)
     for dtype in (np.float64, np.float32):
@@ -67,8 +73,11 @@ def test_row_sweep_equals_the_per_cell_scan_bit_for_bit(case):
         ctx = WarpContext(computed, "cpu", 1)
         binding = model.bind(ctx, None, grid=True)
         assert binding.kernels.grid.key == "cat_grid_lanes"
-        scalar = _scalar_points(model, ctx, binding, x, y)
-        assert np.array_equal(raster.values, scalar.astype(dtype)), int(np.sum(raster.values != scalar))
+        points = model.pdf(x, y, dtype=computed).astype(dtype)
+        assert np.array_equal(raster.values, points), int(np.sum(raster.values != points))
+        scalar = _scalar_points(model, ctx, binding, x, y).astype(dtype)
+        agree = lane_roots_agree(raster.values, scalar)
+        assert np.all(agree), (int(np.sum(~agree)), np.abs(raster.values - scalar).max())
 
 
 def test_the_sweep_finds_roots_on_most_cells_of_the_figure_1_frame():
@@ -84,7 +93,8 @@ def test_the_sweep_finds_roots_on_most_cells_of_the_figure_1_frame():
 
 def test_unsorted_centres_take_the_per_cell_scan():
     """A row whose centres are not sorted (the grid kernel launched on reversed and shuffled
-    columns) is computed cell by cell, and equals the scalar kernel there."""
+    columns) is computed cell by cell (the points kernel's density), and equals ``pdf`` there
+    bit for bit and the scalar kernel to the lane search's rounding."""
     model = bg.CAT(v0=280.0, t=10.0, sigma_a=5 / 3, sigma_omega=math.pi / 20)
     grid = bg.Grid.from_bounds(x=(-3000.0, 3000.0), y=(-200.0, 3400.0), step=100.0)
     rng = np.random.default_rng(7)
@@ -98,7 +108,8 @@ def test_unsorted_centres_take_the_per_cell_scan():
     x, y = np.meshgrid(xs, grid.y)
     scalar = _scalar_points(model, ctx, binding, x, y)
     assert np.count_nonzero(scalar) > 0
-    assert np.array_equal(out.numpy(), scalar)
+    assert np.array_equal(out.numpy(), model.pdf(x, y))
+    assert np.all(lane_roots_agree(out.numpy(), scalar))
     assert binding.kernels.grid is cat_lanes.KERNELS.grid  # the row sweep's generated grid kernel
 
 
@@ -128,17 +139,18 @@ def _ray_cases(draw):
 @given(case=_ray_cases())
 def test_rays_equal_the_per_point_scan_bit_for_bit(case):
     """``cat_lanes.cat_rays`` (each bearing's ray swept as a grid row, what the heading table is
-    built from: ``models/_cat_heading.plain_lattice``) equals the scalar per-point kernel at every
-    lattice point (r sin theta, r cos theta): the turned frame gives the same local points, and the
-    sweep the scan's roots."""
+    built from: ``models/_cat_heading.plain_lattice``) equals ``pdf`` (the CPU points kernel) bit
+    for bit at every lattice point (r sin theta, r cos theta): the turned frame gives the same local
+    points, and the sweep the scan's roots, searched in the same lanes; and the scalar per-point
+    kernel to the lane search's rounding."""
     model, radii, theta = case
     got = heading.plain_lattice(model, radii, theta, threads=2)
     ctx = WarpContext(np.float64, "cpu", 1)
     binding = model.bind(ctx, None, grid=True)
     x = radii[:, None] * np.sin(theta)[None, :]
     y = radii[:, None] * np.cos(theta)[None, :]
-    scalar = _scalar_points(model, ctx, binding, x, y)
-    assert np.array_equal(got, scalar), int(np.sum(got != scalar))
+    assert np.array_equal(got, model.pdf(x, y)), int(np.sum(got != model.pdf(x, y)))
+    assert np.all(lane_roots_agree(got, _scalar_points(model, ctx, binding, x, y)))
 
 
 def test_rays_of_the_figure_1_lattice_find_the_banana():
@@ -152,3 +164,22 @@ def test_rays_of_the_figure_1_lattice_find_the_banana():
     assert np.count_nonzero(rays) > 0.3 * rays.size
     for few in (radii[5:6], radii[3:19:4]):
         assert np.array_equal(heading.plain_lattice(model, few, theta, threads=1), rays[np.isin(radii, few)])
+
+
+def test_turns_beyond_the_lanes_reduction_take_the_scalar_search():
+    """Node intervals at |omega t| beyond ``lanes.LANE_TURN_LIMIT`` (where the lanes' sine
+    reduction would round) are searched by the scalar functions, in the sweep and at points
+    alike: a CAT scanning 3,000 turns each way (k_sigma sigma_omega t = 2e4 rad) about its pose,
+    where every interval's roots lie; the grid equals ``pdf`` bit for bit and the scalar kernel
+    to the lane search's rounding."""
+    model = bg.CAT(v0=10.0, t=100.0, sigma_a=0.5, sigma_omega=25.0)
+    assert model.k_sigma * model.sigma_omega * model.t > 1.5 * lanes.LANE_TURN_LIMIT
+    grid = bg.Grid.from_bounds(x=(-2.0, 2.0), y=(-2.0, 2.0), step=1.0)
+    x, y = np.meshgrid(grid.x, grid.y)
+    raster = bg.rasterise(model, grid, threads=1, min_mass=0.0)
+    ctx = WarpContext(np.float64, "cpu", 1)
+    binding = model.bind(ctx, None, grid=True)
+    scalar = _scalar_points(model, ctx, binding, x, y)
+    assert np.count_nonzero(scalar) == scalar.size
+    assert np.array_equal(raster.values, model.pdf(x, y))
+    assert np.all(lane_roots_agree(raster.values, scalar))

@@ -21,6 +21,8 @@ from bananagrid.kernels.lanes import (
     lane_rsqrt, lane_sin, lane_sinc_of, lane_sqrt, lanes32, lanes64,
 )
 
+from cat_lane_roots import lane_roots_agree
+
 # np.longdouble is the x87 80-bit format here (64-bit mantissa, 11 bits beyond float64): a
 # reference whose own error is ~1/2048 ulp of the float64 result.
 assert np.finfo(np.longdouble).nmant >= 63
@@ -637,10 +639,12 @@ def _cat_cases(draw):
 @settings(max_examples=60, deadline=None, derandomize=True, database=None,
           suppress_health_check=[HealthCheck.too_slow])
 @given(case=_cat_cases())
-def test_cat_lane_scan_equals_the_scalar_scan_bit_for_bit(case):
+def test_cat_lane_scan_equals_the_scalar_scan(case):
     """The lane scan computes F with the scalar scan's arithmetic and examines the flagged
-    intervals with the scalar kernel's own function, in node order: the same density to the bit,
-    in both dtypes, by rasterise (grid kernel) and pdf (points kernel)."""
+    intervals with the scalar kernel's own functions, in node order, but for the single roots,
+    which the lanes search (``lanes.lane_cat_roots``): rasterise (grid kernel) and pdf (points
+    kernel) give the same density to the bit, in both dtypes, and the scalar kernel the same to
+    the lane search's rounding (``cat_lane_roots``)."""
     model, grid = case
     x, y = _centres(grid)
     for dtype in (np.float64, np.float32):
@@ -656,7 +660,7 @@ def test_cat_lane_scan_equals_the_scalar_scan_bit_for_bit(case):
         wp.launch(cat.KERNELS.points, dim=x.size, device="cpu", inputs=[
             ctx.array(x.ravel()), ctx.array(y.ravel()), 0, params, out])
         scalar = out.numpy().reshape(x.shape)
-        assert np.array_equal(lanes.values, scalar.astype(dtype))
-        if computed == dtype:
-            assert np.array_equal(model.pdf(x, y, dtype=dtype), scalar)
+        agree = lane_roots_agree(lanes.values, scalar.astype(dtype))
+        assert np.all(agree), (int(np.sum(~agree)), np.abs(lanes.values - scalar).max())
+        assert np.array_equal(model.pdf(x, y, dtype=computed).astype(dtype), lanes.values)
         assume(np.any(scalar > 0))  # 60 cases where the grid catches the banana (equal zeros say less)
