@@ -172,8 +172,9 @@ def _window_counts(model, omegas, cell, polygons):
 
 def _passes(model, omegas, time, point, near):
     """Turn rates where the line at ``time`` passes ``point`` (the sign of the point's side of
-    the line changes on the scan ``omegas``; ``brentq`` to 1e-15 of sigma_omega), in the scan's
-    steps where ``near`` (a mask of the scan) holds at either end."""
+    the line changes on the scan ``omegas``; ``brentq`` to 1e-15 of sigma_omega, or the side is
+    exactly 0 at a scan node), in the scan's steps where ``near`` (a mask of the scan) holds at
+    either end."""
     def side(w):
         w = np.atleast_1d(np.asarray(w, dtype=float))
         base = model.pose.to_world(cat_position(model.v0, time, np.zeros_like(w), w))
@@ -181,7 +182,11 @@ def _passes(model, omegas, time, point, near):
         return d[:, 0] * (point[1] - base[:, 1]) - d[:, 1] * (point[0] - base[:, 0])
 
     values = side(omegas)
-    out = []
+    # a pass exactly at a scan node (a line through a corner or vertex there: the straight line
+    # omega = 0 along a cell side x = 0 of a grid on the pose's axes) is no sign change of a
+    # step, but a break all the same: there a line along a side leaves the window empty on one
+    # side and full on the other, a jump that quad alone resolves only to ~1e-10 absolute
+    out = [float(w) for w in omegas[(values == 0.0) & near]]
     for k in np.flatnonzero((np.sign(values[:-1]) * np.sign(values[1:]) < 0) & (near[:-1] | near[1:])):
         out.append(optimize.brentq(lambda w: float(side(w)[0]), omegas[k], omegas[k + 1],
                                    xtol=1e-15 * model.sigma_omega, rtol=1e-15))

@@ -59,9 +59,10 @@ def cat_cell(model, cell, scan=20001):
 
     A line's share of the cell is smooth in omega except where the line passes a corner of the
     cell (its entry or exit edge changes there): those turn rates are found as sign changes of
-    the corner's side of the line on a ``scan``-point grid, refined by ``brentq``, and given to
-    ``quad`` as breakpoints, so that every piece it integrates is smooth. Only the stretches of
-    omega whose lines cross the cell (widened by one scan step) are integrated.
+    the corner's side of the line on a ``scan``-point grid, refined by ``brentq`` (or its zeros
+    on the grid), and given to ``quad`` as breakpoints, so that every piece it integrates is
+    smooth. Only the stretches of omega whose lines cross the cell (widened by one scan step)
+    are integrated.
     """
     s = model.sigma_omega
     x0, x1, y0, y1 = cell
@@ -70,6 +71,9 @@ def cat_cell(model, cell, scan=20001):
     breaks = []
     for corner in ((x0, y0), (x1, y0), (x1, y1), (x0, y1)):
         side = _corner_side(model, omegas, corner)
+        # a pass exactly at a scan node is no sign change of a step but a break all the same
+        # (omega = 0 through a corner on the pose's axis: a line along a cell side jumps there)
+        breaks += [float(w) for w in omegas[side == 0.0]]
         for k in np.flatnonzero(np.sign(side[:-1]) * np.sign(side[1:]) < 0):
             g = lambda w: float(_corner_side(model, w, corner)[0])  # noqa: E731
             breaks.append(optimize.brentq(g, omegas[k], omegas[k + 1], xtol=1e-15 * s, rtol=1e-15))
