@@ -11,12 +11,15 @@ probability is the integral of that over omega with the normal weight g(omega). 
 where the density is infinite, are only where neighbouring lines touch: every line's share is
 finite, so the cells there are exact in z like any other.
 
-One kernel thread takes one interval of omega. Its lines are interpolated linearly between
-the interval's two edge lines (a :class:`Ribbon`, narrower than a cell); both edge lines are
-clipped to the grid (Liang-Barsky) and walked through the cells they cross in order
+One kernel thread takes one interval of omega. Its lines are interpolated quadratically
+through the interval's two edge lines and its exact middle line (a :class:`Ribbon`: the chord
+between the edge lines plus s (1 - s) times a bend; at most half a cell wide); both edge lines
+are clipped to the grid (Liang-Barsky) and walked through the cells they cross in order
 (Amanatides-Woo), and each cell they own gets the ribbon's mass there (``ribbon_cell``): the
-integral over omega, piecewise between the turn rates whose lines pass a corner of the cell,
-by Gauss-Legendre. A line's share is smooth between those passes, so the rule stays accurate
+integral over omega, piecewise between the turn rates whose bent lines pass a corner of the
+cell (``bent_corner_roots``), by Gauss-Legendre. The interpolation is third order in the
+interval (``bananagrid.models.cat.cell_turn_edges``), so the walk's narrowness, not the
+curvature of the lines, sets the number of intervals. A line's share is smooth between those passes, so the rule stays accurate
 where a midpoint rule in omega is not: a line running along a cell side leaves the cell over a
 tiny change of omega. Crossings are computed from the lines alone, not accumulated, so no step
 drifts and the result does not depend on the bands. Always float64: a cell's share is a
@@ -24,7 +27,7 @@ difference of two normal tails. Work shared along the walk, the same bits as wit
 Gauss node's line leaves one cell at the z it enters the next by, so its tail there is taken
 from the cell before (``gauss_nodes``); the nodes' weights over the whole ribbon (every cell
 no corner pass cuts) are computed once a ribbon; a corner that stays on one side of every line
-of the ribbon by a margin needs no root (``corner_roots``).
+of the ribbon by a margin needs no root (``bent_corner_roots``).
 
 Earlier evidence (:class:`Earlier`): polygons at earlier times weigh each path by where it was
 then, exactly in z along each line (``weighted_share``), with the kinks over omega as breaks of
@@ -60,8 +63,22 @@ GAUSS_CENTRE_WEIGHT = 8.0 / 9.0
 GAUSS_SIDE_WEIGHT = 5.0 / 9.0
 #: Largest move of z_in or z_out (standard deviations) over one Gauss sub-piece of a ribbon,
 #: and the most sub-pieces between two corner passes (beyond, the move per sub-piece grows).
-Z_PIECE = 0.25
+#: The 3-point rule's error goes as the sixth power of the move: 0.07 keeps a cell's share
+#: within about 1e-12 of it where the ribbons are wide enough to reach the bound (between the
+#: plain rule and the earlier evidence's split rule on Figure 1's 130 m cells, 0.25 left 1.3e-12
+#: of the largest cell and 0.1 left 3e-12).
+Z_PIECE = 0.07
 MAX_PIECES = 64
+#: Largest move (standard deviations) over one Gauss sub-piece of a crossing of an earlier line
+#: with a polygon's edge inside a cell's window: it bounds a piece of constant weight, like z_in
+#: and z_out, but in the whole-plane weighted mass of Figure 1 (60 m cells, 3 s and 5 s searches)
+#: Z_PIECE left 1.7e-7 and this 1.5e-9 (the intervals' own error, 2.5e-9 before)
+Z_CROSSING = 0.05
+#: Newton steps refining a chord's corner pass on the bent lines through the interval's middle:
+#: the chord's root is off by about the bend's sag over the ribbon's width (1e-4 of the interval
+#: on Figure 1), one step leaves about its square, a kink that far from its break costs the
+#: Gauss rule its square again (a second step cost 6 % of Figure 1's cells for nothing seen).
+BENT_NEWTON = 1
 #: Earlier evidence: most vertex passes and window events handled in one sub-piece (beyond,
 #: the rest of the sub-piece takes one Gauss rule), and the halvings that place a window
 #: event (to 2^-30 of the sub-piece: its kink then costs far below the rule's error).
@@ -90,7 +107,8 @@ class Frame:
 @wp.struct
 class Ribbon:
     """The lines of the turn rates omega0 + s h, s in [0, 1], of interval ``k``: ``line + s
-    step`` (a line: its point at z = 0 and its step per unit z, :func:`world_line`), the SD of the
+    step + s (1 - s) bend`` (a line: its point at z = 0 and its step per unit z,
+    :func:`world_line`; the bend puts the exact middle line at s = 1/2), the SD of the
     turn rate's normal weight, and the factors of the Gauss nodes of the whole ribbon taken as
     one piece (:func:`node_scale` over s in [0, 1]: the same in every cell no corner pass cuts)."""
 
@@ -101,6 +119,7 @@ class Ribbon:
     sigma_omega: wp.float64
     k: int
     weights: wp.vec3d
+    bend: wp.vec4d
 
 
 @wp.func
@@ -164,8 +183,8 @@ def cell_clip(line: wp.vec4d, i: int, j: int):
 
 @wp.func
 def ribbon_clip(r: Ribbon, s: wp.float64, i: int, j: int):
-    """:func:`cell_clip` of the ribbon's line s."""
-    return cell_clip(r.line + s * r.step, i, j)
+    """:func:`cell_clip` of the ribbon's (bent) line s: at s = 0 the edge line's bits."""
+    return cell_clip(r.line + s * r.step + (s * (wp.float64(1.0) - s)) * r.bend, i, j)
 
 
 @wp.func
@@ -210,6 +229,83 @@ def corner_roots(line: wp.vec4d, d: wp.vec4d, cx: wp.float64, cy: wp.float64, af
     return best
 
 
+@wp.func
+def bent_cross(line: wp.vec4d, d: wp.vec4d, bend: wp.vec4d, cx: wp.float64, cy: wp.float64, s: wp.float64):
+    """cross(direction, corner - point) of the bent line ``line + s d + s (1 - s) bend`` and its
+    derivative in s."""
+    one = wp.float64(1.0)
+    l = line + s * d + (s * (one - s)) * bend
+    dl = d + (one - wp.float64(2.0) * s) * bend
+    f = l[2] * (cy - l[1]) - l[3] * (cx - l[0])
+    fp = dl[2] * (cy - l[1]) - l[2] * dl[1] - dl[3] * (cx - l[0]) + l[3] * dl[0]
+    return f, fp
+
+
+@wp.func
+def bent_refine(line: wp.vec4d, d: wp.vec4d, bend: wp.vec4d, cx: wp.float64, cy: wp.float64, r: wp.float64,
+                slope: wp.float64, margin: wp.float64, after: wp.float64, best: wp.float64):
+    """``best`` lowered to the root of the bent line's corner function near the chord's root r
+    (Newton's method from r, BENT_NEWTON steps) where it lies in (after, best). The bent
+    function is within ``margin`` of the chord's, whose slope at r is ``slope``: a root further
+    than twice margin / |slope| outside (after, best) stays outside, untouched."""
+    reach = wp.float64(2.0) * margin / wp.max(wp.abs(slope), wp.float64(1.0e-300))
+    if r <= after - reach or r >= best + reach:
+        return best
+    for _ in range(BENT_NEWTON):
+        f, fp = bent_cross(line, d, bend, cx, cy, r)
+        if fp != wp.float64(0.0):
+            r = r - f / fp
+    if r > after and r < best:
+        best = r
+    return best
+
+
+@wp.func
+def bent_corner_roots(line: wp.vec4d, d: wp.vec4d, bend: wp.vec4d, cx: wp.float64, cy: wp.float64,
+                      after: wp.float64, best: wp.float64):
+    """:func:`corner_roots` of the bent lines ``line + s d + s (1 - s) bend``: the least s in
+    (after, best) where one passes the corner (cx, cy), else best. The corner function is the
+    chord's quadratic plus s (1 - s) times terms bounded over [0, 1] (``bent_margin``): the
+    early out holds where the chord's margin exceeds them; else each root of the chord's
+    quadratic (or, without real roots, its vertex) that may move into (after, best) is refined
+    on the bent line by Newton's method (BENT_NEWTON steps)."""
+    zero = wp.float64(0.0)
+    rx = cx - line[0]
+    ry = cy - line[1]
+    c0 = line[2] * ry - line[3] * rx
+    c1 = d[2] * ry - line[2] * d[1] - d[3] * rx + line[3] * d[0]
+    c2 = d[3] * d[0] - d[2] * d[1]
+    scale = wp.abs(c0) + wp.abs(c1) + wp.abs(c2)
+    if scale == zero:
+        return best
+    # |q(s)| and |corner - p(s)| per axis over [0, 1] (linear in s: their ends), and the bent
+    # terms s (1 - s) (bq x (c - p) - q x bp) - s^2 (1 - s)^2 bq x bp at most a quarter of them
+    qx = wp.max(wp.abs(line[2]), wp.abs(line[2] + d[2]))
+    qy = wp.max(wp.abs(line[3]), wp.abs(line[3] + d[3]))
+    px = wp.max(wp.abs(rx), wp.abs(rx - d[0]))
+    py = wp.max(wp.abs(ry), wp.abs(ry - d[1]))
+    margin = wp.float64(0.25) * (wp.abs(bend[2]) * py + wp.abs(bend[3]) * px + qx * wp.abs(bend[1]) + qy * wp.abs(
+        bend[0])) + wp.float64(0.0625) * (wp.abs(bend[2] * bend[1]) + wp.abs(bend[3] * bend[0]))
+    end = c0 + c1 + c2
+    if (c0 > zero) == (end > zero) and wp.min(wp.abs(c0), wp.abs(end)) > wp.float64(0.25) * wp.abs(
+            c2) + margin + wp.float64(1.0e-9) * scale:
+        return best
+    if wp.abs(c2) <= wp.float64(1.0e-14) * scale:  # the chord's is linear: one root
+        if c1 != zero:
+            best = bent_refine(line, d, bend, cx, cy, -c0 / c1, c1, margin, after, best)
+        return best
+    disc = c1 * c1 - wp.float64(4.0) * c2 * c0
+    if disc < zero:  # the chord misses the corner: the bent line's roots, if any, near its vertex
+        return bent_refine(line, d, bend, cx, cy, -c1 / (wp.float64(2.0) * c2), zero, margin, after, best)
+    q = wp.float64(-0.5) * (c1 + wp.sign(c1) * wp.sqrt(disc))
+    r1 = q / c2
+    best = bent_refine(line, d, bend, cx, cy, r1, c1 + wp.float64(2.0) * c2 * r1, margin, after, best)
+    if q != zero:
+        r2 = c0 / q
+        best = bent_refine(line, d, bend, cx, cy, r2, c1 + wp.float64(2.0) * c2 * r2, margin, after, best)
+    return best
+
+
 @wp.struct
 class Earlier:
     """Evidence at earlier times whose weight is constant inside polygons (an area search at a
@@ -218,8 +314,9 @@ class Earlier:
     Polygon p has the edges ``edges[starts[p]:starts[p + 1]]`` (x0, y0, x1, y1; the even-odd
     rule of ``kernels/evidence.py``'s ``polygon_contains``) and bounding box ``boxes[p]`` (x0,
     x1, y0, y1); a path inside it at its time gets the factor ``miss[p]`` (1 - POD, or 0 for
-    land), outside 1. ``lines[p, k]`` is the line at polygon p's time of the turn rate
-    ``edges[k]`` of the walk (:func:`world_line`). Channel c weights each path by the product of
+    land), outside 1. ``lines[p, 2 k]`` is the line at polygon p's time of the turn rate
+    ``edges[k]`` of the walk (:func:`world_line`), ``lines[p, 2 k + 1]`` that of the middle of
+    interval k. Channel c weights each path by the product of
     the factors of the polygons in the bit mask ``masks[c]`` (0: the prior)."""
 
     lines: wp.array2d(dtype=wp.vec4d)
@@ -233,11 +330,19 @@ class Earlier:
 
 
 @wp.func
+def earlier_bend(ev: Earlier, p: int, k: int):
+    """Polygon p's bend across interval k: 4 (middle line - mean of the edge lines)."""
+    a = ev.lines[p, 2 * k]
+    return wp.float64(4.0) * (ev.lines[p, 2 * k + 1] - a - wp.float64(0.5) * (ev.lines[p, 2 * k + 2] - a))
+
+
+@wp.func
 def earlier_line(ev: Earlier, p: int, k: int, s: wp.float64):
-    """Polygon p's line at s in [0, 1] across turn-rate interval k: linear between the
-    interval's edge lines, like the ribbon of lines at the map's time."""
-    a = ev.lines[p, k]
-    return a + s * (ev.lines[p, k + 1] - a)
+    """Polygon p's line at s in [0, 1] across turn-rate interval k: quadratic through the
+    interval's edge lines (``lines[p, 2 k]``, ``lines[p, 2 k + 2]``) and its middle line
+    (``lines[p, 2 k + 1]``), like the ribbon of lines at the map's time."""
+    a = ev.lines[p, 2 * k]
+    return a + s * (ev.lines[p, 2 * k + 2] - a) + (s * (wp.float64(1.0) - s)) * earlier_bend(ev, p, k)
 
 
 @wp.func
@@ -260,6 +365,17 @@ def edge_crossing(line: wp.vec4d, edges: wp.array2d(dtype=wp.float64), e: int):
         return False, zero
     # p + z q = a + tau (b - a): z = cross(a - p, b - a) / cross(q, b - a), cross(q, b - a) = cb - ca
     return True, ((ax - line[0]) * (by - ay) - (ay - line[1]) * (bx - ax)) / (cb - ca)
+
+
+@wp.func
+def edge_line_z(line: wp.vec4d, edges: wp.array2d(dtype=wp.float64), e: int):
+    """The z where the line p + z q meets the line through edge e (a-b) (:func:`edge_crossing`'s
+    formula without its test; 0 where they are parallel)."""
+    ax, ay, bx, by = polygon_edge(edges, e)
+    den = line[2] * (by - ay) - line[3] * (bx - ax)
+    if den == wp.float64(0.0):
+        return wp.float64(0.0)
+    return ((ax - line[0]) * (by - ay) - (ay - line[1]) * (bx - ax)) / den
 
 
 @wp.func
@@ -359,16 +475,21 @@ def weighted_share(ev: Earlier, active: int, base: int, r: Ribbon, s: wp.float64
 @wp.func
 def patch_meets(ev: Earlier, p: int, k: int, s0: wp.float64, s1: wp.float64, z0: wp.float64, z1: wp.float64):
     """The box (corners lo, hi) of the four corners of polygon p's earlier points of the lines
-    s in [s0, s1], z in [z0, z1] (a bilinear patch lies inside their hull), and whether it meets
-    the polygon's box (if not, the polygon holds none of them)."""
+    s in [s0, s1], z in [z0, z1] (a bilinear patch lies inside their hull), widened by the bend's
+    sag between s0 and s1 ((s1 - s0)^2 / 4 of it), and whether it meets the polygon's box (if
+    not, the polygon holds none of them)."""
     a = earlier_line(ev, p, k, s0)
     b = earlier_line(ev, p, k, s1)
     a0 = line_point(a, z0)
     a1 = line_point(a, z1)
     b0 = line_point(b, z0)
     b1 = line_point(b, z1)
-    lo = wp.min(wp.min(a0, a1), wp.min(b0, b1))
-    hi = wp.max(wp.max(a0, a1), wp.max(b0, b1))
+    bend = earlier_bend(ev, p, k)
+    reach = wp.max(wp.abs(z0), wp.abs(z1))
+    sag = wp.float64(0.25) * (s1 - s0) * (s1 - s0)
+    pad = wp.vec2d(sag * (wp.abs(bend[0]) + reach * wp.abs(bend[2])), sag * (wp.abs(bend[1]) + reach * wp.abs(bend[3])))
+    lo = wp.min(wp.min(a0, a1), wp.min(b0, b1)) - pad
+    hi = wp.max(wp.max(a0, a1), wp.max(b0, b1)) + pad
     box = ev.boxes[p]
     return hi[0] >= box[0] and lo[0] <= box[1] and hi[1] >= box[2] and lo[1] <= box[3], lo, hi
 
@@ -478,42 +599,86 @@ def weighted_gauss(ev: Earlier, active: int, base: int, r: Ribbon, a: wp.float64
 
 
 @wp.func
+def crossing_parts(ev: Earlier, active: int, r: Ribbon, a: wp.float64, b: wp.float64, i: int, j: int):
+    """Parts of [a, b] short enough that no crossing of an earlier line with an active
+    polygon's edge, where it meets the cell's windows at a or b, moves by more than Z_CROSSING
+    SDs over one (a crossing bounds a piece of constant weight, like z_in and z_out)."""
+    lo_a, hi_a = ribbon_clip(r, a, i, j)
+    lo_b, hi_b = ribbon_clip(r, b, i, j)
+    z_lo = wp.min(lo_a, lo_b)
+    z_hi = wp.max(hi_a, hi_b)
+    moved = wp.float64(0.0)
+    for p in range(ev.count):
+        if (active >> p) & 1 == 1:
+            line_a = earlier_line(ev, p, r.k, a)
+            line_b = earlier_line(ev, p, r.k, b)
+            for e in range(ev.starts[p], ev.starts[p + 1]):
+                hit_a, za = edge_crossing(line_a, ev.edges, e)
+                hit_b, zb = edge_crossing(line_b, ev.edges, e)
+                if hit_a or hit_b:
+                    # where the edge's line meets the earlier lines at both ends (a part's end
+                    # may be a vertex pass, where the crossing moves onto the next edge)
+                    za = edge_line_z(line_a, ev.edges, e)
+                    zb = edge_line_z(line_b, ev.edges, e)
+                    if wp.max(za, zb) >= z_lo and wp.min(za, zb) <= z_hi:
+                        moved = wp.max(moved, wp.abs(zb - za))
+    return wp.clamp(int(wp.ceil(moved / wp.float64(Z_CROSSING))), 1, MAX_PIECES)
+
+
+@wp.func
+def window_events(ev: Earlier, active: int, base: int, r: Ribbon, s0: wp.float64, s1: wp.float64, i: int, j: int,
+                  out: wp.array3d(dtype=wp.float64)):
+    """:func:`weighted_gauss` over [s0, s1] (no vertex pass inside) cut where the window's
+    crossing count or the polygons holding its lower end change (a crossing entering as
+    another leaves keeps the count; found by bisection, WINDOW_BISECTIONS halvings)."""
+    _lo, _hi, held_left, left = window_state(ev, active, r, s0, i, j)
+    for _e in range(MAX_EVENTS):
+        _lo, _hi, held_right, right = window_state(ev, active, r, s1, i, j)
+        if right == left and held_right == held_left:
+            break
+        lo_s = s0
+        hi_s = s1
+        for _b in range(WINDOW_BISECTIONS):
+            m = wp.float64(0.5) * (lo_s + hi_s)
+            _lo, _hi, held_middle, middle = window_state(ev, active, r, m, i, j)
+            if middle == left and held_middle == held_left:
+                lo_s = m
+            else:
+                hi_s = m
+        weighted_gauss(ev, active, base, r, s0, hi_s, i, j, out)
+        s0 = hi_s
+        _lo, _hi, held_left, left = window_state(ev, active, r, s0, i, j)
+    weighted_gauss(ev, active, base, r, s0, s1, i, j, out)
+
+
+@wp.func
 def weighted_piece(ev: Earlier, active: int, base: int, r: Ribbon, a: wp.float64, b: wp.float64, i: int, j: int,
                    out: wp.array3d(dtype=wp.float64)):
     """The weighted mass of the lines s in [a, b] (one Gauss sub-piece of the ribbon) in cell
     (i, j), into every channel whose mask meets ``active``. Split first where an earlier line
     passes a vertex of an active polygon (its crossings appear or vanish there: roots of the
-    quadratics of ``corner_roots``), then where a crossing enters or leaves the cell's window
-    of z (the window's crossing count changes; found by bisection, WINDOW_BISECTIONS halvings),
-    so that Gauss-Legendre integrates a smooth function on every part."""
+    functions of ``bent_corner_roots``), then where a crossing enters or leaves the cell's window
+    of z (:func:`window_events`, on the parts of :func:`crossing_parts`: a crossing that moved
+    further could enter and leave the window unseen by a part's ends), so that Gauss-Legendre
+    integrates a smooth function on every part."""
     s0 = a
     for event in range(MAX_EVENTS):
         s1 = b
         for p in range(ev.count):
             if (active >> p) & 1 == 1 and event < MAX_EVENTS - 1:  # the last round takes the rest whole
-                l0 = ev.lines[p, r.k]
-                d = ev.lines[p, r.k + 1] - l0
+                l0 = ev.lines[p, 2 * r.k]
+                d = ev.lines[p, 2 * r.k + 2] - l0
+                bend = earlier_bend(ev, p, r.k)
                 for e in range(ev.starts[p], ev.starts[p + 1]):
-                    s1 = corner_roots(l0, d, ev.edges[e, 0], ev.edges[e, 1], s0, s1)
+                    s1 = bent_corner_roots(l0, d, bend, ev.edges[e, 0], ev.edges[e, 1], s0, s1)
         # [s0, s1]: no vertex pass inside; cut where the window's crossing count changes
-        _lo, _hi, _inside, left = window_state(ev, active, r, s0, i, j)
-        for _e in range(MAX_EVENTS):
-            _lo, _hi, _inside, right = window_state(ev, active, r, s1, i, j)
-            if right == left:
-                break
-            lo_s = s0
-            hi_s = s1
-            for _b in range(WINDOW_BISECTIONS):
-                m = wp.float64(0.5) * (lo_s + hi_s)
-                _lo, _hi, _inside, middle = window_state(ev, active, r, m, i, j)
-                if middle == left:
-                    lo_s = m
-                else:
-                    hi_s = m
-            weighted_gauss(ev, active, base, r, s0, hi_s, i, j, out)
-            s0 = hi_s
-            _lo, _hi, _inside, left = window_state(ev, active, r, s0, i, j)
-        weighted_gauss(ev, active, base, r, s0, s1, i, j, out)
+        parts = crossing_parts(ev, active, r, s0, s1, i, j)
+        width = (s1 - s0) / wp.float64(float(parts))
+        for part in range(parts):
+            end = s1
+            if part < parts - 1:
+                end = s0 + wp.float64(float(part + 1)) * width
+            window_events(ev, active, base, r, s0 + wp.float64(float(part)) * width, end, i, j, out)
         if s1 >= b:
             break
         s0 = s1
@@ -525,8 +690,9 @@ def ribbon_cell(r: Ribbon, i: int, j: int, ev: Earlier, near: int, out: wp.array
     """Add the ribbon's mass in cell (i, j) to every channel of ``out``: the integral over s of
     g(omega) h [Phi(z_out(s)) - Phi(z_in(s))], weighted by the earlier evidence ``ev``.
 
-    Between the s where a line passes a corner of the cell (the roots of four quadratics) the
-    sides crossed are fixed and z_in, z_out move monotonically: the stretch is cut into
+    Between the s where a line passes a corner of the cell (``bent_corner_roots``) the sides
+    crossed are fixed and z_in, z_out move monotonically (the chord's do; the bend, a small
+    fraction of the ribbon's width, moves them by as little): the stretch is cut into
     sub-pieces over which they move by at most Z_PIECE, each taking 3-point Gauss-Legendre.
 
     Earlier evidence (``near``: the polygons the interval's earlier lines reach at all): a
@@ -546,10 +712,10 @@ def ribbon_cell(r: Ribbon, i: int, j: int, ev: Earlier, near: int, out: wp.array
     held_total = wp.float64(0.0)
     s0 = wp.float64(0.0)
     for _ in range(9):  # at most 8 corner passes in (0, 1)
-        s1 = corner_roots(r.line, r.step, fi, fj, s0, one)
-        s1 = corner_roots(r.line, r.step, fi + one, fj, s0, s1)
-        s1 = corner_roots(r.line, r.step, fi + one, fj + one, s0, s1)
-        s1 = corner_roots(r.line, r.step, fi, fj + one, s0, s1)
+        s1 = bent_corner_roots(r.line, r.step, r.bend, fi, fj, s0, one)
+        s1 = bent_corner_roots(r.line, r.step, r.bend, fi + one, fj, s0, s1)
+        s1 = bent_corner_roots(r.line, r.step, r.bend, fi + one, fj + one, s0, s1)
+        s1 = bent_corner_roots(r.line, r.step, r.bend, fi, fj + one, s0, s1)
         # sub-pieces short enough that neither z_in nor z_out moves by more than Z_PIECE SDs
         lo0 = edge_lo
         hi0 = edge_hi
@@ -610,7 +776,10 @@ def walk_edge(r: Ribbon, edge: wp.float64, row0: int, row1: int, nx: int, ev: Ea
     (Amanatides-Woo) and add the ribbon's mass to each cell it owns: a cell belongs to the walk
     of s = 0 if that line crosses it over a positive length, else to the walk of s = 1. The
     ribbon is narrower than a cell (the steps are cell / CELL_SUBSTEPS), so every cell it
-    touches is crossed by one of its edge lines."""
+    touches is crossed by one of its edge lines; the bent lines stay between the edge lines
+    except where the band between them is narrower than the bend (a line's contact with a
+    caustic), by at most the bend's sag: a cell reached only there is part of the rule's error
+    (``bananagrid.models.cat.CAT.cell_plan``)."""
     line = r.line + edge * r.step
     z_max = wp.float64(Z_MAX)
     lo, hi = line_interval(line[0], line[2], 0, nx, -z_max, z_max)
@@ -645,9 +814,15 @@ def walk_edge(r: Ribbon, edge: wp.float64, row0: int, row1: int, nx: int, ev: Ea
 @wp.kernel
 def earlier_lines(edges: wp.array(dtype=wp.float64), times: wp.array(dtype=wp.float64), f: Frame,
                   lines: wp.array2d(dtype=wp.vec4d)):
-    """``lines[p, k]``: the line of turn rate ``edges[k]`` at time ``times[p]`` (:func:`world_line`)."""
-    p, k = wp.tid()
-    lines[p, k] = world_line(edges[k], times[p], f)
+    """``lines[p, 2 k]``: the line of turn rate ``edges[k]`` at time ``times[p]``
+    (:func:`world_line`); ``lines[p, 2 k + 1]``: that of the middle of interval k (the bits of
+    the ribbon's middle turn rate)."""
+    p, m = wp.tid()
+    k = m // 2
+    omega = edges[k]
+    if m % 2 == 1:
+        omega = omega + wp.float64(0.5) * (edges[k + 1] - omega)
+    lines[p, m] = world_line(omega, times[p], f)
 
 
 @wp.kernel
@@ -664,6 +839,7 @@ def cat_cells(edges: wp.array(dtype=wp.float64), sigma_omega: wp.float64, t: wp.
     r.h = edges[k + 1] - r.omega0
     r.line = world_line(r.omega0, t, f)
     r.step = world_line(r.omega0 + r.h, t, f) - r.line
+    r.bend = wp.float64(4.0) * (world_line(r.omega0 + wp.float64(0.5) * r.h, t, f) - r.line - wp.float64(0.5) * r.step)
     r.sigma_omega = sigma_omega
     r.k = k
     half = wp.float64(0.5)

@@ -115,15 +115,19 @@ COORDINATE_ULPS = 8.0
 
 #: Exact-in-acceleration cell probabilities (:meth:`CAT.cell_plan`): turn-rate intervals
 #: per crossing of the smallest cell side by the fastest-moving point of a line (so that an
-#: interval's ribbon of lines is narrower than a cell), and at least per sigma_omega; the work
-#: estimate per cell an interval's edge lines walk (a few normal intervals and corner tests;
-#: measured 100-200 ns on the reference machine, AMD Zen 4, rounded up) and per interval.
-CELL_SUBSTEPS = 8
+#: interval's ribbon of lines is narrower than a cell: half a cell at most), and at least per
+#: sigma_omega; the work estimate per cell an interval's edge lines walk (a few normal
+#: intervals and corner tests; measured 100-200 ns on the reference machine, AMD Zen 4, rounded
+#: up) and per interval. With the ribbon bent through its exact middle line the walk's
+#: narrowness sets the count, not the interpolation (Figure 1 at 4 m: 7,486 intervals; 29,943 at
+#: 8 a crossing, 39,315 when a linear ribbon's second-order error set it).
+CELL_SUBSTEPS = 2
 CELL_SIGMA_STEPS = 16
-#: Largest distance between an interval's lines and their linear interpolation, as a fraction
-#: of the smaller of the cell and the acceleration's SD along a line (the scale over which a
-#: cell's share of a line changes): the rule's remaining error, about 4.3 times this relative
-#: to a cell's probability over the sweep (4.3e-5 at 1e-5, 4.3e-6 at 1e-6).
+#: Largest distance between an interval's lines and their quadratic interpolation through its
+#: edge and middle lines, as a fraction of the smaller of the cell and the acceleration's SD
+#: along a line (the scale over which a cell's share of a line changes): the rule's
+#: interpolation error, third order in the interval (the linear ribbon's, second order, was held
+#: to the same tolerance with 5x the intervals on Figure 1).
 CELL_CURVE_TOL = 1e-6
 SECONDS_PER_LINE_CELL = 400e-9
 SECONDS_PER_LINE = 1e-6
@@ -196,16 +200,18 @@ def cell_turn_edges(model: "CAT", cell: float) -> np.ndarray:
     ``cell``: equal intervals of +-k_sigma sigma_omega, at most sigma_omega / CELL_SIGMA_STEPS
     long, short enough that no point of a walked line moves more than cell / CELL_SUBSTEPS
     across one, and that the lines inside one stay within CELL_CURVE_TOL of the smaller of the
-    cell and the acceleration's SD along a line, sigma_a t^2 |(C, D)|, of their linear
-    interpolation between its edges: h^2 |d^2 P / domega^2| / 8, with |d^2 P / domega^2| <=
-    t^2 (v0 t / 6 + Z_MAX sigma_a t^2 / 12) (``line_speed``'s integrals, one power of s more)."""
+    cell and the acceleration's SD along a line, sigma_a t^2 |(C, D)|, of their quadratic
+    interpolation through its edge and middle lines: h^3 |d^3 P / domega^3| sqrt(3) / 216 (the
+    cubic remainder, |s (s - 1/2) (s - 1)| <= sqrt(3) / 36 on [0, 1], over 3!), with
+    |d^3 P / domega^3| <= t^3 (v0 t / 12 + Z_MAX sigma_a t^2 / 20) (``line_speed``'s integrals,
+    two powers of s more)."""
     t = model.t
     span = 2.0 * model.k_sigma * model.sigma_omega
     grid_of_span = np.linspace(-0.5 * span, 0.5 * span, 4097)
     sd_along = model.sigma_a * float(np.min(np.hypot(*cat_position(0.0, t, 1.0, grid_of_span).T)))
-    curvature = t * t * (model.v0 * t / 6.0 + cat_cells.Z_MAX * model.sigma_a * t * t / 12.0)
+    third = t ** 3 * (model.v0 * t / 12.0 + cat_cells.Z_MAX * model.sigma_a * t * t / 20.0)
     step = min(cell / (CELL_SUBSTEPS * line_speed(model)), model.sigma_omega / CELL_SIGMA_STEPS,
-               math.sqrt(8.0 * CELL_CURVE_TOL * min(cell, sd_along) / curvature))
+               (72.0 * math.sqrt(3.0) * CELL_CURVE_TOL * min(cell, sd_along) / third) ** (1.0 / 3.0))
     return np.linspace(-0.5 * span, 0.5 * span, max(1, math.ceil(span / step)) + 1)
 
 
@@ -774,16 +780,21 @@ class CAT(MotionModel):
         .. math:: P_{ij} = \int g(\omega)\, [\Phi(z_{out}(\omega)) - \Phi(z_{in}(\omega))]\, d\omega.
 
         Over each of equal omega intervals (:func:`cell_turn_edges`) the lines are interpolated
-        linearly between its edge lines (a ribbon narrower than a cell), and the integral over
-        omega is taken piecewise between the turn rates whose lines pass a corner of the cell
-        (where the share has kinks, and where a line running along a side starts or stops
-        crossing), by 3-point Gauss-Legendre with the normal weight. The cells of a grid holding
-        all the mass sum to 1 - truncated_mass (|a| <= 7.5 sigma_a, 6.4e-14 left out) within the
-        Gauss rule's error on g, below 1e-12. The remaining error, the ribbons' linear
-        interpolation, is second order in the interval, which is kept short enough for it
-        (``CELL_CURVE_TOL``): stated as 5e-5 of a cell's probability plus 1e-12, tested over
-        the whole parameter domain and at the folds (measured at most 4.3e-6,
-        tests/engine/test_cell_probabilities.py).
+        quadratically through its two edge lines and its exact middle line (a ribbon at most
+        half a cell wide), and the integral over omega is taken piecewise between the turn rates
+        where these lines pass a corner of the cell (where the share has kinks, and where a line
+        running along a side starts or stops crossing; the chord's quadratic roots refined on the
+        bent lines), by 3-point Gauss-Legendre with the normal weight on pieces over which z_in
+        and z_out move by at most 0.07 SD. The cells of a grid holding all the mass sum to 1 -
+        truncated_mass (|a| <= 7.5 sigma_a, 6.4e-14 left out) within the Gauss rule's error on g,
+        below 1e-12. The remaining error is the interpolation, third order in the interval,
+        which is kept short enough for it (``CELL_CURVE_TOL``; on most grids the walk's
+        narrowness sets the interval, far inside it), and the cells a bent line reaches outside
+        the band between the edge lines the walk follows (only where the band is narrower than
+        the bend, h^2 |d^2 P / domega^2| / 8: at a line's contact with a caustic): stated as
+        5e-5 of a cell's probability plus 1e-12, tested over the whole parameter domain and at
+        the folds (measured at most 2.4e-7 over 100 draws of the sweep with 0.1 SD pieces, where
+        the linear ribbon at 5x the intervals left 7.2e-6; tests/engine/test_cell_probabilities.py).
         """
         if self.sigma_heading > 0.0 or not isinstance(domain, Grid):
             return super().cell_plan(domain, region)

@@ -22,11 +22,15 @@ the prior (no polygon), each search alone, all of them.
 
 Error: as the plain rule's, 5e-5 of a cell's probability plus 1e-12 (tested against an
 independent oracle over the CAT domain, folds included, and at the cells the polygons cut
-hardest; measured at most 2.4e-6): the pieces in z are exact and every kink in omega is a
-break; what remains is the linear interpolation of the lines across each turn-rate interval, at
-t and at the earlier times alike (at time s its distance from the exact lines, in SDs along
-the line, is about (s / t)^2 of the tolerance held at t). Without polygons the result is the
-plain rule's bit for bit; with them, the prior channel (and each channel over the parts of the
+hardest): the pieces in z are exact and every kink in omega is a break (the vertex passes of
+the earlier lines refined on their bent interpolation, like the corner passes at t); the
+crossings of the earlier lines with the polygons' edges move by at most Z_CROSSING SDs over a
+Gauss part (so none enters and leaves a cell's window unseen); what remains is the quadratic
+interpolation of the lines through each turn-rate interval's edges and middle, third order in
+the interval, at t and at the earlier times alike (at an earlier time, in SDs along the line,
+below the tolerance held at t: the lines' third derivative in omega grows as the time's fourth
+and fifth powers, the SD along them as its square). Without polygons the result is the plain rule's bit
+for bit; with them, the prior channel (and each channel over the parts of the
 turn-rate range its own polygons do not cut) takes the plain rule's terms, regrouped: the prior
 channel is the plain rule's cells to float64 rounding, polygons on or along the earlier lines
 included.
@@ -132,10 +136,10 @@ def _earlier(ctx: KernelContext, frame, grid: Grid, edges: np.ndarray, polygons:
     ev.masks = ctx.array(np.asarray((0,) if polygons is None else polygons.masks, dtype=np.int32), dtype=np.int32)
     ev.count = count
     ev.channels = 1 if polygons is None else len(polygons.masks)
-    ev.lines = ctx.zeros((count, len(edges) if count else 0), dtype=cat_cells.VEC4)
+    ev.lines = ctx.zeros((count, 2 * len(edges) - 1 if count else 0), dtype=cat_cells.VEC4)
     if count:
         ctx.load(cat_cells.earlier_lines)
-        ctx.launch(cat_cells.earlier_lines, dim=(count, len(edges)), inputs=[
+        ctx.launch(cat_cells.earlier_lines, dim=(count, 2 * len(edges) - 1), inputs=[
             ctx.array(edges, dtype=np.float64), ctx.array(polygons.times, dtype=np.float64), frame, ev.lines])
     return ev
 
