@@ -754,7 +754,10 @@ class CAT(MotionModel):
         estimate is 2.0 to 30 times the measured time (median 5.2; the old per-cell constants
         were 16-50 times it on grids, and half of it near the pose at 480,001 nodes). The widest
         ratios: grids much wider than the banana and points at small scans (64-161 nodes, well
-        under a microsecond a point).
+        under a microsecond a point). Since then single roots are searched in CPU lanes: framing
+        grids of small scans take about half the table's time (the bench's Figure 1 row: the
+        estimate about 24 times it), grids about the pose and large scans about the same (5 of
+        the table's cases remeasured under load: ratios 2.3 to 13.5).
         """
         r_near = extent.radii(self.pose.origin)[0]
         if self.sigma_heading > 0.0:
