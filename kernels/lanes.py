@@ -407,6 +407,16 @@ def _polar_plain_steps(fmt: _Format, x: str, y: str, out: str) -> str:
 CHAINS = 4
 
 
+def _wide_block(fmt: _Format, chains: int) -> tuple[_Format, str]:
+    """The format of ``chains`` registers of ``fmt``'s lanes side by side, and the opening of a
+    row loop's block over them: the vector types, a zero and the reciprocal estimates."""
+    wide = dataclasses.replace(fmt, lanes=chains * fmt.lanes)
+    return wide, ("{\n"
+                  f"typedef {fmt.scalar} vt __attribute__((vector_size({wide.bytes})));\n"
+                  f"typedef {fmt.integer} vi __attribute__((vector_size({wide.bytes})));\n"
+                  "vt zero = {};\n" + _estimates(wide))
+
+
 def _polar_plain_row(fmt: _Format) -> str:
     """out[row, j0 .. j1 - 1] = the density without heading noise at (xs[j], y): the grid
     kernel's row in one loop, with AVX-512 ``CHAINS`` registers of lanes a step (a ``vt`` of
@@ -421,13 +431,10 @@ def _polar_plain_row(fmt: _Format) -> str:
     kernel cost 12 % of a Figure 1 rasterise), then the positions in order, so that a row's sum
     depends on the row alone."""
     def loop(chains: int) -> str:
-        wide = dataclasses.replace(fmt, lanes=chains * fmt.lanes)
+        wide, head = _wide_block(fmt, chains)
         size, n = wide.bytes, wide.lanes
         body = (
-            "{\n"
-            f"typedef {fmt.scalar} vt __attribute__((vector_size({size})));\n"
-            f"typedef {fmt.integer} vi __attribute__((vector_size({size})));\n"
-            "vt zero = {};\n" + _estimates(wide) +
+            head +
             f"typedef double vd __attribute__((vector_size({8 * n})));\n"
             "vd acc = {};\n"
             "vt vy = zero + y;\n"
@@ -585,13 +592,10 @@ def _tabulated_row(fmt: _Format) -> str:
     two float32 registers spilled), elsewhere one; lane by lane the operations of ``lane_tabulated`` (:func:`_tabulated_steps`), so
     the points kernel's bits."""
     def loop(chains: int) -> str:
-        wide = dataclasses.replace(fmt, lanes=chains * fmt.lanes)
+        wide, head = _wide_block(fmt, chains)
         size, n = wide.bytes, wide.lanes
         body = (
-            "{\n"
-            f"typedef {fmt.scalar} vt __attribute__((vector_size({size})));\n"
-            f"typedef {fmt.integer} vi __attribute__((vector_size({size})));\n"
-            "vt zero = {};\n" + _estimates(wide) +
+            head +
             "vt vy = zero + y;\n"
             f"for (int j = j0; j < j1; j += {n}) {{\n"
             f"bool whole = contiguous && j + {n} <= j1;\n"
