@@ -21,7 +21,7 @@ from typing import Any
 import numpy as np
 import warp as wp
 
-from .common import atan2_fast, world_to_local
+from .common import atan2_one_division, world_to_local
 from .generate import ARRAY2D, SCALAR, VEC4, Params, density_kernels
 
 # No adjoints: nothing differentiates these kernels, and the backward kernels Warp would
@@ -82,7 +82,7 @@ def table_density_local(x: Any, y: Any, p: Any):
     # the clamps also keep a NaN's stencil inside the table
     base = wp.clamp(base, 1 - p.mirror, n_r - 3)
     fr = u - type(x)(float(base))
-    v = (atan2_fast(x, y) - p.theta0) / p.dtheta
+    v = (atan2_one_division(x, y) - p.theta0) / p.dtheta
     col = wp.clamp(int(wp.floor(v)), -1, n_theta)  # v in [0, n_theta] up to rounding
     ft = v - type(x)(float(col))
     wr0, wr1, wr2, wr3 = lagrange4(fr)

@@ -78,17 +78,16 @@ NOT_RUN = {
     "pytest tests/models/test_heading.py": "part of the suite itself",
     "python tests/reproduce_tables.py": "about 4 minutes; tests/models/test_paper_tables.py checks the same tables",
     "bananagrid bench --kernels cat-cells,butterly-cells --repeat 3": "a minute of timing (see tests/bench/test_bench.py)",
-    "bananagrid bench --repeat 5 --json bench.json": "about 15 minutes of timing; tests/bench/test_bench.py runs bench on small grids",
-    "bananagrid bench --kernels polar-improved,polar-rough --repeat 9 --no-memory":
+    "bananagrid bench --repeat 3 --json bench.json":
+        "about 40 minutes of timing (the plan-periods row alone 20); tests/bench/test_bench.py runs bench on small grids",
+    "bananagrid bench --kernels cat,cat-heading,polar-improved,polar-rough,cat-cells --repeat 5 --threads 1 --no-memory":
         "a minute of timing (see tests/bench/test_bench.py and tests/bench/test_peers.py)",
-    "bananagrid bench --kernels presence-plane --repeat 5": "minutes of SciPy baseline (see tests/bench/test_bench.py)",
     "bananagrid bench --kernels cat-posterior,butterly-posterior": "minutes of timing (tests/bench/test_bench_posterior.py runs the rows on small grids)",
     "bananagrid bench --small --repeat 7 --no-peers --no-memory": "timing (tests/bench/test_bench.py::test_bench_times_small_calls runs it)",
     "bananagrid bench --kernels plan-periods": "minutes of planning (tests/bench/test_bench.py runs the row on a coarse grid)",
     "bananagrid bench --kernels polar-rough,polar-improved,polar-heading,bearing-exact --step 2 --repeat 15 --no-peers --no-memory":
         "a minute of timing (see tests/bench/test_bench.py)",
     "bananagrid bench --kernels butterly-r1000 --repeat 5 --baseline-stride 100": "a minute of timing (see tests/bench/test_bench.py)",
-    "bananagrid bench --kernels cat,cat-heading,cat-cells --repeat 3": "minutes of timing (see tests/bench/test_bench.py)",
     "pip install 'bananagrid[peers]'": "installs from the package index; the test extra installs Numba and JAX",
     "time bananagrid sweep": "about a minute; tests/analysis/test_compare.py runs the sweep at --n 2",
     "python -m bananagrid.scenes.docs --write docs/scenes.md": "rewrites the docs; the same generator runs with --check in tests/test_architecture.py",
