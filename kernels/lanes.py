@@ -328,6 +328,8 @@ def _angle_steps(fmt: _Format, x: str, y: str, out: str) -> str:
     zero, and a fused one changed phi by an ulp at many more cells, moving the density 3.1e-13
     from the scalar kernel's there (``tests/kernels/test_lanes.py`` allows 1e-13)."""
     series = ATAN_SERIES64 if fmt.scalar == "double" else ATAN_SERIES32
+    # the least normal number, and 2^(mantissa bits + 2): a subnormal times it is normal
+    tiny, up = (2.0**-1022, 2.0**54) if fmt.scalar == "double" else (2.0**-126, 2.0**25)
     fma = "__builtin_elementwise_fma"
     horner = f"vt p = {fma}(s, zero + L({series[-1]!r}), zero + L({series[-2]!r}));\n" + "".join(
         f"p = {fma}(p, s, zero + L({c!r}));\n" for c in series[-3::-1])
@@ -337,6 +339,11 @@ def _angle_steps(fmt: _Format, x: str, y: str, out: str) -> str:
         "vt ay = uy < 0 ? -uy : uy;\n"
         "vt lo = ax > ay ? ay : ax;\n"
         "vt hi = ax > ay ? ax : ay;\n"
+        # subnormal pairs scaled by a power of two (exact): the reciprocal estimate of a subnormal
+        # divisor is inf, and the quotient of the scaled pair is the same
+        f"vt up = hi < L({tiny!r}) ? zero + L({up!r}) : zero + 1;\n"
+        "lo = lo * up;\n"
+        "hi = hi * up;\n"
         f"auto reduced = lo > L({TAN_PI_8!r}) * hi;\n"
         "vt num = reduced ? lo - hi : lo;\n"
         "vt den = reduced ? lo + hi : hi;\n"
