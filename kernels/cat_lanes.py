@@ -472,15 +472,14 @@ def cat_rays(radii: wp.array(dtype=Any), sines: wp.array(dtype=Any), cosines: wp
     (:func:`cat_sweep_row`) through the frame turned so that the world x axis lies along it
     (pose (0, 0, sines[k], cosines[k]): the local point is (r sin, r cos) to the bit, so each value
     is the points kernel's, ``pdf``'s). ``p``'s pose is not used. A polar lattice of the plain CAT
-    costs O(nodes) a ray plus its roots, instead of the scan at every point. Unsorted radii leave
-    the ray at zero (the caller sorts them)."""
+    costs O(nodes) a ray plus its roots, instead of the scan at every point (:func:`cat_row`, the
+    grid's row). Unsorted radii leave the ray at zero (the caller sorts them)."""
     k = k0 + wp.tid()
     sine = sines[k]
     zero = type(sine)(0.0)
     q = p
     q.pose = wp.vector(zero, zero, sine, cosines[k])
-    if row_start(radii, out, k, 0, radii.shape[0]) != 0:  # the ray zeroed, its radii sorted
-        cat_sweep_row(radii, zero, k, 0, radii.shape[0], q, out)
+    cat_row(radii, zero, out, k, 0, radii.shape[0], q)
 
 
 for _scalar in (wp.float64, wp.float32):
